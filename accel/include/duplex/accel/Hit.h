@@ -1,0 +1,37 @@
+#pragma once
+/// \file Hit.h
+/// The preliminary hit kept during traversal; full surface data is derived once, for the winner.
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <limits>
+#include <ostream>
+
+namespace duplex {
+
+/// Id meaning "no instance / no primitive" (a miss).
+inline constexpr std::uint32_t kInvalidId = 0xFFFFFFFFu;
+
+/// Closest-hit record. `t` is in units of the ray's direction (see Ray). `u`, `v` are the
+/// barycentric coordinates of the hit point: p = (1 - u - v) * v0 + u * v1 + v * v2 for triangle
+/// (v0, v1, v2). `ng` is the unnormalised geometric normal cross(v1 - v0, v2 - v0) in the space of
+/// the query (object space from an object's intersector, world space from a scene query).
+struct Hit {
+  float t = std::numeric_limits<float>::infinity();
+  float u = 0.0f;
+  float v = 0.0f;
+  std::uint32_t prim_id = kInvalidId;
+  std::uint32_t instance_id = kInvalidId;
+  glm::vec3 ng{0.0f};
+
+  [[nodiscard]] bool valid() const { return prim_id != kInvalidId; }
+};
+
+inline std::ostream& operator<<(std::ostream& os, const Hit& h) {
+  if (!h.valid()) return os << "Hit{miss}";
+  return os << "Hit{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", prim=" << h.prim_id
+            << ", inst=" << h.instance_id << "}";
+}
+
+}  // namespace duplex

@@ -1,0 +1,51 @@
+#pragma once
+/// \file KdBuildConfig.h
+/// Parameters of the kd-tree build, with the defaults we ship and why.
+
+#include <cstdint>
+#include <ostream>
+#include <string_view>
+
+namespace duplex {
+
+/// How split planes are chosen.
+enum class KdHeuristic {
+  /// Surface area heuristic: 32 bins per axis, then refined to the exact primitive bounds
+  /// inside the best bins (see KdTreeBuilder.cpp). Best trees, slowest build.
+  Sah,
+  /// Plane at the median primitive centroid on the longest axis; leaves of max_leaf_size.
+  Median,
+  /// Plane at the middle of the node's longest axis; leaves of max_leaf_size.
+  SpatialMiddle,
+};
+
+std::string_view toString(KdHeuristic h);
+/// Parses "sah", "median", "middle"; throws InvalidArgument otherwise.
+KdHeuristic parseKdHeuristic(std::string_view name);
+
+/// Build parameters. Costs are relative units: the SAH estimates the cost of a ray through a node
+/// as traversal_cost + intersection_cost * (expected number of primitives tested).
+struct KdBuildConfig {
+  KdHeuristic heuristic = KdHeuristic::Sah;
+  /// Cost of one inner-node step. 1 by convention; only the ratio to intersection_cost matters.
+  float traversal_cost = 1.0f;
+  /// Cost of one primitive test relative to a node step. Our watertight triangle test over a
+  /// leaf-ordered triangle array costs about 1.5 node steps (measured with callgrind).
+  float intersection_cost = 1.5f;
+  /// Relative cost reduction for a split that cuts off empty space (Wald & Havran 2006: 0.2),
+  /// which isolates geometry from empty space and pays off for rays that miss.
+  float empty_bonus = 0.2f;
+  /// Depth bound; 0 means automatic: 8 + 1.3 * log2(N) (Havran).
+  int max_depth = 0;
+  /// Leaf size at which the Median / SpatialMiddle heuristics stop splitting.
+  std::uint32_t max_leaf_size = 4;
+  /// Build subtrees on TBB's threads when they hold at least this many references (0: serial).
+  std::uint32_t parallel_threshold = 4096;
+  /// Clip primitives to node boxes ("perfect splits"). Off: keep unclipped bounds (faster build,
+  /// worse tree), so the benchmark can chart the difference.
+  bool clip_primitives = true;
+};
+
+std::ostream& operator<<(std::ostream& os, const KdBuildConfig& c);
+
+}  // namespace duplex

@@ -1,0 +1,46 @@
+#pragma once
+/// \file KdNode.h
+/// The 8-byte kd-tree node (after pbrt's KdAccelNode, without type punning through a union).
+
+#include <bit>
+#include <cstdint>
+
+namespace duplex {
+
+/// Inner node: split plane position (float, in the tree's space) on one axis; its lower child is
+/// the next node in the array (depth-first layout), its upper child is at `upperChild()`.
+/// Leaf: a range [primOffset(), primOffset() + primCount()) of the tree's primitive index list.
+class KdNode {
+ public:
+  static constexpr std::uint32_t kLeafTag = 3;
+  static constexpr std::uint32_t kMaxIndex = (1u << 30) - 1;
+
+  static KdNode inner(int axis, float split, std::uint32_t upper_child) {
+    KdNode n;
+    n.payload_ = std::bit_cast<std::uint32_t>(split);
+    n.bits_ = (upper_child << 2) | static_cast<std::uint32_t>(axis);
+    return n;
+  }
+  static KdNode leaf(std::uint32_t prim_offset, std::uint32_t prim_count) {
+    KdNode n;
+    n.payload_ = prim_offset;
+    n.bits_ = (prim_count << 2) | kLeafTag;
+    return n;
+  }
+
+  [[nodiscard]] bool isLeaf() const { return (bits_ & 3u) == kLeafTag; }
+  [[nodiscard]] int axis() const { return static_cast<int>(bits_ & 3u); }
+  [[nodiscard]] float split() const { return std::bit_cast<float>(payload_); }
+  [[nodiscard]] std::uint32_t upperChild() const { return bits_ >> 2; }
+  [[nodiscard]] std::uint32_t primOffset() const { return payload_; }
+  [[nodiscard]] std::uint32_t primCount() const { return bits_ >> 2; }
+  void setUpperChild(std::uint32_t upper_child) { bits_ = (upper_child << 2) | (bits_ & 3u); }
+  void setPrimOffset(std::uint32_t offset) { payload_ = offset; }
+
+ private:
+  std::uint32_t payload_ = 0;  // split position bits (inner) or primitive offset (leaf)
+  std::uint32_t bits_ = 0;     // 2 low bits: axis or leaf tag; 30 high bits: upper child or count
+};
+static_assert(sizeof(KdNode) == 8);
+
+}  // namespace duplex

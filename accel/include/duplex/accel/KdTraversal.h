@@ -1,0 +1,132 @@
+#pragma once
+/// \file KdTraversal.h
+/// Front-to-back kd-tree traversal, shared by the bottom (triangles) and top (instances) levels.
+/// The primitive test is a leaf callback, inlined through the template parameter: no virtual call
+/// per node or primitive.
+
+#include "duplex/accel/KdTree.h"
+#include "duplex/accel/Ray.h"
+
+#include <glm/vec3.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace duplex {
+
+/// Per-ray values the traversal needs, computed once per ray and tree space.
+struct KdRay {
+  glm::vec3 origin;
+  glm::vec3 dir;
+  /// 1/dir with tiny or zero components replaced by +-inf of the same sign, so that +0 and -0
+  /// directions classify as "never crosses" and a ray lying in a split plane visits both sides.
+  glm::vec3 inv_dir;
+  bool zero[3];
+  float tnear;
+  float tfar;
+
+  explicit KdRay(const Ray& r) : origin(r.origin), dir(r.dir), tnear(r.tnear), tfar(r.tfar) {
+    for (int k = 0; k < 3; ++k) {
+      const float inv = 1.0f / r.dir[k];
+      zero[k] = !std::isfinite(inv);  // |d| so small that 1/d overflows behaves like 0
+      inv_dir[k] = zero[k] ? std::copysign(std::numeric_limits<float>::infinity(), r.dir[k]) : inv;
+    }
+  }
+};
+
+/// Clips the ray's [tnear, tfar] to `box`. Axes with zero direction only test the origin against
+/// the slab (closed: a ray in a face plane is inside). The exit is widened by 2 ulp-style factors
+/// (Ize 2013) so that rounding never culls a hit on the box boundary.
+inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& tmax) {
+  tmin = ray.tnear;
+  tmax = ray.tfar;
+  if (!(tmin <= tmax)) return false;
+  for (int k = 0; k < 3; ++k) {
+    if (ray.zero[k]) {
+      if (ray.origin[k] < box.lo[k] || ray.origin[k] > box.hi[k]) return false;
+      continue;
+    }
+    float t0 = (box.lo[k] - ray.origin[k]) * ray.inv_dir[k];
+    float t1 = (box.hi[k] - ray.origin[k]) * ray.inv_dir[k];
+    if (t0 > t1) std::swap(t0, t1);
+    t1 *= 1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
+    t0 = t0 >= 0.0f ? t0 * (1.0f - 2.0f * 3.0f * std::numeric_limits<float>::epsilon())
+                    : t0 * (1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon());
+    tmin = std::max(tmin, t0);
+    tmax = std::min(tmax, t1);
+  }
+  return tmin <= tmax;
+}
+
+/// Maximal stack depth; the builder bounds the depth well below it.
+inline constexpr int kKdStackSize = 64;
+
+/// Visits the leaves pierced by the ray front to back and calls
+///   bool leaf(std::uint32_t prim_begin, std::uint32_t prim_count, float& t_best)
+/// where [prim_begin, prim_begin + prim_count) indexes tree.prim_indices (or any array laid out in
+/// the same order). The callback tests its primitives against [ray.tnear, t_best] and lowers
+/// t_best on a closer hit; it returns true when it found a hit. With AnyHit the traversal returns
+/// at the first such leaf. Returns whether any leaf reported a hit. `t_best` starts at ray.tfar.
+///
+/// A leaf's primitives are tested over the whole ray, not only the leaf's interval; traversal
+/// ends when the next node starts behind t_best. That is what keeps hits on split planes and
+/// straddling primitives exact.
+template <bool AnyHit, class LeafFn>
+inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, LeafFn&& leaf) {
+  if (tree.nodes.empty()) return false;
+  float tmin, tmax;
+  if (!clipRayToBox(ray, tree.bounds, tmin, tmax)) return false;
+
+  struct Entry {
+    std::uint32_t node;
+    float tmin, tmax;
+  };
+  Entry stack[kKdStackSize];
+  int top = 0;
+  const KdNode* nodes = tree.nodes.data();
+  std::uint32_t index = 0;
+  bool found = false;
+
+  while (true) {
+    const KdNode& node = nodes[index];
+    if (!node.isLeaf()) {
+      const int axis = node.axis();
+      const float t_plane = (node.split() - ray.origin[axis]) * ray.inv_dir[axis];
+      // The near child is the one the ray is in before it crosses the plane; with a zero
+      // direction the infinite inverse makes t_plane +-inf (or NaN on the plane: both children).
+      const std::uint32_t lower = index + 1;
+      const std::uint32_t upper = node.upperChild();
+      const bool positive = !std::signbit(ray.inv_dir[axis]);
+      const std::uint32_t near_child = positive ? lower : upper;
+      const std::uint32_t far_child = positive ? upper : lower;
+      if (t_plane >= tmax) {
+        index = near_child;
+      } else if (t_plane <= tmin) {
+        index = far_child;
+      } else {
+        // Both; argument order makes a NaN t_plane (ray inside the plane) keep the full interval.
+        stack[top++] = {far_child, std::max(tmin, t_plane), tmax};
+        index = near_child;
+        tmax = std::min(tmax, t_plane);
+      }
+      continue;
+    }
+
+    if (node.primCount() != 0 && leaf(node.primOffset(), node.primCount(), t_best)) {
+      found = true;
+      if constexpr (AnyHit) return true;
+    }
+    // Pop the next node that can still hold a closer hit.
+    do {
+      if (top == 0) return found;
+      --top;
+      index = stack[top].node;
+      tmin = stack[top].tmin;
+      tmax = stack[top].tmax;
+    } while (tmin > t_best);
+  }
+}
+
+}  // namespace duplex

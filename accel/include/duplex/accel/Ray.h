@@ -1,0 +1,41 @@
+#pragma once
+/// \file Ray.h
+/// A ray segment origin + t * dir for t in [tnear, tfar].
+
+#include <glm/vec3.hpp>
+
+#include <cmath>
+#include <limits>
+#include <ostream>
+
+namespace duplex {
+
+/// A ray in whatever space its user states (world space for scene queries, object space inside
+/// an object's intersector). The direction is not required to be unit length: `t` is measured in
+/// units of `dir`, which keeps t comparable between world and object space when an instance
+/// transform scales (we never renormalise on entering object space).
+///
+/// The memory layout is exactly one record of the ray file (32 bytes, little endian:
+/// ox, oy, oz, tnear, dx, dy, dz, tfar), so ray files are read without conversion.
+struct Ray {
+  glm::vec3 origin{0.0f};
+  float tnear = 0.0f;
+  glm::vec3 dir{0.0f, 0.0f, 1.0f};
+  float tfar = std::numeric_limits<float>::infinity();
+};
+static_assert(sizeof(Ray) == 32, "Ray must match the 32-byte ray-file record");
+
+/// A ray that queries can answer: finite origin and direction, non-zero direction, tnear not NaN
+/// and tnear <= tfar (tfar may be +inf). Queries report a miss for anything else.
+[[nodiscard]] inline bool isQueryable(const Ray& r) {
+  const bool finite = std::isfinite(r.origin.x) && std::isfinite(r.origin.y) && std::isfinite(r.origin.z) &&
+                      std::isfinite(r.dir.x) && std::isfinite(r.dir.y) && std::isfinite(r.dir.z);
+  return finite && (r.dir.x != 0.0f || r.dir.y != 0.0f || r.dir.z != 0.0f) && r.tnear <= r.tfar;
+}
+
+inline std::ostream& operator<<(std::ostream& os, const Ray& r) {
+  return os << "Ray{o=(" << r.origin.x << ", " << r.origin.y << ", " << r.origin.z << "), d=(" << r.dir.x
+            << ", " << r.dir.y << ", " << r.dir.z << "), t=[" << r.tnear << ", " << r.tfar << "]}";
+}
+
+}  // namespace duplex

@@ -1,0 +1,35 @@
+#pragma once
+/// \file RayFile.h
+/// The raw ray and hit files of the interchange contract (little endian, no header):
+///   ray record: float ox, oy, oz, tnear, dx, dy, dz, tfar              (32 bytes)
+///   hit record: float t, u, v; uint32 instance_id, prim_id             (20 bytes)
+/// A miss has instance_id 0xFFFFFFFF and t = +inf.
+
+#include "duplex/accel/Hit.h"
+#include "duplex/accel/Ray.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <vector>
+
+namespace duplex {
+
+/// One hit-file record.
+struct HitRecord {
+  float t, u, v;
+  std::uint32_t instance_id, prim_id;
+
+  static HitRecord from(const Hit& h);
+  static HitRecord miss();
+};
+static_assert(sizeof(HitRecord) == 20, "HitRecord must match the 20-byte hit-file record");
+
+/// Reads a ray file; throws FileError naming the file when it cannot be read or its size is not
+/// a multiple of 32 bytes.
+[[nodiscard]] std::vector<Ray> readRayFile(const std::filesystem::path& path);
+void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays);
+[[nodiscard]] std::vector<HitRecord> readHitFile(const std::filesystem::path& path);
+void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits);
+
+}  // namespace duplex

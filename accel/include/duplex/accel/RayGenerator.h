@@ -1,0 +1,37 @@
+#pragma once
+/// \file RayGenerator.h
+/// The ray sets of `duplex rays` (primary camera rays and random rays), shared by the tool, the
+/// tests and the benchmarks so that all of them trace the same rays.
+
+#include "duplex/accel/Box.h"
+#include "duplex/accel/Ray.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace duplex {
+
+/// Pinhole camera in world space.
+struct PinholeCamera {
+  glm::dvec3 eye{0.0};
+  glm::dvec3 forward{0.0, 0.0, -1.0};  ///< unit
+  glm::dvec3 right{1.0, 0.0, 0.0};     ///< unit
+  glm::dvec3 up{0.0, 1.0, 0.0};        ///< unit
+  double vertical_fov_deg = 45.0;
+
+  /// The camera of `duplex rays --primary`: at 1.0 x the bbox diagonal from the bbox centre along
+  /// normalize(1, 0.6, 0.8), looking at the centre, up = +y, 45 degrees vertical field of view.
+  static PinholeCamera looking_at_box(const Box& world_bounds);
+  /// Unit direction through the centre of pixel (px, py) of a width x height image, pixel (0, 0)
+  /// at the top left, square pixels.
+  [[nodiscard]] glm::vec3 direction(std::uint32_t px, std::uint32_t py, std::uint32_t width,
+                                    std::uint32_t height) const;
+};
+
+/// width * height primary rays, row-major from the top-left pixel; unit directions, t in [0, inf).
+[[nodiscard]] std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height);
+/// `count` rays with origins uniform in `world_bounds` and directions uniform on the unit sphere,
+/// t in [0, inf). Deterministic for a seed (std::mt19937_64, independent of the thread count).
+[[nodiscard]] std::vector<Ray> randomRays(const Box& world_bounds, std::size_t count, std::uint64_t seed);
+
+}  // namespace duplex

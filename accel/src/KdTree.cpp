@@ -1,0 +1,60 @@
+#include "duplex/accel/KdTree.h"
+
+#include <algorithm>
+#include <functional>
+
+namespace duplex {
+
+KdTreeStats KdTree::stats(float traversal_cost, float intersection_cost) const {
+  KdTreeStats s;
+  s.nodes = static_cast<std::uint32_t>(nodes.size());
+  s.bytes = nodes.size() * sizeof(KdNode) + prim_indices.size() * sizeof(std::uint32_t);
+  if (nodes.empty()) return s;
+  const double root_area = std::max(1e-30, static_cast<double>(bounds.area()));
+  // Depth-first walk carrying each node's box; the SAH cost weighs every node by the probability
+  // that a ray through the root box also passes through it.
+  std::function<void(std::uint32_t, const Box&, std::uint32_t)> walk = [&](std::uint32_t i, const Box& box,
+                                                                           std::uint32_t depth) {
+    const KdNode& n = nodes[i];
+    const double p = box.area() / root_area;
+    s.max_depth = std::max(s.max_depth, depth);
+    if (n.isLeaf()) {
+      ++s.leaves;
+      if (n.primCount() == 0) ++s.empty_leaves;
+      s.references += n.primCount();
+      s.sah_cost += p * intersection_cost * n.primCount();
+      return;
+    }
+    ++s.inner_nodes;
+    s.sah_cost += p * traversal_cost;
+    Box lower = box, upper = box;
+    lower.hi[n.axis()] = n.split();
+    upper.lo[n.axis()] = n.split();
+    walk(i + 1, lower, depth + 1);
+    walk(n.upperChild(), upper, depth + 1);
+  };
+  walk(0, bounds, 0);
+  const std::uint32_t filled = s.leaves - s.empty_leaves;
+  s.avg_leaf_size = filled ? static_cast<double>(s.references) / filled : 0.0;
+  return s;
+}
+
+Box KdTree::nodeBox(std::uint32_t index) const {
+  // Descend from the root; the target lies in the lower subtree iff index < upperChild.
+  Box box = bounds;
+  std::uint32_t i = 0;
+  while (i != index) {
+    const KdNode& n = nodes[i];
+    if (n.isLeaf() || index < i) return {};
+    if (index < n.upperChild()) {
+      box.hi[n.axis()] = n.split();
+      i = i + 1;
+    } else {
+      box.lo[n.axis()] = n.split();
+      i = n.upperChild();
+    }
+  }
+  return box;
+}
+
+}  // namespace duplex

@@ -1,0 +1,62 @@
+#include "duplex/accel/RayGenerator.h"
+
+#include <glm/geometric.hpp>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+namespace duplex {
+
+PinholeCamera PinholeCamera::looking_at_box(const Box& b) {
+  PinholeCamera cam;
+  const glm::dvec3 lo(b.lo), hi(b.hi);
+  const glm::dvec3 centre = 0.5 * (lo + hi);
+  const double diagonal = glm::length(hi - lo);
+  cam.eye = centre + diagonal * glm::normalize(glm::dvec3(1.0, 0.6, 0.8));
+  cam.forward = glm::normalize(centre - cam.eye);
+  cam.right = glm::normalize(glm::cross(cam.forward, glm::dvec3(0.0, 1.0, 0.0)));
+  cam.up = glm::cross(cam.right, cam.forward);
+  return cam;
+}
+
+glm::vec3 PinholeCamera::direction(std::uint32_t px, std::uint32_t py, std::uint32_t width, std::uint32_t height) const {
+  const double half_h = std::tan(0.5 * vertical_fov_deg * std::numbers::pi / 180.0);
+  const double half_w = half_h * static_cast<double>(width) / static_cast<double>(height);
+  const double sx = (2.0 * (px + 0.5) / width - 1.0) * half_w;
+  const double sy = (1.0 - 2.0 * (py + 0.5) / height) * half_h;
+  return glm::vec3(glm::normalize(forward + sx * right + sy * up));
+}
+
+std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height) {
+  const PinholeCamera cam = PinholeCamera::looking_at_box(world_bounds);
+  std::vector<Ray> rays(static_cast<std::size_t>(width) * height);
+  for (std::uint32_t y = 0; y < height; ++y)
+    for (std::uint32_t x = 0; x < width; ++x) {
+      Ray& r = rays[static_cast<std::size_t>(y) * width + x];
+      r.origin = glm::vec3(cam.eye);
+      r.dir = cam.direction(x, y, width, height);
+      r.tnear = 0.0f;
+      r.tfar = std::numeric_limits<float>::infinity();
+    }
+  return rays;
+}
+
+std::vector<Ray> randomRays(const Box& b, std::size_t count, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::vector<Ray> rays(count);
+  for (Ray& r : rays) {
+    for (int k = 0; k < 3; ++k) r.origin[k] = static_cast<float>(b.lo[k] + unit(rng) * (b.hi[k] - b.lo[k]));
+    // Uniform on the sphere: z uniform in [-1, 1], azimuth uniform.
+    const double z = 2.0 * unit(rng) - 1.0;
+    const double phi = 2.0 * std::numbers::pi * unit(rng);
+    const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
+    r.dir = glm::vec3(static_cast<float>(s * std::cos(phi)), static_cast<float>(s * std::sin(phi)), static_cast<float>(z));
+    r.tnear = 0.0f;
+    r.tfar = std::numeric_limits<float>::infinity();
+  }
+  return rays;
+}
+
+}  // namespace duplex

@@ -1,0 +1,60 @@
+#pragma once
+/// \file TriangleMesh.h
+/// Indexed triangle geometry in object space, validated once.
+
+#include "duplex/accel/Box.h"
+
+#include <glm/vec3.hpp>
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace duplex {
+
+/// Positions (object space, any unit) and triangles as vertex-index triples. The triangle index is
+/// the primitive id reported in hits. Degenerate triangles (an index repeated, a non-finite vertex,
+/// or exactly zero area) stay in the list, so ids keep their meaning, but are never hit; they are
+/// counted in degenerateCount().
+class TriangleMesh {
+ public:
+  using Triangle = std::array<std::uint32_t, 3>;
+
+  /// From flat arrays: positions x0 y0 z0 x1 ..., indices i0 i1 i2 (three per triangle). The CAD
+  /// path: no file involved. `name` is used in error messages. Throws InvalidArgument when the
+  /// array sizes are not multiples of 3, an index is out of range, or no triangle is valid.
+  static TriangleMesh fromArrays(std::span<const float> positions, std::span<const std::uint32_t> indices,
+                                 std::string name);
+  /// Same, from vectors of points and triangles.
+  static TriangleMesh fromTriangles(std::vector<glm::vec3> positions, std::vector<Triangle> triangles,
+                                    std::string name);
+
+  [[nodiscard]] const std::string& name() const { return name_; }
+  [[nodiscard]] const std::vector<glm::vec3>& positions() const { return positions_; }
+  [[nodiscard]] const std::vector<Triangle>& triangles() const { return triangles_; }
+  [[nodiscard]] std::size_t triangleCount() const { return triangles_.size(); }
+  /// Whether triangle `i` can be hit (not degenerate).
+  [[nodiscard]] bool isValid(std::size_t i) const { return valid_[i] != 0; }
+  [[nodiscard]] std::size_t degenerateCount() const { return degenerate_count_; }
+  /// Object-space bounds of the valid triangles.
+  [[nodiscard]] const Box& bounds() const { return bounds_; }
+  [[nodiscard]] std::array<glm::vec3, 3> vertices(std::size_t i) const {
+    const Triangle& t = triangles_[i];
+    return {positions_[t[0]], positions_[t[1]], positions_[t[2]]};
+  }
+
+ private:
+  TriangleMesh() = default;
+  void validate();
+
+  std::string name_;
+  std::vector<glm::vec3> positions_;
+  std::vector<Triangle> triangles_;
+  std::vector<std::uint8_t> valid_;
+  std::size_t degenerate_count_ = 0;
+  Box bounds_;
+};
+
+}  // namespace duplex

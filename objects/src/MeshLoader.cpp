@@ -1,0 +1,160 @@
+// OpenMesh is kept in this translation unit only: its headers are heavy and its streams global.
+
+#include "duplex/objects/MeshLoader.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/accel/Log.h"
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Tools/Subdivider/Uniform/LoopT.hh>
+
+#include <algorithm>
+#include <cctype>
+#include <iostream>
+#include <mutex>
+#include <sstream>
+
+namespace duplex {
+
+namespace {
+
+using PolyMesh = OpenMesh::PolyMesh_ArrayKernelT<>;
+using TriMesh = OpenMesh::TriMesh_ArrayKernelT<>;
+
+// OpenMesh reports through global streams that print to std::cerr, once per bad face. We capture
+// them for the duration of a read and count, which is why reads are serialised.
+std::mutex& openMeshMutex() {
+  static std::mutex m;
+  return m;
+}
+
+class OpenMeshCapture {
+ public:
+  OpenMeshCapture() {
+    for (auto* s : {&omerr(), &omlog(), &omout()}) {
+      s->disconnect(std::cerr);
+      s->disconnect(std::cout);
+      s->connect(buffer_);
+    }
+  }
+  ~OpenMeshCapture() {
+    for (auto* s : {&omerr(), &omlog(), &omout()}) {
+      s->flush();
+      s->disconnect(buffer_);
+    }
+    omerr().connect(std::cerr);
+    omlog().connect(std::cerr);
+    omout().connect(std::cout);
+  }
+  std::string text() {
+    for (auto* s : {&omerr(), &omlog(), &omout()}) s->flush();
+    return buffer_.str();
+  }
+
+ private:
+  std::ostringstream buffer_;
+};
+
+std::size_t countOccurrences(const std::string& text, const std::string& what) {
+  std::size_t n = 0;
+  for (std::size_t pos = text.find(what); pos != std::string::npos; pos = text.find(what, pos + what.size())) ++n;
+  return n;
+}
+
+}  // namespace
+
+TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw FileError("mesh file '" + path.string() + "': no such file");
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (ext != ".obj" && ext != ".ply" && ext != ".off" && ext != ".stl" && ext != ".stla" && ext != ".stlb" &&
+      ext != ".om")
+    throw FileError("mesh file '" + path.string() + "': unsupported extension '" + ext +
+                    "' (expected .obj, .ply, .off, .stl or .om)");
+
+  PolyMesh mesh;
+  std::string messages;
+  bool ok = false;
+  {
+    std::lock_guard<std::mutex> lock(openMeshMutex());
+    OpenMeshCapture capture;
+    OpenMesh::IO::Options options;
+    ok = OpenMesh::IO::read_mesh(mesh, path.string(), options);
+    messages = capture.text();
+  }
+  if (!ok) throw FileError("mesh file '" + path.string() + "': OpenMesh could not read it (malformed or truncated)");
+
+  MeshLoadReport rep;
+  rep.complex_edge_warnings = countOccurrences(messages, "complex edge") + countOccurrences(messages, "complex vertex");
+  const std::size_t lines = static_cast<std::size_t>(std::count(messages.begin(), messages.end(), '\n'));
+  rep.other_warnings = lines > rep.complex_edge_warnings ? lines - rep.complex_edge_warnings : 0;
+
+  std::vector<glm::vec3> positions(mesh.n_vertices());
+  for (const auto vh : mesh.vertices()) {
+    const auto& p = mesh.point(vh);
+    positions[vh.idx()] = {p[0], p[1], p[2]};
+  }
+  std::vector<TriangleMesh::Triangle> triangles;
+  triangles.reserve(mesh.n_faces());
+  std::vector<std::uint32_t> corners;
+  for (const auto fh : mesh.faces()) {
+    corners.clear();
+    for (const auto vh : mesh.fv_range(fh)) corners.push_back(static_cast<std::uint32_t>(vh.idx()));
+    if (corners.size() < 3) continue;
+    if (corners.size() > 3) ++rep.polygons_triangulated;
+    for (std::size_t k = 1; k + 1 < corners.size(); ++k) triangles.push_back({corners[0], corners[k], corners[k + 1]});
+  }
+  if (rep.complex_edge_warnings > 0)
+    logger()->info("mesh file '{}': {} non-manifold faces (OpenMesh 'complex edge/vertex'), all kept", path.string(),
+                   rep.complex_edge_warnings);
+  if (report) *report = rep;
+  if (triangles.empty()) throw FileError("mesh file '" + path.string() + "': contains no triangles");
+  try {
+    return TriangleMesh::fromTriangles(std::move(positions), std::move(triangles), path.string());
+  } catch (const InvalidArgument& e) {
+    throw FileError(e.what());
+  }
+}
+
+TriangleMesh loopSubdivide(const TriangleMesh& input, int steps) {
+  if (steps < 0) throw InvalidArgument("loopSubdivide: negative step count");
+  TriMesh mesh;
+  std::vector<TriMesh::VertexHandle> handles;
+  handles.reserve(input.positions().size());
+  for (const glm::vec3& p : input.positions()) handles.push_back(mesh.add_vertex(TriMesh::Point(p.x, p.y, p.z)));
+  {
+    std::lock_guard<std::mutex> lock(openMeshMutex());
+    OpenMeshCapture capture;
+    for (std::size_t i = 0; i < input.triangleCount(); ++i) {
+      if (!input.isValid(i)) continue;
+      const auto& t = input.triangles()[i];
+      mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]);
+    }
+    OpenMesh::Subdivider::Uniform::LoopT<TriMesh> loop;
+    loop.attach(mesh);
+    loop(static_cast<std::size_t>(steps));
+    loop.detach();
+  }
+  mesh.garbage_collection();
+  std::vector<glm::vec3> positions(mesh.n_vertices());
+  for (const auto vh : mesh.vertices()) {
+    const auto& p = mesh.point(vh);
+    positions[vh.idx()] = {p[0], p[1], p[2]};
+  }
+  std::vector<TriangleMesh::Triangle> triangles;
+  triangles.reserve(mesh.n_faces());
+  for (const auto fh : mesh.faces()) {
+    TriangleMesh::Triangle t{};
+    int k = 0;
+    for (const auto vh : mesh.fv_range(fh)) t[k++] = static_cast<std::uint32_t>(vh.idx());
+    triangles.push_back(t);
+  }
+  return TriangleMesh::fromTriangles(std::move(positions), std::move(triangles),
+                                     input.name() + " (Loop x" + std::to_string(steps) + ")");
+}
+
+}  // namespace duplex

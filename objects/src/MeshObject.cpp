@@ -1,0 +1,101 @@
+#include "duplex/objects/MeshObject.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/KdTreeBuilder.h"
+#include "duplex/accel/TriangleClip.h"
+#include "duplex/objects/WatertightTriangle.h"
+
+#include <glm/geometric.hpp>
+
+namespace duplex {
+
+MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config)
+    : Object(mesh ? mesh->name() : std::string()), mesh_(std::move(mesh)) {
+  if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
+  const TriangleMesh& m = *mesh_;
+  // Degenerate triangles get an empty box, which the builder leaves out.
+  std::vector<Box> bounds(m.triangleCount());
+  for (std::size_t i = 0; i < m.triangleCount(); ++i) {
+    if (!m.isValid(i)) continue;
+    const auto v = m.vertices(i);
+    Box b;
+    for (const auto& p : v) b.extend(p);
+    bounds[i] = b;
+  }
+  tree_ = buildKdTree(
+      bounds,
+      [&m](std::uint32_t prim, const Box& box) {
+        const auto v = m.vertices(prim);
+        return clipTriangleToBox(v[0], v[1], v[2], box);
+      },
+      config);
+  leaf_triangles_.resize(tree_.prim_indices.size());
+  for (std::size_t i = 0; i < tree_.prim_indices.size(); ++i) {
+    const std::uint32_t prim = tree_.prim_indices[i];
+    const auto v = m.vertices(prim);
+    leaf_triangles_[i] = {v[0], v[1], v[2], prim};
+  }
+}
+
+bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
+  if (!isQueryable(ray_os)) return false;
+  const KdRay kray(ray_os);
+  const WatertightRay wray(ray_os);
+  float t_best = std::min(hit.t, ray_os.tfar);
+  std::uint32_t best = kInvalidId;
+  float best_u = 0.0f, best_v = 0.0f;
+  const LeafTriangle* tris = leaf_triangles_.data();
+  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+    bool found = false;
+    for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
+      float t, u, v;
+      if (intersectWatertight(wray, tris[i].v0, tris[i].v1, tris[i].v2, t_max, t, u, v)) {
+        t_max = t;
+        best = i;
+        best_u = u;
+        best_v = v;
+        found = true;
+      }
+    }
+    return found;
+  });
+  if (best == kInvalidId) return false;
+  const LeafTriangle& tri = tris[best];
+  hit.t = t_best;
+  hit.u = best_u;
+  hit.v = best_v;
+  hit.prim_id = tri.prim;
+  hit.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+  return true;
+}
+
+bool MeshObject::occluded(const Ray& ray_os) const {
+  if (!isQueryable(ray_os)) return false;
+  const KdRay kray(ray_os);
+  const WatertightRay wray(ray_os);
+  float t_best = ray_os.tfar;
+  const LeafTriangle* tris = leaf_triangles_.data();
+  return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+    for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
+      float t, u, v;
+      if (intersectWatertight(wray, tris[i].v0, tris[i].v1, tris[i].v2, t_max, t, u, v)) return true;
+    }
+    return false;
+  });
+}
+
+bool MeshObject::intersect(const Ray& ray_os, Hit& hit, QueryContext&) const { return intersect(ray_os, hit); }
+bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occluded(ray_os); }
+
+std::size_t MeshObject::accelBytes() const {
+  return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
+         leaf_triangles_.size() * sizeof(LeafTriangle);
+}
+
+std::size_t MeshObject::memoryBytes() const {
+  return accelBytes() + mesh_->positions().size() * sizeof(glm::vec3) +
+         mesh_->triangles().size() * sizeof(TriangleMesh::Triangle);
+}
+
+}  // namespace duplex
