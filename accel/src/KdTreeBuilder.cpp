@@ -166,27 +166,37 @@ class Builder {
     }
     if (best.axis < 0) return best;
 
-    // 2. Exact events in the window of the two bins around the chosen boundary.
+    // 2. Exact events in the window of the two bins around the chosen boundary. Only primitive
+    // bounds are candidates (the SAH optimum lies on one): a bin boundary that is not an event
+    // would let empty-space splits go on forever around a single primitive.
     const int axis = best.axis;
     const float lo = box.lo[axis], hi = box.hi[axis];
-    const float win_lo = std::max(lo, lo + (hi - lo) * (static_cast<float>(best_bin - 1) / kBins));
-    const float win_hi = std::min(hi, lo + (hi - lo) * (static_cast<float>(best_bin + 1) / kBins));
+    float win_lo = std::max(lo, lo + (hi - lo) * (static_cast<float>(best_bin - 1) / kBins));
+    float win_hi = std::min(hi, lo + (hi - lo) * (static_cast<float>(best_bin + 1) / kBins));
     std::size_t below_window = 0, above_window = 0;  // lo < win_lo, hi > win_hi
     std::vector<float> starts, ends, planars;
-    for (const PrimRef& r : refs) {
-      const float a = r.box.lo[axis], b = r.box.hi[axis];
-      if (a < win_lo) ++below_window; else if (a <= win_hi) starts.push_back(a);
-      if (b > win_hi) ++above_window; else if (b >= win_lo) ends.push_back(b);
-      if (a == b && a >= win_lo && a <= win_hi) planars.push_back(a);
+    for (int attempt = 0; attempt < 2; ++attempt) {
+      below_window = above_window = 0;
+      starts.clear();
+      ends.clear();
+      planars.clear();
+      for (const PrimRef& r : refs) {
+        const float a = r.box.lo[axis], b = r.box.hi[axis];
+        if (a < win_lo) ++below_window; else if (a <= win_hi) starts.push_back(a);
+        if (b > win_hi) ++above_window; else if (b >= win_lo) ends.push_back(b);
+        if (a == b && a >= win_lo && a <= win_hi) planars.push_back(a);
+      }
+      if (!starts.empty() || !ends.empty()) break;
+      win_lo = lo;  // no event near the binned optimum: sweep the whole axis
+      win_hi = hi;
     }
     std::sort(starts.begin(), starts.end());
     std::sort(ends.begin(), ends.end());
     std::sort(planars.begin(), planars.end());
     std::vector<float> candidates;
-    candidates.reserve(starts.size() + ends.size() + 1);
+    candidates.reserve(starts.size() + ends.size());
     candidates.insert(candidates.end(), starts.begin(), starts.end());
     candidates.insert(candidates.end(), ends.begin(), ends.end());
-    candidates.push_back(best.pos);
     std::sort(candidates.begin(), candidates.end());
     candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
 
@@ -206,7 +216,7 @@ class Builder {
       if (cost_l < refined.cost) refined = {axis, p, cost_l, true};
       if (cost_u < refined.cost) refined = {axis, p, cost_u, false};
     }
-    return refined.axis >= 0 ? refined : best;
+    return refined;
   }
 
   Split findSimpleSplit(std::vector<PrimRef>& refs, const Box& box) const {

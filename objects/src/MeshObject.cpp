@@ -30,11 +30,10 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
         return clipTriangleToBox(v[0], v[1], v[2], box);
       },
       config);
-  leaf_triangles_.resize(tree_.prim_indices.size());
-  for (std::size_t i = 0; i < tree_.prim_indices.size(); ++i) {
-    const std::uint32_t prim = tree_.prim_indices[i];
-    const auto v = m.vertices(prim);
-    leaf_triangles_[i] = {v[0], v[1], v[2], prim};
+  triangles_.resize(m.triangleCount());
+  for (std::size_t i = 0; i < m.triangleCount(); ++i) {
+    const auto v = m.vertices(i);
+    triangles_[i] = {v[0], v[1], v[2]};
   }
 }
 
@@ -45,14 +44,16 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   float t_best = std::min(hit.t, ray_os.tfar);
   std::uint32_t best = kInvalidId;
   float best_u = 0.0f, best_v = 0.0f;
-  const LeafTriangle* tris = leaf_triangles_.data();
+  const TriangleVertices* tris = triangles_.data();
+  const std::uint32_t* refs = tree_.prim_indices.data();
   traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
     bool found = false;
     for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
+      const TriangleVertices& tri = tris[refs[i]];
       float t, u, v;
-      if (intersectWatertight(wray, tris[i].v0, tris[i].v1, tris[i].v2, t_max, t, u, v)) {
+      if (intersectWatertight(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) {
         t_max = t;
-        best = i;
+        best = refs[i];
         best_u = u;
         best_v = v;
         found = true;
@@ -61,11 +62,11 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
     return found;
   });
   if (best == kInvalidId) return false;
-  const LeafTriangle& tri = tris[best];
+  const TriangleVertices& tri = tris[best];
   hit.t = t_best;
   hit.u = best_u;
   hit.v = best_v;
-  hit.prim_id = tri.prim;
+  hit.prim_id = best;
   hit.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
   return true;
 }
@@ -75,11 +76,13 @@ bool MeshObject::occluded(const Ray& ray_os) const {
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
   float t_best = ray_os.tfar;
-  const LeafTriangle* tris = leaf_triangles_.data();
+  const TriangleVertices* tris = triangles_.data();
+  const std::uint32_t* refs = tree_.prim_indices.data();
   return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
     for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
+      const TriangleVertices& tri = tris[refs[i]];
       float t, u, v;
-      if (intersectWatertight(wray, tris[i].v0, tris[i].v1, tris[i].v2, t_max, t, u, v)) return true;
+      if (intersectWatertight(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) return true;
     }
     return false;
   });
@@ -90,7 +93,7 @@ bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occlu
 
 std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
-         leaf_triangles_.size() * sizeof(LeafTriangle);
+         triangles_.size() * sizeof(TriangleVertices);
 }
 
 std::size_t MeshObject::memoryBytes() const {

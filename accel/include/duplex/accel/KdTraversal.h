@@ -17,21 +17,23 @@
 namespace duplex {
 
 /// Per-ray values the traversal needs, computed once per ray and tree space.
+/// Plain arrays rather than glm::vec3: the traversal indexes by a run-time axis, and GLM's
+/// operator[] is a switch.
 struct KdRay {
-  glm::vec3 origin;
-  glm::vec3 dir;
+  float origin[3];
   /// 1/dir with tiny or zero components replaced by +-inf of the same sign, so that +0 and -0
   /// directions classify as "never crosses" and a ray lying in a split plane visits both sides.
-  glm::vec3 inv_dir;
+  float inv_dir[3];
   bool zero[3];
   float tnear;
   float tfar;
 
-  explicit KdRay(const Ray& r) : origin(r.origin), dir(r.dir), tnear(r.tnear), tfar(r.tfar) {
+  explicit KdRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear), tfar(r.tfar) {
+    const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     for (int k = 0; k < 3; ++k) {
-      const float inv = 1.0f / r.dir[k];
+      const float inv = 1.0f / d[k];
       zero[k] = !std::isfinite(inv);  // |d| so small that 1/d overflows behaves like 0
-      inv_dir[k] = zero[k] ? std::copysign(std::numeric_limits<float>::infinity(), r.dir[k]) : inv;
+      inv_dir[k] = zero[k] ? std::copysign(std::numeric_limits<float>::infinity(), d[k]) : inv;
     }
   }
 };
@@ -43,13 +45,15 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   tmin = ray.tnear;
   tmax = ray.tfar;
   if (!(tmin <= tmax)) return false;
+  const float lo[3] = {box.lo.x, box.lo.y, box.lo.z};
+  const float hi[3] = {box.hi.x, box.hi.y, box.hi.z};
   for (int k = 0; k < 3; ++k) {
     if (ray.zero[k]) {
-      if (ray.origin[k] < box.lo[k] || ray.origin[k] > box.hi[k]) return false;
+      if (ray.origin[k] < lo[k] || ray.origin[k] > hi[k]) return false;
       continue;
     }
-    float t0 = (box.lo[k] - ray.origin[k]) * ray.inv_dir[k];
-    float t1 = (box.hi[k] - ray.origin[k]) * ray.inv_dir[k];
+    float t0 = (lo[k] - ray.origin[k]) * ray.inv_dir[k];
+    float t1 = (hi[k] - ray.origin[k]) * ray.inv_dir[k];
     if (t0 > t1) std::swap(t0, t1);
     t1 *= 1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
     t0 = t0 >= 0.0f ? t0 * (1.0f - 2.0f * 3.0f * std::numeric_limits<float>::epsilon())

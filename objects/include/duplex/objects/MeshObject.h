@@ -37,14 +37,15 @@ class MeshObject final : public Object {
   [[nodiscard]] std::size_t accelBytes() const;
 
  private:
-  // Triangle vertices copied in leaf order so that a leaf is one contiguous read.
-  struct LeafTriangle {
+  // Vertices of each triangle by triangle id (36 bytes), so that a leaf reference is a 4-byte
+  // index: random rays are bound by memory latency, and copying triangles per reference
+  // (40 bytes each, 2-4 references per triangle) made the working set several times larger.
+  struct TriangleVertices {
     glm::vec3 v0, v1, v2;
-    std::uint32_t prim;
   };
   std::shared_ptr<const TriangleMesh> mesh_;
   KdTree tree_;
-  std::vector<LeafTriangle> leaf_triangles_;
+  std::vector<TriangleVertices> triangles_;
 };
 
 }  // namespace duplex

@@ -16,20 +16,21 @@ namespace duplex {
 
 /// Per-ray constants of the watertight test (computed once per ray and space).
 struct WatertightRay {
-  glm::vec3 origin;
+  float origin[3];
   int kx, ky, kz;       // axis permutation: kz = dominant direction axis
   float sx, sy, sz;     // shear constants
   float tnear;
 
-  explicit WatertightRay(const Ray& r) : origin(r.origin), tnear(r.tnear) {
-    const glm::vec3 a = glm::abs(r.dir);
-    kz = (a.x >= a.y && a.x >= a.z) ? 0 : (a.y >= a.z ? 1 : 2);
+  explicit WatertightRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear) {
+    const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
+    const float a[3] = {std::abs(d[0]), std::abs(d[1]), std::abs(d[2])};
+    kz = (a[0] >= a[1] && a[0] >= a[2]) ? 0 : (a[1] >= a[2] ? 1 : 2);
     kx = (kz + 1) % 3;
     ky = (kx + 1) % 3;
-    if (r.dir[kz] < 0.0f) std::swap(kx, ky);  // keep the winding, so the sign of det is meaningful
-    sx = r.dir[kx] / r.dir[kz];
-    sy = r.dir[ky] / r.dir[kz];
-    sz = 1.0f / r.dir[kz];
+    if (d[kz] < 0.0f) std::swap(kx, ky);  // keep the winding, so the sign of det is meaningful
+    sx = d[kx] / d[kz];
+    sy = d[ky] / d[kz];
+    sz = 1.0f / d[kz];
   }
 };
 
@@ -37,9 +38,10 @@ struct WatertightRay {
 /// barycentrics (u weighs b, v weighs c) and returns true.
 inline bool intersectWatertight(const WatertightRay& ray, const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                                 float t_max, float& t, float& u, float& v) {
-  const glm::vec3 A = a - ray.origin;
-  const glm::vec3 B = b - ray.origin;
-  const glm::vec3 C = c - ray.origin;
+  // Plain arrays: indexed by the run-time permutation below (GLM's operator[] is a switch).
+  const float A[3] = {a.x - ray.origin[0], a.y - ray.origin[1], a.z - ray.origin[2]};
+  const float B[3] = {b.x - ray.origin[0], b.y - ray.origin[1], b.z - ray.origin[2]};
+  const float C[3] = {c.x - ray.origin[0], c.y - ray.origin[1], c.z - ray.origin[2]};
   const float ax = A[ray.kx] - ray.sx * A[ray.kz];
   const float ay = A[ray.ky] - ray.sy * A[ray.kz];
   const float bx = B[ray.kx] - ray.sx * B[ray.kz];
