@@ -24,9 +24,14 @@ namespace duplex {
 
 namespace {
 
+// Bounds as plain arrays: the builder indexes by a run-time axis everywhere, and GLM's
+// operator[] is a switch.
 struct PrimRef {
-  Box box;  // primitive bounds clipped to the current node
+  float lo[3], hi[3];  // primitive bounds clipped to the current node
   std::uint32_t id;
+
+  PrimRef(const Box& b, std::uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z}, hi{b.hi.x, b.hi.y, b.hi.z}, id(i) {}
+  [[nodiscard]] Box box() const { return Box({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}); }
 };
 
 struct Subtree {
@@ -42,13 +47,6 @@ struct Split {
 };
 
 constexpr int kBins = 32;
-
-// Surface area of `box` with its extent on `axis` replaced by `length` (children of a split).
-inline float areaWithLength(const glm::vec3& e, int axis, float length) {
-  const float a = e[(axis + 1) % 3];
-  const float b = e[(axis + 2) % 3];
-  return 2.0f * (a * b + length * (a + b));
-}
 
 class Builder {
  public:
@@ -121,43 +119,76 @@ class Builder {
     out.prims.insert(out.prims.end(), sub.prims.begin(), sub.prims.end());
   }
 
-  float splitCost(const glm::vec3& extent, float inv_area, int axis, float lo, float hi, float pos,
-                  std::size_t n_lower, std::size_t n_upper) const {
-    const float p_lower = areaWithLength(extent, axis, pos - lo) * inv_area;
-    const float p_upper = areaWithLength(extent, axis, hi - pos) * inv_area;
+  // SAH cost terms of one node: the surface area of a child is 2 (ab + len (a + b)) where a, b
+  // are the node's extents on the other two axes and len its extent on the split axis.
+  struct NodeGeometry {
+    float lo[3], hi[3];
+    float ab[3], a_plus_b[3];
+    float inv_half_area;
+    explicit NodeGeometry(const Box& box) {
+      lo[0] = box.lo.x, lo[1] = box.lo.y, lo[2] = box.lo.z;
+      hi[0] = box.hi.x, hi[1] = box.hi.y, hi[2] = box.hi.z;
+      const float e[3] = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+      for (int axis = 0; axis < 3; ++axis) {
+        const float a = e[(axis + 1) % 3], b = e[(axis + 2) % 3];
+        ab[axis] = a * b;
+        a_plus_b[axis] = a + b;
+      }
+      const float half_area = e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
+      inv_half_area = half_area > 0.0f ? 1.0f / half_area : 0.0f;
+    }
+  };
+
+  float splitCost(const NodeGeometry& g, int axis, float pos, std::size_t n_lower, std::size_t n_upper) const {
+    const float p_lower = (g.ab[axis] + (pos - g.lo[axis]) * g.a_plus_b[axis]) * g.inv_half_area;
+    const float p_upper = (g.ab[axis] + (g.hi[axis] - pos) * g.a_plus_b[axis]) * g.inv_half_area;
     float cost = cfg_.traversal_cost +
                  cfg_.intersection_cost * (p_lower * static_cast<float>(n_lower) + p_upper * static_cast<float>(n_upper));
     if (n_lower == 0 || n_upper == 0) cost *= 1.0f - cfg_.empty_bonus;
     return cost;
   }
 
-  Split findSahSplit(const std::vector<PrimRef>& refs, const Box& box) const {
-    const glm::vec3 extent = box.extent();
-    const float area = box.area();
-    Split best;
-    if (!(area > 0.0f)) return best;
-    const float inv_area = 1.0f / area;
+  // Nodes this small are swept exactly on all axes; binning would cost more than it saves.
+  static constexpr std::size_t kExactSweepMax = 48;
 
-    // 1. Binned estimate on every axis with a positive extent.
+  Split findSahSplit(const std::vector<PrimRef>& refs, const Box& box) const {
+    const NodeGeometry g(box);
+    if (!(g.inv_half_area > 0.0f)) return {};
+    if (refs.size() <= kExactSweepMax) {
+      Split best;
+      for (int axis = 0; axis < 3; ++axis) {
+        if (!(g.hi[axis] > g.lo[axis])) continue;
+        const Split s = sweepEvents(refs, g, axis, g.lo[axis], g.hi[axis]);
+        if (s.cost < best.cost) best = s;
+      }
+      return best;
+    }
+
+    // 1. Binned estimate on every axis with a positive extent, one pass over the references.
+    float scale[3];
+    for (int axis = 0; axis < 3; ++axis)
+      scale[axis] = g.hi[axis] > g.lo[axis] ? static_cast<float>(kBins) / (g.hi[axis] - g.lo[axis]) : 0.0f;
+    std::array<std::array<std::uint32_t, kBins>, 3> starts_bin{}, ends_bin{};
+    for (const PrimRef& r : refs) {
+      for (int axis = 0; axis < 3; ++axis) {
+        const int b0 = std::clamp(static_cast<int>((r.lo[axis] - g.lo[axis]) * scale[axis]), 0, kBins - 1);
+        const int b1 = std::clamp(static_cast<int>((r.hi[axis] - g.lo[axis]) * scale[axis]), 0, kBins - 1);
+        ++starts_bin[axis][b0];
+        ++ends_bin[axis][b1];
+      }
+    }
+    Split best;
     int best_bin = -1;
     for (int axis = 0; axis < 3; ++axis) {
-      const float lo = box.lo[axis], hi = box.hi[axis];
+      const float lo = g.lo[axis], hi = g.hi[axis];
       if (!(hi > lo)) continue;
-      const float scale = static_cast<float>(kBins) / (hi - lo);
-      std::array<std::uint32_t, kBins> starts{}, ends{};
-      for (const PrimRef& r : refs) {
-        const int b0 = std::clamp(static_cast<int>((r.box.lo[axis] - lo) * scale), 0, kBins - 1);
-        const int b1 = std::clamp(static_cast<int>((r.box.hi[axis] - lo) * scale), 0, kBins - 1);
-        ++starts[b0];
-        ++ends[b1];
-      }
       std::size_t n_lower = 0, n_upper = refs.size();
       for (int j = 1; j < kBins; ++j) {
-        n_lower += starts[j - 1];
-        n_upper -= ends[j - 1];
+        n_lower += starts_bin[axis][j - 1];
+        n_upper -= ends_bin[axis][j - 1];
         const float pos = lo + (hi - lo) * (static_cast<float>(j) / kBins);
         if (!(pos > lo && pos < hi)) continue;
-        const float cost = splitCost(extent, inv_area, axis, lo, hi, pos, n_lower, n_upper);
+        const float cost = splitCost(g, axis, pos, n_lower, n_upper);
         if (cost < best.cost) {
           best = {axis, pos, cost, true};
           best_bin = j;
@@ -168,55 +199,60 @@ class Builder {
 
     // 2. Exact events in the window of the two bins around the chosen boundary. Only primitive
     // bounds are candidates (the SAH optimum lies on one): a bin boundary that is not an event
-    // would let empty-space splits go on forever around a single primitive.
+    // would let empty-space splits go on forever around a single primitive. When no event falls
+    // into the window, the whole axis is swept.
     const int axis = best.axis;
-    const float lo = box.lo[axis], hi = box.hi[axis];
-    float win_lo = std::max(lo, lo + (hi - lo) * (static_cast<float>(best_bin - 1) / kBins));
-    float win_hi = std::min(hi, lo + (hi - lo) * (static_cast<float>(best_bin + 1) / kBins));
+    const float lo = g.lo[axis], hi = g.hi[axis];
+    const float win_lo = std::max(lo, lo + (hi - lo) * (static_cast<float>(best_bin - 1) / kBins));
+    const float win_hi = std::min(hi, lo + (hi - lo) * (static_cast<float>(best_bin + 1) / kBins));
+    Split refined = sweepEvents(refs, g, axis, win_lo, win_hi);
+    if (refined.axis < 0) refined = sweepEvents(refs, g, axis, lo, hi);
+    return refined;
+  }
+
+  // Exact SAH over the events (clipped bounds) of `axis` that lie in [win_lo, win_hi], after
+  // Wald & Havran: a primitive counts below a plane p if its lower bound is < p, above if its
+  // upper bound is > p; a primitive lying in p goes to the cheaper side.
+  Split sweepEvents(const std::vector<PrimRef>& refs, const NodeGeometry& g, int axis, float win_lo, float win_hi) const {
     std::size_t below_window = 0, above_window = 0;  // lo < win_lo, hi > win_hi
-    std::vector<float> starts, ends, planars;
-    for (int attempt = 0; attempt < 2; ++attempt) {
-      below_window = above_window = 0;
-      starts.clear();
-      ends.clear();
-      planars.clear();
-      for (const PrimRef& r : refs) {
-        const float a = r.box.lo[axis], b = r.box.hi[axis];
-        if (a < win_lo) ++below_window; else if (a <= win_hi) starts.push_back(a);
-        if (b > win_hi) ++above_window; else if (b >= win_lo) ends.push_back(b);
-        if (a == b && a >= win_lo && a <= win_hi) planars.push_back(a);
-      }
-      if (!starts.empty() || !ends.empty()) break;
-      win_lo = lo;  // no event near the binned optimum: sweep the whole axis
-      win_hi = hi;
+    // Per-thread scratch: this runs once or three times per node, and allocation dominated.
+    thread_local std::vector<float> starts, ends, planars;
+    starts.clear();
+    ends.clear();
+    planars.clear();
+    for (const PrimRef& r : refs) {
+      const float a = r.lo[axis], b = r.hi[axis];
+      if (a < win_lo) ++below_window; else if (a <= win_hi) starts.push_back(a);
+      if (b > win_hi) ++above_window; else if (b >= win_lo) ends.push_back(b);
+      if (a == b && a >= win_lo && a <= win_hi) planars.push_back(a);
     }
+    Split best;
+    if (starts.empty() && ends.empty()) return best;
     std::sort(starts.begin(), starts.end());
     std::sort(ends.begin(), ends.end());
     std::sort(planars.begin(), planars.end());
-    std::vector<float> candidates;
-    candidates.reserve(starts.size() + ends.size());
-    candidates.insert(candidates.end(), starts.begin(), starts.end());
-    candidates.insert(candidates.end(), ends.begin(), ends.end());
-    std::sort(candidates.begin(), candidates.end());
-    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-
-    Split refined;
+    const float lo = g.lo[axis], hi = g.hi[axis];
     std::size_t i_start = 0, i_end = 0, i_planar = 0;
-    for (const float p : candidates) {
-      if (!(p > lo && p < hi)) continue;
-      while (i_start < starts.size() && starts[i_start] < p) ++i_start;
-      while (i_end < ends.size() && ends[i_end] <= p) ++i_end;
+    // Merge the two sorted lists; each distinct value is one candidate plane.
+    while (i_start < starts.size() || i_end < ends.size()) {
+      const float p = i_end >= ends.size() ? starts[i_start]
+                      : i_start >= starts.size() ? ends[i_end]
+                                                 : std::min(starts[i_start], ends[i_end]);
       while (i_planar < planars.size() && planars[i_planar] < p) ++i_planar;
       std::size_t n_planar = 0;
       while (i_planar + n_planar < planars.size() && planars[i_planar + n_planar] == p) ++n_planar;
-      const std::size_t n_lower = below_window + i_start;             // lo < p
+      const std::size_t n_lower = below_window + i_start;                // lo < p
+      while (i_end < ends.size() && ends[i_end] <= p) ++i_end;
       const std::size_t n_upper = above_window + (ends.size() - i_end);  // hi > p
-      const float cost_l = splitCost(extent, inv_area, axis, lo, hi, p, n_lower + n_planar, n_upper);
-      const float cost_u = splitCost(extent, inv_area, axis, lo, hi, p, n_lower, n_upper + n_planar);
-      if (cost_l < refined.cost) refined = {axis, p, cost_l, true};
-      if (cost_u < refined.cost) refined = {axis, p, cost_u, false};
+      if (p > lo && p < hi) {
+        const float cost_l = splitCost(g, axis, p, n_lower + n_planar, n_upper);
+        const float cost_u = splitCost(g, axis, p, n_lower, n_upper + n_planar);
+        if (cost_l < best.cost) best = {axis, p, cost_l, true};
+        if (cost_u < best.cost) best = {axis, p, cost_u, false};
+      }
+      while (i_start < starts.size() && starts[i_start] <= p) ++i_start;
     }
-    return refined;
+    return best;
   }
 
   Split findSimpleSplit(std::vector<PrimRef>& refs, const Box& box) const {
@@ -226,7 +262,7 @@ class Builder {
     float pos = 0.5f * (lo + hi);
     if (cfg_.heuristic == KdHeuristic::Median) {
       std::vector<float> c(refs.size());
-      for (std::size_t i = 0; i < refs.size(); ++i) c[i] = 0.5f * (refs[i].box.lo[axis] + refs[i].box.hi[axis]);
+      for (std::size_t i = 0; i < refs.size(); ++i) c[i] = 0.5f * (refs[i].lo[axis] + refs[i].hi[axis]);
       auto mid = c.begin() + static_cast<std::ptrdiff_t>(c.size() / 2);
       std::nth_element(c.begin(), mid, c.end());
       pos = *mid;
@@ -245,7 +281,7 @@ class Builder {
     upper.reserve(refs.size());
     const int axis = s.axis;
     for (const PrimRef& r : refs) {
-      const float a = r.box.lo[axis], b = r.box.hi[axis];
+      const float a = r.lo[axis], b = r.hi[axis];
       if (a == s.pos && b == s.pos) {
         (s.planar_left ? lower : upper).push_back(r);
         continue;
@@ -261,12 +297,10 @@ class Builder {
         // the plain box intersection is the fallback when clipping is off.
         for (int side = 0; side < 2; ++side) {
           const Box& child = side == 0 ? lower_box : upper_box;
-          Box clipped = cfg_.clip_primitives ? clip_(r.id, intersection(r.box, child)) : intersection(r.box, child);
-          if (clipped.empty()) {
-            if (cfg_.clip_primitives) continue;
-            clipped = intersection(r.box, child);
-          }
-          (side == 0 ? lower : upper).push_back({clipped, r.id});
+          const Box bounded = intersection(r.box(), child);
+          const Box clipped = cfg_.clip_primitives ? clip_(r.id, bounded) : bounded;
+          if (clipped.empty()) continue;
+          (side == 0 ? lower : upper).emplace_back(clipped, r.id);
         }
       }
     }
@@ -319,7 +353,7 @@ KdTree buildKdTree(std::span<const Box> prim_bounds, const KdClipFunction& clip,
   refs.reserve(prim_bounds.size());
   for (std::size_t i = 0; i < prim_bounds.size(); ++i) {
     if (!finiteBox(prim_bounds[i])) continue;
-    refs.push_back({prim_bounds[i], static_cast<std::uint32_t>(i)});
+    refs.emplace_back(prim_bounds[i], static_cast<std::uint32_t>(i));
     tree.bounds.extend(prim_bounds[i]);
   }
   if (refs.empty()) return tree;
