@@ -1,0 +1,26 @@
+#pragma once
+/// \file RaysCommand.h
+/// `duplex rays`: write the contract's ray sets (primary camera rays or random rays) for a scene.
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+
+namespace duplex::cli {
+
+struct RaysOptions {
+  std::filesystem::path scene;  ///< scene-json-v1 file; only its world bounds are used
+  std::filesystem::path out;    ///< ray file to write
+  /// Exactly one of the two sets: primary rays of a width x height image (duplex::primaryRays) or
+  /// `random_count` random rays from `seed` (duplex::randomRays).
+  std::optional<std::uint32_t> width, height;
+  std::optional<std::uint64_t> random_count, seed;
+};
+
+/// Writes the ray file and returns {"rays": N, "out": PATH}. Throws duplex::Error for bad input
+/// (including a scene without instances, which has no bounds to aim at).
+[[nodiscard]] nlohmann::ordered_json runRays(const RaysOptions& options);
+
+}  // namespace duplex::cli
