@@ -1,0 +1,320 @@
+// duplex_cli_check: the contract tests of the `duplex` tool and the demo, run from CTest.
+// It drives the built programs as a tool outside the project would (fork/exec, files, stdout),
+// and shares no code with the library: the expected records and camera are computed here.
+//
+//   duplex_cli_check fixtures DIR                      write the fixtures (QuadScene.h)
+//   duplex_cli_check trace DUPLEX DIR                  closest-hit records and the JSON line
+//   duplex_cli_check any-hit DUPLEX DIR                --any-hit records
+//   duplex_cli_check rays DUPLEX DIR                   `duplex rays` sizes, contract, determinism
+//   duplex_cli_check fails DIR NEEDLE -- PROGRAM ARGS  non-zero exit, no crash, NEEDLE in stderr
+//   duplex_cli_check demo DEMO DIR                     the demo writes a PNG and prints figures
+//   duplex_cli_check shared-data DUPLEX DIR DATA_DIR   real meshes (skipped, status 77, without them)
+// Exit status: 0 pass, 1 fail, 77 skipped.
+
+#include "QuadScene.h"
+#include "Subprocess.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using namespace duplex::clitest;
+
+namespace {
+
+constexpr int kSkip = 77;
+
+/// A failed expectation; main prints it and exits 1.
+struct Failure : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+void expect(bool ok, const std::string& what) {
+  if (!ok) throw Failure(what);
+}
+
+std::string show(const HitRecord& h) {
+  std::ostringstream s;
+  s << "{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", instance=" << h.instance_id << ", prim=" << h.prim_id << "}";
+  return s.str();
+}
+
+std::string show(const RayRecord& r) {
+  std::ostringstream s;
+  s << "{o=(" << r.ox << ", " << r.oy << ", " << r.oz << "), d=(" << r.dx << ", " << r.dy << ", " << r.dz << "), t=["
+    << r.tnear << ", " << r.tfar << "]}";
+  return s.str();
+}
+
+RunResult runOk(const std::vector<std::string>& argv, const fs::path& dir) {
+  RunResult r = run(argv, dir.string());
+  std::string cmd;
+  for (const std::string& a : argv) cmd += a + " ";
+  expect(r.exited && r.exit_code == 0, "`" + cmd + "` ended with " + describe(r) + "; stderr:\n" + r.err);
+  return r;
+}
+
+// stdout must be exactly one JSON object on one line.
+nlohmann::json parseOneLine(const std::string& out) {
+  expect(!out.empty() && out.back() == '\n' && out.find('\n') == out.size() - 1,
+         "stdout is not exactly one line:\n" + out);
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(out);
+  } catch (const nlohmann::json::exception& e) {
+    throw Failure("stdout is not JSON (" + std::string(e.what()) + "):\n" + out);
+  }
+  expect(j.is_object(), "stdout is not a JSON object: " + out);
+  return j;
+}
+
+double number(const nlohmann::json& j, const char* key) {
+  expect(j.contains(key) && j[key].is_number(), std::string("JSON key \"") + key + "\" missing or not a number: " + j.dump());
+  return j[key].get<double>();
+}
+
+void compareRecords(const fs::path& actual_path, const fs::path& expected_path, const std::vector<RayRecord>& rays) {
+  const auto actual = readRecords<HitRecord>(actual_path);
+  const auto expected = readRecords<HitRecord>(expected_path);
+  expect(actual.size() == expected.size(), actual_path.string() + ": " + std::to_string(actual.size()) +
+                                               " records, expected " + std::to_string(expected.size()));
+  std::string errors;
+  for (std::size_t i = 0; i < actual.size(); ++i)
+    if (std::memcmp(&actual[i], &expected[i], sizeof(HitRecord)) != 0)
+      errors += "  ray " + std::to_string(i) + " " + show(rays[i]) + ": got " + show(actual[i]) + ", expected " +
+                show(expected[i]) + "\n";
+  expect(errors.empty(), actual_path.string() + " differs from the analytic records:\n" + errors);
+}
+
+std::vector<std::string> traceArgs(const std::string& duplex, const fs::path& dir, const fs::path& hits) {
+  return {duplex, "trace", "--scene", (dir / "quad.json").string(), "--rays", (dir / "rays.bin").string(), "--hits",
+          hits.string()};
+}
+
+// Closest hit or --any-hit over the quad scene: exact records, the JSON line, and the same
+// records with any thread count.
+int checkTrace(const std::string& duplex, const fs::path& dir, bool any_hit) {
+  const QuadCase c = quadCase();
+  const fs::path expected = dir / (any_hit ? "expected_any.bin" : "expected_closest.bin");
+  const std::string tag = any_hit ? "any" : "closest";
+  std::size_t expected_hits = 0;
+  for (const HitRecord& h : any_hit ? c.any_hit : c.closest) expected_hits += h.instance_id != kNone;
+
+  // Two threads, three runs: the full report.
+  const fs::path hits = dir / ("hits_" + tag + ".bin");
+  auto args = traceArgs(duplex, dir, hits);
+  args.insert(args.end(), {"--threads", "2", "--repeat", "3"});
+  if (any_hit) args.push_back("--any-hit");
+  fs::remove(hits);
+  const RunResult r = runOk(args, dir);
+  const nlohmann::json j = parseOneLine(r.out);
+  expect(number(j, "rays") == static_cast<double>(c.rays.size()), "\"rays\" is not " + std::to_string(c.rays.size()) + ": " + j.dump());
+  expect(number(j, "hits") == static_cast<double>(expected_hits), "\"hits\" is not " + std::to_string(expected_hits) + ": " + j.dump());
+  expect(number(j, "threads") == 2.0, "\"threads\" is not 2: " + j.dump());
+  for (const char* key : {"load_ms", "build_ms", "trace_ms", "mrays_per_s"})
+    expect(number(j, key) >= 0.0, std::string("\"") + key + "\" is negative: " + j.dump());
+  if (j.contains("trace_ms_all")) {
+    expect(j["trace_ms_all"].is_array() && j["trace_ms_all"].size() == 3, "\"trace_ms_all\" does not hold 3 runs: " + j.dump());
+    std::vector<double> runs = j["trace_ms_all"].get<std::vector<double>>();
+    std::sort(runs.begin(), runs.end());
+    expect(number(j, "trace_ms") == runs[1], "\"trace_ms\" is not the median of \"trace_ms_all\": " + j.dump());
+  }
+  compareRecords(hits, expected, c.rays);
+
+  // One thread, and the default thread count: the same records.
+  for (const std::vector<std::string>& extra : {std::vector<std::string>{"--threads", "1"}, std::vector<std::string>{}}) {
+    const fs::path again = dir / ("hits_" + tag + "_again.bin");
+    auto a = traceArgs(duplex, dir, again);
+    a.insert(a.end(), extra.begin(), extra.end());
+    if (any_hit) a.push_back("--any-hit");
+    parseOneLine(runOk(a, dir).out);
+    compareRecords(again, expected, c.rays);
+  }
+  std::cout << "trace" << (any_hit ? " --any-hit" : "") << ": " << c.rays.size() << " records as expected; " << r.out;
+  return 0;
+}
+
+// The world box of quad.json, by hand: [0,7] x [0,2] x [-3,1].
+constexpr double kBoxLo[3] = {0.0, 0.0, -3.0};
+constexpr double kBoxHi[3] = {7.0, 2.0, 1.0};
+
+struct Vec {
+  double x, y, z;
+  Vec operator+(const Vec& o) const { return {x + o.x, y + o.y, z + o.z}; }
+  Vec operator-(const Vec& o) const { return {x - o.x, y - o.y, z - o.z}; }
+  Vec operator*(double s) const { return {x * s, y * s, z * s}; }
+};
+double dot(const Vec& a, const Vec& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+Vec cross(const Vec& a, const Vec& b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
+Vec normalize(const Vec& a) { return a * (1.0 / std::sqrt(dot(a, a))); }
+
+bool near(double a, double b, double tol) { return std::abs(a - b) <= tol * std::max(1.0, std::abs(b)); }
+
+// `duplex rays`: record counts, the primary camera of the contract, random rays in the world box,
+// determinism per seed.
+int checkRays(const std::string& duplex, const fs::path& dir) {
+  const std::string scene = (dir / "quad.json").string();
+  auto raysCmd = [&](const fs::path& out, std::vector<std::string> mode) {
+    std::vector<std::string> a = {duplex, "rays", "--scene", scene};
+    a.insert(a.end(), mode.begin(), mode.end());
+    a.insert(a.end(), {"--out", out.string()});
+    const nlohmann::json j = parseOneLine(runOk(a, dir).out);
+    expect(j.contains("out") && j["out"] == out.string(), "summary does not name the output " + out.string() + ": " + j.dump());
+    return number(j, "rays");
+  };
+  auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+
+  // Primary rays: 4 x 3, row-major from the top-left pixel, against an independent camera.
+  const fs::path primary = dir / "primary.bin";
+  expect(raysCmd(primary, {"--primary", "4", "3"}) == 12.0, "--primary 4 3 does not report 12 rays");
+  expect(fs::file_size(primary) == 12 * 32, "--primary 4 3 wrote " + std::to_string(fs::file_size(primary)) + " bytes, not 384");
+  const Vec lo{kBoxLo[0], kBoxLo[1], kBoxLo[2]}, hi{kBoxHi[0], kBoxHi[1], kBoxHi[2]};
+  const Vec centre = (lo + hi) * 0.5;
+  const Vec eye = centre + normalize({1.0, 0.6, 0.8}) * std::sqrt(dot(hi - lo, hi - lo));
+  const Vec forward = normalize(centre - eye);
+  const Vec right = normalize(cross(forward, {0.0, 1.0, 0.0}));
+  const Vec up = cross(right, forward);
+  const double half_h = std::tan(22.5 * std::numbers::pi / 180.0), half_w = half_h * 4.0 / 3.0;
+  const auto p = readRecords<RayRecord>(primary);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double px = static_cast<double>(i % 4), py = static_cast<double>(i / 4);
+    const Vec d = normalize(forward + right * ((2.0 * (px + 0.5) / 4.0 - 1.0) * half_w) +
+                            up * ((1.0 - 2.0 * (py + 0.5) / 3.0) * half_h));
+    const bool ok = near(p[i].ox, eye.x, 1e-5) && near(p[i].oy, eye.y, 1e-5) && near(p[i].oz, eye.z, 1e-5) &&
+                    near(p[i].dx, d.x, 1e-5) && near(p[i].dy, d.y, 1e-5) && near(p[i].dz, d.z, 1e-5) &&
+                    p[i].tnear == 0.0f && std::isinf(p[i].tfar) && p[i].tfar > 0.0f;
+    std::ostringstream expected;
+    expected << "o=(" << eye.x << ", " << eye.y << ", " << eye.z << ") d=(" << d.x << ", " << d.y << ", " << d.z << ")";
+    expect(ok, "primary ray " + std::to_string(i) + " is " + show(p[i]) + ", expected " + expected.str());
+  }
+
+  // Random rays: size, determinism per seed, origins in the box, unit directions.
+  const fs::path r1 = dir / "random1.bin", r2 = dir / "random2.bin", r3 = dir / "random3.bin";
+  expect(raysCmd(r1, {"--random", "100", "--seed", "7"}) == 100.0, "--random 100 does not report 100 rays");
+  expect(fs::file_size(r1) == 3200, "--random 100 wrote " + std::to_string(fs::file_size(r1)) + " bytes, not 3200");
+  raysCmd(r2, {"--random", "100", "--seed", "7"});
+  expect(bytes(r1) == bytes(r2), "--random 100 --seed 7 is not deterministic");
+  raysCmd(r3, {"--random", "100", "--seed", "8"});
+  expect(bytes(r1) != bytes(r3), "--seed 8 gives the same rays as --seed 7");
+  for (const RayRecord& r : readRecords<RayRecord>(r1)) {
+    const double o[3] = {r.ox, r.oy, r.oz};
+    bool inside = true;
+    for (int k = 0; k < 3; ++k) inside &= o[k] >= kBoxLo[k] - 1e-4 && o[k] <= kBoxHi[k] + 1e-4;
+    const double len = std::sqrt(double(r.dx) * r.dx + double(r.dy) * r.dy + double(r.dz) * r.dz);
+    expect(inside && near(len, 1.0, 1e-5) && r.tnear == 0.0f && std::isinf(r.tfar),
+           "random ray " + show(r) + " is not in the world box with a unit direction and t in [0, inf)");
+  }
+  std::cout << "rays: primary 4x3 (384 bytes) and random 100 (3200 bytes, deterministic) as expected\n";
+  return 0;
+}
+
+int checkFails(const fs::path& dir, const std::string& needle, const std::vector<std::string>& argv) {
+  const RunResult r = run(argv, dir.string());
+  std::string cmd;
+  for (const std::string& a : argv) cmd += a + " ";
+  expect(r.exited, "`" + cmd + "` crashed (" + describe(r) + "); stderr:\n" + r.err);
+  expect(r.exit_code != 0, "`" + cmd + "` succeeded on bad input; stdout:\n" + r.out);
+  expect(r.err.find(needle) != std::string::npos,
+         "`" + cmd + "`: stderr does not name '" + needle + "':\n" + r.err);
+  expect(r.out.empty(), "`" + cmd + "` printed on stdout:\n" + r.out);
+  std::cout << describe(r) << ", stderr: " << r.err;
+  return 0;
+}
+
+int checkDemo(const std::string& demo, const fs::path& dir) {
+  const fs::path png = dir / "demo_out" / "demo.png";
+  fs::remove_all(dir / "demo_out");
+  const RunResult r = runOk({demo, "--width", "64", "--height", "36", "--threads", "2", "--out", png.string()}, dir);
+  std::ifstream in(png, std::ios::binary);
+  char signature[8] = {};
+  in.read(signature, 8);
+  expect(in && std::memcmp(signature, "\x89PNG\r\n\x1a\n", 8) == 0, png.string() + " is not a PNG");
+  for (const char* word : {"Mrays/s", "build", "load", "instances", "triangles"})
+    expect(r.out.find(word) != std::string::npos, std::string("demo output lacks '") + word + "':\n" + r.out);
+  std::cout << r.out;
+  return 0;
+}
+
+// Real meshes from ../shared/data: three instances of spot.obj, primary rays, closest and any-hit
+// agree on which rays hit, and thread counts do not change the records.
+int checkSharedData(const std::string& duplex, const fs::path& dir, const fs::path& data) {
+  const fs::path spot = data / "meshes" / "spot.obj";
+  if (!fs::exists(spot)) {
+    std::cout << "skipped: " << spot.string() << " not found (the shared data folder is not beside the repository)\n";
+    return kSkip;
+  }
+  const fs::path scene = dir / "spot_scene.json";
+  {
+    std::ofstream out(scene);
+    out << R"({"format": "scene-json-v1", "objects": [{"name": "spot", "mesh": {"file": )"
+        << nlohmann::json(spot.string()).dump() << R"(}}], "instances": [
+      {"object": "spot", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]},
+      {"object": "spot", "transform": [0,0,1,1.5, 0,1,0,0, -1,0,0,0]},
+      {"object": "spot", "transform": [0.5,0,0,-1.2, 0,0.5,0,0.3, 0,0,0.5,0.4]}]})";
+  }
+  const fs::path rays = dir / "spot_rays.bin";
+  runOk({duplex, "rays", "--scene", scene.string(), "--primary", "64", "48", "--out", rays.string()}, dir);
+  auto trace = [&](const fs::path& hits, std::vector<std::string> extra) {
+    std::vector<std::string> a = {duplex, "trace", "--scene", scene.string(), "--rays", rays.string(), "--hits", hits.string()};
+    a.insert(a.end(), extra.begin(), extra.end());
+    return parseOneLine(runOk(a, dir).out);
+  };
+  const nlohmann::json closest = trace(dir / "spot_hits1.bin", {"--threads", "1"});
+  trace(dir / "spot_hits2.bin", {"--threads", "2"});
+  const nlohmann::json any = trace(dir / "spot_any.bin", {"--any-hit"});
+  expect(number(closest, "hits") > 0.0, "no primary ray hits spot: " + closest.dump());
+  expect(number(closest, "hits") == number(any, "hits"),
+         "closest hit and --any-hit disagree on the number of hits: " + closest.dump() + " vs " + any.dump());
+  const auto h1 = readRecords<HitRecord>(dir / "spot_hits1.bin"), h2 = readRecords<HitRecord>(dir / "spot_hits2.bin");
+  expect(h1.size() == 64 * 48 && std::memcmp(h1.data(), h2.data(), h1.size() * sizeof(HitRecord)) == 0,
+         "1 and 2 threads write different hit files");
+  std::cout << "shared data: " << closest.dump() << "\n";
+  return 0;
+}
+
+int usage() {
+  std::cerr << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
+               "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR\n";
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::vector<std::string> args(argv + 1, argv + argc);
+  try {
+    if (args.size() == 2 && args[0] == "fixtures") {
+      writeFixtures(args[1]);
+      std::cout << "fixtures written to " << args[1] << "\n";
+      return 0;
+    }
+    if (args.size() == 3 && args[0] == "trace") return checkTrace(args[1], args[2], false);
+    if (args.size() == 3 && args[0] == "any-hit") return checkTrace(args[1], args[2], true);
+    if (args.size() == 3 && args[0] == "rays") return checkRays(args[1], args[2]);
+    if (args.size() >= 5 && args[0] == "fails" && args[3] == "--")
+      return checkFails(args[1], args[2], std::vector<std::string>(args.begin() + 4, args.end()));
+    if (args.size() == 3 && args[0] == "demo") return checkDemo(args[1], args[2]);
+    if (args.size() == 4 && args[0] == "shared-data") return checkSharedData(args[1], args[2], args[3]);
+    return usage();
+  } catch (const Failure& f) {
+    std::cerr << "FAIL: " << f.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "ERROR: " << e.what() << "\n";
+    return 1;
+  }
+}

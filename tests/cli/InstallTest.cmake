@@ -1,0 +1,33 @@
+# cmake -P script of the install.consumer test: install the build into PREFIX, then configure,
+# build and run tests/cli/consumer against it. Variables: BUILD_DIR, PREFIX, WORK_DIR,
+# CONSUMER_SOURCE, CXX_COMPILER, BUILD_TYPE, SANITIZE.
+cmake_minimum_required(VERSION 3.25)
+
+# A fresh prefix each time, so that nothing from an earlier install can satisfy find_package. The
+# consumer's build folder is kept: it rebuilds only what changed.
+file(REMOVE_RECURSE "${PREFIX}")
+execute_process(COMMAND "${CMAKE_COMMAND}" --install "${BUILD_DIR}" --prefix "${PREFIX}" --config "${BUILD_TYPE}"
+                OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+foreach(f lib/cmake/duplex/duplexConfig.cmake lib/cmake/duplex/duplexConfigVersion.cmake
+          include/duplex/accel/TopLevel.h include/duplex/scenegraph/SceneFile.h bin/duplex)
+  if(NOT EXISTS "${PREFIX}/${f}")
+    message(FATAL_ERROR "install: ${PREFIX}/${f} is missing")
+  endif()
+endforeach()
+
+# The installed targets do not carry the sanitizer flags (they are build-tree only), so a
+# sanitized build's consumer must add them itself.
+set(extra_flags "")
+if(SANITIZE)
+  set(extra_flags "-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined" "-DCMAKE_EXE_LINKER_FLAGS=-fsanitize=address,undefined")
+endif()
+execute_process(COMMAND "${CMAKE_COMMAND}" -S "${CONSUMER_SOURCE}" -B "${WORK_DIR}"
+                        "-DCMAKE_PREFIX_PATH=${PREFIX}" "-DCMAKE_CXX_COMPILER=${CXX_COMPILER}"
+                        "-DCMAKE_BUILD_TYPE=${BUILD_TYPE}" ${extra_flags}
+                OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+execute_process(COMMAND "${CMAKE_COMMAND}" --build "${WORK_DIR}" OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+execute_process(COMMAND "${WORK_DIR}/duplex_consumer" RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+message(STATUS "consumer: ${out}${err}")
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "the installed-package consumer failed (${rc})")
+endif()
