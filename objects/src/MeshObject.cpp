@@ -30,11 +30,19 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
         return clipTriangleToBox(v[0], v[1], v[2], box);
       },
       config);
-  triangles_.resize(m.triangleCount());
-  for (std::size_t i = 0; i < m.triangleCount(); ++i) {
-    const auto v = m.vertices(i);
-    triangles_[i] = {v[0], v[1], v[2]};
+  std::vector<std::uint32_t> renumbered(m.triangleCount(), kInvalidId);
+  leaf_refs_.reserve(tree_.prim_indices.size());
+  for (const std::uint32_t prim : tree_.prim_indices) {
+    if (renumbered[prim] == kInvalidId) {
+      renumbered[prim] = static_cast<std::uint32_t>(prim_ids_.size());
+      prim_ids_.push_back(prim);
+      const auto v = m.vertices(prim);
+      triangles_.push_back({v[0], v[1], v[2]});
+    }
+    leaf_refs_.push_back(renumbered[prim]);
   }
+  triangles_.shrink_to_fit();
+  prim_ids_.shrink_to_fit();
 }
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
@@ -45,28 +53,32 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   std::uint32_t best = kInvalidId;
   float best_u = 0.0f, best_v = 0.0f;
   const TriangleVertices* tris = triangles_.data();
-  const std::uint32_t* refs = tree_.prim_indices.data();
-  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-    bool found = false;
-    for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
-      const TriangleVertices& tri = tris[refs[i]];
-      float t, u, v;
-      if (intersectWatertight(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) {
-        t_max = t;
-        best = refs[i];
-        best_u = u;
-        best_v = v;
-        found = true;
+  const std::uint32_t* refs = leaf_refs_.data();
+  // One dispatch per ray on the axis permutation; traversal and triangle tests below are
+  // instantiated for each of the six permutations.
+  dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
+    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      bool found = false;
+      for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
+        const TriangleVertices& tri = tris[refs[i]];
+        float t, u, v;
+        if (intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) {
+          t_max = t;
+          best = refs[i];
+          best_u = u;
+          best_v = v;
+          found = true;
+        }
       }
-    }
-    return found;
+      return found;
+    });
   });
   if (best == kInvalidId) return false;
   const TriangleVertices& tri = tris[best];
   hit.t = t_best;
   hit.u = best_u;
   hit.v = best_v;
-  hit.prim_id = best;
+  hit.prim_id = prim_ids_[best];
   hit.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
   return true;
 }
@@ -77,14 +89,16 @@ bool MeshObject::occluded(const Ray& ray_os) const {
   const WatertightRay wray(ray_os);
   float t_best = ray_os.tfar;
   const TriangleVertices* tris = triangles_.data();
-  const std::uint32_t* refs = tree_.prim_indices.data();
-  return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-    for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
-      const TriangleVertices& tri = tris[refs[i]];
-      float t, u, v;
-      if (intersectWatertight(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) return true;
-    }
-    return false;
+  const std::uint32_t* refs = leaf_refs_.data();
+  return dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
+    return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
+        const TriangleVertices& tri = tris[refs[i]];
+        float t, u, v;
+        if (intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) return true;
+      }
+      return false;
+    });
   });
 }
 
@@ -93,7 +107,8 @@ bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occlu
 
 std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
-         triangles_.size() * sizeof(TriangleVertices);
+         leaf_refs_.size() * sizeof(std::uint32_t) +
+         triangles_.size() * (sizeof(TriangleVertices) + sizeof(std::uint32_t));
 }
 
 std::size_t MeshObject::memoryBytes() const {

@@ -44,8 +44,12 @@ class MeshObject final : public Object {
     glm::vec3 v0, v1, v2;
   };
   std::shared_ptr<const TriangleMesh> mesh_;
-  KdTree tree_;
+  KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
+  std::vector<std::uint32_t> leaf_refs_;  // tree_.prim_indices renumbered into triangles_
+  // Triangles renumbered in the order the leaves first reference them (depth first), so that
+  // the triangles of one leaf and of neighbouring leaves share cache lines.
   std::vector<TriangleVertices> triangles_;
+  std::vector<std::uint32_t> prim_ids_;  // renumbered index -> triangle index in the mesh
 };
 
 }  // namespace duplex
