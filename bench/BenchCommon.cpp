@@ -1,0 +1,154 @@
+#include "BenchCommon.h"
+
+#if DUPLEX_BENCH_HAVE_EMBREE
+#include <embree3/rtcore.h>
+#endif
+
+#include <oneapi/tbb/version.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include <unistd.h>
+
+namespace duplex::bench {
+
+double median(std::vector<double> samples) {
+  if (samples.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(samples.begin(), samples.end());
+  const std::size_t n = samples.size();
+  return n % 2 == 1 ? samples[n / 2] : 0.5 * (samples[n / 2 - 1] + samples[n / 2]);
+}
+
+tbb::task_arena& Arenas::get(int threads) {
+  auto& slot = arenas_[threads];
+  if (!slot) {
+    slot = std::make_unique<tbb::task_arena>(threads);
+    // Start the workers now, so that no measurement pays for thread creation.
+    slot->execute([] {
+      tbb::parallel_for(0, 1 << 16, [](int) { setFtzDaz(); });
+    });
+  }
+  return *slot;
+}
+
+namespace {
+
+// First line of a command's output, or "" when it fails.
+std::string commandLine(const std::string& command) {
+  std::string out;
+  if (FILE* pipe = ::popen(command.c_str(), "r")) {
+    char buf[512];
+    if (std::fgets(buf, sizeof buf, pipe)) out = buf;
+    ::pclose(pipe);
+  }
+  while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
+  return out;
+}
+
+std::string cpuModel() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("model name", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) return line.substr(line.find_first_not_of(" \t", colon + 1));
+    }
+  }
+  return "unknown";
+}
+
+bool cpuHasFlag(const std::string& flag) {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("flags", 0) == 0) return (line + " ").find(" " + flag + " ") != std::string::npos;
+  }
+  return false;
+}
+
+}  // namespace
+
+std::string loadAverage() {
+  std::ifstream in("/proc/loadavg");
+  std::string one, five, fifteen;
+  in >> one >> five >> fifteen;
+  return one + " " + five + " " + fifteen;
+}
+
+nlohmann::json machineInfo() {
+  nlohmann::json m;
+  // Other engineers share the two cores: the load average says how much of the machine we had.
+  m["loadavg_at_start"] = loadAverage();
+  m["nproc"] = static_cast<long>(::sysconf(_SC_NPROCESSORS_ONLN));
+  m["hardware_concurrency"] = std::thread::hardware_concurrency();
+  m["cpu_model"] = cpuModel();
+  m["avx2"] = cpuHasFlag("avx2");
+  m["avx512f"] = cpuHasFlag("avx512f");
+  m["compiler"] = std::string(__VERSION__);
+#ifdef NDEBUG
+  m["ndebug"] = true;
+#else
+  m["ndebug"] = false;
+#endif
+  m["tbb_version"] = std::string(TBB_VERSION_STRING);
+  const std::string src = DUPLEX_BENCH_SOURCE_DIR;
+  m["duplex_git_revision"] = commandLine("git -C '" + src + "' rev-parse --short HEAD 2>/dev/null");
+  // Uncommitted changes in the measured library code make the revision alone ambiguous.
+  m["duplex_library_dirty"] = !commandLine("git -C '" + src + "' status --porcelain -- accel objects 2>/dev/null").empty();
+#if DUPLEX_BENCH_HAVE_EMBREE
+  m["embree_version"] = std::string(RTC_VERSION_STRING);
+#else
+  m["embree_version"] = nullptr;
+#endif
+  const std::time_t now = std::time(nullptr);
+  char stamp[64];
+  std::strftime(stamp, sizeof stamp, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  m["date_utc"] = stamp;
+  return m;
+}
+
+void writeJson(const std::string& path, const nlohmann::json& doc) {
+  const std::filesystem::path p(path);
+  if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path());
+  std::ofstream out(p);
+  if (!out) throw std::runtime_error("cannot write " + path);
+  out << doc.dump(2) << '\n';
+  if (!out) throw std::runtime_error("error while writing " + path);
+}
+
+std::string fmt(double value, int decimals) {
+  if (!std::isfinite(value)) return "-";
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(decimals) << value;
+  return os.str();
+}
+
+std::string pad(const std::string& s, std::size_t width) {
+  return s.size() >= width ? s : s + std::string(width - s.size(), ' ');
+}
+
+std::string lpad(const std::string& s, std::size_t width) {
+  return s.size() >= width ? s : std::string(width - s.size(), ' ') + s;
+}
+
+std::string thousands(std::uint64_t n) {
+  const std::string digits = std::to_string(n);
+  std::string s;
+  for (std::size_t i = 0; i < digits.size(); ++i) {
+    if (i > 0 && (digits.size() - i) % 3 == 0) s.push_back(',');
+    s.push_back(digits[i]);
+  }
+  return s;
+}
+
+}  // namespace duplex::bench

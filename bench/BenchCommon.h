@@ -1,0 +1,162 @@
+#pragma once
+/// \file BenchCommon.h
+/// The measuring instrument shared by every benchmark mode: options, clocks, medians, the
+/// thread-limited trace harness (one harness for our kd-tree and for Embree, so both are timed by the
+/// same loop), and machine facts for the JSON.
+
+#include "duplex/accel/Hit.h"
+#include "duplex/accel/Ray.h"
+
+#include <nlohmann/json.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <xmmintrin.h>
+#include <pmmintrin.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace duplex::bench {
+
+/// Everything the command line sets (see mesh_bench.cpp for the help texts and defaults).
+struct Options {
+  std::string data_dir;
+  std::vector<std::string> meshes;
+  std::size_t random_rays = 1'000'000;
+  std::uint32_t primary_width = 1024;
+  std::uint32_t primary_height = 1024;
+  std::vector<int> threads{1, 2};
+  int repeat = 3;
+  std::uint64_t seed = 1;
+  bool quick = false;
+  std::string out;
+  std::string embree_config;  ///< extra rtcNewDevice configuration, e.g. "isa=avx2"
+  bool with_embree = true;
+  // --sweep
+  std::vector<std::string> sweep_meshes;
+  std::size_t sweep_random_rays = 250'000;
+  std::uint32_t sweep_primary_width = 512;
+  std::uint32_t sweep_primary_height = 512;
+  // --callgrind
+  std::string callgrind_mesh;
+  std::size_t callgrind_rays = 20'000;
+  std::vector<std::string> callgrind_what{"ours", "embree"};
+};
+
+/// Wall-clock milliseconds since construction.
+class Stopwatch {
+ public:
+  Stopwatch() : start_(std::chrono::steady_clock::now()) {}
+  [[nodiscard]] double ms() const {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+ private:
+  std::chrono::steady_clock::time_point start_;
+};
+
+/// Median of the samples (mean of the two middle ones for an even count); NaN for none.
+[[nodiscard]] double median(std::vector<double> samples);
+
+/// Flush-to-zero and denormals-are-zero for the calling thread, as Embree recommends for every
+/// thread that traces; we set it for our traversal too so that both run under the same FP mode.
+inline void setFtzDaz() {
+  _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+  _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+}
+
+/// One TBB arena per thread count, created once and warmed up, so that "N threads" means the same
+/// thing for every measurement (our build, our traversal, Embree's traversal).
+class Arenas {
+ public:
+  /// Arena limited to `threads` threads (the calling thread plus threads-1 workers).
+  tbb::task_arena& get(int threads);
+
+ private:
+  std::map<int, std::unique_ptr<tbb::task_arena>> arenas_;
+};
+
+/// Rays per parallel_for chunk: large enough that scheduling costs nothing, small enough that two
+/// threads balance.
+inline constexpr std::size_t kTraceChunk = 4096;
+
+/// Result of one timed trace.
+struct TraceTiming {
+  double ms = 0.0;
+  std::uint64_t hits = 0;
+  [[nodiscard]] double mrays(std::size_t rays) const { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; }
+};
+
+/// Times `query(ray) -> bool` over all rays inside `arena`: parallel_for over chunks of kTraceChunk
+/// rays, one call per ray, hits summed per chunk. The same loop times every tracer.
+template <class Query>
+TraceTiming timeTrace(tbb::task_arena& arena, std::span<const Ray> rays, const Query& query) {
+  std::atomic<std::uint64_t> hits{0};
+  const Stopwatch clock;
+  arena.execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, rays.size(), kTraceChunk),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          setFtzDaz();
+          std::uint64_t chunk_hits = 0;
+          for (std::size_t i = range.begin(); i != range.end(); ++i) chunk_hits += query(rays[i]) ? 1u : 0u;
+          hits.fetch_add(chunk_hits, std::memory_order_relaxed);
+        },
+        tbb::simple_partitioner());
+  });
+  return {clock.ms(), hits.load()};
+}
+
+/// The two queries every tracer answers.
+enum class Query { Closest, Any };
+[[nodiscard]] inline const char* toString(Query q) { return q == Query::Closest ? "closest" : "any"; }
+
+/// Times one query kind of `accel` (MeshObject or EmbreeMesh: anything with intersect(ray, hit) and
+/// occluded(ray)); closest hit gets a fresh Hit per ray.
+template <class Accel>
+TraceTiming timeQuery(tbb::task_arena& arena, std::span<const Ray> rays, const Accel& accel, Query query) {
+  if (query == Query::Closest)
+    return timeTrace(arena, rays, [&accel](const Ray& r) {
+      Hit hit;
+      return accel.intersect(r, hit);
+    });
+  return timeTrace(arena, rays, [&accel](const Ray& r) { return accel.occluded(r); });
+}
+
+/// Runs `fn(i)` for i in [0, n) in parallel on the widest arena (untimed work: checks, counters).
+template <class Fn>
+void parallelFor(tbb::task_arena& arena, std::size_t n, const Fn& fn) {
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kTraceChunk), [&](const tbb::blocked_range<std::size_t>& r) {
+      setFtzDaz();
+      for (std::size_t i = r.begin(); i != r.end(); ++i) fn(i);
+    });
+  });
+}
+
+/// nproc, CPU model, compiler, the measured library's git revision, Embree version, load average.
+[[nodiscard]] nlohmann::json machineInfo();
+/// The 1, 5 and 15 minute load averages from /proc/loadavg, as one string.
+[[nodiscard]] std::string loadAverage();
+
+/// Writes `doc` to `path` (pretty-printed; parent folders created). Throws on I/O failure.
+void writeJson(const std::string& path, const nlohmann::json& doc);
+
+/// "12.3" style formatting for the stderr tables ("-" for NaN).
+[[nodiscard]] std::string fmt(double value, int decimals = 2);
+/// Left-aligned (pad) and right-aligned (lpad) to `width` characters.
+[[nodiscard]] std::string pad(const std::string& s, std::size_t width);
+[[nodiscard]] std::string lpad(const std::string& s, std::size_t width);
+/// 1234567 -> "1,234,567".
+[[nodiscard]] std::string thousands(std::uint64_t n);
+
+}  // namespace duplex::bench

@@ -1,0 +1,186 @@
+#!/usr/bin/env python3
+"""Instructions per ray from the callgrind dumps of `duplex_bench_mesh --callgrind`.
+
+The bench dumps one callgrind part per tracer and query ("ours-closest", "ours-any", "embree-closest",
+"embree-any"), each holding only its trace loop. This script reads those parts, divides the totals by
+the ray count, and splits our instructions by source file (needs a build with -g: KdTraversal.h is the
+traversal, WatertightTriangle.h the triangle test) and both sides' by function.
+
+usage: bench_callgrind_report.py DUMP_DIR WORKLOAD_JSON [--out FILE.json]
+"""
+
+import argparse
+import glob
+import json
+import os
+import re
+import sys
+from collections import defaultdict
+
+NAME_RE = re.compile(r"^\((\d+)\)(?: (.*))?$")
+
+
+class Names:
+    """callgrind's name compression: '(7) name' defines id 7, '(7)' refers to it."""
+
+    def __init__(self):
+        self.by_id = {}
+
+    def resolve(self, text):
+        m = NAME_RE.match(text.strip())
+        if not m:
+            return text.strip()
+        ident, name = m.group(1), m.group(2)
+        if name is not None:
+            self.by_id[ident] = name
+            return name
+        return self.by_id.get(ident, "(%s)" % ident)
+
+
+def parse_part(path):
+    """Self cost (first event, Ir) per source file and per function, the total, and the trigger name."""
+    files, fns = Names(), Names()
+    per_file, per_fn = defaultdict(int), defaultdict(int)
+    trigger, totals = None, None
+    fl = cur_file = cur_fn = "???"
+    skip_next_cost = False
+    n_positions = 1
+    with open(path, errors="replace") as f:
+        for raw in f:
+            line = raw.rstrip("\n")
+            if not line:
+                continue
+            if line.startswith("desc: Trigger:"):
+                trigger = line.split("Client Request:", 1)[-1].strip() if "Client Request:" in line else line
+                continue
+            if line.startswith("positions:"):
+                n_positions = len(line.split(":", 1)[1].split())
+                continue
+            if line.startswith("totals:"):
+                totals = int(line.split(":", 1)[1].split()[0])
+                continue
+            key, sep, value = line.partition("=")
+            if sep:
+                if key == "fl":
+                    fl = cur_file = files.resolve(value)
+                elif key in ("fi", "fe"):
+                    cur_file = files.resolve(value)
+                elif key == "fn":
+                    cur_fn = fns.resolve(value)
+                    cur_file = fl
+                elif key in ("cfl", "cfi"):
+                    files.resolve(value)
+                elif key == "cfn":
+                    fns.resolve(value)
+                elif key == "calls":
+                    skip_next_cost = True  # the next cost line is the call's inclusive cost
+                continue
+            if line[0].isdigit() or line[0] in "+-*":
+                if skip_next_cost:
+                    skip_next_cost = False
+                    continue
+                parts = line.split()
+                if len(parts) > n_positions:
+                    cost = int(parts[n_positions])  # the first event: Ir
+                    per_file[cur_file] += cost
+                    per_fn[cur_fn] += cost
+    if totals is None:
+        totals = sum(per_fn.values())
+    return trigger, totals, per_file, per_fn
+
+
+def short_file(path):
+    return os.path.basename(path) if path not in ("???", "") else "(no debug info)"
+
+
+def short_fn(name, width=90):
+    name = re.sub(r"\(.*\)( const)?$", "()", name) if len(name) > width else name
+    return name if len(name) <= width else name[: width - 3] + "..."
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("dump_dir")
+    ap.add_argument("workload_json")
+    ap.add_argument("--out")
+    args = ap.parse_args()
+
+    with open(args.workload_json) as f:
+        workload = json.load(f)
+    rays = workload["rays"]
+    parts = {}
+    for path in sorted(glob.glob(os.path.join(args.dump_dir, "callgrind.out*"))):
+        trigger, totals, per_file, per_fn = parse_part(path)
+        if trigger and re.match(r"^(ours|embree)-(closest|any)$", trigger):
+            parts[trigger] = (totals, per_file, per_fn)
+    if not parts:
+        sys.exit("no callgrind parts named ours-*/embree-* in %s (was the bench built with valgrind/callgrind.h?)"
+                 % args.dump_dir)
+
+    result = {
+        "kind": "duplex_bench_callgrind_report",
+        "machine": workload.get("machine"),
+        "mesh": workload["mesh"],
+        "triangles": workload["triangles"],
+        "rays": rays,
+        "note": "instructions (callgrind Ir) per ray of the trace loop only, single thread; under valgrind Embree "
+                "runs its AVX2 kernels (valgrind does not emulate AVX-512), our library is built for baseline "
+                "x86-64 (SSE2) unless DUPLEX_NATIVE is on",
+        "queries": {},
+    }
+    print("callgrind: %s (%s triangles), %d random rays, single thread, instructions of the trace loop only"
+          % (workload["mesh"], format(workload["triangles"], ","), rays))
+    print("%-10s %14s %14s %10s" % ("query", "ours Ir/ray", "Embree Ir/ray", "ours/Embree"))
+    for query in ("closest", "any"):
+        ours = parts.get("ours-" + query)
+        emb = parts.get("embree-" + query)
+        rec = {}
+        if ours:
+            rec["ours_ir_per_ray"] = ours[0] / rays
+            files = sorted(ours[1].items(), key=lambda kv: -kv[1])
+            rec["ours_by_file"] = {short_file(k): v / rays for k, v in files if v > 0}
+            rec["ours_by_function"] = {k: v / rays for k, v in sorted(ours[2].items(), key=lambda kv: -kv[1])[:8]}
+        if emb:
+            rec["embree_medium_ir_per_ray"] = emb[0] / rays
+            rec["embree_by_function"] = {k: v / rays for k, v in sorted(emb[2].items(), key=lambda kv: -kv[1])[:8]}
+        if ours and emb:
+            rec["ratio_ours_over_embree"] = ours[0] / emb[0]
+        result["queries"][query] = rec
+        print("%-10s %14s %14s %10s" % (
+            query,
+            "%.0f" % rec["ours_ir_per_ray"] if ours else "-",
+            "%.0f" % rec["embree_medium_ir_per_ray"] if emb else "-",
+            "%.2fx" % rec["ratio_ours_over_embree"] if ours and emb else "-"))
+
+    trav = workload.get("ours", {}).get("traversal")
+    if trav:
+        result["ours_traversal"] = trav
+        print("\nour closest-hit query per ray: %.1f leaves visited, %.1f triangle tests"
+              % (trav["leaves_per_ray"], trav["triangle_tests_per_ray"]))
+    for query in ("closest", "any"):
+        rec = result["queries"][query]
+        if "ours_by_file" in rec:
+            total = rec["ours_ir_per_ray"]
+            print("\nours, %s hit, Ir/ray by source file (inlined code counted where it is written):" % query)
+            for name, v in list(rec["ours_by_file"].items())[:6]:
+                print("  %-40s %8.0f  %5.1f%%" % (name, v, 100.0 * v / total))
+            if query == "closest" and trav and "WatertightTriangle.h" in rec["ours_by_file"] and trav["triangle_tests_per_ray"] > 0:
+                per_test = rec["ours_by_file"]["WatertightTriangle.h"] / trav["triangle_tests_per_ray"]
+                rec["ir_per_triangle_test"] = per_test
+                print("  => about %.0f instructions per triangle test" % per_test)
+        if "embree_by_function" in rec:
+            total = rec["embree_medium_ir_per_ray"]
+            print("Embree medium, %s hit, Ir/ray by function:" % query)
+            for name, v in list(rec["embree_by_function"].items())[:4]:
+                print("  %-70s %8.0f  %5.1f%%" % (short_fn(name, 70), v, 100.0 * v / total))
+
+    if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+        with open(args.out, "w") as f:
+            json.dump(result, f, indent=2)
+            f.write("\n")
+        print("\nwrote %s" % args.out)
+
+
+if __name__ == "__main__":
+    main()

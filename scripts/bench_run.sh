@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Builds duplex_bench_mesh (Release) and runs the whole benchmark:
+#   main bench  -> docs/bench/mesh_bench.json (+ .txt: the table printed on stderr)
+#   sweep       -> docs/bench/sweep.json      (+ .txt)
+#   charts      -> docs/bench/build_vs_trace.png, docs/bench/throughput_vs_embree.png
+# About 10 minutes on the shared 2-core machine; the 1.6M-triangle mesh is the slow part.
+#
+# Environment:
+#   BUILD_DIR   build directory (default: build-bench)
+#   OUTDIR      where JSON, tables and charts go (default: docs/bench; with QUICK=1: /tmp/duplex_bench_quick)
+#   QUICK=1     smoke run (--quick: small meshes, few rays, one repetition)
+#   MAIN_ARGS   extra arguments for the main bench   (e.g. "--repeat 5" or "--meshes koala.obj:2")
+#   SWEEP_ARGS  extra arguments for the sweep        (e.g. "--sweep-meshes koala.obj")
+#   SKIP_MAIN=1 / SKIP_SWEEP=1   run only the other part (the charts are drawn from whatever JSON exists)
+#   CALLGRIND=1 also run scripts/bench_callgrind.sh (instructions per ray; a few more minutes)
+#   JOBS        make -j (default 2: the machine is shared)
+#   PYTHON      interpreter with matplotlib (default: /usr/bin/python3, Debian's python3-matplotlib)
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+BUILD_DIR=${BUILD_DIR:-$ROOT/build-bench}
+JOBS=${JOBS:-2}
+if [ "${QUICK:-0}" = 1 ]; then
+  OUTDIR=${OUTDIR:-/tmp/duplex_bench_quick}
+  QUICK_ARG=--quick
+else
+  OUTDIR=${OUTDIR:-$ROOT/docs/bench}
+  QUICK_ARG=
+fi
+PYTHON=${PYTHON:-/usr/bin/python3}
+"$PYTHON" -c "import matplotlib" 2>/dev/null || PYTHON=python3
+mkdir -p "$OUTDIR"
+
+# Tests and examples stay off here: the bench must build while others edit those folders.
+cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DDUPLEX_BUILD_BENCH=ON \
+      -DDUPLEX_BUILD_TESTS=OFF -DDUPLEX_BUILD_EXAMPLES=OFF >/dev/null
+make -C "$BUILD_DIR" -j"$JOBS" duplex_bench_mesh >/dev/null
+BIN="$BUILD_DIR/bench/duplex_bench_mesh"
+
+start=$(date +%s)
+if [ "${SKIP_MAIN:-0}" != 1 ]; then
+  echo "== main bench -> $OUTDIR/mesh_bench.json" >&2
+  # shellcheck disable=SC2086
+  "$BIN" $QUICK_ARG ${MAIN_ARGS:-} --out "$OUTDIR/mesh_bench.json" 2>&1 | tee "$OUTDIR/mesh_bench.txt" >&2
+fi
+if [ "${SKIP_SWEEP:-0}" != 1 ]; then
+  echo "== sweep -> $OUTDIR/sweep.json" >&2
+  # shellcheck disable=SC2086
+  "$BIN" --sweep $QUICK_ARG ${SWEEP_ARGS:-} --out "$OUTDIR/sweep.json" 2>&1 | tee "$OUTDIR/sweep.txt" >&2
+fi
+"$PYTHON" "$ROOT/scripts/plot_bench.py" --main "$OUTDIR/mesh_bench.json" --sweep "$OUTDIR/sweep.json" --outdir "$OUTDIR"
+if [ "${CALLGRIND:-0}" = 1 ]; then
+  OUT="$OUTDIR/callgrind.json" "$ROOT/scripts/bench_callgrind.sh" | tee "$OUTDIR/callgrind.txt"
+fi
+echo "bench_run.sh: done in $(( $(date +%s) - start )) s; results in $OUTDIR" >&2
