@@ -1,0 +1,509 @@
+// The generic kd-tree builder (buildKdTree / buildKdTreeOverBoxes) used directly, with the
+// invariant checker, and the generic traversal (traverseKdTree) with a box "primitive" against a
+// brute force; plus the small value types the builder rests on (Box, KdNode, clipTriangleToBox,
+// KdBuildConfig parsing and validation).
+
+#include "KdTreeChecks.h"
+#include "TestSupport.h"
+
+#include "duplex/accel/Box.h"
+#include "duplex/accel/Error.h"
+#include "duplex/accel/KdBuildConfig.h"
+#include "duplex/accel/KdNode.h"
+#include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/KdTreeBuilder.h"
+#include "duplex/accel/RayGenerator.h"
+#include "duplex/accel/TriangleClip.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <set>
+#include <vector>
+
+namespace duplex::test {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+std::vector<std::array<glm::vec3, 3>> randomTriangles(std::size_t count, std::uint64_t seed) {
+  const TriangleMesh soup = triangleSoup(count, seed);
+  std::vector<std::array<glm::vec3, 3>> tris(soup.triangleCount());
+  for (std::size_t i = 0; i < tris.size(); ++i) tris[i] = soup.vertices(i);
+  return tris;
+}
+
+KdTree buildOverTriangles(const std::vector<std::array<glm::vec3, 3>>& tris, const KdBuildConfig& config) {
+  std::vector<Box> bounds(tris.size());
+  for (std::size_t i = 0; i < tris.size(); ++i)
+    for (const auto& v : tris[i]) bounds[i].extend(v);
+  return buildKdTree(
+      bounds, [&](std::uint32_t prim, const Box& box) { return clipTriangleToBox(tris[prim][0], tris[prim][1], tris[prim][2], box); },
+      config);
+}
+
+/// Random boxes in [0, 4]^3: ordinary ones, flat ones (zero extent on one axis), points, and boxes
+/// snapped to a coarse grid so that many share faces with each other and with split planes.
+std::vector<Box> randomBoxes(std::size_t count, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 4.0f), s(0.0f, 0.4f);
+  std::vector<Box> boxes;
+  for (std::size_t i = 0; i < count; ++i) {
+    glm::vec3 lo(u(rng), u(rng), u(rng));
+    glm::vec3 hi = lo + glm::vec3(s(rng), s(rng), s(rng));
+    switch (i % 6) {
+      case 1: hi[i % 3] = lo[i % 3]; break;  // flat
+      case 2: hi = lo; break;                // point
+      case 3:                                // on a grid of step 0.5
+        lo = glm::floor(lo * 2.0f) * 0.5f;
+        hi = lo + glm::vec3(0.5f * static_cast<float>(1 + rng() % 3));
+        break;
+      default: break;
+    }
+    boxes.emplace_back(lo, hi);
+  }
+  return boxes;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(KdTreeBuilder, EmptyInputGivesEmptyTree) {
+  const KdTree a = buildKdTree({}, [](std::uint32_t, const Box& b) { return b; });
+  EXPECT_TRUE(a.empty());
+  EXPECT_TRUE(a.nodes.empty());
+  EXPECT_TRUE(a.prim_indices.empty());
+  EXPECT_TRUE(a.bounds.empty());
+  const KdTree b = buildKdTreeOverBoxes({});
+  EXPECT_TRUE(b.empty());
+  EXPECT_TRUE(b.prim_indices.empty());
+  EXPECT_EQ(b.stats(1.0f, 1.5f).nodes, 0u);
+  // Traversal of an empty tree never calls the leaf function.
+  const KdRay ray(Ray{});
+  float t = kInf;
+  bool called = false;
+  EXPECT_FALSE(traverseKdTree<false>(a, ray, t, [&](std::uint32_t, std::uint32_t, float&) { return called = true; }));
+  EXPECT_FALSE(called);
+}
+
+TEST(KdTreeBuilder, OnlyUnusableBoxesGiveEmptyTree) {
+  const std::vector<Box> boxes = {
+      Box(),                                                      // default: empty
+      Box(glm::vec3(1.0f), glm::vec3(0.0f)),                      // inverted
+      Box(glm::vec3(0.0f, kNaN, 0.0f), glm::vec3(1.0f)),          // NaN
+      Box(glm::vec3(0.0f), glm::vec3(1.0f, 1.0f, kInf)),          // infinite
+      Box(glm::vec3(-kInf), glm::vec3(kInf)),                     // infinite
+  };
+  const KdTree tree = buildKdTreeOverBoxes(boxes);
+  EXPECT_TRUE(tree.empty());
+  EXPECT_TRUE(tree.prim_indices.empty());
+  EXPECT_TRUE(checkBoxKdTree(tree, boxes));
+}
+
+TEST(KdTreeBuilder, NaNAndEmptyBoxesAreLeftOut) {
+  std::vector<Box> boxes = randomBoxes(300, 5);
+  const std::set<std::size_t> bad = {0, 17, 101, 250, 399};
+  boxes[0] = Box(glm::vec3(kNaN), glm::vec3(kNaN));
+  boxes[17] = Box(glm::vec3(1.0f, 1.0f, kNaN), glm::vec3(2.0f));
+  boxes[101] = Box();
+  boxes[250] = Box(glm::vec3(0.0f), glm::vec3(kInf));
+  boxes[399] = Box(glm::vec3(3.0f), glm::vec3(2.0f));
+  for (const ConfigCase& c : allConfigCases()) {
+    SCOPED_TRACE(c.name);
+    const KdTree tree = buildKdTreeOverBoxes(boxes, c.config);
+    EXPECT_TRUE(checkBoxKdTree(tree, boxes, c.config.max_depth));  // also: no reference to a left-out box
+    for (const std::uint32_t id : tree.prim_indices) EXPECT_EQ(bad.count(id), 0u) << "left-out box " << id << " referenced";
+    for (int k = 0; k < 3; ++k) EXPECT_TRUE(std::isfinite(tree.bounds.lo[k]) && std::isfinite(tree.bounds.hi[k]));
+  }
+}
+
+TEST(KdTreeBuilder, SingleBoxIsOneLeaf) {
+  const std::vector<Box> boxes = {Box(glm::vec3(1.0f, 2.0f, 3.0f), glm::vec3(2.0f, 4.0f, 3.5f))};
+  const KdTree tree = buildKdTreeOverBoxes(boxes);
+  ASSERT_TRUE(checkBoxKdTree(tree, boxes));
+  ASSERT_EQ(tree.nodes.size(), 1u);
+  EXPECT_TRUE(tree.nodes[0].isLeaf());
+  EXPECT_EQ(tree.bounds, boxes[0]);
+  const KdTreeStats st = tree.stats(1.0f, 1.5f);
+  EXPECT_EQ(st.leaves, 1u);
+  EXPECT_EQ(st.references, 1u);
+  EXPECT_DOUBLE_EQ(st.sah_cost, 1.5);  // one leaf of one primitive: Ci * 1
+}
+
+class KdTreeBuilderConfigs : public ::testing::TestWithParam<ConfigCase> {};
+
+TEST_P(KdTreeBuilderConfigs, RandomTriangles) {
+  const auto tris = randomTriangles(GetParam().config.heuristic == KdHeuristic::Sah ? 2500 : 800, 31);
+  const KdTree tree = buildOverTriangles(tris, GetParam().config);
+  EXPECT_TRUE(checkTriangleKdTree(tree, tris, std::vector<char>(tris.size(), 1), GetParam().config.max_depth));
+}
+
+/// Box count for a heuristic: the simple heuristics split overlapping boxes to the depth limit
+/// (see SimpleHeuristicsStopWhenASplitSeparatesNothing), so their trees grow too fast for big inputs.
+std::size_t boxCount(const KdBuildConfig& c, std::size_t sah_count) {
+  return c.heuristic == KdHeuristic::Sah ? sah_count : 300;
+}
+
+TEST_P(KdTreeBuilderConfigs, RandomBoxes) {
+  const auto boxes = randomBoxes(boxCount(GetParam().config, 2500), 32);
+  const KdTree tree = buildKdTreeOverBoxes(boxes, GetParam().config);
+  EXPECT_TRUE(checkBoxKdTree(tree, boxes, GetParam().config.max_depth));
+}
+
+TEST_P(KdTreeBuilderConfigs, IdenticalBoxes) {
+  // Copies of one box and a few others: no split can separate the copies.
+  std::vector<Box> boxes(GetParam().config.heuristic == KdHeuristic::Sah ? 300 : 12, Box(glm::vec3(1.0f), glm::vec3(2.0f)));
+  boxes.emplace_back(glm::vec3(5.0f), glm::vec3(6.0f));
+  boxes.emplace_back(glm::vec3(-3.0f), glm::vec3(-2.5f));
+  const KdTree tree = buildKdTreeOverBoxes(boxes, GetParam().config);
+  EXPECT_TRUE(checkBoxKdTree(tree, boxes, GetParam().config.max_depth));
+}
+
+TEST_P(KdTreeBuilderConfigs, CoplanarTrianglesOnSplitCandidates) {
+  // Triangles lying in a few shared axis planes (planar events), including the planes of other
+  // triangles' bounds: the planar-left/right choice must keep them referenced.
+  std::vector<std::array<glm::vec3, 3>> tris;
+  for (int level = 0; level < 5; ++level)
+    for (int i = 0; i < 40; ++i) {
+      const float z = 0.25f * static_cast<float>(level);
+      const float x = 0.1f * static_cast<float>(i % 10), y = 0.1f * static_cast<float>(i / 10);
+      tris.push_back({glm::vec3(x, y, z), glm::vec3(x + 0.1f, y, z), glm::vec3(x, y + 0.1f, z)});
+      tris.push_back({glm::vec3(x, y, z), glm::vec3(x, y + 0.1f, z + 0.25f), glm::vec3(x + 0.05f, y, z + 0.25f)});
+    }
+  const KdTree tree = buildOverTriangles(tris, GetParam().config);
+  EXPECT_TRUE(checkTriangleKdTree(tree, tris, std::vector<char>(tris.size(), 1), GetParam().config.max_depth));
+}
+
+INSTANTIATE_TEST_SUITE_P(AllHeuristics, KdTreeBuilderConfigs, ::testing::ValuesIn(allConfigCases()),
+                         [](const auto& info) { return info.param.name; });
+
+// A split that sends every primitive of a node to both children separates nothing: it only
+// doubles the references below it. Overlapping primitives (instances placed at one spot, big boxes
+// over small ones) must not make the tree grow exponentially up to the depth limit.
+TEST(KdTreeBuilder, SimpleHeuristicsStopWhenASplitSeparatesNothing) {
+  std::vector<Box> boxes(24, Box(glm::vec3(1.0f), glm::vec3(2.0f)));
+  boxes.emplace_back(glm::vec3(5.0f), glm::vec3(6.0f));
+  for (const KdHeuristic h : {KdHeuristic::Sah, KdHeuristic::Median, KdHeuristic::SpatialMiddle}) {
+    SCOPED_TRACE(toString(h));
+    KdBuildConfig c;
+    c.heuristic = h;
+    const KdTree tree = buildKdTreeOverBoxes(boxes, c);
+    ASSERT_TRUE(checkBoxKdTree(tree, boxes));
+    // Primitive sets of every subtree (post-order over the depth-first array).
+    std::vector<std::set<std::uint32_t>> prims(tree.nodes.size());
+    std::size_t useless = 0;
+    for (std::size_t i = tree.nodes.size(); i-- > 0;) {
+      const KdNode& n = tree.nodes[i];
+      if (n.isLeaf()) {
+        prims[i].insert(tree.prim_indices.begin() + n.primOffset(), tree.prim_indices.begin() + n.primOffset() + n.primCount());
+        continue;
+      }
+      prims[i] = prims[i + 1];
+      prims[i].insert(prims[n.upperChild()].begin(), prims[n.upperChild()].end());
+      if (prims[i + 1] == prims[i] && prims[n.upperChild()] == prims[i] && prims[i].size() > 1) ++useless;
+    }
+    EXPECT_EQ(useless, 0u) << "inner nodes whose two children both hold all of the node's primitives (of "
+                           << tree.nodes.size() << " nodes)";
+    EXPECT_LE(tree.prim_indices.size(), 4 * boxes.size()) << "references for " << boxes.size() << " boxes";
+  }
+}
+
+TEST(KdTreeBuilder, ExplicitDepthLimitIsHonoured) {
+  const auto boxes = randomBoxes(3000, 8);
+  for (const int depth : {1, 3, 7}) {
+    KdBuildConfig c;
+    c.max_depth = depth;
+    const KdTree tree = buildKdTreeOverBoxes(boxes, c);
+    EXPECT_TRUE(checkBoxKdTree(tree, boxes, depth));
+    EXPECT_LE(tree.stats(1.0f, 1.5f).max_depth, static_cast<std::uint32_t>(depth));
+  }
+}
+
+TEST(KdTreeBuilder, InvalidConfigurationThrows) {
+  const std::vector<Box> boxes = {Box(glm::vec3(0.0f), glm::vec3(1.0f))};
+  auto expect_throw = [&](auto mutate) {
+    KdBuildConfig c;
+    mutate(c);
+    EXPECT_THROW((void)buildKdTreeOverBoxes(boxes, c), InvalidArgument) << c;
+  };
+  expect_throw([](KdBuildConfig& c) { c.traversal_cost = 0.0f; });
+  expect_throw([](KdBuildConfig& c) { c.intersection_cost = -1.0f; });
+  expect_throw([](KdBuildConfig& c) { c.intersection_cost = kNaN; });
+  expect_throw([](KdBuildConfig& c) { c.empty_bonus = 1.0f; });
+  expect_throw([](KdBuildConfig& c) { c.empty_bonus = -0.1f; });
+  expect_throw([](KdBuildConfig& c) { c.max_depth = -1; });
+}
+
+TEST(KdBuildConfig, HeuristicNamesRoundTrip) {
+  for (const KdHeuristic h : {KdHeuristic::Sah, KdHeuristic::Median, KdHeuristic::SpatialMiddle})
+    EXPECT_EQ(parseKdHeuristic(toString(h)), h);
+  EXPECT_EQ(parseKdHeuristic("sah"), KdHeuristic::Sah);
+  EXPECT_EQ(parseKdHeuristic("median"), KdHeuristic::Median);
+  EXPECT_EQ(parseKdHeuristic("middle"), KdHeuristic::SpatialMiddle);
+  try {
+    (void)parseKdHeuristic("bvh");
+    ADD_FAILURE() << "parseKdHeuristic(\"bvh\") did not throw";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("bvh"), std::string::npos) << e.what();
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Generic traversal with boxes as primitives: the leaf callback computes the exact entry distance
+// of the ray into each referenced box (double slabs) and lowers t_best; the result must be the
+// brute-force nearest box entry, and an any-hit query must agree with "some box is hit".
+
+/// The ray's parameter interval inside the box in double, clipped to [tnear, tfar]; false when it
+/// misses.
+bool boxInterval(const Ray& r, const Box& b, double& t0, double& t1) {
+  t0 = r.tnear;
+  t1 = r.tfar;
+  for (int k = 0; k < 3; ++k) {
+    const double o = r.origin[k], d = r.dir[k], lo = b.lo[k], hi = b.hi[k];
+    if (d == 0.0) {
+      if (o < lo || o > hi) return false;
+      continue;
+    }
+    double a = (lo - o) / d, c = (hi - o) / d;
+    if (a > c) std::swap(a, c);
+    t0 = std::max(t0, a);
+    t1 = std::min(t1, c);
+  }
+  return t0 <= t1;
+}
+
+/// Entry t of the ray into the box, or NaN when it misses.
+double boxEntry(const Ray& r, const Box& b) {
+  double t0, t1;
+  return boxInterval(r, b, t0, t1) ? t0 : std::numeric_limits<double>::quiet_NaN();
+}
+
+/// Whether the ray runs through the box over a positive length (not only touching it at one
+/// parameter, e.g. starting on its face and leaving at once: such contacts are optional).
+bool boxPierced(const Ray& r, const Box& b) {
+  double t0, t1;
+  return boxInterval(r, b, t0, t1) && t1 - t0 > 1e-6 * (1.0 + std::abs(t0));
+}
+
+TEST(KdTraversal, NearestBoxAgreesWithBruteForce) {
+  const auto boxes = randomBoxes(300, 44);
+  Box all;
+  for (const Box& b : boxes) all.extend(b);
+  for (const ConfigCase& c : allConfigCases()) {
+    SCOPED_TRACE(c.name);
+    const KdTree tree = buildKdTreeOverBoxes(boxes, c.config);
+    ASSERT_TRUE(checkBoxKdTree(tree, boxes, c.config.max_depth));
+    std::vector<Ray> rays = randomRays(enlarged(all, 0.5f), 1500, 9);
+    // Axis-parallel rays, some with -0 components, and rays with limited [tnear, tfar].
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<float> u(-1.0f, 5.0f);
+    for (int i = 0; i < 600; ++i) {
+      Ray r;
+      r.origin = glm::vec3(u(rng), u(rng), u(rng));
+      const int axis = i % 3;
+      r.dir = glm::vec3(i % 2 ? -0.0f : 0.0f, (i / 2) % 2 ? -0.0f : 0.0f, (i / 4) % 2 ? -0.0f : 0.0f);
+      r.dir[axis] = (i / 3) % 2 ? 1.0f : -1.0f;
+      if (i % 5 == 0) r.origin = glm::floor(r.origin * 2.0f) * 0.5f;  // on grid planes, shared with boxes
+      rays.push_back(r);
+    }
+    for (std::size_t i = 0; i < 600; ++i) {
+      Ray r = rays[i];
+      r.tnear = 0.5f;
+      r.tfar = 2.0f + static_cast<float>(i % 3);
+      rays.push_back(r);
+    }
+    std::size_t failures = 0, hits = 0;
+    for (const Ray& ray : rays) {
+      // best_any: nearest entry over all boxes; best_pierced: over boxes the ray runs through.
+      double best_any = std::numeric_limits<double>::infinity(), best_pierced = best_any;
+      for (const Box& b : boxes) {
+        const double t = boxEntry(ray, b);
+        if (std::isnan(t)) continue;
+        best_any = std::min(best_any, t);
+        if (boxPierced(ray, b)) best_pierced = std::min(best_pierced, t);
+      }
+      const KdRay kray(ray);
+      float t_best = ray.tfar;
+      double best_kd = std::numeric_limits<double>::infinity();
+      const bool found = traverseKdTree<false>(tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+        bool any = false;
+        for (std::uint32_t k = begin; k < begin + count; ++k) {
+          const double t = boxEntry(ray, boxes[tree.prim_indices[k]]);
+          if (!std::isnan(t) && t <= t_max) {
+            best_kd = std::min(best_kd, t);
+            float f = static_cast<float>(best_kd);  // rounded up, so no closer box is culled
+            if (static_cast<double>(f) < best_kd) f = std::nextafter(f, kInf);
+            t_max = f;
+            any = true;
+          }
+        }
+        return any;
+      });
+      float t_any = ray.tfar;
+      const bool any_hit = traverseKdTree<true>(tree, kray, t_any, [&](std::uint32_t begin, std::uint32_t count, float&) {
+        for (std::uint32_t k = begin; k < begin + count; ++k)
+          if (!std::isnan(boxEntry(ray, boxes[tree.prim_indices[k]]))) return true;
+        return false;
+      });
+      const bool must_hit = std::isfinite(best_pierced), may_hit = std::isfinite(best_any);
+      hits += must_hit;
+      const double tol = 1e-6 * (1.0 + std::abs(best_any));
+      bool ok = found == std::isfinite(best_kd) && (!must_hit || found) && (may_hit || !found) &&
+                (!must_hit || any_hit) && (may_hit || !any_hit);
+      if (found) ok = ok && best_kd >= best_any - tol && (!must_hit || best_kd <= best_pierced + tol);
+      if (!ok && failures++ < 8)
+        ADD_FAILURE() << ray << ": traversal nearest " << best_kd << " (found " << found << ", any-hit " << any_hit
+                      << ") vs brute force " << best_pierced << " (touching included: " << best_any << ")";
+    }
+    EXPECT_EQ(failures, 0u);
+    EXPECT_GT(hits, rays.size() / 5);
+  }
+}
+
+TEST(KdTraversal, ZeroDirectionComponentsAndSplitPlanes) {
+  // Rays lying exactly in split planes must still find every box they touch.
+  const auto boxes = randomBoxes(800, 45);
+  const KdTree tree = buildKdTreeOverBoxes(boxes);
+  ASSERT_TRUE(checkBoxKdTree(tree, boxes));
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<float> u(-0.5f, 4.5f);
+  std::size_t checked = 0, failures = 0;
+  for (std::uint32_t i = 0; i < tree.nodes.size() && checked < 3000; ++i) {
+    const KdNode& n = tree.nodes[i];
+    if (n.isLeaf()) continue;
+    for (int rep = 0; rep < 4; ++rep, ++checked) {
+      Ray r;
+      r.origin = glm::vec3(u(rng), u(rng), u(rng));
+      r.origin[n.axis()] = n.split();
+      r.dir = glm::normalize(glm::vec3(u(rng) - 2.0f, u(rng) - 2.0f, u(rng) - 2.0f));
+      r.dir[n.axis()] = rep % 2 ? -0.0f : 0.0f;
+      std::set<std::uint32_t> expected, visited;
+      for (std::uint32_t b = 0; b < boxes.size(); ++b)
+        if (boxPierced(r, boxes[b])) expected.insert(b);
+      const KdRay kray(r);
+      float t_best = r.tfar;
+      (void)traverseKdTree<false>(tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
+        for (std::uint32_t k = begin; k < begin + count; ++k) visited.insert(tree.prim_indices[k]);
+        return false;
+      });
+      for (const std::uint32_t b : expected)
+        if (!visited.count(b) && failures++ < 8)
+          ADD_FAILURE() << r << " in the split plane of node " << i << " never visits box " << b << " " << boxes[b];
+    }
+  }
+  EXPECT_EQ(failures, 0u);
+  EXPECT_GT(checked, 100u);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(KdNode, EncodesInnerAndLeafFields) {
+  for (const int axis : {0, 1, 2}) {
+    const KdNode n = KdNode::inner(axis, -3.25f, KdNode::kMaxIndex);
+    EXPECT_FALSE(n.isLeaf());
+    EXPECT_EQ(n.axis(), axis);
+    EXPECT_EQ(n.split(), -3.25f);
+    EXPECT_EQ(n.upperChild(), KdNode::kMaxIndex);
+    KdNode m = n;
+    m.setUpperChild(12345);
+    EXPECT_EQ(m.upperChild(), 12345u);
+    EXPECT_EQ(m.axis(), axis);
+    EXPECT_EQ(m.split(), -3.25f);
+  }
+  KdNode leaf = KdNode::leaf(0xFFFFFFF0u, KdNode::kMaxIndex);
+  EXPECT_TRUE(leaf.isLeaf());
+  EXPECT_EQ(leaf.primOffset(), 0xFFFFFFF0u);
+  EXPECT_EQ(leaf.primCount(), KdNode::kMaxIndex);
+  leaf.setPrimOffset(7);
+  EXPECT_EQ(leaf.primOffset(), 7u);
+  EXPECT_EQ(leaf.primCount(), KdNode::kMaxIndex);
+  EXPECT_TRUE(KdNode::leaf(3, 0).isLeaf());
+  EXPECT_EQ(KdNode::leaf(3, 0).primCount(), 0u);
+}
+
+TEST(Box, BasicOperations) {
+  Box b;
+  EXPECT_TRUE(b.empty());
+  EXPECT_EQ(b.area(), 0.0f);
+  b.extend(glm::vec3(1.0f, 2.0f, 3.0f));
+  EXPECT_FALSE(b.empty());  // a point box is not empty
+  EXPECT_EQ(b.area(), 0.0f);
+  b.extend(Box(glm::vec3(0.0f), glm::vec3(2.0f, 3.0f, 4.0f)));
+  EXPECT_EQ(b, Box(glm::vec3(0.0f), glm::vec3(2.0f, 3.0f, 4.0f)));
+  EXPECT_FLOAT_EQ(b.area(), 2.0f * (2 * 3 + 3 * 4 + 4 * 2));
+  EXPECT_EQ(b.longestAxis(), 2);
+  EXPECT_EQ(Box(glm::vec3(0.0f), glm::vec3(1.0f)).longestAxis(), 0);  // ties: x first
+  EXPECT_EQ(Box(glm::vec3(0.0f), glm::vec3(1.0f, 2.0f, 2.0f)).longestAxis(), 1);
+  EXPECT_TRUE(b.contains(glm::vec3(2.0f, 3.0f, 4.0f)));  // closed
+  EXPECT_FALSE(b.contains(glm::vec3(2.0f, 3.0f, 4.0001f)));
+  EXPECT_TRUE(b.overlaps(Box(glm::vec3(2.0f, 0.0f, 0.0f), glm::vec3(5.0f))));  // touching counts
+  EXPECT_TRUE(intersection(b, Box(glm::vec3(3.0f), glm::vec3(5.0f))).empty());
+  EXPECT_EQ(intersection(b, Box(glm::vec3(1.0f), glm::vec3(5.0f))), Box(glm::vec3(1.0f), glm::vec3(2.0f, 3.0f, 4.0f)));
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(TriangleClip, ContainsEveryPointOfTheTriangleInsideTheBox) {
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const auto tris = randomTriangles(400, 78);
+  std::size_t nonempty = 0;
+  for (std::size_t i = 0; i < tris.size(); ++i) {
+    const auto& t = tris[i];
+    // A box around a point of the triangle, or (every fourth) anywhere.
+    const glm::vec3 centre = i % 4 == 0 ? glm::vec3(u(rng), u(rng), u(rng)) : (t[0] + t[1] + t[2]) / 3.0f;
+    const glm::vec3 half(0.01f + 0.05f * static_cast<float>(u(rng)), 0.01f + 0.05f * static_cast<float>(u(rng)),
+                         0.01f + 0.05f * static_cast<float>(u(rng)));
+    const Box box(centre - half, centre + half);
+    const Box clipped = clipTriangleToBox(t[0], t[1], t[2], box);
+    if (!clipped.empty()) {
+      ++nonempty;
+      EXPECT_TRUE(box.contains(clipped.lo) && box.contains(clipped.hi)) << clipped << " not inside " << box;
+    }
+    // Sample the triangle (and its corners and edges) in double; points in the box must be in the result.
+    for (int s = 0; s < 300; ++s) {
+      double a = u(rng), b = u(rng);
+      if (s < 3) {  // the corners
+        a = s == 1 ? 1.0 : 0.0;
+        b = s == 2 ? 1.0 : 0.0;
+      }
+      if (a + b > 1.0) a = 1.0 - a, b = 1.0 - b;
+      if (s >= 3 && s < 6) b = 0.0;  // edge points
+      const glm::dvec3 p = (1.0 - a - b) * glm::dvec3(t[0]) + a * glm::dvec3(t[1]) + b * glm::dvec3(t[2]);
+      // The sample is rounded in double (1e-16 relative): allow that much outside the result.
+      bool in_box = true, in_clip = !clipped.empty();
+      for (int k = 0; k < 3; ++k) {
+        const double slack = 1e-12 * (1.0 + std::abs(p[k]));
+        in_box = in_box && p[k] >= box.lo[k] && p[k] <= box.hi[k];
+        in_clip = in_clip && p[k] >= clipped.lo[k] - slack && p[k] <= clipped.hi[k] + slack;
+      }
+      if (in_box) {
+        ASSERT_TRUE(in_clip) << "triangle " << i << " point inside " << box << " outside clipped " << clipped;
+      }
+    }
+  }
+  EXPECT_GT(nonempty, 250u);
+}
+
+TEST(TriangleClip, ExactCases) {
+  const glm::vec3 a(0.0f), b(1.0f, 0.0f, 0.0f), c(0.0f, 1.0f, 0.0f);
+  // Entirely inside: the triangle's bounds.
+  EXPECT_EQ(clipTriangleToBox(a, b, c, Box(glm::vec3(-1.0f), glm::vec3(2.0f))), Box(a, glm::vec3(1.0f, 1.0f, 0.0f)));
+  // Disjoint: empty.
+  EXPECT_TRUE(clipTriangleToBox(a, b, c, Box(glm::vec3(0.6f, 0.6f, -1.0f), glm::vec3(1.0f, 1.0f, 1.0f))).empty());
+  EXPECT_TRUE(clipTriangleToBox(a, b, c, Box(glm::vec3(0.0f, 0.0f, 0.5f), glm::vec3(1.0f))).empty());
+  // Half space x <= 0.5: bounds [0, 0.5] x [0, 1] x [0, 0].
+  const Box half = clipTriangleToBox(a, b, c, Box(glm::vec3(-1.0f), glm::vec3(0.5f, 2.0f, 2.0f)));
+  EXPECT_EQ(half, Box(a, glm::vec3(0.5f, 1.0f, 0.0f)));
+  // Corner box around the hypotenuse midpoint: [0.25, 0.75]^2 clipped by x + y <= 1.
+  const Box corner = clipTriangleToBox(a, b, c, Box(glm::vec3(0.25f, 0.25f, -1.0f), glm::vec3(0.75f, 0.75f, 1.0f)));
+  EXPECT_EQ(corner, Box(glm::vec3(0.25f, 0.25f, 0.0f), glm::vec3(0.75f, 0.75f, 0.0f)));
+  // Empty box in, empty box out.
+  EXPECT_TRUE(clipTriangleToBox(a, b, c, Box()).empty());
+}
+
+}  // namespace
+}  // namespace duplex::test
