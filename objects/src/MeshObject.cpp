@@ -5,8 +5,12 @@
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/accel/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
+#include "WatertightTriangle4.h"
 
 #include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <limits>
 
 namespace duplex {
 
@@ -41,6 +45,8 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
     }
     leaf_refs_.push_back(renumbered[prim]);
   }
+  // One spare element: the 4-wide leaf test reads 12 floats from each triangle's start.
+  triangles_.push_back(triangles_.empty() ? TriangleVertices{} : triangles_.back());
   triangles_.shrink_to_fit();
   prim_ids_.shrink_to_fit();
 }
@@ -59,15 +65,34 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
     traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
       bool found = false;
-      for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
-        const TriangleVertices& tri = tris[refs[i]];
-        float t, u, v;
-        if (intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) {
-          t_max = t;
-          best = refs[i];
-          best_u = u;
-          best_v = v;
-          found = true;
+      // Four triangles per step; lanes are resolved in order with the scalar interval test so
+      // that the result equals testing them one by one.
+      for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
+        const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
+        const float* lane[4];
+        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + (k < n ? k : 0)]].v0.x;
+        const detail::Watertight4 r = detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
+        if ((r.fast | r.exact) == 0) continue;
+        for (int k = 0; k < n; ++k) {
+          const TriangleVertices& tri = tris[refs[i + k]];
+          float t, u, v;
+          bool hit = false;
+          if (r.exact >> k & 1) {
+            hit = intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v);
+          } else if ((r.fast >> k & 1) && !(r.sT[k] > t_max * r.abs_det[k])) {
+            // Same arithmetic as the scalar test's final step.
+            const float inv = 1.0f / r.det[k];
+            t = r.T[k] * inv;
+            hit = true;
+            u = v = 0.0f;  // filled below for the winner only
+          }
+          if (hit) {
+            t_max = t;
+            best = refs[i + k];
+            best_u = u;
+            best_v = v;
+            found = true;
+          }
         }
       }
       return found;
@@ -75,6 +100,14 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   });
   if (best == kInvalidId) return false;
   const TriangleVertices& tri = tris[best];
+  {
+    // Barycentrics of the winner from the scalar test (the 4-wide path keeps only t).
+    float t, u, v;
+    if (intersectWatertight(wray, tri.v0, tri.v1, tri.v2, std::numeric_limits<float>::infinity(), t, u, v)) {
+      best_u = u;
+      best_v = v;
+    }
+  }
   hit.t = t_best;
   hit.u = best_u;
   hit.v = best_v;
@@ -92,10 +125,18 @@ bool MeshObject::occluded(const Ray& ray_os) const {
   const std::uint32_t* refs = leaf_refs_.data();
   return dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
     return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-      for (std::uint32_t i = begin, end = begin + count; i < end; ++i) {
-        const TriangleVertices& tri = tris[refs[i]];
-        float t, u, v;
-        if (intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) return true;
+      for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
+        const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
+        const float* lane[4];
+        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + (k < n ? k : 0)]].v0.x;
+        const detail::Watertight4 r = detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
+        if (r.fast) return true;
+        for (int k = 0; k < n; ++k) {
+          if (!(r.exact >> k & 1)) continue;
+          const TriangleVertices& tri = tris[refs[i + k]];
+          float t, u, v;
+          if (intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) return true;
+        }
       }
       return false;
     });

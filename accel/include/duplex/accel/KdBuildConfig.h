@@ -30,11 +30,12 @@ struct KdBuildConfig {
   /// Cost of one inner-node step. 1 by convention; only the ratio to intersection_cost matters.
   float traversal_cost = 1.0f;
   /// Cost of one primitive test relative to a node step. By instruction count a watertight
-  /// triangle test costs about 4 node steps, but the SAH model ignores what a node step really
-  /// costs on random rays (a dependent load and an unpredictable branch per node), so smaller,
-  /// shallower trees win: on koala (100k triangles) random-ray throughput peaks near 0.2 and
-  /// falls by a third at 1.5 (bench/ sweep, charted in docs/bench). 0.2 also builds 5x faster.
-  float intersection_cost = 0.2f;
+  /// triangle test costs about 4 node steps (1 in a 4-wide leaf packet), but the SAH model ignores
+  /// what a node step really costs on random rays (a dependent load and an unpredictable branch
+  /// per node), so small, shallow trees with larger leaves win: on koala (100k triangles)
+  /// random-ray throughput is flat between 0.1 and 0.3 and a third lower at 1.5, while the build
+  /// at 0.1 is 1.7x faster than at 0.2 and 8x faster than at 1.5 (bench/ sweep, docs/bench).
+  float intersection_cost = 0.1f;
   /// Relative cost reduction for a split that cuts off empty space (Wald & Havran 2006: 0.2),
   /// which isolates geometry from empty space and pays off for rays that miss.
   float empty_bonus = 0.2f;

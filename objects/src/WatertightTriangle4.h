@@ -1,0 +1,90 @@
+#pragma once
+// Four watertight ray/triangle tests at once with SSE2 (baseline x86-64, no run-time dispatch).
+// Private to the objects library: MeshObject's leaves call it.
+//
+// Every lane computes exactly the operations of the scalar intersectWatertight<KX, KY, KZ>, in the
+// same order (SSE2 has no fused multiply-add), so a vertex shared by two triangles gets the same
+// sheared coordinates in a lane as in scalar code: the watertightness argument carries over. Lanes
+// with an edge function exactly zero are handed to the scalar test, which redoes them in double.
+
+#include "duplex/objects/WatertightTriangle.h"
+
+#include <emmintrin.h>
+
+#include <cstdint>
+
+namespace duplex::detail {
+
+/// Result lanes of one 4-wide test: for lane i, bit i of `fast` means "hit candidate decided in
+/// float" (then t/u/v/abs_det/sT hold its values); bit i of `exact` means "edge function zero:
+/// decide with the scalar test".
+struct Watertight4 {
+  int fast = 0;
+  int exact = 0;
+  alignas(16) float sT[4];
+  alignas(16) float abs_det[4];
+  alignas(16) float T[4];
+  alignas(16) float det[4];
+};
+
+/// `tri[i]` points to 9 floats (v0, v1, v2) of lane i's triangle; 12 floats must be readable from
+/// there (the vertex array is padded). Lanes >= count repeat lane 0 and are masked off.
+template <int KX, int KY, int KZ>
+inline Watertight4 intersectWatertight4(const WatertightRay& ray, const float* const tri[4], int count, float t_max) {
+  // Load and transpose: rows are triangles, columns x y z (the 4th column is ignored).
+  __m128 v[3][4];
+  for (int k = 0; k < 3; ++k) {
+    __m128 r0 = _mm_loadu_ps(tri[0] + 3 * k);
+    __m128 r1 = _mm_loadu_ps(tri[1] + 3 * k);
+    __m128 r2 = _mm_loadu_ps(tri[2] + 3 * k);
+    __m128 r3 = _mm_loadu_ps(tri[3] + 3 * k);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+    v[k][0] = r0;  // x of the 4 triangles' vertex k
+    v[k][1] = r1;
+    v[k][2] = r2;
+  }
+  const __m128 o[3] = {_mm_set1_ps(ray.origin[0]), _mm_set1_ps(ray.origin[1]), _mm_set1_ps(ray.origin[2])};
+  const __m128 sx = _mm_set1_ps(ray.sx), sy = _mm_set1_ps(ray.sy), sz = _mm_set1_ps(ray.sz);
+  __m128 A[3], B[3], C[3];
+  for (int k = 0; k < 3; ++k) {
+    A[k] = _mm_sub_ps(v[0][k], o[k]);
+    B[k] = _mm_sub_ps(v[1][k], o[k]);
+    C[k] = _mm_sub_ps(v[2][k], o[k]);
+  }
+  const __m128 ax = _mm_sub_ps(A[KX], _mm_mul_ps(sx, A[KZ]));
+  const __m128 ay = _mm_sub_ps(A[KY], _mm_mul_ps(sy, A[KZ]));
+  const __m128 bx = _mm_sub_ps(B[KX], _mm_mul_ps(sx, B[KZ]));
+  const __m128 by = _mm_sub_ps(B[KY], _mm_mul_ps(sy, B[KZ]));
+  const __m128 cx = _mm_sub_ps(C[KX], _mm_mul_ps(sx, C[KZ]));
+  const __m128 cy = _mm_sub_ps(C[KY], _mm_mul_ps(sy, C[KZ]));
+  const __m128 U = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+  const __m128 V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+  const __m128 W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+  const __m128 zero = _mm_setzero_ps();
+  const int lanes = (1 << count) - 1;
+
+  Watertight4 r;
+  const __m128 any_zero = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(U, zero), _mm_cmpeq_ps(V, zero)), _mm_cmpeq_ps(W, zero));
+  r.exact = _mm_movemask_ps(any_zero) & lanes;
+  // Same-sign test and det != 0, as in the scalar code.
+  const __m128 mixed = _mm_and_ps(_mm_cmplt_ps(_mm_min_ps(U, _mm_min_ps(V, W)), zero),
+                                  _mm_cmpgt_ps(_mm_max_ps(U, _mm_max_ps(V, W)), zero));
+  const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
+  int candidates = ~_mm_movemask_ps(_mm_or_ps(mixed, _mm_cmpeq_ps(det, zero))) & lanes & ~r.exact;
+  if (candidates == 0) return r;
+  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, A[KZ])), _mm_mul_ps(V, _mm_mul_ps(sz, B[KZ]))),
+                              _mm_mul_ps(W, _mm_mul_ps(sz, C[KZ])));
+  const __m128 sign = _mm_and_ps(det, _mm_set1_ps(-0.0f));
+  const __m128 abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), det);
+  const __m128 sT = _mm_xor_ps(T, sign);
+  const __m128 outside = _mm_or_ps(_mm_cmplt_ps(sT, _mm_mul_ps(_mm_set1_ps(ray.tnear), abs_det)),
+                                   _mm_cmpgt_ps(sT, _mm_mul_ps(_mm_set1_ps(t_max), abs_det)));
+  r.fast = candidates & ~_mm_movemask_ps(outside);
+  _mm_store_ps(r.sT, sT);
+  _mm_store_ps(r.abs_det, abs_det);
+  _mm_store_ps(r.T, T);
+  _mm_store_ps(r.det, det);
+  return r;
+}
+
+}  // namespace duplex::detail
