@@ -258,24 +258,35 @@ class Builder {
     return best;
   }
 
-  Split findSimpleSplit(std::vector<PrimRef>& refs, const Box& box) const {
-    Split s;
-    const int axis = box.longestAxis();
-    const float lo = box.lo[axis], hi = box.hi[axis];
-    float pos = 0.5f * (lo + hi);
-    if (cfg_.heuristic == KdHeuristic::Median) {
-      std::vector<float> c(refs.size());
-      for (std::size_t i = 0; i < refs.size(); ++i) c[i] = 0.5f * (refs[i].lo[axis] + refs[i].hi[axis]);
-      auto mid = c.begin() + static_cast<std::ptrdiff_t>(c.size() / 2);
-      std::nth_element(c.begin(), mid, c.end());
-      pos = *mid;
-      if (!(pos > lo && pos < hi)) pos = 0.5f * (lo + hi);
+  // Median / spatial-middle plane, on the longest axis where both children get fewer references
+  // than the node: otherwise the split only duplicates references (overlapping boxes would then
+  // grow the tree to the depth limit). The SAH rejects such splits by cost; these heuristics need
+  // the explicit check.
+  Split findSimpleSplit(const std::vector<PrimRef>& refs, const Box& box) const {
+    const glm::vec3 e = box.extent();
+    int order[3] = {0, 1, 2};
+    std::sort(order, order + 3, [&](int a, int b) { return e[a] > e[b]; });
+    for (const int axis : order) {
+      const float lo = box.lo[axis], hi = box.hi[axis];
+      float pos = 0.5f * (lo + hi);
+      if (cfg_.heuristic == KdHeuristic::Median) {
+        std::vector<float> c(refs.size());
+        for (std::size_t i = 0; i < refs.size(); ++i) c[i] = 0.5f * (refs[i].lo[axis] + refs[i].hi[axis]);
+        auto mid = c.begin() + static_cast<std::ptrdiff_t>(c.size() / 2);
+        std::nth_element(c.begin(), mid, c.end());
+        pos = *mid;
+        if (!(pos > lo && pos < hi)) pos = 0.5f * (lo + hi);
+      }
+      if (!(pos > lo && pos < hi)) continue;
+      std::size_t n_lower = 0, n_upper = 0;
+      for (const PrimRef& r : refs) {
+        n_lower += (r.lo[axis] < pos || (r.lo[axis] == pos && r.hi[axis] == pos)) ? 1 : 0;
+        n_upper += r.hi[axis] > pos ? 1 : 0;
+      }
+      if (n_lower == refs.size() || n_upper == refs.size()) continue;
+      return {axis, pos, 0.0f, true};
     }
-    if (!(pos > lo && pos < hi)) return s;
-    s.axis = axis;
-    s.pos = pos;
-    s.cost = 0.0f;
-    return s;
+    return {};
   }
 
   void partition(const std::vector<PrimRef>& refs, const Split& s, const Box& lower_box, const Box& upper_box,

@@ -64,6 +64,9 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   return tmin <= tmax;
 }
 
+/// Relative slack in t when deciding whether a ray meets a child cell (see traverseKdTree).
+inline constexpr float kKdPlaneSlack = 8.0f * std::numeric_limits<float>::epsilon();
+
 /// Maximal stack depth; the builder bounds the depth well below it.
 inline constexpr int kKdStackSize = 64;
 
@@ -105,9 +108,13 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       const bool positive = !std::signbit(ray.inv_dir[axis]);
       const std::uint32_t near_child = positive ? lower : upper;
       const std::uint32_t far_child = positive ? upper : lower;
-      if (t_plane >= tmax) {
+      // Closed intervals with a few ulps of slack: a ray through a vertex that lies on split
+      // planes touches the cells meeting there at a single point, and the t of two planes at
+      // that point differ by rounding. Skipping such a cell can skip every triangle around the
+      // vertex, so a child is dropped only when the plane is clearly outside [tmin, tmax].
+      if (t_plane > tmax + std::abs(tmax) * kKdPlaneSlack) {
         index = near_child;
-      } else if (t_plane <= tmin) {
+      } else if (t_plane < tmin - std::abs(tmin) * kKdPlaneSlack) {
         index = far_child;
       } else {
         // Both; argument order makes a NaN t_plane (ray inside the plane) keep the full interval.
