@@ -246,6 +246,32 @@ void shootFarExact(const TriangleMesh& original, std::size_t budget, std::uint64
   report(s, budget, label);
 }
 
+// The generated closed meshes are what the tests assume: every edge shared by exactly two
+// triangles with opposite directions (consistent winding), outward orientation, the right volume.
+TEST(Generators, ClosedMeshesAreConsistentlyOutwardOriented) {
+  const double pi = 3.14159265358979;
+  struct Case {
+    TriangleMesh mesh;
+    double volume, rel_tol;
+  };
+  std::vector<Case> cases;
+  cases.push_back({uvSphere(64, 32), 4.0 / 3.0 * pi, 0.02});
+  cases.push_back({icosphere(4, 1.0, glm::dvec3(0.3, -0.2, 0.1)), 4.0 / 3.0 * pi, 0.02});
+  cases.push_back({boxMesh(glm::vec3(-1.0f, -0.5f, 0.0f), glm::vec3(1.0f, 0.5f, 2.0f)), 4.0, 1e-12});
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.mesh.name());
+    EXPECT_EQ(c.mesh.degenerateCount(), 0u);
+    std::map<std::pair<std::uint32_t, std::uint32_t>, int> directed;
+    for (const auto& t : c.mesh.triangles())
+      for (int k = 0; k < 3; ++k) ++directed[{t[k], t[(k + 1) % 3]}];
+    for (const auto& [edge, count] : directed) {
+      EXPECT_EQ(count, 1) << "directed edge used twice";
+      EXPECT_EQ(directed.count({edge.second, edge.first}), 1u) << "edge without an opposite twin";
+    }
+    EXPECT_NEAR(signedVolume(c.mesh), c.volume, c.rel_tol * c.volume);
+  }
+}
+
 // 300k + 300k + 200k + 200k = 10^6 rays on the generated spheres; spot adds 4 * 10^5.
 
 TEST(Watertight, UvSphereNearOrigin) {

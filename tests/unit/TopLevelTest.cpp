@@ -1,0 +1,389 @@
+// The two-level structure: TopLevel over instances with rotations, non-uniform scales, mirrors and
+// translations against a brute force over all triangles transformed to world space in double
+// (same instance and primitive, or same t within 1e-5 relative), occlusion, world-space normals,
+// the top-level tree invariants, counters, and invalid input.
+
+#include "KdTreeChecks.h"
+#include "MeshChecks.h"
+#include "Reference.h"
+#include "TestSupport.h"
+
+#include "duplex/accel/Affine.h"
+#include "duplex/accel/Error.h"
+#include "duplex/accel/QueryContext.h"
+#include "duplex/accel/RayGenerator.h"
+#include "duplex/accel/TopLevel.h"
+#include "duplex/objects/MeshObject.h"
+
+#include <gtest/gtest.h>
+#include <glm/matrix.hpp>
+
+#include <limits>
+#include <map>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace duplex::test {
+namespace {
+
+constexpr double kNaNd = std::numeric_limits<double>::quiet_NaN();
+
+/// Instances, their world-space reference triangles, and a lookup (instance id, prim) -> triangle.
+struct World {
+  std::vector<InstanceDesc> instances;
+  std::vector<RefTriangle> tris;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, RefTriangle> by_id;
+  std::vector<bool> mirrored;  // by position in `instances`
+
+  void add(const std::shared_ptr<const MeshObject>& object, const Affine& world_from_object, std::uint32_t id) {
+    instances.push_back({object, world_from_object, id});
+    mirrored.push_back(glm::determinant(world_from_object.linear) < 0.0);
+    for (const RefTriangle& t : refTriangles(object->mesh(), world_from_object, id)) {
+      tris.push_back(t);
+      by_id.emplace(std::make_pair(id, t.prim), t);
+    }
+  }
+  [[nodiscard]] bool isMirrored(std::uint32_t id) const {
+    for (std::size_t i = 0; i < instances.size(); ++i)
+      if (instances[i].id == id) return mirrored[i];
+    return false;
+  }
+};
+
+std::vector<Box> worldBoxes(const World& w) {
+  std::vector<Box> boxes;
+  for (const InstanceDesc& d : w.instances) boxes.push_back(d.world_from_object.apply(d.object->bounds()));
+  return boxes;
+}
+
+/// Objects shared by the worlds below (each tree checked once, when built).
+struct Library {
+  std::shared_ptr<const MeshObject> sphere, box, grid, soup, spot;
+  Library() {
+    sphere = buildChecked(icosphere(3));
+    box = buildChecked(boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f), "unit-box"));
+    grid = buildChecked(flatGrid(12, 2, 0.0f, 0.25f));
+    soup = buildChecked(triangleSoup(300, 61));
+    if (auto m = sharedMeshCached("spot.obj")) spot = buildChecked(m);
+  }
+};
+
+/// Random rotations, non-uniform scales (some mirrored), translations in a cube of side `spread`
+/// around `offset`; instance ids start at 100 so that they differ from positions.
+World randomWorld(const Library& lib, int count, glm::dvec3 offset, double spread, std::uint64_t seed, bool mirrors) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.3, 2.0);
+  std::vector<std::shared_ptr<const MeshObject>> objects = {lib.sphere, lib.box, lib.grid, lib.soup};
+  if (lib.spot) objects.push_back(lib.spot);
+  World w;
+  if (offset == glm::dvec3(0.0))
+    w.add(lib.sphere, Affine::identity(), 100);  // placed as authored (the identity fast path)
+  else
+    w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, offset.x, 0, 1, 0, offset.y, 0, 0, 1, offset.z}), 100);
+  w.add(lib.box, Affine::fromRowMajor3x4({2, 0, 0, offset.x, 0, 2, 0, offset.y, 0, 0, 2, offset.z}), 101);
+  for (int i = 2; i < count; ++i) {
+    glm::dvec3 scale(s(rng), s(rng), s(rng));
+    if (i % 3 == 0) scale = glm::dvec3(scale.x);  // uniform
+    if (mirrors && i % 4 == 1) scale.y = -scale.y;
+    const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
+    const auto m = rotationScaleTranslation(axis, 3.14159 * u(rng), scale,
+                                            offset + 0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng)));
+    w.add(objects[static_cast<std::size_t>(i) % objects.size()], Affine::fromRowMajor3x4(m), 100 + static_cast<std::uint32_t>(i));
+  }
+  return w;
+}
+
+/// Every ray: TopLevel::intersect (instance, primitive, t), the hit's geometry in world space,
+/// TopLevel::occluded and the ray counter, against the world-space brute force.
+DiffStats expectTopLevelAgrees(const TopLevel& top, const World& w, std::span<const Ray> rays, bool check_normal,
+                               const std::string& label) {
+  const RefScene ref(w.tris);
+  HitTolerance tol;
+  tol.abs_scale = 1e-6 * coordinateScale(top.bounds());
+  DiffStats s;
+  QueryContext ctx;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& ray = rays[i];
+    ++s.rays;
+    auto fail = [&](const auto& what) {
+      if (s.failures++ < 8) ADD_FAILURE() << label << ", ray " << i << ": " << what;
+    };
+    const std::uint64_t before = ctx.stats.rays;
+    const Hit hit = top.intersect(ray, ctx);
+    const bool occ = top.occluded(ray, ctx);
+    if (ctx.stats.rays != before + 2) fail("QueryContext::stats.rays does not count one per query");
+    const auto match = agreesWithReference(hit, ray, ref, tol, true);
+    if (!match) fail(match.message());
+    const auto occ_match = occlusionAgrees(occ, ray, ref, tol);
+    if (!occ_match) fail(occ_match.message());
+    if (!hit.valid()) continue;
+    ++s.hits;
+    const auto it = w.by_id.find({hit.instance_id, hit.prim_id});
+    if (it == w.by_id.end()) {
+      fail(::testing::Message() << hit << " names no instance/triangle of the world");
+      continue;
+    }
+    const RefTriangle& tri = it->second;
+    // Barycentrics are invariant under affine maps: they give the hit point on the world triangle.
+    const glm::dvec3 pb = (1.0 - double(hit.u) - double(hit.v)) * tri.a + double(hit.u) * tri.b + double(hit.v) * tri.c;
+    const glm::dvec3 pr = glm::dvec3(ray.origin) + double(hit.t) * glm::dvec3(ray.dir);
+    const double allowed = 1e-5 * (coordinateScale(top.bounds()) + double(hit.t) * glm::length(glm::dvec3(ray.dir)));
+    if (!(glm::length(pb - pr) <= allowed))
+      fail(::testing::Message() << hit << ": barycentric point " << glm::length(pb - pr) << " from origin + t dir");
+    if (check_normal && !w.isMirrored(hit.instance_id)) {
+      const double c = glm::dot(glm::normalize(glm::dvec3(hit.ng)), glm::normalize(tri.n));
+      if (!(c > 1.0 - 1e-4)) fail(::testing::Message() << hit << ": ng not along the world triangle normal (cos " << c << ")");
+    }
+  }
+  EXPECT_EQ(s.failures, 0u) << label << ": " << s.failures << " of " << s.rays << " rays disagree";
+  return s;
+}
+
+std::vector<Ray> worldRays(const Box& bounds, std::uint64_t seed) {
+  std::vector<Ray> rays = randomRays(bounds, 2500, seed);
+  const auto outer = randomRays(enlarged(bounds, 0.5f), 1000, seed + 1);
+  rays.insert(rays.end(), outer.begin(), outer.end());
+  const auto primary = primaryRays(bounds, 40, 40);
+  rays.insert(rays.end(), primary.begin(), primary.end());
+  // Limited intervals and scaled (non-unit) directions.
+  for (std::size_t i = 0; i < 600; ++i) {
+    Ray r = rays[i];
+    r.dir *= 0.37f + static_cast<float>(i % 5);
+    r.tnear = 0.1f * static_cast<float>(i % 4);
+    r.tfar = 0.5f + static_cast<float>(i % 7);
+    rays.push_back(r);
+  }
+  return rays;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(TopLevel, AgreesWithWorldSpaceBruteForce) {
+  const Library lib;
+  const World w = randomWorld(lib, 14, glm::dvec3(0.0), 8.0, 71, true);
+  TopLevel top;
+  top.build(w.instances);
+  EXPECT_EQ(top.size(), w.instances.size());
+  EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w)));
+  const auto s = expectTopLevelAgrees(top, w, worldRays(top.bounds(), 72), true, "random world");
+  EXPECT_GT(s.hits, s.rays / 5);
+}
+
+TEST(TopLevel, AgreesForEveryHeuristic) {
+  const Library lib;
+  const World w = randomWorld(lib, 10, glm::dvec3(1.0, 2.0, 3.0), 5.0, 73, true);
+  for (const ConfigCase& c : allConfigCases()) {
+    SCOPED_TRACE(c.name);
+    TopLevel top;
+    top.build(w.instances, c.config);
+    EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w), c.config.max_depth));
+    auto rays = worldRays(top.bounds(), 74);
+    rays.resize(1200);
+    expectTopLevelAgrees(top, w, rays, true, c.name);
+  }
+}
+
+TEST(TopLevel, InstancesFarFromTheOrigin) {
+  const Library lib;
+  const World w = randomWorld(lib, 10, glm::dvec3(1.0e5, -2.0e5, 5.0e4), 10.0, 75, true);
+  TopLevel top;
+  top.build(w.instances);
+  EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w)));
+  const auto s = expectTopLevelAgrees(top, w, worldRays(top.bounds(), 76), true, "far world");
+  EXPECT_GT(s.hits, s.rays / 8);
+}
+
+TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {
+  // 60 instances of one sphere around one spot: the top-level leaves hold many instances and the
+  // traversal's mailbox (8 entries) overflows.
+  const Library lib;
+  World w;
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (std::uint32_t i = 0; i < 60; ++i)
+    w.add(lib.sphere, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(u(rng), u(rng), 1.0), u(rng),
+                                                                       glm::dvec3(0.5 + 0.3 * u(rng)),
+                                                                       glm::dvec3(u(rng), u(rng), u(rng)))), i);
+  TopLevel top;
+  top.build(w.instances);
+  EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w)));
+  auto rays = worldRays(top.bounds(), 78);
+  rays.resize(2000);
+  const auto s = expectTopLevelAgrees(top, w, rays, true, "overlapping");
+  EXPECT_GT(s.hits, s.rays / 5);
+}
+
+TEST(TopLevel, AnalyticScaledBox) {
+  // Unit box [-1, 1]^3 scaled by 2 around (0, 0, 0): the face z = -2 is hit at t = 8 from z = -10,
+  // t is in units of the (unnormalised) world direction, and ng points along -z.
+  const Library lib;
+  TopLevel top;
+  const std::vector<InstanceDesc> inst = {
+      {lib.box, Affine::fromRowMajor3x4({2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0}), 7}};
+  top.build(inst);
+  EXPECT_LE(top.bounds().lo.z, -2.0f);  // world box rounded outward, but tight
+  EXPECT_GE(top.bounds().lo.z, -2.00001f);
+  QueryContext ctx;
+  Ray r;
+  r.origin = glm::vec3(0.1f, 0.2f, -10.0f);
+  r.dir = glm::vec3(0.0f, 0.0f, 1.0f);
+  Hit h = top.intersect(r, ctx);
+  ASSERT_TRUE(h.valid());
+  EXPECT_EQ(h.instance_id, 7u);
+  EXPECT_NEAR(h.t, 8.0f, 1e-5f);
+  EXPECT_GT(glm::dot(glm::dvec3(h.ng), glm::dvec3(0, 0, -1)), 0.999 * glm::length(glm::dvec3(h.ng)));
+  r.dir = glm::vec3(0.0f, 0.0f, 0.5f);
+  h = top.intersect(r, ctx);
+  ASSERT_TRUE(h.valid());
+  EXPECT_NEAR(h.t, 16.0f, 2e-5f);
+  r.tfar = 15.9f;
+  EXPECT_FALSE(top.intersect(r, ctx).valid());
+  EXPECT_FALSE(top.occluded(r, ctx));
+  r.tfar = 16.1f;
+  EXPECT_TRUE(top.occluded(r, ctx));
+  // Rotated 90 degrees about z and moved: the face x = +2 (object +y face) is hit from +x.
+  top.build(std::vector<InstanceDesc>{
+      {lib.box, Affine::fromRowMajor3x4({0, -2, 0, 5, 2, 0, 0, 0, 0, 0, 2, 0}), 9}});
+  Ray s;
+  s.origin = glm::vec3(20.0f, 0.25f, 0.5f);
+  s.dir = glm::vec3(-1.0f, 0.0f, 0.0f);
+  h = top.intersect(s, ctx);
+  ASSERT_TRUE(h.valid());
+  EXPECT_EQ(h.instance_id, 9u);
+  EXPECT_NEAR(h.t, 13.0f, 1e-5f);  // face at x = 5 + 2 = 7
+  EXPECT_GT(glm::dot(glm::dvec3(h.ng), glm::dvec3(1, 0, 0)), 0.999 * glm::length(glm::dvec3(h.ng)));
+  EXPECT_EQ(top.size(), 1u);  // a rebuild replaces the instances
+}
+
+// Hit::ng is documented as cross(v1 - v0, v2 - v0) of the hit triangle in the space of the query.
+// For a mirroring instance (det < 0) the transformed triangle's cross product flips with the
+// winding, so ng must still point along the world triangle's normal.
+TEST(TopLevel, NormalOfMirroredInstancesFollowsTheWorldTriangle) {
+  const Library lib;
+  World w;
+  w.add(lib.box, Affine::fromRowMajor3x4({-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}), 0);      // mirror x
+  w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, 4, 0, -2, 0, 0, 0, 0, 1, 0}), 1);   // mirror y, scaled
+  w.add(lib.soup, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(1, 2, 3), 0.7,
+                                                                  glm::dvec3(1.5, 0.5, -1.0), glm::dvec3(0, 4, 0))), 2);
+  TopLevel top;
+  top.build(w.instances);
+  QueryContext ctx;
+  std::size_t checked = 0, wrong = 0;
+  for (const Ray& r : worldRays(top.bounds(), 79)) {
+    const Hit h = top.intersect(r, ctx);
+    if (!h.valid()) continue;
+    const RefTriangle& tri = w.by_id.at({h.instance_id, h.prim_id});
+    ++checked;
+    const double c = glm::dot(glm::normalize(glm::dvec3(h.ng)), glm::normalize(tri.n));
+    if (!(c > 1.0 - 1e-4) && wrong++ < 5)
+      ADD_FAILURE() << r << " hits mirrored instance " << h.instance_id << " prim " << h.prim_id
+                    << ": ng (" << h.ng.x << ", " << h.ng.y << ", " << h.ng.z << ") vs world cross(v1 - v0, v2 - v0) ("
+                    << tri.n.x << ", " << tri.n.y << ", " << tri.n.z << "), cos " << c;
+  }
+  EXPECT_GT(checked, 500u);
+  EXPECT_EQ(wrong, 0u) << "hits whose ng points against the world triangle's normal";
+}
+
+// The same contract for length: ng = cross(v1 - v0, v2 - v0) of the world-space triangle, for
+// scaled (not mirrored) instances.
+TEST(TopLevel, NormalIsTheWorldCrossProduct) {
+  const Library lib;
+  World w;
+  w.add(lib.box, Affine::fromRowMajor3x4({3, 0, 0, 0, 0, 3, 0, 0, 0, 0, 3, 0}), 0);  // uniform scale 3
+  w.add(lib.sphere, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(0, 1, 1), 0.4,
+                                                                    glm::dvec3(0.5, 2.0, 1.0), glm::dvec3(8, 0, 0))), 1);
+  TopLevel top;
+  top.build(w.instances);
+  QueryContext ctx;
+  std::size_t checked = 0, wrong = 0;
+  for (const Ray& r : worldRays(top.bounds(), 80)) {
+    const Hit h = top.intersect(r, ctx);
+    if (!h.valid()) continue;
+    ++checked;
+    const glm::dvec3 n = w.by_id.at({h.instance_id, h.prim_id}).n;
+    if (!(glm::length(glm::dvec3(h.ng) - n) <= 1e-4 * glm::length(n)) && wrong++ < 5)
+      ADD_FAILURE() << r << " instance " << h.instance_id << ": ng (" << h.ng.x << ", " << h.ng.y << ", " << h.ng.z
+                    << ") but world cross(v1 - v0, v2 - v0) = (" << n.x << ", " << n.y << ", " << n.z << ")";
+  }
+  EXPECT_GT(checked, 500u);
+  EXPECT_EQ(wrong, 0u);
+}
+
+TEST(TopLevel, EmptyTopLevelMissesEverything) {
+  TopLevel top;
+  top.build({});
+  EXPECT_EQ(top.size(), 0u);
+  EXPECT_TRUE(top.bounds().empty());
+  EXPECT_TRUE(top.tree().empty());
+  QueryContext ctx;
+  Ray r;
+  EXPECT_FALSE(top.intersect(r, ctx).valid());
+  EXPECT_FALSE(top.occluded(r, ctx));
+  EXPECT_EQ(ctx.stats.rays, 2u);
+  EXPECT_EQ(ctx.stats.instance_visits, 0u);
+  TopLevel never_built;
+  EXPECT_FALSE(never_built.intersect(r, ctx).valid());
+  EXPECT_FALSE(never_built.occluded(r, ctx));
+}
+
+TEST(TopLevel, BadRaysMissAndInstanceVisitsAreCounted) {
+  const Library lib;
+  TopLevel top;
+  const std::vector<InstanceDesc> inst = {{lib.sphere, Affine::identity(), 0},
+                                          {lib.box, Affine::fromRowMajor3x4({1, 0, 0, 10, 0, 1, 0, 0, 0, 0, 1, 0}), 1}};
+  top.build(inst);
+  QueryContext ctx;
+  Ray r;
+  r.origin = glm::vec3(0.0f, 0.0f, -5.0f);
+  r.dir = glm::vec3(0.0f, 0.0f, 1.0f);
+  const Hit h = top.intersect(r, ctx);
+  ASSERT_TRUE(h.valid());
+  EXPECT_EQ(h.instance_id, 0u);
+  EXPECT_GE(ctx.stats.instance_visits, 1u);
+  // A ray pointing away from everything visits no instance.
+  QueryContext away;
+  Ray a;
+  a.origin = glm::vec3(0.0f, 0.0f, -5.0f);
+  a.dir = glm::vec3(0.0f, 0.0f, -1.0f);
+  EXPECT_FALSE(top.intersect(a, away).valid());
+  EXPECT_FALSE(top.occluded(a, away));
+  EXPECT_EQ(away.stats.instance_visits, 0u);
+  EXPECT_EQ(away.stats.rays, 2u);
+  for (int k = 0; k < 4; ++k) {
+    Ray bad = r;
+    if (k == 0) bad.dir = glm::vec3(0.0f);
+    if (k == 1) bad.dir.z = std::numeric_limits<float>::quiet_NaN();
+    if (k == 2) bad.origin.x = std::numeric_limits<float>::infinity();
+    if (k == 3) {
+      bad.tnear = 10.0f;
+      bad.tfar = 1.0f;
+    }
+    EXPECT_FALSE(top.intersect(bad, ctx).valid()) << bad;
+    EXPECT_FALSE(top.occluded(bad, ctx)) << bad;
+  }
+}
+
+TEST(TopLevel, InvalidInstancesThrowNamingTheInstance) {
+  const Library lib;
+  auto expect_throw = [&](const InstanceDesc& bad, const std::string& needle) {
+    const std::vector<InstanceDesc> inst = {{lib.sphere, Affine::identity(), 0}, bad};
+    TopLevel top;
+    try {
+      top.build(inst);
+      ADD_FAILURE() << "no InvalidArgument for instance " << bad.id << " " << bad.world_from_object;
+    } catch (const InvalidArgument& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  expect_throw({lib.box, Affine::fromRowMajor3x4({kNaNd, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}), 41}, "41");
+  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, kNaNd, 0, 1, 0, 0, 0, 0, 1, 0}), 42}, "42");
+  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, INFINITY, 0, 0, 1, 0}), 43}, "43");
+  expect_throw({lib.box, Affine::fromRowMajor3x4({0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}), 44}, "44");      // zero
+  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 5}), 45}, "45");      // flat
+  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 2, 3, 0, 2, 4, 6, 0, 1, 0, 1, 0}), 46}, "46");      // rank 2
+  expect_throw({nullptr, Affine::identity(), 47}, "47");
+}
+
+}  // namespace
+}  // namespace duplex::test
