@@ -26,7 +26,11 @@ void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfi
       throw InvalidArgument("instance " + std::to_string(d.id) + " (object '" + d.object->name() +
                             "'): transform is singular");
     owners.push_back(d.object);
-    const glm::dmat3 normal = glm::transpose(glm::inverse(d.world_from_object.linear));
+    // Cofactor matrix det(L) L^-T: maps cross(v1 - v0, v2 - v0) of object space exactly to the
+    // same cross product of the world-space vertices (the inverse transpose alone would lose the
+    // scale and flip the winding of mirrored instances).
+    const glm::dmat3& l = d.world_from_object.linear;
+    const glm::dmat3 normal = glm::determinant(l) * glm::transpose(glm::inverse(l));
     const bool identity = d.world_from_object.linear == glm::dmat3(1.0) && d.world_from_object.translation == glm::dvec3(0.0);
     items.push_back({d.object.get(), d.world_from_object.inverse(), glm::mat3(normal), d.id, identity});
     boxes.push_back(d.world_from_object.apply(d.object->bounds()));

@@ -34,8 +34,9 @@ class TopLevel {
   /// singular transform (naming the instance id).
   void build(std::span<const InstanceDesc> instances, const KdBuildConfig& config = {});
 
-  /// Closest hit of a world-space ray; t is in units of the world ray's direction, hit.ng is the
-  /// world-space geometric normal (unnormalised), hit.instance_id the instance's id. Returns a
+  /// Closest hit of a world-space ray; t is in units of the world ray's direction, hit.ng is
+  /// cross(v1 - v0, v2 - v0) of the world-space triangle (unnormalised), hit.instance_id the
+  /// instance's id. Returns a
   /// miss (hit.valid() false) when nothing is hit.
   [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx) const;
   /// Whether any blocking object is hit within [tnear, tfar] of the world-space ray.
@@ -50,7 +51,7 @@ class TopLevel {
   struct Instance {
     const Object* object;
     Affine object_from_world;
-    glm::mat3 normal_to_world;  // inverse transpose of the world_from_object linear part
+    glm::mat3 normal_to_world;  // cofactor matrix of the world_from_object linear part
     std::uint32_t id;
     bool identity;  // skip the transform for instances placed as authored
   };
