@@ -1,0 +1,181 @@
+// Ray and hit files of the interchange contract (RayFile.h), and the ray generators (RayGenerator.h)
+// that the tool, tests and benchmarks share.
+
+#include "TestSupport.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/accel/Hit.h"
+#include "duplex/accel/RayFile.h"
+#include "duplex/accel/RayGenerator.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace duplex::test {
+namespace {
+
+template <class F>
+void expectFileErrorNaming(F&& f, const std::string& needle) {
+  try {
+    f();
+    ADD_FAILURE() << "no FileError thrown (expected one naming '" << needle << "')";
+  } catch (const FileError& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "message: " << e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "wrong exception type: " << e.what();
+  }
+}
+
+TEST(RayFile, RaysRoundTripBitExactly) {
+  TempDir dir;
+  std::vector<Ray> rays = randomRays(Box(glm::vec3(-5.0f), glm::vec3(5.0f)), 1000, 1);
+  rays[3].tfar = 17.25f;
+  rays[4].tnear = 0.5f;
+  rays[5].dir = glm::vec3(-0.0f, 0.0f, 1.0f);
+  rays[6].origin.x = std::numeric_limits<float>::denorm_min();
+  const auto path = dir / "rays.bin";
+  writeRayFile(path, rays);
+  EXPECT_EQ(std::filesystem::file_size(path), rays.size() * 32);
+  const auto back = readRayFile(path);
+  ASSERT_EQ(back.size(), rays.size());
+  EXPECT_EQ(std::memcmp(back.data(), rays.data(), rays.size() * sizeof(Ray)), 0);
+  // Empty file: no rays.
+  writeRayFile(dir / "empty.bin", {});
+  EXPECT_TRUE(readRayFile(dir / "empty.bin").empty());
+}
+
+TEST(RayFile, RecordLayoutIsOriginTnearDirTfar) {
+  TempDir dir;
+  Ray r;
+  r.origin = glm::vec3(1.0f, 2.0f, 3.0f);
+  r.tnear = 4.0f;
+  r.dir = glm::vec3(5.0f, 6.0f, 7.0f);
+  r.tfar = 8.0f;
+  writeRayFile(dir / "one.bin", std::vector<Ray>{r});
+  const auto bytes = readBinaryFile(dir / "one.bin");
+  ASSERT_EQ(bytes.size(), 32u);
+  float f[8];
+  std::memcpy(f, bytes.data(), 32);  // little endian on every supported machine
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(f[i], static_cast<float>(i + 1)) << "float " << i;
+}
+
+TEST(RayFile, HitsRoundTripAndMissRecord) {
+  TempDir dir;
+  const HitRecord miss = HitRecord::miss();
+  EXPECT_EQ(miss.t, std::numeric_limits<float>::infinity());
+  EXPECT_EQ(miss.instance_id, 0xFFFFFFFFu);
+  EXPECT_EQ(miss.prim_id, 0xFFFFFFFFu);
+  Hit h;
+  const HitRecord from_miss = HitRecord::from(h);
+  EXPECT_EQ(std::memcmp(&from_miss, &miss, sizeof(HitRecord)), 0);
+  h.t = 2.5f;
+  h.u = 0.25f;
+  h.v = 0.5f;
+  h.prim_id = 17;
+  h.instance_id = 3;
+  const HitRecord rec = HitRecord::from(h);
+  EXPECT_EQ(rec.t, 2.5f);
+  EXPECT_EQ(rec.u, 0.25f);
+  EXPECT_EQ(rec.v, 0.5f);
+  EXPECT_EQ(rec.prim_id, 17u);
+  EXPECT_EQ(rec.instance_id, 3u);
+
+  std::vector<HitRecord> hits = {miss, rec, {1.0f, 0.0f, 1.0f, 0u, 0u}};
+  writeHitFile(dir / "hits.bin", hits);
+  const auto bytes = readBinaryFile(dir / "hits.bin");
+  ASSERT_EQ(bytes.size(), 60u);
+  // Layout: float t, u, v; uint32 instance_id, prim_id.
+  float t;
+  std::uint32_t inst, prim;
+  std::memcpy(&t, bytes.data() + 20, 4);
+  std::memcpy(&inst, bytes.data() + 32, 4);
+  std::memcpy(&prim, bytes.data() + 36, 4);
+  EXPECT_EQ(t, 2.5f);
+  EXPECT_EQ(inst, 3u);
+  EXPECT_EQ(prim, 17u);
+  const auto back = readHitFile(dir / "hits.bin");
+  ASSERT_EQ(back.size(), hits.size());
+  EXPECT_EQ(std::memcmp(back.data(), hits.data(), hits.size() * sizeof(HitRecord)), 0);
+}
+
+TEST(RayFile, WrongSizesAndMissingFilesThrowNamingTheFile) {
+  TempDir dir;
+  for (const std::size_t size : {1u, 31u, 33u, 63u, 100u}) {
+    const auto path = dir / ("rays_" + std::to_string(size) + ".bin");
+    writeBinaryFile(path, std::vector<char>(size, 0));
+    expectFileErrorNaming([&] { (void)readRayFile(path); }, path.filename().string());
+  }
+  for (const std::size_t size : {1u, 19u, 21u, 32u, 64u}) {  // 32, 64: ray-record multiples
+    const auto path = dir / ("hits_" + std::to_string(size) + ".bin");
+    writeBinaryFile(path, std::vector<char>(size, 0));
+    expectFileErrorNaming([&] { (void)readHitFile(path); }, path.filename().string());
+  }
+  expectFileErrorNaming([&] { (void)readRayFile(dir / "no_such_rays.bin"); }, "no_such_rays.bin");
+  expectFileErrorNaming([&] { (void)readHitFile(dir / "no_such_hits.bin"); }, "no_such_hits.bin");
+  expectFileErrorNaming([&] { writeRayFile(dir / "missing_dir" / "r.bin", std::vector<Ray>(1)); }, "r.bin");
+  expectFileErrorNaming([&] { writeHitFile(dir / "missing_dir" / "h.bin", std::vector<HitRecord>(1)); }, "h.bin");
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(RayGenerator, RandomRaysAreDeterministicUniformAndInside) {
+  const Box b(glm::vec3(-1.0f, 2.0f, 10.0f), glm::vec3(3.0f, 2.5f, 20.0f));
+  const auto a = randomRays(b, 20000, 42);
+  const auto c = randomRays(b, 20000, 42);
+  const auto d = randomRays(b, 20000, 43);
+  ASSERT_EQ(a.size(), 20000u);
+  EXPECT_EQ(std::memcmp(a.data(), c.data(), a.size() * sizeof(Ray)), 0) << "same seed, different rays";
+  EXPECT_NE(std::memcmp(a.data(), d.data(), a.size() * sizeof(Ray)), 0) << "different seeds, same rays";
+  glm::dvec3 mean_dir(0.0), mean_origin(0.0);
+  for (const Ray& r : a) {
+    EXPECT_TRUE(b.contains(r.origin)) << r;
+    EXPECT_NEAR(glm::length(glm::dvec3(r.dir)), 1.0, 1e-6) << r;
+    EXPECT_EQ(r.tnear, 0.0f);
+    EXPECT_EQ(r.tfar, std::numeric_limits<float>::infinity());
+    mean_dir += glm::dvec3(r.dir);
+    mean_origin += glm::dvec3(r.origin);
+  }
+  mean_dir /= double(a.size());
+  mean_origin /= double(a.size());
+  // Uniform on the sphere: mean direction ~ 0 (sd of each component 1/sqrt(3 n) = 0.004).
+  EXPECT_LT(glm::length(mean_dir), 0.03);
+  EXPECT_LT(glm::length(mean_origin - glm::dvec3(b.center())), 0.1);
+}
+
+TEST(RayGenerator, PrimaryRaysLookAtTheBox) {
+  const Box b(glm::vec3(-2.0f, -1.0f, 0.0f), glm::vec3(2.0f, 1.0f, 3.0f));
+  const std::uint32_t w = 64, h = 48;
+  const auto rays = primaryRays(b, w, h);
+  ASSERT_EQ(rays.size(), std::size_t(w) * h);
+  const PinholeCamera cam = PinholeCamera::looking_at_box(b);
+  const glm::dvec3 centre(b.center());
+  // The camera: at one bbox diagonal from the centre along normalize(1, 0.6, 0.8).
+  const double diagonal = glm::length(glm::dvec3(b.extent()));
+  EXPECT_LT(glm::length(cam.eye - (centre + diagonal * glm::normalize(glm::dvec3(1.0, 0.6, 0.8)))), 1e-9);
+  for (const Ray& r : rays) {
+    EXPECT_EQ(glm::dvec3(r.origin), glm::dvec3(glm::vec3(cam.eye)));
+    EXPECT_NEAR(glm::length(glm::dvec3(r.dir)), 1.0, 1e-6);
+    EXPECT_EQ(r.tnear, 0.0f);
+    EXPECT_EQ(r.tfar, std::numeric_limits<float>::infinity());
+  }
+  // Row-major from the top left: the centre pixels look at the box centre, the top row up.
+  const glm::dvec3 to_centre = glm::normalize(centre - glm::dvec3(rays[0].origin));
+  const Ray& mid = rays[std::size_t(h / 2) * w + w / 2];
+  EXPECT_GT(glm::dot(glm::dvec3(mid.dir), to_centre), 0.999);
+  EXPECT_GT(rays[0].dir.y, rays[std::size_t(h - 1) * w].dir.y);         // top row above bottom row
+  EXPECT_GT(glm::dot(glm::dvec3(rays[w - 1].dir - rays[0].dir), cam.right), 0.0);  // left to right
+  // 45 degrees vertical field of view: top and bottom centre rays are 45 * (h-1)/h degrees apart.
+  const double angle = std::acos(glm::dot(glm::dvec3(rays[w / 2].dir), glm::dvec3(rays[std::size_t(h - 1) * w + w / 2].dir)));
+  const double half = std::atan(std::tan(22.5 * 3.14159265358979 / 180.0) * (h - 1.0) / h);
+  EXPECT_NEAR(angle, 2.0 * half, 2e-3);
+}
+
+}  // namespace
+}  // namespace duplex::test
