@@ -18,6 +18,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <ctime>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -64,6 +65,44 @@ class Stopwatch {
   std::chrono::steady_clock::time_point start_;
 };
 
+/// CPU milliseconds consumed since construction, by the calling thread or by the whole process.
+/// The machine is shared: when other processes take our core, wall time grows but CPU time does
+/// not, so one-thread figures in CPU time repeat much better than wall-clock ones.
+class CpuStopwatch {
+ public:
+  enum class Scope { Thread, Process };
+  explicit CpuStopwatch(Scope scope) : scope_(scope), start_(now(scope)) {}
+  [[nodiscard]] double ms() const { return now(scope_) - start_; }
+
+ private:
+  static double now(Scope scope) {
+    timespec ts{};
+    ::clock_gettime(scope == Scope::Thread ? CLOCK_THREAD_CPUTIME_ID : CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+  }
+  Scope scope_;
+  double start_;
+};
+
+/// Wall and CPU time of one measurement. `cpu_ms` is the calling thread's CPU time for one thread
+/// (all work of a one-thread arena runs on the calling thread), and the process's CPU time divided
+/// by the thread count for more: right for trace loops, which keep every thread busy to the end;
+/// not for builds, whose serial parts leave threads idle (builds report it for one thread only).
+struct Timing {
+  double wall_ms = 0.0;
+  double cpu_ms = 0.0;
+};
+
+/// Times `fn()` run by the calling thread with `threads` threads available.
+template <class Fn>
+Timing timeIt(int threads, const Fn& fn) {
+  const CpuStopwatch cpu(threads == 1 ? CpuStopwatch::Scope::Thread : CpuStopwatch::Scope::Process);
+  const Stopwatch wall;
+  fn();
+  const double wall_ms = wall.ms();
+  return {wall_ms, cpu.ms() / threads};
+}
+
 /// Median of the samples (mean of the two middle ones for an even count); NaN for none.
 [[nodiscard]] double median(std::vector<double> samples);
 
@@ -91,29 +130,29 @@ inline constexpr std::size_t kTraceChunk = 4096;
 
 /// Result of one timed trace.
 struct TraceTiming {
-  double ms = 0.0;
+  Timing time;
   std::uint64_t hits = 0;
-  [[nodiscard]] double mrays(std::size_t rays) const { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; }
 };
 
 /// Times `query(ray) -> bool` over all rays inside `arena`: parallel_for over chunks of kTraceChunk
 /// rays, one call per ray, hits summed per chunk. The same loop times every tracer.
-template <class Query>
-TraceTiming timeTrace(tbb::task_arena& arena, std::span<const Ray> rays, const Query& query) {
+template <class QueryFn>
+TraceTiming timeTrace(tbb::task_arena& arena, std::span<const Ray> rays, const QueryFn& query) {
   std::atomic<std::uint64_t> hits{0};
-  const Stopwatch clock;
-  arena.execute([&] {
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, rays.size(), kTraceChunk),
-        [&](const tbb::blocked_range<std::size_t>& range) {
-          setFtzDaz();
-          std::uint64_t chunk_hits = 0;
-          for (std::size_t i = range.begin(); i != range.end(); ++i) chunk_hits += query(rays[i]) ? 1u : 0u;
-          hits.fetch_add(chunk_hits, std::memory_order_relaxed);
-        },
-        tbb::simple_partitioner());
+  const Timing time = timeIt(arena.max_concurrency(), [&] {
+    arena.execute([&] {
+      tbb::parallel_for(
+          tbb::blocked_range<std::size_t>(0, rays.size(), kTraceChunk),
+          [&](const tbb::blocked_range<std::size_t>& range) {
+            setFtzDaz();
+            std::uint64_t chunk_hits = 0;
+            for (std::size_t i = range.begin(); i != range.end(); ++i) chunk_hits += query(rays[i]) ? 1u : 0u;
+            hits.fetch_add(chunk_hits, std::memory_order_relaxed);
+          },
+          tbb::simple_partitioner());
+    });
   });
-  return {clock.ms(), hits.load()};
+  return {time, hits.load()};
 }
 
 /// The two queries every tracer answers.

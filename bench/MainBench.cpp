@@ -152,31 +152,35 @@ nlohmann::json MeshBench::run(const LoadedMesh& loaded) {
 void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
   const TriangleMesh& mesh = *loaded.mesh;
   const double triangles = static_cast<double>(mesh.triangleCount());
-  std::map<int, std::vector<double>> ms[kTracers];
+  // Wall ms per tracer and thread count; CPU ms (calling thread) for one thread only.
+  std::map<int, std::vector<double>> ms[kTracers], cpu_ms[kTracers];
   const Stopwatch phase;
   for (int rep = 0; rep < options_.repeat; ++rep) {
     for (const int t : threads_) {
-      // Alternate the order between repetitions so that drift on the shared machine hits both sides.
-      const bool ours_first = rep % 2 == 0;
+      auto record = [&](int tracer, const Timing& time) {
+        ms[tracer][t].push_back(time.wall_ms);
+        if (t == 1) cpu_ms[tracer][t].push_back(time.cpu_ms);
+      };
       auto buildOurs = [&] {
         ours_.reset();
-        const Stopwatch clock;
-        arenas_.get(t).execute([&] { ours_ = std::make_unique<MeshObject>(loaded.mesh, config_); });
-        ms[kOurs][t].push_back(clock.ms());
+        record(kOurs, timeIt(t, [&] {
+                 arenas_.get(t).execute([&] { ours_ = std::make_unique<MeshObject>(loaded.mesh, config_); });
+               }));
       };
       auto buildEmbree = [&] {
 #if DUPLEX_BENCH_HAVE_EMBREE
         if (!haveEmbree()) return;
         for (const Tracer e : {kEmbreeMedium, kEmbreeHigh}) {
           embree_.scenes[e].reset();
-          const Stopwatch clock;
-          embree_.scenes[e] = std::make_unique<EmbreeMesh>(*embree_.devices.at(t), mesh,
-                                                    e == kEmbreeMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
-          ms[e][t].push_back(clock.ms());
+          record(e, timeIt(t, [&] {
+                   embree_.scenes[e] = std::make_unique<EmbreeMesh>(
+                       *embree_.devices.at(t), mesh, e == kEmbreeMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
+                 }));
         }
 #endif
       };
-      if (ours_first) {
+      // Alternate the order between repetitions so that drift on the shared machine hits both sides.
+      if (rep % 2 == 0) {
         buildOurs();
         buildEmbree();
       } else {
@@ -210,24 +214,36 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
 #endif
   nlohmann::json builds = nlohmann::json::array();
   std::cerr << "  build ms    " << pad("threads", 9) << lpad("ours", 10) << lpad("emb-med", 10) << lpad("emb-high", 10)
-            << lpad("/med", 8) << lpad("/high", 8) << "\n";
+            << lpad("/med", 8) << lpad("/high", 8) << lpad("/med cpu", 10) << "\n";
   for (const int t : threads_) {
-    double med[kTracers];
-    for (int k = 0; k < kTracers; ++k) med[k] = ms[k].count(t) ? median(ms[k][t]) : kNaN;
+    double med[kTracers], cpu[kTracers];
+    for (int k = 0; k < kTracers; ++k) {
+      med[k] = ms[k].count(t) ? median(ms[k][t]) : kNaN;
+      cpu[k] = cpu_ms[k].count(t) ? median(cpu_ms[k][t]) : kNaN;
+    }
     nlohmann::json rec{{"threads", t}};
     for (int k = 0; k < kTracers; ++k) {
       if (!std::isfinite(med[k])) continue;
-      rec[std::string(kTracerKey[k]) + "_ms"] = med[k];
-      rec[std::string(kTracerKey[k]) + "_ms_samples"] = ms[k][t];
-      out[kTracerKey[k]]["build_ms"][std::to_string(t)] = med[k];
+      const std::string name = kTracerKey[k];
+      rec[name + "_ms"] = med[k];
+      rec[name + "_ms_samples"] = ms[k][t];
+      out[name]["build_ms"][std::to_string(t)] = med[k];
+      if (std::isfinite(cpu[k])) {
+        rec[name + "_cpu_ms"] = cpu[k];
+        rec[name + "_cpu_ms_samples"] = cpu_ms[k][t];
+        out[name]["build_cpu_ms"][std::to_string(t)] = cpu[k];
+      }
     }
     rec["ratio_vs_embree_medium"] = num(ratio(med[kOurs], med[kEmbreeMedium]));
     rec["ratio_vs_embree_high"] = num(ratio(med[kOurs], med[kEmbreeHigh]));
+    rec["ratio_cpu_vs_embree_medium"] = num(ratio(cpu[kOurs], cpu[kEmbreeMedium]));
+    rec["ratio_cpu_vs_embree_high"] = num(ratio(cpu[kOurs], cpu[kEmbreeHigh]));
     builds.push_back(rec);
     std::cerr << "              " << pad(std::to_string(t), 9) << lpad(fmt(med[kOurs], 1), 10)
               << lpad(fmt(med[kEmbreeMedium], 1), 10) << lpad(fmt(med[kEmbreeHigh], 1), 10)
               << lpad(fmt(ratio(med[kOurs], med[kEmbreeMedium])) + "x", 8)
-              << lpad(fmt(ratio(med[kOurs], med[kEmbreeHigh])) + "x", 8) << "\n";
+              << lpad(fmt(ratio(med[kOurs], med[kEmbreeHigh])) + "x", 8)
+              << lpad(fmt(ratio(cpu[kOurs], cpu[kEmbreeMedium])) + "x", 10) << "\n";
   }
   out["build"] = builds;
   std::cerr << "  bytes/tri   ours " << fmt(bytes_per_triangle[kOurs], 1) << "  emb-med "
@@ -242,6 +258,10 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
     const std::string key = std::to_string(rec["threads"].get<int>()) + "T";
     out["ratios"]["vs_embree_medium"]["build"][key] = rec["ratio_vs_embree_medium"];
     out["ratios"]["vs_embree_high"]["build"][key] = rec["ratio_vs_embree_high"];
+    if (!rec["ratio_cpu_vs_embree_medium"].is_null()) {
+      out["ratios"]["vs_embree_medium"]["build_cpu"][key] = rec["ratio_cpu_vs_embree_medium"];
+      out["ratios"]["vs_embree_high"]["build_cpu"][key] = rec["ratio_cpu_vs_embree_high"];
+    }
   }
 }
 
@@ -293,10 +313,22 @@ void MeshBench::checkAgreement(const TriangleMesh& mesh, const std::vector<RaySe
     constexpr std::size_t kRefereeSample = 48;
     std::uint64_t referee_ours = 0, referee_embree = 0;
     const std::size_t examined = std::min(disputed.size(), kRefereeSample);
+    nlohmann::json wrong_ours = nlohmann::json::array();  // rays to reproduce where the referee says we are wrong
     for (std::size_t k = 0; k < examined; ++k) {
       const std::size_t i = disputed[k * disputed.size() / examined];
-      const bool truth = refereeHits(arena, mesh, set.rays[i]);
-      if (truth == (t[kOurs][i] < inf)) ++referee_ours;
+      const Ray& r = set.rays[i];
+      const bool truth = refereeHits(arena, mesh, r);
+      if (truth == (t[kOurs][i] < inf)) {
+        ++referee_ours;
+      } else if (wrong_ours.size() < 5) {
+        wrong_ours.push_back({{"index", i},
+                              {"origin", {r.origin.x, r.origin.y, r.origin.z}},
+                              {"dir", {r.dir.x, r.dir.y, r.dir.z}},
+                              {"tnear", r.tnear},
+                              {"ours_t", num(t[kOurs][i])},
+                              {"embree_medium_t", num(t[kEmbreeMedium][i])},
+                              {"referee_hits", truth}});
+      }
       if (truth == (t[kEmbreeMedium][i] < inf)) ++referee_embree;
     }
     agreement[set.name] = {{"rays", n},
@@ -310,7 +342,8 @@ void MeshBench::checkAgreement(const TriangleMesh& mesh, const std::vector<RaySe
                            {"ours_anyhit_vs_closest_disagree", ours_any_vs_closest},
                            {"referee_examined", examined},
                            {"referee_sides_with_ours", referee_ours},
-                           {"referee_sides_with_embree", referee_embree}};
+                           {"referee_sides_with_embree", referee_embree},
+                           {"rays_referee_says_ours_wrong", wrong_ours}};
     std::cerr << "  agreement   " << pad(set.name, 8) << thousands(hitmiss_medium) << " hit/miss (vs high "
               << thousands(hitmiss_high) << "), " << thousands(any_disagree) << " any-hit, " << thousands(t_mismatch)
               << " t differ, of " << thousands(n) << "; referee on " << examined << ": ours right " << referee_ours
@@ -324,7 +357,7 @@ void MeshBench::checkAgreement(const TriangleMesh& mesh, const std::vector<RaySe
 
 void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
   using Key = std::tuple<std::size_t, Query, int>;  // ray set, query, threads
-  std::map<Key, std::vector<double>> ms[kTracers];
+  std::map<Key, std::vector<double>> ms[kTracers], cpu_ms[kTracers];
   std::map<Key, std::uint64_t> hits[kTracers];
   const int tracers = haveEmbree() ? kTracers : 1;
   const Stopwatch phase;
@@ -345,7 +378,8 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
               timing = timeQuery(arena, sets[s].rays, *embree_.scenes[tracer], q);
 #endif
             }
-            ms[tracer][key].push_back(timing.ms);
+            ms[tracer][key].push_back(timing.time.wall_ms);
+            cpu_ms[tracer][key].push_back(timing.time.cpu_ms);
             hits[tracer][key] = timing.hits;
           }
         }
@@ -354,7 +388,7 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
   }
   std::cerr << "  traces: " << fmt(phase.ms() / 1e3, 1) << " s\n";
   std::cerr << "  Mrays/s     " << pad("rays", 9) << pad("query", 8) << pad("T", 3) << lpad("ours", 8) << lpad("emb-med", 9)
-            << lpad("emb-high", 9) << lpad("/med", 8) << lpad("/high", 8) << "\n";
+            << lpad("emb-high", 9) << lpad("/med", 8) << lpad("/high", 8) << lpad("/med cpu", 10) << "\n";
   nlohmann::json records = nlohmann::json::array();
   for (const int t : threads_) {
     for (std::size_t s = 0; s < sets.size(); ++s) {
@@ -362,26 +396,35 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
         const Key key{s, q, t};
         const std::size_t n = sets[s].rays.size();
         nlohmann::json rec{{"rays", sets[s].name}, {"query", toString(q)}, {"threads", t}, {"ray_count", n}};
-        double mrays[kTracers] = {kNaN, kNaN, kNaN};
+        double mrays[kTracers] = {kNaN, kNaN, kNaN}, mrays_cpu[kTracers] = {kNaN, kNaN, kNaN};
         for (int k = 0; k < tracers; ++k) {
-          const double med = median(ms[k][key]);
+          const double med = median(ms[k][key]), cpu = median(cpu_ms[k][key]);
           mrays[k] = n / (med * 1e3);
+          mrays_cpu[k] = n / (cpu * 1e3);
           const std::string name = kTracerKey[k];
           rec[name + "_ms"] = med;
           rec[name + "_ms_samples"] = ms[k][key];
           rec[name + "_mrays"] = mrays[k];
+          rec[name + "_cpu_ms"] = cpu;
+          rec[name + "_cpu_ms_samples"] = cpu_ms[k][key];
+          rec[name + "_mrays_cpu"] = mrays_cpu[k];
           rec[name + "_hits"] = hits[k][key];
         }
         rec["ratio_vs_embree_medium"] = num(ratio(mrays[kOurs], mrays[kEmbreeMedium]));
         rec["ratio_vs_embree_high"] = num(ratio(mrays[kOurs], mrays[kEmbreeHigh]));
+        rec["ratio_cpu_vs_embree_medium"] = num(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeMedium]));
+        rec["ratio_cpu_vs_embree_high"] = num(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeHigh]));
         const std::string label = sets[s].name + " " + toString(q) + " " + std::to_string(t) + "T";
-        out["ratios"]["vs_embree_medium"]["trace"][label] = rec["ratio_vs_embree_medium"];
-        out["ratios"]["vs_embree_high"]["trace"][label] = rec["ratio_vs_embree_high"];
+        for (const char* which : {"vs_embree_medium", "vs_embree_high"}) {
+          out["ratios"][which]["trace"][label] = rec[std::string("ratio_") + which];
+          out["ratios"][which]["trace_cpu"][label] = rec[std::string("ratio_cpu_") + which];
+        }
         records.push_back(rec);
         std::cerr << "              " << pad(sets[s].name, 9) << pad(toString(q), 8) << pad(std::to_string(t), 3)
                   << lpad(fmt(mrays[kOurs]), 8) << lpad(fmt(mrays[kEmbreeMedium]), 9) << lpad(fmt(mrays[kEmbreeHigh]), 9)
                   << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeMedium])) + "x", 8)
-                  << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeHigh])) + "x", 8) << "\n";
+                  << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeHigh])) + "x", 8)
+                  << lpad(fmt(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeMedium])) + "x", 10) << "\n";
       }
     }
   }
@@ -398,6 +441,7 @@ nlohmann::json evaluateGoals(const nlohmann::json& meshes) {
       trace.push_back({{"mesh", m["mesh"]},
                        {"threads", rec["threads"]},
                        {"ratio", r},
+                       {"ratio_cpu", rec["ratio_cpu_vs_embree_medium"]},
                        {"goal", 1.0},
                        {"met", r >= 1.0},
                        {"floor", 0.7},
@@ -407,21 +451,26 @@ nlohmann::json evaluateGoals(const nlohmann::json& meshes) {
     for (const auto& rec : m["build"]) {
       if (rec["ratio_vs_embree_medium"].is_null()) continue;
       const double r = rec["ratio_vs_embree_medium"].get<double>();
-      build.push_back({{"mesh", m["mesh"]}, {"threads", rec["threads"]}, {"ratio", r}, {"goal", 3.0}, {"met", r <= 3.0}});
+      build.push_back({{"mesh", m["mesh"]},
+                       {"threads", rec["threads"]},
+                       {"ratio", r},
+                       {"ratio_cpu", rec["ratio_cpu_vs_embree_medium"]},
+                       {"goal", 3.0},
+                       {"met", r <= 3.0}});
     }
   }
   return {{"random_closest_throughput_vs_embree_medium", trace},
           {"build_time_vs_embree_medium_1M_triangles", build},
           {"note",
            "throughput ratio = our Mrays/s / Embree's (goal >= 1.0, issue unresolved below 0.7); build ratio = our ms / "
-           "Embree's (goal <= 3.0, meshes of >= 10^6 triangles)"}};
+           "Embree's (goal <= 3.0, meshes of >= 10^6 triangles); 'ratio' from wall-clock medians, 'ratio_cpu' from CPU "
+           "time (see config.clocks); 'met' judges the wall-clock ratio"}};
 }
 
 void printSummary(const nlohmann::json& meshes, const std::vector<int>& threads) {
-  std::cerr << "\n== Summary: ours / Embree medium (throughput: >1 means we are faster; build: <1 means we are faster)\n";
+  std::vector<std::string> keys;
   std::ostringstream head;
   head << pad("mesh", 22) << lpad("tris", 10);
-  std::vector<std::string> keys;
   for (const char* rays : {"random", "primary"})
     for (const char* q : {"closest", "any"})
       for (const int t : threads) {
@@ -430,22 +479,28 @@ void printSummary(const nlohmann::json& meshes, const std::vector<int>& threads)
       }
   for (const int t : threads) head << lpad("build-" + std::to_string(t) + "T", 10);
   head << lpad("B/tri", 8);
-  std::cerr << head.str() << "\n";
-  for (const auto& m : meshes) {
-    std::ostringstream row;
-    row << pad(m["mesh"].get<std::string>(), 22) << lpad(thousands(m["triangles"].get<std::uint64_t>()), 10);
-    const auto& r = m["ratios"]["vs_embree_medium"];
-    for (const auto& k : keys) {
-      const auto& v = r["trace"][k];
-      row << lpad(v.is_number() ? fmt(v.get<double>()) : "-", 11);
+  for (const bool cpu : {false, true}) {
+    std::cerr << "\n== Summary: ours / Embree medium, " << (cpu ? "CPU time" : "wall clock")
+              << " (throughput: >1 means we are faster; build: <1 means we are faster)\n"
+              << head.str() << "\n";
+    for (const auto& m : meshes) {
+      std::ostringstream row;
+      row << pad(m["mesh"].get<std::string>(), 22) << lpad(thousands(m["triangles"].get<std::uint64_t>()), 10);
+      const auto& r = m["ratios"]["vs_embree_medium"];
+      const auto cell = [](const nlohmann::json& v, std::size_t width) {
+        return lpad(v.is_number() ? fmt(v.get<double>()) : "-", width);
+      };
+      const nlohmann::json none;
+      const auto& trace = r.contains(cpu ? "trace_cpu" : "trace") ? r[cpu ? "trace_cpu" : "trace"] : none;
+      const auto& build = r.contains(cpu ? "build_cpu" : "build") ? r[cpu ? "build_cpu" : "build"] : none;
+      for (const auto& k : keys) row << cell(trace.is_object() && trace.contains(k) ? trace[k] : none, 11);
+      for (const int t : threads) {
+        const std::string k = std::to_string(t) + "T";
+        row << cell(build.is_object() && build.contains(k) ? build[k] : none, 10);
+      }
+      row << cell(r.contains("bytes_per_triangle") ? r["bytes_per_triangle"] : none, 8);
+      std::cerr << row.str() << "\n";
     }
-    for (const int t : threads) {
-      const auto& v = r["build"][std::to_string(t) + "T"];
-      row << lpad(v.is_number() ? fmt(v.get<double>()) : "-", 10);
-    }
-    const auto& b = r["bytes_per_triangle"];
-    row << lpad(b.is_number() ? fmt(b.get<double>()) : "-", 8);
-    std::cerr << row.str() << "\n";
   }
 }
 
@@ -479,6 +534,11 @@ nlohmann::json runMainBench(const Options& options) {
                    {"quick", options.quick},
                    {"embree", embree.enabled()},
                    {"embree_config", options.embree_config},
+                   {"clocks",
+                    "every figure has a wall-clock median (fields *_ms, *_mrays, ratio_*) and a CPU-time median "
+                    "(*_cpu_ms, *_mrays_cpu, ratio_cpu_*): CPU time of the calling thread for 1 thread, process CPU "
+                    "time / N for N-thread traces; N-thread builds have wall clock only. The machine is shared: "
+                    "compare machine.loadavg_*; CPU-time ratios repeat better under load"},
                    {"method",
                     "builds: MeshObject constructor inside a tbb::task_arena of N threads vs Embree geometry setup + "
                     "rtcCommitScene on a device made with threads=N; traces: the same tbb::parallel_for over chunks of "
