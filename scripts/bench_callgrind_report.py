@@ -40,11 +40,12 @@ class Names:
 def parse_part(path):
     """Self cost (first event, Ir) per source file and per function, the total, and the trigger name."""
     files, fns = Names(), Names()
-    per_file, per_fn = defaultdict(int), defaultdict(int)
+    per_file, per_fn, per_line = defaultdict(int), defaultdict(int), defaultdict(int)
     trigger, totals = None, None
     fl = cur_file = cur_fn = "???"
     skip_next_cost = False
     n_positions = 1
+    line_no = 0
     with open(path, errors="replace") as f:
         for raw in f:
             line = raw.rstrip("\n")
@@ -76,17 +77,24 @@ def parse_part(path):
                     skip_next_cost = True  # the next cost line is the call's inclusive cost
                 continue
             if line[0].isdigit() or line[0] in "+-*":
+                parts = line.split()
+                # Position compression: "+n"/"-n" relative to the previous position, "*" the same.
+                pos = parts[0]
+                if pos.startswith("+") or pos.startswith("-"):
+                    line_no += int(pos)
+                elif pos != "*":
+                    line_no = int(pos)
                 if skip_next_cost:
                     skip_next_cost = False
                     continue
-                parts = line.split()
                 if len(parts) > n_positions:
                     cost = int(parts[n_positions])  # the first event: Ir
                     per_file[cur_file] += cost
                     per_fn[cur_fn] += cost
+                    per_line[(cur_file, line_no)] += cost
     if totals is None:
         totals = sum(per_fn.values())
-    return trigger, totals, per_file, per_fn
+    return trigger, totals, per_file, per_fn, per_line
 
 
 def short_file(path):
@@ -94,8 +102,19 @@ def short_file(path):
 
 
 def short_fn(name, width=90):
-    name = re.sub(r"\(.*\)( const)?$", "()", name) if len(name) > width else name
     return name if len(name) <= width else name[: width - 3] + "..."
+
+
+# Where our instructions go, by the file the (inlined) code is written in. A heuristic mapping, kept
+# next to the raw per-file list: traversal = the kd-tree walk, triangle = the triangle tests (SIMD
+# intrinsics headers count here: the traversal is scalar), everything else = per-ray setup and the
+# bench loop.
+def category(file_name):
+    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h"):
+        return "traversal"
+    if "Triangle" in file_name or file_name.endswith("intrin.h"):
+        return "triangle tests"
+    return "setup and other"
 
 
 def main():
@@ -110,9 +129,9 @@ def main():
     rays = workload["rays"]
     parts = {}
     for path in sorted(glob.glob(os.path.join(args.dump_dir, "callgrind.out*"))):
-        trigger, totals, per_file, per_fn = parse_part(path)
+        trigger, totals, per_file, per_fn, per_line = parse_part(path)
         if trigger and re.match(r"^(ours|embree)-(closest|any)$", trigger):
-            parts[trigger] = (totals, per_file, per_fn)
+            parts[trigger] = (totals, per_file, per_fn, per_line)
     if not parts:
         sys.exit("no callgrind parts named ours-*/embree-* in %s (was the bench built with valgrind/callgrind.h?)"
                  % args.dump_dir)
@@ -140,6 +159,9 @@ def main():
             files = sorted(ours[1].items(), key=lambda kv: -kv[1])
             rec["ours_by_file"] = {short_file(k): v / rays for k, v in files if v > 0}
             rec["ours_by_function"] = {k: v / rays for k, v in sorted(ours[2].items(), key=lambda kv: -kv[1])[:8]}
+            rec["ours_hot_lines"] = [{"file": short_file(k[0]), "line": k[1], "ir_per_ray": v / rays}
+                                     for k, v in sorted(ours[3].items(), key=lambda kv: -kv[1])[:12]
+                                     if k[0] not in ("???", "")]
         if emb:
             rec["embree_medium_ir_per_ray"] = emb[0] / rays
             rec["embree_by_function"] = {k: v / rays for k, v in sorted(emb[2].items(), key=lambda kv: -kv[1])[:8]}
@@ -162,12 +184,21 @@ def main():
         if "ours_by_file" in rec:
             total = rec["ours_ir_per_ray"]
             print("\nours, %s hit, Ir/ray by source file (inlined code counted where it is written):" % query)
-            for name, v in list(rec["ours_by_file"].items())[:6]:
+            for name, v in list(rec["ours_by_file"].items())[:8]:
                 print("  %-40s %8.0f  %5.1f%%" % (name, v, 100.0 * v / total))
-            if query == "closest" and trav and "WatertightTriangle.h" in rec["ours_by_file"] and trav["triangle_tests_per_ray"] > 0:
-                per_test = rec["ours_by_file"]["WatertightTriangle.h"] / trav["triangle_tests_per_ray"]
+            cats = defaultdict(float)
+            for name, v in rec["ours_by_file"].items():
+                cats[category(name)] += v
+            rec["ours_by_category"] = dict(cats)
+            print("  => " + ", ".join("%s %.0f (%.0f%%)" % (k, cats[k], 100.0 * cats[k] / total)
+                                      for k in ("traversal", "triangle tests", "setup and other")))
+            print("  hottest lines: " + ", ".join("%s:%d %.0f" % (h["file"], h["line"], h["ir_per_ray"])
+                                                  for h in rec["ours_hot_lines"][:6]))
+            if query == "closest" and trav and trav["triangle_tests_per_ray"] > 0 and cats["triangle tests"] > 0:
+                per_test = cats["triangle tests"] / trav["triangle_tests_per_ray"]
                 rec["ir_per_triangle_test"] = per_test
-                print("  => about %.0f instructions per triangle test" % per_test)
+                print("  => about %.0f instructions per triangle test (%.1f tests per ray)"
+                      % (per_test, trav["triangle_tests_per_ray"]))
         if "embree_by_function" in rec:
             total = rec["embree_medium_ir_per_ray"]
             print("Embree medium, %s hit, Ir/ray by function:" % query)
