@@ -142,6 +142,11 @@ void traceOne(const MeshObject& object, const Ray& ray, double t_allowed, bool t
   }
 }
 
+/// float(v), kept out of the optimiser's sight: GCC 12 at -O2/-O3 (SLP vectorizer) was seen to
+/// replace double(float(x)) by x in shootFarExact, i.e. to drop the rounding that the ray
+/// construction relies on (clang and GCC -O1 keep it).
+[[gnu::noinline]] glm::vec3 roundToFloat(const glm::dvec3& v) { return glm::vec3(v); }
+
 /// Near the origin: rays built in double and rounded, tolerance from the computed miss distance.
 void shootNearOrigin(std::shared_ptr<const TriangleMesh> mesh, std::size_t budget, std::uint64_t seed,
                      const std::string& label) {
@@ -171,8 +176,8 @@ void shootNearOrigin(std::shared_ptr<const TriangleMesh> mesh, std::size_t budge
     }
     const double dist = diag * (0.05 + 0.45 * u01(rng));
     Ray ray;
-    ray.origin = glm::vec3(target.point - dir0 * dist);
-    ray.dir = glm::vec3(target.point - glm::dvec3(ray.origin));
+    ray.origin = roundToFloat(target.point - dir0 * dist);
+    ray.dir = roundToFloat(target.point - glm::dvec3(ray.origin));
     const double facing = minFacing(glm::dvec3(ray.dir), target, normals);
     if (!(facing > 0.0)) continue;  // rounding turned the direction: draw again
     const glm::dvec3 o(ray.origin), d(ray.dir);
@@ -232,7 +237,7 @@ void shootFarExact(const TriangleMesh& original, std::size_t budget, std::uint64
     }
     const double dist = 300.0 + 14000.0 * u01(rng);
     Ray ray;
-    ray.origin = glm::vec3(target.point - dir0 * dist);
+    ray.origin = roundToFloat(target.point - dir0 * dist);
     bool same_binade = true;
     for (int k = 0; k < 3; ++k) same_binade = same_binade && ray.origin[k] >= 65536.0f && ray.origin[k] < 131072.0f;
     if (!same_binade) continue;
