@@ -81,6 +81,8 @@ TEST(KdTreeBuilder, EmptyInputGivesEmptyTree) {
   EXPECT_TRUE(b.empty());
   EXPECT_TRUE(b.prim_indices.empty());
   EXPECT_EQ(b.stats(1.0f, 1.5f).nodes, 0u);
+  EXPECT_TRUE(checkBoxKdTree(a, {}));
+  EXPECT_TRUE(checkBoxKdTree(b, {}));
   // Traversal of an empty tree never calls the leaf function.
   const KdRay ray(Ray{});
   float t = kInf;

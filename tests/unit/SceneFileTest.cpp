@@ -3,6 +3,8 @@
 // distinct file), instance ids = position, row-major transforms, unknown keys ignored; every error
 // throws FileError naming the file and the JSON path of the bad value.
 
+#include "KdTreeChecks.h"
+#include "MeshChecks.h"
 #include "TestSupport.h"
 
 #include "duplex/accel/Error.h"
@@ -35,6 +37,18 @@ struct SceneDir {
     return scenes / name;
   }
 };
+
+/// Loads a scene and runs the tree checker on every mesh object it built.
+Scene loadChecked(const std::filesystem::path& path, const SceneLoadOptions& options = {},
+                  SceneLoadReport* report = nullptr) {
+  Scene s = loadScene(path, options, report);
+  for (std::uint32_t i = 0; i < s.objectCount(); ++i) {
+    if (const auto* m = dynamic_cast<const MeshObject*>(s.object(i).get())) {
+      EXPECT_TRUE(checkMeshTree(*m, options.build.max_depth)) << "object '" << s.objectName(i) << "'";
+    }
+  }
+  return s;
+}
 
 /// A valid scene text with `objects` and `instances` spliced in.
 std::string scene(const std::string& objects, const std::string& instances) {
@@ -86,7 +100,7 @@ TEST(SceneFile, InlineAndFileObjectsInstancesAndUnknownKeys) {
     "extra": {"nested": [1, 2, 3]}
   })";
   SceneLoadReport report;
-  const Scene s = loadScene(d.write(json), {}, &report);
+  const Scene s = loadChecked(d.write(json), {}, &report);
   ASSERT_EQ(s.objectCount(), 4u);
   EXPECT_EQ(s.objectName(0), "cube");
   EXPECT_EQ(s.objectName(1), "tetra");
@@ -128,6 +142,9 @@ TEST(SceneFile, InlineAndFileObjectsInstancesAndUnknownKeys) {
   // y in [-3, -1], z in [0.25, 2.25].
   TopLevel top;
   top.build(descs);
+  std::vector<Box> boxes;
+  for (const InstanceDesc& desc : descs) boxes.push_back(desc.world_from_object.apply(desc.object->bounds()));
+  EXPECT_TRUE(checkBoxKdTree(top.tree(), boxes));
   QueryContext ctx;
   Ray r;
   r.origin = glm::vec3(9.5f, -2.0f, 50.0f);
@@ -146,7 +163,7 @@ TEST(SceneFile, RelativeMeshPathIsResolvedAgainstTheJsonFolderNotTheWorkingDirec
   SceneDir d;
   const auto path = d.write(scene(kCubeObject, R"({"object": "cube", "transform": )" + kIdentity + "}"));
   // From the test's working directory (elsewhere) ...
-  EXPECT_EQ(loadScene(path).objectCount(), 1u);
+  EXPECT_EQ(loadChecked(path).objectCount(), 1u);
   // ... from the scene folder's parent, with a relative JSON path ...
   const auto saved = std::filesystem::current_path();
   std::filesystem::current_path(d.dir.path());
@@ -159,7 +176,7 @@ TEST(SceneFile, RelativeMeshPathIsResolvedAgainstTheJsonFolderNotTheWorkingDirec
 
 TEST(SceneFile, EmptyObjectAndInstanceLists) {
   SceneDir d;
-  const Scene s = loadScene(d.write(scene("", "")));
+  const Scene s = loadChecked(d.write(scene("", "")));
   EXPECT_EQ(s.objectCount(), 0u);
   EXPECT_TRUE(s.instances().empty());
   EXPECT_TRUE(s.worldBounds().empty());
@@ -170,7 +187,7 @@ TEST(SceneFile, BuildOptionsReachTheMeshes) {
   SceneLoadOptions options;
   options.build.heuristic = KdHeuristic::SpatialMiddle;
   options.build.max_depth = 2;
-  const Scene s = loadScene(d.write(scene(kCubeObject, "")), options);
+  const Scene s = loadChecked(d.write(scene(kCubeObject, "")), options);
   const auto* cube = dynamic_cast<const MeshObject*>(s.object(0).get());
   ASSERT_NE(cube, nullptr);
   EXPECT_LE(cube->tree().stats(1.0f, 1.0f).max_depth, 2u);
@@ -270,7 +287,7 @@ TEST(SceneFileErrors, Instances) {
 
 TEST(Scene, AddObjectAndInstanceValidation) {
   Scene s;
-  const auto sphere = std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(icosphere(1)));
+  const auto sphere = buildChecked(icosphere(1));
   EXPECT_EQ(s.addObject("sphere", sphere), 0u);
   EXPECT_THROW(s.addObject("sphere", sphere), InvalidArgument);  // duplicate
   EXPECT_THROW(s.addObject("", sphere), InvalidArgument);

@@ -51,10 +51,13 @@ struct World {
   }
 };
 
-std::vector<Box> worldBoxes(const World& w) {
+/// TopLevel::build followed by the tree checker over the instances' world boxes (every top-level
+/// tree built in these tests is checked).
+void buildTopChecked(TopLevel& top, std::span<const InstanceDesc> instances, const KdBuildConfig& config = {}) {
+  top.build(instances, config);
   std::vector<Box> boxes;
-  for (const InstanceDesc& d : w.instances) boxes.push_back(d.world_from_object.apply(d.object->bounds()));
-  return boxes;
+  for (const InstanceDesc& d : instances) boxes.push_back(d.world_from_object.apply(d.object->bounds()));
+  EXPECT_TRUE(checkBoxKdTree(top.tree(), boxes, config.max_depth));
 }
 
 /// Objects shared by the worlds below (each tree checked once, when built).
@@ -163,9 +166,8 @@ TEST(TopLevel, AgreesWithWorldSpaceBruteForce) {
   const Library lib;
   const World w = randomWorld(lib, 14, glm::dvec3(0.0), 8.0, 71, true);
   TopLevel top;
-  top.build(w.instances);
+  buildTopChecked(top, w.instances);
   EXPECT_EQ(top.size(), w.instances.size());
-  EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w)));
   const auto s = expectTopLevelAgrees(top, w, worldRays(top.bounds(), 72), true, "random world");
   EXPECT_GT(s.hits, s.rays / 5);
 }
@@ -176,8 +178,7 @@ TEST(TopLevel, AgreesForEveryHeuristic) {
   for (const ConfigCase& c : allConfigCases()) {
     SCOPED_TRACE(c.name);
     TopLevel top;
-    top.build(w.instances, c.config);
-    EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w), c.config.max_depth));
+    buildTopChecked(top, w.instances, c.config);
     auto rays = worldRays(top.bounds(), 74);
     rays.resize(1200);
     expectTopLevelAgrees(top, w, rays, true, c.name);
@@ -188,8 +189,7 @@ TEST(TopLevel, InstancesFarFromTheOrigin) {
   const Library lib;
   const World w = randomWorld(lib, 10, glm::dvec3(1.0e5, -2.0e5, 5.0e4), 10.0, 75, true);
   TopLevel top;
-  top.build(w.instances);
-  EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w)));
+  buildTopChecked(top, w.instances);
   const auto s = expectTopLevelAgrees(top, w, worldRays(top.bounds(), 76), true, "far world");
   EXPECT_GT(s.hits, s.rays / 8);
 }
@@ -206,8 +206,7 @@ TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {
                                                                        glm::dvec3(0.5 + 0.3 * u(rng)),
                                                                        glm::dvec3(u(rng), u(rng), u(rng)))), i);
   TopLevel top;
-  top.build(w.instances);
-  EXPECT_TRUE(checkBoxKdTree(top.tree(), worldBoxes(w)));
+  buildTopChecked(top, w.instances);
   auto rays = worldRays(top.bounds(), 78);
   rays.resize(2000);
   const auto s = expectTopLevelAgrees(top, w, rays, true, "overlapping");
@@ -221,7 +220,7 @@ TEST(TopLevel, AnalyticScaledBox) {
   TopLevel top;
   const std::vector<InstanceDesc> inst = {
       {lib.box, Affine::fromRowMajor3x4({2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0}), 7}};
-  top.build(inst);
+  buildTopChecked(top, inst);
   EXPECT_LE(top.bounds().lo.z, -2.0f);  // world box rounded outward, but tight
   EXPECT_GE(top.bounds().lo.z, -2.00001f);
   QueryContext ctx;
@@ -243,8 +242,8 @@ TEST(TopLevel, AnalyticScaledBox) {
   r.tfar = 16.1f;
   EXPECT_TRUE(top.occluded(r, ctx));
   // Rotated 90 degrees about z and moved: the face x = +2 (object +y face) is hit from +x.
-  top.build(std::vector<InstanceDesc>{
-      {lib.box, Affine::fromRowMajor3x4({0, -2, 0, 5, 2, 0, 0, 0, 0, 0, 2, 0}), 9}});
+  buildTopChecked(top, std::vector<InstanceDesc>{
+                        {lib.box, Affine::fromRowMajor3x4({0, -2, 0, 5, 2, 0, 0, 0, 0, 0, 2, 0}), 9}});
   Ray s;
   s.origin = glm::vec3(20.0f, 0.25f, 0.5f);
   s.dir = glm::vec3(-1.0f, 0.0f, 0.0f);
@@ -267,7 +266,7 @@ TEST(TopLevel, NormalOfMirroredInstancesFollowsTheWorldTriangle) {
   w.add(lib.soup, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(1, 2, 3), 0.7,
                                                                   glm::dvec3(1.5, 0.5, -1.0), glm::dvec3(0, 4, 0))), 2);
   TopLevel top;
-  top.build(w.instances);
+  buildTopChecked(top, w.instances);
   QueryContext ctx;
   std::size_t checked = 0, wrong = 0;
   for (const Ray& r : worldRays(top.bounds(), 79)) {
@@ -294,7 +293,7 @@ TEST(TopLevel, NormalIsTheWorldCrossProduct) {
   w.add(lib.sphere, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(0, 1, 1), 0.4,
                                                                     glm::dvec3(0.5, 2.0, 1.0), glm::dvec3(8, 0, 0))), 1);
   TopLevel top;
-  top.build(w.instances);
+  buildTopChecked(top, w.instances);
   QueryContext ctx;
   std::size_t checked = 0, wrong = 0;
   for (const Ray& r : worldRays(top.bounds(), 80)) {
@@ -312,7 +311,7 @@ TEST(TopLevel, NormalIsTheWorldCrossProduct) {
 
 TEST(TopLevel, EmptyTopLevelMissesEverything) {
   TopLevel top;
-  top.build({});
+  buildTopChecked(top, {});
   EXPECT_EQ(top.size(), 0u);
   EXPECT_TRUE(top.bounds().empty());
   EXPECT_TRUE(top.tree().empty());
@@ -332,7 +331,7 @@ TEST(TopLevel, BadRaysMissAndInstanceVisitsAreCounted) {
   TopLevel top;
   const std::vector<InstanceDesc> inst = {{lib.sphere, Affine::identity(), 0},
                                           {lib.box, Affine::fromRowMajor3x4({1, 0, 0, 10, 0, 1, 0, 0, 0, 0, 1, 0}), 1}};
-  top.build(inst);
+  buildTopChecked(top, inst);
   QueryContext ctx;
   Ray r;
   r.origin = glm::vec3(0.0f, 0.0f, -5.0f);
@@ -370,7 +369,7 @@ TEST(TopLevel, InvalidInstancesThrowNamingTheInstance) {
     const std::vector<InstanceDesc> inst = {{lib.sphere, Affine::identity(), 0}, bad};
     TopLevel top;
     try {
-      top.build(inst);
+      top.build(inst);  // must throw: no tree to check
       ADD_FAILURE() << "no InvalidArgument for instance " << bad.id << " " << bad.world_from_object;
     } catch (const InvalidArgument& e) {
       EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
