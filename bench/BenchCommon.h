@@ -91,16 +91,18 @@ class CpuStopwatch {
 struct Timing {
   double wall_ms = 0.0;
   double cpu_ms = 0.0;
+  double process_cpu_ms = 0.0;  ///< CPU of the whole process (all threads), for sanity checks
 };
 
 /// Times `fn()` run by the calling thread with `threads` threads available.
 template <class Fn>
 Timing timeIt(int threads, const Fn& fn) {
   const CpuStopwatch cpu(threads == 1 ? CpuStopwatch::Scope::Thread : CpuStopwatch::Scope::Process);
+  const CpuStopwatch process(CpuStopwatch::Scope::Process);
   const Stopwatch wall;
   fn();
   const double wall_ms = wall.ms();
-  return {wall_ms, cpu.ms() / threads};
+  return {wall_ms, cpu.ms() / threads, process.ms()};
 }
 
 /// Median of the samples (mean of the two middle ones for an even count); NaN for none.

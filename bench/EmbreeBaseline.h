@@ -6,10 +6,11 @@
 ///
 /// Threads: with TBB tasking, Embree builds inside its device's own task_arena, sized from the
 /// device's "threads=N" setting, and "threads=N" also installs a process-wide
-/// tbb::global_control(max_allowed_parallelism) for the largest N among the live devices. So the
-/// benchmark makes one device per thread count, in ascending order (the first device's arena keeps
-/// its size while later devices raise the global limit), builds the N-thread figures on device N,
-/// and traces from our own arenas (rtcIntersect1 runs on the calling thread).
+/// tbb::global_control(max_allowed_parallelism) for the largest N among the live devices. Measured
+/// here (Embree 3.13.5, oneTBB 2021.8): while a "threads=2" device is alive, a "threads=1" device's
+/// build runs on two threads (process CPU = 2x the calling thread's). So the benchmark keeps one
+/// device alive at a time: a fresh device with threads=N for each N-thread build measurement, and
+/// one more for the scenes it traces (rtcIntersect1 runs on the calling thread, in our arenas).
 
 #include "duplex/accel/Hit.h"
 #include "duplex/accel/Ray.h"

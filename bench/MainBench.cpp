@@ -68,16 +68,21 @@ double ratio(double a, double b) { return (std::isfinite(a) && std::isfinite(b) 
 // JSON number or null (nlohmann writes NaN as null anyway; this keeps the intent visible).
 nlohmann::json num(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
-// Embree's devices (one per thread count) and the scenes of the mesh being measured; empty without
-// Embree or with --no-embree.
+// Embree's side of a run: whether it takes part, and the device and scenes being traced. Only one
+// device lives at a time (see EmbreeBaseline.h: a second device with more threads lets a
+// "threads=1" device build on two).
 struct EmbreeSide {
+  bool enabled_ = false;
 #if DUPLEX_BENCH_HAVE_EMBREE
-  std::map<int, std::unique_ptr<EmbreeDevice>> devices;
+  std::string config;
+  std::unique_ptr<EmbreeDevice> device;
   std::unique_ptr<EmbreeMesh> scenes[kTracers];  // [kEmbreeMedium], [kEmbreeHigh]
-  [[nodiscard]] bool enabled() const { return !devices.empty(); }
-#else
-  [[nodiscard]] bool enabled() const { return false; }
+  void release() {
+    for (auto& scene : scenes) scene.reset();  // scenes before their device
+    device.reset();
+  }
 #endif
+  [[nodiscard]] bool enabled() const { return enabled_; }
 };
 
 class MeshBench {
@@ -144,7 +149,7 @@ nlohmann::json MeshBench::run(const LoadedMesh& loaded) {
   trace(sets, out);
   ours_.reset();
 #if DUPLEX_BENCH_HAVE_EMBREE
-  for (auto& e : embree_.scenes) e.reset();
+  embree_.release();
 #endif
   return out;
 }
@@ -152,14 +157,19 @@ nlohmann::json MeshBench::run(const LoadedMesh& loaded) {
 void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
   const TriangleMesh& mesh = *loaded.mesh;
   const double triangles = static_cast<double>(mesh.triangleCount());
-  // Wall ms per tracer and thread count; CPU ms (calling thread) for one thread only.
-  std::map<int, std::vector<double>> ms[kTracers], cpu_ms[kTracers];
+  // Wall ms per tracer and thread count; CPU ms (calling thread) for one thread only, with the
+  // process's CPU ms next to it to check that one thread did all the work.
+  std::map<int, std::vector<double>> ms[kTracers], cpu_ms[kTracers], process_cpu_ms[kTracers];
+  double bytes[kTracers] = {0.0, 0.0, 0.0};
   const Stopwatch phase;
   for (int rep = 0; rep < options_.repeat; ++rep) {
     for (const int t : threads_) {
       auto record = [&](int tracer, const Timing& time) {
         ms[tracer][t].push_back(time.wall_ms);
-        if (t == 1) cpu_ms[tracer][t].push_back(time.cpu_ms);
+        if (t == 1) {
+          cpu_ms[tracer][t].push_back(time.cpu_ms);
+          process_cpu_ms[tracer][t].push_back(time.process_cpu_ms);
+        }
       };
       auto buildOurs = [&] {
         ours_.reset();
@@ -170,13 +180,18 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
       auto buildEmbree = [&] {
 #if DUPLEX_BENCH_HAVE_EMBREE
         if (!haveEmbree()) return;
+        // A fresh device limited to t threads, the only one alive while it builds.
+        embree_.release();
+        embree_.device = std::make_unique<EmbreeDevice>(t, embree_.config);
         for (const Tracer e : {kEmbreeMedium, kEmbreeHigh}) {
-          embree_.scenes[e].reset();
+          std::unique_ptr<EmbreeMesh> scene;
           record(e, timeIt(t, [&] {
-                   embree_.scenes[e] = std::make_unique<EmbreeMesh>(
-                       *embree_.devices.at(t), mesh, e == kEmbreeMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
+                   scene = std::make_unique<EmbreeMesh>(
+                       *embree_.device, mesh, e == kEmbreeMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
                  }));
+          bytes[e] = static_cast<double>(scene->accelBytes());
         }
+        embree_.release();
 #endif
       };
       // Alternate the order between repetitions so that drift on the shared machine hits both sides.
@@ -189,6 +204,14 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
       }
     }
   }
+#if DUPLEX_BENCH_HAVE_EMBREE
+  // The scenes that are traced (untimed builds, on a device with the most threads).
+  if (haveEmbree()) {
+    embree_.device = std::make_unique<EmbreeDevice>(threads_.back(), embree_.config);
+    embree_.scenes[kEmbreeMedium] = std::make_unique<EmbreeMesh>(*embree_.device, mesh, RTC_BUILD_QUALITY_MEDIUM);
+    embree_.scenes[kEmbreeHigh] = std::make_unique<EmbreeMesh>(*embree_.device, mesh, RTC_BUILD_QUALITY_HIGH);
+  }
+#endif
   std::cerr << "  builds: " << options_.repeat << " x " << threads_.size() << " thread counts in "
             << fmt(phase.ms() / 1e3, 1) << " s\n";
 
@@ -207,6 +230,7 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
       j["quality"] = toString(e == kEmbreeMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
       j["accel_bytes"] = embree_.scenes[e]->accelBytes();
       j["total_bytes"] = embree_.scenes[e]->totalBytes();
+      j["accel_bytes_timed_build"] = bytes[e];
       bytes_per_triangle[e] = static_cast<double>(embree_.scenes[e]->accelBytes()) / triangles;
       j["bytes_per_triangle"] = bytes_per_triangle[e];
     }
@@ -231,7 +255,12 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
       if (std::isfinite(cpu[k])) {
         rec[name + "_cpu_ms"] = cpu[k];
         rec[name + "_cpu_ms_samples"] = cpu_ms[k][t];
+        rec[name + "_process_cpu_ms"] = median(process_cpu_ms[k][t]);
         out[name]["build_cpu_ms"][std::to_string(t)] = cpu[k];
+        // A one-thread build whose process used clearly more CPU than the calling thread ran elsewhere too.
+        const double process = median(process_cpu_ms[k][t]);
+        if (process > 1.2 * cpu[k] + 5.0)
+          std::cerr << "  WARNING: the 1-thread build of " << name << " used " << fmt(process / cpu[k]) << "x the CPU of the calling thread\n";
       }
     }
     rec["ratio_vs_embree_medium"] = num(ratio(med[kOurs], med[kEmbreeMedium]));
@@ -513,9 +542,8 @@ nlohmann::json runMainBench(const Options& options) {
 
   EmbreeSide embree;
 #if DUPLEX_BENCH_HAVE_EMBREE
-  // Devices in ascending thread order, before our arenas (see EmbreeBaseline.h).
-  if (options.with_embree)
-    for (const int t : threads) embree.devices[t] = std::make_unique<EmbreeDevice>(t, options.embree_config);
+  embree.enabled_ = options.with_embree;
+  embree.config = options.embree_config;
 #endif
   Arenas arenas;
   for (const int t : threads) arenas.get(t);
@@ -541,7 +569,8 @@ nlohmann::json runMainBench(const Options& options) {
                     "compare machine.loadavg_*; CPU-time ratios repeat better under load"},
                    {"method",
                     "builds: MeshObject constructor inside a tbb::task_arena of N threads vs Embree geometry setup + "
-                    "rtcCommitScene on a device made with threads=N; traces: the same tbb::parallel_for over chunks of "
+                    "rtcCommitScene on a device made with threads=N for that measurement (the only Embree device alive: "
+                    "with a second device of more threads alive, a threads=1 device builds on two); traces: the same tbb::parallel_for over chunks of "
                     "4096 rays in a task_arena of N threads, one call per ray (MeshObject::intersect with a fresh Hit / "
                     "occluded vs rtcIntersect1 / rtcOccluded1), FTZ+DAZ set per chunk; ours and Embree interleaved per "
                     "repetition, figures are medians of the repetitions"}};
