@@ -174,6 +174,8 @@ def main():
             "%.0f" % rec["embree_medium_ir_per_ray"] if emb else "-",
             "%.2fx" % rec["ratio_ours_over_embree"] if ours and emb else "-"))
 
+    if "ours" in workload:
+        result["ours_tree"] = {k: workload["ours"][k] for k in ("nodes", "sah_cost") if k in workload["ours"]}
     trav = workload.get("ours", {}).get("traversal")
     if trav:
         result["ours_traversal"] = trav

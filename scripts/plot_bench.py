@@ -50,6 +50,43 @@ def subtitle(doc):
         m.get("date_utc", "?")[:16].replace("T", " "), m.get("loadavg_at_start", "?").split(" ")[0])
 
 
+def place_labels(ax, points, fontsize=6.5):
+    """Greedy label placement: for each (x, y, text) try a few offsets around the point and take the
+    first whose box (estimated in display pixels) overlaps no label placed so far and no marker."""
+    ax.figure.canvas.draw()  # fixes limits and transforms
+    to_px = ax.transData.transform
+    char_w, line_h = 0.62 * fontsize * ax.figure.dpi / 72.0, 1.25 * fontsize * ax.figure.dpi / 72.0
+    markers = [to_px((x, y)) for x, y, _ in points]
+    placed = []
+    offsets = [(6, 3), (6, -11), (-6, 3), (-6, -11), (6, 12), (6, -20), (-6, 12), (-6, -20), (6, 21), (6, -29)]
+
+    def overlaps(box):
+        x0, y0, x1, y1 = box
+        for bx0, by0, bx1, by1 in placed:
+            if x0 < bx1 and bx0 < x1 and y0 < by1 and by0 < y1:
+                return True
+        return any(x0 - 4 < mx < x1 + 4 and y0 - 4 < my < y1 + 4 for mx, my in markers)
+
+    for (x, y, text) in sorted(points, key=lambda p: (p[0], p[1])):
+        px, py = to_px((x, y))
+        width = char_w * len(text)
+        best = None
+        for dx, dy in offsets:
+            x0 = px + dx if dx > 0 else px + dx - width
+            box = (x0, py + dy, x0 + width, py + dy + line_h)
+            if not overlaps(box):
+                best = (dx, dy, box)
+                break
+        if best is None:
+            dx, dy = offsets[0]
+            x0 = px + dx
+            best = (dx, dy, (x0, py + dy, x0 + width, py + dy + line_h))
+        dx, dy, box = best
+        placed.append(box)
+        ax.annotate(text, (x, y), textcoords="offset points", xytext=(dx * 72.0 / ax.figure.dpi, dy * 72.0 / ax.figure.dpi),
+                    ha="left" if dx > 0 else "right", va="bottom", fontsize=fontsize, color="0.2")
+
+
 def plot_sweep(doc, path):
     meshes = doc["meshes"]
     fig, axes = plt.subplots(2, len(meshes), figsize=(max(8.5, 7.5 * len(meshes)), 12), squeeze=False)
@@ -72,8 +109,6 @@ def plot_sweep(doc, path):
                 ax.scatter(s["build_ms"], s[y_key], marker=marker, s=46, facecolors=face, edgecolors=colour,
                            linewidths=1.3, zorder=3, label=None if label in seen else label)
                 seen.add(label)
-                ax.annotate(s["label"], (s["build_ms"], s[y_key]), textcoords="offset points", xytext=(5, 3),
-                            fontsize=6.5, color="0.2")
             ax.scatter(default["build_ms"], default[y_key], marker="*", s=320, facecolors="gold", edgecolors="red",
                        linewidths=1.4, zorder=4, label="default: " + default["label"])
             for quality, marker in (("medium", "D"), ("high", "P")):
@@ -97,6 +132,7 @@ def plot_sweep(doc, path):
                          % (mesh["mesh"], format(mesh["triangles"], ","), format(mesh[rays_key], ","), kind),
                          fontsize=10)
             ax.grid(True, which="both", lw=0.3, alpha=0.5)
+            place_labels(ax, [(s["build_ms"], s[y_key], s["label"]) for s in settings])
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", ncol=4, fontsize=8, bbox_to_anchor=(0.5, 0.945))
     fig.suptitle("Build time against trace time over kd-tree heuristics and SAH costs\n"
