@@ -15,6 +15,8 @@
 
 #include <tbb/task_group.h>
 
+#include <emmintrin.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -172,12 +174,26 @@ class Builder {
     for (int axis = 0; axis < 3; ++axis)
       scale[axis] = g.hi[axis] > g.lo[axis] ? static_cast<float>(bins) / (g.hi[axis] - g.lo[axis]) : 0.0f;
     std::array<std::array<std::uint32_t, kBins>, 3> starts_bin{}, ends_bin{};
+    // Bin indices of the three axes at once (SSE2): this loop runs over every reference of every
+    // node and was a fifth of the build. Clamping in float before the conversion also keeps
+    // out-of-range values (rounding at the box faces) defined.
+    const __m128 node_lo = _mm_setr_ps(g.lo[0], g.lo[1], g.lo[2], 0.0f);
+    const __m128 node_scale = _mm_setr_ps(scale[0], scale[1], scale[2], 0.0f);
+    const __m128 max_bin = _mm_set1_ps(static_cast<float>(bins - 1));
+    alignas(16) std::int32_t b0[4], b1[4];
     for (const PrimRef& r : refs) {
+      // lo[0..2] then hi[0]; hi[0..2] then the id: the fourth lanes are scaled by 0 and ignored.
+      const __m128 lo = _mm_loadu_ps(r.lo);
+      const __m128 hi = _mm_loadu_ps(r.hi);
+      const __m128 f0 = _mm_mul_ps(_mm_sub_ps(lo, node_lo), node_scale);
+      const __m128 f1 = _mm_mul_ps(_mm_sub_ps(hi, node_lo), node_scale);
+      _mm_store_si128(reinterpret_cast<__m128i*>(b0),
+                      _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), max_bin)));
+      _mm_store_si128(reinterpret_cast<__m128i*>(b1),
+                      _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), max_bin)));
       for (int axis = 0; axis < 3; ++axis) {
-        const int b0 = std::clamp(static_cast<int>((r.lo[axis] - g.lo[axis]) * scale[axis]), 0, bins - 1);
-        const int b1 = std::clamp(static_cast<int>((r.hi[axis] - g.lo[axis]) * scale[axis]), 0, bins - 1);
-        ++starts_bin[axis][b0];
-        ++ends_bin[axis][b1];
+        ++starts_bin[axis][b0[axis]];
+        ++ends_bin[axis][b1[axis]];
       }
     }
     Split best;
