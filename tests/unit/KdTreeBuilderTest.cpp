@@ -401,6 +401,63 @@ TEST(KdTraversal, ZeroDirectionComponentsAndSplitPlanes) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The checker itself must be able to fail: corrupt valid trees and expect a report.
+
+TEST(KdTreeChecks, CheckerCatchesCorruptedTrees) {
+  const auto tris = randomTriangles(600, 90);
+  const std::vector<char> usable(tris.size(), 1);
+  const KdTree good = buildOverTriangles(tris, {});
+  ASSERT_TRUE(checkTriangleKdTree(good, tris, usable));
+  ASSERT_GT(good.nodes.size(), 3u);
+  std::uint32_t inner = 0, leaf = 0;
+  while (good.nodes[inner].isLeaf()) ++inner;
+  while (!good.nodes[leaf].isLeaf() || good.nodes[leaf].primCount() < 2) ++leaf;
+  const KdNode& in = good.nodes[inner];
+  const KdNode& lf = good.nodes[leaf];
+
+  auto expect_caught = [&](const char* what, auto corrupt, const std::vector<char>& use) {
+    KdTree bad = good;
+    corrupt(bad);
+    EXPECT_FALSE(checkTriangleKdTree(bad, tris, use)) << "checker missed: " << what;
+  };
+  expect_caught("a reference replaced by a duplicate", [&](KdTree& t) {
+    t.prim_indices[lf.primOffset()] = t.prim_indices[lf.primOffset() + 1];
+  }, usable);
+  expect_caught("split moved outside the node", [&](KdTree& t) {
+    t.nodes[inner] = KdNode::inner(in.axis(), t.bounds.hi[in.axis()] + 1.0f, in.upperChild());
+  }, usable);
+  expect_caught("split moved inside the node", [&](KdTree& t) {
+    const Box b = good.nodeBox(inner);
+    t.nodes[inner] = KdNode::inner(in.axis(), 0.5f * (in.split() + b.lo[in.axis()]), in.upperChild());
+  }, usable);
+  expect_caught("upper child pointing back", [&](KdTree& t) { t.nodes[inner].setUpperChild(inner); }, usable);
+  expect_caught("upper child out of range", [&](KdTree& t) {
+    t.nodes[inner].setUpperChild(static_cast<std::uint32_t>(t.nodes.size()));
+  }, usable);
+  expect_caught("leaf range past the index list", [&](KdTree& t) {
+    t.nodes[leaf].setPrimOffset(static_cast<std::uint32_t>(t.prim_indices.size()));
+  }, usable);
+  expect_caught("reference to an unknown primitive", [&](KdTree& t) { t.prim_indices[0] = 100000; }, usable);
+  expect_caught("bounds shrunk", [&](KdTree& t) { t.bounds.hi.x -= 0.01f; }, usable);
+  std::vector<char> one_unusable = usable;
+  one_unusable[good.prim_indices[0]] = 0;
+  expect_caught("reference to an unusable primitive", [](KdTree&) {}, one_unusable);
+  EXPECT_FALSE(checkTriangleKdTree(good, tris, usable, 3)) << "checker missed a tree deeper than max_depth";
+
+  // Box trees: drop a box from one leaf.
+  const auto boxes = randomBoxes(300, 91);
+  const KdTree box_tree = buildKdTreeOverBoxes(boxes);
+  ASSERT_TRUE(checkBoxKdTree(box_tree, boxes));
+  KdTree bad = box_tree;
+  for (std::uint32_t i = 0; i < bad.nodes.size(); ++i)
+    if (bad.nodes[i].isLeaf() && bad.nodes[i].primCount() >= 2) {
+      bad.prim_indices[bad.nodes[i].primOffset()] = bad.prim_indices[bad.nodes[i].primOffset() + 1];
+      break;
+    }
+  EXPECT_FALSE(checkBoxKdTree(bad, boxes)) << "checker missed a box dropped from a leaf";
+}
+
+// ---------------------------------------------------------------------------------------------
 
 TEST(KdNode, EncodesInnerAndLeafFields) {
   for (const int axis : {0, 1, 2}) {

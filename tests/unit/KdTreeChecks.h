@@ -199,6 +199,7 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
   std::vector<Item> stack{{0, tree.bounds, 0}};
   int max_seen = 0;
   std::vector<std::uint32_t> ids;
+  std::vector<Box> walk_boxes(tree.nodes.size());
   while (!stack.empty()) {
     const Item it = stack.back();
     stack.pop_back();
@@ -211,10 +212,7 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
       continue;
     }
     max_seen = std::max(max_seen, it.depth);
-    if (it.node % 8 == 0 || tree.nodes.size() < 4096) {  // nodeBox walks from the root: sample big trees
-      const Box nb = tree.nodeBox(it.node);
-      if (!(nb == it.box)) f.add([&](auto& os) { os << "nodeBox(" << it.node << ") = " << nb << " but walk gives " << it.box; });
-    }
+    walk_boxes[it.node] = it.box;
     const KdNode& n = tree.nodes[it.node];
     if (n.isLeaf()) {
       if (it.depth > bound)
@@ -274,6 +272,13 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
     f.add([&](auto& os) { os << "leaves hold " << total << " references but prim_indices has " << tree.prim_indices.size(); });
   for (std::size_t i = 0; i < prim_count; ++i)
     if (usable[i] && !referenced[i]) f.add([&](auto& os) { os << "usable primitive " << i << " is in no leaf"; });
+  // KdTree::nodeBox and KdTree::stats assume a well-formed node array: only ask them now.
+  if (f.any()) return f.result("kd-tree structure");
+  for (std::uint32_t i = 0; i < tree.nodes.size(); ++i) {
+    if (i % 8 != 0 && tree.nodes.size() >= 4096) continue;  // nodeBox walks from the root: sample big trees
+    const Box nb = tree.nodeBox(i);
+    if (!(nb == walk_boxes[i])) f.add([&](auto& os) { os << "nodeBox(" << i << ") = " << nb << " but walk gives " << walk_boxes[i]; });
+  }
   const KdTreeStats st = tree.stats(1.0f, 1.5f);
   if (st.nodes != tree.nodes.size() || int(st.max_depth) != max_seen || st.references != tree.prim_indices.size())
     f.add([&](auto& os) {
