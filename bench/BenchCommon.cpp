@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -102,9 +103,13 @@ nlohmann::json machineInfo() {
 #endif
   m["tbb_version"] = std::string(TBB_VERSION_STRING);
   const std::string src = DUPLEX_BENCH_SOURCE_DIR;
+  // The working tree when the bench runs; what was compiled is what the scripts saw right before
+  // `make` (DUPLEX_BENCH_BUILD_INFO: revision, "+dirty:<hash of the diff>" for uncommitted changes in
+  // accel/ or objects/), which is the one to trust while someone edits the library.
   m["duplex_git_revision"] = commandLine("git -C '" + src + "' rev-parse --short HEAD 2>/dev/null");
-  // Uncommitted changes in the measured library code make the revision alone ambiguous.
   m["duplex_library_dirty"] = !commandLine("git -C '" + src + "' status --porcelain -- accel objects 2>/dev/null").empty();
+  const char* built = std::getenv("DUPLEX_BENCH_BUILD_INFO");
+  m["duplex_library_at_build"] = built ? nlohmann::json(built) : nlohmann::json(nullptr);
 #if DUPLEX_BENCH_HAVE_EMBREE
   m["embree_version"] = std::string(RTC_VERSION_STRING);
 #else

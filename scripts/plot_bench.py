@@ -42,9 +42,12 @@ def heuristic_key(name):
 
 def subtitle(doc):
     m = doc.get("machine", {})
-    rev = m.get("duplex_git_revision") or "?"
-    if m.get("duplex_library_dirty"):
-        rev += "+dirty"
+    # What was compiled (recorded by the scripts before `make`), else the working tree at run time.
+    rev = m.get("duplex_library_at_build")
+    if not rev:
+        rev = m.get("duplex_git_revision") or "?"
+        if m.get("duplex_library_dirty"):
+            rev += "+dirty"
     return "duplex %s, %s, %s cores, Embree %s, %s (load %s)" % (
         rev, m.get("cpu_model", "?"), m.get("nproc", "?"), m.get("embree_version") or "-",
         m.get("date_utc", "?")[:16].replace("T", " "), m.get("loadavg_at_start", "?").split(" ")[0])
