@@ -12,6 +12,10 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <limits>
 #include <iostream>
 #include <mutex>
 #include <sstream>
@@ -57,6 +61,65 @@ class OpenMeshCapture {
   std::ostringstream buffer_;
 };
 
+// What a file's header declares, for the formats that have a face count (OFF, PLY, binary STL),
+// so that a file cut short is refused instead of loading fewer faces: OpenMesh's readers stop at
+// the end of the data without reporting it (and its OFF reader even invents faces past the end).
+struct FaceCount {
+  long long declared = -1;  // -1: unknown
+  long long present = -1;   // faces actually in the file, where we walked the list (-1: not known)
+};
+
+FaceCount declaredFaceCount(const std::filesystem::path& path, const std::string& ext) {
+  FaceCount fc;
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return fc;
+  if (ext == ".off") {
+    std::string word;
+    if (!(in >> word) || word != "OFF") return fc;  // COFF, NOFF, binary OFF: left to OpenMesh
+    long long v = -1, f = -1, e = -1;
+    if (!(in >> v >> f >> e) || v < 0 || f < 0) return fc;
+    fc.declared = f;
+    fc.present = 0;
+    double x;
+    for (long long i = 0; i < 3 * v; ++i)
+      if (!(in >> x)) return fc;
+    for (long long i = 0; i < f; ++i) {
+      long long k = 0, index = 0;
+      if (!(in >> k) || k < 0) break;
+      bool ok = true;
+      for (long long j = 0; j < k && ok; ++j) ok = static_cast<bool>(in >> index);
+      if (!ok) break;
+      ++fc.present;
+      in.ignore(std::numeric_limits<std::streamsize>::max(), '\n');  // optional colour values
+    }
+    return fc;
+  }
+  if (ext == ".ply") {
+    std::string line;
+    while (std::getline(in, line)) {
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (line.rfind("element face ", 0) == 0) fc.declared = std::atoll(line.c_str() + 13);
+      if (line == "end_header") break;
+    }
+    return fc;
+  }
+  if (ext == ".stl" || ext == ".stlb") {
+    char header[84];
+    if (!in.read(header, 84)) return fc;
+    std::uint32_t n = 0;
+    std::memcpy(&n, header + 80, 4);
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path, ec);
+    if (ec) return fc;
+    // "solid" starts ASCII files but also some binary ones; the exact binary size decides.
+    if (std::string(header, 5) == "solid" && size != 84ull + 50ull * n) return fc;
+    fc.declared = n;
+    fc.present = static_cast<long long>(std::min<std::uintmax_t>(n, (size - 84) / 50));
+    return fc;
+  }
+  return fc;
+}
+
 std::size_t countOccurrences(const std::string& text, const std::string& what) {
   std::size_t n = 0;
   for (std::size_t pos = text.find(what); pos != std::string::npos; pos = text.find(what, pos + what.size())) ++n;
@@ -87,6 +150,14 @@ TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report)
     messages = capture.text();
   }
   if (!ok) throw FileError("mesh file '" + path.string() + "': OpenMesh could not read it (malformed or truncated)");
+
+  const FaceCount faces = declaredFaceCount(path, ext);
+  if (faces.present >= 0 && faces.present < faces.declared)
+    throw FileError("mesh file '" + path.string() + "': declares " + std::to_string(faces.declared) +
+                    " faces but contains only " + std::to_string(faces.present) + " (truncated or malformed)");
+  if (faces.declared >= 0 && static_cast<long long>(mesh.n_faces()) < faces.declared)
+    throw FileError("mesh file '" + path.string() + "': declares " + std::to_string(faces.declared) +
+                    " faces but only " + std::to_string(mesh.n_faces()) + " could be read (truncated or malformed)");
 
   MeshLoadReport rep;
   rep.complex_edge_warnings = countOccurrences(messages, "complex edge") + countOccurrences(messages, "complex vertex");

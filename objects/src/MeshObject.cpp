@@ -45,7 +45,10 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
     }
     leaf_refs_.push_back(renumbered[prim]);
   }
-  // One spare element: the 4-wide leaf test reads 12 floats from each triangle's start.
+  // Three spare references so that a 4-wide group never reads past the list (the extra lanes
+  // are masked off), and one spare triangle: the 4-wide test reads 12 floats from each start.
+  leaf_refs_.insert(leaf_refs_.end(), 3, 0u);
+  leaf_refs_.shrink_to_fit();
   triangles_.push_back(triangles_.empty() ? TriangleVertices{} : triangles_.back());
   triangles_.shrink_to_fit();
   prim_ids_.shrink_to_fit();
@@ -70,7 +73,7 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
       for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
         const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
         const float* lane[4];
-        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + (k < n ? k : 0)]].v0.x;
+        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;  // refs are padded
         const detail::Watertight4 r = detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
         if ((r.fast | r.exact) == 0) continue;
         for (int k = 0; k < n; ++k) {
@@ -128,7 +131,7 @@ bool MeshObject::occluded(const Ray& ray_os) const {
       for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
         const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
         const float* lane[4];
-        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + (k < n ? k : 0)]].v0.x;
+        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;  // refs are padded
         const detail::Watertight4 r = detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
         if (r.fast) return true;
         for (int k = 0; k < n; ++k) {

@@ -28,7 +28,7 @@ struct Watertight4 {
 };
 
 /// `tri[i]` points to 9 floats (v0, v1, v2) of lane i's triangle; 12 floats must be readable from
-/// there (the vertex array is padded). Lanes >= count repeat lane 0 and are masked off.
+/// there (the vertex array is padded). Lanes >= count may point at any triangle: they are masked off.
 template <int KX, int KY, int KZ>
 inline Watertight4 intersectWatertight4(const WatertightRay& ray, const float* const tri[4], int count, float t_max) {
   // Load and transpose: rows are triangles, columns x y z (the 4th column is ignored).

@@ -95,6 +95,10 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
   const KdNode* nodes = tree.nodes.data();
   std::uint32_t index = 0;
   bool found = false;
+  // The interval widened by the slack (see below), updated only where tmin / tmax change.
+  auto widen_up = [](float t) { return t + std::abs(t) * kKdPlaneSlack; };
+  auto widen_down = [](float t) { return t - std::abs(t) * kKdPlaneSlack; };
+  float tmin_lo = widen_down(tmin), tmax_hi = widen_up(tmax);
 
   while (true) {
     const KdNode& node = nodes[index];
@@ -112,15 +116,16 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       // planes touches the cells meeting there at a single point, and the t of two planes at
       // that point differ by rounding. Skipping such a cell can skip every triangle around the
       // vertex, so a child is dropped only when the plane is clearly outside [tmin, tmax].
-      if (t_plane > tmax + std::abs(tmax) * kKdPlaneSlack) {
+      if (t_plane > tmax_hi) {
         index = near_child;
-      } else if (t_plane < tmin - std::abs(tmin) * kKdPlaneSlack) {
+      } else if (t_plane < tmin_lo) {
         index = far_child;
       } else {
         // Both; argument order makes a NaN t_plane (ray inside the plane) keep the full interval.
         stack[top++] = {far_child, std::max(tmin, t_plane), tmax};
         index = near_child;
         tmax = std::min(tmax, t_plane);
+        tmax_hi = widen_up(tmax);
       }
       continue;
     }
@@ -137,6 +142,8 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       tmin = stack[top].tmin;
       tmax = stack[top].tmax;
     } while (tmin > t_best);
+    tmin_lo = widen_down(tmin);
+    tmax_hi = widen_up(tmax);
   }
 }
 
