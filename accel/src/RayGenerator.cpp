@@ -1,14 +1,27 @@
 #include "duplex/accel/RayGenerator.h"
 
+#include "duplex/accel/Error.h"
+
 #include <glm/geometric.hpp>
 
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <string>
 
 namespace duplex {
 
+namespace {
+void requireBounds(const Box& b, const char* what) {
+  for (int k = 0; k < 3; ++k)
+    if (!std::isfinite(b.lo[k]) || !std::isfinite(b.hi[k]))
+      throw InvalidArgument(std::string(what) + ": the world bounds are empty or not finite (a scene without instances?)");
+  if (b.empty()) throw InvalidArgument(std::string(what) + ": the world bounds are empty (a scene without instances?)");
+}
+}  // namespace
+
 PinholeCamera PinholeCamera::looking_at_box(const Box& b) {
+  requireBounds(b, "PinholeCamera::looking_at_box");
   PinholeCamera cam;
   const glm::dvec3 lo(b.lo), hi(b.hi);
   const glm::dvec3 centre = 0.5 * (lo + hi);
@@ -43,6 +56,7 @@ std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::
 }
 
 std::vector<Ray> randomRays(const Box& b, std::size_t count, std::uint64_t seed) {
+  requireBounds(b, "randomRays");
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::vector<Ray> rays(count);

@@ -27,38 +27,41 @@ namespace {
 using PolyMesh = OpenMesh::PolyMesh_ArrayKernelT<>;
 using TriMesh = OpenMesh::TriMesh_ArrayKernelT<>;
 
-// OpenMesh reports through global streams that print to std::cerr, once per bad face. We capture
-// them for the duration of a read and count, which is why reads are serialised.
+// Reads are serialised: OpenMesh's message streams are global.
 std::mutex& openMeshMutex() {
   static std::mutex m;
   return m;
 }
 
+// OpenMesh reports through global streams that print to std::cerr, once per bad face. The first
+// read redirects them, once per process, into a buffer that each read empties and counts (under
+// openMeshMutex). Once, because OpenMesh's disconnect() does not free what connect() allocated:
+// redirecting per read leaked on every read. The price: OpenMesh messages of an application that
+// uses OpenMesh itself also land in this buffer instead of on std::cerr.
 class OpenMeshCapture {
  public:
   OpenMeshCapture() {
-    for (auto* s : {&omerr(), &omlog(), &omout()}) {
-      s->disconnect(std::cerr);
-      s->disconnect(std::cout);
-      s->connect(buffer_);
-    }
-  }
-  ~OpenMeshCapture() {
-    for (auto* s : {&omerr(), &omlog(), &omout()}) {
-      s->flush();
-      s->disconnect(buffer_);
-    }
-    omerr().connect(std::cerr);
-    omlog().connect(std::cerr);
-    omout().connect(std::cout);
+    static std::ostringstream* buffer = [] {
+      auto* b = new std::ostringstream;  // lives as long as OpenMesh's streams do
+      for (auto* s : {&omerr(), &omlog(), &omout()}) {
+        s->disconnect(std::cerr);
+        s->disconnect(std::cout);
+        s->connect(*b);
+      }
+      return b;
+    }();
+    buffer_ = buffer;
+    buffer_->str({});
   }
   std::string text() {
     for (auto* s : {&omerr(), &omlog(), &omout()}) s->flush();
-    return buffer_.str();
+    std::string t = buffer_->str();
+    buffer_->str({});
+    return t;
   }
 
  private:
-  std::ostringstream buffer_;
+  std::ostringstream* buffer_;
 };
 
 // What a file's header declares, for the formats that have a face count (OFF, PLY, binary STL),

@@ -71,7 +71,8 @@ Scene loadScene(const std::filesystem::path& path, const SceneLoadOptions& optio
   json doc;
   try {
     doc = json::parse(text.str());
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {
+    // parse_error, and out_of_range for numbers such as 1e999
     throw FileError(path.string() + ": not valid JSON (" + e.what() + ")");
   }
   if (!doc.is_object()) ctx.fail("", "expected a JSON object at the top level");

@@ -28,8 +28,7 @@ struct Affine {
 
   [[nodiscard]] glm::dvec3 point(const glm::dvec3& p) const { return linear * p + translation; }
   [[nodiscard]] glm::dvec3 vector(const glm::dvec3& v) const { return linear * v; }
-  /// Normals transform with the inverse transpose; `normal_from_linear` is supplied by the caller
-  /// because it is precomputed once per instance.
+  /// Whether all 12 entries are finite.
   [[nodiscard]] bool isFinite() const;
   /// |det(linear)| relative to the scale of the matrix is tiny: not invertible in practice.
   [[nodiscard]] bool isSingular() const;

@@ -21,6 +21,7 @@ struct PinholeCamera {
 
   /// The camera of `duplex rays --primary`: at 1.0 x the bbox diagonal from the bbox centre along
   /// normalize(1, 0.6, 0.8), looking at the centre, up = +y, 45 degrees vertical field of view.
+  /// Throws InvalidArgument for empty or non-finite bounds.
   static PinholeCamera looking_at_box(const Box& world_bounds);
   /// Unit direction through the centre of pixel (px, py) of a width x height image, pixel (0, 0)
   /// at the top left, square pixels.
@@ -32,6 +33,7 @@ struct PinholeCamera {
 [[nodiscard]] std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height);
 /// `count` rays with origins uniform in `world_bounds` and directions uniform on the unit sphere,
 /// t in [0, inf). Deterministic for a seed (std::mt19937_64, independent of the thread count).
+/// Throws InvalidArgument for empty or non-finite bounds.
 [[nodiscard]] std::vector<Ray> randomRays(const Box& world_bounds, std::size_t count, std::uint64_t seed);
 
 }  // namespace duplex
