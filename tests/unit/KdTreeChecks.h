@@ -447,6 +447,9 @@ struct ConfigCase {
   KdBuildConfig config;
 };
 
+/// Test names print the case's name, not its bytes.
+inline void PrintTo(const ConfigCase& c, std::ostream* os) { *os << c.name; }
+
 /// Every heuristic with and without clipping, plus the knobs that change the tree's shape or the
 /// build path (TBB subtrees, serial, depth limit, small leaves, cheap traversal).
 inline std::vector<ConfigCase> allConfigCases() {

@@ -149,6 +149,18 @@ TEST(RayGenerator, RandomRaysAreDeterministicUniformAndInside) {
   EXPECT_LT(glm::length(mean_origin - glm::dvec3(b.center())), 0.1);
 }
 
+TEST(RayGenerator, EmptyOrNonFiniteBoundsThrow) {
+  const float inf = std::numeric_limits<float>::infinity();
+  for (const Box& b : {Box(), Box(glm::vec3(1.0f), glm::vec3(0.0f)), Box(glm::vec3(0.0f), glm::vec3(inf)),
+                       Box(glm::vec3(std::numeric_limits<float>::quiet_NaN()), glm::vec3(1.0f))}) {
+    EXPECT_THROW((void)randomRays(b, 10, 1), InvalidArgument) << b;
+    EXPECT_THROW((void)primaryRays(b, 4, 4), InvalidArgument) << b;
+  }
+  // A flat box (one zero extent) is not empty: rays start in its plane.
+  const auto flat = randomRays(Box(glm::vec3(0.0f, 0.0f, 2.0f), glm::vec3(1.0f, 1.0f, 2.0f)), 50, 2);
+  for (const Ray& r : flat) EXPECT_EQ(r.origin.z, 2.0f);
+}
+
 TEST(RayGenerator, PrimaryRaysLookAtTheBox) {
   const Box b(glm::vec3(-2.0f, -1.0f, 0.0f), glm::vec3(2.0f, 1.0f, 3.0f));
   const std::uint32_t w = 64, h = 48;

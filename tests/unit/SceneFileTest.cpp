@@ -281,6 +281,8 @@ TEST(SceneFileErrors, Instances) {
   expectSceneError(d, scene(kCubeObject, instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]")), "/instances/0/transform",
                    "singular");
   expectSceneError(d, scene(kCubeObject, instance("cube", "[1, 2, 3, 0, 2, 4, 6, 0, 0, 0, 1, 0]")), "/instances/0/transform");
+  // A number beyond double's range is rejected (by the parser: the file is named).
+  expectSceneError(d, scene(kCubeObject, instance("cube", "[1e999, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]")), "bad_scene.json");
 }
 
 // ---------------------------------------------------------------------------------------------
