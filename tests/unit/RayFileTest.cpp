@@ -21,17 +21,6 @@
 namespace duplex::test {
 namespace {
 
-template <class F>
-void expectFileErrorNaming(F&& f, const std::string& needle) {
-  try {
-    f();
-    ADD_FAILURE() << "no FileError thrown (expected one naming '" << needle << "')";
-  } catch (const FileError& e) {
-    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "message: " << e.what();
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "wrong exception type: " << e.what();
-  }
-}
 
 TEST(RayFile, RaysRoundTripBitExactly) {
   TempDir dir;
@@ -110,17 +99,17 @@ TEST(RayFile, WrongSizesAndMissingFilesThrowNamingTheFile) {
   for (const std::size_t size : {1u, 31u, 33u, 63u, 100u}) {
     const auto path = dir / ("rays_" + std::to_string(size) + ".bin");
     writeBinaryFile(path, std::vector<char>(size, 0));
-    expectFileErrorNaming([&] { (void)readRayFile(path); }, path.filename().string());
+    expectErrorNaming<FileError>([&] { (void)readRayFile(path); }, path.filename().string());
   }
   for (const std::size_t size : {1u, 19u, 21u, 32u, 64u}) {  // 32, 64: ray-record multiples
     const auto path = dir / ("hits_" + std::to_string(size) + ".bin");
     writeBinaryFile(path, std::vector<char>(size, 0));
-    expectFileErrorNaming([&] { (void)readHitFile(path); }, path.filename().string());
+    expectErrorNaming<FileError>([&] { (void)readHitFile(path); }, path.filename().string());
   }
-  expectFileErrorNaming([&] { (void)readRayFile(dir / "no_such_rays.bin"); }, "no_such_rays.bin");
-  expectFileErrorNaming([&] { (void)readHitFile(dir / "no_such_hits.bin"); }, "no_such_hits.bin");
-  expectFileErrorNaming([&] { writeRayFile(dir / "missing_dir" / "r.bin", std::vector<Ray>(1)); }, "r.bin");
-  expectFileErrorNaming([&] { writeHitFile(dir / "missing_dir" / "h.bin", std::vector<HitRecord>(1)); }, "h.bin");
+  expectErrorNaming<FileError>([&] { (void)readRayFile(dir / "no_such_rays.bin"); }, "no_such_rays.bin");
+  expectErrorNaming<FileError>([&] { (void)readHitFile(dir / "no_such_hits.bin"); }, "no_such_hits.bin");
+  expectErrorNaming<FileError>([&] { writeRayFile(dir / "missing_dir" / "r.bin", std::vector<Ray>(1)); }, "r.bin");
+  expectErrorNaming<FileError>([&] { writeHitFile(dir / "missing_dir" / "h.bin", std::vector<HitRecord>(1)); }, "h.bin");
 }
 
 // ---------------------------------------------------------------------------------------------

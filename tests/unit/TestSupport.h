@@ -4,6 +4,7 @@
 /// grids, triangle soups) and scratch directories. Everything here is deterministic.
 
 #include "duplex/accel/Box.h"
+#include "duplex/accel/Error.h"
 #include "duplex/objects/MeshLoader.h"
 #include "duplex/objects/TriangleMesh.h"
 
@@ -34,6 +35,20 @@
 #endif
 
 namespace duplex::test {
+
+/// Runs `f` and expects an exception of type E (FileError, InvalidArgument, ...) whose message
+/// contains `needle` (the file or object the error must name).
+template <class E, class F>
+void expectErrorNaming(F&& f, const std::string& needle) {
+  try {
+    f();
+    ADD_FAILURE() << "no exception thrown (expected one naming '" << needle << "')";
+  } catch (const E& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "message: " << e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "wrong exception type: " << e.what();
+  }
+}
 
 /// The shared data folder (meshes of the project's benchmarks); may be absent on a fresh machine.
 inline std::filesystem::path sharedDataDir() { return std::filesystem::path(DUPLEX_SHARED_DATA); }
