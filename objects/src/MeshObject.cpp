@@ -14,6 +14,20 @@
 
 namespace duplex {
 
+namespace {
+
+// One 4-wide group of a leaf: the references [i, i + min(4, end - i)) of `refs` (padded, so the
+// extra lanes read valid triangles and are masked off).
+template <int KX, int KY, int KZ, class TriangleVertices>
+inline detail::Watertight4 testGroup(const WatertightRay& wray, const TriangleVertices* tris, const std::uint32_t* refs,
+                                     std::uint32_t i, int n, float t_max) {
+  const float* lane[4];
+  for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;
+  return detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
+}
+
+}  // namespace
+
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config)
     : Object(mesh ? mesh->name() : std::string()), mesh_(std::move(mesh)) {
   if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
@@ -60,7 +74,6 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   const WatertightRay wray(ray_os);
   float t_best = std::min(hit.t, ray_os.tfar);
   std::uint32_t best = kInvalidId;
-  float best_u = 0.0f, best_v = 0.0f;
   const TriangleVertices* tris = triangles_.data();
   const std::uint32_t* refs = leaf_refs_.data();
   // One dispatch per ray on the axis permutation; traversal and triangle tests below are
@@ -72,28 +85,21 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
       // that the result equals testing them one by one.
       for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
         const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
-        const float* lane[4];
-        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;  // refs are padded
-        const detail::Watertight4 r = detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
+        const detail::Watertight4 r = testGroup<KX, KY, KZ>(wray, tris, refs, i, n, t_max);
         if ((r.fast | r.exact) == 0) continue;
         for (int k = 0; k < n; ++k) {
-          const TriangleVertices& tri = tris[refs[i + k]];
           float t, u, v;
           bool hit = false;
           if (r.exact >> k & 1) {
+            const TriangleVertices& tri = tris[refs[i + k]];
             hit = intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v);
           } else if ((r.fast >> k & 1) && !(r.sT[k] > t_max * r.abs_det[k])) {
-            // Same arithmetic as the scalar test's final step.
-            const float inv = 1.0f / r.det[k];
-            t = r.T[k] * inv;
+            t = r.T[k] * (1.0f / r.det[k]);  // the scalar test's final step
             hit = true;
-            u = v = 0.0f;  // filled below for the winner only
           }
           if (hit) {
             t_max = t;
             best = refs[i + k];
-            best_u = u;
-            best_v = v;
             found = true;
           }
         }
@@ -103,17 +109,12 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   });
   if (best == kInvalidId) return false;
   const TriangleVertices& tri = tris[best];
-  {
-    // Barycentrics of the winner from the scalar test (the 4-wide path keeps only t).
-    float t, u, v;
-    if (intersectWatertight(wray, tri.v0, tri.v1, tri.v2, std::numeric_limits<float>::infinity(), t, u, v)) {
-      best_u = u;
-      best_v = v;
-    }
-  }
+  // Barycentrics only for the winner, from the scalar test (its arithmetic is the 4-wide one).
+  float t, u = 0.0f, v = 0.0f;
+  (void)intersectWatertight(wray, tri.v0, tri.v1, tri.v2, std::numeric_limits<float>::infinity(), t, u, v);
   hit.t = t_best;
-  hit.u = best_u;
-  hit.v = best_v;
+  hit.u = u;
+  hit.v = v;
   hit.prim_id = prim_ids_[best];
   hit.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
   return true;
@@ -130,9 +131,7 @@ bool MeshObject::occluded(const Ray& ray_os) const {
     return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
       for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
         const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
-        const float* lane[4];
-        for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;  // refs are padded
-        const detail::Watertight4 r = detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
+        const detail::Watertight4 r = testGroup<KX, KY, KZ>(wray, tris, refs, i, n, t_max);
         if (r.fast) return true;
         for (int k = 0; k < n; ++k) {
           if (!(r.exact >> k & 1)) continue;
