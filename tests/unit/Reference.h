@@ -86,6 +86,19 @@ inline double refIntersect(const glm::dvec3& o, const glm::dvec3& d, const RefTr
 
 /// The triangles of a reference with a bounding sphere per triangle, so that a ray tests only the
 /// few triangles whose sphere it passes (conservative cull: the sphere radius is padded).
+/// Makes `tri` the closest hit when the ray meets it with t in [tnear, tfar] before best.t.
+inline void refConsider(const glm::dvec3& o, const glm::dvec3& d, double tnear, double tfar, const RefTriangle& tri,
+                        RefHit& best) {
+  const double denom = glm::dot(d, tri.n);
+  if (denom == 0.0) return;
+  const double t = (tri.plane - glm::dot(tri.n, o)) / denom;
+  if (!(t >= tnear && t <= tfar && t < best.t)) return;
+  if (std::isnan(refIntersect(o, d, tri))) return;
+  best.t = t;
+  best.prim = tri.prim;
+  best.instance = tri.instance;
+}
+
 class RefScene {
  public:
   RefScene() = default;
@@ -122,14 +135,7 @@ class RefScene {
       const double r = s.r + pad;
       if (px * px + py * py + pz * pz > r * r) continue;
       const RefTriangle& tri = tris_[i];
-      const double denom = glm::dot(d, tri.n);
-      if (denom == 0.0) continue;
-      const double t = (tri.plane - glm::dot(tri.n, o)) / denom;
-      if (!(t >= tnear && t <= tfar && t < best.t)) continue;
-      if (std::isnan(refIntersect(o, d, tri))) continue;
-      best.t = t;
-      best.prim = tri.prim;
-      best.instance = tri.instance;
+      refConsider(o, d, tnear, tfar, tri, best);
     }
     return best;
   }
@@ -150,14 +156,7 @@ inline RefHit refClosestHit(std::span<const RefTriangle> tris, const Ray& ray) {
   const glm::dvec3 o(ray.origin), d(ray.dir);
   const double tnear = ray.tnear, tfar = ray.tfar;
   for (const RefTriangle& tri : tris) {
-    const double denom = glm::dot(d, tri.n);
-    if (denom == 0.0) continue;
-    const double t = (tri.plane - glm::dot(tri.n, o)) / denom;
-    if (!(t >= tnear && t <= tfar && t < best.t)) continue;
-    if (std::isnan(refIntersect(o, d, tri))) continue;
-    best.t = t;
-    best.prim = tri.prim;
-    best.instance = tri.instance;
+    refConsider(o, d, tnear, tfar, tri, best);
   }
   return best;
 }
