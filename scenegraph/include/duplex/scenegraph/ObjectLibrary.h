@@ -1,0 +1,74 @@
+#pragma once
+/// \file ObjectLibrary.h
+/// The scene's unique objects, shared by any number of instances. Bottom-level structures are
+/// built lazily: an object added with a factory is built on first use, once, however many
+/// instances refer to it.
+
+#include "duplex/accel/Object.h"
+#include "duplex/scenegraph/NodeId.h"
+
+#include <atomic>
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <deque>
+
+namespace duplex {
+
+/// Thread-safe: get() and buildAll() may be called from several threads; add*() must not overlap
+/// with other calls.
+class ObjectLibrary {
+ public:
+  /// Builds the object (its bottom-level structure included). Called at most once per entry.
+  using Factory = std::function<std::shared_ptr<const Object>()>;
+
+  /// Adds a built object under a unique, non-empty `name`. Throws InvalidArgument for an empty or
+  /// duplicate name or a null object; the library is then unchanged.
+  ObjectId add(std::string name, std::shared_ptr<const Object> object);
+  /// Adds an object to be built on first use. `type_name` is the registered type ("mesh", ...), for
+  /// messages and listings. Same errors as add().
+  ObjectId addDeferred(std::string name, std::string type_name, Factory factory);
+
+  [[nodiscard]] std::size_t size() const { return entries_.size(); }
+  [[nodiscard]] std::optional<ObjectId> find(std::string_view name) const;
+  /// Throws InvalidArgument for an unknown id.
+  [[nodiscard]] const std::string& name(ObjectId id) const;
+  [[nodiscard]] const std::string& typeName(ObjectId id) const;
+  [[nodiscard]] bool isBuilt(ObjectId id) const;
+
+  /// The object, built now if it was deferred (blocking; concurrent callers wait for one build).
+  /// A factory that throws leaves the entry unbuilt and the exception is rethrown as
+  /// InvalidArgument naming the object (the next get() tries again). Throws for an unknown id.
+  [[nodiscard]] std::shared_ptr<const Object> get(ObjectId id) const;
+  /// Builds every listed deferred object, in parallel (TBB). Throws the first failure as get() does,
+  /// after the others finished.
+  void buildAll(std::span<const ObjectId> ids) const;
+  /// Builds all deferred objects.
+  void buildAll() const;
+
+  /// Number of factory calls that succeeded so far (tests check "once per object").
+  [[nodiscard]] std::size_t buildCount() const { return build_count_.load(); }
+
+ private:
+  struct Entry {
+    std::string name;
+    std::string type_name;
+    mutable Factory factory;  // reset after a successful build
+    mutable std::mutex mutex;
+    mutable std::shared_ptr<const Object> object;
+    mutable std::atomic<bool> built{false};
+  };
+  ObjectId push(std::string name, std::string type_name, Factory factory, std::shared_ptr<const Object> object);
+  const Entry& entry(ObjectId id) const;
+  std::deque<Entry> entries_;  // deque: entries hold a mutex and never move
+  std::unordered_map<std::string, ObjectId> by_name_;
+  mutable std::atomic<std::size_t> build_count_{0};
+};
+
+}  // namespace duplex

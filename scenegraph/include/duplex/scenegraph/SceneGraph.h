@@ -1,0 +1,137 @@
+#pragma once
+/// \file SceneGraph.h
+/// The hierarchical scene: groups, transform nodes and object instances, edited in batches and
+/// committed at once; observers (the tracer) learn per commit which instances changed.
+///
+/// Lifecycle: edits (add*, remove, reparent, set*) are validated when called and take effect in
+/// the graph at once (getters show them), but world transforms, visibility and observers are
+/// brought up to date only by commit(), which turns the pending batch into one ChangeSet. An edit
+/// that throws changes nothing. rollback() undoes every edit since the last commit.
+///
+/// Threading: one thread edits and commits. Observers run inside commit(), on that thread. Const
+/// getters may run concurrently with each other but not with edits.
+///
+/// Spaces: a node's `local` transform maps its own space to its parent's space (parent_from_local);
+/// an instance's world transform is the product of the local transforms from the root down to and
+/// including the instance (world_from_object), all in double precision.
+
+#include "duplex/accel/Affine.h"
+#include "duplex/scenegraph/ChangeSet.h"
+#include "duplex/scenegraph/NodeId.h"
+#include "duplex/scenegraph/ObjectLibrary.h"
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace duplex {
+
+enum class NodeKind : std::uint8_t { Group, Transform, Instance };
+
+/// A read-only view of one node (as of the edits made so far; world transforms as of the last commit).
+struct NodeInfo {
+  NodeId id = kInvalidNode;
+  NodeKind kind = NodeKind::Group;
+  NodeId parent = kInvalidNode;  ///< kInvalidNode for the root
+  std::string_view name;
+  Affine local;                  ///< parent_from_local (identity for groups)
+  bool visible = true;           ///< the node's own flag; hidden if it or an ancestor is hidden
+  ObjectId object = kInvalidObject;   ///< instances only
+  std::uint32_t mask = 0xFFFFFFFFu;   ///< instances only
+};
+
+class SceneGraph {
+ public:
+  using Observer = std::function<void(const ChangeSet&)>;
+  using ObserverId = std::uint64_t;
+
+  /// An empty graph (just the root group, named "") over `library` (a new one when null).
+  explicit SceneGraph(std::shared_ptr<ObjectLibrary> library = nullptr);
+  SceneGraph(const SceneGraph&) = delete;
+  SceneGraph& operator=(const SceneGraph&) = delete;
+
+  [[nodiscard]] ObjectLibrary& library() { return *library_; }
+  [[nodiscard]] const ObjectLibrary& library() const { return *library_; }
+  [[nodiscard]] const std::shared_ptr<ObjectLibrary>& sharedLibrary() const { return library_; }
+
+  // ---- edits (pending until commit) ----
+  // Names: non-empty, without '/', unique among the parent's children; an empty name is replaced
+  // by "<kind><id>" (e.g. "instance17"). Parents must be groups or transform nodes.
+  // Transforms must be finite and non-singular. Every error throws InvalidArgument naming the node
+  // (by path or id) and the problem, and changes nothing.
+
+  NodeId addGroup(NodeId parent, std::string name = {});
+  NodeId addTransform(NodeId parent, const Affine& local, std::string name = {});
+  /// Instance of library object `object` with its own local transform. The object is built now if it
+  /// was deferred (a failed build rejects the edit).
+  NodeId addInstance(NodeId parent, ObjectId object, const Affine& local = Affine::identity(),
+                     std::string name = {}, std::uint32_t mask = 0xFFFFFFFFu);
+  /// Removes `node` and its whole subtree (not the root).
+  void remove(NodeId node);
+  /// Moves `node` (with its subtree) under `new_parent`, keeping its local transform (so its world
+  /// transform changes with the new parent's). Rejects cycles and the root.
+  void reparent(NodeId node, NodeId new_parent);
+  void rename(NodeId node, std::string name);
+  /// Transform and instance nodes only.
+  void setTransform(NodeId node, const Affine& local);
+  /// Instances only; builds the object if deferred.
+  void setObject(NodeId instance, ObjectId object);
+  /// Hides or shows a node and (effectively) its subtree.
+  void setVisible(NodeId node, bool visible);
+  /// Instances only.
+  void setMask(NodeId instance, std::uint32_t mask);
+
+  /// Whether there are edits since the last commit.
+  [[nodiscard]] bool hasPendingEdits() const;
+  /// Brings world transforms up to date (only below edited nodes), builds the ChangeSet of the batch,
+  /// calls every observer with it (in subscription order) and returns it. With no pending edits,
+  /// returns an empty ChangeSet without calling observers. An observer that throws does not undo the
+  /// commit; the exception propagates after the remaining observers ran.
+  ChangeSet commit();
+  /// Undoes every edit since the last commit.
+  void rollback();
+
+  // ---- observers ----
+  /// `observer` is called on every commit that changed something.
+  ObserverId subscribe(Observer observer);
+  void unsubscribe(ObserverId id);
+
+  // ---- queries (edits so far; world transforms and visibility as of the last commit) ----
+  [[nodiscard]] bool contains(NodeId id) const;
+  /// Throws InvalidArgument for an unknown id.
+  [[nodiscard]] NodeInfo node(NodeId id) const;
+  [[nodiscard]] std::vector<NodeId> children(NodeId id) const;
+  /// "/a/b/c" from the root's children down; the root is "/".
+  [[nodiscard]] std::string path(NodeId id) const;
+  /// Node ids from the root's child down to `id` (the root excluded).
+  [[nodiscard]] std::vector<NodeId> pathIds(NodeId id) const;
+  [[nodiscard]] std::optional<NodeId> find(std::string_view path) const;
+  /// world_from_object of an instance (or world_from_local of any node) as of the last commit.
+  [[nodiscard]] const Affine& worldTransform(NodeId id) const;
+  /// Whether an instance is visible (itself and all ancestors) as of the last commit.
+  [[nodiscard]] bool isVisibleInstance(NodeId id) const;
+  /// Every instance node that exists (committed or not), sorted by id.
+  [[nodiscard]] std::vector<NodeId> instances() const;
+  /// Visible instances as of the last commit, sorted by id.
+  [[nodiscard]] std::vector<NodeId> visibleInstances() const;
+  [[nodiscard]] std::size_t nodeCount() const;
+  [[nodiscard]] std::uint64_t commitCount() const;
+
+  /// Bytes the graph holds per instance node (documented in the README).
+  [[nodiscard]] static std::size_t bytesPerInstance();
+
+ private:
+  struct Impl;
+  std::shared_ptr<ObjectLibrary> library_;
+  std::unique_ptr<Impl> impl_;
+
+ public:
+  ~SceneGraph();
+};
+
+}  // namespace duplex

@@ -1,0 +1,114 @@
+/// \file ObjectLibrary.cpp
+/// Entries live in a deque (they hold a mutex and never move). A deferred entry is built under its
+/// own mutex with double-checked locking on an atomic flag, so concurrent get() calls of one object
+/// wait for a single factory call while get() calls of other objects proceed in parallel.
+
+#include "duplex/scenegraph/ObjectLibrary.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/accel/Log.h"
+
+#include <tbb/parallel_for.h>
+
+#include <exception>
+#include <utility>
+#include <vector>
+
+namespace duplex {
+
+ObjectId ObjectLibrary::add(std::string name, std::shared_ptr<const Object> object) {
+  if (!object) throw InvalidArgument("ObjectLibrary::add: object '" + name + "' is null");
+  std::string type_name(object->typeName());
+  return push(std::move(name), std::move(type_name), nullptr, std::move(object));
+}
+
+ObjectId ObjectLibrary::addDeferred(std::string name, std::string type_name, Factory factory) {
+  if (!factory) throw InvalidArgument("ObjectLibrary::addDeferred: object '" + name + "' has no factory");
+  return push(std::move(name), std::move(type_name), std::move(factory), nullptr);
+}
+
+ObjectId ObjectLibrary::push(std::string name, std::string type_name, Factory factory,
+                             std::shared_ptr<const Object> object) {
+  // Validate everything before touching the containers, so a rejected add changes nothing.
+  if (name.empty()) throw InvalidArgument("ObjectLibrary: an object needs a non-empty name");
+  if (by_name_.count(name) != 0) throw InvalidArgument("ObjectLibrary: duplicate object name '" + name + "'");
+  if (entries_.size() >= kInvalidObject) throw InvalidArgument("ObjectLibrary: too many objects");
+  const auto id = static_cast<ObjectId>(entries_.size());
+  Entry& e = entries_.emplace_back();  // may throw; nothing changed yet
+  try {
+    by_name_.emplace(name, id);
+  } catch (...) {
+    entries_.pop_back();
+    throw;
+  }
+  e.name = std::move(name);
+  e.type_name = std::move(type_name);
+  e.factory = std::move(factory);
+  e.object = std::move(object);
+  e.built.store(e.object != nullptr, std::memory_order_release);
+  return id;
+}
+
+std::optional<ObjectId> ObjectLibrary::find(std::string_view name) const {
+  const auto it = by_name_.find(std::string(name));
+  if (it == by_name_.end()) return std::nullopt;
+  return it->second;
+}
+
+const ObjectLibrary::Entry& ObjectLibrary::entry(ObjectId id) const {
+  if (id >= entries_.size())
+    throw InvalidArgument("ObjectLibrary: unknown object id " + std::to_string(id) + " (library holds " +
+                          std::to_string(entries_.size()) + " objects)");
+  return entries_[id];
+}
+
+const std::string& ObjectLibrary::name(ObjectId id) const { return entry(id).name; }
+const std::string& ObjectLibrary::typeName(ObjectId id) const { return entry(id).type_name; }
+bool ObjectLibrary::isBuilt(ObjectId id) const { return entry(id).built.load(std::memory_order_acquire); }
+
+std::shared_ptr<const Object> ObjectLibrary::get(ObjectId id) const {
+  const Entry& e = entry(id);
+  // Fast path: once built, `object` is never written again.
+  if (e.built.load(std::memory_order_acquire)) return e.object;
+  std::lock_guard lock(e.mutex);
+  if (e.built.load(std::memory_order_relaxed)) return e.object;
+  std::shared_ptr<const Object> object;
+  try {
+    object = e.factory();
+  } catch (const std::exception& ex) {
+    throw InvalidArgument("object '" + e.name + "' (type " + e.type_name + "): build failed: " + ex.what());
+  } catch (...) {
+    throw InvalidArgument("object '" + e.name + "' (type " + e.type_name + "): build failed (unknown error)");
+  }
+  if (!object) throw InvalidArgument("object '" + e.name + "' (type " + e.type_name + "): factory returned null");
+  e.object = std::move(object);
+  e.factory = nullptr;  // release what the factory captured (source meshes, file names)
+  e.built.store(true, std::memory_order_release);
+  build_count_.fetch_add(1);
+  logger()->debug("object '{}' built ({} bytes)", e.name, e.object->memoryBytes());
+  return e.object;
+}
+
+void ObjectLibrary::buildAll(std::span<const ObjectId> ids) const {
+  for (const ObjectId id : ids) (void)entry(id);  // unknown ids throw before any build
+  // One slot per listed id, so "the first failure" is the first in list order, whatever the timing.
+  std::vector<std::exception_ptr> failures(ids.size());
+  tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
+    try {
+      (void)get(ids[i]);
+    } catch (...) {
+      failures[i] = std::current_exception();
+    }
+  });
+  for (const auto& f : failures)
+    if (f) std::rethrow_exception(f);
+}
+
+void ObjectLibrary::buildAll() const {
+  std::vector<ObjectId> pending;
+  for (std::size_t i = 0; i < entries_.size(); ++i)
+    if (!entries_[i].built.load(std::memory_order_acquire)) pending.push_back(static_cast<ObjectId>(i));
+  buildAll(pending);
+}
+
+}  // namespace duplex
