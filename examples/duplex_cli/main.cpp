@@ -1,10 +1,16 @@
 // The `duplex` command-line tool: the interchange contract used by tools outside the project.
 //   duplex trace --scene S.json --rays R.bin --hits H.bin [--threads N] [--any-hit] [--repeat R]
 //   duplex rays  --scene S.json (--primary W H | --random N --seed X) --out R.bin
+//   duplex scene split     --mesh M --objects K [--loop N] --out S.json
+//   duplex scene instances --mesh M --count N --seed X --out S.json
+//   duplex scene robot     --urdf U [--copies C] [--joints a1,a2,...] [--spacing D] --out S.json
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
 
 #include "RaysCommand.h"
+#include "SceneInstancesCommand.h"
+#include "SceneRobotCommand.h"
+#include "SceneSplitCommand.h"
 #include "TraceCommand.h"
 
 #include <duplex/accel/Error.h>
@@ -74,6 +80,55 @@ int main(int argc, char** argv) {
   random_opt->needs(seed_opt);
   seed_opt->needs(random_opt);
 
+  // duplex scene split|instances|robot
+  CLI::App* scene_cmd = app.add_subcommand("scene", "Write benchmark scenes as scene-json-v1 (split, instances, robot)");
+  scene_cmd->require_subcommand(1);
+
+  duplex::cli::SceneSplitOptions split;
+  CLI::App* split_cmd =
+      scene_cmd->add_subcommand("split", "Split a mesh into K objects (the paper's scenes), one identity instance each");
+  split_cmd->footer(
+      "Rule (issue 3, section 6): split(tris, k): k == 1 gives one object; else kl = k div 2, order the\n"
+      "triangles by (centroid on the longest axis of their centroid box, ties x, y, z; triangle index),\n"
+      "the first (2 n kl + k) div 2k go left with kl, the rest right with k - kl. Objects part0..part<K-1>\n"
+      "(depth-first, left to right) hold inline arrays: triangles in their original order, vertices\n"
+      "re-indexed in order of first use. Every triangle the loader returns counts, degenerate (zero-area)\n"
+      "ones included; they stay in their object (an object of degenerate triangles only is reported).");
+  split_cmd->add_option("--mesh", split.mesh, "Mesh file (OBJ, PLY, OFF, STL, OM)")->required();
+  split_cmd->add_option("--objects", split.objects, "K: number of objects (1 to the triangle count)")
+      ->required()
+      ->check(CLI::Range(1u, 0xFFFFFFFFu));
+  split_cmd->add_option("--loop", split.loop, "Loop-subdivide the mesh N times before splitting (default 0)")
+      ->check(CLI::Range(0, 6));
+  split_cmd->add_option("--out", split.out, "scene-json-v1 file to write")->required();
+
+  duplex::cli::SceneInstancesOptions scatter;
+  CLI::App* instances_cmd = scene_cmd->add_subcommand(
+      "instances", "N randomly rotated instances of one mesh on a grid (cells of the mesh's bounding diagonal)");
+  instances_cmd->add_option("--mesh", scatter.mesh, "Mesh file (written relative to the output's folder when possible)")
+      ->required();
+  instances_cmd->add_option("--count", scatter.count, "N: number of instances")
+      ->required()
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
+  instances_cmd->add_option("--seed", scatter.seed, "Seed of the rotations (std::mt19937_64, 0 to 2^64-1)")
+      ->required()
+      ->check(kNotNegative);
+  instances_cmd->add_option("--out", scatter.out, "scene-json-v1 file to write")->required();
+
+  duplex::cli::SceneRobotOptions robot;
+  double spacing = 0.0;
+  CLI::App* robot_cmd = scene_cmd->add_subcommand(
+      "robot", "A URDF robot's link meshes placed by forward kinematics, in copies side by side along +y");
+  robot_cmd->add_option("--urdf", robot.urdf, "URDF file (package:// mesh paths resolved near it)")->required();
+  robot_cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")->check(CLI::Range(1, 1000000));
+  robot_cmd->add_option("--joints", robot.joints,
+                        "Joint values a1,a2,... in radians (metres for prismatic), one per movable joint in file "
+                        "order (default: all zero)")
+      ->delimiter(',');
+  CLI::Option* spacing_opt = robot_cmd->add_option(
+      "--spacing", spacing, "Distance between copies (default 1.25 x the larger horizontal extent of one robot)");
+  robot_cmd->add_option("--out", robot.out, "scene-json-v1 file to write")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -81,11 +136,22 @@ int main(int argc, char** argv) {
   }
   if (verbose) duplex::logger()->set_level(spdlog::level::info);
 
-  const char* command = *trace_cmd ? "duplex trace" : "duplex rays";
+  const char* command = *trace_cmd       ? "duplex trace"
+                        : *rays_cmd      ? "duplex rays"
+                        : *split_cmd     ? "duplex scene split"
+                        : *instances_cmd ? "duplex scene instances"
+                                         : "duplex scene robot";
   try {
     nlohmann::ordered_json result;
     if (*trace_cmd) {
       result = duplex::cli::runTrace(trace);
+    } else if (*split_cmd) {
+      result = duplex::cli::runSceneSplit(split);
+    } else if (*instances_cmd) {
+      result = duplex::cli::runSceneInstances(scatter);
+    } else if (*robot_cmd) {
+      if (*spacing_opt) robot.spacing = spacing;
+      result = duplex::cli::runSceneRobot(robot);
     } else {
       if (*primary_opt) {
         rays.width = primary[0];

@@ -1,0 +1,472 @@
+#include "SceneRobotCommand.h"
+
+#include "SceneWriter.h"
+
+#include <duplex/accel/Error.h>
+#include <duplex/objects/MeshLoader.h>
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <utility>
+
+namespace duplex::cli {
+
+namespace {
+
+// ---- A tiny XML reader: elements and attributes only (text, comments, declarations skipped). ----
+
+struct XmlElement {
+  std::string name;
+  std::vector<std::pair<std::string, std::string>> attributes;
+  std::vector<XmlElement> children;
+  int line = 0;
+
+  [[nodiscard]] const std::string* attribute(std::string_view key) const {
+    for (const auto& [k, v] : attributes)
+      if (k == key) return &v;
+    return nullptr;
+  }
+  [[nodiscard]] const XmlElement* child(std::string_view child_name) const {
+    for (const XmlElement& c : children)
+      if (c.name == child_name) return &c;
+    return nullptr;
+  }
+};
+
+class XmlReader {
+ public:
+  XmlReader(std::string text, std::string file) : text_(std::move(text)), file_(std::move(file)) {}
+
+  XmlElement parseDocument() {
+    std::vector<XmlElement> stack;
+    std::optional<XmlElement> root;
+    while (true) {
+      const std::size_t open = text_.find('<', pos_);
+      if (open == std::string::npos) break;
+      advanceTo(open);
+      if (startsWith("<?")) {
+        skipPast("?>");
+      } else if (startsWith("<!--")) {
+        skipPast("-->");
+      } else if (startsWith("<![CDATA[")) {
+        skipPast("]]>");
+      } else if (startsWith("<!")) {
+        skipPast(">");
+      } else if (startsWith("</")) {
+        advanceTo(pos_ + 2);
+        const std::string name = readName();
+        skipSpace();
+        expectChar('>');
+        if (stack.empty() || stack.back().name != name)
+          fail("closing tag </" + name + "> does not match " + (stack.empty() ? "any open element" : "<" + stack.back().name + ">"));
+        XmlElement done = std::move(stack.back());
+        stack.pop_back();
+        finish(std::move(done), stack, root);
+      } else {
+        advanceTo(pos_ + 1);
+        XmlElement element;
+        element.line = line_;
+        element.name = readName();
+        bool self_closing = false;
+        while (true) {
+          skipSpace();
+          if (startsWith("/>")) {
+            advanceTo(pos_ + 2);
+            self_closing = true;
+            break;
+          }
+          if (startsWith(">")) {
+            advanceTo(pos_ + 1);
+            break;
+          }
+          std::string key = readName();
+          skipSpace();
+          expectChar('=');
+          skipSpace();
+          element.attributes.emplace_back(std::move(key), readQuoted());
+        }
+        if (self_closing)
+          finish(std::move(element), stack, root);
+        else
+          stack.push_back(std::move(element));
+      }
+    }
+    if (!stack.empty()) fail("<" + stack.back().name + "> (line " + std::to_string(stack.back().line) + ") is never closed");
+    if (!root) fail("no XML element");
+    return std::move(*root);
+  }
+
+ private:
+  void finish(XmlElement element, std::vector<XmlElement>& stack, std::optional<XmlElement>& root) {
+    if (!stack.empty()) {
+      stack.back().children.push_back(std::move(element));
+    } else {
+      if (root) fail("more than one top-level element");
+      root = std::move(element);
+    }
+  }
+  [[noreturn]] void fail(const std::string& what) const {
+    throw FileError(file_ + ": line " + std::to_string(line_) + ": " + what);
+  }
+  bool startsWith(std::string_view s) const { return std::string_view(text_).substr(pos_).starts_with(s); }
+  void advanceTo(std::size_t to) {
+    line_ += static_cast<int>(std::count(text_.begin() + static_cast<std::ptrdiff_t>(pos_),
+                                         text_.begin() + static_cast<std::ptrdiff_t>(to), '\n'));
+    pos_ = to;
+  }
+  void skipPast(std::string_view end) {
+    const std::size_t at = text_.find(end, pos_);
+    if (at == std::string::npos) fail("unterminated markup (missing '" + std::string(end) + "')");
+    advanceTo(at + end.size());
+  }
+  void skipSpace() {
+    std::size_t p = pos_;
+    while (p < text_.size() && std::isspace(static_cast<unsigned char>(text_[p]))) ++p;
+    advanceTo(p);
+  }
+  void expectChar(char c) {
+    if (pos_ >= text_.size() || text_[pos_] != c)
+      fail(std::string("expected '") + c + "'" + (pos_ < text_.size() ? std::string(" before '") + text_[pos_] + "'" : " before the end"));
+    advanceTo(pos_ + 1);
+  }
+  std::string readName() {
+    std::size_t p = pos_;
+    while (p < text_.size() && (std::isalnum(static_cast<unsigned char>(text_[p])) || std::string_view("_-.:").find(text_[p]) != std::string_view::npos))
+      ++p;
+    if (p == pos_) fail("expected a name");
+    std::string name = text_.substr(pos_, p - pos_);
+    advanceTo(p);
+    return name;
+  }
+  std::string readQuoted() {
+    if (pos_ >= text_.size() || (text_[pos_] != '"' && text_[pos_] != '\'')) fail("expected a quoted attribute value");
+    const char quote = text_[pos_];
+    const std::size_t end = text_.find(quote, pos_ + 1);
+    if (end == std::string::npos) fail("unterminated attribute value");
+    std::string raw = text_.substr(pos_ + 1, end - pos_ - 1);
+    advanceTo(end + 1);
+    // The five predefined entities.
+    std::string value;
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      if (raw[i] != '&') {
+        value += raw[i];
+        continue;
+      }
+      static const std::pair<std::string_view, char> kEntities[] = {
+          {"&amp;", '&'}, {"&lt;", '<'}, {"&gt;", '>'}, {"&quot;", '"'}, {"&apos;", '\''}};
+      bool known = false;
+      for (const auto& [entity, c] : kEntities)
+        if (std::string_view(raw).substr(i).starts_with(entity)) {
+          value += c;
+          i += entity.size() - 1;
+          known = true;
+          break;
+        }
+      if (!known) fail("unsupported entity in attribute value '" + raw + "'");
+    }
+    return value;
+  }
+
+  std::string text_;
+  std::string file_;
+  std::size_t pos_ = 0;
+  int line_ = 1;
+};
+
+// ---- The URDF structure this command needs. ----
+
+struct UrdfLink {
+  std::string name;
+  std::string mesh_uri;           ///< empty: nothing to place
+  glm::dvec3 mesh_scale{1.0};
+  Affine link_from_visual;        ///< the visual's <origin>
+};
+
+enum class JointKind { Fixed, Revolute, Prismatic };
+
+struct UrdfJoint {
+  std::string name;
+  JointKind kind = JointKind::Fixed;
+  Affine parent_from_joint;       ///< <origin xyz rpy>
+  glm::dvec3 axis{1.0, 0.0, 0.0}; ///< unit, joint frame
+  std::string parent, child;
+  std::optional<std::pair<double, double>> limits;  ///< lower, upper (revolute, prismatic)
+};
+
+std::vector<double> parseNumbers(const std::string& text, std::size_t count, const std::string& where) {
+  std::vector<double> values;
+  std::size_t p = 0;
+  while (true) {
+    while (p < text.size() && std::isspace(static_cast<unsigned char>(text[p]))) ++p;
+    if (p >= text.size()) break;
+    if (text[p] == '+') ++p;
+    double v = 0.0;
+    const auto [end, ec] = std::from_chars(text.data() + p, text.data() + text.size(), v);
+    if (ec != std::errc() || !std::isfinite(v)) throw FileError(where + ": '" + text + "' is not a list of numbers");
+    values.push_back(v);
+    p = static_cast<std::size_t>(end - text.data());
+  }
+  if (values.size() != count)
+    throw FileError(where + ": expected " + std::to_string(count) + " numbers, got '" + text + "'");
+  return values;
+}
+
+glm::dvec3 vec3Attribute(const XmlElement* element, const char* key, glm::dvec3 fallback, const std::string& where) {
+  if (!element) return fallback;
+  const std::string* text = element->attribute(key);
+  if (!text) return fallback;
+  const std::vector<double> v = parseNumbers(*text, 3, where + " " + key);
+  return {v[0], v[1], v[2]};
+}
+
+// Rotation by `angle` radians about the unit vector `axis` (Rodrigues), column-major.
+glm::dmat3 axisAngle(const glm::dvec3& axis, double angle) {
+  const double c = std::cos(angle), s = std::sin(angle), t = 1.0 - c;
+  const double x = axis.x, y = axis.y, z = axis.z;
+  glm::dmat3 m;
+  m[0] = {t * x * x + c, t * x * y + s * z, t * x * z - s * y};
+  m[1] = {t * x * y - s * z, t * y * y + c, t * y * z + s * x};
+  m[2] = {t * x * z + s * y, t * y * z - s * x, t * z * z + c};
+  return m;
+}
+
+// URDF <origin>: translate(xyz) * Rz(yaw) * Ry(pitch) * Rx(roll).
+Affine originTransform(const XmlElement* origin, const std::string& where) {
+  const glm::dvec3 xyz = vec3Attribute(origin, "xyz", glm::dvec3(0.0), where + " <origin>");
+  const glm::dvec3 rpy = vec3Attribute(origin, "rpy", glm::dvec3(0.0), where + " <origin>");
+  Affine a;
+  a.linear = axisAngle({0, 0, 1}, rpy.z) * axisAngle({0, 1, 0}, rpy.y) * axisAngle({1, 0, 0}, rpy.x);
+  a.translation = xyz;
+  return a;
+}
+
+struct Urdf {
+  std::vector<UrdfLink> links;
+  std::vector<UrdfJoint> joints;
+};
+
+Urdf readUrdf(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path.string() + ": cannot open the URDF file");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string file = path.string();
+  const XmlElement root = XmlReader(buffer.str(), file).parseDocument();
+  if (root.name != "robot") throw FileError(file + ": the top-level element is <" + root.name + ">, not <robot>");
+
+  Urdf urdf;
+  for (const XmlElement& e : root.children) {
+    const std::string* name = e.attribute("name");
+    const std::string where = file + ": line " + std::to_string(e.line) + ": <" + e.name + (name ? " name=\"" + *name + "\"" : "") + ">";
+    if (e.name == "link") {
+      if (!name) throw FileError(where + " has no name");
+      UrdfLink link;
+      link.name = *name;
+      // The visual mesh, else the collision mesh.
+      for (const char* kind : {"visual", "collision"}) {
+        const XmlElement* shape = e.child(kind);
+        const XmlElement* geometry = shape ? shape->child("geometry") : nullptr;
+        const XmlElement* mesh = geometry ? geometry->child("mesh") : nullptr;
+        if (!mesh) continue;
+        const std::string* filename = mesh->attribute("filename");
+        if (!filename || filename->empty()) throw FileError(where + ": <mesh> without a filename");
+        link.mesh_uri = *filename;
+        link.mesh_scale = vec3Attribute(mesh, "scale", glm::dvec3(1.0), where + " <mesh>");
+        link.link_from_visual = originTransform(shape->child("origin"), where + " <" + kind + ">");
+        break;
+      }
+      urdf.links.push_back(std::move(link));
+    } else if (e.name == "joint") {
+      if (!name) throw FileError(where + " has no name");
+      UrdfJoint joint;
+      joint.name = *name;
+      const std::string* type = e.attribute("type");
+      if (!type) throw FileError(where + " has no type");
+      if (*type == "fixed") joint.kind = JointKind::Fixed;
+      else if (*type == "revolute" || *type == "continuous") joint.kind = JointKind::Revolute;
+      else if (*type == "prismatic") joint.kind = JointKind::Prismatic;
+      else throw FileError(where + ": joint type '" + *type + "' is not supported (fixed, revolute, continuous, prismatic)");
+      joint.parent_from_joint = originTransform(e.child("origin"), where);
+      const glm::dvec3 axis = vec3Attribute(e.child("axis"), "xyz", {1.0, 0.0, 0.0}, where + " <axis>");
+      if (!(glm::length(axis) > 0.0)) throw FileError(where + ": <axis xyz> is the zero vector");
+      joint.axis = glm::normalize(axis);
+      const XmlElement* parent = e.child("parent");
+      const XmlElement* child = e.child("child");
+      if (!parent || !parent->attribute("link") || !child || !child->attribute("link"))
+        throw FileError(where + ": needs <parent link=...> and <child link=...>");
+      joint.parent = *parent->attribute("link");
+      joint.child = *child->attribute("link");
+      if (*type == "revolute" || *type == "prismatic") {
+        if (const XmlElement* limit = e.child("limit"); limit && limit->attribute("lower") && limit->attribute("upper")) {
+          const double lower = parseNumbers(*limit->attribute("lower"), 1, where + " <limit lower>")[0];
+          const double upper = parseNumbers(*limit->attribute("upper"), 1, where + " <limit upper>")[0];
+          joint.limits = std::make_pair(lower, upper);
+        }
+      }
+      urdf.joints.push_back(std::move(joint));
+    }
+  }
+  if (urdf.links.empty()) throw FileError(file + ": no <link>");
+  return urdf;
+}
+
+// Where a URDF mesh reference points, as an existing file (see SceneRobotOptions).
+std::filesystem::path resolveMesh(const std::string& uri, const std::filesystem::path& urdf, const std::string& link) {
+  const std::filesystem::path folder = std::filesystem::absolute(urdf).parent_path();
+  std::vector<std::filesystem::path> candidates;
+  if (uri.starts_with("package://")) {
+    const std::string rest = uri.substr(10);
+    const std::size_t slash = rest.find('/');
+    const std::string package = rest.substr(0, slash);
+    const std::string inside = slash == std::string::npos ? std::string() : rest.substr(slash + 1);
+    for (std::filesystem::path p = folder; !p.empty(); p = p.parent_path()) {
+      if (p.filename() == package) candidates.push_back(p / inside);
+      if (p == p.parent_path()) break;
+    }
+    candidates.push_back(folder / inside);
+    candidates.push_back(folder / std::filesystem::path(inside).filename());
+  } else if (uri.starts_with("file://")) {
+    candidates.push_back(uri.substr(7));
+  } else {
+    const std::filesystem::path p(uri);
+    candidates.push_back(p.is_absolute() ? p : folder / p);
+  }
+  std::string tried;
+  for (const std::filesystem::path& c : candidates) {
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(c, ec)) return c;
+    tried += (tried.empty() ? "" : ", ") + c.string();
+  }
+  throw FileError(urdf.string() + ": link '" + link + "': mesh '" + uri + "' not found (tried " + tried + ")");
+}
+
+}  // namespace
+
+nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
+  if (options.copies < 1) throw InvalidArgument("--copies must be at least 1");
+  if (options.spacing && !(std::isfinite(*options.spacing) && *options.spacing >= 0.0))
+    throw InvalidArgument("--spacing must be a finite number >= 0");
+  const Urdf urdf = readUrdf(options.urdf);
+  const std::string file = options.urdf.string();
+
+  // The tree: each link is the child of at most one joint; exactly one root.
+  std::map<std::string, std::size_t> link_index;
+  for (std::size_t i = 0; i < urdf.links.size(); ++i)
+    if (!link_index.emplace(urdf.links[i].name, i).second)
+      throw FileError(file + ": link '" + urdf.links[i].name + "' is defined twice");
+  std::vector<int> parent_joint(urdf.links.size(), -1);
+  std::vector<std::size_t> movable;  // joint indices, file order
+  for (std::size_t j = 0; j < urdf.joints.size(); ++j) {
+    const UrdfJoint& joint = urdf.joints[j];
+    for (const std::string* l : {&joint.parent, &joint.child})
+      if (!link_index.contains(*l)) throw FileError(file + ": joint '" + joint.name + "' names unknown link '" + *l + "'");
+    int& pj = parent_joint[link_index[joint.child]];
+    if (pj >= 0) throw FileError(file + ": link '" + joint.child + "' is the child of two joints ('" + urdf.joints[static_cast<std::size_t>(pj)].name + "' and '" + joint.name + "')");
+    pj = static_cast<int>(j);
+    if (joint.kind != JointKind::Fixed) movable.push_back(j);
+  }
+  std::vector<std::size_t> roots;
+  for (std::size_t i = 0; i < urdf.links.size(); ++i)
+    if (parent_joint[i] < 0) roots.push_back(i);
+  if (roots.size() != 1)
+    throw FileError(file + ": expected one root link (a link no joint has as child), found " + std::to_string(roots.size()));
+
+  // Joint values.
+  std::vector<double> q(urdf.joints.size(), 0.0);
+  if (!options.joints.empty()) {
+    if (options.joints.size() != movable.size()) {
+      std::string names;
+      for (const std::size_t j : movable) names += (names.empty() ? "" : ", ") + urdf.joints[j].name;
+      throw InvalidArgument("--joints gives " + std::to_string(options.joints.size()) + " values but " + file + " has " +
+                            std::to_string(movable.size()) + " movable joints (" + names + ")");
+    }
+    for (std::size_t m = 0; m < movable.size(); ++m) {
+      const UrdfJoint& joint = urdf.joints[movable[m]];
+      const double v = options.joints[m];
+      if (!std::isfinite(v)) throw InvalidArgument("--joints: value for '" + joint.name + "' is not finite");
+      if (joint.limits && (v < joint.limits->first || v > joint.limits->second))
+        throw InvalidArgument("--joints: " + std::to_string(v) + " for joint '" + joint.name + "' is outside its limits [" +
+                              std::to_string(joint.limits->first) + ", " + std::to_string(joint.limits->second) + "] in " + file);
+      q[movable[m]] = v;
+    }
+  }
+
+  // Forward kinematics, parents before children (repeat until every reachable link is placed).
+  std::vector<std::optional<Affine>> world_from_link(urdf.links.size());
+  world_from_link[roots[0]] = Affine::identity();
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (std::size_t j = 0; j < urdf.joints.size(); ++j) {
+      const UrdfJoint& joint = urdf.joints[j];
+      const std::size_t p = link_index[joint.parent], c = link_index[joint.child];
+      if (!world_from_link[p] || world_from_link[c]) continue;
+      Affine joint_from_child;
+      if (joint.kind == JointKind::Revolute) joint_from_child.linear = axisAngle(joint.axis, q[j]);
+      if (joint.kind == JointKind::Prismatic) joint_from_child.translation = joint.axis * q[j];
+      world_from_link[c] = *world_from_link[p] * joint.parent_from_joint * joint_from_child;
+      progress = true;
+    }
+  }
+  for (std::size_t i = 0; i < urdf.links.size(); ++i)
+    if (!world_from_link[i]) throw FileError(file + ": link '" + urdf.links[i].name + "' is not connected to the root (a joint cycle?)");
+
+  // Objects: one per distinct mesh file; the posed robot's bounds for the spacing.
+  std::vector<SceneObjectEntry> objects;
+  std::map<std::filesystem::path, std::size_t> object_of_file;
+  struct Placed {
+    std::string link;
+    std::size_t object;
+    Affine robot_from_object;
+  };
+  std::vector<Placed> placed;
+  Box robot_bounds;
+  for (std::size_t i = 0; i < urdf.links.size(); ++i) {
+    const UrdfLink& link = urdf.links[i];
+    if (link.mesh_uri.empty()) continue;
+    const std::filesystem::path mesh_path =
+        std::filesystem::weakly_canonical(resolveMesh(link.mesh_uri, options.urdf, link.name));
+    auto [it, inserted] = object_of_file.emplace(mesh_path, objects.size());
+    if (inserted) objects.push_back({link.name, pathRelativeToFolderOf(options.out, mesh_path), {}, {}});
+    Affine scale;
+    scale.linear = glm::dmat3(glm::dvec3(link.mesh_scale.x, 0, 0), glm::dvec3(0, link.mesh_scale.y, 0),
+                              glm::dvec3(0, 0, link.mesh_scale.z));
+    const Affine robot_from_object = *world_from_link[i] * link.link_from_visual * scale;
+    if (robot_from_object.isSingular()) throw FileError(file + ": link '" + link.name + "': singular mesh transform (zero scale?)");
+    placed.push_back({link.name, it->second, robot_from_object});
+    if (!options.spacing) robot_bounds.extend(robot_from_object.apply(loadMesh(mesh_path).bounds()));
+  }
+  if (placed.empty()) throw FileError(file + ": no link has a mesh");
+  const double spacing = options.spacing ? *options.spacing
+                                         : 1.25 * std::max(robot_bounds.extent().x, robot_bounds.extent().y);
+
+  std::vector<SceneInstanceEntry> instances;
+  for (int c = 0; c < options.copies; ++c)
+    for (const Placed& p : placed) {
+      Affine world_from_object = p.robot_from_object;
+      world_from_object.translation.y += spacing * c;
+      instances.push_back({objects[p.object].name, world_from_object, "robot" + std::to_string(c) + "/" + p.link});
+    }
+  writeSceneJson(options.out, objects, instances);
+
+  nlohmann::ordered_json summary;
+  summary["copies"] = options.copies;
+  summary["links"] = placed.size();
+  summary["objects"] = objects.size();
+  summary["instances"] = instances.size();
+  summary["movable_joints"] = movable.size();
+  summary["spacing"] = spacing;
+  summary["out"] = options.out.string();
+  return summary;
+}
+
+}  // namespace duplex::cli
