@@ -10,7 +10,10 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
+#include <string>
+#include <utility>
 
 namespace duplex {
 
@@ -24,6 +27,62 @@ inline detail::Watertight4 testGroup(const WatertightRay& wray, const TriangleVe
   const float* lane[4];
   for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;
   return detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
+}
+
+// The checks of MeshObject::fromParts (see MeshObject.h): what traversal and the leaf tests rely
+// on, so that a tree from a file, however damaged, can only be refused, never crash a query.
+void checkTreeAgainstMesh(const KdTree& tree, const TriangleMesh& mesh) {
+  auto fail = [](const std::string& problem) { throw InvalidArgument("kd-tree does not fit its mesh: " + problem); };
+  const std::size_t n = tree.nodes.size();
+  if (n == 0) fail("no nodes");
+  if (n > KdNode::kMaxIndex) fail("more nodes than a node can address");
+  const Box& b = tree.bounds;
+  for (int k = 0; k < 3; ++k)
+    if (!std::isfinite(b.lo[k]) || !std::isfinite(b.hi[k]) || !(b.lo[k] <= b.hi[k])) fail("bounds not finite");
+  const Box& mb = mesh.bounds();
+  if (!b.contains(mb.lo) || !b.contains(mb.hi)) fail("bounds do not contain the mesh");
+  for (std::size_t i = 0; i < tree.prim_indices.size(); ++i) {
+    const std::uint32_t prim = tree.prim_indices[i];
+    if (prim >= mesh.triangleCount() || !mesh.isValid(prim))
+      fail("prim_indices[" + std::to_string(i) + "] = " + std::to_string(prim) + " is not a valid triangle (" +
+           std::to_string(mesh.triangleCount()) + " triangles)");
+  }
+  // Depth-first layout: walk the nodes in order; an inner node's lower child is the next node, its
+  // upper child must start exactly where the lower subtree ends. `pending` holds the upper children
+  // not reached yet with their depth (inner nodes above them), bounded by the traversal stack.
+  std::vector<std::pair<std::uint32_t, int>> pending;
+  std::uint32_t index = 0;
+  int depth = 0;
+  while (true) {
+    const KdNode& node = tree.nodes[index];
+    auto at = [index] { return "node " + std::to_string(index) + ": "; };  // only built on failure
+    if (!node.isLeaf()) {
+      if (!std::isfinite(node.split())) fail(at() + "split plane not finite");
+      if (depth + 1 >= kKdStackSize) fail(at() + "deeper than the traversal stack (" + std::to_string(kKdStackSize) + ")");
+      const std::uint32_t upper = node.upperChild();
+      if (upper <= index + 1 || upper >= n)
+        fail(at() + "upper child " + std::to_string(upper) + " out of range (" + std::to_string(n) + " nodes)");
+      pending.emplace_back(upper, depth + 1);
+      ++index;
+      ++depth;
+      continue;
+    }
+    const std::uint64_t end = std::uint64_t{node.primOffset()} + node.primCount();
+    if (end > tree.prim_indices.size())
+      fail(at() + "leaf range [" + std::to_string(node.primOffset()) + ", " + std::to_string(end) +
+           ") beyond prim_indices (" + std::to_string(tree.prim_indices.size()) + ")");
+    if (pending.empty()) {
+      if (index + 1 != n) fail("nodes after the end of the tree (" + std::to_string(n - index - 1) + ")");
+      return;
+    }
+    const auto [upper, upper_depth] = pending.back();
+    pending.pop_back();
+    if (upper != index + 1)
+      fail("node " + std::to_string(upper) + " is not where its sibling subtree ends (node " +
+           std::to_string(index + 1) + ")");
+    index = upper;
+    depth = upper_depth;
+  }
 }
 
 }  // namespace
@@ -48,14 +107,33 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
         return clipTriangleToBox(v[0], v[1], v[2], box);
       },
       config);
+  orderTrianglesByLeaves();
+}
+
+MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag)
+    : Object(mesh->name()), mesh_(std::move(mesh)), tree_(std::move(tree)) {
+  orderTrianglesByLeaves();
+}
+
+std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const TriangleMesh> mesh, KdTree tree) {
+  if (!mesh) throw InvalidArgument("MeshObject::fromParts: null mesh");
+  checkTreeAgainstMesh(tree, *mesh);
+  return std::shared_ptr<const MeshObject>(new MeshObject(std::move(mesh), std::move(tree), PartsTag{}));
+}
+
+void MeshObject::orderTrianglesByLeaves() {
+  const TriangleMesh& m = *mesh_;
+  const std::vector<glm::vec3>& positions = m.positions();
   std::vector<std::uint32_t> renumbered(m.triangleCount(), kInvalidId);
-  leaf_refs_.reserve(tree_.prim_indices.size());
+  leaf_refs_.reserve(tree_.prim_indices.size() + 3);
+  prim_ids_.reserve(m.triangleCount());
+  triangles_.reserve(m.triangleCount() + 1);
   for (const std::uint32_t prim : tree_.prim_indices) {
     if (renumbered[prim] == kInvalidId) {
       renumbered[prim] = static_cast<std::uint32_t>(prim_ids_.size());
       prim_ids_.push_back(prim);
-      const auto v = m.vertices(prim);
-      triangles_.push_back({v[0], v[1], v[2]});
+      const TriangleMesh::Triangle& t = m.triangles()[prim];
+      triangles_.push_back({positions[t[0]], positions[t[1]], positions[t[2]]});
     }
     leaf_refs_.push_back(renumbered[prim]);
   }

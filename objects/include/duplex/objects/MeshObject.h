@@ -21,6 +21,15 @@ class MeshObject final : public Object {
   /// Builds the kd-tree over the mesh's valid triangles (object space).
   explicit MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config = {});
 
+  /// From a kd-tree built before (e.g. read from a file by loadMeshObject) over `mesh`'s triangles:
+  /// no build. The tree is checked first, so that no later query can read out of bounds or loop:
+  /// nodes in depth-first layout (each inner node's upper child right after its lower subtree, every
+  /// node reached once), depth within the traversal stack, finite split planes, leaf ranges inside
+  /// prim_indices, every index a valid (non-degenerate) triangle of `mesh`, and finite bounds that
+  /// hold the mesh's bounds. Throws InvalidArgument naming the first violation. Linear time.
+  [[nodiscard]] static std::shared_ptr<const MeshObject> fromParts(std::shared_ptr<const TriangleMesh> mesh,
+                                                                   KdTree tree);
+
   [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
   [[nodiscard]] Box bounds() const override { return mesh_->bounds(); }
   bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
@@ -37,6 +46,11 @@ class MeshObject final : public Object {
   [[nodiscard]] std::size_t accelBytes() const;
 
  private:
+  struct PartsTag {};
+  MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag);
+  /// Fills leaf_refs_, triangles_ and prim_ids_ from tree_ (the leaf-order renumbering below).
+  void orderTrianglesByLeaves();
+
   // Vertices of each triangle by triangle id (36 bytes), so that a leaf reference is a 4-byte
   // index: random rays are bound by memory latency, and copying triangles per reference
   // (40 bytes each, 2-4 references per triangle) made the working set several times larger.
