@@ -16,6 +16,10 @@ KdTreeStats KdTree::stats(float traversal_cost, float intersection_cost) const {
   std::function<void(std::uint32_t, const Box&, std::uint32_t)> walk = [&](std::uint32_t i, const Box& box,
                                                                            std::uint32_t depth) {
     const KdNode& n = nodes[i];
+    if (n.isJump()) {
+      walk(n.jumpTarget(), box, depth);
+      return;
+    }
     const double p = box.area() / root_area;
     s.max_depth = std::max(s.max_depth, depth);
     if (n.isLeaf()) {
@@ -40,21 +44,26 @@ KdTreeStats KdTree::stats(float traversal_cost, float intersection_cost) const {
 }
 
 Box KdTree::nodeBox(std::uint32_t index) const {
-  // Descend from the root; the target lies in the lower subtree iff index < upperChild.
-  Box box = bounds;
-  std::uint32_t i = 0;
-  while (i != index) {
+  if (nodes.empty()) return {};
+  // Depth-first search from the root (jumps make "index < upperChild" unusable as a guide).
+  std::vector<std::pair<std::uint32_t, Box>> stack{{0u, bounds}};
+  while (!stack.empty()) {
+    const auto [i, box] = stack.back();
+    stack.pop_back();
+    if (i == index) return box;
     const KdNode& n = nodes[i];
-    if (n.isLeaf() || index < i) return {};
-    if (index < n.upperChild()) {
-      box.hi[n.axis()] = n.split();
-      i = i + 1;
-    } else {
-      box.lo[n.axis()] = n.split();
-      i = n.upperChild();
+    if (n.isJump()) {
+      stack.emplace_back(n.jumpTarget(), box);
+      continue;
     }
+    if (n.isLeaf()) continue;
+    Box lower = box, upper = box;
+    lower.hi[n.axis()] = n.split();
+    upper.lo[n.axis()] = n.split();
+    stack.emplace_back(n.upperChild(), upper);
+    stack.emplace_back(i + 1, lower);
   }
-  return box;
+  return {};
 }
 
 }  // namespace duplex

@@ -34,11 +34,15 @@ PinholeCamera PinholeCamera::looking_at_box(const Box& b) {
 }
 
 glm::vec3 PinholeCamera::direction(std::uint32_t px, std::uint32_t py, std::uint32_t width, std::uint32_t height) const {
+  return glm::vec3(directionAt(px + 0.5, py + 0.5, width, height));
+}
+
+glm::dvec3 PinholeCamera::directionAt(double x, double y, std::uint32_t width, std::uint32_t height) const {
   const double half_h = std::tan(0.5 * vertical_fov_deg * std::numbers::pi / 180.0);
   const double half_w = half_h * static_cast<double>(width) / static_cast<double>(height);
-  const double sx = (2.0 * (px + 0.5) / width - 1.0) * half_w;
-  const double sy = (1.0 - 2.0 * (py + 0.5) / height) * half_h;
-  return glm::vec3(glm::normalize(forward + sx * right + sy * up));
+  const double sx = (2.0 * x / width - 1.0) * half_w;
+  const double sy = (1.0 - 2.0 * y / height) * half_h;
+  return glm::normalize(forward + sx * right + sy * up);
 }
 
 std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height) {

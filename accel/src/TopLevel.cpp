@@ -1,3 +1,16 @@
+// The top level: a kd-tree over instance world boxes, kept up to date incrementally.
+//
+// Incremental update (commit): an edited instance is routed through the split planes with its old
+// and new world boxes; it leaves the leaves only the old box touches and joins the leaves only the
+// new box touches. A leaf that gains references is re-split by a small SAH build over its own
+// references (clipped to its cell) when it overflows or when it now holds empty space worth cutting
+// off; the resulting subtrees are spliced into the depth-first node array in one pass. The SAH
+// cost of the tree is tracked per edit (exactly recomputed after splices); when it exceeds the cost
+// of the last full build by TopLevelConfig::rebuild_ratio, or the instance count drifted far from
+// that build's, the whole tree is rebuilt. A leaf that grows is moved to the end of the index list
+// (its old range becomes garbage, compacted when garbage outweighs live references), so an edit
+// costs O(leaves touched), independent of the scene size.
+
 #include "duplex/accel/TopLevel.h"
 
 #include "duplex/accel/Error.h"
@@ -6,72 +19,524 @@
 
 #include <glm/matrix.hpp>
 
+#include <algorithm>
+#include <cmath>
+#include <optional>
 #include <string>
+#include <unordered_map>
+#include <utility>
 
 namespace duplex {
 
-void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
-  std::vector<std::shared_ptr<const Object>> owners;
-  std::vector<Instance> items;
-  std::vector<Box> boxes;
-  owners.reserve(instances.size());
-  items.reserve(instances.size());
-  boxes.reserve(instances.size());
-  for (const InstanceDesc& d : instances) {
-    if (!d.object) throw InvalidArgument("instance " + std::to_string(d.id) + ": no object");
-    if (!d.world_from_object.isFinite())
-      throw InvalidArgument("instance " + std::to_string(d.id) + " (object '" + d.object->name() +
-                            "'): transform has NaN or infinite entries");
-    if (d.world_from_object.isSingular())
-      throw InvalidArgument("instance " + std::to_string(d.id) + " (object '" + d.object->name() +
-                            "'): transform is singular");
-    owners.push_back(d.object);
-    // Cofactor matrix det(L) L^-T: maps cross(v1 - v0, v2 - v0) of object space exactly to the
-    // same cross product of the world-space vertices (the inverse transpose alone would lose the
-    // scale and flip the winding of mirrored instances).
-    const glm::dmat3& l = d.world_from_object.linear;
-    const glm::dmat3 normal = glm::determinant(l) * glm::transpose(glm::inverse(l));
-    const bool identity = d.world_from_object.linear == glm::dmat3(1.0) && d.world_from_object.translation == glm::dvec3(0.0);
-    items.push_back({d.object.get(), d.world_from_object.inverse(), glm::mat3(normal), d.id, identity});
-    boxes.push_back(d.world_from_object.apply(d.object->bounds()));
-  }
-  tree_ = buildKdTreeOverBoxes(boxes, config);
-  owners_ = std::move(owners);
-  instances_ = std::move(items);
+namespace {
+
+// What traversal reads for an instance: one record, no pointer chase but the object.
+struct Record {
+  const Object* object = nullptr;
+  Affine object_from_world;
+  glm::mat3 normal_to_world{1.0f};  // cofactor matrix of world_from_object's linear part
+  std::uint32_t id = kInvalidId;
+  std::uint32_t mask = 0;
+  ObjectRole role = ObjectRole::Surface;
+  bool identity = false;  // skip the transform for instances placed as authored
+};
+
+struct Prepared {
+  Record record;
+  std::shared_ptr<const Object> owner;
+  Box box;
+};
+
+std::string describe(const InstanceDesc& d) {
+  std::string s = "instance " + std::to_string(d.id);
+  if (d.object) s += " (object '" + d.object->name() + "')";
+  return s;
 }
 
-Hit TopLevel::intersect(const Ray& ray_ws, QueryContext& ctx) const {
+Prepared prepare(const InstanceDesc& d) {
+  if (!d.object) throw InvalidArgument(describe(d) + ": no object");
+  if (!d.world_from_object.isFinite()) throw InvalidArgument(describe(d) + ": transform has NaN or infinite entries");
+  if (d.world_from_object.isSingular()) throw InvalidArgument(describe(d) + ": transform is singular");
+  if (d.id == kInvalidId) throw InvalidArgument(describe(d) + ": id 0xFFFFFFFF is reserved for misses");
+  Prepared p;
+  // Cofactor matrix det(L) L^-T: maps cross(v1 - v0, v2 - v0) of object space exactly to the
+  // same cross product of the world-space vertices (the inverse transpose alone would lose the
+  // scale and flip the winding of mirrored instances).
+  const glm::dmat3& l = d.world_from_object.linear;
+  const glm::dmat3 normal = glm::determinant(l) * glm::transpose(glm::inverse(l));
+  p.record.object = d.object.get();
+  p.record.object_from_world = d.world_from_object.inverse();
+  p.record.normal_to_world = glm::mat3(normal);
+  p.record.id = d.id;
+  p.record.mask = d.mask;
+  p.record.role = d.object->role();
+  p.record.identity = l == glm::dmat3(1.0) && d.world_from_object.translation == glm::dvec3(0.0);
+  p.owner = d.object;
+  p.box = d.world_from_object.apply(d.object->bounds());
+  return p;
+}
+
+double boxArea(const Box& b) { return static_cast<double>(b.area()); }
+
+// A leaf reached by routing a box, with the cell it covers.
+struct LeafVisit {
+  std::uint32_t node;
+  Box cell;
+  std::uint32_t depth;  // inner nodes above it (jumps do not count: they use no stack)
+  Box root;             // the root bounds the cell was derived from
+};
+
+}  // namespace
+
+struct TopLevel::State {
+  std::vector<Record> records;  // by slot; tree indices are slots
+  std::vector<std::shared_ptr<const Object>> owners;
+  std::vector<Box> boxes;  // world box by slot; empty for a free slot
+  std::vector<std::uint32_t> free_slots;
+  std::unordered_map<std::uint32_t, std::uint32_t> slot_of_id;
+
+  // Edits recorded since the last commit, in call order; nullopt = removal.
+  std::vector<std::pair<std::uint32_t, std::optional<Prepared>>> pending;
+  std::unordered_map<std::uint32_t, std::size_t> pending_index;
+
+  std::size_t garbage = 0;  // dead entries in tree.prim_indices
+  double sah_cost = 0.0;
+  double fresh_cost = 0.0;
+  std::size_t fresh_count = 0;
+  std::uint64_t commits = 0, full_rebuilds = 0, subtree_rebuilds = 0;
+  std::size_t last_edits = 0;
+  bool last_full = false;
+
+  std::vector<LeafVisit> scratch_old, scratch_new;
+
+  // Re-splits grown leaves by local builds; returns whether the tree changed.
+  bool refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves);
+};
+
+namespace {
+
+// Calls f(LeafVisit) for every leaf whose closed cell meets `box` (a superset of the leaves the
+// builder put the box in: touching counts on both sides of a plane).
+template <class F>
+void forEachLeaf(const KdTree& tree, const Box& box, F&& f) {
+  if (tree.nodes.empty()) return;
+  LeafVisit stack[kKdStackSize + 1];
+  int top = 0;
+  stack[top++] = {0, tree.bounds, 0, tree.bounds};
+  while (top > 0) {
+    LeafVisit v = stack[--top];
+    KdNode n = tree.nodes[v.node];
+    while (n.isJump()) {
+      v.node = n.jumpTarget();
+      n = tree.nodes[v.node];
+    }
+    if (n.isLeaf()) {
+      f(v);
+      continue;
+    }
+    const int a = n.axis();
+    const float s = n.split();
+    if (box.hi[a] >= s) {
+      LeafVisit u{n.upperChild(), v.cell, v.depth + 1, v.root};
+      u.cell.lo[a] = s;
+      stack[top++] = u;
+    }
+    if (box.lo[a] <= s) {
+      LeafVisit l{v.node + 1, v.cell, v.depth + 1, v.root};
+      l.cell.hi[a] = s;
+      stack[top++] = l;
+    }
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Edits
+
+void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
+  TopLevelConfig c = config_;
+  c.build = config;
+  // Validate everything before touching the current state.
+  std::vector<Prepared> prepared;
+  prepared.reserve(instances.size());
+  std::unordered_map<std::uint32_t, std::uint32_t> slot_of_id;
+  slot_of_id.reserve(instances.size());
+  for (const InstanceDesc& d : instances) {
+    prepared.push_back(prepare(d));
+    if (!slot_of_id.emplace(d.id, static_cast<std::uint32_t>(prepared.size() - 1)).second)
+      throw InvalidArgument(describe(d) + ": duplicate instance id");
+  }
+  auto state = std::make_shared<State>();
+  state->records.reserve(prepared.size());
+  for (Prepared& p : prepared) {
+    state->records.push_back(p.record);
+    state->owners.push_back(std::move(p.owner));
+    state->boxes.push_back(p.box);
+  }
+  state->slot_of_id = std::move(slot_of_id);
+  if (state_) {
+    state->commits = state_->commits;
+    state->full_rebuilds = state_->full_rebuilds;
+    state->subtree_rebuilds = state_->subtree_rebuilds;
+  }
+  config_ = c;
+  state_ = std::move(state);
+  live_count_ = prepared.size();
+  fullRebuild();
+}
+
+void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances, config_.build); }
+
+void TopLevel::set(const InstanceDesc& instance) {
+  if (!state_) state_ = std::make_shared<State>();
+  Prepared p = prepare(instance);
+  State& s = *state_;
+  const auto it = s.pending_index.find(instance.id);
+  if (it != s.pending_index.end()) {
+    s.pending[it->second].second = std::move(p);
+  } else {
+    s.pending_index.emplace(instance.id, s.pending.size());
+    s.pending.emplace_back(instance.id, std::move(p));
+  }
+}
+
+void TopLevel::remove(std::uint32_t id) {
+  if (!contains(id)) throw InvalidArgument("top level: remove of instance " + std::to_string(id) + ", which is not present");
+  State& s = *state_;
+  const auto it = s.pending_index.find(id);
+  if (it != s.pending_index.end()) {
+    s.pending[it->second].second.reset();
+  } else {
+    s.pending_index.emplace(id, s.pending.size());
+    s.pending.emplace_back(id, std::nullopt);
+  }
+}
+
+bool TopLevel::contains(std::uint32_t id) const {
+  if (!state_) return false;
+  const auto it = state_->pending_index.find(id);
+  if (it != state_->pending_index.end()) return state_->pending[it->second].second.has_value();
+  return state_->slot_of_id.count(id) != 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Commit
+
+void TopLevel::fullRebuild() {
+  State& s = *state_;
+  // Free slots hold empty boxes, which the builder leaves out.
+  KdBuildConfig cfg = config_.build;
+  tree_ = buildKdTreeOverBoxes(s.boxes, cfg);
+  s.garbage = 0;
+  const KdTreeStats st = tree_.stats(cfg.traversal_cost, cfg.intersection_cost);
+  s.sah_cost = st.sah_cost;
+  s.fresh_cost = st.sah_cost;
+  s.fresh_count = live_count_;
+  ++s.full_rebuilds;
+  s.last_full = true;
+}
+
+void TopLevel::rebuild() {
+  if (!state_) return;
+  fullRebuild();
+}
+
+void TopLevel::commit() {
+  if (!state_ || state_->pending.empty()) return;
+  State& s = *state_;
+  auto pending = std::move(s.pending);
+  s.pending.clear();
+  s.pending_index.clear();
+  ++s.commits;
+  s.last_edits = pending.size();
+  s.last_full = false;
+
+  const bool incremental = config_.update == TopLevelUpdate::Incremental && !tree_.empty();
+  const float ci = config_.build.intersection_cost;
+  bool exact_cost_needed = false;
+  std::vector<LeafVisit> grown;  // leaves that gained references
+
+  auto leaf_area_weight = [&](const Box& cell) { return ci * boxArea(cell); };
+  const double root_area_before = std::max(1e-30, boxArea(tree_.bounds));
+
+  auto remove_from = [&](const LeafVisit& v, std::uint32_t slot) {
+    KdNode& n = tree_.nodes[v.node];
+    const std::uint32_t off = n.primOffset(), cnt = n.primCount();
+    std::uint32_t* refs = tree_.prim_indices.data() + off;
+    for (std::uint32_t i = 0; i < cnt; ++i) {
+      if (refs[i] != slot) continue;
+      refs[i] = refs[cnt - 1];
+      n = KdNode::leaf(off, cnt - 1);
+      ++s.garbage;
+      s.sah_cost -= leaf_area_weight(v.cell) / root_area_before;
+      return;
+    }
+    // Not there: the builder placed a box that only touches a plane on one side only.
+  };
+  auto append_to = [&](const LeafVisit& v, std::uint32_t slot) {
+    KdNode& n = tree_.nodes[v.node];
+    const std::uint32_t off = n.primOffset(), cnt = n.primCount();
+    auto& idx = tree_.prim_indices;
+    if (cnt == 0 || off + cnt == idx.size()) {
+      if (cnt == 0) n = KdNode::leaf(static_cast<std::uint32_t>(idx.size()), 0);
+      idx.push_back(slot);
+    } else {
+      // Move the leaf's range to the end; the old range becomes garbage.
+      const std::size_t new_off = idx.size();
+      idx.resize(new_off + cnt + 1);
+      std::copy_n(idx.begin() + off, cnt, idx.begin() + static_cast<std::ptrdiff_t>(new_off));
+      idx.back() = slot;
+      s.garbage += cnt;
+      n = KdNode::leaf(static_cast<std::uint32_t>(new_off), cnt);
+    }
+    n = KdNode::leaf(n.primOffset(), cnt + 1);
+    s.sah_cost += leaf_area_weight(v.cell) / root_area_before;
+    grown.push_back(v);
+  };
+  auto grow_root = [&](const Box& box) {
+    if (box.empty()) return;
+    if (tree_.bounds.lo.x <= box.lo.x && tree_.bounds.lo.y <= box.lo.y && tree_.bounds.lo.z <= box.lo.z &&
+        tree_.bounds.hi.x >= box.hi.x && tree_.bounds.hi.y >= box.hi.y && tree_.bounds.hi.z >= box.hi.z)
+      return;
+    tree_.bounds.extend(box);  // boundary cells grow with it; their areas change, so recompute the cost
+    exact_cost_needed = true;
+  };
+
+  for (auto& [id, edit] : pending) {
+    const auto it = s.slot_of_id.find(id);
+    if (!edit) {
+      if (it == s.slot_of_id.end()) continue;  // added and removed within this batch
+      const std::uint32_t slot = it->second;
+      if (incremental) forEachLeaf(tree_, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
+      s.boxes[slot] = Box();
+      s.records[slot] = Record{};
+      s.owners[slot].reset();
+      s.free_slots.push_back(slot);
+      s.slot_of_id.erase(it);
+      --live_count_;
+      continue;
+    }
+    std::uint32_t slot;
+    Box old_box;
+    if (it != s.slot_of_id.end()) {
+      slot = it->second;
+      old_box = s.boxes[slot];
+    } else {
+      if (!s.free_slots.empty()) {
+        slot = s.free_slots.back();
+        s.free_slots.pop_back();
+      } else {
+        slot = static_cast<std::uint32_t>(s.records.size());
+        s.records.emplace_back();
+        s.owners.emplace_back();
+        s.boxes.emplace_back();
+      }
+      s.slot_of_id.emplace(id, slot);
+      ++live_count_;
+    }
+    s.records[slot] = edit->record;
+    s.owners[slot] = std::move(edit->owner);
+    s.boxes[slot] = edit->box;
+    if (!incremental || old_box == edit->box) continue;
+    // Leave the leaves only the old box touches, join those only the new box touches.
+    s.scratch_old.clear();
+    s.scratch_new.clear();
+    if (!old_box.empty()) forEachLeaf(tree_, old_box, [&](const LeafVisit& v) { s.scratch_old.push_back(v); });
+    grow_root(edit->box);
+    if (!edit->box.empty()) forEachLeaf(tree_, edit->box, [&](const LeafVisit& v) { s.scratch_new.push_back(v); });
+    auto in = [](const std::vector<LeafVisit>& list, std::uint32_t node) {
+      return std::any_of(list.begin(), list.end(), [&](const LeafVisit& v) { return v.node == node; });
+    };
+    for (const LeafVisit& v : s.scratch_old)
+      if (!in(s.scratch_new, v.node)) remove_from(v, slot);
+    for (const LeafVisit& v : s.scratch_new) {
+      if (in(s.scratch_old, v.node)) {
+        // The builder may have left the old box out of a leaf it only touched.
+        const KdNode& n = tree_.nodes[v.node];
+        const std::uint32_t* refs = tree_.prim_indices.data() + n.primOffset();
+        if (std::find(refs, refs + n.primCount(), slot) != refs + n.primCount()) continue;
+      }
+      append_to(v, slot);
+    }
+  }
+
+  if (!incremental) {
+    fullRebuild();
+    return;
+  }
+  // Too few instances to bother, or the count drifted far from the last full build's: rebuild.
+  const double drift = std::abs(static_cast<double>(live_count_) - static_cast<double>(s.fresh_count));
+  if (live_count_ < 16 || drift > 0.25 * static_cast<double>(std::max<std::size_t>(s.fresh_count, 1))) {
+    fullRebuild();
+    return;
+  }
+  if (s.refineLeaves(*this, grown)) exact_cost_needed = true;
+  if (exact_cost_needed) {
+    s.sah_cost = tree_.stats(config_.build.traversal_cost, ci).sah_cost;
+  }
+  if (s.sah_cost > config_.rebuild_ratio * s.fresh_cost) {
+    fullRebuild();
+    return;
+  }
+  if (s.garbage > 1024 && s.garbage > tree_.prim_indices.size() / 2) compact();
+}
+
+bool TopLevel::State::refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves) {
+  KdTree& tree = top.tree_;
+  const TopLevelConfig& config = top.config_;
+  if (grown_leaves.empty()) return false;
+  std::sort(grown_leaves.begin(), grown_leaves.end(),
+            [](const LeafVisit& a, const LeafVisit& b) { return a.node < b.node; });
+  grown_leaves.erase(std::unique(grown_leaves.begin(), grown_leaves.end(),
+                                 [](const LeafVisit& a, const LeafVisit& b) { return a.node == b.node; }),
+                     grown_leaves.end());
+  std::vector<Box> clipped;
+  std::vector<std::uint32_t> slots;
+  bool changed = false;
+  for (LeafVisit& v : grown_leaves) {
+    const KdNode n = tree.nodes[v.node];
+    const std::uint32_t cnt = n.primCount();
+    if (cnt < 2) continue;
+    // A cell on the root's boundary grew with the root since the visit.
+    for (int a = 0; a < 3; ++a) {
+      if (v.cell.lo[a] <= v.root.lo[a]) v.cell.lo[a] = tree.bounds.lo[a];
+      if (v.cell.hi[a] >= v.root.hi[a]) v.cell.hi[a] = tree.bounds.hi[a];
+    }
+    clipped.clear();
+    slots.clear();
+    Box content;
+    for (std::uint32_t i = 0; i < cnt; ++i) {
+      const std::uint32_t slot = tree.prim_indices[n.primOffset() + i];
+      const Box c = intersection(boxes[slot], v.cell);
+      clipped.push_back(c);
+      slots.push_back(slot);
+      content.extend(c);
+    }
+    // Worth a local build: an overflowing leaf, or one whose references cover much less than its
+    // cell (empty space an SAH split would cut off).
+    const bool overflow = cnt > config.leaf_split_size;
+    const bool loose = boxArea(content) < 0.5 * boxArea(v.cell);
+    if (!overflow && !loose) continue;
+    const int depth_left = kKdStackSize - 4 - static_cast<int>(v.depth);
+    if (depth_left < 2) continue;
+    KdBuildConfig cfg = config.build;
+    cfg.parallel_threshold = 0;  // a handful of boxes: task overhead would dominate
+    const int auto_depth = 8 + static_cast<int>(1.3 * std::log2(static_cast<double>(cnt)));
+    cfg.max_depth = std::min(cfg.max_depth > 0 ? cfg.max_depth : auto_depth, depth_left);
+    const KdTree sub = buildKdTreeOverBoxes(clipped, cfg);
+    if (sub.nodes.size() <= 1) continue;
+    // Append the subtree (its child and leaf offsets shifted) and turn the leaf into a jump to it.
+    const std::uint32_t node_base = static_cast<std::uint32_t>(tree.nodes.size());
+    const std::uint32_t prim_base = static_cast<std::uint32_t>(tree.prim_indices.size());
+    for (KdNode m : sub.nodes) {
+      if (m.isLeaf())
+        m = KdNode::leaf(m.primCount() ? m.primOffset() + prim_base : 0, m.primCount());
+      else
+        m.setUpperChild(m.upperChild() + node_base);
+      tree.nodes.push_back(m);
+    }
+    for (const std::uint32_t p : sub.prim_indices) tree.prim_indices.push_back(slots[p]);
+    garbage += cnt;
+    tree.nodes[v.node] = KdNode::jump(node_base);
+    ++subtree_rebuilds;
+    changed = true;
+  }
+  return changed;
+}
+
+void TopLevel::compact() {
+  std::vector<std::uint32_t> indices;
+  indices.reserve(tree_.prim_indices.size() - state_->garbage);
+  for (KdNode& n : tree_.nodes) {
+    if (!n.isLeaf() || n.isJump() || n.primCount() == 0) continue;
+    const std::uint32_t off = static_cast<std::uint32_t>(indices.size());
+    indices.insert(indices.end(), tree_.prim_indices.begin() + n.primOffset(),
+                   tree_.prim_indices.begin() + n.primOffset() + n.primCount());
+    n.setPrimOffset(off);
+  }
+  tree_.prim_indices = std::move(indices);
+  state_->garbage = 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Queries
+
+namespace {
+
+// The world ray in both precisions: float for the top-level traversal, double for the transform
+// into object space.
+struct WorldRay {
+  Ray f;
+  RayD d;
+};
+
+WorldRay fromFloat(const Ray& r) {
+  return {r, RayD{glm::dvec3(r.origin), glm::dvec3(r.dir), static_cast<double>(r.tnear), static_cast<double>(r.tfar)}};
+}
+
+WorldRay fromDouble(const RayD& r) {
+  Ray f;
+  f.origin = glm::vec3(r.origin);
+  f.dir = glm::vec3(r.dir);
+  f.tnear = static_cast<float>(r.tnear);
+  f.tfar = static_cast<float>(r.tfar);
+  return {f, r};
+}
+
+Ray toObject(const Record& rec, const WorldRay& w) {
+  if (rec.identity) return w.f;
+  Ray r;
+  r.origin = glm::vec3(rec.object_from_world.point(w.d.origin));
+  r.dir = glm::vec3(rec.object_from_world.vector(w.d.dir));
+  r.tnear = w.f.tnear;
+  r.tfar = w.f.tfar;
+  return r;
+}
+
+// A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
+// traversal of the same instance for the same ray is wasted work.
+struct Mailbox {
+  std::uint32_t slots[8];
+  int count = 0, next = 0;
+  bool seen(std::uint32_t slot) {
+    for (int m = 0; m < count; ++m)
+      if (slots[m] == slot) return true;
+    slots[next] = slot;
+    next = (next + 1) & 7;
+    if (count < 8) ++count;
+    return false;
+  }
+};
+
+}  // namespace
+
+Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
-  if (!isQueryable(ray_ws)) return Hit{};
+  if (!isQueryable(ray_f) || tree_.empty()) return Hit{};
+  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_f);
+  const Record* records = state_->records.data();
   Hit best;
-  best.t = ray_ws.tfar;
-  const Instance* winner = nullptr;
-  // A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
-  // traversal of the same instance for the same ray is wasted work.
-  std::uint32_t mailbox[8];
-  int mail_count = 0, mail_next = 0;
-  const KdRay kray(ray_ws);
-  float t_best = ray_ws.tfar;
+  best.t = ray_f.tfar;
+  const Record* winner = nullptr;
+  Mailbox mailbox;
+  const KdRay kray(ray_f);
+  float t_best = ray_f.tfar;
   traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
     bool found = false;
     for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t index = tree_.prim_indices[i];
-      bool seen = false;
-      for (int m = 0; m < mail_count; ++m) seen |= mailbox[m] == index;
-      if (seen) continue;
-      mailbox[mail_next] = index;
-      mail_next = (mail_next + 1) & 7;
-      if (mail_count < 8) ++mail_count;
-      const Instance& inst = instances_[index];
+      const std::uint32_t slot = tree_.prim_indices[i];
+      const Record& rec = records[slot];
+      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || mailbox.seen(slot)) continue;
       ++ctx.stats.instance_visits;
-      Ray ray_os = inst.identity ? ray_ws : inst.object_from_world.apply(ray_ws);
+      Ray ray_os = toObject(rec, w);
       ray_os.tfar = t;
       Hit h = best;
       h.t = t;
-      if (inst.object->intersect(ray_os, h, ctx)) {
+      if (rec.object->intersect(ray_os, h, ctx)) {
         best = h;
         t = h.t;
-        winner = &inst;
+        winner = &rec;
         found = true;
       }
     }
@@ -83,21 +548,157 @@ Hit TopLevel::intersect(const Ray& ray_ws, QueryContext& ctx) const {
   return best;
 }
 
-bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx) const {
+Hit TopLevel::intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  return intersectImpl(ray_ws, nullptr, ctx, mask);
+}
+
+Hit TopLevel::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  return intersectImpl(fromDouble(ray_ws).f, &ray_ws, ctx, mask);
+}
+
+bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
-  if (!isQueryable(ray_ws)) return false;
+  if (!isQueryable(ray_ws) || tree_.empty()) return false;
+  const WorldRay w = fromFloat(ray_ws);
+  const Record* records = state_->records.data();
+  Mailbox mailbox;
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
   return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
     for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const Instance& inst = instances_[tree_.prim_indices[i]];
-      if (!inst.object->blocks()) continue;
+      const std::uint32_t slot = tree_.prim_indices[i];
+      const Record& rec = records[slot];
+      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || mailbox.seen(slot)) continue;
       ++ctx.stats.instance_visits;
-      const Ray ray_os = inst.identity ? ray_ws : inst.object_from_world.apply(ray_ws);
-      if (inst.object->occluded(ray_os, ctx)) return true;
+      if (rec.object->occluded(toObject(rec, w), ctx)) return true;
     }
     return false;
   });
+}
+
+void TopLevel::intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask) const {
+  intersectAllImpl(ray_ws, nullptr, hits, ctx, mask);
+}
+
+void TopLevel::intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask) const {
+  intersectAllImpl(fromDouble(ray_ws).f, &ray_ws, hits, ctx, mask);
+}
+
+void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
+                                std::uint32_t mask) const {
+  ++ctx.stats.rays;
+  hits.clear();
+  if (!isQueryable(ray_ws) || tree_.empty()) return;
+  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
+  const Record* records = state_->records.data();
+  std::vector<std::uint32_t> visited;  // every instance once, however many leaves hold it
+  const KdRay kray(ray_ws);
+  float t_best = ray_ws.tfar;  // never lowered: all leaves along the ray
+  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
+    for (std::uint32_t i = begin; i < begin + count; ++i) {
+      const std::uint32_t slot = tree_.prim_indices[i];
+      const Record& rec = records[slot];
+      if ((rec.mask & mask) == 0 || std::find(visited.begin(), visited.end(), slot) != visited.end()) continue;
+      visited.push_back(slot);
+      ++ctx.stats.instance_visits;
+      const std::size_t first = hits.size();
+      rec.object->intersectAll(toObject(rec, w), hits, ctx);
+      for (std::size_t k = first; k < hits.size(); ++k) {
+        hits[k].instance_id = rec.id;
+        if (!rec.identity) hits[k].ng = rec.normal_to_world * hits[k].ng;
+      }
+    }
+    return false;
+  });
+  std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
+    if (a.t != b.t) return a.t < b.t;
+    if (a.instance_id != b.instance_id) return a.instance_id < b.instance_id;
+    return a.prim_id < b.prim_id;
+  });
+}
+
+std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {
+  std::vector<std::uint32_t> out;
+  if (tree_.empty()) return out;
+  // A box is outside when its corner furthest along a plane's normal is still outside it.
+  auto outside = [&](const Box& b) {
+    for (const glm::dvec4& p : planes) {
+      const glm::dvec3 corner(p.x >= 0 ? b.lo.x : b.hi.x, p.y >= 0 ? b.lo.y : b.hi.y, p.z >= 0 ? b.lo.z : b.hi.z);
+      if (p.x * corner.x + p.y * corner.y + p.z * corner.z > p.w) return true;
+    }
+    return false;
+  };
+  std::vector<std::uint32_t> slots;
+  std::vector<std::pair<std::uint32_t, Box>> stack{{0u, tree_.bounds}};
+  while (!stack.empty()) {
+    const auto [i, cell] = stack.back();
+    stack.pop_back();
+    if (outside(cell)) continue;
+    const KdNode& n = tree_.nodes[i];
+    if (n.isJump()) {
+      stack.emplace_back(n.jumpTarget(), cell);
+      continue;
+    }
+    if (n.isLeaf()) {
+      for (std::uint32_t k = 0; k < n.primCount(); ++k) slots.push_back(tree_.prim_indices[n.primOffset() + k]);
+      continue;
+    }
+    Box lower = cell, upper = cell;
+    lower.hi[n.axis()] = n.split();
+    upper.lo[n.axis()] = n.split();
+    stack.emplace_back(n.upperChild(), upper);
+    stack.emplace_back(i + 1, lower);
+  }
+  std::sort(slots.begin(), slots.end());
+  slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
+  for (const std::uint32_t slot : slots) {
+    const Record& rec = state_->records[slot];
+    if ((rec.mask & mask) != 0 && !outside(state_->boxes[slot])) out.push_back(rec.id);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+const Affine& TopLevel::objectFromWorld(std::uint32_t id) const {
+  if (state_) {
+    const auto it = state_->slot_of_id.find(id);
+    if (it != state_->slot_of_id.end()) return state_->records[it->second].object_from_world;
+  }
+  throw InvalidArgument("top level: unknown instance " + std::to_string(id));
+}
+
+Box TopLevel::instanceBounds(std::uint32_t id) const {
+  if (state_) {
+    const auto it = state_->slot_of_id.find(id);
+    if (it != state_->slot_of_id.end()) return state_->boxes[it->second];
+  }
+  throw InvalidArgument("top level: unknown instance " + std::to_string(id));
+}
+
+std::uint32_t TopLevel::idAt(std::uint32_t slot) const {
+  if (!state_ || slot >= state_->records.size()) return kInvalidId;
+  return state_->records[slot].id;
+}
+
+TopLevelStats TopLevel::stats() const {
+  TopLevelStats st;
+  st.instances = live_count_;
+  st.tree = tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
+  if (state_) {
+    st.sah_cost = state_->sah_cost;
+    st.fresh_sah_cost = state_->fresh_cost;
+    st.commits = state_->commits;
+    st.full_rebuilds = state_->full_rebuilds;
+    st.subtree_rebuilds = state_->subtree_rebuilds;
+    st.last_commit_edits = state_->last_edits;
+    st.last_commit_full_rebuild = state_->last_full;
+  }
+  return st;
+}
+
+std::size_t TopLevel::bytesPerInstance() {
+  // Record, owner pointer, world box, and the id map's node (key, value, next pointer, hash).
+  return sizeof(Record) + sizeof(std::shared_ptr<const Object>) + sizeof(Box) + 4 * sizeof(void*);
 }
 
 }  // namespace duplex

@@ -223,6 +223,38 @@ bool MeshObject::occluded(const Ray& ray_os) const {
   });
 }
 
+void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
+  if (!isQueryable(ray_os)) return;
+  const KdRay kray(ray_os);
+  const WatertightRay wray(ray_os);
+  float t_best = ray_os.tfar;  // never lowered: every leaf along the ray is visited
+  const std::size_t first = hits.size();
+  dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
+    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      for (std::uint32_t i = begin; i < begin + count; ++i) {
+        const std::uint32_t ref = leaf_refs_[i];
+        const TriangleVertices& tri = triangles_[ref];
+        float t, u, v;
+        if (!intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) continue;
+        Hit h;
+        h.t = t;
+        h.u = u;
+        h.v = v;
+        h.prim_id = prim_ids_[ref];
+        h.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+        hits.push_back(h);
+      }
+      return false;
+    });
+  });
+  // A triangle referenced by several leaves the ray crosses is reported once.
+  std::sort(hits.begin() + static_cast<std::ptrdiff_t>(first), hits.end(),
+            [](const Hit& a, const Hit& b) { return a.prim_id < b.prim_id; });
+  hits.erase(std::unique(hits.begin() + static_cast<std::ptrdiff_t>(first), hits.end(),
+                         [](const Hit& a, const Hit& b) { return a.prim_id == b.prim_id; }),
+             hits.end());
+}
+
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit, QueryContext&) const { return intersect(ray_os, hit); }
 bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occluded(ray_os); }
 

@@ -10,15 +10,24 @@ namespace duplex {
 /// Inner node: split plane position (float, in the tree's space) on one axis; its lower child is
 /// the next node in the array (depth-first layout), its upper child is at `upperChild()`.
 /// Leaf: a range [primOffset(), primOffset() + primCount()) of the tree's primitive index list.
+/// Jump (only in incrementally updated trees, never from the builder): a leaf-tagged node with all
+/// bits set in the count field, standing for the subtree rooted at jumpTarget(). It lets an update
+/// replace a leaf by a subtree appended at the end of the array without moving any other node.
 class KdNode {
  public:
   static constexpr std::uint32_t kLeafTag = 3;
-  static constexpr std::uint32_t kMaxIndex = (1u << 30) - 1;
+  static constexpr std::uint32_t kMaxIndex = (1u << 30) - 2;  // all ones marks a jump
 
   static KdNode inner(int axis, float split, std::uint32_t upper_child) {
     KdNode n;
     n.payload_ = std::bit_cast<std::uint32_t>(split);
     n.bits_ = (upper_child << 2) | static_cast<std::uint32_t>(axis);
+    return n;
+  }
+  static KdNode jump(std::uint32_t target) {
+    KdNode n;
+    n.payload_ = target;
+    n.bits_ = 0xFFFFFFFFu;
     return n;
   }
   static KdNode leaf(std::uint32_t prim_offset, std::uint32_t prim_count) {
@@ -28,7 +37,11 @@ class KdNode {
     return n;
   }
 
+  /// True for leaves and jumps (test isJump() in a leaf's branch, where it costs nothing on trees
+  /// without jumps).
   [[nodiscard]] bool isLeaf() const { return (bits_ & 3u) == kLeafTag; }
+  [[nodiscard]] bool isJump() const { return bits_ == 0xFFFFFFFFu; }
+  [[nodiscard]] std::uint32_t jumpTarget() const { return payload_; }
   [[nodiscard]] int axis() const { return static_cast<int>(bits_ & 3u); }
   [[nodiscard]] float split() const { return std::bit_cast<float>(payload_); }
   [[nodiscard]] std::uint32_t upperChild() const { return bits_ >> 2; }

@@ -130,6 +130,10 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       continue;
     }
 
+    if (node.isJump()) {  // incrementally updated trees only: same cell, same interval
+      index = node.jumpTarget();
+      continue;
+    }
     if (node.primCount() != 0 && leaf(node.primOffset(), node.primCount(), t_best)) {
       found = true;
       if constexpr (AnyHit) return true;

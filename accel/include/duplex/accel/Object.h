@@ -10,13 +10,28 @@
 #include "duplex/accel/Ray.h"
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace duplex {
 
-/// An immutable, shareable object (a mesh, later a volume or a sensor). Any number of instances
-/// refer to one Object and share its bottom-level structure. All methods are const and thread-safe.
+/// What an object does to a ray that meets it. Stored in the object (not a virtual call), so the
+/// top level can filter instances before it pays for a bottom-level query.
+enum class ObjectRole : std::uint8_t {
+  /// Blocks rays: closest-hit and any-hit queries stop at it (meshes, level-set volumes).
+  Surface,
+  /// Attenuates rays without a hard hit: answered through transmittance() (fog volumes).
+  Medium,
+  /// Never blocks or changes a ray; records the rays that cross it (light sensors). Closest-hit
+  /// and any-hit queries ignore it; intersectAll() reports its crossings.
+  Sensor,
+};
+
+/// An immutable, shareable object (a mesh, a volume, a sensor). Any number of instances refer to
+/// one Object and share its bottom-level structure. All methods are const and thread-safe; per-query
+/// mutable state (caches, accessors, counters) lives in the QueryContext, one per thread.
 class Object {
  public:
   virtual ~Object() = default;
@@ -25,26 +40,38 @@ class Object {
   [[nodiscard]] virtual std::string_view typeName() const = 0;
   /// The user-visible name (the scene file's object name, or the file name).
   [[nodiscard]] const std::string& name() const { return name_; }
+  [[nodiscard]] ObjectRole role() const { return role_; }
+  /// Whether a hit on this object stops a ray (role() == Surface).
+  [[nodiscard]] bool blocks() const { return role_ == ObjectRole::Surface; }
   /// Bounds in object space. Empty for an object that cannot be hit.
   [[nodiscard]] virtual Box bounds() const = 0;
-  /// Whether a hit on this object stops a ray (meshes: yes; sensors: no).
-  [[nodiscard]] virtual bool blocks() const { return true; }
 
   /// Closest hit of `ray_os` (object space, direction not normalised) with t in
   /// [ray_os.tnear, hit.t]. On a closer hit, overwrites hit.t, u, v, prim_id and hit.ng (object
   /// space geometric normal) and returns true; otherwise leaves `hit` alone and returns false.
+  /// Objects that do not block (role() != Surface) are never asked.
   virtual bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const = 0;
   /// Whether anything blocks `ray_os` within [tnear, tfar] (object space).
   [[nodiscard]] virtual bool occluded(const Ray& ray_os, QueryContext& ctx) const = 0;
+  /// Appends every hit (every primitive crossing, each once) of `ray_os` with t in [tnear, tfar]
+  /// to `hits`, in no particular order, with t, u, v, prim_id and ng filled as intersect() does.
+  /// For picking through layers and, for sensors, the crossings a ray deposits energy in.
+  virtual void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const = 0;
+  /// Fraction of light that passes along [tnear, tfar] of `ray_os`, in [0, 1]. Surfaces: 0 when
+  /// occluded, else 1; media override it.
+  [[nodiscard]] virtual float transmittance(const Ray& ray_os, QueryContext& ctx) const {
+    return role_ == ObjectRole::Surface && occluded(ray_os, ctx) ? 0.0f : 1.0f;
+  }
 
   /// Bytes held by the object's geometry and acceleration structure.
   [[nodiscard]] virtual std::size_t memoryBytes() const = 0;
 
  protected:
-  explicit Object(std::string name) : name_(std::move(name)) {}
+  explicit Object(std::string name, ObjectRole role = ObjectRole::Surface) : name_(std::move(name)), role_(role) {}
 
  private:
   std::string name_;
+  ObjectRole role_;
 };
 
 }  // namespace duplex

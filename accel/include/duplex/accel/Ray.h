@@ -25,6 +25,16 @@ struct Ray {
 };
 static_assert(sizeof(Ray) == 32, "Ray must match the 32-byte ray-file record");
 
+/// A world-space ray in double precision, for queries far from the origin (picking): the top level
+/// converts it to object space in double, so a hit's accuracy depends on the object's size, not on
+/// its distance from the origin.
+struct RayD {
+  glm::dvec3 origin{0.0};
+  glm::dvec3 dir{0.0, 0.0, 1.0};
+  double tnear = 0.0;
+  double tfar = std::numeric_limits<double>::infinity();
+};
+
 /// A ray that queries can answer: finite origin and direction, non-zero direction, tnear not NaN
 /// and tnear <= tfar (tfar may be +inf). Queries report a miss for anything else.
 [[nodiscard]] inline bool isQueryable(const Ray& r) {

@@ -27,6 +27,10 @@ struct PinholeCamera {
   /// at the top left, square pixels.
   [[nodiscard]] glm::vec3 direction(std::uint32_t px, std::uint32_t py, std::uint32_t width,
                                     std::uint32_t height) const;
+  /// Unit direction (double) through continuous image coordinates (x, y): (0, 0) is the top-left
+  /// corner of the image, (width, height) the bottom-right; pixel (i, j) has its centre at
+  /// (i + 0.5, j + 0.5). For picking and rectangle selection.
+  [[nodiscard]] glm::dvec3 directionAt(double x, double y, std::uint32_t width, std::uint32_t height) const;
 };
 
 /// width * height primary rays, row-major from the top-left pixel; unit directions, t in [0, inf).

@@ -1,7 +1,13 @@
 #pragma once
 /// \file TopLevel.h
-/// The top level of the two-level structure: a kd-tree over the world boxes of object instances,
-/// built with the same builder and traversed with the same code as the bottom level.
+/// The top level of the two-level structure: a kd-tree (BSP) over the world boxes of object
+/// instances, built with the same builder and traversed with the same code as the bottom level,
+/// and updated incrementally when instances move, appear or disappear.
+///
+/// Lifecycle (after Embree's edit -> commit -> trace): set() / remove() record edits; commit()
+/// applies them to the tree; queries see the state of the last commit. Queries are const and may
+/// run from any number of threads at once, each with its own QueryContext, but not while
+/// set() / remove() / commit() / build() run (the caller serialises them; SceneTracer does).
 
 #include "duplex/accel/Affine.h"
 #include "duplex/accel/Hit.h"
@@ -24,40 +30,121 @@ namespace duplex {
 struct InstanceDesc {
   std::shared_ptr<const Object> object;
   Affine world_from_object;
-  std::uint32_t id = 0;  ///< reported in Hit::instance_id
+  std::uint32_t id = 0;           ///< the caller's id, reported in Hit::instance_id; unique
+  std::uint32_t mask = 0xFFFFFFFFu;  ///< user bits; a query sees the instance when (mask & query mask) != 0
 };
 
-/// Immutable after build(); queries are thread-safe with one QueryContext per thread.
+/// How commit() brings the tree up to date.
+enum class TopLevelUpdate : std::uint8_t {
+  /// Re-insert only the edited instances into the leaves their old and new boxes touch; rebuild a
+  /// subtree when its leaves overflow, and the whole tree when its SAH cost drifts above the cost
+  /// of a fresh build by more than TopLevelConfig::rebuild_ratio.
+  Incremental,
+  /// Rebuild the whole tree on every commit that changed something (the paper's method; the
+  /// baseline of the update benchmark).
+  FullRebuild,
+};
+
+struct TopLevelConfig {
+  KdBuildConfig build;  ///< for full and subtree builds
+  TopLevelUpdate update = TopLevelUpdate::Incremental;
+  /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
+  /// scaled to the current instance count).
+  double rebuild_ratio = 1.1;
+  /// A leaf that grows past this many references is rebuilt as a subtree.
+  std::uint32_t leaf_split_size = 8;
+};
+
+/// Figures of the current tree and of the last commit (for tests and the benchmark).
+struct TopLevelStats {
+  std::size_t instances = 0;
+  KdTreeStats tree;
+  double sah_cost = 0.0;            ///< current
+  double fresh_sah_cost = 0.0;      ///< the estimate of a fresh build's cost it is compared with
+  std::uint64_t commits = 0;
+  std::uint64_t full_rebuilds = 0;
+  std::uint64_t subtree_rebuilds = 0;
+  std::size_t last_commit_edits = 0;   ///< instances set or removed by the last commit
+  bool last_commit_full_rebuild = false;
+};
+
 class TopLevel {
  public:
-  /// Builds over `instances`; throws InvalidArgument for a null object or a non-finite or
-  /// singular transform (naming the instance id).
-  void build(std::span<const InstanceDesc> instances, const KdBuildConfig& config = {});
+  TopLevel() = default;
+  explicit TopLevel(const TopLevelConfig& config) : config_(config) {}
 
-  /// Closest hit of a world-space ray; t is in units of the world ray's direction, hit.ng is
-  /// cross(v1 - v0, v2 - v0) of the world-space triangle (unnormalised), hit.instance_id the
-  /// instance's id. Returns a
-  /// miss (hit.valid() false) when nothing is hit.
-  [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx) const;
-  /// Whether any blocking object is hit within [tnear, tfar] of the world-space ray.
-  [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx) const;
+  [[nodiscard]] const TopLevelConfig& config() const { return config_; }
+  void setConfig(const TopLevelConfig& config) { config_ = config; }
 
-  [[nodiscard]] const KdTree& tree() const { return tree_; }
-  /// World-space bounds of everything.
+  /// Replaces everything by `instances` and builds a fresh tree. Throws InvalidArgument for a null
+  /// object, a duplicate id, or a non-finite or singular transform (naming the instance id and its
+  /// object); the top level is then unchanged.
+  void build(std::span<const InstanceDesc> instances);
+  /// Same with `config` as the build configuration (kept for later commits).
+  void build(std::span<const InstanceDesc> instances, const KdBuildConfig& config);
+
+  /// Records an insertion (new id) or a change (known id: transform, object or mask). Validated
+  /// at once: throws InvalidArgument as build() does, and nothing is recorded.
+  void set(const InstanceDesc& instance);
+  /// Records the removal of `id`; throws InvalidArgument for an id that is not present (after the
+  /// edits recorded so far).
+  void remove(std::uint32_t id);
+  /// Whether `id` is present (after the edits recorded so far).
+  [[nodiscard]] bool contains(std::uint32_t id) const;
+  /// Applies the recorded edits. Cheap when nothing was recorded.
+  void commit();
+  /// Rebuilds the whole tree over the committed instances now (pending edits stay pending).
+  void rebuild();
+
+  /// Closest blocking hit of a world-space ray among instances whose mask meets `mask`; t in units
+  /// of the world ray's direction (comparable across instances), hit.ng the world-space geometric
+  /// normal cross(v1 - v0, v2 - v0) (unnormalised, winding kept under mirroring),
+  /// hit.instance_id the instance's id. A miss has hit.valid() false.
+  [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// The same for a double-precision world ray: the transform into object space is done in double
+  /// from the double origin and direction (picking far from the origin).
+  [[nodiscard]] Hit intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Whether any blocking instance whose mask meets `mask` is hit within [tnear, tfar].
+  [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Every hit within [tnear, tfar] of instances whose mask meets `mask`, of any role (sensor
+  /// crossings included), sorted by t (ties by instance id, then primitive id); world-space t and ng.
+  void intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,
+                    std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// The same for a double-precision world ray (object-space rays computed in double).
+  void intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Ids of the instances whose world box meets the convex region {x : dot(n_i, x) <= d_i for all
+  /// planes}, planes given as (n.x, n.y, n.z, d) in world space, mask-filtered; sorted by id. The
+  /// test is conservative per box (a box is reported unless one plane has it fully outside), which
+  /// is exact for frustum picking of boxes up to the corner cases of the separating-axis test.
+  [[nodiscard]] std::vector<std::uint32_t> instancesInRegion(std::span<const glm::dvec4> planes,
+                                                             std::uint32_t mask = 0xFFFFFFFFu) const;
+
+  /// object_from_world of instance `id` (last commit), double precision. Throws for an unknown id.
+  [[nodiscard]] const Affine& objectFromWorld(std::uint32_t id) const;
+  /// World box of instance `id` as the tree holds it (last commit). Throws for an unknown id.
+  [[nodiscard]] Box instanceBounds(std::uint32_t id) const;
+  /// The id of the instance that tree().prim_indices entry `slot` refers to (for tests and tools);
+  /// kInvalidId for a free slot.
+  [[nodiscard]] std::uint32_t idAt(std::uint32_t slot) const;
+  /// World-space bounds of everything (last commit).
   [[nodiscard]] Box bounds() const { return tree_.bounds; }
-  [[nodiscard]] std::size_t size() const { return instances_.size(); }
+  [[nodiscard]] std::size_t size() const { return live_count_; }
+  [[nodiscard]] const KdTree& tree() const { return tree_; }
+  [[nodiscard]] TopLevelStats stats() const;
+  /// Bytes the top level holds per instance, excluding tree references (instance record and id map).
+  [[nodiscard]] static std::size_t bytesPerInstance();
 
  private:
-  struct Instance {
-    const Object* object;
-    Affine object_from_world;
-    glm::mat3 normal_to_world;  // cofactor matrix of the world_from_object linear part
-    std::uint32_t id;
-    bool identity;  // skip the transform for instances placed as authored
-  };
-  std::vector<std::shared_ptr<const Object>> owners_;
-  std::vector<Instance> instances_;
+  struct State;  // instance records, id map, pending edits, leaf bookkeeping (TopLevel.cpp)
+  void fullRebuild();
+  void compact();
+  Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
+  void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
+                        std::uint32_t mask) const;
+  TopLevelConfig config_;
   KdTree tree_;
+  std::size_t live_count_ = 0;
+  std::shared_ptr<State> state_;
 };
 
 }  // namespace duplex

@@ -34,6 +34,7 @@ class MeshObject final : public Object {
   [[nodiscard]] Box bounds() const override { return mesh_->bounds(); }
   bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
   [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
+  void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
 
   /// The same queries without the virtual call and context (for benchmarks and the bottom level).

@@ -1,0 +1,97 @@
+#pragma once
+/// \file SceneTracer.h
+/// Ray queries against a SceneGraph. The tracer observes the graph: each commit updates its top
+/// level incrementally (only the instances the ChangeSet names), bottom-level structures are shared
+/// per object. Hits come back in world space with the instance's node id and path.
+///
+/// Threading: queries (const) may run concurrently from any number of threads; a commit of the
+/// graph waits until running queries finish and blocks new ones while it updates the top level
+/// (a reader-writer lock), so a query sees either the scene before or after a commit, never a mix.
+/// Edits that are not committed yet are invisible to queries.
+
+#include "duplex/accel/Hit.h"
+#include "duplex/accel/QueryContext.h"
+#include "duplex/accel/Ray.h"
+#include "duplex/accel/RayGenerator.h"
+#include "duplex/accel/TopLevel.h"
+#include "duplex/scenegraph/SceneGraph.h"
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+namespace duplex {
+
+/// A full hit, computed once for the winner (two-phase hits).
+struct SceneHit {
+  Hit hit;                    ///< t (units of the world ray's direction), u, v, prim_id, instance_id = node id, world ng
+  NodeId instance = kInvalidNode;
+  glm::dvec3 position_ws{0.0};  ///< recomputed in double from the object-space hit
+  glm::dvec3 normal_ws{0.0};    ///< unit geometric normal, world space
+  std::vector<NodeId> path;     ///< node ids from below the root down to the instance
+
+  [[nodiscard]] bool valid() const { return hit.valid(); }
+};
+
+enum class PickMode : std::uint8_t {
+  Nearest,      ///< the closest hit
+  AllSorted,    ///< every hit along the ray, sorted by t
+  PerInstance,  ///< the closest hit of each instance, sorted by t
+};
+
+class SceneTracer {
+ public:
+  /// Subscribes to `graph` (which must outlive the tracer) and builds the top level over its
+  /// visible instances as of its last commit.
+  explicit SceneTracer(SceneGraph& graph, const TopLevelConfig& config = {});
+  ~SceneTracer();
+  SceneTracer(const SceneTracer&) = delete;
+  SceneTracer& operator=(const SceneTracer&) = delete;
+
+  /// Closest blocking hit (preliminary: world t, u, v, prim_id, instance_id = node id, world ng).
+  [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Every hit along the ray within [tnear, tfar], sorted by t (sensors included when the mask selects them).
+  [[nodiscard]] std::vector<Hit> intersectAll(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Closest hit with position, normal and path; the ray is transformed in double. Reads node paths
+  /// from the graph: do not call while the graph is being edited (same for pick()).
+  [[nodiscard]] SceneHit intersectDetailed(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+
+  /// Batch versions, in parallel over the rays with TBB (one QueryContext per task). `hits` /
+  /// `occluded` must have the size of `rays`.
+  void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu) const;
+  void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu) const;
+
+  /// Picking through pixel (px, py) (continuous pixel coordinates, (0, 0) the top-left corner,
+  /// (w, h) the bottom-right) of a width x height image seen by `camera`.
+  [[nodiscard]] std::vector<SceneHit> pick(const PinholeCamera& camera, double px, double py, std::uint32_t width,
+                                           std::uint32_t height, PickMode mode = PickMode::Nearest,
+                                           std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Rectangle selection: every visible instance whose world box meets the frustum through the pixel
+  /// rectangle [x0, x1] x [y0, y1] (continuous pixel coordinates), sorted by node id.
+  [[nodiscard]] std::vector<NodeId> selectRectangle(const PinholeCamera& camera, double x0, double y0, double x1,
+                                                    double y1, std::uint32_t width, std::uint32_t height,
+                                                    std::uint32_t mask = 0xFFFFFFFFu) const;
+
+  /// World bounds of the top level (last commit): contains every visible instance; may be larger
+  /// than tight after instances moved inwards or disappeared, until the next full rebuild.
+  [[nodiscard]] Box bounds() const;
+  [[nodiscard]] TopLevelStats stats() const;
+  /// Milliseconds the last commit spent in the tracer (top-level update).
+  [[nodiscard]] double lastUpdateMs() const;
+  /// Forces a full top-level rebuild now (benchmark baseline).
+  void rebuild();
+  [[nodiscard]] const SceneGraph& graph() const { return graph_; }
+  /// The top level itself, for tools and tests (no locking: do not use while the graph commits).
+  [[nodiscard]] const TopLevel& topLevel() const;
+
+ private:
+  struct Impl;
+  SceneGraph& graph_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace duplex

@@ -1,0 +1,240 @@
+#include "duplex/scenegraph/SceneTracer.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/accel/Log.h"
+
+#include <glm/geometric.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <mutex>
+#include <shared_mutex>
+#include <string>
+
+namespace duplex {
+
+struct SceneTracer::Impl {
+  TopLevel top;
+  mutable std::shared_mutex mutex;  // queries share it; the commit observer takes it alone
+  SceneGraph::ObserverId observer = 0;
+  double last_update_ms = 0.0;
+
+  explicit Impl(const TopLevelConfig& config) : top(config) {}
+};
+
+namespace {
+
+InstanceDesc describeInstance(const SceneGraph& graph, NodeId id) {
+  const NodeInfo info = graph.node(id);
+  return {graph.library().get(info.object), graph.worldTransform(id), id, info.mask};
+}
+
+// Batches are split into chunks of this many rays: one QueryContext per chunk.
+constexpr std::size_t kBatchGrain = 256;
+
+}  // namespace
+
+SceneTracer::SceneTracer(SceneGraph& graph, const TopLevelConfig& config)
+    : graph_(graph), impl_(std::make_unique<Impl>(config)) {
+  std::vector<InstanceDesc> instances;
+  for (const NodeId id : graph.visibleInstances()) instances.push_back(describeInstance(graph, id));
+  impl_->top.build(instances);
+  Impl* impl = impl_.get();
+  SceneGraph* g = &graph_;
+  impl_->observer = graph_.subscribe([impl, g](const ChangeSet& changes) {
+    const auto start = std::chrono::steady_clock::now();
+    std::unique_lock lock(impl->mutex);
+    std::string failures;
+    // Disappeared first, so that nothing is both removed and set.
+    for (const NodeId id : changes.disappeared) impl->top.remove(id);
+    auto set = [&](NodeId id) {
+      try {
+        impl->top.set(describeInstance(*g, id));
+      } catch (const Error& e) {
+        // A world transform can turn non-finite or singular as a product of valid local ones.
+        failures += std::string(failures.empty() ? "" : "; ") + g->path(id) + ": " + e.what();
+        if (impl->top.contains(id)) impl->top.remove(id);
+      }
+    };
+    for (const NodeId id : changes.appeared) set(id);
+    // moved, object_changed and mask_changed may share ids: set each once.
+    std::vector<NodeId> changed;
+    changed.reserve(changes.moved.size() + changes.object_changed.size() + changes.mask_changed.size());
+    changed.insert(changed.end(), changes.moved.begin(), changes.moved.end());
+    changed.insert(changed.end(), changes.object_changed.begin(), changes.object_changed.end());
+    changed.insert(changed.end(), changes.mask_changed.begin(), changes.mask_changed.end());
+    if (!changes.object_changed.empty() || !changes.mask_changed.empty()) {
+      std::sort(changed.begin(), changed.end());
+      changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+    }
+    for (const NodeId id : changed) set(id);
+    impl->top.commit();
+    impl->last_update_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (!failures.empty())
+      throw InvalidArgument("scene tracer: instances left out of the top level: " + failures);
+  });
+}
+
+SceneTracer::~SceneTracer() { graph_.unsubscribe(impl_->observer); }
+
+Hit SceneTracer::intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  return impl_->top.intersect(ray_ws, ctx, mask);
+}
+
+bool SceneTracer::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  return impl_->top.occluded(ray_ws, ctx, mask);
+}
+
+std::vector<Hit> SceneTracer::intersectAll(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  std::vector<Hit> hits;
+  impl_->top.intersectAll(ray_ws, hits, ctx, mask);
+  return hits;
+}
+
+namespace {
+
+// Position recomputed in double from the object-space hit: the object-space ray is formed in
+// double, the point found on it, and mapped back with world_from_object.
+SceneHit detail(const SceneGraph& graph, const TopLevel& top, const RayD& ray_ws, const Hit& hit) {
+  SceneHit out;
+  out.hit = hit;
+  if (!hit.valid()) return out;
+  out.instance = hit.instance_id;
+  const Affine& object_from_world = top.objectFromWorld(hit.instance_id);
+  const glm::dvec3 o_os = object_from_world.point(ray_ws.origin);
+  const glm::dvec3 d_os = object_from_world.vector(ray_ws.dir);
+  const glm::dvec3 p_os = o_os + static_cast<double>(hit.t) * d_os;
+  out.position_ws = graph.worldTransform(hit.instance_id).point(p_os);
+  const glm::dvec3 n(hit.ng);
+  const double len = glm::length(n);
+  out.normal_ws = len > 0.0 ? n / len : n;
+  out.path = graph.pathIds(hit.instance_id);
+  return out;
+}
+
+}  // namespace
+
+SceneHit SceneTracer::intersectDetailed(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  return detail(graph_, impl_->top, ray_ws, impl_->top.intersect(ray_ws, ctx, mask));
+}
+
+void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask) const {
+  if (hits.size() != rays.size())
+    throw InvalidArgument("SceneTracer::intersect: " + std::to_string(rays.size()) + " rays but room for " +
+                          std::to_string(hits.size()) + " hits");
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
+    QueryContext ctx;
+    for (std::size_t i = range.begin(); i != range.end(); ++i) hits[i] = top.intersect(rays[i], ctx, mask);
+  });
+}
+
+void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask) const {
+  if (occluded.size() != rays.size())
+    throw InvalidArgument("SceneTracer::occluded: " + std::to_string(rays.size()) + " rays but room for " +
+                          std::to_string(occluded.size()) + " results");
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
+    QueryContext ctx;
+    for (std::size_t i = range.begin(); i != range.end(); ++i) occluded[i] = top.occluded(rays[i], ctx, mask) ? 1 : 0;
+  });
+}
+
+namespace {
+
+void requireImage(const char* what, std::uint32_t width, std::uint32_t height) {
+  if (width == 0 || height == 0)
+    throw InvalidArgument(std::string(what) + ": image size " + std::to_string(width) + " x " +
+                          std::to_string(height) + " (both must be positive)");
+}
+
+}  // namespace
+
+std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, double py, std::uint32_t width,
+                                        std::uint32_t height, PickMode mode, std::uint32_t mask) const {
+  requireImage("SceneTracer::pick", width, height);
+  if (!std::isfinite(px) || !std::isfinite(py))
+    throw InvalidArgument("SceneTracer::pick: pixel coordinates must be finite");
+  RayD ray;
+  ray.origin = camera.eye;
+  ray.dir = camera.directionAt(px, py, width, height);
+  QueryContext ctx;
+  std::shared_lock lock(impl_->mutex);
+  std::vector<SceneHit> out;
+  if (mode == PickMode::Nearest) {
+    SceneHit h = detail(graph_, impl_->top, ray, impl_->top.intersect(ray, ctx, mask));
+    if (h.valid()) out.push_back(std::move(h));
+    return out;
+  }
+  std::vector<Hit> hits;
+  impl_->top.intersectAll(ray, hits, ctx, mask);
+  std::vector<NodeId> seen;
+  for (const Hit& h : hits) {
+    if (mode == PickMode::PerInstance) {
+      if (std::find(seen.begin(), seen.end(), h.instance_id) != seen.end()) continue;
+      seen.push_back(h.instance_id);
+    }
+    out.push_back(detail(graph_, impl_->top, ray, h));
+  }
+  return out;
+}
+
+std::vector<NodeId> SceneTracer::selectRectangle(const PinholeCamera& camera, double x0, double y0, double x1,
+                                                 double y1, std::uint32_t width, std::uint32_t height,
+                                                 std::uint32_t mask) const {
+  requireImage("SceneTracer::selectRectangle", width, height);
+  if (!std::isfinite(x0) || !std::isfinite(y0) || !std::isfinite(x1) || !std::isfinite(y1))
+    throw InvalidArgument("SceneTracer::selectRectangle: rectangle coordinates must be finite");
+  if (x0 > x1) std::swap(x0, x1);
+  if (y0 > y1) std::swap(y0, y1);
+  // Corner directions in the order top-left, top-right, bottom-right, bottom-left (clockwise on
+  // screen); each side plane contains the eye and two neighbouring corner rays, normal outward.
+  const glm::dvec3 c[4] = {camera.directionAt(x0, y0, width, height), camera.directionAt(x1, y0, width, height),
+                           camera.directionAt(x1, y1, width, height), camera.directionAt(x0, y1, width, height)};
+  std::vector<glm::dvec4> planes;
+  const glm::dvec3 inside = glm::normalize(c[0] + c[1] + c[2] + c[3]);
+  for (int k = 0; k < 4; ++k) {
+    glm::dvec3 n = glm::cross(c[k], c[(k + 1) % 4]);
+    const double len = glm::length(n);
+    if (!(len > 0.0)) continue;  // a zero-width rectangle: its side planes coincide; keep the others
+    n /= len;
+    if (glm::dot(n, inside) > 0.0) n = -n;
+    planes.emplace_back(n, glm::dot(n, camera.eye));
+  }
+  // Nothing behind the camera.
+  planes.emplace_back(-camera.forward, -glm::dot(camera.forward, camera.eye));
+  std::shared_lock lock(impl_->mutex);
+  return impl_->top.instancesInRegion(planes, mask);
+}
+
+Box SceneTracer::bounds() const {
+  std::shared_lock lock(impl_->mutex);
+  return impl_->top.bounds();
+}
+
+TopLevelStats SceneTracer::stats() const {
+  std::shared_lock lock(impl_->mutex);
+  return impl_->top.stats();
+}
+
+double SceneTracer::lastUpdateMs() const {
+  std::shared_lock lock(impl_->mutex);
+  return impl_->last_update_ms;
+}
+
+void SceneTracer::rebuild() {
+  std::unique_lock lock(impl_->mutex);
+  impl_->top.rebuild();
+}
+
+const TopLevel& SceneTracer::topLevel() const { return impl_->top; }
+
+}  // namespace duplex

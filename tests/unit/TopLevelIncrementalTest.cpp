@@ -1,0 +1,387 @@
+// The incremental top level: thousands of random edits (insert, remove, move, replace the object,
+// change the mask) committed in random batches; after each commit the tree's invariants hold and
+// closest hits, occlusion and intersectAll agree exactly with a brute force over the live instances
+// (each instance's own bottom-level query on the same object-space ray) and with a fresh build.
+
+#include "MeshChecks.h"
+#include "TestSupport.h"
+
+#include "duplex/accel/Affine.h"
+#include "duplex/accel/Error.h"
+#include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/QueryContext.h"
+#include "duplex/accel/RayGenerator.h"
+#include "duplex/accel/TopLevel.h"
+#include "duplex/objects/MeshObject.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <map>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace duplex::test {
+namespace {
+
+struct Objects {
+  std::vector<std::shared_ptr<const MeshObject>> list;
+  Objects() {
+    list.push_back(buildChecked(icosphere(2)));
+    list.push_back(buildChecked(boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f), "unit-box")));
+    list.push_back(buildChecked(flatGrid(6, 2, 0.0f, 0.25f)));
+    list.push_back(buildChecked(triangleSoup(120, 7)));
+  }
+};
+
+const Objects& objects() {
+  static const Objects o;
+  return o;
+}
+
+/// The live instances as the test believes them to be.
+using Model = std::map<std::uint32_t, InstanceDesc>;
+
+/// Brute force: every live instance whose mask meets `mask`, the same object-space ray the top level
+/// computes (double transform from the float world ray), the object's own closest-hit query.
+Hit bruteIntersect(const Model& model, const Ray& ray, std::uint32_t mask) {
+  Hit best;
+  best.t = ray.tfar;
+  QueryContext ctx;
+  std::uint32_t winner = kInvalidId;
+  glm::dmat3 normal(1.0);
+  for (const auto& [id, d] : model) {
+    if ((d.mask & mask) == 0) continue;
+    Ray ray_os = d.world_from_object.inverse().apply(ray);
+    ray_os.tfar = best.t;
+    Hit h = best;
+    if (d.object->intersect(ray_os, h, ctx) && (winner == kInvalidId || h.t < best.t)) {
+      best = h;
+      winner = id;
+      const glm::dmat3& l = d.world_from_object.linear;
+      normal = glm::determinant(l) * glm::transpose(glm::inverse(l));
+    }
+  }
+  if (winner == kInvalidId) return Hit{};
+  best.instance_id = winner;
+  best.ng = glm::mat3(normal) * best.ng;
+  return best;
+}
+
+/// Same t bit for bit; a different (instance, primitive) only as an exact tie.
+::testing::AssertionResult sameHit(const Hit& a, const Hit& b) {
+  if (a.valid() != b.valid() || (a.valid() && a.t != b.t))
+    return ::testing::AssertionFailure() << a << " vs " << b;
+  return ::testing::AssertionSuccess();
+}
+
+/// Structure and coverage of the (possibly incrementally updated) tree: nodes reached once, jumps
+/// in range, leaf ranges inside the index list, every referenced slot live, every live box that
+/// meets a leaf cell (after shrinking by a relative 1e-6) referenced by it, no slot twice in a leaf.
+::testing::AssertionResult checkIncrementalTree(const TopLevel& top, const Model& model) {
+  const KdTree& tree = top.tree();
+  if (model.empty()) return ::testing::AssertionSuccess();
+  if (tree.empty()) return ::testing::AssertionFailure() << "empty tree for " << model.size() << " instances";
+  std::vector<int> reached(tree.nodes.size(), 0);
+  std::map<std::uint32_t, std::uint32_t> id_of_slot;
+  std::string problems;
+  int problem_count = 0;
+  auto problem = [&](const std::string& s) {
+    if (problem_count++ < 8) problems += "\n  " + s;
+  };
+  for (const auto& [id, d] : model) {
+    (void)d;
+    if (!top.contains(id)) problem("instance " + std::to_string(id) + " missing");
+  }
+  std::vector<std::pair<std::uint32_t, Box>> stack{{0u, tree.bounds}};
+  while (!stack.empty()) {
+    auto [i, cell] = stack.back();
+    stack.pop_back();
+    if (i >= tree.nodes.size()) {
+      problem("node index " + std::to_string(i) + " out of range");
+      continue;
+    }
+    if (reached[i]++) problem("node " + std::to_string(i) + " reached twice");
+    const KdNode& n = tree.nodes[i];
+    if (n.isJump()) {
+      stack.emplace_back(n.jumpTarget(), cell);
+      continue;
+    }
+    if (!n.isLeaf()) {
+      if (!(n.split() >= cell.lo[n.axis()] && n.split() <= cell.hi[n.axis()]))
+        problem("split outside its cell at node " + std::to_string(i));
+      Box lower = cell, upper = cell;
+      lower.hi[n.axis()] = n.split();
+      upper.lo[n.axis()] = n.split();
+      stack.emplace_back(n.upperChild(), upper);
+      stack.emplace_back(i + 1, lower);
+      continue;
+    }
+    if (static_cast<std::size_t>(n.primOffset()) + n.primCount() > tree.prim_indices.size()) {
+      problem("leaf range out of the index list at node " + std::to_string(i));
+      continue;
+    }
+    std::set<std::uint32_t> ids;
+    for (std::uint32_t k = 0; k < n.primCount(); ++k) {
+      const std::uint32_t slot = tree.prim_indices[n.primOffset() + k];
+      const std::uint32_t id = top.idAt(slot);
+      if (!model.count(id)) {
+        problem("leaf " + std::to_string(i) + " references slot " + std::to_string(slot) + " of a dead instance");
+        continue;
+      }
+      if (!ids.insert(id).second) problem("leaf " + std::to_string(i) + " holds instance " + std::to_string(id) + " twice");
+    }
+    for (const auto& [id, d] : model) {
+      const Box b = top.instanceBounds(id);
+      Box s = intersection(b, cell);
+      // Relative to the extent and to the coordinates' magnitude (a box touching the cell from
+      // outside must not count, and 1e-6 of a small extent can vanish in a large coordinate's ulp).
+      const glm::vec3 shrink = 1e-6f * (cell.extent() + glm::max(glm::abs(cell.lo), glm::abs(cell.hi)));
+      s.lo += shrink;
+      s.hi -= shrink;
+      if (!s.empty() && !ids.count(id))
+        problem("instance " + std::to_string(id) + " meets leaf " + std::to_string(i) + " but is not referenced");
+    }
+  }
+  for (std::size_t i = 0; i < reached.size(); ++i) {
+    // Nodes replaced by a jump's subtree are unreachable only if they are the old leaf itself,
+    // which the jump overwrote; anything else unreached is a leak.
+    if (!reached[i]) problem("node " + std::to_string(i) + " unreachable");
+  }
+  if (problem_count == 0) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << problem_count << " problem(s):" << problems;
+}
+
+Affine randomPlacement(std::mt19937_64& rng, double spread) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.3, 1.5);
+  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
+  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, 3.14159 * u(rng), glm::dvec3(s(rng), s(rng), s(rng)),
+                                                          0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng))));
+}
+
+struct EditRun {
+  std::size_t edits = 0, commits = 0, rays_checked = 0, hits = 0;
+};
+
+EditRun runRandomEdits(TopLevelUpdate mode, std::size_t total_edits, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const auto& objs = objects().list;
+  const double spread = 14.0;
+  Model model;
+  TopLevelConfig config;
+  config.update = mode;
+  TopLevel top(config);
+  std::uint32_t next_id = 1;
+  std::vector<InstanceDesc> initial;
+  for (int i = 0; i < 40; ++i) {
+    InstanceDesc d{objs[rng() % objs.size()], randomPlacement(rng, spread), next_id++, 0xFFFFFFFFu};
+    model[d.id] = d;
+    initial.push_back(d);
+  }
+  top.build(initial);
+  EditRun run;
+  const Box world(glm::vec3(-0.6f * float(spread)), glm::vec3(0.6f * float(spread)));
+  while (run.edits < total_edits) {
+    const int batch = 1 + static_cast<int>(rng() % 12);
+    for (int e = 0; e < batch; ++e, ++run.edits) {
+      const int kind = static_cast<int>(rng() % 10);
+      auto pick = [&]() {
+        auto it = model.begin();
+        std::advance(it, static_cast<long>(rng() % model.size()));
+        return it->first;
+      };
+      if (kind < 2 || model.size() < 10) {  // insert
+        InstanceDesc d{objs[rng() % objs.size()], randomPlacement(rng, spread), next_id++,
+                       rng() % 4 == 0 ? 2u : 0xFFFFFFFFu};
+        top.set(d);
+        model[d.id] = d;
+      } else if (kind < 4) {  // remove
+        const std::uint32_t id = pick();
+        top.remove(id);
+        model.erase(id);
+      } else if (kind < 8) {  // move a little (the common CAD edit) or far
+        const std::uint32_t id = pick();
+        InstanceDesc d = model[id];
+        std::uniform_real_distribution<double> u(-1.0, 1.0);
+        const double step = rng() % 4 == 0 ? spread : 0.05 * spread;
+        d.world_from_object.translation += step * glm::dvec3(u(rng), u(rng), u(rng));
+        top.set(d);
+        model[id] = d;
+      } else if (kind < 9) {  // replace the object
+        const std::uint32_t id = pick();
+        InstanceDesc d = model[id];
+        d.object = objs[rng() % objs.size()];
+        top.set(d);
+        model[id] = d;
+      } else {  // change the mask
+        const std::uint32_t id = pick();
+        InstanceDesc d = model[id];
+        d.mask = d.mask == 2u ? 0xFFFFFFFFu : 2u;
+        top.set(d);
+        model[id] = d;
+      }
+    }
+    top.commit();
+    ++run.commits;
+    EXPECT_EQ(top.size(), model.size());
+    const auto tree_ok = checkIncrementalTree(top, model);
+    EXPECT_TRUE(tree_ok) << "after commit " << run.commits;
+    if (!tree_ok) break;
+
+    // Rays: random through the world box, some with a mask that selects only mask-2 instances.
+    std::vector<InstanceDesc> live;
+    for (const auto& [id, d] : model) live.push_back(d);
+    TopLevel fresh;
+    fresh.build(live);
+    const std::vector<Ray> rays = randomRays(world, 60, seed * 1000 + run.commits);
+    QueryContext ctx;
+    std::size_t failures = 0;
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      const std::uint32_t mask = r % 3 == 0 ? 2u : 0xFFFFFFFFu;
+      const Hit got = top.intersect(rays[r], ctx, mask);
+      const Hit want = bruteIntersect(model, rays[r], mask);
+      const Hit rebuilt = fresh.intersect(rays[r], ctx, mask);
+      ++run.rays_checked;
+      run.hits += got.valid();
+      const auto a = sameHit(got, want), b = sameHit(got, rebuilt);
+      const bool occ = top.occluded(rays[r], ctx, mask);
+      if ((!a || !b || occ != want.valid()) && failures++ < 4)
+        ADD_FAILURE() << "commit " << run.commits << ", ray " << r << " " << rays[r] << " mask " << mask
+                      << ": incremental vs brute force: " << a.message() << "; vs fresh build: " << b.message()
+                      << "; occluded " << occ;
+    }
+    if (failures) break;
+  }
+  return run;
+}
+
+TEST(TopLevelIncremental, RandomEditsAgreeWithBruteForceAndFreshBuild) {
+  const EditRun run = runRandomEdits(TopLevelUpdate::Incremental, 4000, 11);
+  EXPECT_GE(run.commits, 500u);
+  EXPECT_GT(run.hits, run.rays_checked / 20);
+}
+
+TEST(TopLevelIncremental, FullRebuildModeAgreesToo) {
+  const EditRun run = runRandomEdits(TopLevelUpdate::FullRebuild, 600, 12);
+  EXPECT_GT(run.hits, run.rays_checked / 10);
+}
+
+TEST(TopLevelIncremental, IntersectAllListsEveryInstanceHitSorted) {
+  const auto& objs = objects().list;
+  // A row of unit boxes along x; a ray down the row crosses each box twice.
+  std::vector<InstanceDesc> row;
+  for (std::uint32_t i = 0; i < 5; ++i)
+    row.push_back({objs[1], Affine::fromRowMajor3x4({1, 0, 0, 4.0 * i, 0, 1, 0, 0, 0, 0, 1, 0}), 10 + i, i % 2 ? 1u : 2u});
+  TopLevel top;
+  top.build(row);
+  Ray r;
+  r.origin = glm::vec3(-5.0f, 0.1f, 0.2f);
+  r.dir = glm::vec3(1.0f, 0.0f, 0.0f);
+  QueryContext ctx;
+  std::vector<Hit> hits;
+  top.intersectAll(r, hits, ctx);
+  ASSERT_EQ(hits.size(), 10u);
+  for (std::size_t k = 0; k < hits.size(); ++k) {
+    EXPECT_EQ(hits[k].instance_id, 10 + k / 2);
+    const float expected = 4.0f * float(k / 2) + (k % 2 ? 6.0f : 4.0f);
+    EXPECT_NEAR(hits[k].t, expected, 1e-5f);
+  }
+  top.intersectAll(r, hits, ctx, 1u);  // only the odd boxes
+  ASSERT_EQ(hits.size(), 4u);
+  EXPECT_EQ(hits[0].instance_id, 11u);
+  EXPECT_EQ(hits[3].instance_id, 13u);
+}
+
+TEST(TopLevelIncremental, RegionQueryMatchesBoxTest) {
+  const auto& objs = objects().list;
+  std::mt19937_64 rng(5);
+  std::vector<InstanceDesc> all;
+  for (std::uint32_t i = 0; i < 300; ++i) all.push_back({objs[i % objs.size()], randomPlacement(rng, 40.0), i + 1});
+  TopLevel top;
+  top.build(all);
+  // Move a third incrementally so the query also runs on an updated tree.
+  for (std::uint32_t i = 0; i < 100; ++i) {
+    all[i].world_from_object.translation += glm::dvec3(3.0, -2.0, 1.0);
+    top.set(all[i]);
+  }
+  top.commit();
+  std::uniform_real_distribution<double> u(-20.0, 20.0);
+  for (int q = 0; q < 50; ++q) {
+    // An axis-aligned query box as six planes n.x <= d.
+    const glm::dvec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const glm::dvec3 lo = glm::min(a, b), hi = glm::max(a, b);
+    const std::vector<glm::dvec4> planes = {{1, 0, 0, hi.x},  {-1, 0, 0, -lo.x}, {0, 1, 0, hi.y},
+                                            {0, -1, 0, -lo.y}, {0, 0, 1, hi.z},  {0, 0, -1, -lo.z}};
+    std::vector<std::uint32_t> want;
+    for (const InstanceDesc& d : all) {
+      const Box bb = top.instanceBounds(d.id);
+      if (bb.lo.x <= hi.x && bb.hi.x >= lo.x && bb.lo.y <= hi.y && bb.hi.y >= lo.y && bb.lo.z <= hi.z && bb.hi.z >= lo.z)
+        want.push_back(d.id);
+    }
+    std::sort(want.begin(), want.end());
+    EXPECT_EQ(top.instancesInRegion(planes), want) << "query " << q;
+  }
+}
+
+TEST(TopLevelIncremental, SingleMoveTouchesOnlyTheTopLevelLocally) {
+  const auto& objs = objects().list;
+  std::mt19937_64 rng(9);
+  std::vector<InstanceDesc> all;
+  for (std::uint32_t i = 0; i < 2000; ++i) all.push_back({objs[i % objs.size()], randomPlacement(rng, 200.0), i});
+  TopLevel top;
+  top.build(all);
+  const auto before = top.stats();
+  for (int k = 0; k < 200; ++k) {
+    InstanceDesc d = all[rng() % all.size()];
+    d.world_from_object.translation += glm::dvec3(1.0, 0.5, -0.5);
+    all[d.id] = d;
+    top.set(d);
+    top.commit();
+  }
+  const auto after = top.stats();
+  EXPECT_EQ(after.commits - before.commits, 200u);
+  // Small moves in a big scene: the quality stays within the rebuild ratio without full rebuilds.
+  EXPECT_LE(after.full_rebuilds - before.full_rebuilds, 2u);
+  EXPECT_LE(after.sah_cost, top.config().rebuild_ratio * after.fresh_sah_cost * 1.0000001);
+  EXPECT_TRUE(checkIncrementalTree(top, [&] {
+    Model m;
+    for (const auto& d : all) m[d.id] = d;
+    return m;
+  }()));
+}
+
+TEST(TopLevelIncremental, RejectedEditsChangeNothing) {
+  const auto& objs = objects().list;
+  TopLevel top;
+  std::vector<InstanceDesc> two = {{objs[0], Affine::identity(), 1}, {objs[1], Affine::identity(), 2}};
+  top.build(two);
+  Affine nan = Affine::identity();
+  nan.translation.x = std::numeric_limits<double>::quiet_NaN();
+  Affine singular = Affine::identity();
+  singular.linear[2] = glm::dvec3(0.0);
+  expectErrorNaming<InvalidArgument>([&] { top.set({objs[0], nan, 3}); }, "instance 3");
+  expectErrorNaming<InvalidArgument>([&] { top.set({objs[0], singular, 4}); }, "singular");
+  expectErrorNaming<InvalidArgument>([&] { top.set({nullptr, Affine::identity(), 5}); }, "instance 5");
+  expectErrorNaming<InvalidArgument>([&] { top.remove(77); }, "77");
+  expectErrorNaming<InvalidArgument>([&] { top.build(std::vector<InstanceDesc>{{objs[0], Affine::identity(), 9}, {objs[1], nan, 9}}); },
+                                     "instance 9");
+  top.commit();
+  EXPECT_EQ(top.size(), 2u);
+  EXPECT_TRUE(top.contains(1));
+  EXPECT_FALSE(top.contains(3));
+  EXPECT_FALSE(top.contains(9));
+  // Remove then re-add in one batch; add then remove in one batch.
+  top.remove(1);
+  EXPECT_FALSE(top.contains(1));
+  top.set({objs[2], Affine::identity(), 1});
+  top.set({objs[2], Affine::identity(), 6});
+  top.remove(6);
+  top.commit();
+  EXPECT_EQ(top.size(), 2u);
+  EXPECT_FALSE(top.contains(6));
+}
+
+}  // namespace
+}  // namespace duplex::test
