@@ -84,6 +84,12 @@ const char* kindName(NodeKind k) {
   return "node";
 }
 
+/// Room for one more element, growing geometrically (reserve(size() + 1) would copy every time).
+template <class V>
+void reserveOneMore(V& v) {
+  if (v.size() == v.capacity()) v.reserve(2 * v.size() + 16);
+}
+
 bool sameAffine(const Affine& a, const Affine& b) {
   for (int c = 0; c < 3; ++c)
     if (a.linear[c] != b.linear[c]) return false;
@@ -279,16 +285,18 @@ NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, Nod
   const std::string who = "new " + std::string(kindName(nn.kind)) + " '" + name + "' under '" + path(parent) + "'";
   if (nn.kind != NodeKind::Group) checkTransform(call, who, nn.local);
   if (nn.kind == NodeKind::Instance) requireObject(library, call, who, nn.object);
-  // Valid. Reserve first so that the bookkeeping below cannot fail half-way.
-  undo.reserve(undo.size() + 1);
-  dirty_roots.reserve(dirty_roots.size() + 1);
-  touched.reserve(touched.size() + 1);
+  // Valid. Reserve first (geometrically) so that the bookkeeping below cannot fail half-way.
+  reserveOneMore(undo);
+  reserveOneMore(dirty_roots);
+  reserveOneMore(touched);
+  reserveOneMore(nodes);
   Node n;
   n.local = nn.local;
   n.name = std::move(name);
   n.kind = nn.kind;
   n.object = nn.object;
   n.mask = nn.mask;
+  n.parent = parent;  // the name index key; link() below sets it again
   n.flags = kAlive | kVisible;  // not kEffVisible: it was not visible at the last commit
   nodes.push_back(std::move(n));
   try {
