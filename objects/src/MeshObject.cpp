@@ -247,12 +247,19 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
       return false;
     });
   });
-  // A triangle referenced by several leaves the ray crosses is reported once.
-  std::sort(hits.begin() + static_cast<std::ptrdiff_t>(first), hits.end(),
-            [](const Hit& a, const Hit& b) { return a.prim_id < b.prim_id; });
-  hits.erase(std::unique(hits.begin() + static_cast<std::ptrdiff_t>(first), hits.end(),
-                         [](const Hit& a, const Hit& b) { return a.prim_id == b.prim_id; }),
-             hits.end());
+  // A triangle referenced by several leaves the ray crosses is reported once; and a ray through a
+  // shared edge or vertex hits every triangle around it at the same distance but crosses the
+  // surface once (a sensor must not count it twice): hits within kSameCrossing of each other in
+  // t merge into the one with the lowest primitive id.
+  const auto begin = hits.begin() + static_cast<std::ptrdiff_t>(first);
+  std::sort(begin, hits.end(), [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.prim_id < b.prim_id; });
+  constexpr float kSameCrossing = 4.0f * std::numeric_limits<float>::epsilon();
+  auto out = begin;
+  for (auto it = begin; it != hits.end(); ++it) {
+    if (out != begin && it->t - (out - 1)->t <= kSameCrossing * std::abs(it->t)) continue;
+    *out++ = *it;
+  }
+  hits.erase(out, hits.end());
 }
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit, QueryContext&) const { return intersect(ray_os, hit); }

@@ -5,6 +5,7 @@
 
 #include "MeshChecks.h"
 #include "TestSupport.h"
+#include "TwoLevelChecks.h"
 
 #include "duplex/accel/Affine.h"
 #include "duplex/accel/Error.h"
@@ -39,119 +40,6 @@ struct Objects {
 const Objects& objects() {
   static const Objects o;
   return o;
-}
-
-/// The live instances as the test believes them to be.
-using Model = std::map<std::uint32_t, InstanceDesc>;
-
-/// Brute force: every live instance whose mask meets `mask`, the same object-space ray the top level
-/// computes (double transform from the float world ray), the object's own closest-hit query.
-Hit bruteIntersect(const Model& model, const Ray& ray, std::uint32_t mask) {
-  Hit best;
-  best.t = ray.tfar;
-  QueryContext ctx;
-  std::uint32_t winner = kInvalidId;
-  glm::dmat3 normal(1.0);
-  for (const auto& [id, d] : model) {
-    if ((d.mask & mask) == 0) continue;
-    Ray ray_os = d.world_from_object.inverse().apply(ray);
-    ray_os.tfar = best.t;
-    Hit h = best;
-    if (d.object->intersect(ray_os, h, ctx) && (winner == kInvalidId || h.t < best.t)) {
-      best = h;
-      winner = id;
-      const glm::dmat3& l = d.world_from_object.linear;
-      normal = glm::determinant(l) * glm::transpose(glm::inverse(l));
-    }
-  }
-  if (winner == kInvalidId) return Hit{};
-  best.instance_id = winner;
-  best.ng = glm::mat3(normal) * best.ng;
-  return best;
-}
-
-/// Same t bit for bit; a different (instance, primitive) only as an exact tie.
-::testing::AssertionResult sameHit(const Hit& a, const Hit& b) {
-  if (a.valid() != b.valid() || (a.valid() && a.t != b.t))
-    return ::testing::AssertionFailure() << a << " vs " << b;
-  return ::testing::AssertionSuccess();
-}
-
-/// Structure and coverage of the (possibly incrementally updated) tree: nodes reached once, jumps
-/// in range, leaf ranges inside the index list, every referenced slot live, every live box that
-/// meets a leaf cell (after shrinking by a relative 1e-6) referenced by it, no slot twice in a leaf.
-::testing::AssertionResult checkIncrementalTree(const TopLevel& top, const Model& model) {
-  const KdTree& tree = top.tree();
-  if (model.empty()) return ::testing::AssertionSuccess();
-  if (tree.empty()) return ::testing::AssertionFailure() << "empty tree for " << model.size() << " instances";
-  std::vector<int> reached(tree.nodes.size(), 0);
-  std::map<std::uint32_t, std::uint32_t> id_of_slot;
-  std::string problems;
-  int problem_count = 0;
-  auto problem = [&](const std::string& s) {
-    if (problem_count++ < 8) problems += "\n  " + s;
-  };
-  for (const auto& [id, d] : model) {
-    (void)d;
-    if (!top.contains(id)) problem("instance " + std::to_string(id) + " missing");
-  }
-  std::vector<std::pair<std::uint32_t, Box>> stack{{0u, tree.bounds}};
-  while (!stack.empty()) {
-    auto [i, cell] = stack.back();
-    stack.pop_back();
-    if (i >= tree.nodes.size()) {
-      problem("node index " + std::to_string(i) + " out of range");
-      continue;
-    }
-    if (reached[i]++) problem("node " + std::to_string(i) + " reached twice");
-    const KdNode& n = tree.nodes[i];
-    if (n.isJump()) {
-      stack.emplace_back(n.jumpTarget(), cell);
-      continue;
-    }
-    if (!n.isLeaf()) {
-      if (!(n.split() >= cell.lo[n.axis()] && n.split() <= cell.hi[n.axis()]))
-        problem("split outside its cell at node " + std::to_string(i));
-      Box lower = cell, upper = cell;
-      lower.hi[n.axis()] = n.split();
-      upper.lo[n.axis()] = n.split();
-      stack.emplace_back(n.upperChild(), upper);
-      stack.emplace_back(i + 1, lower);
-      continue;
-    }
-    if (static_cast<std::size_t>(n.primOffset()) + n.primCount() > tree.prim_indices.size()) {
-      problem("leaf range out of the index list at node " + std::to_string(i));
-      continue;
-    }
-    std::set<std::uint32_t> ids;
-    for (std::uint32_t k = 0; k < n.primCount(); ++k) {
-      const std::uint32_t slot = tree.prim_indices[n.primOffset() + k];
-      const std::uint32_t id = top.idAt(slot);
-      if (!model.count(id)) {
-        problem("leaf " + std::to_string(i) + " references slot " + std::to_string(slot) + " of a dead instance");
-        continue;
-      }
-      if (!ids.insert(id).second) problem("leaf " + std::to_string(i) + " holds instance " + std::to_string(id) + " twice");
-    }
-    for (const auto& [id, d] : model) {
-      const Box b = top.instanceBounds(id);
-      Box s = intersection(b, cell);
-      // Relative to the extent and to the coordinates' magnitude (a box touching the cell from
-      // outside must not count, and 1e-6 of a small extent can vanish in a large coordinate's ulp).
-      const glm::vec3 shrink = 1e-6f * (cell.extent() + glm::max(glm::abs(cell.lo), glm::abs(cell.hi)));
-      s.lo += shrink;
-      s.hi -= shrink;
-      if (!s.empty() && !ids.count(id))
-        problem("instance " + std::to_string(id) + " meets leaf " + std::to_string(i) + " but is not referenced");
-    }
-  }
-  for (std::size_t i = 0; i < reached.size(); ++i) {
-    // Nodes replaced by a jump's subtree are unreachable only if they are the old leaf itself,
-    // which the jump overwrote; anything else unreached is a leak.
-    if (!reached[i]) problem("node " + std::to_string(i) + " unreachable");
-  }
-  if (problem_count == 0) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << problem_count << " problem(s):" << problems;
 }
 
 Affine randomPlacement(std::mt19937_64& rng, double spread) {

@@ -53,8 +53,10 @@ class Object {
   virtual bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const = 0;
   /// Whether anything blocks `ray_os` within [tnear, tfar] (object space).
   [[nodiscard]] virtual bool occluded(const Ray& ray_os, QueryContext& ctx) const = 0;
-  /// Appends every hit (every primitive crossing, each once) of `ray_os` with t in [tnear, tfar]
-  /// to `hits`, in no particular order, with t, u, v, prim_id and ng filled as intersect() does.
+  /// Appends every surface crossing of `ray_os` with t in [tnear, tfar] to `hits`, each once, in
+  /// no particular order, with t, u, v, prim_id and ng filled as intersect() does. A ray through an
+  /// edge or vertex shared by several primitives crosses once: meshes merge hits closer than 4 float
+  /// epsilons (relative) in t into one.
   /// For picking through layers and, for sensors, the crossings a ray deposits energy in.
   virtual void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const = 0;
   /// Fraction of light that passes along [tnear, tfar] of `ray_os`, in [0, 1]. Surfaces: 0 when

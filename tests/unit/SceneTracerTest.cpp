@@ -1,0 +1,344 @@
+// SceneTracer over a SceneGraph: 10,000 random graph edits (add, remove, move, re-parent, replace,
+// hide, mask) in random batches, each commit checked against a brute force over the visible
+// instances and the top-level invariants; picking (nearest, all, per instance) with node paths,
+// precision 10^6 units from the origin, rectangle selection, batch queries on 1 and 2 threads,
+// lazy builds, and what queries see before a commit.
+
+#include "MeshChecks.h"
+#include "TestSupport.h"
+#include "TwoLevelChecks.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/accel/RayGenerator.h"
+#include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/scenegraph/SceneTracer.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace duplex::test {
+namespace {
+
+/// A graph whose library holds a few small meshes (objects 0..3).
+struct Fixture {
+  std::shared_ptr<ObjectLibrary> library = std::make_shared<ObjectLibrary>();
+  SceneGraph graph{library};
+  std::vector<ObjectId> objects;
+  Fixture() {
+    objects.push_back(library->add("sphere", buildChecked(icosphere(2))));
+    objects.push_back(library->add("box", buildChecked(boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f), "box"))));
+    objects.push_back(library->add("grid", buildChecked(flatGrid(6, 2, 0.0f, 0.25f))));
+    objects.push_back(library->add("soup", buildChecked(triangleSoup(120, 7))));
+  }
+};
+
+/// The visible instances as the graph says after its last commit.
+Model visibleModel(const SceneGraph& graph) {
+  Model m;
+  for (const NodeId id : graph.visibleInstances()) {
+    const NodeInfo info = graph.node(id);
+    m[id] = InstanceDesc{graph.library().get(info.object), graph.worldTransform(id), id, info.mask};
+  }
+  return m;
+}
+
+Affine randomLocal(std::mt19937_64& rng, double spread) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.5, 1.5);
+  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
+  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, 3.14159 * u(rng), glm::dvec3(s(rng), s(rng), s(rng)),
+                                                          0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng))));
+}
+
+TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
+  Fixture f;
+  SceneGraph& g = f.graph;
+  std::mt19937_64 rng(2024);
+  // Start: a few groups and transform nodes with instances below them.
+  std::vector<NodeId> parents{kRootNode};
+  for (int i = 0; i < 6; ++i) parents.push_back(g.addTransform(parents[rng() % parents.size()], randomLocal(rng, 6.0)));
+  for (int i = 0; i < 30; ++i)
+    g.addInstance(parents[rng() % parents.size()], f.objects[rng() % 4], randomLocal(rng, 8.0));
+  g.commit();
+  SceneTracer tracer(g);
+  const Box world(glm::vec3(-9.0f), glm::vec3(9.0f));
+
+  std::size_t edits = 0, commits = 0, rejected = 0, rays_checked = 0, hits = 0;
+  while (edits < 10000) {
+    const int batch = 1 + static_cast<int>(rng() % 20);
+    for (int e = 0; e < batch; ++e, ++edits) {
+      // Live nodes of each kind (pending state).
+      std::vector<NodeId> inst = g.instances();
+      std::vector<NodeId> containers;
+      for (NodeId p : parents)
+        if (g.contains(p)) containers.push_back(p);
+      parents = containers;
+      const int kind = static_cast<int>(rng() % 12);
+      try {
+        if (kind < 2 || inst.size() < 10) {
+          g.addInstance(containers[rng() % containers.size()], f.objects[rng() % 4], randomLocal(rng, 8.0), {},
+                        rng() % 3 == 0 ? 2u : 0xFFFFFFFFu);
+        } else if (kind < 3 && containers.size() < 12) {
+          parents.push_back(g.addTransform(containers[rng() % containers.size()], randomLocal(rng, 4.0)));
+        } else if (kind < 4) {
+          // Remove an instance, or now and then a whole transform node's subtree.
+          if (rng() % 5 == 0 && containers.size() > 3) {
+            const NodeId victim = containers[1 + rng() % (containers.size() - 1)];
+            g.remove(victim);
+          } else {
+            g.remove(inst[rng() % inst.size()]);
+          }
+        } else if (kind < 7) {  // move an instance or a transform node (moves its subtree)
+          const bool node = rng() % 3 == 0 && containers.size() > 1;
+          const NodeId target = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];
+          Affine a = g.node(target).local;
+          std::uniform_real_distribution<double> u(-0.7, 0.7);
+          a.translation += glm::dvec3(u(rng), u(rng), u(rng));
+          if (rng() % 50 == 0) a.translation.x = std::numeric_limits<double>::quiet_NaN();  // must be rejected
+          g.setTransform(target, a);
+        } else if (kind < 8) {  // re-parent (cycles must be rejected)
+          const bool node = rng() % 2 == 0 && containers.size() > 1;
+          const NodeId what = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];
+          g.reparent(what, containers[rng() % containers.size()]);
+        } else if (kind < 9) {
+          g.setObject(inst[rng() % inst.size()], f.objects[rng() % 4]);
+        } else if (kind < 11) {
+          const bool node = rng() % 3 == 0 && containers.size() > 1;
+          const NodeId target = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];
+          g.setVisible(target, !g.node(target).visible);
+        } else {
+          const NodeId target = inst[rng() % inst.size()];
+          g.setMask(target, g.node(target).mask == 2u ? 0xFFFFFFFFu : 2u);
+        }
+      } catch (const InvalidArgument&) {
+        ++rejected;
+      }
+    }
+    g.commit();
+    ++commits;
+    const Model model = visibleModel(g);
+    ASSERT_EQ(tracer.topLevel().size(), model.size()) << "commit " << commits;
+    const auto tree_ok = checkIncrementalTree(tracer.topLevel(), model);
+    ASSERT_TRUE(tree_ok) << "commit " << commits;
+    const std::vector<Ray> rays = randomRays(world, 40, 77 + commits);
+    QueryContext ctx;
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      const std::uint32_t mask = r % 4 == 0 ? 2u : 0xFFFFFFFFu;
+      const Hit got = tracer.intersect(rays[r], ctx, mask);
+      const Hit want = bruteIntersect(model, rays[r], mask);
+      ++rays_checked;
+      hits += got.valid();
+      ASSERT_TRUE(sameHit(got, want)) << "commit " << commits << ", ray " << r << " " << rays[r] << " mask " << mask;
+      ASSERT_EQ(tracer.occluded(rays[r], ctx, mask), want.valid()) << "commit " << commits << ", ray " << r;
+    }
+  }
+  EXPECT_GE(commits, 800u);
+  EXPECT_GT(rejected, 20u);  // NaN transforms and cycles were tried, and refused
+  EXPECT_GT(hits, 1000u);  // enough rays met geometry for the comparison to mean something
+  const TopLevelStats st = tracer.stats();
+  EXPECT_GT(st.commits, 800u);
+  EXPECT_LE(st.sah_cost, tracer.topLevel().config().rebuild_ratio * st.fresh_sah_cost * (1.0 + 1e-9));
+}
+
+TEST(SceneTracer, QueriesSeeEditsOnlyAfterCommit) {
+  Fixture f;
+  const NodeId a = f.graph.addInstance(kRootNode, f.objects[1], Affine::identity(), "a");
+  f.graph.commit();
+  SceneTracer tracer(f.graph);
+  Ray r;
+  r.origin = glm::vec3(0.0f, 0.0f, -10.0f);
+  r.dir = glm::vec3(0.0f, 0.0f, 1.0f);
+  QueryContext ctx;
+  ASSERT_TRUE(tracer.intersect(r, ctx).valid());
+  EXPECT_NEAR(tracer.intersect(r, ctx).t, 9.0f, 1e-5f);
+  f.graph.setTransform(a, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 5}));
+  EXPECT_NEAR(tracer.intersect(r, ctx).t, 9.0f, 1e-5f) << "pending edit visible before commit";
+  f.graph.commit();
+  EXPECT_NEAR(tracer.intersect(r, ctx).t, 14.0f, 1e-5f);
+  f.graph.setVisible(a, false);
+  f.graph.commit();
+  EXPECT_FALSE(tracer.intersect(r, ctx).valid());
+  f.graph.setVisible(a, true);
+  f.graph.rollback();  // undone: stays hidden
+  f.graph.commit();
+  EXPECT_FALSE(tracer.intersect(r, ctx).valid());
+}
+
+TEST(SceneTracer, PickingModesAndPaths) {
+  Fixture f;
+  SceneGraph& g = f.graph;
+  // A row of boxes along -z from the camera, under nested nodes.
+  const NodeId car = g.addGroup(kRootNode, "car");
+  const NodeId body = g.addTransform(car, Affine::identity(), "body");
+  std::vector<NodeId> boxes;
+  for (int i = 0; i < 3; ++i)
+    boxes.push_back(g.addInstance(body, f.objects[1], Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -4.0 * i}),
+                                  "box" + std::to_string(i), i == 1 ? 4u : 1u));
+  g.commit();
+  SceneTracer tracer(g);
+  PinholeCamera cam;  // at the origin... moved back so it looks down -z at the boxes
+  cam.eye = glm::dvec3(0.0, 0.0, 10.0);
+  const auto nearest = tracer.pick(cam, 50.0, 50.0, 100, 100);
+  ASSERT_EQ(nearest.size(), 1u);
+  EXPECT_EQ(nearest[0].instance, boxes[0]);
+  EXPECT_EQ(nearest[0].path, (std::vector<NodeId>{car, body, boxes[0]}));
+  EXPECT_NEAR(nearest[0].position_ws.z, 1.0, 1e-6);
+  EXPECT_NEAR(nearest[0].normal_ws.z, 1.0, 1e-6);
+  EXPECT_EQ(g.path(nearest[0].instance), "/car/body/box0");
+
+  // Through the box faces' diagonals (shared edges): each face is still crossed once.
+  const auto all = tracer.pick(cam, 50.0, 50.0, 100, 100, PickMode::AllSorted);
+  ASSERT_EQ(all.size(), 6u);
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    EXPECT_EQ(all[k].instance, boxes[k / 2]);
+    EXPECT_NEAR(all[k].position_ws.z, 1.0 - 4.0 * double(k / 2) - 2.0 * double(k % 2), 1e-6);
+  }
+  const auto per = tracer.pick(cam, 50.0, 50.0, 100, 100, PickMode::PerInstance);
+  ASSERT_EQ(per.size(), 3u);
+  EXPECT_EQ(per[2].instance, boxes[2]);
+  const auto masked = tracer.pick(cam, 50.0, 50.0, 100, 100, PickMode::PerInstance, 4u);
+  ASSERT_EQ(masked.size(), 1u);
+  EXPECT_EQ(masked[0].instance, boxes[1]);
+  // Off to the side: nothing.
+  EXPECT_TRUE(tracer.pick(cam, 0.5, 0.5, 100, 100).empty());
+  expectErrorNaming<InvalidArgument>([&] { (void)tracer.pick(cam, 1.0, 1.0, 0, 100); }, "image size");
+}
+
+TEST(SceneTracer, PickingFarFromTheOriginIsAsAccurateAsNearIt) {
+  // The same unit sphere and the same relative camera, at the origin and 10^6 units away: the
+  // picked points (relative to the sphere) agree to 1e-6 of the sphere's size. A float world ray
+  // there would be off by up to 0.06 (the float spacing at 10^6).
+  auto pickAt = [](double offset, double px, double py) {
+    Fixture f;
+    const Affine place = Affine::fromRowMajor3x4({1, 0, 0, offset, 0, 1, 0, offset, 0, 0, 1, offset});
+    const NodeId t = f.graph.addTransform(kRootNode, place, "far");
+    f.graph.addInstance(t, f.objects[0], Affine::identity(), "sphere");
+    f.graph.commit();
+    SceneTracer tracer(f.graph);
+    PinholeCamera cam;
+    cam.eye = glm::dvec3(offset, offset, offset + 4.0);
+    const auto hits = tracer.pick(cam, px, py, 64, 64);
+    return hits.empty() ? glm::dvec3(std::numeric_limits<double>::quiet_NaN()) : hits[0].position_ws - glm::dvec3(offset);
+  };
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(20.0, 44.0);
+  for (int k = 0; k < 50; ++k) {
+    const double px = u(rng), py = u(rng);
+    const glm::dvec3 near = pickAt(0.0, px, py), far = pickAt(1.0e6, px, py);
+    ASSERT_TRUE(std::isfinite(near.x)) << px << ", " << py;
+    EXPECT_LT(glm::length(near - far), 1e-6) << "pixel " << px << ", " << py << ": " << near.x << " vs " << far.x;
+    EXPECT_NEAR(glm::length(near), 1.0, 0.05);  // on the (tessellated) unit sphere
+  }
+}
+
+TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
+  Fixture f;
+  std::mt19937_64 rng(8);
+  std::vector<NodeId> all;
+  for (int i = 0; i < 300; ++i) all.push_back(f.graph.addInstance(kRootNode, f.objects[i % 4], randomLocal(rng, 40.0)));
+  f.graph.commit();
+  SceneTracer tracer(f.graph);
+  const PinholeCamera cam = PinholeCamera::looking_at_box(tracer.bounds());
+  const std::uint32_t w = 200, h = 150;
+  // Independent check: a box is selected iff some point of it projects into the rectangle in front
+  // of the camera. Sampled: the 8 corners, centre and face centres of each box (inside: must be
+  // selected); all 8 corners on one outer side of the rectangle or behind (must not be).
+  auto project = [&](const glm::dvec3& p, double& x, double& y) {
+    const glm::dvec3 d = p - cam.eye;
+    const double z = glm::dot(d, cam.forward);
+    if (z <= 0.0) return false;
+    const double half_h = std::tan(0.5 * cam.vertical_fov_deg * 3.14159265358979 / 180.0);
+    const double half_w = half_h * w / h;
+    x = (glm::dot(d, cam.right) / z / half_w + 1.0) * 0.5 * w;
+    y = (1.0 - glm::dot(d, cam.up) / z / half_h) * 0.5 * h;
+    return true;
+  };
+  std::uniform_real_distribution<double> ux(0.0, w), uy(0.0, h);
+  for (int q = 0; q < 40; ++q) {
+    double x0 = ux(rng), x1 = ux(rng), y0 = uy(rng), y1 = uy(rng);
+    if (x0 > x1) std::swap(x0, x1);
+    if (y0 > y1) std::swap(y0, y1);
+    const std::vector<NodeId> got = tracer.selectRectangle(cam, x0, y0, x1, y1, w, h);
+    for (const NodeId id : all) {
+      const Box b = tracer.topLevel().instanceBounds(id);
+      int left = 0, right = 0, top = 0, bottom = 0, behind = 0, inside = 0;
+      for (int c = 0; c < 8; ++c) {
+        const glm::dvec3 p(c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z);
+        double x, y;
+        if (!project(p, x, y)) {
+          ++behind;
+          continue;
+        }
+        left += x < x0;
+        right += x > x1;
+        top += y < y0;
+        bottom += y > y1;
+        inside += x >= x0 && x <= x1 && y >= y0 && y <= y1;
+      }
+      const bool selected = std::binary_search(got.begin(), got.end(), id);
+      if (inside > 0) {
+        EXPECT_TRUE(selected) << "query " << q << ": instance " << id << " has a corner inside";
+      }
+      if (behind == 0 && (left == 8 || right == 8 || top == 8 || bottom == 8)) {
+        EXPECT_FALSE(selected) << "query " << q << ": instance " << id << " is entirely outside";
+      }
+    }
+  }
+}
+
+TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
+  Fixture f;
+  std::mt19937_64 rng(12);
+  for (int i = 0; i < 200; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomLocal(rng, 20.0));
+  f.graph.commit();
+  SceneTracer tracer(f.graph);
+  const std::vector<Ray> rays = randomRays(tracer.bounds(), 20000, 4);
+  std::vector<Hit> one(rays.size()), two(rays.size());
+  std::vector<std::uint8_t> occ1(rays.size()), occ2(rays.size());
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    tracer.intersect(rays, one);
+    tracer.occluded(rays, occ1);
+  }
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+    tracer.intersect(rays, two);
+    tracer.occluded(rays, occ2);
+  }
+  QueryContext ctx;
+  std::size_t hits = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    ASSERT_TRUE(sameHit(one[i], two[i])) << i;
+    ASSERT_EQ(one[i].instance_id, two[i].instance_id) << i;
+    ASSERT_TRUE(sameHit(one[i], tracer.intersect(rays[i], ctx))) << i;
+    ASSERT_EQ(occ1[i], occ2[i]) << i;
+    ASSERT_EQ(occ1[i] != 0, one[i].valid()) << i;
+    hits += one[i].valid();
+  }
+  EXPECT_GT(hits, rays.size() / 10);
+  std::vector<Hit> wrong(3);
+  expectErrorNaming<InvalidArgument>([&] { tracer.intersect(rays, wrong); }, "20000 rays");
+}
+
+TEST(SceneTracer, ObjectsAreBuiltLazilyOnceAndShared) {
+  auto library = std::make_shared<ObjectLibrary>();
+  const ObjectId used = library->addDeferred("used", "mesh", [] { return buildChecked(icosphere(1)); });
+  const ObjectId unused = library->addDeferred("unused", "mesh", [] { return buildChecked(icosphere(1)); });
+  SceneGraph g(library);
+  for (int i = 0; i < 50; ++i)
+    g.addInstance(kRootNode, used, Affine::fromRowMajor3x4({1, 0, 0, 3.0 * i, 0, 1, 0, 0, 0, 0, 1, 0}));
+  g.commit();
+  SceneTracer tracer(g);
+  EXPECT_EQ(library->buildCount(), 1u);
+  EXPECT_TRUE(library->isBuilt(used));
+  EXPECT_FALSE(library->isBuilt(unused));
+  EXPECT_EQ(tracer.topLevel().size(), 50u);
+}
+
+}  // namespace
+}  // namespace duplex::test
