@@ -1,0 +1,140 @@
+#pragma once
+/// \file ObjectTypeRegistry.h
+/// Object types by the name a scene file uses for them. An object entry of a scene file is
+/// `{"name": N, "<type>": SPEC, "structure": PATH?}`; the reader finds the type by which registered
+/// key the entry has (exactly one) and hands SPEC to that type's reader, which returns the object
+/// built, or a factory that ObjectLibrary calls later (in parallel, ObjectLibrary::buildAll).
+///
+/// Built in: "mesh" (`{"file": PATH}` or `{"positions": [...], "indices": [...]}`), and procedural
+/// meshes "sphere" (`{"radius": r, "subdivisions": s}`), "box" (`{"size": [x, y, z] | s}`) and
+/// "plane" (`{"size": [w, h] | s}`). Volumes and sensors register the same way.
+
+#include "duplex/accel/KdBuildConfig.h"
+#include "duplex/accel/Object.h"
+#include "duplex/objects/TriangleMesh.h"
+#include "duplex/scenegraph/ObjectLibrary.h"
+
+#include <nlohmann/json_fwd.hpp>
+
+#include <atomic>
+#include <cstddef>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+namespace duplex {
+
+/// State shared by the object readers of one scene-file load, kept alive by the factories that use
+/// it. Thread-safe.
+class SceneLoadCache {
+ public:
+  /// Registers a mesh file (a resolved path) to be read by readRequested(); readers call it while
+  /// the scene file is parsed, so that the files are read in parallel, once each, before any build.
+  void requestMesh(const std::filesystem::path& file);
+  /// Reads every requested file not read yet, in parallel (TBB). Errors are kept and thrown by mesh().
+  void readRequested();
+  /// The mesh of `file`, read at most once per load (now, if it was not read before); throws the
+  /// reader's FileError (naming the mesh file).
+  [[nodiscard]] std::shared_ptr<const TriangleMesh> mesh(const std::filesystem::path& file);
+  /// The object stored under `key`, built by `build` on the first call for that key (concurrent
+  /// callers wait; the build runs isolated from their TBB work, so nested parallel builds cannot
+  /// deadlock). Objects of several entries with the same source (mesh file, prepared structure)
+  /// are built once and shared this way. A build that throws is retried by the next call.
+  [[nodiscard]] std::shared_ptr<const Object> shared(const std::string& key,
+                                                     const std::function<std::shared_ptr<const Object>()>& build);
+
+  /// Figures of the load (summed over all files and objects).
+  [[nodiscard]] std::size_t meshFiles() const;
+  [[nodiscard]] std::size_t complexEdgeWarnings() const;
+  std::atomic<std::size_t> structures_loaded{0};  ///< prepared structures read instead of built
+
+ private:
+  struct MeshEntry {
+    std::filesystem::path file;  // as first requested (messages name it)
+    std::once_flag once;
+    std::shared_ptr<const TriangleMesh> mesh;
+    std::string error;
+    std::size_t complex_edge_warnings = 0;
+  };
+  struct SharedEntry {
+    std::mutex mutex;
+    std::shared_ptr<const Object> object;
+  };
+  MeshEntry& meshEntry(const std::filesystem::path& file);
+  mutable std::mutex mutex_;  // guards the maps (entries never move: held by unique_ptr)
+  std::map<std::filesystem::path, std::unique_ptr<MeshEntry>> meshes_;  // by canonical path
+  std::map<std::string, std::unique_ptr<SharedEntry>> shared_;
+};
+
+/// What a type's reader is given besides its spec.
+struct ObjectSpecContext {
+  std::filesystem::path scene_file;  ///< for messages; relative paths resolve against its folder
+  std::string pointer;               ///< JSON pointer of the spec, e.g. "/objects/3/mesh"
+  std::string entry_pointer;         ///< JSON pointer of the object entry, e.g. "/objects/3"
+  std::string object_name;           ///< the entry's "name"
+  KdBuildConfig build;               ///< bottom-level build parameters
+  /// A prepared bottom-level structure (resolved path) to load instead of building, when the entry
+  /// names one ("structure") and the type accepts it.
+  std::optional<std::filesystem::path> structure;
+  /// Own format: unknown keys are errors. scene-json-v1: unknown keys are ignored.
+  bool strict = false;
+  std::shared_ptr<SceneLoadCache> cache;  ///< never null
+
+  /// Throws FileError "<scene file>: <pointer>: <problem>".
+  [[noreturn]] void fail(const std::string& pointer, const std::string& problem) const;
+  /// `path` relative to the scene file's folder (absolute paths unchanged).
+  [[nodiscard]] std::filesystem::path resolve(const std::string& path) const;
+
+  // JSON helpers with errors naming the file and pointer (`at` is the value's pointer).
+  [[nodiscard]] const nlohmann::json& member(const nlohmann::json& obj, const std::string& at, const char* key) const;
+  [[nodiscard]] double number(const nlohmann::json& v, const std::string& at) const;
+  [[nodiscard]] double positiveNumber(const nlohmann::json& v, const std::string& at) const;
+  [[nodiscard]] std::string string(const nlohmann::json& v, const std::string& at) const;
+  /// A number or an array of `n` numbers (a number s means n copies of s), each > 0.
+  [[nodiscard]] std::vector<double> positiveSizes(const nlohmann::json& v, const std::string& at, std::size_t n) const;
+  /// In strict mode, fails on the first key of `obj` not in `allowed`.
+  void onlyKeys(const nlohmann::json& obj, const std::string& at, std::initializer_list<std::string_view> allowed) const;
+};
+
+/// A reader's answer: the object, built now, or a factory for ObjectLibrary::addDeferred.
+using ObjectSpecResult = std::variant<std::shared_ptr<const Object>, ObjectLibrary::Factory>;
+/// Reads a type's spec. Called serially while the scene file is read; errors must throw (ctx.fail).
+/// A returned factory may run on any thread, after the scene file is closed; it captures what it
+/// needs (the context by value) and throws on failure (the scene reader adds file and pointer).
+using ObjectTypeReader = std::function<ObjectSpecResult(const nlohmann::json& spec, const ObjectSpecContext& ctx)>;
+
+struct ObjectTypeInfo {
+  std::string name;  ///< the key in an object entry ("mesh")
+  ObjectTypeReader reader;
+  /// The key belongs to the scene-json-v1 interchange format (read in v1 files; other keys are
+  /// ignored there, as v1 requires).
+  bool in_scene_json_v1 = false;
+  /// The type loads prepared bottom-level structures ("structure" in the entry); for other types
+  /// the key is an error.
+  bool accepts_structure = false;
+};
+
+/// A set of object types. Copy builtin() and add() your own. Not thread-safe for add().
+class ObjectTypeRegistry {
+ public:
+  /// "mesh" (scene-json-v1, accepts structures), "sphere", "box", "plane".
+  [[nodiscard]] static const ObjectTypeRegistry& builtin();
+
+  /// Registers a type; throws InvalidArgument for an empty or taken name or a null reader.
+  void add(ObjectTypeInfo info);
+  [[nodiscard]] const ObjectTypeInfo* find(std::string_view name) const;
+  /// Registered names, in registration order.
+  [[nodiscard]] std::vector<std::string> names() const;
+
+ private:
+  std::vector<ObjectTypeInfo> types_;
+};
+
+}  // namespace duplex

@@ -1,0 +1,108 @@
+#pragma once
+/// \file SceneDocument.h
+/// Scene files read into a SceneGraph: scene-json-v1 (the interchange format, to the letter) and
+/// the project's own format "duplex-scene-v1" (groups, transform nodes, instances, objects through
+/// the ObjectTypeRegistry, prepared bottom-level structures, timed edits). docs/scene-format.md
+/// describes both with a complete example.
+///
+/// Errors throw FileError naming the file and the JSON pointer of the bad value
+/// ("scene.json: /instances/3/transform/5: expected a number").
+
+#include "duplex/accel/Affine.h"
+#include "duplex/accel/KdBuildConfig.h"
+#include "duplex/scenegraph/NodeId.h"
+#include "duplex/scenegraph/ObjectTypeRegistry.h"
+#include "duplex/scenegraph/SceneGraph.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace duplex {
+
+/// A node of the file's tree, or of an "add" edit, as read (objects resolved to library ids).
+struct SceneNodeSpec {
+  NodeKind kind = NodeKind::Group;
+  std::string name;                      ///< may be empty: the graph names it "<kind><id>"
+  Affine local;                          ///< parent_from_local (transform nodes and instances)
+  bool visible = true;
+  ObjectId object = kInvalidObject;      ///< instances
+  std::uint32_t mask = 0xFFFFFFFFu;      ///< instances
+  std::vector<SceneNodeSpec> children;   ///< groups and transform nodes
+  std::string pointer;                   ///< JSON pointer, for messages
+};
+
+enum class SceneEditKind : std::uint8_t { SetTransform, Add, Remove, SetVisible, SetObject, SetMask };
+
+/// One timed edit of the file's "edits" list; applied (by the demo, a player) with applyEdit().
+struct SceneEdit {
+  double time = 0.0;                   ///< seconds from the start of the animation, >= 0
+  SceneEditKind kind = SceneEditKind::SetTransform;
+  std::string node;                    ///< path of the edited node; for Add, of the parent ("/" = root)
+  Affine transform;                    ///< SetTransform: the node's new local transform
+  bool visible = true;                 ///< SetVisible
+  ObjectId object = kInvalidObject;    ///< SetObject
+  std::uint32_t mask = 0xFFFFFFFFu;    ///< SetMask
+  std::shared_ptr<const SceneNodeSpec> added;  ///< Add: the subtree to add
+  std::string pointer;                 ///< "/edits/3", for messages
+};
+
+/// Figures of a load (milliseconds of wall time).
+struct SceneLoadFigures {
+  double load_ms = 0.0;   ///< reading and parsing the JSON, the object specs, and the mesh files
+  double build_ms = 0.0;  ///< bottom-level structures (built, or loaded from prepared files), in parallel
+  double graph_ms = 0.0;  ///< adding the nodes to the graph and the first commit
+  std::size_t objects = 0;
+  std::size_t mesh_files = 0;         ///< distinct mesh files read
+  std::size_t structures_loaded = 0;  ///< prepared bottom-level structures read instead of built
+  std::size_t triangles = 0;          ///< over distinct mesh objects
+  std::size_t degenerate_triangles = 0;
+  std::size_t complex_edge_warnings = 0;
+  std::size_t instances = 0;
+  std::size_t nodes = 0;              ///< graph nodes, root included
+};
+
+struct SceneDocumentOptions {
+  KdBuildConfig build;                         ///< bottom-level build parameters
+  const ObjectTypeRegistry* registry = nullptr;  ///< nullptr: ObjectTypeRegistry::builtin()
+  /// Honour "structure" keys (prepared bottom-level structures); false builds every object.
+  bool use_structures = true;
+};
+
+/// A loaded scene file: the graph (committed once, so a SceneTracer sees every instance), with its
+/// library, and what the file says beyond the graph.
+struct SceneDocument {
+  std::filesystem::path file;
+  std::string format;                    ///< "scene-json-v1" or "duplex-scene-v1"
+  std::unique_ptr<SceneGraph> graph;
+  std::vector<ObjectId> objects;         ///< the "objects" entries, in file order
+  /// Instance nodes in file order (depth first in the own format). For scene-json-v1 the position is
+  /// the instance id of the hit file: instances[id] is its node. v1 instances are children of the
+  /// root named "instance<k>".
+  std::vector<NodeId> instances;
+  std::vector<SceneEdit> edits;          ///< sorted by time (stable: equal times keep file order)
+  SceneLoadFigures figures;
+};
+
+/// Reads `path` (either format, by its "format" key). Objects are read through the registry; their
+/// bottom-level structures are built (or loaded) in parallel, each mesh file read once and objects of
+/// the same source built once, before the instances are added; then the graph is committed. Throws
+/// FileError naming the file and the JSON pointer of the first problem (objects: the first in file
+/// order whose build failed).
+[[nodiscard]] SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDocumentOptions& options = {});
+
+/// Applies `edit` to doc.graph (without committing). Returns the nodes an Add created (its subtree,
+/// depth first), else nothing. Throws FileError naming doc.file and edit.pointer when the node path
+/// does not exist (now) or the graph refuses the edit; the graph is then unchanged.
+std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit);
+
+/// Writes the bottom-level structure of every mesh object of doc's library (built now if deferred) to
+/// `dir` (created if needed) as "<object id>_<name>.dkdt" (characters other than [A-Za-z0-9._-]
+/// replaced by '_'), for use as "structure" in a scene file. Returns the path per library object id
+/// (empty for objects of other types). An object shared by several entries is written once per entry.
+std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, const std::filesystem::path& dir);
+
+}  // namespace duplex

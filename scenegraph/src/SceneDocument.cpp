@@ -1,0 +1,476 @@
+#include "duplex/scenegraph/SceneDocument.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/objects/MeshObject.h"
+#include "duplex/objects/MeshObjectFile.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+#include <unordered_set>
+
+namespace duplex {
+
+namespace {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+constexpr const char* kV1 = "scene-json-v1";
+constexpr const char* kOwn = "duplex-scene-v1";
+constexpr int kMaxNesting = 256;  // node trees deeper than this are refused (recursion bound)
+
+std::string at(const std::string& pointer, std::string_view key) { return pointer + "/" + std::string(key); }
+std::string at(const std::string& pointer, std::size_t index) { return pointer + "/" + std::to_string(index); }
+
+// Rotation about a unit axis by `radians` (Rodrigues), as a row-major 3x3 into an Affine.
+Affine rotation(glm::dvec3 axis, double radians) {
+  const double c = std::cos(radians), s = std::sin(radians), k = 1.0 - c;
+  const double x = axis.x, y = axis.y, z = axis.z;
+  return Affine::fromRowMajor3x4({c + x * x * k, x * y * k - z * s, x * z * k + y * s, 0.0,  //
+                                  y * x * k + z * s, c + y * y * k, y * z * k - x * s, 0.0,  //
+                                  z * x * k - y * s, z * y * k + x * s, c + z * z * k, 0.0});
+}
+
+/// Reads the JSON of one scene file into a graph. `ctx` carries the file, strictness and the JSON
+/// helpers; every error goes through ctx.fail (file + pointer).
+class DocumentReader {
+ public:
+  DocumentReader(const ObjectSpecContext& ctx, SceneGraph& graph) : ctx_(ctx), graph_(graph) {}
+
+  std::array<double, 12> twelveNumbers(const json& v, const std::string& p) const {
+    if (!v.is_array()) ctx_.fail(p, "expected an array");
+    if (v.size() != 12) ctx_.fail(p, "expected 12 numbers (row-major 3x4), got " + std::to_string(v.size()));
+    std::array<double, 12> m{};
+    for (std::size_t k = 0; k < 12; ++k) m[k] = ctx_.number(v[k], at(p, k));
+    return m;
+  }
+
+  glm::dvec3 vec3(const json& v, const std::string& p) const {
+    if (!v.is_array() || v.size() != 3) ctx_.fail(p, "expected an array of 3 numbers");
+    return {ctx_.number(v[0], at(p, 0)), ctx_.number(v[1], at(p, 1)), ctx_.number(v[2], at(p, 2))};
+  }
+
+  Affine rotate(const json& v, const std::string& p) const {
+    if (!v.is_object()) ctx_.fail(p, "expected {\"axis\": [x, y, z], \"degrees\": a} or {\"euler_xyz\": [a, b, c]}");
+    ctx_.onlyKeys(v, p, {"axis", "degrees", "euler_xyz"});
+    const double to_rad = std::numbers::pi / 180.0;
+    if (v.contains("euler_xyz")) {
+      if (v.contains("axis") || v.contains("degrees")) ctx_.fail(p, "\"euler_xyz\" cannot be combined with \"axis\"/\"degrees\"");
+      const glm::dvec3 e = vec3(v["euler_xyz"], at(p, "euler_xyz")) * to_rad;
+      // About x first, then y, then z (fixed axes): R = Rz * Ry * Rx.
+      return rotation({0, 0, 1}, e.z) * rotation({0, 1, 0}, e.y) * rotation({1, 0, 0}, e.x);
+    }
+    const glm::dvec3 axis = vec3(ctx_.member(v, p, "axis"), at(p, "axis"));
+    const double len = std::sqrt(axis.x * axis.x + axis.y * axis.y + axis.z * axis.z);
+    if (!(len > 0.0) || !std::isfinite(len)) ctx_.fail(at(p, "axis"), "rotation axis must be a non-zero vector");
+    return rotation(axis / len, ctx_.number(ctx_.member(v, p, "degrees"), at(p, "degrees")) * to_rad);
+  }
+
+  /// The keys "matrix" or "translate"/"rotate"/"scale" of `obj` (T * R * S: scale first); identity
+  /// when none is present. `has` tells whether any was.
+  Affine transformFields(const json& obj, const std::string& p, bool* has = nullptr) const {
+    const bool matrix = obj.contains("matrix");
+    const bool trs = obj.contains("translate") || obj.contains("rotate") || obj.contains("scale");
+    if (has) *has = matrix || trs;
+    Affine result;
+    if (matrix) {
+      if (trs) ctx_.fail(at(p, "matrix"), "\"matrix\" cannot be combined with \"translate\"/\"rotate\"/\"scale\"");
+      result = Affine::fromRowMajor3x4(twelveNumbers(obj["matrix"], at(p, "matrix")));
+    } else if (trs) {
+      Affine t, r, s;
+      if (obj.contains("translate")) t.translation = vec3(obj["translate"], at(p, "translate"));
+      if (obj.contains("rotate")) r = rotate(obj["rotate"], at(p, "rotate"));
+      if (obj.contains("scale")) {
+        const auto sz = ctx_.positiveSizes(obj["scale"], at(p, "scale"), 3);
+        s.linear = glm::dmat3(1.0);
+        for (int k = 0; k < 3; ++k) s.linear[k][k] = sz[static_cast<std::size_t>(k)];
+      }
+      result = t * r * s;
+    }
+    if (result.isSingular()) ctx_.fail(matrix ? at(p, "matrix") : p, "singular transform");
+    return result;
+  }
+
+  /// An instance's "transform" or an edit's "set_transform": 12 numbers, or an object of
+  /// "matrix" | "translate"/"rotate"/"scale".
+  Affine transformValue(const json& v, const std::string& p) const {
+    if (v.is_array()) {
+      const Affine a = Affine::fromRowMajor3x4(twelveNumbers(v, p));
+      if (a.isSingular()) ctx_.fail(p, "singular transform");
+      return a;
+    }
+    if (!v.is_object())
+      ctx_.fail(p, "expected 12 numbers (row-major 3x4) or an object with \"matrix\" or \"translate\"/\"rotate\"/\"scale\"");
+    ctx_.onlyKeys(v, p, {"matrix", "translate", "rotate", "scale"});
+    return transformFields(v, p);
+  }
+
+  ObjectId object(const json& v, const std::string& p) const {
+    const std::string name = ctx_.string(v, p);
+    const auto id = graph_.library().find(name);
+    if (!id) ctx_.fail(p, "no object named \"" + name + "\"");
+    return *id;
+  }
+
+  bool boolean(const json& v, const std::string& p) const {
+    if (!v.is_boolean()) ctx_.fail(p, "expected true or false");
+    return v.get<bool>();
+  }
+
+  std::uint32_t mask(const json& v, const std::string& p) const {
+    const double d = ctx_.number(v, p);
+    if (d < 0.0 || d > 4294967295.0 || d != std::floor(d)) ctx_.fail(p, "expected a mask (integer in [0, 2^32 - 1])");
+    return static_cast<std::uint32_t>(d);
+  }
+
+  SceneNodeSpec node(const json& v, const std::string& p, int depth) const {
+    if (depth > kMaxNesting) ctx_.fail(p, "nodes nested deeper than " + std::to_string(kMaxNesting));
+    if (!v.is_object()) ctx_.fail(p, "expected a node (an object with \"group\" or \"instance\")");
+    const bool group = v.contains("group"), instance = v.contains("instance");
+    if (group == instance)
+      ctx_.fail(p, group ? "a node is either a \"group\" or an \"instance\", not both"
+                         : "expected a node (an object with \"group\" or \"instance\")");
+    SceneNodeSpec spec;
+    spec.pointer = p;
+    if (v.contains("visible")) spec.visible = boolean(v["visible"], at(p, "visible"));
+    if (instance) {
+      ctx_.onlyKeys(v, p, {"instance", "object", "transform", "mask", "visible"});
+      spec.kind = NodeKind::Instance;
+      spec.name = ctx_.string(v["instance"], at(p, "instance"));
+      spec.object = object(ctx_.member(v, p, "object"), at(p, "object"));
+      if (v.contains("transform")) spec.local = transformValue(v["transform"], at(p, "transform"));
+      if (v.contains("mask")) spec.mask = mask(v["mask"], at(p, "mask"));
+      return spec;
+    }
+    ctx_.onlyKeys(v, p, {"group", "children", "visible", "matrix", "translate", "rotate", "scale"});
+    spec.name = ctx_.string(v["group"], at(p, "group"));
+    bool has_transform = false;
+    spec.local = transformFields(v, p, &has_transform);
+    spec.kind = has_transform ? NodeKind::Transform : NodeKind::Group;
+    if (v.contains("children")) {
+      const json& children = v["children"];
+      if (!children.is_array()) ctx_.fail(at(p, "children"), "expected an array of nodes");
+      for (std::size_t i = 0; i < children.size(); ++i)
+        spec.children.push_back(node(children[i], at(at(p, "children"), i), depth + 1));
+    }
+    return spec;
+  }
+
+  SceneEdit edit(const json& v, const std::string& p) const {
+    if (!v.is_object()) ctx_.fail(p, "expected an edit (an object)");
+    SceneEdit e;
+    e.pointer = p;
+    e.time = ctx_.number(ctx_.member(v, p, "time"), at(p, "time"));
+    if (e.time < 0.0) ctx_.fail(at(p, "time"), "expected a time >= 0 (seconds)");
+    static constexpr std::array<std::pair<const char*, SceneEditKind>, 6> kinds = {{
+        {"set_transform", SceneEditKind::SetTransform},
+        {"add", SceneEditKind::Add},
+        {"remove", SceneEditKind::Remove},
+        {"visible", SceneEditKind::SetVisible},
+        {"object", SceneEditKind::SetObject},
+        {"mask", SceneEditKind::SetMask},
+    }};
+    const char* key = nullptr;
+    for (const auto& [k, kind] : kinds) {
+      if (!v.contains(k)) continue;
+      if (key) ctx_.fail(p, std::string("an edit does one thing: both \"") + key + "\" and \"" + k + "\"");
+      key = k;
+      e.kind = kind;
+    }
+    if (!key)
+      ctx_.fail(p, "expected one of \"set_transform\", \"add\", \"remove\", \"visible\", \"object\", \"mask\"");
+    const std::string kp = at(p, key);
+    auto target = [&] { return ctx_.string(ctx_.member(v, p, "node"), at(p, "node")); };
+    switch (e.kind) {
+      case SceneEditKind::SetTransform:
+        ctx_.onlyKeys(v, p, {"time", "node", "set_transform"});
+        e.node = target();
+        e.transform = transformValue(v[key], kp);
+        break;
+      case SceneEditKind::Add:
+        ctx_.onlyKeys(v, p, {"time", "add", "parent"});
+        e.node = v.contains("parent") ? ctx_.string(v["parent"], at(p, "parent")) : "/";
+        e.added = std::make_shared<const SceneNodeSpec>(node(v[key], kp, 0));
+        break;
+      case SceneEditKind::Remove:
+        ctx_.onlyKeys(v, p, {"time", "remove"});
+        e.node = ctx_.string(v[key], kp);
+        break;
+      case SceneEditKind::SetVisible:
+        ctx_.onlyKeys(v, p, {"time", "node", "visible"});
+        e.node = target();
+        e.visible = boolean(v[key], kp);
+        break;
+      case SceneEditKind::SetObject:
+        ctx_.onlyKeys(v, p, {"time", "node", "object"});
+        e.node = target();
+        e.object = object(v[key], kp);
+        break;
+      case SceneEditKind::SetMask:
+        ctx_.onlyKeys(v, p, {"time", "node", "mask"});
+        e.node = target();
+        e.mask = mask(v[key], kp);
+        break;
+    }
+    return e;
+  }
+
+ private:
+  const ObjectSpecContext& ctx_;
+  SceneGraph& graph_;
+};
+
+[[noreturn]] void failAt(const std::filesystem::path& file, const std::string& pointer, const std::string& problem) {
+  throw FileError(file.string() + ": " + (pointer.empty() ? "/" : pointer) + ": " + problem);
+}
+
+/// Adds `spec` and its subtree under `parent`; appends instance ids to `instances` and every new id
+/// to `added`. Graph errors become FileErrors at the node's pointer.
+void addNode(SceneGraph& graph, const std::filesystem::path& file, NodeId parent, const SceneNodeSpec& spec,
+             std::vector<NodeId>* instances, std::vector<NodeId>& added) {
+  NodeId id = kInvalidNode;
+  try {
+    switch (spec.kind) {
+      case NodeKind::Group: id = graph.addGroup(parent, spec.name); break;
+      case NodeKind::Transform: id = graph.addTransform(parent, spec.local, spec.name); break;
+      case NodeKind::Instance: id = graph.addInstance(parent, spec.object, spec.local, spec.name, spec.mask); break;
+    }
+    added.push_back(id);
+    if (!spec.visible) graph.setVisible(id, false);
+  } catch (const InvalidArgument& e) {
+    failAt(file, spec.pointer, e.what());
+  }
+  if (spec.kind == NodeKind::Instance && instances) instances->push_back(id);
+  for (const SceneNodeSpec& child : spec.children) addNode(graph, file, id, child, instances, added);
+}
+
+json parseFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path.string() + ": cannot open scene file");
+  std::stringstream text;
+  text << in.rdbuf();
+  try {
+    return json::parse(text.str());
+  } catch (const json::exception& e) {
+    // parse_error, and out_of_range for numbers such as 1e999
+    throw FileError(path.string() + ": not valid JSON (" + e.what() + ")");
+  }
+}
+
+}  // namespace
+
+SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDocumentOptions& options) {
+  const auto t_load = Clock::now();
+  const ObjectTypeRegistry& registry = options.registry ? *options.registry : ObjectTypeRegistry::builtin();
+  SceneDocument doc;
+  doc.file = path;
+  doc.graph = std::make_unique<SceneGraph>();
+  SceneGraph& graph = *doc.graph;
+  ObjectLibrary& library = graph.library();
+
+  ObjectSpecContext ctx;
+  ctx.scene_file = path;
+  ctx.build = options.build;
+  ctx.cache = std::make_shared<SceneLoadCache>();
+
+  const json root = parseFile(path);
+  if (!root.is_object()) ctx.fail("", "expected a JSON object at the top level");
+  doc.format = ctx.string(ctx.member(root, "", "format"), "/format");
+  if (doc.format != kV1 && doc.format != kOwn)
+    ctx.fail("/format", "unknown format \"" + doc.format + "\" (this version reads \"" + kV1 + "\" and \"" + kOwn + "\")");
+  const bool v1 = doc.format == kV1;
+  ctx.strict = !v1;  // v1: unknown keys are ignored; own format: they are errors (typos)
+  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits"});
+  DocumentReader reader(ctx, graph);
+
+  // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).
+  const json& objects = ctx.member(root, "", "objects");
+  if (!objects.is_array()) ctx.fail("/objects", "expected an array");
+  std::vector<std::shared_ptr<std::string>> build_errors;  // per entry, set by its failing factory
+  for (std::size_t i = 0; i < objects.size(); ++i) {
+    const std::string p = at("/objects", i);
+    const json& entry = objects[i];
+    if (!entry.is_object()) ctx.fail(p, "expected an object");
+    const std::string name = ctx.string(ctx.member(entry, p, "name"), at(p, "name"));
+    if (library.find(name)) ctx.fail(at(p, "name"), "duplicate object name \"" + name + "\"");
+    const ObjectTypeInfo* type = nullptr;
+    std::string known;
+    for (const std::string& t : registry.names()) {
+      const ObjectTypeInfo* info = registry.find(t);
+      if (v1 && !info->in_scene_json_v1) continue;
+      known += (known.empty() ? "\"" : ", \"") + t + "\"";
+      if (!entry.contains(t)) continue;
+      if (type) ctx.fail(p, "two object types, \"" + type->name + "\" and \"" + t + "\" (expected exactly one)");
+      type = info;
+    }
+    if (!type) ctx.fail(p, "no object type (expected exactly one of the keys " + known + ")");
+    std::vector<std::string_view> allowed = {"name", "structure"};
+    for (const std::string& t : registry.names()) allowed.push_back(t);
+    if (ctx.strict)
+      for (const auto& [key, value] : entry.items())
+        if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
+          ctx.fail(at(p, key), "unknown key \"" + key + "\"");
+
+    ObjectSpecContext object_ctx = ctx;
+    object_ctx.pointer = at(p, type->name);
+    object_ctx.entry_pointer = p;
+    object_ctx.object_name = name;
+    if (entry.contains("structure") && options.use_structures) {
+      if (!type->accepts_structure)
+        ctx.fail(at(p, "structure"), "objects of type \"" + type->name + "\" have no prepared structure");
+      object_ctx.structure = ctx.resolve(ctx.string(entry["structure"], at(p, "structure")));
+    }
+    ObjectSpecResult result = type->reader(entry[type->name], object_ctx);
+    try {
+      if (auto* built = std::get_if<std::shared_ptr<const Object>>(&result)) {
+        if (!*built) ctx.fail(object_ctx.pointer, "type \"" + type->name + "\" returned no object");
+        doc.objects.push_back(library.add(name, *built));
+        continue;
+      }
+      auto factory = std::get<ObjectLibrary::Factory>(std::move(result));
+      if (!factory) ctx.fail(object_ctx.pointer, "type \"" + type->name + "\" returned no object");
+      auto error = std::make_shared<std::string>();
+      build_errors.push_back(error);
+      // Errors of the build name the file and the entry; the first in file order is reported.
+      const std::string prefix = path.string() + ": ";
+      doc.objects.push_back(library.addDeferred(
+          name, type->name, [factory = std::move(factory), error, prefix, pointer = object_ctx.pointer] {
+            try {
+              return factory();
+            } catch (const std::exception& e) {
+              std::string message = e.what();
+              if (message.rfind(prefix, 0) != 0) message = prefix + pointer + ": " + message;
+              *error = message;
+              throw FileError(message);
+            }
+          }));
+    } catch (const InvalidArgument& e) {
+      ctx.fail(at(p, "name"), e.what());
+    }
+  }
+  ctx.cache->readRequested();
+  doc.figures.load_ms = msSince(t_load);
+
+  // Bottom-level structures, all in parallel, before any instance is added.
+  const auto t_build = Clock::now();
+  try {
+    library.buildAll();
+  } catch (const std::exception& e) {
+    for (const auto& error : build_errors)
+      if (!error->empty()) throw FileError(*error);
+    throw FileError(path.string() + ": " + e.what());
+  }
+  doc.figures.build_ms = msSince(t_build);
+
+  // Nodes.
+  const auto t_graph = Clock::now();
+  std::vector<NodeId> added;
+  if (v1) {
+    const json& instances = ctx.member(root, "", "instances");
+    if (!instances.is_array()) ctx.fail("/instances", "expected an array");
+    for (std::size_t i = 0; i < instances.size(); ++i) {
+      const std::string p = at("/instances", i);
+      if (!instances[i].is_object()) ctx.fail(p, "expected an object");
+      const ObjectId object = reader.object(ctx.member(instances[i], p, "object"), at(p, "object"));
+      const std::string tp = at(p, "transform");
+      const Affine transform = Affine::fromRowMajor3x4(reader.twelveNumbers(ctx.member(instances[i], p, "transform"), tp));
+      try {
+        doc.instances.push_back(graph.addInstance(kRootNode, object, transform, "instance" + std::to_string(i)));
+      } catch (const InvalidArgument& e) {
+        ctx.fail(tp, e.what());
+      }
+    }
+  } else {
+    if (root.contains("nodes")) {
+      const json& nodes = root["nodes"];
+      if (!nodes.is_array()) ctx.fail("/nodes", "expected an array of nodes");
+      for (std::size_t i = 0; i < nodes.size(); ++i)
+        addNode(graph, path, kRootNode, reader.node(nodes[i], at("/nodes", i), 0), &doc.instances, added);
+    }
+    if (root.contains("edits")) {
+      const json& edits = root["edits"];
+      if (!edits.is_array()) ctx.fail("/edits", "expected an array of edits");
+      for (std::size_t i = 0; i < edits.size(); ++i) doc.edits.push_back(reader.edit(edits[i], at("/edits", i)));
+      std::stable_sort(doc.edits.begin(), doc.edits.end(),
+                       [](const SceneEdit& a, const SceneEdit& b) { return a.time < b.time; });
+    }
+  }
+  (void)graph.commit();
+  doc.figures.graph_ms = msSince(t_graph);
+
+  SceneLoadFigures& f = doc.figures;
+  f.objects = library.size();
+  f.mesh_files = ctx.cache->meshFiles();
+  f.structures_loaded = ctx.cache->structures_loaded.load();
+  f.complex_edge_warnings = ctx.cache->complexEdgeWarnings();
+  std::unordered_set<const Object*> seen;
+  for (ObjectId id = 0; id < library.size(); ++id) {
+    const auto object = library.get(id);
+    if (!seen.insert(object.get()).second) continue;
+    if (const auto* mesh = dynamic_cast<const MeshObject*>(object.get())) {
+      f.triangles += mesh->mesh().triangleCount();
+      f.degenerate_triangles += mesh->mesh().degenerateCount();
+    }
+  }
+  f.instances = doc.instances.size();
+  f.nodes = graph.nodeCount();
+  return doc;
+}
+
+std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit) {
+  SceneGraph& graph = *doc.graph;
+  const auto target = graph.find(edit.node);
+  if (!target) failAt(doc.file, edit.pointer, "no node at path \"" + edit.node + "\"");
+  std::vector<NodeId> added;
+  try {
+    switch (edit.kind) {
+      case SceneEditKind::SetTransform: graph.setTransform(*target, edit.transform); break;
+      case SceneEditKind::Remove: graph.remove(*target); break;
+      case SceneEditKind::SetVisible: graph.setVisible(*target, edit.visible); break;
+      case SceneEditKind::SetObject: graph.setObject(*target, edit.object); break;
+      case SceneEditKind::SetMask: graph.setMask(*target, edit.mask); break;
+      case SceneEditKind::Add:
+        if (!edit.added) failAt(doc.file, edit.pointer, "no node to add");
+        try {
+          addNode(graph, doc.file, *target, *edit.added, nullptr, added);
+        } catch (...) {
+          if (!added.empty()) graph.remove(added.front());  // the partial subtree goes again
+          throw;
+        }
+        break;
+    }
+  } catch (const InvalidArgument& e) {
+    failAt(doc.file, edit.pointer, e.what());
+  }
+  return added;
+}
+
+std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, const std::filesystem::path& dir) {
+  const ObjectLibrary& library = doc.graph->library();
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw FileError(dir.string() + ": cannot create directory (" + ec.message() + ")");
+  std::vector<std::filesystem::path> written(library.size());
+  for (ObjectId id = 0; id < library.size(); ++id) {
+    const auto object = library.get(id);
+    const auto* mesh = dynamic_cast<const MeshObject*>(object.get());
+    if (!mesh) continue;
+    std::string name = library.name(id);
+    for (char& c : name)
+      if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) c = '_';
+    written[id] = dir / (std::to_string(id) + "_" + name + ".dkdt");
+    saveMeshObject(*mesh, written[id]);
+  }
+  return written;
+}
+
+}  // namespace duplex

@@ -1,0 +1,513 @@
+// Scene files into a SceneGraph (SceneDocument.h): scene-json-v1 gives the same instances,
+// transforms and errors as the flat loader (loadScene); the own format's groups and transforms give
+// the hand-computed world transforms; procedural objects, prepared structures, timed edits, custom
+// object types; every malformed input names the file and the JSON pointer.
+
+#include "TestSupport.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/objects/MeshObject.h"
+#include "duplex/objects/MeshObjectFile.h"
+#include "duplex/objects/ProceduralMesh.h"
+#include "duplex/scenegraph/ObjectTypeRegistry.h"
+#include "duplex/scenegraph/SceneDocument.h"
+#include "duplex/scenegraph/SceneFile.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+namespace duplex::test {
+namespace {
+
+const std::string kCube = R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}})";
+const std::string kTetra =
+    R"({"name": "tetra", "mesh": {"positions": [0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1], "indices": [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3]}})";
+const std::string kIdentity = "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]";
+
+struct SceneDir {
+  TempDir dir;
+  std::filesystem::path scenes = dir.path() / "scenes";
+  SceneDir() {
+    std::filesystem::create_directories(scenes / "meshes");
+    std::filesystem::copy_file(fixtureDir() / "quad_cube.obj", scenes / "meshes" / "quad_cube.obj");
+  }
+  std::filesystem::path write(const std::string& json, const std::string& name = "scene.json") const {
+    writeTextFile(scenes / name, json);
+    return scenes / name;
+  }
+};
+
+std::string v1(const std::string& objects, const std::string& instances) {
+  return R"({"format": "scene-json-v1", "objects": [)" + objects + R"(], "instances": [)" + instances + "]}";
+}
+std::string own(const std::string& objects, const std::string& nodes, const std::string& edits = "") {
+  return R"({"format": "duplex-scene-v1", "objects": [)" + objects + R"(], "nodes": [)" + nodes + "]" +
+         (edits.empty() ? "" : R"(, "edits": [)" + edits + "]") + "}";
+}
+
+/// `load` must throw FileError naming the file and `pointer` (and `also` when given).
+template <class Load>
+void expectError(Load&& load, const std::filesystem::path& file, const std::string& pointer, const std::string& also = "") {
+  try {
+    load();
+    ADD_FAILURE() << "no FileError (expected " << pointer << ")";
+  } catch (const FileError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(file.filename().string()), std::string::npos) << "does not name the file: " << msg;
+    EXPECT_NE(msg.find(pointer + ":"), std::string::npos) << "does not name '" << pointer << "': " << msg;
+    if (!also.empty()) {
+      EXPECT_NE(msg.find(also), std::string::npos) << "does not mention '" << also << "': " << msg;
+    }
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "wrong exception type: " << e.what();
+  }
+}
+
+void expectDocError(const SceneDir& d, const std::string& json, const std::string& pointer, const std::string& also = "",
+                    const SceneDocumentOptions& options = {}) {
+  SCOPED_TRACE(json);
+  const auto path = d.write(json, "bad_scene.json");
+  expectError([&] { (void)loadSceneDocument(path, options); }, path, pointer, also);
+}
+
+::testing::AssertionResult sameAffine(const Affine& a, const Affine& b, double tol = 0.0) {
+  const auto x = a.toRowMajor3x4(), y = b.toRowMajor3x4();
+  for (std::size_t k = 0; k < 12; ++k)
+    if (!(std::abs(x[k] - y[k]) <= tol)) return ::testing::AssertionFailure() << a << " != " << b << " (entry " << k << ")";
+  return ::testing::AssertionSuccess();
+}
+
+// ---- scene-json-v1 against the flat loader ----
+
+TEST(SceneDocumentV1, SameInstancesAndTransformsAsTheFlatLoader) {
+  SceneDir d;
+  const std::string instances =
+      R"({"object": "cube", "transform": [1, 0, 0, 5, 0, 1, 0, -2, 0, 0, 1, 0.5], "comment": "ignored"},)"
+      R"({"object": "tetra", "transform": [0, -2, 0, 1, 2, 0, 0, 2, 0, 0, 2, 3]},)"
+      R"({"object": "cube2", "transform": [0.3, 0.1, 0, 1e6, 0, 0.7, 0.2, -3, 0.1, 0, 0.9, 1e-3]},)"
+      R"({"object": "cube", "transform": )" + kIdentity + "}";
+  // cube2 names the same file as cube: read and built once. Unknown keys and a non-v1 type key
+  // ("sphere", not part of scene-json-v1) are ignored, as v1 requires.
+  const auto path = d.write(R"({"format": "scene-json-v1", "extra": {"x": 1}, "objects": [)" + kCube + "," + kTetra +
+                            R"(, {"name": "cube2", "mesh": {"file": "./meshes/quad_cube.obj"}, "sphere": 3}], "instances": [)" +
+                            instances + "]}");
+  SceneLoadReport report;
+  const Scene flat = loadScene(path, {}, &report);
+  const SceneDocument doc = loadSceneDocument(path);
+  EXPECT_EQ(doc.format, "scene-json-v1");
+  ASSERT_EQ(doc.instances.size(), flat.instances().size());
+  for (std::size_t k = 0; k < doc.instances.size(); ++k) {
+    SCOPED_TRACE(k);
+    const NodeInfo info = doc.graph->node(doc.instances[k]);
+    EXPECT_EQ(info.kind, NodeKind::Instance);
+    EXPECT_EQ(info.name, "instance" + std::to_string(k));
+    EXPECT_EQ(doc.graph->library().name(info.object), flat.objectName(flat.instances()[k].object));
+    EXPECT_TRUE(sameAffine(doc.graph->worldTransform(doc.instances[k]), flat.instances()[k].world_from_object));
+    EXPECT_TRUE(doc.graph->isVisibleInstance(doc.instances[k]));
+  }
+  EXPECT_EQ(doc.figures.triangles, report.triangles);
+  EXPECT_EQ(doc.figures.mesh_files, 1u);
+  EXPECT_EQ(doc.figures.objects, 3u);
+  const ObjectLibrary& lib = doc.graph->library();
+  EXPECT_EQ(lib.get(doc.objects[0]).get(), lib.get(doc.objects[2]).get()) << "one object per distinct file";
+  EXPECT_EQ(doc.graph->commitCount(), 1u);
+}
+
+// Every malformed scene-json-v1 input the flat loader refuses is refused alike: file and pointer.
+TEST(SceneDocumentV1, ErrorsNameTheFileAndPointerLikeTheFlatLoader) {
+  SceneDir d;
+  auto inl = [](const std::string& positions, const std::string& indices) {
+    return R"({"name": "m", "mesh": {"positions": )" + positions + R"(, "indices": )" + indices + "}}";
+  };
+  auto inst = [](const std::string& object, const std::string& transform) {
+    return R"({"object": ")" + object + R"(", "transform": )" + transform + "}";
+  };
+  const std::string tri = "[0, 0, 0, 1, 0, 0, 0, 1, 0]";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"{ this is not json", "bad_scene.json"},
+      {"[1, 2, 3]", "bad_scene.json"},
+      {R"({"format": "scene-json-v2", "objects": [], "instances": []})", "/format"},
+      {R"({"format": 1, "objects": [], "instances": []})", "/format"},
+      {R"({"objects": [], "instances": []})", "/"},
+      {R"({"format": "scene-json-v1", "instances": []})", "/"},
+      {R"({"format": "scene-json-v1", "objects": []})", "/"},
+      {R"({"format": "scene-json-v1", "objects": {}, "instances": []})", "/objects"},
+      {R"({"format": "scene-json-v1", "objects": [], "instances": 5})", "/instances"},
+      {v1("42", ""), "/objects/0"},
+      {v1(R"({"mesh": {"file": "meshes/quad_cube.obj"}})", ""), "/objects/0"},
+      {v1(R"({"name": 7, "mesh": {"file": "meshes/quad_cube.obj"}})", ""), "/objects/0/name"},
+      {v1(kCube + R"(, {"name": "tetra"})", ""), "/objects/1"},
+      {v1(R"({"name": "x", "mesh": "meshes/quad_cube.obj"})", ""), "/objects/0/mesh"},
+      {v1(R"({"name": "x", "mesh": {"vertices": []}})", ""), "/objects/0/mesh"},
+      {v1(R"({"name": "x", "mesh": {"file": 3}})", ""), "/objects/0/mesh/file"},
+      {v1(kCube + "," + kCube, ""), "/objects/1/name"},
+      {v1(R"({"name": "", "mesh": {"file": "meshes/quad_cube.obj"}})", ""), "/objects/0/name"},
+      {v1(kCube + R"(, {"name": "gone", "mesh": {"file": "meshes/gone.obj"}})", ""), "/objects/1/mesh"},
+      {v1(R"({"name": "txt", "mesh": {"file": "bad_scene.json"}})", ""), "/objects/0/mesh"},
+      {v1(inl(R"([0, 0, 0, 1, "x", 0, 0, 1, 0])", "[0, 1, 2]"), ""), "/objects/0/mesh/positions/4"},
+      {v1(inl(tri, "[0, -1, 2]"), ""), "/objects/0/mesh/indices/1"},
+      {v1(inl(tri, "[0, 1.5, 2]"), ""), "/objects/0/mesh/indices/1"},
+      {v1(inl(tri, "[0, 1, null]"), ""), "/objects/0/mesh/indices/2"},
+      {v1(inl(tri, "{}"), ""), "/objects/0/mesh/indices"},
+      {v1(R"({"name": "m", "mesh": {"positions": [0, 0, 0]}})", ""), "/objects/0/mesh"},
+      {v1(inl(tri, "[0, 1, 7]"), ""), "/objects/0/mesh"},
+      {v1(inl(tri, "[]"), ""), "/objects/0/mesh"},
+      {v1(inl("[0, 0, 0, 1, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh"},
+      {v1(inl("[0, 0, 0, 1, 0, 0, 2, 0, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh"},
+      {v1(kCube, "1"), "/instances/0"},
+      {v1(kCube, R"({"transform": )" + kIdentity + "}"), "/instances/0"},
+      {v1(kCube, R"({"object": "cube"})"), "/instances/0"},
+      {v1(kCube, R"({"object": 0, "transform": )" + kIdentity + "}"), "/instances/0/object"},
+      {v1(kCube, inst("cube", kIdentity) + ", " + inst("sphere", kIdentity)), "/instances/1/object"},
+      {v1(kCube, inst("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]")), "/instances/0/transform"},
+      {v1(kCube, inst("cube", R"("identity")")), "/instances/0/transform"},
+      {v1(kCube, inst("cube", R"([1, 0, 0, 0, 0, "one", 0, 0, 0, 0, 1, 0])")), "/instances/0/transform/5"},
+      {v1(kCube, inst("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, null]")), "/instances/0/transform/11"},
+      {v1(kCube, inst("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]")), "/instances/0/transform"},
+      {v1(kCube, inst("cube", "[1, 2, 3, 0, 2, 4, 6, 0, 0, 0, 1, 0]")), "/instances/0/transform"},
+      {v1(kCube, inst("cube", "[1e999, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]")), "bad_scene.json"},
+      // A type that is not part of scene-json-v1 does not count as a type there.
+      {v1(R"({"name": "s", "sphere": {"radius": 1}})", ""), "/objects/0", },
+  };
+  for (const auto& [json, pointer] : cases) {
+    SCOPED_TRACE(json);
+    const auto path = d.write(json, "bad_scene.json");
+    const std::string p = pointer == "bad_scene.json" ? "" : pointer;
+    auto check = [&](auto&& load) {
+      try {
+        load();
+        ADD_FAILURE() << "accepted";
+      } catch (const FileError& e) {
+        const std::string msg = e.what();
+        EXPECT_NE(msg.find("bad_scene.json"), std::string::npos) << msg;
+        EXPECT_NE(msg.find(p), std::string::npos) << msg;
+      } catch (const std::exception& e) {
+        ADD_FAILURE() << "wrong exception type: " << e.what();
+      }
+    };
+    check([&] { (void)loadSceneDocument(path); });
+    check([&] { (void)loadScene(path); });
+  }
+}
+
+// ---- the own format ----
+
+TEST(SceneDocumentOwn, WorldTransformsAreTheHandComputedProducts) {
+  SceneDir d;
+  // car (translate 10, 0, 0) > wheel_hub (rotate 90 degrees about z, then translate 0, 1, 0) >
+  // wheel instance (scale 2). world = T(10,0,0) * [T(0,1,0) R_z(90)] * S(2).
+  const std::string nodes = R"(
+    {"group": "car", "translate": [10, 0, 0], "children": [
+       {"group": "parts", "children": [
+         {"group": "hub", "translate": [0, 1, 0], "rotate": {"axis": [0, 0, 2], "degrees": 90}, "children": [
+           {"instance": "wheel", "object": "cube", "transform": {"scale": 2}, "mask": 5}]}]},
+       {"instance": "body", "object": "tetra", "transform": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 3], "visible": false}]},
+    {"group": "free", "matrix": [0, 0, 1, 7, 0, 1, 0, 8, -1, 0, 0, 9], "children": [
+       {"instance": "e", "object": "tetra", "transform": {"rotate": {"euler_xyz": [90, 0, 90]}}}]})";
+  const auto path = d.write(own(kCube + "," + kTetra, nodes));
+  const SceneDocument doc = loadSceneDocument(path);
+  EXPECT_EQ(doc.format, "duplex-scene-v1");
+  ASSERT_EQ(doc.instances.size(), 3u);
+  const SceneGraph& g = *doc.graph;
+  EXPECT_EQ(g.path(doc.instances[0]), "/car/parts/hub/wheel");
+  EXPECT_EQ(g.path(doc.instances[1]), "/car/body");
+  EXPECT_EQ(g.node(*g.find("/car")).kind, NodeKind::Transform);
+  EXPECT_EQ(g.node(*g.find("/car/parts")).kind, NodeKind::Group);
+  EXPECT_EQ(g.node(doc.instances[0]).mask, 5u);
+  // Hand-computed: R_z(90) maps x -> y, y -> -x; scaled by 2; translation (10, 1, 0).
+  EXPECT_TRUE(sameAffine(g.worldTransform(doc.instances[0]),
+                         Affine::fromRowMajor3x4({0, -2, 0, 10, 2, 0, 0, 1, 0, 0, 2, 0}), 1e-12));
+  EXPECT_TRUE(sameAffine(g.worldTransform(doc.instances[1]),
+                         Affine::fromRowMajor3x4({1, 0, 0, 10, 0, 1, 0, 0, 0, 0, 1, 3}), 0.0));
+  EXPECT_FALSE(g.isVisibleInstance(doc.instances[1]));
+  EXPECT_TRUE(g.isVisibleInstance(doc.instances[0]));
+  // euler_xyz [90, 0, 90] = R_z(90) R_x(90): x -> y, y -> z, z -> x. Then the "free" matrix.
+  const Affine euler = Affine::fromRowMajor3x4({0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0});
+  const Affine free = Affine::fromRowMajor3x4({0, 0, 1, 7, 0, 1, 0, 8, -1, 0, 0, 9});
+  EXPECT_TRUE(sameAffine(g.worldTransform(doc.instances[2]), free * euler, 1e-12));
+  EXPECT_EQ(g.visibleInstances().size(), 2u);
+}
+
+TEST(SceneDocumentOwn, ProceduralObjects) {
+  SceneDir d;
+  const auto path = d.write(own(R"({"name": "ball", "sphere": {"radius": 2, "subdivisions": 2}},
+      {"name": "crate", "box": {"size": [1, 2, 3]}}, {"name": "cubeish", "box": {"size": 4}},
+      {"name": "ground", "plane": {"size": [10, 20]}}, {"name": "unit", "sphere": {}})",
+                                R"({"instance": "b", "object": "ball"}, {"instance": "c", "object": "crate"},
+      {"instance": "g", "object": "ground"})"));
+  const SceneDocument doc = loadSceneDocument(path);
+  const ObjectLibrary& lib = doc.graph->library();
+  auto mesh = [&](ObjectId id) { return &dynamic_cast<const MeshObject&>(*lib.get(id)).mesh(); };
+  EXPECT_EQ(mesh(doc.objects[0])->triangleCount(), 320u);
+  EXPECT_NEAR(mesh(doc.objects[0])->bounds().hi.x, 2.0f, 1e-5f);
+  EXPECT_EQ(mesh(doc.objects[1])->triangleCount(), 12u);
+  EXPECT_EQ(mesh(doc.objects[1])->bounds(), Box(glm::vec3(-0.5f, -1.0f, -1.5f), glm::vec3(0.5f, 1.0f, 1.5f)));
+  EXPECT_EQ(mesh(doc.objects[2])->bounds(), Box(glm::vec3(-2.0f), glm::vec3(2.0f)));
+  EXPECT_EQ(mesh(doc.objects[3])->triangleCount(), 2u);
+  EXPECT_EQ(mesh(doc.objects[3])->bounds(), Box(glm::vec3(-5.0f, -10.0f, 0.0f), glm::vec3(5.0f, 10.0f, 0.0f)));
+  EXPECT_EQ(mesh(doc.objects[4])->triangleCount(), 20u * 64u);
+  EXPECT_EQ(doc.figures.triangles, 320u + 12u + 12u + 2u + 1280u);
+  // Outward winding: the box's normals point away from its centre.
+  const TriangleMesh& box = *mesh(doc.objects[1]);
+  for (std::size_t t = 0; t < box.triangleCount(); ++t) {
+    const auto v = box.vertices(t);
+    const glm::vec3 n = glm::cross(v[1] - v[0], v[2] - v[0]);
+    EXPECT_GT(glm::dot(n, (v[0] + v[1] + v[2]) / 3.0f), 0.0f) << "triangle " << t;
+  }
+}
+
+TEST(SceneDocumentOwn, TimedEditsAreReadSortedAndApplied) {
+  SceneDir d;
+  const std::string edits = R"(
+    {"time": 2.0, "remove": "/arm/tip"},
+    {"time": 0.5, "node": "/arm", "set_transform": {"translate": [0, 0, 5]}},
+    {"time": 1.0, "add": {"group": "extra", "translate": [1, 1, 1], "children": [{"instance": "x", "object": "cube"}]}, "parent": "/arm"},
+    {"time": 1.0, "node": "/arm/tip", "visible": false},
+    {"time": 1.5, "node": "/arm/tip", "object": "cube"},
+    {"time": 1.5, "node": "/arm/tip", "mask": 3},
+    {"time": 3.0, "node": "/gone", "visible": true})";
+  const auto path = d.write(own(kCube + "," + kTetra,
+                                R"({"group": "arm", "matrix": )" + kIdentity +
+                                    R"(, "children": [{"instance": "tip", "object": "tetra"}]})",
+                                edits));
+  SceneDocument doc = loadSceneDocument(path);
+  ASSERT_EQ(doc.edits.size(), 7u);
+  std::vector<std::string> order;
+  for (const auto& e : doc.edits) order.push_back(e.pointer);
+  EXPECT_EQ(order, (std::vector<std::string>{"/edits/1", "/edits/2", "/edits/3", "/edits/4", "/edits/5", "/edits/0",
+                                             "/edits/6"}));
+  SceneGraph& g = *doc.graph;
+  const NodeId tip = doc.instances[0];
+  (void)applyEdit(doc, doc.edits[0]);
+  (void)g.commit();
+  EXPECT_TRUE(sameAffine(g.worldTransform(tip), Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 5})));
+  const auto added = applyEdit(doc, doc.edits[1]);
+  ASSERT_EQ(added.size(), 2u);
+  (void)applyEdit(doc, doc.edits[2]);
+  (void)g.commit();
+  EXPECT_EQ(g.path(added[1]), "/arm/extra/x");
+  EXPECT_TRUE(sameAffine(g.worldTransform(added[1]), Affine::fromRowMajor3x4({1, 0, 0, 1, 0, 1, 0, 1, 0, 0, 1, 6})));
+  EXPECT_FALSE(g.isVisibleInstance(tip));
+  (void)applyEdit(doc, doc.edits[3]);
+  (void)applyEdit(doc, doc.edits[4]);
+  EXPECT_EQ(g.node(tip).object, doc.objects[0]);
+  EXPECT_EQ(g.node(tip).mask, 3u);
+  (void)applyEdit(doc, doc.edits[5]);
+  (void)g.commit();
+  EXPECT_FALSE(g.contains(tip));
+  expectError([&] { (void)applyEdit(doc, doc.edits[6]); }, path, "/edits/6", "/gone");
+}
+
+TEST(SceneDocumentOwn, MalformedInputNamesFileAndPointer) {
+  SceneDir d;
+  const std::string objs = kCube + "," + kTetra;
+  const std::string inst = R"({"instance": "i", "object": "cube"})";
+  expectDocError(d, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], "extra": 1})", "/extra", "unknown key");
+  expectDocError(d, R"({"format": "duplex-scene-v1", "objects": [], "nodes": {}})", "/nodes");
+  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "colour": 1})", ""), "/objects/0/colour");
+  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "box": {}})", ""), "/objects/0",
+                 "two object types");
+  expectDocError(d, own(R"({"name": "c"})", ""), "/objects/0", "no object type");
+  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj", "positions": []}})", ""),
+                 "/objects/0/mesh/positions", "unknown key");
+  expectDocError(d, own(R"({"name": "s", "sphere": {"radius": -1}})", ""), "/objects/0/sphere/radius");
+  expectDocError(d, own(R"({"name": "s", "sphere": {"subdivisions": 9}})", ""), "/objects/0/sphere/subdivisions");
+  expectDocError(d, own(R"({"name": "s", "sphere": {"subdivisions": 1.5}})", ""), "/objects/0/sphere/subdivisions");
+  expectDocError(d, own(R"({"name": "s", "sphere": {"radius": 1, "segments": 3}})", ""), "/objects/0/sphere/segments");
+  expectDocError(d, own(R"({"name": "b", "box": {"size": [1, 2]}})", ""), "/objects/0/box/size");
+  expectDocError(d, own(R"({"name": "b", "box": {"size": [1, 0, 2]}})", ""), "/objects/0/box/size/1");
+  expectDocError(d, own(R"({"name": "p", "plane": {"size": "big"}})", ""), "/objects/0/plane/size");
+  expectDocError(d, own(R"({"name": "p", "plane": 3})", ""), "/objects/0/plane");
+  expectDocError(d, own(R"({"name": "s", "sphere": {}, "structure": "x.dkdt"})", ""), "/objects/0/structure");
+  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": 5})", ""),
+                 "/objects/0/structure");
+  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "none.dkdt"})", ""),
+                 "/objects/0/structure", "none.dkdt");
+  // Nodes.
+  expectDocError(d, own(objs, "3"), "/nodes/0");
+  expectDocError(d, own(objs, R"({"name": "x"})"), "/nodes/0", "group");
+  expectDocError(d, own(objs, R"({"group": "g", "instance": "i", "object": "cube"})"), "/nodes/0", "not both");
+  expectDocError(d, own(objs, R"({"group": 1})"), "/nodes/0/group");
+  expectDocError(d, own(objs, R"({"group": "g", "children": [)" + inst + ", 7]}"), "/nodes/0/children/1");
+  expectDocError(d, own(objs, R"({"group": "g", "children": {}})"), "/nodes/0/children");
+  expectDocError(d, own(objs, R"({"group": "g", "visible": 1})"), "/nodes/0/visible");
+  expectDocError(d, own(objs, R"({"group": "g", "translate": [1, 2]})"), "/nodes/0/translate");
+  expectDocError(d, own(objs, R"({"group": "g", "translate": [1, 2, "z"]})"), "/nodes/0/translate/2");
+  expectDocError(d, own(objs, R"({"group": "g", "matrix": )" + kIdentity + R"(, "scale": 2})"), "/nodes/0/matrix",
+                 "cannot be combined");
+  expectDocError(d, own(objs, R"({"group": "g", "matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]})"), "/nodes/0/matrix",
+                 "singular");
+  expectDocError(d, own(objs, R"({"group": "g", "scale": [1, 0, 1]})"), "/nodes/0/scale/1");
+  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"axis": [0, 0, 0], "degrees": 5}})"), "/nodes/0/rotate/axis");
+  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"axis": [0, 0, 1]}})"), "/nodes/0/rotate", "degrees");
+  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"euler_xyz": [0, 0, 1], "degrees": 3}})"), "/nodes/0/rotate");
+  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"euler": [0, 0, 1]}})"), "/nodes/0/rotate/euler");
+  expectDocError(d, own(objs, R"({"group": "g", "tranlsate": [0, 0, 1]})"), "/nodes/0/tranlsate", "unknown key");
+  expectDocError(d, own(objs, R"({"group": "a/b"})"), "/nodes/0", "/");
+  expectDocError(d, own(objs, inst + "," + inst), "/nodes/1");  // duplicate sibling name
+  expectDocError(d, own(objs, R"({"instance": "i"})"), "/nodes/0", "object");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "nothing"})"), "/nodes/0/object", "nothing");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "cube", "mask": -1})"), "/nodes/0/mask");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "cube", "mask": 4294967296})"), "/nodes/0/mask");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "cube", "transform": [1, 2]})"), "/nodes/0/transform");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "cube", "transform": "id"})"), "/nodes/0/transform");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "cube", "transform": {"shear": 1}})"),
+                 "/nodes/0/transform/shear");
+  expectDocError(d, own(objs, R"({"instance": "i", "object": "cube", "children": []})"), "/nodes/0/children");
+  std::string deep = inst;
+  for (int i = 0; i < 300; ++i) deep = R"({"group": "g", "children": [)" + deep + "]}";
+  expectDocError(d, own(objs, deep), "/children/0", "nested deeper");
+  // Edits.
+  const std::string tree = R"({"group": "g", "translate": [0, 0, 0], "children": [)" + inst + "]}";
+  expectDocError(d, own(objs, tree, "5"), "/edits/0");
+  expectDocError(d, own(objs, tree, R"({"node": "/g", "visible": true})"), "/edits/0", "time");
+  expectDocError(d, own(objs, tree, R"({"time": -1, "node": "/g", "visible": true})"), "/edits/0/time");
+  expectDocError(d, own(objs, tree, R"({"time": 1})"), "/edits/0", "set_transform");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "node": "/g", "visible": true, "remove": "/g"})"), "/edits/0",
+                 "one thing");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "set_transform": [1]})"), "/edits/0", "node");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "node": "/g", "set_transform": [1]})"), "/edits/0/set_transform");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "node": "/g", "object": "none"})"), "/edits/0/object");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "add": {"group": 3}})"), "/edits/0/add/group");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "remove": "/g", "node": "/g"})"), "/edits/0/node", "unknown key");
+  expectDocError(d, R"({"format": "duplex-scene-v1", "objects": [], "edits": {}})", "/edits");
+}
+
+TEST(SceneDocumentOwn, EditsThatTheGraphRefusesNameTheEditAndChangeNothing) {
+  SceneDir d;
+  const auto path = d.write(own(kCube, R"({"group": "g", "children": [{"instance": "i", "object": "cube"}]})",
+                                R"({"time": 0, "node": "/g", "set_transform": {"translate": [1, 0, 0]}},
+                                   {"time": 0, "add": {"group": "h", "children": [{"instance": "i", "object": "cube"},
+                                                                                    {"instance": "i", "object": "cube"}]}},
+                                   {"time": 0, "remove": "/"})"));
+  SceneDocument doc = loadSceneDocument(path);
+  const std::size_t nodes = doc.graph->nodeCount();
+  expectError([&] { (void)applyEdit(doc, doc.edits[0]); }, path, "/edits/0");  // a plain group has no transform
+  expectError([&] { (void)applyEdit(doc, doc.edits[1]); }, path, "/edits/1/add/children/1");
+  expectError([&] { (void)applyEdit(doc, doc.edits[2]); }, path, "/edits/2");
+  (void)doc.graph->commit();
+  EXPECT_EQ(doc.graph->nodeCount(), nodes);
+  EXPECT_FALSE(doc.graph->find("/h"));
+}
+
+// ---- prepared structures ----
+
+TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
+  SceneDir d;
+  const std::string objs = kCube + "," + kTetra + R"(, {"name": "ball", "sphere": {"subdivisions": 2}})";
+  const auto path = d.write(own(objs, R"({"instance": "a", "object": "cube"}, {"instance": "b", "object": "tetra"})"));
+  const SceneDocument built = loadSceneDocument(path);
+  EXPECT_EQ(built.figures.structures_loaded, 0u);
+  const auto files = saveStructures(built, d.scenes / "prepared");
+  ASSERT_EQ(files.size(), 3u);
+  EXPECT_EQ(files[0].filename(), "0_cube.dkdt");
+  EXPECT_EQ(files[1].filename(), "1_tetra.dkdt");
+  const std::string prepared = R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/0_cube.dkdt"},)"
+                               R"({"name": "tetra", "mesh": )" + nlohmann::json::parse(kTetra)["mesh"].dump() +
+                               R"(, "structure": "prepared/1_tetra.dkdt"})";
+  for (const std::string format : {"duplex-scene-v1", "scene-json-v1"}) {
+    SCOPED_TRACE(format);
+    const auto p2 = d.write(R"({"format": ")" + format + R"(", "objects": [)" + prepared + R"(], "instances": [], "nodes": []})",
+                            format + ".json");
+    if (format == std::string("duplex-scene-v1")) {
+      // "instances" is not a key of the own format.
+      expectError([&] { (void)loadSceneDocument(p2); }, p2, "/instances", "unknown key");
+      d.write(own(prepared, ""), format + ".json");
+    }
+    const SceneDocument loaded = loadSceneDocument(p2);
+    EXPECT_EQ(loaded.figures.structures_loaded, 2u);
+    for (int k = 0; k < 2; ++k) {
+      const auto& a = dynamic_cast<const MeshObject&>(*built.graph->library().get(built.objects[k]));
+      const auto& b = dynamic_cast<const MeshObject&>(*loaded.graph->library().get(loaded.objects[k]));
+      EXPECT_EQ(a.tree().prim_indices, b.tree().prim_indices);
+      EXPECT_EQ(a.tree().nodes.size(), b.tree().nodes.size());
+    }
+    SceneDocumentOptions no_structures;
+    no_structures.use_structures = false;
+    EXPECT_EQ(loadSceneDocument(p2, no_structures).figures.structures_loaded, 0u);
+  }
+  // A structure saved for another mesh is refused: the scene file, the entry and the structure file.
+  const auto wrong = d.write(own(R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/1_tetra.dkdt"})", ""),
+                             "wrong.json");
+  expectError([&] { (void)loadSceneDocument(wrong); }, wrong, "/objects/0/structure", "1_tetra.dkdt");
+}
+
+// ---- the registry ----
+
+TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
+  const auto names = ObjectTypeRegistry::builtin().names();
+  EXPECT_EQ(names, (std::vector<std::string>{"mesh", "sphere", "box", "plane"}));
+  ObjectTypeRegistry registry = ObjectTypeRegistry::builtin();
+  expectErrorNaming<InvalidArgument>([&] { registry.add({"mesh", ObjectTypeRegistry::builtin().find("mesh")->reader}); },
+                                     "already registered");
+  expectErrorNaming<InvalidArgument>([&] { registry.add({"name", ObjectTypeRegistry::builtin().find("mesh")->reader}); },
+                                     "name");
+  expectErrorNaming<InvalidArgument>([&] { registry.add({"x", nullptr}); }, "no reader");
+  // A custom type: a tetrahedron of a given edge, built now ("tetra") or deferred ("lazy_tetra").
+  int built_now = 0;
+  auto tetra = [](double edge, const std::string& name) {
+    const float e = static_cast<float>(edge);
+    return std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(
+        {{0, 0, 0}, {e, 0, 0}, {0, e, 0}, {0, 0, e}}, {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}, name)));
+  };
+  registry.add({"tetra", [&](const nlohmann::json& spec, const ObjectSpecContext& ctx) -> ObjectSpecResult {
+                  ctx.onlyKeys(spec, ctx.pointer, {"edge"});
+                  const double edge = ctx.positiveNumber(ctx.member(spec, ctx.pointer, "edge"), ctx.pointer + "/edge");
+                  ++built_now;
+                  return std::shared_ptr<const Object>(tetra(edge, ctx.object_name));
+                }});
+  registry.add({"lazy_tetra", [&](const nlohmann::json& spec, const ObjectSpecContext& ctx) -> ObjectSpecResult {
+                  const double edge = ctx.positiveNumber(ctx.member(spec, ctx.pointer, "edge"), ctx.pointer + "/edge");
+                  return ObjectLibrary::Factory([=] {
+                    if (edge > 100) throw InvalidArgument("edge too long");
+                    return std::shared_ptr<const Object>(tetra(edge, ctx.object_name));
+                  });
+                }});
+  SceneDir d;
+  SceneDocumentOptions options;
+  options.registry = &registry;
+  const auto path = d.write(own(R"({"name": "t", "tetra": {"edge": 2}}, {"name": "l", "lazy_tetra": {"edge": 3}})",
+                                R"({"instance": "a", "object": "t"}, {"instance": "b", "object": "l"})"));
+  const SceneDocument doc = loadSceneDocument(path, options);
+  EXPECT_EQ(built_now, 1);
+  EXPECT_EQ(doc.graph->library().typeName(doc.objects[1]), "lazy_tetra");
+  EXPECT_EQ(doc.graph->library().get(doc.objects[1])->bounds().hi.x, 3.0f);
+  EXPECT_EQ(doc.instances.size(), 2u);
+  expectDocError(d, own(R"({"name": "t", "tetra": {"edge": -2}})", ""), "/objects/0/tetra/edge", "", options);
+  expectDocError(d, own(R"({"name": "t", "tetra": {}})", ""), "/objects/0/tetra", "edge", options);
+  expectDocError(d, own(kCube + R"(, {"name": "l", "lazy_tetra": {"edge": 300}})", ""), "/objects/1/lazy_tetra",
+                 "edge too long", options);
+  // Without the registry, the key is no type at all.
+  expectDocError(d, own(R"({"name": "t", "tetra": {"edge": 2}})", ""), "/objects/0", "no object type");
+  // Not a scene-json-v1 type: v1 files ignore the key.
+  expectDocError(d, v1(R"({"name": "t", "tetra": {"edge": 2}})", ""), "/objects/0", "no object type", options);
+}
+
+// Many small objects: each deferred build runs once, in parallel, before the instances are added.
+TEST(SceneDocumentScale, ThousandsOfInlineObjects) {
+  SceneDir d;
+  nlohmann::json scene = {{"format", "scene-json-v1"}, {"objects", nlohmann::json::array()}, {"instances", nlohmann::json::array()}};
+  const int n = 3000;
+  for (int i = 0; i < n; ++i) {
+    const float o = static_cast<float>(i);
+    scene["objects"].push_back({{"name", "o" + std::to_string(i)},
+                                {"mesh", {{"positions", {o, 0, 0, o + 1, 0, 0, o, 1, 0, o, 0, 1}},
+                                          {"indices", {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3}}}}});
+    scene["instances"].push_back({{"object", "o" + std::to_string(i)}, {"transform", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, i}}});
+  }
+  const auto path = d.write(scene.dump());
+  const SceneDocument doc = loadSceneDocument(path);
+  EXPECT_EQ(doc.instances.size(), std::size_t(n));
+  EXPECT_EQ(doc.graph->library().buildCount(), std::size_t(n));
+  EXPECT_EQ(doc.figures.triangles, std::size_t(4 * n));
+  EXPECT_EQ(doc.graph->worldTransform(doc.instances[17]).translation.z, 17.0);
+  std::printf("%d inline objects: load %.1f ms, build %.1f ms, graph %.1f ms\n", n, doc.figures.load_ms,
+              doc.figures.build_ms, doc.figures.graph_ms);
+}
+
+}  // namespace
+}  // namespace duplex::test
