@@ -64,15 +64,15 @@ struct Touched {
 
 enum class UndoKind : std::uint8_t { Added, Removed, Reparented, Renamed, Transform, Object, Visible, Mask };
 
-/// One edit, with what rollback() needs to restore the state before it.
+/// One edit, with what rollback() needs to restore the state before it. Old transforms and names
+/// go to their own stacks (Impl::undo_locals, undo_names), popped in the same reverse order, so that
+/// a record stays 20 bytes.
 struct Undo {
   UndoKind kind;
   NodeId node;
   NodeId parent = kInvalidNode;  ///< Removed, Reparented: old parent
   NodeId prev = kInvalidNode;    ///< Removed, Reparented: old previous sibling (kInvalidNode: first)
   std::uint32_t value = 0;       ///< Object, Mask, Visible: old value
-  Affine local{};                ///< Transform: old local
-  std::string name{};            ///< Renamed: old name
 };
 
 const char* kindName(NodeKind k) {
@@ -96,12 +96,14 @@ bool sameAffine(const Affine& a, const Affine& b) {
   return a.translation == b.translation;
 }
 
-/// Builds `object` now (deferred objects) so that a failed build rejects the edit.
-void requireObject(const ObjectLibrary& library, const char* call, const std::string& who, ObjectId object) {
+/// Builds `object` now (deferred objects) so that a failed build rejects the edit. `who()` names
+/// the node in the message (built only on failure: edits are on the update path).
+template <class Who>
+void requireObject(const ObjectLibrary& library, const char* call, const Who& who, ObjectId object) {
   try {
     (void)library.get(object);
   } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who + ": " + e.what());
+    throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who() + ": " + e.what());
   }
 }
 
@@ -122,6 +124,8 @@ struct SceneGraph::Impl {
   /// Holds exactly the alive nodes except the root.
   std::unordered_multimap<std::uint64_t, NodeId> name_index;
   std::vector<Undo> undo;
+  std::vector<Affine> undo_locals;      // Transform records' old locals, in edit order
+  std::vector<std::string> undo_names;  // Renamed records' old names, in edit order
   std::vector<NodeId> dirty_roots;
   std::vector<Touched> touched;
   std::vector<NodeId> stack;  // scratch for subtree walks (edits and commit only)
@@ -228,6 +232,8 @@ struct SceneGraph::Impl {
     touched.clear();
     dirty_roots.clear();
     undo.clear();
+    undo_locals.clear();
+    undo_names.clear();
   }
 
   // ---- validation (before any mutation) ----
@@ -249,15 +255,16 @@ struct SceneGraph::Impl {
       throw InvalidArgument(std::string("SceneGraph::") + call + ": parent " + describe(parent) +
                             " is an instance; parents must be groups or transform nodes");
   }
-  static void checkTransform(const char* call, const std::string& who, const Affine& local) {
+  template <class Who>
+  static void checkTransform(const char* call, const Who& who, const Affine& local) {
     if (!local.isFinite())
-      throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who + ": transform is not finite");
-    if (local.isSingular()) throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who + ": transform is singular");
+      throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who() + ": transform is not finite");
+    if (local.isSingular()) throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who() + ": transform is singular");
   }
 
   // ---- edits and commit (defined below) ----
   NodeId add(const ObjectLibrary& library, const char* call, NodeId parent, NewNode nn);
-  void undoOne(Undo& u);
+  void undoOne(const Undo& u);
   /// Recomputes world transforms and effective visibility of `root`'s subtree from its parent's.
   void propagate(NodeId root);
   ChangeSet collectChanges();
@@ -282,7 +289,7 @@ NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, Nod
   if (nodes.size() >= kInvalidNode) throw InvalidArgument(std::string("SceneGraph::") + call + ": node ids exhausted");
   const auto id = static_cast<NodeId>(nodes.size());
   std::string name = checkName(call, parent, id, nn.kind, std::move(nn.name));
-  const std::string who = "new " + std::string(kindName(nn.kind)) + " '" + name + "' under '" + path(parent) + "'";
+  const auto who = [&] { return "new " + std::string(kindName(nn.kind)) + " '" + name + "' under '" + path(parent) + "'"; };
   if (nn.kind != NodeKind::Group) checkTransform(call, who, nn.local);
   if (nn.kind == NodeKind::Instance) requireObject(library, call, who, nn.object);
   // Valid. Reserve first (geometrically) so that the bookkeeping below cannot fail half-way.
@@ -368,9 +375,8 @@ void SceneGraph::rename(NodeId node, std::string name) {
   const Node& n = m.live(node, "rename");
   if (node == kRootNode) throw InvalidArgument("SceneGraph::rename: the root has no name");
   name = m.checkName("rename", n.parent, node, n.kind, std::move(name));
-  Undo u{UndoKind::Renamed, node};
-  u.name = n.name;
-  m.undo.push_back(std::move(u));
+  m.undo_names.push_back(n.name);
+  m.undo.push_back({UndoKind::Renamed, node});
   m.indexErase(node);
   m.nodes[node].name = std::move(name);
   m.indexInsert(node);
@@ -381,10 +387,9 @@ void SceneGraph::setTransform(NodeId node, const Affine& local) {
   const Node& n = m.live(node, "setTransform");
   if (n.kind == NodeKind::Group)
     throw InvalidArgument("SceneGraph::setTransform: " + m.describe(node) + " is a group; only transform and instance nodes have one");
-  Impl::checkTransform("setTransform", m.describe(node), local);
-  Undo u{UndoKind::Transform, node};
-  u.local = n.local;
-  m.undo.push_back(std::move(u));
+  Impl::checkTransform("setTransform", [&] { return m.describe(node); }, local);
+  m.undo_locals.push_back(n.local);
+  m.undo.push_back({UndoKind::Transform, node});
   m.nodes[node].local = local;
   m.markDirty(node);
 }
@@ -393,10 +398,8 @@ void SceneGraph::setObject(NodeId instance, ObjectId object) {
   Impl& m = *impl_;
   const Node& n = m.live(instance, "setObject");
   if (n.kind != NodeKind::Instance) throw InvalidArgument("SceneGraph::setObject: " + m.describe(instance) + " is not an instance");
-  requireObject(*library_, "setObject", m.describe(instance), object);
-  Undo u{UndoKind::Object, instance};
-  u.value = n.object;
-  m.undo.push_back(std::move(u));
+  requireObject(*library_, "setObject", [&] { return m.describe(instance); }, object);
+  m.undo.push_back({UndoKind::Object, instance, kInvalidNode, kInvalidNode, n.object});
   m.touch(instance);
   m.nodes[instance].object = object;
 }
@@ -404,9 +407,7 @@ void SceneGraph::setObject(NodeId instance, ObjectId object) {
 void SceneGraph::setVisible(NodeId node, bool visible) {
   Impl& m = *impl_;
   const Node& n = m.live(node, "setVisible");
-  Undo u{UndoKind::Visible, node};
-  u.value = (n.flags & kVisible) ? 1u : 0u;
-  m.undo.push_back(std::move(u));
+  m.undo.push_back({UndoKind::Visible, node, kInvalidNode, kInvalidNode, (n.flags & kVisible) ? 1u : 0u});
   Node& w = m.nodes[node];
   w.flags = visible ? (w.flags | kVisible) : (w.flags & static_cast<std::uint8_t>(~kVisible));
   m.markDirty(node);
@@ -416,9 +417,7 @@ void SceneGraph::setMask(NodeId instance, std::uint32_t mask) {
   Impl& m = *impl_;
   const Node& n = m.live(instance, "setMask");
   if (n.kind != NodeKind::Instance) throw InvalidArgument("SceneGraph::setMask: " + m.describe(instance) + " is not an instance");
-  Undo u{UndoKind::Mask, instance};
-  u.value = n.mask;
-  m.undo.push_back(std::move(u));
+  m.undo.push_back({UndoKind::Mask, instance, kInvalidNode, kInvalidNode, n.mask});
   m.touch(instance);
   m.nodes[instance].mask = mask;
 }
@@ -510,7 +509,7 @@ ChangeSet SceneGraph::commit() {
   return cs;
 }
 
-void SceneGraph::Impl::undoOne(Undo& u) {
+void SceneGraph::Impl::undoOne(const Undo& u) {
   Node& n = nodes[u.node];
   switch (u.kind) {
     case UndoKind::Added:
@@ -535,10 +534,14 @@ void SceneGraph::Impl::undoOne(Undo& u) {
       break;
     case UndoKind::Renamed:
       indexErase(u.node);
-      n.name = std::move(u.name);
+      n.name = std::move(undo_names.back());
+      undo_names.pop_back();
       indexInsert(u.node);
       break;
-    case UndoKind::Transform: n.local = u.local; break;
+    case UndoKind::Transform:
+      n.local = undo_locals.back();
+      undo_locals.pop_back();
+      break;
     case UndoKind::Object: n.object = u.value; break;
     case UndoKind::Mask: n.mask = u.value; break;
     case UndoKind::Visible:

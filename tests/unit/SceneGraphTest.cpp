@@ -191,9 +191,7 @@ void expectPendingEquals(const SceneGraph& g, const Model& m, const std::string&
     EXPECT_EQ(g.find(p), std::optional<NodeId>(id)) << p;
   }
   EXPECT_EQ(g.instances(), instances);
-  for (NodeId id = 0; id < m.next_id + 3; ++id) {
-    if (!m.has(id)) EXPECT_FALSE(g.contains(id)) << "node " << id;
-  }
+  for (NodeId id = 0; id < m.next_id + 3; ++id) EXPECT_EQ(g.contains(id), m.has(id)) << "node " << id;
 }
 
 /// Committed state of the graph equals the model's from-scratch evaluation.
