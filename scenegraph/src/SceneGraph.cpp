@@ -636,21 +636,20 @@ bool SceneGraph::isVisibleInstance(NodeId id) const {
   return (impl_->live(id, "isVisibleInstance").flags & kEffVisible) != 0;
 }
 
-std::vector<NodeId> SceneGraph::instances() const {
+namespace {
+/// Instance nodes with `flag` set, by id (a scan of the node table: a query, not on the update path).
+std::vector<NodeId> instancesWith(const std::vector<Node>& nodes, std::uint8_t flag) {
   std::vector<NodeId> out;
-  const auto& nodes = impl_->nodes;
   for (std::size_t i = 0; i < nodes.size(); ++i)
-    if (nodes[i].kind == NodeKind::Instance && (nodes[i].flags & kAlive)) out.push_back(static_cast<NodeId>(i));
+    if (nodes[i].kind == NodeKind::Instance && (nodes[i].flags & flag)) out.push_back(static_cast<NodeId>(i));
   return out;
 }
+}  // namespace
 
-std::vector<NodeId> SceneGraph::visibleInstances() const {
-  std::vector<NodeId> out;
-  const auto& nodes = impl_->nodes;
-  for (std::size_t i = 0; i < nodes.size(); ++i)
-    if (nodes[i].kind == NodeKind::Instance && (nodes[i].flags & kEffVisible)) out.push_back(static_cast<NodeId>(i));
-  return out;
-}
+std::vector<NodeId> SceneGraph::instances() const { return instancesWith(impl_->nodes, kAlive); }
+
+// Committed visibility: an instance removed since the last commit is listed until the next one.
+std::vector<NodeId> SceneGraph::visibleInstances() const { return instancesWith(impl_->nodes, kEffVisible); }
 
 std::size_t SceneGraph::nodeCount() const { return impl_->alive; }
 std::uint64_t SceneGraph::commitCount() const { return impl_->commits; }

@@ -38,7 +38,7 @@ struct NodeInfo {
   NodeId id = kInvalidNode;
   NodeKind kind = NodeKind::Group;
   NodeId parent = kInvalidNode;  ///< kInvalidNode for the root
-  std::string_view name;
+  std::string_view name;          ///< valid until the next edit of the graph
   Affine local;                  ///< parent_from_local (identity for groups)
   bool visible = true;           ///< the node's own flag; hidden if it or an ancestor is hidden
   ObjectId object = kInvalidObject;   ///< instances only
@@ -90,10 +90,14 @@ class SceneGraph {
   [[nodiscard]] bool hasPendingEdits() const;
   /// Brings world transforms up to date (only below edited nodes), builds the ChangeSet of the batch,
   /// calls every observer with it (in subscription order) and returns it. With no pending edits,
-  /// returns an empty ChangeSet without calling observers. An observer that throws does not undo the
+  /// returns an empty ChangeSet without calling observers; a batch whose net effect on instances is
+  /// nil (renames, a transform set to its old value) does the same. An empty ChangeSet carries the
+  /// number of the last commit that changed something. An observer that throws does not undo the
   /// commit; the exception propagates after the remaining observers ran.
+  /// Cost: O(edits + nodes below the edited ones + depth per edited node); no scan of the graph.
   ChangeSet commit();
-  /// Undoes every edit since the last commit.
+  /// Undoes every edit since the last commit (children order included). Ids handed out by rolled-back
+  /// additions are not reused.
   void rollback();
 
   // ---- observers ----
@@ -110,19 +114,26 @@ class SceneGraph {
   [[nodiscard]] std::string path(NodeId id) const;
   /// Node ids from the root's child down to `id` (the root excluded).
   [[nodiscard]] std::vector<NodeId> pathIds(NodeId id) const;
+  /// The node at `path` ("/" is the root), or nullopt (also for a malformed path: no leading '/', an
+  /// empty component, a trailing '/'). One hash look-up per component.
   [[nodiscard]] std::optional<NodeId> find(std::string_view path) const;
-  /// world_from_object of an instance (or world_from_local of any node) as of the last commit.
+  /// world_from_object of an instance (or world_from_local of any node) as of the last commit
+  /// (identity for a node added since).
   [[nodiscard]] const Affine& worldTransform(NodeId id) const;
   /// Whether an instance is visible (itself and all ancestors) as of the last commit.
   [[nodiscard]] bool isVisibleInstance(NodeId id) const;
   /// Every instance node that exists (committed or not), sorted by id.
   [[nodiscard]] std::vector<NodeId> instances() const;
-  /// Visible instances as of the last commit, sorted by id.
+  /// Visible instances as of the last commit, sorted by id (an instance removed since is listed
+  /// until the next commit). Scans the node table.
   [[nodiscard]] std::vector<NodeId> visibleInstances() const;
   [[nodiscard]] std::size_t nodeCount() const;
   [[nodiscard]] std::uint64_t commitCount() const;
 
-  /// Bytes the graph holds per instance node (documented in the README).
+  /// Bytes the graph holds per instance node (documented in the README): the node record (local and
+  /// committed world transform, links, object, mask, flags, name in the small-string buffer) plus its
+  /// entry in the (parent, name) index. Names longer than 15 characters and the pending batch's
+  /// transient lists are not counted. Removed nodes keep their slot (ids are never reused).
   [[nodiscard]] static std::size_t bytesPerInstance();
 
  private:
