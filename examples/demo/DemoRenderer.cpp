@@ -1,8 +1,5 @@
 #include "DemoRenderer.h"
 
-#include <duplex/accel/QueryContext.h>
-#include <duplex/accel/RayGenerator.h>
-
 #include <glm/common.hpp>
 #include <glm/exponential.hpp>
 #include <glm/geometric.hpp>
@@ -13,8 +10,8 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <limits>
-#include <vector>
 
 namespace duplex::demo {
 
@@ -24,25 +21,15 @@ using Clock = std::chrono::steady_clock;
 
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
-constexpr std::size_t kRaysPerTask = 1024;
-
-// Calls body(i, ctx) for every i in [0, n) on the current arena, one QueryContext per task.
-template <class Body>
-void forEachRay(std::size_t n, Body&& body) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kRaysPerTask), [&](const tbb::blocked_range<std::size_t>& r) {
-    QueryContext ctx;
-    for (std::size_t i = r.begin(); i != r.end(); ++i) body(i, ctx);
-  });
-}
-
-// Base colour: by library object, varied slightly per instance so that copies stay apart.
-glm::vec3 albedo(const Scene& scene, std::uint32_t instance_id) {
-  static constexpr std::array<glm::vec3, 6> kPalette = {
-      glm::vec3(0.78f, 0.76f, 0.72f), glm::vec3(0.85f, 0.33f, 0.24f), glm::vec3(0.25f, 0.52f, 0.85f),
-      glm::vec3(0.95f, 0.74f, 0.22f), glm::vec3(0.33f, 0.72f, 0.42f), glm::vec3(0.68f, 0.42f, 0.80f)};
-  const std::uint32_t object = scene.instances()[instance_id].object;
-  const std::uint32_t hash = instance_id * 2654435761u;
-  const float tint = 0.82f + 0.18f * static_cast<float>(hash >> 24) / 255.0f;
+// Base colour by library object (file order), varied slightly per instance so that copies stay apart.
+glm::vec3 baseColour(ObjectId object, NodeId instance) {
+  static constexpr std::array<glm::vec3, 12> kPalette = {
+      glm::vec3(0.55f, 0.55f, 0.52f), glm::vec3(0.80f, 0.12f, 0.10f), glm::vec3(0.50f, 0.66f, 0.82f),
+      glm::vec3(0.95f, 0.62f, 0.12f), glm::vec3(0.08f, 0.08f, 0.09f), glm::vec3(0.05f, 0.05f, 0.05f),
+      glm::vec3(0.62f, 0.48f, 0.32f), glm::vec3(1.00f, 0.95f, 0.75f), glm::vec3(0.95f, 0.85f, 0.15f),
+      glm::vec3(0.15f, 0.35f, 0.95f), glm::vec3(0.98f, 0.40f, 0.05f), glm::vec3(0.90f, 0.70f, 0.58f)};
+  const std::uint32_t hash = instance * 2654435761u;
+  const float tint = 0.88f + 0.12f * static_cast<float>(hash >> 24) / 255.0f;
   return kPalette[object % kPalette.size()] * tint;
 }
 
@@ -56,65 +43,91 @@ std::uint8_t toSrgb8(float linear) {
   return static_cast<std::uint8_t>(encoded * 255.0f + 0.5f);
 }
 
+// The normal of a hit, unit length and facing the viewer (surfaces are two-sided).
+glm::vec3 facingNormal(const Hit& h, const Ray& r) {
+  const glm::vec3 n = glm::normalize(h.ng);
+  return glm::dot(n, r.dir) > 0.0f ? -n : n;
+}
+
 }  // namespace
 
-RgbImage render(const Scene& scene, const TopLevel& top, const RenderSettings& settings, RenderStats& stats) {
-  const Box bounds = scene.worldBounds();
-  const std::vector<Ray> rays = primaryRays(bounds, settings.width, settings.height);
-  const std::size_t n = rays.size();
-  const glm::vec3 to_light = glm::normalize(settings.to_light);
-  // Shadow rays start this far off the surface (world units), so they do not hit their own triangle.
-  const float offset = 1e-4f * glm::length(bounds.extent());
+DemoRenderer::DemoRenderer(const SceneTracer& tracer, const PinholeCamera& camera, const RenderSettings& settings)
+    : tracer_(tracer), settings_(settings) {
+  const std::size_t n = static_cast<std::size_t>(settings.width) * settings.height;
+  primary_.resize(n);
+  const glm::vec3 eye(camera.eye);
+  for (std::uint32_t y = 0; y < settings.height; ++y)
+    for (std::uint32_t x = 0; x < settings.width; ++x)
+      primary_[static_cast<std::size_t>(y) * settings.width + x] =
+          Ray{eye, 0.0f, camera.direction(x, y, settings.width, settings.height), std::numeric_limits<float>::infinity()};
+  hits_.resize(n);
+}
 
-  // Primary rays: closest hits.
-  std::vector<Hit> hits(n);
+RgbImage DemoRenderer::render(FrameStats& stats) {
+  const std::size_t n = primary_.size();
+  const glm::vec3 to_light = glm::normalize(settings_.to_light);
+  // Shadow rays start this far off the surface (world units), so they do not hit their own triangle.
+  const Box bounds = tracer_.bounds();
+  const float offset = bounds.empty() ? 1e-4f : 1e-5f * glm::length(bounds.extent());
+
+  // Base colours of this commit's instances, looked up per hit by node id.
+  const SceneGraph& graph = tracer_.graph();
+  colour_of_node_.assign(colour_of_node_.size(), glm::vec3(0.0f));
+  for (const NodeId id : graph.visibleInstances()) {
+    if (id >= colour_of_node_.size()) colour_of_node_.resize(id + 1, glm::vec3(0.0f));
+    colour_of_node_[id] = baseColour(graph.node(id).object, id);
+  }
+
+  // Primary rays: closest hits, one batch.
   auto t0 = Clock::now();
-  forEachRay(n, [&](std::size_t i, QueryContext& ctx) { hits[i] = top.intersect(rays[i], ctx); });
+  tracer_.intersect(primary_, hits_);
   stats.primary_ms = msSince(t0);
   stats.primary_rays = n;
 
-  // Facing normals and the shadow rays of the surfaces that face the light.
-  std::vector<glm::vec3> normals(n, glm::vec3(0.0f));
-  std::vector<Ray> shadow_rays(n);
-  std::vector<std::uint8_t> needs_shadow(n, 0);
-  forEachRay(n, [&](std::size_t i, QueryContext&) {
-    const Hit& h = hits[i];
-    if (!h.valid()) return;
-    glm::vec3 nrm = glm::normalize(h.ng);
-    if (glm::dot(nrm, rays[i].dir) > 0.0f) nrm = -nrm;  // two-sided: face the viewer
-    normals[i] = nrm;
-    if (glm::dot(nrm, to_light) <= 0.0f) return;
-    const glm::vec3 p = rays[i].origin + h.t * rays[i].dir;
-    shadow_rays[i] = Ray{p + offset * nrm, 0.0f, to_light, std::numeric_limits<float>::infinity()};
-    needs_shadow[i] = 1;
-  });
-
-  // Shadow rays: occlusion only.
-  std::vector<std::uint8_t> in_shadow(n, 0);
+  // Shadow rays of the hits that face the light, compacted into one batch.
+  shadow_.clear();
+  shadow_pixel_.clear();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Hit& h = hits_[i];
+    if (!h.valid()) continue;
+    const glm::vec3 nrm = facingNormal(h, primary_[i]);
+    if (glm::dot(nrm, to_light) <= 0.0f) continue;
+    const glm::vec3 p = primary_[i].origin + h.t * primary_[i].dir;
+    shadow_.push_back(Ray{p + offset * nrm, 0.0f, to_light, std::numeric_limits<float>::infinity()});
+    shadow_pixel_.push_back(i);
+  }
+  blocked_.assign(shadow_.size(), 0);
   t0 = Clock::now();
-  forEachRay(n, [&](std::size_t i, QueryContext& ctx) {
-    if (needs_shadow[i]) in_shadow[i] = top.occluded(shadow_rays[i], ctx) ? 1 : 0;
-  });
+  tracer_.occluded(shadow_, blocked_);
   stats.shadow_ms = msSince(t0);
+  stats.shadow_rays = shadow_.size();
+  stats.shadowed = static_cast<std::size_t>(std::count(blocked_.begin(), blocked_.end(), std::uint8_t{1}));
 
-  // Shade: sky for misses, ambient plus Lambert (n.l on the facing normal) where the light arrives.
-  RgbImage image{settings.width, settings.height, std::vector<std::uint8_t>(n * 3)};
-  forEachRay(n, [&](std::size_t i, QueryContext&) {
+  // Light arriving per pixel: n.l where the shadow ray is free, else 0.
+  std::vector<float> direct(n, 0.0f);
+  for (std::size_t k = 0; k < shadow_pixel_.size(); ++k) {
+    const std::size_t i = shadow_pixel_[k];
+    if (!blocked_[k]) direct[i] = glm::dot(facingNormal(hits_[i], primary_[i]), to_light);
+  }
+
+  // Shade: sky for misses, ambient (brighter towards +y) plus Lambert.
+  RgbImage image{settings_.width, settings_.height, std::vector<std::uint8_t>(n * 3)};
+  std::size_t primary_hits = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Hit& h = hits_[i];
     glm::vec3 colour;
-    if (!hits[i].valid()) {
-      colour = sky(rays[i].dir);
+    if (!h.valid()) {
+      colour = sky(primary_[i].dir);
     } else {
-      const glm::vec3& nrm = normals[i];
-      const float ambient = 0.10f + 0.12f * (0.5f + 0.5f * nrm.y);
-      const float direct = (needs_shadow[i] && !in_shadow[i]) ? glm::dot(nrm, to_light) : 0.0f;
-      colour = albedo(scene, hits[i].instance_id) * (ambient + 0.85f * direct);
+      ++primary_hits;
+      const glm::vec3 nrm = facingNormal(h, primary_[i]);
+      const float ambient = 0.12f + 0.14f * (0.5f + 0.5f * nrm.y);
+      const glm::vec3 base = h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
+      colour = base * (ambient + 0.85f * direct[i]);
     }
     for (int c = 0; c < 3; ++c) image.pixels[i * 3 + c] = toSrgb8(colour[c]);
-  });
-
-  stats.primary_hits = static_cast<std::size_t>(std::count_if(hits.begin(), hits.end(), [](const Hit& h) { return h.valid(); }));
-  stats.shadow_rays = static_cast<std::size_t>(std::count(needs_shadow.begin(), needs_shadow.end(), 1));
-  stats.shadowed = static_cast<std::size_t>(std::count(in_shadow.begin(), in_shadow.end(), 1));
+  }
+  stats.primary_hits = primary_hits;
   return image;
 }
 

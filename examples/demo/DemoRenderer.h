@@ -1,41 +1,65 @@
 #pragma once
 /// \file DemoRenderer.h
-/// A small shading pass over the two-level structure: primary rays from the contract camera
-/// (duplex::primaryRays), Lambert shading on the world-space geometric normal, one shadow ray per
-/// lit hit (TopLevel::occluded).
+/// A small shading pass through a SceneTracer and its batch queries: primary rays from a fixed
+/// camera (SceneTracer::intersect over all pixels), Lambert shading on the world-space geometric
+/// normal, one shadow ray per lit hit (SceneTracer::occluded over the lit pixels). The base colour
+/// comes from the hit instance's library object, tinted slightly per instance.
 
 #include "PngWriter.h"
 
-#include <duplex/accel/TopLevel.h>
-#include <duplex/scenegraph/Scene.h>
+#include <duplex/accel/Hit.h>
+#include <duplex/accel/Ray.h>
+#include <duplex/accel/RayGenerator.h>
+#include <duplex/scenegraph/SceneTracer.h>
 
 #include <glm/vec3.hpp>
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 namespace duplex::demo {
 
 struct RenderSettings {
-  std::uint32_t width = 960;
-  std::uint32_t height = 540;
+  std::uint32_t width = 640;
+  std::uint32_t height = 400;
   /// Direction towards the (distant) light, world space; need not be unit length.
-  glm::vec3 to_light{-0.45f, 1.0f, 0.35f};
+  glm::vec3 to_light{-0.35f, 1.0f, 0.45f};
 };
 
-/// Figures of one render. Times are wall-clock milliseconds.
-struct RenderStats {
+/// Figures of one frame. Times are wall-clock milliseconds of the batch queries alone.
+struct FrameStats {
   std::size_t primary_rays = 0;
   std::size_t primary_hits = 0;
   double primary_ms = 0.0;
   std::size_t shadow_rays = 0;
   std::size_t shadowed = 0;
   double shadow_ms = 0.0;
+
+  [[nodiscard]] std::size_t rays() const { return primary_rays + shadow_rays; }
+  [[nodiscard]] double traceMs() const { return primary_ms + shadow_ms; }
 };
 
-/// Renders `scene` (already built into `top`) with the camera of `duplex rays --primary`. Runs on
-/// the calling TBB arena; one QueryContext per task.
-[[nodiscard]] RgbImage render(const Scene& scene, const TopLevel& top, const RenderSettings& settings,
-                              RenderStats& stats);
+/// Renders frames of the scene a tracer sees. The camera and the primary rays are fixed at
+/// construction; buffers are reused from frame to frame. Call render() between commits of the
+/// graph (it reads the graph for colours), from one thread; the queries run in parallel on the
+/// calling TBB arena.
+class DemoRenderer {
+ public:
+  DemoRenderer(const SceneTracer& tracer, const PinholeCamera& camera, const RenderSettings& settings);
+
+  /// Traces and shades the scene as of the graph's last commit.
+  [[nodiscard]] RgbImage render(FrameStats& stats);
+
+ private:
+  const SceneTracer& tracer_;
+  RenderSettings settings_;
+  std::vector<Ray> primary_;  ///< one per pixel, row-major from the top-left pixel
+  std::vector<Hit> hits_;
+  std::vector<Ray> shadow_;   ///< towards the light, for the lit pixels listed in shadow_pixel_
+  std::vector<std::size_t> shadow_pixel_;
+  std::vector<std::uint8_t> blocked_;
+  std::vector<glm::vec3> colour_of_node_;  ///< base colour per node id (instances of the last commit)
+};
 
 }  // namespace duplex::demo

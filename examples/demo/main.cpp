@@ -1,85 +1,298 @@
-// duplex_demo: renders a scene shipped with the repository (examples/scenes/demo.json) to a PNG
-// and prints how long loading, building and tracing took.
-//   duplex_demo [--scene S.json] [--out out/demo.png] [--width W] [--height H] [--threads N]
+// duplex_demo: the dynamic demo. Loads a scene file (by default examples/scenes/car.json, a car
+// whose doors open, wipers sweep and wheels turn while it drives; any duplex-scene-v1 or
+// scene-json-v1 file), renders it through a SceneTracer before the timed edits, plays the edits
+// commit by commit (edits with equal times form one commit), traces every frame, and renders the
+// final frame. Prints build, per-commit update and per-frame trace figures, then one line of JSON.
+//   duplex_demo [--scene S.json] [--out PNG] [--before PNG] [--frames DIR] [--width W] [--height H]
+//               [--threads N] [--distance F] [--probe NODE_PATH]...
 
+#include "DemoCamera.h"
 #include "DemoRenderer.h"
 #include "PngWriter.h"
 
 #include <duplex/accel/Error.h>
-#include <duplex/accel/TopLevel.h>
-#include <duplex/scenegraph/SceneFile.h>
+#include <duplex/scenegraph/SceneDocument.h>
+#include <duplex/scenegraph/SceneTracer.h>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <iostream>
 #include <optional>
+#include <string>
+#include <vector>
 
 namespace {
 
+namespace fs = std::filesystem;
+using duplex::NodeId;
 using Clock = std::chrono::steady_clock;
 
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 double mraysPerSecond(std::size_t rays, double ms) { return ms > 0.0 ? static_cast<double>(rays) / (ms * 1e3) : 0.0; }
 
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
+// Figures rounded for the JSON line (microsecond resolution is plenty for milliseconds).
+double round4(double x) { return std::round(x * 1e4) / 1e4; }
+
+struct Options {
+  fs::path scene = DUPLEX_DEMO_SCENE;
+  fs::path out;     // final frame; default out/<stem>_after.png (out/<stem>.png without edits)
+  fs::path before;  // first frame; default beside `out`: <stem>_before.png
+  fs::path frames;  // every frame as frame_NNN.png when set
+  duplex::demo::RenderSettings render;
+  int threads = tbb::info::default_concurrency();
+  double distance = 0.7;
+  std::vector<std::string> probes;
+};
+
+// One commit of the animation: the edits of one time.
+struct CommitFigures {
+  double time = 0.0;
+  std::size_t edits = 0;
+  std::size_t instances_changed = 0;  // moved + appeared + disappeared + object changed
+  double update_ms = 0.0;             // wall time from the first edit call until queries see the new scene
+  double tracer_ms = 0.0;             // SceneTracer::lastUpdateMs: the top-level update inside the commit
+  bool full_rebuild = false;
+};
+
+// A point of the scene picked before and after the edits: the centre of an instance's world box as
+// loaded, carried to the end by the motion of the instance's top-level ancestor (the child of the
+// root it belongs to, e.g. /car), not by the instance's own motion. With a door as the probe, the
+// pick changes from the door to what is behind it once the door has opened, wherever the car drove.
+struct Probe {
+  std::string path;
+  NodeId anchor = duplex::kInvalidNode;
+  duplex::Affine anchor_from_world;  // at the start
+  glm::dvec3 point_ws{0.0};          // at the start
+  std::optional<glm::dvec2> pixel_before, pixel_after;
+  std::string hit_before, hit_after;  // node paths of the nearest hits; "" for a miss
+};
+
+std::string pickPath(const duplex::SceneTracer& tracer, const duplex::PinholeCamera& camera,
+                     const std::optional<glm::dvec2>& pixel, const duplex::demo::RenderSettings& s) {
+  if (!pixel) return {};
+  const std::vector<duplex::SceneHit> hits = tracer.pick(camera, pixel->x, pixel->y, s.width, s.height);
+  return hits.empty() ? std::string() : tracer.graph().path(hits.front().instance);
+}
+
+Probe startProbe(const duplex::SceneGraph& graph, const std::string& path) {
+  const std::optional<NodeId> id = graph.find(path);
+  if (!id || graph.node(*id).kind != duplex::NodeKind::Instance)
+    throw duplex::InvalidArgument("--probe " + path + ": no instance node with that path in the scene");
+  Probe p;
+  p.path = path;
+  p.anchor = graph.pathIds(*id).front();
+  p.anchor_from_world = graph.worldTransform(p.anchor).inverse();
+  const duplex::Box box_ws = graph.worldTransform(*id).apply(graph.library().get(graph.node(*id).object)->bounds());
+  p.point_ws = glm::dvec3(box_ws.center());
+  return p;
+}
+
+nlohmann::json pixelJson(const std::optional<glm::dvec2>& px) {
+  return px ? nlohmann::json::array({round4(px->x), round4(px->y)}) : nlohmann::json(nullptr);
+}
+
+fs::path framePath(const fs::path& dir, std::size_t frame) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%03zu.png", frame);
+  return dir / name;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::filesystem::path scene_path = DUPLEX_DEMO_SCENE;
-  std::filesystem::path out_path = "out/demo.png";
-  duplex::demo::RenderSettings settings;
-  int threads = tbb::info::default_concurrency();
-
-  CLI::App app{"Renders a scene-json-v1 scene to a PNG (Lambert shading and shadow rays) and prints the figures.",
+  Options opt;
+  CLI::App app{"Plays a scene's timed edits through a SceneTracer: renders PNGs before and after them (Lambert "
+               "shading, shadow rays) and prints build, update and trace figures, then one JSON line.",
                "duplex_demo"};
-  app.add_option("--scene", scene_path, "Scene to render")->capture_default_str();
-  app.add_option("--out", out_path, "PNG to write (folders are created)")->capture_default_str();
-  app.add_option("--width", settings.width, "Image width in pixels")->check(CLI::Range(1u, 16384u))->capture_default_str();
-  app.add_option("--height", settings.height, "Image height in pixels")->check(CLI::Range(1u, 16384u))->capture_default_str();
-  app.add_option("--threads", threads, "Worker threads (default: all hardware threads)")->check(CLI::Range(1, 4096));
+  app.add_option("--scene", opt.scene, "Scene file (duplex-scene-v1 or scene-json-v1)")->capture_default_str();
+  app.add_option("--out", opt.out, "PNG of the final frame (default out/<scene>_after.png; out/<scene>.png without edits)");
+  app.add_option("--before", opt.before, "PNG of the first frame, before the edits (default: <scene>_before.png beside --out)");
+  app.add_option("--frames", opt.frames, "Also write every frame to DIR/frame_NNN.png");
+  app.add_option("--width", opt.render.width, "Image width in pixels")->check(CLI::Range(1u, 16384u))->capture_default_str();
+  app.add_option("--height", opt.render.height, "Image height in pixels")->check(CLI::Range(1u, 16384u))->capture_default_str();
+  app.add_option("--threads", opt.threads, "Worker threads (default: all hardware threads)")->check(CLI::Range(1, 4096));
+  app.add_option("--distance", opt.distance, "Camera distance in diagonals of the (non-flat) scene as loaded")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--probe", opt.probes, "Instance node path: pick its centre before and after the edits (repeatable)");
   CLI11_PARSE(app, argc, argv);
 
   try {
-    tbb::global_control thread_limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
-    tbb::task_arena arena(threads);
+    tbb::global_control thread_limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(opt.threads));
+    tbb::task_arena arena(opt.threads);
 
-    duplex::SceneLoadReport load;
-    std::optional<duplex::Scene> scene;
-    duplex::TopLevel top;
+    duplex::SceneDocument doc;
+    std::optional<duplex::SceneTracer> tracer;
     double top_build_ms = 0.0;
-    duplex::demo::RenderStats stats;
-    duplex::demo::RgbImage image;
     arena.execute([&] {
-      scene.emplace(duplex::loadScene(scene_path, {}, &load));
-      if (scene->instances().empty()) throw duplex::InvalidArgument(scene_path.string() + ": scene has no instances");
+      doc = duplex::loadSceneDocument(opt.scene);
       const auto t0 = Clock::now();
-      top.build(scene->instanceDescs());
+      tracer.emplace(*doc.graph);
       top_build_ms = msSince(t0);
-      image = duplex::demo::render(*scene, top, settings, stats);
     });
-    duplex::demo::writePng(out_path, image);
+    duplex::SceneGraph& graph = *doc.graph;
+    if (graph.visibleInstances().empty())
+      throw duplex::InvalidArgument(opt.scene.string() + ": scene has no visible instances");
 
-    const double hit_percent = 100.0 * static_cast<double>(stats.primary_hits) / static_cast<double>(stats.primary_rays);
-    std::printf("Duplex demo: %s\n", scene_path.string().c_str());
-    std::printf("  scene    %zu objects, %zu instances, %zu triangles in the library\n", scene->objectCount(),
-                scene->instances().size(), load.triangles);
-    std::printf("  load     %8.2f ms  (scene parse + mesh files)\n", load.load_ms);
-    std::printf("  build    %8.2f ms  (bottom levels %.2f ms + top level %.2f ms)\n", load.build_ms + top_build_ms,
-                load.build_ms, top_build_ms);
-    std::printf("  primary  %8.2f ms  %zu rays, %.2f Mrays/s, %.1f%% hit\n", stats.primary_ms, stats.primary_rays,
-                mraysPerSecond(stats.primary_rays, stats.primary_ms), hit_percent);
-    std::printf("  shadow   %8.2f ms  %zu rays, %.2f Mrays/s, %zu blocked\n", stats.shadow_ms, stats.shadow_rays,
-                mraysPerSecond(stats.shadow_rays, stats.shadow_ms), stats.shadowed);
-    std::printf("  threads  %d\n", threads);
-    std::printf("  image    %s (%u x %u)\n", out_path.string().c_str(), image.width, image.height);
+    const bool animated = !doc.edits.empty();
+    const std::string stem = opt.scene.stem().string();
+    if (opt.out.empty()) opt.out = fs::path("out") / (animated ? stem + "_after.png" : stem + ".png");
+    if (opt.before.empty()) opt.before = opt.out.parent_path() / (stem + "_before.png");
+
+    const duplex::PinholeCamera camera = duplex::demo::frameCamera(duplex::demo::subjectBounds(graph), opt.distance);
+    std::vector<Probe> probes;
+    for (const std::string& path : opt.probes) {
+      probes.push_back(startProbe(graph, path));
+      Probe& p = probes.back();
+      p.pixel_before = duplex::demo::project(camera, p.point_ws, opt.render.width, opt.render.height);
+      p.hit_before = pickPath(*tracer, camera, p.pixel_before, opt.render);
+    }
+
+    std::printf("Duplex demo: %s (%s)\n", opt.scene.string().c_str(), doc.format.c_str());
+    std::printf("  scene    %zu objects, %zu instances (%zu nodes), %zu triangles in the library, %zu timed edits\n",
+                doc.figures.objects, doc.figures.instances, doc.figures.nodes, doc.figures.triangles, doc.edits.size());
+    std::printf("  load     %8.3f ms  (scene parse + mesh files)\n", doc.figures.load_ms);
+    std::printf("  build    %8.3f ms  (bottom levels %.3f ms + top level %.3f ms; graph %.3f ms)\n",
+                doc.figures.build_ms + top_build_ms, doc.figures.build_ms, top_build_ms, doc.figures.graph_ms);
+    std::printf("  render   %u x %u, %d threads, camera at %.2f diagonals\n", opt.render.width, opt.render.height,
+                opt.threads, opt.distance);
+
+    duplex::demo::DemoRenderer renderer(*tracer, camera, opt.render);
+    std::vector<duplex::demo::FrameStats> frames;
+    std::vector<CommitFigures> commits;
+    duplex::demo::RgbImage image;
+
+    // Traces the current frame, writes the PNGs asked for, prints its line.
+    const auto traceFrame = [&](const CommitFigures* commit) {
+      duplex::demo::FrameStats stats;
+      arena.execute([&] { image = renderer.render(stats); });
+      const std::size_t index = frames.size();
+      frames.push_back(stats);
+      if (!opt.frames.empty()) duplex::demo::writePng(framePath(opt.frames, index), image);
+      if (commit) {
+        std::printf("  frame %3zu t=%5.2f s  %2zu edits %3zu instances  update %7.3f ms (top level %6.3f ms%s)", index,
+                    commit->time, commit->edits, commit->instances_changed, commit->update_ms, commit->tracer_ms,
+                    commit->full_rebuild ? ", full rebuild" : "");
+      } else {
+        std::printf("  frame %3zu t= 0.00 s  as loaded %48s", index, "");
+      }
+      std::printf("  trace %7.2f ms  %.2f Mrays/s\n", stats.traceMs(), mraysPerSecond(stats.rays(), stats.traceMs()));
+    };
+
+    traceFrame(nullptr);
+    if (animated) duplex::demo::writePng(opt.before, image);
+
+    // Play the edits: one commit per distinct time, then one frame.
+    for (std::size_t i = 0; i < doc.edits.size();) {
+      std::size_t j = i;
+      while (j < doc.edits.size() && doc.edits[j].time == doc.edits[i].time) ++j;
+      CommitFigures c;
+      c.time = doc.edits[i].time;
+      c.edits = j - i;
+      const auto t0 = Clock::now();
+      for (std::size_t k = i; k < j; ++k) (void)duplex::applyEdit(doc, doc.edits[k]);
+      duplex::ChangeSet changes;
+      arena.execute([&] { changes = graph.commit(); });  // the tracer updates inside commit()
+      c.update_ms = msSince(t0);
+      c.tracer_ms = tracer->lastUpdateMs();
+      c.full_rebuild = tracer->stats().last_commit_full_rebuild;
+      c.instances_changed =
+          changes.moved.size() + changes.appeared.size() + changes.disappeared.size() + changes.object_changed.size();
+      commits.push_back(c);
+      traceFrame(&commits.back());
+      i = j;
+    }
+    duplex::demo::writePng(opt.out, image);
+
+    for (Probe& p : probes) {
+      if (graph.contains(p.anchor)) {
+        const glm::dvec3 point_ws = (graph.worldTransform(p.anchor) * p.anchor_from_world).point(p.point_ws);
+        p.pixel_after = duplex::demo::project(camera, point_ws, opt.render.width, opt.render.height);
+        p.hit_after = pickPath(*tracer, camera, p.pixel_after, opt.render);
+      }
+    }
+
+    // Summary.
+    std::vector<double> update_ms, tracer_ms, trace_ms;
+    std::size_t rays = 0;
+    double all_trace_ms = 0.0;
+    for (const CommitFigures& c : commits) {
+      update_ms.push_back(c.update_ms);
+      tracer_ms.push_back(c.tracer_ms);
+    }
+    for (const auto& f : frames) {
+      trace_ms.push_back(f.traceMs());
+      rays += f.rays();
+      all_trace_ms += f.traceMs();
+    }
+    const double update_max = update_ms.empty() ? 0.0 : *std::max_element(update_ms.begin(), update_ms.end());
+    const double mrays = mraysPerSecond(rays, all_trace_ms);
+    if (!commits.empty())
+      std::printf("  update   median %.3f ms, max %.3f ms per commit (first edit call until queries see it); "
+                  "top level median %.3f ms\n",
+                  median(update_ms), update_max, median(tracer_ms));
+    std::printf("  trace    median %.2f ms per frame over %zu frames, %.2f Mrays/s (primary + shadow rays)\n",
+                median(trace_ms), frames.size(), mrays);
+    for (const Probe& p : probes)
+      std::printf("  probe    %s: before %s, after %s\n", p.path.c_str(), p.hit_before.empty() ? "(miss)" : p.hit_before.c_str(),
+                  p.hit_after.empty() ? "(miss)" : p.hit_after.c_str());
+    if (animated) std::printf("  image    %s (before), ", opt.before.string().c_str());
+    else std::printf("  image    ");
+    std::printf("%s (%u x %u)\n", opt.out.string().c_str(), image.width, image.height);
+
+    nlohmann::json j;
+    j["scene"] = opt.scene.string();
+    j["format"] = doc.format;
+    j["width"] = opt.render.width;
+    j["height"] = opt.render.height;
+    j["threads"] = opt.threads;
+    j["objects"] = doc.figures.objects;
+    j["instances"] = doc.figures.instances;
+    j["triangles"] = doc.figures.triangles;
+    j["load_ms"] = round4(doc.figures.load_ms);
+    j["bottom_build_ms"] = round4(doc.figures.build_ms);
+    j["top_build_ms"] = round4(top_build_ms);
+    j["build_ms"] = round4(doc.figures.build_ms + top_build_ms);
+    j["edits"] = doc.edits.size();
+    j["commits"] = commits.size();
+    j["frames"] = frames.size();
+    j["update_ms_median"] = round4(median(update_ms));
+    j["update_ms_max"] = round4(update_max);
+    j["top_update_ms_median"] = round4(median(tracer_ms));
+    j["update_ms"] = nlohmann::json::array();
+    for (const double ms : update_ms) j["update_ms"].push_back(round4(ms));
+    j["trace_ms_median"] = round4(median(trace_ms));
+    j["rays"] = rays;
+    j["mrays_per_s"] = round4(mrays);
+    j["before"] = animated ? nlohmann::json(opt.before.string()) : nlohmann::json(nullptr);
+    j["after"] = opt.out.string();
+    j["probes"] = nlohmann::json::array();
+    for (const Probe& p : probes)
+      j["probes"].push_back({{"node", p.path},
+                             {"pixel_before", pixelJson(p.pixel_before)},
+                             {"pixel_after", pixelJson(p.pixel_after)},
+                             {"hit_before", p.hit_before},
+                             {"hit_after", p.hit_after}});
+    std::cout << j.dump() << std::endl;
     return 0;
   } catch (const duplex::Error& e) {
     std::cerr << "duplex_demo: error: " << e.what() << '\n';
