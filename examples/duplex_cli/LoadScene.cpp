@@ -1,15 +1,19 @@
 #include "LoadScene.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/Hit.h>
+#include <duplex/objects/MeshObject.h>
 
+#include <algorithm>
 #include <exception>
+#include <new>
 #include <string>
 
 namespace duplex::cli {
 
-Scene loadSceneNamed(const std::filesystem::path& path, SceneLoadReport* report) {
+SceneDocument loadDocumentNamed(const std::filesystem::path& path, const SceneDocumentOptions& options) {
   try {
-    return loadScene(path, {}, report);
+    return loadSceneDocument(path, options);
   } catch (const Error&) {
     throw;  // already names the file
   } catch (const std::bad_alloc&) {
@@ -17,6 +21,32 @@ Scene loadSceneNamed(const std::filesystem::path& path, SceneLoadReport* report)
   } catch (const std::exception& e) {
     throw FileError(path.string() + ": " + e.what());
   }
+}
+
+InstanceIds::InstanceIds(const SceneDocument& doc) {
+  NodeId largest = 0;
+  for (const NodeId node : doc.instances) largest = std::max(largest, node);
+  by_node_.assign(doc.instances.empty() ? 0 : std::size_t{largest} + 1, kInvalidId);
+  for (std::size_t i = 0; i < doc.instances.size(); ++i) by_node_[doc.instances[i]] = static_cast<std::uint32_t>(i);
+}
+
+Box visibleWorldBounds(const SceneDocument& doc) {
+  const SceneGraph& graph = *doc.graph;
+  Box bounds;
+  for (const NodeId node : doc.instances)
+    if (graph.isVisibleInstance(node))
+      bounds.extend(graph.worldTransform(node).apply(graph.library().get(graph.node(node).object)->bounds()));
+  return bounds;
+}
+
+std::size_t instancedTriangles(const SceneDocument& doc) {
+  const SceneGraph& graph = *doc.graph;
+  std::size_t n = 0;
+  for (const NodeId node : doc.instances) {
+    const auto object = graph.library().get(graph.node(node).object);
+    if (const auto* mesh = dynamic_cast<const MeshObject*>(object.get())) n += mesh->mesh().triangleCount();
+  }
+  return n;
 }
 
 }  // namespace duplex::cli

@@ -1,16 +1,48 @@
 #pragma once
 /// \file LoadScene.h
-/// duplex::loadScene with every failure reported as a duplex::FileError naming the scene file.
+/// Scene files for the tool's commands: duplex::loadSceneDocument (scene-json-v1 and
+/// duplex-scene-v1) with every failure reported as a duplex::FileError naming the scene file, and
+/// the hit-file view of a loaded document (instance ids, world bounds, triangle counts).
 
-#include <duplex/scenegraph/SceneFile.h>
+#include <duplex/accel/Box.h>
+#include <duplex/scenegraph/SceneDocument.h>
 
+#include <cstddef>
+#include <cstdint>
 #include <filesystem>
+#include <vector>
 
 namespace duplex::cli {
 
-/// Same as duplex::loadScene with default options. Some failures reach callers of loadScene as
-/// other exceptions (e.g. nlohmann's out_of_range for a number such as 1e999); they are rethrown
-/// as FileError("<file>: <what>") so that the tool's message always names the file.
-[[nodiscard]] Scene loadSceneNamed(const std::filesystem::path& path, SceneLoadReport* report = nullptr);
+/// Same as duplex::loadSceneDocument. Some failures reach callers as other exceptions (e.g.
+/// nlohmann's out_of_range for a number such as 1e999); they are rethrown as
+/// FileError("<file>: <what>") so that the tool's message always names the file.
+[[nodiscard]] SceneDocument loadDocumentNamed(const std::filesystem::path& path,
+                                              const SceneDocumentOptions& options = {});
+
+/// The hit file's instance ids of a document's instance nodes. The id of an instance is its
+/// position in SceneDocument::instances: for scene-json-v1 the position in "instances" (the
+/// interchange contract); for duplex-scene-v1 the position in depth-first file order of the node
+/// tree, hidden instances included (they are never hit, but keep their place).
+class InstanceIds {
+ public:
+  explicit InstanceIds(const SceneDocument& doc);
+  /// The hit-file id of node `node`; kInvalidId for kInvalidId (a miss) and for nodes that are not
+  /// instances of the document (none is hit while the graph is not edited).
+  [[nodiscard]] std::uint32_t of(std::uint32_t node) const {
+    return node < by_node_.size() ? by_node_[node] : 0xFFFFFFFFu;
+  }
+
+ private:
+  std::vector<std::uint32_t> by_node_;
+};
+
+/// Union of the world boxes of the visible instances as of the last commit (each object's box
+/// mapped by its world_from_object), in the order of SceneDocument::instances. Empty without any.
+[[nodiscard]] Box visibleWorldBounds(const SceneDocument& doc);
+
+/// Triangles as the rays see them: the mesh triangles of every instance (hidden ones included),
+/// summed over instances.
+[[nodiscard]] std::size_t instancedTriangles(const SceneDocument& doc);
 
 }  // namespace duplex::cli

@@ -11,7 +11,9 @@
 namespace duplex::cli {
 
 struct RaysOptions {
-  std::filesystem::path scene;  ///< scene-json-v1 file; only its world bounds are used
+  /// scene-json-v1 or duplex-scene-v1 file; only its world bounds (the union of its visible
+  /// instances' world boxes) are used
+  std::filesystem::path scene;
   std::filesystem::path out;    ///< ray file to write
   /// Exactly one of the two sets: primary rays of a width x height image (duplex::primaryRays) or
   /// `random_count` random rays from `seed` (duplex::randomRays).
@@ -20,7 +22,7 @@ struct RaysOptions {
 };
 
 /// Writes the ray file and returns {"rays": N, "out": PATH}. Throws duplex::Error for bad input
-/// (including a scene without instances, which has no bounds to aim at).
+/// (including a scene without visible instances, which has no bounds to aim at).
 [[nodiscard]] nlohmann::ordered_json runRays(const RaysOptions& options);
 
 }  // namespace duplex::cli

@@ -1,7 +1,8 @@
 #pragma once
 /// \file TraceCommand.h
-/// `duplex trace`: load a scene-json-v1 file, build both levels, trace a ray file, write a hit
-/// file, and report the figures as one JSON object.
+/// `duplex trace`: load a scene (scene-json-v1 or duplex-scene-v1) into a SceneGraph, build both
+/// levels (SceneTracer), trace a ray file with the tracer's batch queries, write a hit file, and
+/// report the figures as one JSON object.
 
 #include <nlohmann/json.hpp>
 
@@ -11,7 +12,9 @@
 namespace duplex::cli {
 
 struct TraceOptions {
-  std::filesystem::path scene;  ///< scene-json-v1 file
+  /// scene-json-v1 or duplex-scene-v1 file (read by loadSceneDocument; the latter's timed edits
+  /// are not applied: the scene is traced as loaded).
+  std::filesystem::path scene;
   std::filesystem::path rays;   ///< ray file (32-byte records)
   std::filesystem::path hits;   ///< hit file to write (20-byte records, one per ray, same order)
   /// Worker threads for loading, building and tracing; 0 means all hardware threads.
@@ -25,10 +28,16 @@ struct TraceOptions {
 };
 
 /// Runs the command and returns the report. Contract keys: rays, hits (rays that hit, or are
-/// blocked with any_hit), threads, load_ms (scene parse and mesh files), build_ms (bottom levels
-/// plus top level), trace_ms (median of the runs), mrays_per_s. Extra keys: repeat, any_hit,
-/// objects, instances, triangles (in the object library), instanced_triangles (summed over
-/// instances), bottom_build_ms, top_build_ms, trace_ms_all. Times are wall-clock milliseconds.
+/// blocked with any_hit), threads, load_ms (scene parse, mesh files, and adding the nodes to the
+/// graph), build_ms (bottom levels, built or read from prepared structures, plus the top level),
+/// trace_ms (median of the runs), mrays_per_s. Extra keys: repeat, any_hit, objects, instances,
+/// triangles (in the object library), instanced_triangles (summed over instances),
+/// bottom_build_ms, top_build_ms, trace_ms_all, format, structures_loaded (prepared bottom levels
+/// read instead of built), graph_ms (part of load_ms). Times are wall-clock milliseconds.
+///
+/// A hit record's instance_id is the position of the instance in SceneDocument::instances: for
+/// scene-json-v1 its position in "instances" (the contract); for duplex-scene-v1 its position in
+/// depth-first file order of the node tree, hidden instances included (never hit, but counted).
 /// Throws duplex::Error (naming the file) for bad input.
 [[nodiscard]] nlohmann::ordered_json runTrace(const TraceOptions& options);
 

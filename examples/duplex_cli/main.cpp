@@ -4,9 +4,15 @@
 //   duplex scene split     --mesh M --objects K [--loop N] --out S.json
 //   duplex scene instances --mesh M --count N --seed X --out S.json
 //   duplex scene robot     --urdf U [--copies C] [--joints a1,a2,...] [--spacing D] --out S.json
+//   duplex prepare --scene S.json --out DIR [--threads N]
+//   duplex bench update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]
+//                       [--primary W] [--build-repeat B]
+// Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
 
+#include "BenchUpdateCommand.h"
+#include "PrepareCommand.h"
 #include "RaysCommand.h"
 #include "SceneInstancesCommand.h"
 #include "SceneRobotCommand.h"
@@ -40,7 +46,8 @@ int main(int argc, char** argv) {
   using duplex::cli::RaysOptions;
   using duplex::cli::TraceOptions;
 
-  CLI::App app{"Two-level kd-tree ray tracing of scene-json-v1 scenes (ray and hit files in, JSON figures out).",
+  CLI::App app{"Two-level kd-tree ray tracing of scene-json-v1 and duplex-scene-v1 scenes (ray and hit files in, "
+               "JSON figures out).",
                "duplex"};
   app.require_subcommand(1);
   bool verbose = false;
@@ -49,7 +56,7 @@ int main(int argc, char** argv) {
   // duplex trace
   TraceOptions trace;
   CLI::App* trace_cmd = app.add_subcommand("trace", "Trace a ray file against a scene and write a hit file");
-  trace_cmd->add_option("--scene", trace.scene, "scene-json-v1 file")->required();
+  trace_cmd->add_option("--scene", trace.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
   trace_cmd->add_option("--rays", trace.rays, "Ray file: 32-byte records ox oy oz tnear dx dy dz tfar")->required();
   trace_cmd->add_option("--hits", trace.hits, "Hit file to write: 20-byte records t u v instance_id prim_id")
       ->required();
@@ -59,13 +66,17 @@ int main(int argc, char** argv) {
                       "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
       ->check(CLI::Range(1, 1000000));
+  trace_cmd->footer(
+      "A hit's instance_id is the instance's position in the scene: in \"instances\" for scene-json-v1; in\n"
+      "depth-first file order of the node tree for duplex-scene-v1 (hidden instances keep their place).\n"
+      "The timed edits of a duplex-scene-v1 file are not applied.");
 
   // duplex rays
   RaysOptions rays;
   std::vector<std::uint32_t> primary;
   std::uint64_t random_count = 0, seed = 0;
   CLI::App* rays_cmd = app.add_subcommand("rays", "Write primary or random rays for a scene");
-  rays_cmd->add_option("--scene", rays.scene, "scene-json-v1 file (its world bounds place the rays)")->required();
+  rays_cmd->add_option("--scene", rays.scene, "scene-json-v1 or duplex-scene-v1 file (the world bounds of its visible instances place the rays)")->required();
   rays_cmd->add_option("--out", rays.out, "Ray file to write")->required();
   CLI::Option* primary_opt =
       rays_cmd->add_option("--primary", primary, "W H: primary rays of a W x H image, row-major from the top left")
@@ -129,6 +140,36 @@ int main(int argc, char** argv) {
       "--spacing", spacing, "Distance between copies (default 1.25 x the larger horizontal extent of one robot)");
   robot_cmd->add_option("--out", robot.out, "scene-json-v1 file to write")->required();
 
+  // duplex prepare
+  duplex::cli::PrepareOptions prepare;
+  CLI::App* prepare_cmd = app.add_subcommand(
+      "prepare", "Save the bottom-level structure of every mesh object and a duplex-scene-v1 copy that names them");
+  prepare_cmd->add_option("--scene", prepare.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  prepare_cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dkdt structure files")
+      ->required();
+  prepare_cmd->add_option("--threads", prepare.threads, "Worker threads (default: all hardware threads)")
+      ->check(CLI::Range(1, 4096));
+
+  // duplex bench update
+  CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update)");
+  bench_cmd->require_subcommand(1);
+  duplex::cli::BenchUpdateOptions bench_update;
+  CLI::App* update_cmd = bench_cmd->add_subcommand(
+      "update", "Time commits of moved, added and removed instances (ours incremental, ours full rebuild, Embree)");
+  update_cmd->footer("The seeded edit plan is described in examples/duplex_cli/BenchUpdateCommand.h.");
+  update_cmd->add_option("--scene", bench_update.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  update_cmd->add_option("--moves", bench_update.moves,
+                         "Instances moved per commit: a count or a percentage such as 1% (default 1)");
+  update_cmd->add_option("--repeat", bench_update.repeat, "Commits per measurement, medians reported (default 50)")
+      ->check(CLI::Range(1, 1000000));
+  update_cmd->add_option("--seed", bench_update.seed, "Seed of the edit plan (default 1)")->check(kNotNegative);
+  update_cmd->add_option("--threads", bench_update.threads, "Worker threads (default: all hardware threads)")
+      ->check(CLI::Range(1, 4096));
+  update_cmd->add_option("--primary", bench_update.primary, "Primary rays of a W x W image (default 512)")
+      ->check(CLI::Range(1u, 8192u));
+  update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Full Embree builds timed per mode (default 3)")
+      ->check(CLI::Range(1, 100));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -140,7 +181,9 @@ int main(int argc, char** argv) {
                         : *rays_cmd      ? "duplex rays"
                         : *split_cmd     ? "duplex scene split"
                         : *instances_cmd ? "duplex scene instances"
-                                         : "duplex scene robot";
+                        : *robot_cmd     ? "duplex scene robot"
+                        : *prepare_cmd   ? "duplex prepare"
+                                         : "duplex bench update";
   try {
     nlohmann::ordered_json result;
     if (*trace_cmd) {
@@ -149,6 +192,10 @@ int main(int argc, char** argv) {
       result = duplex::cli::runSceneSplit(split);
     } else if (*instances_cmd) {
       result = duplex::cli::runSceneInstances(scatter);
+    } else if (*prepare_cmd) {
+      result = duplex::cli::runPrepare(prepare);
+    } else if (*update_cmd) {
+      result = duplex::cli::runBenchUpdate(bench_update);
     } else if (*robot_cmd) {
       if (*spacing_opt) robot.spacing = spacing;
       result = duplex::cli::runSceneRobot(robot);

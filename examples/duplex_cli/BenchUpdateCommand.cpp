@@ -1,30 +1,14 @@
-// duplex_bench_update: the update benchmark of issue 3, section 6. Loads a scene-json-v1 scene and
-// measures, for every two-level structure on the same seeded edit plan:
-//   full build; update after moving M instances (median over --repeat commits); add and remove
-//   of one instance; primary-ray Mrays/s right after the updates (and, for ours, after a fresh
-//   top-level build: the slowdown the incremental commits left behind).
-// Structures: ours incremental (SceneGraph + SceneTracer, TopLevelUpdate::Incremental), ours with a
-// full top-level rebuild per commit (TopLevelUpdate::FullRebuild, the paper's method), and, when
-// Embree 3 is found, Embree two-level scenes with the default top-level flags and with
-// dynamic + low quality. Prints one JSON object on stdout; progress goes to stderr.
-//
-//   duplex_bench_update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X]
-//                       [--threads N] [--primary W] [--build-repeat B]
-//
-// The edit plan (so that other tracers can replay it): rng = std::mt19937_64(seed), u(rng) =
-// (rng() >> 11) * 2^-53, side = 5% of the diagonal of the scene's world bounds,
-// delta() = ((u - 0.5) * side, (u - 0.5) * side, (u - 0.5) * side) drawn x, y, z in that order.
-//   R move steps: ids = 0..N-1; for j < M: k = j + rng() % (N - j), swap(ids[j], ids[k]); then for
-//     each of ids[0..M) in that order, translation += delta(). One commit per step.
-//   R add/remove steps (after the moves): object = rng() % objects, base = rng() % N, transform =
-//     base's current transform with translation + delta(); add it (commit), remove it (commit).
+#include "BenchUpdateCommand.h"
+
+#include "LoadScene.h"
+#include "WorkerThreads.h"
 
 #include "BenchCommon.h"
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/RayGenerator.h>
 #include <duplex/objects/MeshObject.h>
-#include <duplex/scenegraph/SceneFile.h>
+#include <duplex/scenegraph/SceneDocument.h>
 #include <duplex/scenegraph/SceneGraph.h>
 #include <duplex/scenegraph/SceneTracer.h>
 
@@ -32,9 +16,7 @@
 #include "EmbreeTwoLevel.h"
 #endif
 
-#include <CLI/CLI.hpp>
 #include <glm/geometric.hpp>
-#include <nlohmann/json.hpp>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -44,15 +26,21 @@
 #include <iostream>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <random>
+#include <span>
 #include <string>
 #include <vector>
 
-namespace duplex::bench {
+namespace duplex::cli {
 namespace {
 
+using bench::median;
+using bench::Stopwatch;
+using bench::TraceTiming;
+
 struct Move {
-  std::uint32_t instance;
+  std::uint32_t instance;  ///< index into the benchmark's instance list
   glm::dvec3 delta_ws;
 };
 
@@ -75,14 +63,13 @@ glm::dvec3 randomDelta(std::mt19937_64& rng, double side) {
   return {x, y, z};
 }
 
-// The plan described at the top of this file.
-EditPlan makePlan(const std::vector<SceneInstance>& instances, std::size_t objects, std::size_t moves, int repeat,
+// The plan described in BenchUpdateCommand.h.
+EditPlan makePlan(const std::vector<Affine>& world_from_object, std::size_t objects, std::size_t moves, int repeat,
                   std::uint64_t seed, double side) {
-  const std::size_t n = instances.size();
+  const std::size_t n = world_from_object.size();
   std::mt19937_64 rng(seed);
   EditPlan plan;
-  std::vector<Affine> current;
-  for (const SceneInstance& i : instances) current.push_back(i.world_from_object);
+  std::vector<Affine> current = world_from_object;
   std::vector<std::uint32_t> ids(n);
   for (int r = 0; r < repeat; ++r) {
     std::iota(ids.begin(), ids.end(), 0u);
@@ -150,15 +137,20 @@ Figures replay(Structure& s, const EditPlan& plan, std::vector<Affine> current, 
   return f;
 }
 
-/// Ours: a flat SceneGraph (every instance under the root) observed by a SceneTracer.
+/// Ours: a copy of the document's node tree (sharing its object library) observed by a
+/// SceneTracer. Instances are addressed by their index in the benchmark's instance list.
 class Ours {
  public:
-  Ours(const Scene& scene, TopLevelUpdate update) {
-    for (std::uint32_t i = 0; i < scene.objectCount(); ++i)
-      objects_.push_back(graph_.library().add(scene.objectName(i), scene.object(i)));
-    for (const SceneInstance& instance : scene.instances())
-      nodes_.push_back(graph_.addInstance(kRootNode, objects_[instance.object], instance.world_from_object));
+  Ours(const SceneGraph& source, std::span<const NodeId> instances, TopLevelUpdate update)
+      : graph_(source.sharedLibrary()) {
+    copyChildren(source, kRootNode, kRootNode);
     graph_.commit();
+    for (const NodeId node : instances) {
+      nodes_.push_back(copy_.at(node));
+      const NodeId parent = graph_.node(nodes_.back()).parent;
+      parent_from_world_.push_back(parent == kRootNode ? std::nullopt
+                                                       : std::optional(graph_.worldTransform(parent).inverse()));
+    }
     TopLevelConfig config;
     config.update = update;
     const Stopwatch watch;
@@ -169,10 +161,13 @@ class Ours {
   [[nodiscard]] SceneTracer& tracer() { return *tracer_; }
 
   void setTransform(std::uint32_t instance, const Affine& world_from_object) {
-    graph_.setTransform(nodes_[instance], world_from_object);
+    // Children of the root (every instance of scene-json-v1) take the world transform as it is.
+    const std::optional<Affine>& parent_from_world = parent_from_world_[instance];
+    graph_.setTransform(nodes_[instance], parent_from_world ? *parent_from_world * world_from_object : world_from_object);
   }
   std::uint32_t add(std::uint32_t object, const Affine& world_from_object) {
-    nodes_.push_back(graph_.addInstance(kRootNode, objects_[object], world_from_object));
+    nodes_.push_back(graph_.addInstance(kRootNode, object, world_from_object));
+    parent_from_world_.emplace_back();
     return static_cast<std::uint32_t>(nodes_.size() - 1);
   }
   void remove(std::uint32_t instance) { graph_.remove(nodes_[instance]); }
@@ -180,7 +175,7 @@ class Ours {
   TraceTiming trace(tbb::task_arena& arena, std::span<const Ray> rays) {
     std::vector<Hit> hits(rays.size());
     TraceTiming t;
-    t.time = timeIt(arena.max_concurrency(), [&] { arena.execute([&] { tracer_->intersect(rays, hits); }); });
+    t.time = bench::timeIt(arena.max_concurrency(), [&] { arena.execute([&] { tracer_->intersect(rays, hits); }); });
     for (const Hit& h : hits) t.hits += h.valid() ? 1u : 0u;
     return t;
   }
@@ -192,9 +187,29 @@ class Ours {
   }
 
  private:
+  // The subtree below `source_parent`, added below `copy_parent` (depth first, sibling order).
+  void copyChildren(const SceneGraph& source, NodeId source_parent, NodeId copy_parent) {
+    for (const NodeId child : source.children(source_parent)) {
+      const NodeInfo info = source.node(child);
+      const std::string name(info.name);
+      NodeId copy = kInvalidNode;
+      switch (info.kind) {
+        case NodeKind::Group: copy = graph_.addGroup(copy_parent, name); break;
+        case NodeKind::Transform: copy = graph_.addTransform(copy_parent, info.local, name); break;
+        case NodeKind::Instance: copy = graph_.addInstance(copy_parent, info.object, info.local, name, info.mask); break;
+      }
+      if (!info.visible) graph_.setVisible(copy, false);
+      if (copy_.size() <= child) copy_.resize(std::size_t{child} + 1, kInvalidNode);
+      copy_[child] = copy;
+      copyChildren(source, child, copy);
+    }
+  }
+
   SceneGraph graph_;
-  std::vector<ObjectId> objects_;
-  std::vector<NodeId> nodes_;  ///< by instance index (plan order)
+  std::vector<NodeId> copy_;   ///< source node id -> node id here
+  std::vector<NodeId> nodes_;  ///< by instance index (plan order, then added ones)
+  /// By instance index: parent_from_world of instances below transform nodes (parents never move).
+  std::vector<std::optional<Affine>> parent_from_world_;
   std::unique_ptr<SceneTracer> tracer_;
   double top_build_ms_ = 0.0;
 };
@@ -203,20 +218,20 @@ class Ours {
 /// Embree's two-level scene with the loop's interface.
 class Embree {
  public:
-  Embree(EmbreeDevice& device, std::span<const TriangleMesh* const> meshes, std::span<const EmbreeInstanceDesc> instances,
-         EmbreeTopLevelMode mode)
+  Embree(bench::EmbreeDevice& device, std::span<const TriangleMesh* const> meshes,
+         std::span<const bench::EmbreeInstanceDesc> instances, bench::EmbreeTopLevelMode mode)
       : scene_(device, meshes, instances, mode) {}
-  [[nodiscard]] const EmbreeTwoLevel& scene() const { return scene_; }
+  [[nodiscard]] const bench::EmbreeTwoLevel& scene() const { return scene_; }
   void setTransform(std::uint32_t instance, const Affine& a) { scene_.setTransform(instance, a); }
   std::uint32_t add(std::uint32_t object, const Affine& a) { return scene_.addInstance(object, a); }
   void remove(std::uint32_t instance) { scene_.removeInstance(instance); }
   void commit() { scene_.commit(); }
   TraceTiming trace(tbb::task_arena& arena, std::span<const Ray> rays) {
-    return timeTrace(arena, rays, [this](const Ray& r) { return scene_.intersect(r).valid(); });
+    return bench::timeTrace(arena, rays, [this](const Ray& r) { return scene_.intersect(r).valid(); });
   }
 
  private:
-  EmbreeTwoLevel scene_;
+  bench::EmbreeTwoLevel scene_;
 };
 #endif
 
@@ -230,20 +245,6 @@ void putFigures(nlohmann::ordered_json& out, const std::string& prefix, const Fi
   out[prefix + "mrays_per_s"] = mraysPerS(rays, f.trace_ms);
   out[prefix + "hits"] = f.hits;
 }
-
-}  // namespace
-
-struct UpdateOptions {
-  std::string scene;
-  std::string moves = "1";
-  int repeat = 50;
-  std::uint64_t seed = 1;
-  int threads = 2;
-  std::uint32_t primary = 512;
-  int build_repeat = 3;
-};
-
-namespace {
 
 // "1" or "1%" (of the instances, at least 1).
 std::size_t parseMoves(const std::string& text, std::size_t instances) {
@@ -260,33 +261,46 @@ std::size_t parseMoves(const std::string& text, std::size_t instances) {
   const double count = percent ? std::round(value * static_cast<double>(instances) / 100.0) : value;
   const std::size_t m = std::max<std::size_t>(1, static_cast<std::size_t>(count));
   if (m > instances)
-    throw InvalidArgument("--moves " + text + " exceeds the scene's " + std::to_string(instances) + " instances");
+    throw InvalidArgument("--moves " + text + " exceeds the scene's " + std::to_string(instances) + " visible instances");
   return m;
 }
 
 }  // namespace
 
-nlohmann::ordered_json run(const UpdateOptions& options) {
-  tbb::task_arena arena(options.threads);
-  SceneLoadReport report;
-  Scene scene;
-  arena.execute([&] { scene = loadScene(options.scene, {}, &report); });
-  const std::size_t n = scene.instances().size();
-  if (n == 0) throw InvalidArgument(options.scene + ": no instances to move");
-  const Box bounds = scene.worldBounds();
+nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
+  if (options.repeat < 1) throw InvalidArgument("--repeat must be at least 1");
+  WorkerThreads workers(options.threads);
+  tbb::task_arena& arena = workers.arena;
+  const int threads = workers.count;
+
+  std::optional<SceneDocument> doc;
+  arena.execute([&] { doc.emplace(loadDocumentNamed(options.scene)); });
+  const SceneGraph& graph = *doc->graph;
+  const ObjectLibrary& library = graph.library();
+
+  // The benchmark's instances: the visible ones, in document order.
+  std::vector<NodeId> instances;
+  std::vector<Affine> initial;
+  for (const NodeId node : doc->instances)
+    if (graph.isVisibleInstance(node)) {
+      instances.push_back(node);
+      initial.push_back(graph.worldTransform(node));
+    }
+  const std::size_t n = instances.size();
+  if (n == 0) throw InvalidArgument(options.scene.string() + ": no visible instances to move");
+  const Box bounds = visibleWorldBounds(*doc);
   const double side = 0.05 * glm::length(glm::dvec3(bounds.hi) - glm::dvec3(bounds.lo));
   const std::size_t moves = parseMoves(options.moves, n);
-  const EditPlan plan = makePlan(scene.instances(), scene.objectCount(), moves, options.repeat, options.seed, side);
-  std::vector<Affine> initial;
-  for (const SceneInstance& i : scene.instances()) initial.push_back(i.world_from_object);
+  const EditPlan plan = makePlan(initial, library.size(), moves, options.repeat, options.seed, side);
   const std::vector<Ray> rays = primaryRays(bounds, options.primary, options.primary);
 
   nlohmann::ordered_json out;
-  out["scene"] = options.scene;
-  out["objects"] = scene.objectCount();
+  out["scene"] = options.scene.string();
+  out["format"] = doc->format;
+  out["objects"] = library.size();
   out["instances"] = n;
-  out["triangles"] = report.triangles;
-  out["threads"] = options.threads;
+  out["triangles"] = doc->figures.triangles;
+  out["threads"] = threads;
   out["seed"] = options.seed;
   out["moves"] = moves;
   out["moves_spec"] = options.moves;
@@ -297,9 +311,9 @@ nlohmann::ordered_json run(const UpdateOptions& options) {
   // Ours, incremental.
   std::cerr << "ours: incremental top level\n";
   std::unique_ptr<Ours> ours;
-  arena.execute([&] { ours = std::make_unique<Ours>(scene, TopLevelUpdate::Incremental); });
-  out["build_ms"] = report.build_ms + ours->topBuildMs();
-  out["bottom_build_ms"] = report.build_ms;
+  arena.execute([&] { ours = std::make_unique<Ours>(graph, instances, TopLevelUpdate::Incremental); });
+  out["build_ms"] = doc->figures.build_ms + ours->topBuildMs();
+  out["bottom_build_ms"] = doc->figures.build_ms;
   out["top_build_ms"] = ours->topBuildMs();
   const Figures incremental = replay(*ours, plan, initial, arena, rays);
   putFigures(out, "", incremental, rays.size());
@@ -323,7 +337,7 @@ nlohmann::ordered_json run(const UpdateOptions& options) {
   {
     std::cerr << "ours: full top-level rebuild per commit\n";
     std::unique_ptr<Ours> full;
-    arena.execute([&] { full = std::make_unique<Ours>(scene, TopLevelUpdate::FullRebuild); });
+    arena.execute([&] { full = std::make_unique<Ours>(graph, instances, TopLevelUpdate::FullRebuild); });
     const Figures f = replay(*full, plan, initial, arena, rays);
     out["full_rebuild_ms_median"] = median(f.update_ms);
     out["full_rebuild_add_ms_median"] = median(f.add_ms);
@@ -332,24 +346,28 @@ nlohmann::ordered_json run(const UpdateOptions& options) {
   }
 
 #if DUPLEX_BENCH_HAVE_EMBREE
+  using bench::EmbreeTopLevelMode;
+  std::vector<std::shared_ptr<const Object>> held;  // keeps the meshes alive while Embree copies them
   std::vector<const TriangleMesh*> meshes;
-  for (std::uint32_t i = 0; i < scene.objectCount(); ++i) {
-    const auto* mesh_object = dynamic_cast<const MeshObject*>(scene.object(i).get());
-    if (!mesh_object) throw InvalidArgument(options.scene + ": object " + scene.objectName(i) + " is not a mesh");
+  for (ObjectId i = 0; i < library.size(); ++i) {
+    held.push_back(library.get(i));
+    const auto* mesh_object = dynamic_cast<const MeshObject*>(held.back().get());
+    if (!mesh_object)
+      throw InvalidArgument(options.scene.string() + ": object " + library.name(i) + " is not a mesh (Embree baseline)");
     meshes.push_back(&mesh_object->mesh());
   }
-  std::vector<EmbreeInstanceDesc> instances;
-  for (const SceneInstance& i : scene.instances()) instances.push_back({i.object, i.world_from_object});
-  EmbreeDevice device(options.threads, "");
+  std::vector<bench::EmbreeInstanceDesc> embree_instances;
+  for (std::size_t i = 0; i < n; ++i) embree_instances.push_back({graph.node(instances[i]).object, initial[i]});
+  bench::EmbreeDevice device(threads, "");
   for (const EmbreeTopLevelMode mode : {EmbreeTopLevelMode::Default, EmbreeTopLevelMode::DynamicLow}) {
     const std::string prefix = mode == EmbreeTopLevelMode::Default ? "embree_" : "embree_dynamic_low_";
-    std::cerr << "embree: top level " << toString(mode) << "\n";
+    std::cerr << "embree: top level " << bench::toString(mode) << "\n";
     std::vector<double> build_ms, objects_ms, top_ms;
     std::unique_ptr<Embree> embree;
     for (int b = 0; b < options.build_repeat; ++b) {
       embree.reset();
-      arena.execute([&] { embree = std::make_unique<Embree>(device, meshes, instances, mode); });
-      const EmbreeTwoLevelBuildTimes& t = embree->scene().buildTimes();
+      arena.execute([&] { embree = std::make_unique<Embree>(device, meshes, embree_instances, mode); });
+      const bench::EmbreeTwoLevelBuildTimes& t = embree->scene().buildTimes();
       objects_ms.push_back(t.objects_ms);
       top_ms.push_back(t.top_ms);
       build_ms.push_back(t.objects_ms + t.top_ms);
@@ -375,34 +393,8 @@ nlohmann::ordered_json run(const UpdateOptions& options) {
   }
   out["embree_update_over_ours"] = out["embree_update_ms_median"].get<double>() / out["update_ms_median"].get<double>();
 #endif
-  out["machine"] = machineInfo();
+  out["machine"] = bench::machineInfo();
   return out;
 }
 
-}  // namespace duplex::bench
-
-int main(int argc, char** argv) {
-  duplex::bench::UpdateOptions options;
-  CLI::App app{"Update benchmark: moves, adds and removes instances of a scene-json-v1 scene and times the commits "
-               "(ours incremental, ours full rebuild, Embree default and dynamic/low)",
-               "duplex_bench_update"};
-  app.add_option("--scene", options.scene, "scene-json-v1 file")->required();
-  app.add_option("--moves", options.moves, "Instances moved per commit: a count or a percentage (e.g. 1%)");
-  app.add_option("--repeat", options.repeat, "Commits per measurement (median reported)")->check(CLI::Range(1, 1000000));
-  app.add_option("--seed", options.seed, "Seed of the edit plan");
-  app.add_option("--threads", options.threads, "Threads for builds, commits and tracing")->check(CLI::Range(1, 4096));
-  app.add_option("--primary", options.primary, "Primary rays: W x W image")->check(CLI::Range(1u, 8192u));
-  app.add_option("--build-repeat", options.build_repeat, "Full builds timed per structure")->check(CLI::Range(1, 100));
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
-  try {
-    std::cout << duplex::bench::run(options).dump() << std::endl;
-    return 0;
-  } catch (const std::exception& e) {
-    std::cerr << "duplex_bench_update: error: " << e.what() << '\n';
-    return 1;
-  }
-}
+}  // namespace duplex::cli

@@ -1,0 +1,59 @@
+#pragma once
+/// \file BenchUpdateCommand.h
+/// `duplex bench update`: the update benchmark of issue 3, section 6. Loads a scene (scene-json-v1
+/// or duplex-scene-v1) and measures, for every two-level structure on the same seeded edit plan:
+/// full build; update after moving M instances (median over --repeat commits); add and remove of
+/// one instance; primary-ray Mrays/s right after the updates (and, for ours, after a fresh
+/// top-level build: the slowdown the incremental commits left behind).
+///
+/// Structures: ours incremental (SceneGraph + SceneTracer, TopLevelUpdate::Incremental), ours with
+/// a full top-level rebuild per commit (TopLevelUpdate::FullRebuild, the paper's method), and, when
+/// the tool was built with Embree 3, Embree two-level scenes with the default top-level flags and
+/// with dynamic + low quality. Each timed interval runs from the first edit call until queries see
+/// the new scene (graph bookkeeping, notifications and the top-level update included).
+///
+/// The edit plan (so that other tracers can replay it), over the visible instances in
+/// SceneDocument::instances order (for scene-json-v1: the "instances" order):
+///   rng = std::mt19937_64(seed), u(rng) = (rng() >> 11) * 2^-53, side = 5% of the diagonal of the
+///   union of their world boxes, delta() = ((u - 0.5) * side, (u - 0.5) * side, (u - 0.5) * side)
+///   drawn x, y, z in that order.
+///   R move steps: ids = 0..N-1; for j < M: k = j + rng() % (N - j), swap(ids[j], ids[k]); then
+///     for each of ids[0..M) in that order, world translation += delta(). One commit per step.
+///   R add/remove steps (after the moves): object = rng() % objects (library order), base =
+///     rng() % N, world transform = base's current one with translation + delta(); add it under
+///     the root (commit), remove it (commit).
+/// A moved instance below transform nodes gets the local transform that gives it the moved world
+/// transform (parents do not move).
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+namespace duplex::cli {
+
+struct BenchUpdateOptions {
+  std::filesystem::path scene;
+  /// Instances moved per commit: a count ("1") or a percentage of the instances ("1%", at least 1).
+  std::string moves = "1";
+  int repeat = 50;          ///< commits per measurement (medians reported)
+  std::uint64_t seed = 1;   ///< seed of the edit plan
+  int threads = 0;          ///< builds, commits and tracing; 0 means all hardware threads
+  std::uint32_t primary = 512;  ///< primary rays of a W x W image (the camera of `duplex rays`)
+  int build_repeat = 3;     ///< full Embree builds timed per mode
+};
+
+/// Runs the benchmark and returns one JSON object. Keys: scene, objects, instances, triangles,
+/// threads, seed, moves, moves_spec, repeat, move_cube_side, primary_rays, build_ms,
+/// bottom_build_ms, top_build_ms, update_ms_median, update_ms_max, add_ms_median,
+/// remove_ms_median, mrays_per_s, hits, top_level_full_rebuilds, top_level_subtree_rebuilds,
+/// top_rebuild_ms_median, mrays_per_s_fresh, trace_slowdown_pct, full_rebuild_ms_median,
+/// full_rebuild_add_ms_median, full_rebuild_remove_ms_median, full_rebuild_mrays_per_s; with
+/// Embree the same figures prefixed "embree_" and "embree_dynamic_low_" plus embree_*build*_ms,
+/// agreement_with_embree (fraction of primary rays with the same instance and triangle) and
+/// embree_update_over_ours; machine. Times are wall-clock milliseconds. Progress goes to stderr.
+/// Throws duplex::Error for bad input.
+[[nodiscard]] nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options);
+
+}  // namespace duplex::cli

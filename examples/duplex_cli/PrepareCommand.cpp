@@ -1,0 +1,146 @@
+#include "PrepareCommand.h"
+
+#include "LoadScene.h"
+#include "WorkerThreads.h"
+
+#include <duplex/accel/Error.h>
+#include <duplex/scenegraph/SceneDocument.h>
+
+#include <tbb/task_arena.h>
+
+#include <chrono>
+#include <cstddef>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <system_error>
+#include <vector>
+
+namespace duplex::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+json readJson(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path.string() + ": cannot open");
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw FileError(path.string() + ": " + e.what());
+  }
+}
+
+/// `file` as named in the source scene, as it must be named in a scene file in `out_dir`.
+std::string rebaseMeshPath(const std::string& file, const fs::path& source_dir, const fs::path& out_dir) {
+  const fs::path named(file);
+  const fs::path target = (named.is_absolute() ? named : fs::absolute(source_dir / named)).lexically_normal();
+  const fs::path relative = target.lexically_relative(fs::absolute(out_dir).lexically_normal());
+  return relative.empty() ? target.string() : relative.generic_string();
+}
+
+/// A mesh spec for the copy: the file rebased, or the inline arrays ("file" wins, as in v1).
+json meshSpec(const json& mesh, bool v1, const fs::path& source_dir, const fs::path& out_dir) {
+  json spec = v1 ? json::object() : mesh;
+  if (mesh.contains("file")) {
+    if (v1) spec = json::object();
+    spec["file"] = rebaseMeshPath(mesh["file"].get<std::string>(), source_dir, out_dir);
+  } else if (v1) {
+    spec["positions"] = mesh["positions"];
+    spec["indices"] = mesh["indices"];
+  }
+  return spec;
+}
+
+void writeText(const fs::path& path, const std::string& text) {
+  const fs::path temporary = fs::path(path.string() + ".tmp");
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    out << text;
+    out.flush();
+    if (!out) throw FileError(path.string() + ": cannot write");
+  }
+  std::error_code ec;
+  fs::rename(temporary, path, ec);
+  if (ec) throw FileError(path.string() + ": cannot write (" + ec.message() + ")");
+}
+
+}  // namespace
+
+nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
+  const fs::path scene_out = options.out / (options.scene.stem().string() + ".json");
+  std::error_code ec;
+  if (fs::exists(scene_out, ec) && fs::equivalent(scene_out, options.scene, ec))
+    throw InvalidArgument(scene_out.string() + ": would overwrite the source scene; choose another --out");
+
+  WorkerThreads workers(options.threads);
+  tbb::task_arena& arena = workers.arena;
+  const int threads = workers.count;
+
+  // Load (and so check) the scene the way `duplex trace` does; prepared entries are rebuilt, so a
+  // stale structure named by the source is replaced rather than copied.
+  SceneDocumentOptions load_options;
+  load_options.use_structures = false;
+  std::optional<SceneDocument> doc;
+  arena.execute([&] { doc.emplace(loadDocumentNamed(options.scene, load_options)); });
+
+  const auto t_save = Clock::now();
+  const std::vector<fs::path> saved = saveStructures(*doc, options.out);
+  const double save_ms = msSince(t_save);
+
+  // The copy: the loader accepted the file, so its shape is known to be valid here.
+  const json source = readJson(options.scene);
+  const bool v1 = doc->format == "scene-json-v1";
+  const fs::path source_dir = options.scene.parent_path();
+  json copy = json::object();
+  copy["format"] = "duplex-scene-v1";
+  copy["objects"] = json::array();
+  std::size_t mesh_objects = 0;
+  const json& objects = source["objects"];
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    const json& entry = objects[k];
+    const fs::path& structure = saved.at(doc->objects.at(k));
+    json out_entry = v1 ? json{{"name", entry["name"]}} : entry;
+    if (entry.contains("mesh")) {
+      out_entry["mesh"] = meshSpec(entry["mesh"], v1, source_dir, options.out);
+      if (structure.empty()) throw InvalidArgument(options.scene.string() + ": /objects/" + std::to_string(k) +
+                                                   ": mesh object without a saved structure");
+      out_entry["structure"] = structure.filename().string();
+      ++mesh_objects;
+    } else if (!structure.empty()) {
+      fs::remove(structure, ec);  // procedural types are rebuilt from their spec: no structure key
+    }
+    copy["objects"].push_back(std::move(out_entry));
+  }
+  if (v1) {
+    copy["nodes"] = json::array();
+    const json& instances = source["instances"];
+    for (std::size_t k = 0; k < instances.size(); ++k)
+      copy["nodes"].push_back({{"instance", "instance" + std::to_string(k)},
+                               {"object", instances[k]["object"]},
+                               {"transform", instances[k]["transform"]}});
+  } else {
+    for (const char* key : {"nodes", "edits"})
+      if (source.contains(key)) copy[key] = source[key];
+  }
+  writeText(scene_out, copy.dump(1) + "\n");
+
+  json report;
+  report["scene"] = scene_out.string();
+  report["format_in"] = doc->format;
+  report["objects"] = objects.size();
+  report["mesh_objects"] = mesh_objects;
+  report["structures"] = mesh_objects;
+  report["load_ms"] = doc->figures.load_ms + doc->figures.graph_ms;
+  report["build_ms"] = doc->figures.build_ms;
+  report["save_ms"] = save_ms;
+  report["threads"] = threads;
+  return report;
+}
+
+}  // namespace duplex::cli
