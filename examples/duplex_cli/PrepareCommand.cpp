@@ -57,6 +57,24 @@ json meshSpec(const json& mesh, bool v1, const fs::path& source_dir, const fs::p
   return spec;
 }
 
+/// Compact JSON with one line per top-level key and per element of its arrays (objects, nodes,
+/// edits): small for inline meshes, readable in a diff.
+std::string layout(const json& doc) {
+  std::string text = "{";
+  bool first_key = true;
+  for (const auto& [key, value] : doc.items()) {
+    text += (first_key ? "" : ",\n ") + json(key).dump() + ": ";
+    first_key = false;
+    if (!value.is_array() || value.empty()) {
+      text += value.dump();
+      continue;
+    }
+    for (std::size_t i = 0; i < value.size(); ++i) text += (i == 0 ? "[\n  " : ",\n  ") + value[i].dump();
+    text += "]";
+  }
+  return text + "}\n";
+}
+
 void writeText(const fs::path& path, const std::string& text) {
   const fs::path temporary = fs::path(path.string() + ".tmp");
   {
@@ -128,7 +146,7 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
     for (const char* key : {"nodes", "edits"})
       if (source.contains(key)) copy[key] = source[key];
   }
-  writeText(scene_out, copy.dump(1) + "\n");
+  writeText(scene_out, layout(copy));
 
   json report;
   report["scene"] = scene_out.string();

@@ -9,6 +9,10 @@
 //   duplex_cli_check fails DIR NEEDLE -- PROGRAM ARGS  non-zero exit, no crash, NEEDLE in stderr
 //   duplex_cli_check demo DEMO DIR                     the demo writes a PNG and prints figures
 //   duplex_cli_check shared-data DUPLEX DIR DATA_DIR   real meshes (skipped, status 77, without them)
+//   duplex_cli_check document DUPLEX DIR               duplex-scene-v1 vs scene-json-v1: identical hit files
+//   duplex_cli_check prepare DUPLEX DIR                `duplex prepare`: structures loaded, same hits
+//   duplex_cli_check prepare-koala DUPLEX DIR DATA_DIR koala in 19 objects, prepared (skipped without data)
+//   duplex_cli_check bench-update DUPLEX DIR           `duplex bench update` keys and figures on tiny scenes
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
@@ -17,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -26,6 +31,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace fs = std::filesystem;
@@ -286,9 +292,231 @@ int checkSharedData(const std::string& duplex, const fs::path& dir, const fs::pa
   return 0;
 }
 
+// ---- duplex-scene-v1, prepared structures and the update benchmark (issue 3) ----
+
+// A row-major 3x4 matrix [r00 r01 r02 t0 r10 ... t2], world_from_object, composed by hand here.
+using Mat34 = std::array<double, 12>;
+
+Mat34 compose(const Mat34& a, const Mat34& b) {  // a * b: b first
+  Mat34 m{};
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      double v = c == 3 ? a[r * 4 + 3] : 0.0;
+      for (int k = 0; k < 3; ++k) v += a[r * 4 + k] * b[k * 4 + c];
+      m[r * 4 + c] = v;
+    }
+  }
+  return m;
+}
+Mat34 translate(double x, double y, double z) { return {1, 0, 0, x, 0, 1, 0, y, 0, 0, 1, z}; }
+Mat34 scale(double x, double y, double z) { return {x, 0, 0, 0, 0, y, 0, 0, 0, 0, z, 0}; }
+
+// The same five instances twice: doc_tree.json (duplex-scene-v1: groups, transform nodes given as
+// translate/scale/matrix, an empty group, a mask, and a hidden group last, whose instance has id 5
+// and is never hit) and doc_flat.json (scene-json-v1: the world matrices, in depth-first order).
+// Every number is a small dyadic rational and rotations are permutations, so both give the same
+// world matrices bit for bit and must give byte-identical hit files.
+void writeDocumentFixtures(const fs::path& dir) {
+  fs::create_directories(dir);
+  {
+    std::ofstream obj(dir / "doc_tet.obj");
+    obj << "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  }
+  const std::string objects = R"([
+    {"name": "quad", "mesh": {"positions": [0,0,0, 1,0,0, 1,1,0, 0,1,0], "indices": [0,1,2, 0,2,3]}},
+    {"name": "tet", "mesh": {"file": "doc_tet.obj"}},
+    {"name": "tri", "mesh": {"positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}}])";
+  {
+    std::ofstream tree(dir / "doc_tree.json");
+    tree << R"({"format": "duplex-scene-v1", "objects": )" << objects << R"(,
+ "nodes": [
+  {"instance": "floor", "object": "quad", "transform": {"scale": [8, 8, 1], "translate": [-4, -4, 0]}},
+  {"group": "rig", "translate": [1, 2, 3], "children": [
+    {"instance": "a", "object": "tet", "transform": {"scale": 2}},
+    {"group": "arm", "matrix": [0,0,1,0.5, 0,1,0,0, -1,0,0,0], "children": [
+      {"instance": "b", "object": "tet", "transform": [1,0,0,0.25, 0,1,0,0, 0,0,1,-1]},
+      {"instance": "c", "object": "tri", "transform": {"scale": [0.5, 2, 1], "translate": [0, 1, 0]}, "mask": 2}]},
+    {"group": "empty"}]},
+  {"instance": "d", "object": "quad", "transform": {"matrix": [1,0,0,-2, 0,0,-1,1, 0,1,0,0]}},
+  {"group": "hidden", "visible": false, "children": [{"instance": "h", "object": "tet"}]}]})";
+  }
+  const Mat34 rig = translate(1, 2, 3), arm = {0, 0, 1, 0.5, 0, 1, 0, 0, -1, 0, 0, 0};
+  const std::vector<std::pair<std::string, Mat34>> instances = {
+      {"quad", compose(translate(-4, -4, 0), scale(8, 8, 1))},
+      {"tet", compose(rig, scale(2, 2, 2))},
+      {"tet", compose(compose(rig, arm), {1, 0, 0, 0.25, 0, 1, 0, 0, 0, 0, 1, -1})},
+      {"tri", compose(compose(rig, arm), compose(translate(0, 1, 0), scale(0.5, 2, 1)))},
+      {"quad", {1, 0, 0, -2, 0, 0, -1, 1, 0, 1, 0, 0}}};
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& [object, m] : instances) list.push_back({{"object", object}, {"transform", m}});
+  std::ofstream flat(dir / "doc_flat.json");
+  flat << R"({"format": "scene-json-v1", "objects": )" << objects << R"(, "instances": )" << list.dump() << "}";
+}
+
+std::string fileBytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+nlohmann::json traceJson(const std::string& duplex, const fs::path& dir, const fs::path& scene, const fs::path& rays,
+                         const fs::path& hits, std::vector<std::string> extra) {
+  std::vector<std::string> a = {duplex, "trace", "--scene", scene.string(), "--rays", rays.string(), "--hits", hits.string()};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return parseOneLine(runOk(a, dir).out);
+}
+
+void expectSameFile(const fs::path& a, const fs::path& b) {
+  expect(fs::exists(a) && fs::exists(b) && fileBytes(a) == fileBytes(b),
+         a.string() + " and " + b.string() + " differ (expected byte-identical hit files)");
+}
+
+// duplex-scene-v1 against scene-json-v1: the same rays (bounds of the visible instances), and
+// byte-identical closest-hit and --any-hit files, with 1 and 2 threads.
+int checkDocument(const std::string& duplex, const fs::path& dir) {
+  writeDocumentFixtures(dir);
+  const fs::path tree = dir / "doc_tree.json", flat = dir / "doc_flat.json";
+  for (const auto& [name, mode] : std::vector<std::pair<std::string, std::vector<std::string>>>{
+           {"random", {"--random", "4000", "--seed", "5"}}, {"primary", {"--primary", "48", "32"}}}) {
+    const fs::path rays_tree = dir / ("doc_" + name + "_tree.bin"), rays_flat = dir / ("doc_" + name + ".bin");
+    for (const auto& [scene, out] : {std::pair{tree, rays_tree}, std::pair{flat, rays_flat}}) {
+      std::vector<std::string> a = {duplex, "rays", "--scene", scene.string()};
+      a.insert(a.end(), mode.begin(), mode.end());
+      a.insert(a.end(), {"--out", out.string()});
+      parseOneLine(runOk(a, dir).out);
+    }
+    expectSameFile(rays_tree, rays_flat);
+
+    for (const bool any_hit : {false, true}) {
+      const std::string tag = name + (any_hit ? "_any" : "");
+      std::vector<std::string> extra = {"--threads", "2"};
+      if (any_hit) extra.push_back("--any-hit");
+      const nlohmann::json jt = traceJson(duplex, dir, tree, rays_flat, dir / ("doc_hits_" + tag + "_tree.bin"), extra);
+      const nlohmann::json jf = traceJson(duplex, dir, flat, rays_flat, dir / ("doc_hits_" + tag + "_flat.bin"), extra);
+      extra[1] = "1";
+      traceJson(duplex, dir, tree, rays_flat, dir / ("doc_hits_" + tag + "_tree1.bin"), extra);
+      expectSameFile(dir / ("doc_hits_" + tag + "_tree.bin"), dir / ("doc_hits_" + tag + "_flat.bin"));
+      expectSameFile(dir / ("doc_hits_" + tag + "_tree.bin"), dir / ("doc_hits_" + tag + "_tree1.bin"));
+      expect(jt.value("format", "") == "duplex-scene-v1" && jf.value("format", "") == "scene-json-v1",
+             "\"format\" does not name the scene formats: " + jt.dump() + " / " + jf.dump());
+      expect(number(jt, "instances") == 6.0 && number(jf, "instances") == 5.0,
+             "\"instances\" is not 6 (tree, hidden one included) and 5 (flat): " + jt.dump() + " / " + jf.dump());
+      expect(number(jt, "hits") == number(jf, "hits") && number(jt, "hits") > 0.0, "hit counts differ or are 0: " + jt.dump());
+      if (!any_hit) {
+        std::vector<int> per_instance(5, 0);
+        for (const HitRecord& h : readRecords<HitRecord>(dir / ("doc_hits_" + tag + "_tree.bin"))) {
+          if (h.instance_id == kNone) continue;
+          expect(h.instance_id < 5, "a hit names instance " + std::to_string(h.instance_id) + " (hidden or unknown)");
+          ++per_instance[h.instance_id];
+        }
+        if (name == "random")
+          for (std::size_t i = 0; i < 5; ++i)
+            expect(per_instance[i] > 0, "no random ray hits instance " + std::to_string(i) + " (the fixture misses its point)");
+      }
+      std::cout << "document " << tag << ": identical hit files; " << jt.dump() << "\n";
+    }
+  }
+  return 0;
+}
+
+// `duplex prepare`: both formats; the copies load every structure instead of building it, give
+// the same hits, and a damaged structure is refused with its file named.
+int checkPrepare(const std::string& duplex, const fs::path& dir) {
+  writeDocumentFixtures(dir);
+  const fs::path rays = dir / "prep_rays.bin";
+  runOk({duplex, "rays", "--scene", (dir / "doc_flat.json").string(), "--random", "3000", "--seed", "9", "--out",
+         rays.string()},
+        dir);
+  for (const std::string name : {"doc_tree", "doc_flat"}) {
+    const fs::path source = dir / (name + ".json"), out = dir / ("prepared_" + name);
+    fs::remove_all(out);
+    const nlohmann::json p =
+        parseOneLine(runOk({duplex, "prepare", "--scene", source.string(), "--out", out.string()}, dir).out);
+    const fs::path prepared = out / (name + ".json");
+    expect(p.value("scene", "") == prepared.string() && number(p, "structures") == 3.0 && number(p, "mesh_objects") == 3.0,
+           "prepare report: " + p.dump());
+    const nlohmann::json copy = nlohmann::json::parse(fileBytes(prepared));
+    expect(copy.value("format", "") == "duplex-scene-v1", prepared.string() + " is not duplex-scene-v1");
+    for (const nlohmann::json& object : copy["objects"])
+      expect(object.contains("structure") && fs::exists(out / object["structure"].get<std::string>()),
+             prepared.string() + ": object without an existing structure file: " + object.dump());
+
+    const nlohmann::json built = traceJson(duplex, dir, source, rays, dir / ("prep_hits_" + name + ".bin"), {});
+    const nlohmann::json loaded = traceJson(duplex, dir, prepared, rays, dir / ("prep_hits_" + name + "_prepared.bin"), {});
+    expect(number(built, "structures_loaded") == 0.0 && number(loaded, "structures_loaded") == 3.0,
+           "structures_loaded is not 0 (source) and 3 (prepared): " + built.dump() + " / " + loaded.dump());
+    expectSameFile(dir / ("prep_hits_" + name + ".bin"), dir / ("prep_hits_" + name + "_prepared.bin"));
+
+    // A damaged structure: the load fails and names the file.
+    const fs::path bad = dir / ("prepared_bad_" + name);
+    fs::remove_all(bad);
+    fs::copy(out, bad);
+    const fs::path damaged = bad / copy["objects"][1]["structure"].get<std::string>();
+    std::string bytes = fileBytes(damaged);
+    bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x5A);
+    std::ofstream(damaged, std::ios::binary | std::ios::trunc) << bytes;
+    const RunResult r = run({duplex, "trace", "--scene", (bad / (name + ".json")).string(), "--rays", rays.string(),
+                             "--hits", (dir / "prep_bad_hits.bin").string()},
+                            dir.string());
+    expect(r.exited && r.exit_code == 1 && r.err.find(damaged.filename().string()) != std::string::npos,
+           "a damaged structure was not refused with its file named (" + describe(r) + "): " + r.err);
+    std::cout << "prepare " << name << ": " << p.dump() << "\n  built " << built.dump() << "\n  loaded " << loaded.dump()
+              << "\n";
+  }
+  return 0;
+}
+
+// The paper's first scene: koala split into 19 objects, prepared; load + build of both.
+int checkPrepareKoala(const std::string& duplex, const fs::path& dir, const fs::path& data) {
+  const fs::path koala = data / "meshes" / "koala.obj";
+  if (!fs::exists(koala)) {
+    std::cout << "skipped: " << koala.string() << " not found\n";
+    return kSkip;
+  }
+  fs::create_directories(dir);
+  const fs::path scene = dir / "koala19.json", out = dir / "koala19_prepared", rays = dir / "koala19_rays.bin";
+  fs::remove_all(out);
+  runOk({duplex, "scene", "split", "--mesh", koala.string(), "--objects", "19", "--out", scene.string()}, dir);
+  runOk({duplex, "prepare", "--scene", scene.string(), "--out", out.string()}, dir);
+  runOk({duplex, "rays", "--scene", scene.string(), "--primary", "128", "128", "--out", rays.string()}, dir);
+  const nlohmann::json built = traceJson(duplex, dir, scene, rays, dir / "koala19_hits.bin", {});
+  const nlohmann::json loaded = traceJson(duplex, dir, out / "koala19.json", rays, dir / "koala19_hits_prepared.bin", {});
+  expect(number(loaded, "structures_loaded") == 19.0, "prepared koala did not load 19 structures: " + loaded.dump());
+  expectSameFile(dir / "koala19_hits.bin", dir / "koala19_hits_prepared.bin");
+  for (const auto& [what, j] : {std::pair{"original", built}, std::pair{"prepared", loaded}})
+    std::cout << "koala 19 objects, " << what << ": load_ms " << number(j, "load_ms") << ", bottom_build_ms "
+              << number(j, "bottom_build_ms") << ", build_ms " << number(j, "build_ms") << ", load+build ms "
+              << number(j, "load_ms") + number(j, "build_ms") << "\n";
+  return 0;
+}
+
+// `duplex bench update` on tiny scenes: the keys of the issue, positive times, and, with Embree,
+// agreement of the hits after the same edits.
+int checkBenchUpdate(const std::string& duplex, const fs::path& dir) {
+  writeDocumentFixtures(dir);
+  for (const fs::path& scene : {dir / "quad.json", dir / "doc_tree.json"}) {
+    const nlohmann::json j = parseOneLine(runOk({duplex, "bench", "update", "--scene", scene.string(), "--moves", "2",
+                                                 "--repeat", "3", "--seed", "4", "--threads", "2", "--primary", "48"},
+                                                dir)
+                                              .out);
+    expect(number(j, "moves") == 2.0 && number(j, "repeat") == 3.0, "moves/repeat not as given: " + j.dump());
+    for (const char* key : {"update_ms_median", "full_rebuild_ms_median", "add_ms_median", "remove_ms_median",
+                            "build_ms", "mrays_per_s"})
+      expect(number(j, key) > 0.0, std::string("\"") + key + "\" is not positive: " + j.dump());
+    if (j.contains("embree_update_ms_median")) {
+      expect(number(j, "embree_update_ms_median") > 0.0, "\"embree_update_ms_median\" is not positive: " + j.dump());
+      expect(number(j, "agreement_with_embree") >= 0.99, "ours and Embree disagree after the same edits: " + j.dump());
+      expect(number(j, "hits") == number(j, "embree_hits"), "ours and Embree hit different ray counts: " + j.dump());
+    }
+    std::cout << "bench update " << scene.filename().string() << ": " << j.dump() << "\n";
+  }
+  return 0;
+}
+
 int usage() {
   std::cerr << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
-               "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR\n";
+               "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR |\n"
+               "       document DUPLEX DIR | prepare DUPLEX DIR | prepare-koala DUPLEX DIR DATA_DIR |\n"
+               "       bench-update DUPLEX DIR\n";
   return 2;
 }
 
@@ -309,6 +537,10 @@ int main(int argc, char** argv) {
       return checkFails(args[1], args[2], std::vector<std::string>(args.begin() + 4, args.end()));
     if (args.size() == 3 && args[0] == "demo") return checkDemo(args[1], args[2]);
     if (args.size() == 4 && args[0] == "shared-data") return checkSharedData(args[1], args[2], args[3]);
+    if (args.size() == 3 && args[0] == "document") return checkDocument(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "prepare") return checkPrepare(args[1], args[2]);
+    if (args.size() == 4 && args[0] == "prepare-koala") return checkPrepareKoala(args[1], args[2], args[3]);
+    if (args.size() == 3 && args[0] == "bench-update") return checkBenchUpdate(args[1], args[2]);
     return usage();
   } catch (const Failure& f) {
     std::cerr << "FAIL: " << f.what() << "\n";
