@@ -34,7 +34,6 @@ namespace {
 struct Record {
   const Object* object = nullptr;
   Affine object_from_world;
-  glm::mat3 normal_to_world{1.0f};  // cofactor matrix of world_from_object's linear part
   std::uint32_t id = kInvalidId;
   std::uint32_t mask = 0;
   ObjectRole role = ObjectRole::Surface;
@@ -59,14 +58,9 @@ Prepared prepare(const InstanceDesc& d) {
   if (d.world_from_object.isSingular()) throw InvalidArgument(describe(d) + ": transform is singular");
   if (d.id == kInvalidId) throw InvalidArgument(describe(d) + ": id 0xFFFFFFFF is reserved for misses");
   Prepared p;
-  // Cofactor matrix det(L) L^-T: maps cross(v1 - v0, v2 - v0) of object space exactly to the
-  // same cross product of the world-space vertices (the inverse transpose alone would lose the
-  // scale and flip the winding of mirrored instances).
   const glm::dmat3& l = d.world_from_object.linear;
-  const glm::dmat3 normal = glm::determinant(l) * glm::transpose(glm::inverse(l));
   p.record.object = d.object.get();
   p.record.object_from_world = d.world_from_object.inverse();
-  p.record.normal_to_world = glm::mat3(normal);
   p.record.id = d.id;
   p.record.mask = d.mask;
   p.record.role = d.object->role();
@@ -494,6 +488,17 @@ Ray toObject(const Record& rec, const WorldRay& w) {
   return r;
 }
 
+// The world-space geometric normal of a hit: the cofactor matrix det(L) L^-T of L =
+// world_from_object's linear part maps cross(v1 - v0, v2 - v0) of object space exactly to the same
+// cross product of the world-space vertices (the inverse transpose alone would lose the scale and
+// flip the winding of mirrored instances). With M = L^-1 (which the record holds) it is M^T / det M;
+// computed per reported hit rather than stored per instance.
+glm::vec3 normalToWorld(const Record& rec, const glm::vec3& ng_os) {
+  if (rec.identity) return ng_os;
+  const glm::dmat3& m = rec.object_from_world.linear;
+  return glm::vec3((glm::transpose(m) / glm::determinant(m)) * glm::dvec3(ng_os));
+}
+
 // A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
 // traversal of the same instance for the same ray is wasted work.
 struct Mailbox {
@@ -544,7 +549,7 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
   });
   if (!winner) return Hit{};
   best.instance_id = winner->id;
-  if (!winner->identity) best.ng = winner->normal_to_world * best.ng;
+  best.ng = normalToWorld(*winner, best.ng);
   return best;
 }
 
@@ -605,7 +610,7 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
       rec.object->intersectAll(toObject(rec, w), hits, ctx);
       for (std::size_t k = first; k < hits.size(); ++k) {
         hits[k].instance_id = rec.id;
-        if (!rec.identity) hits[k].ng = rec.normal_to_world * hits[k].ng;
+        hits[k].ng = normalToWorld(rec, hits[k].ng);
       }
     }
     return false;
