@@ -296,6 +296,9 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
   const json& objects = ctx.member(root, "", "objects");
   if (!objects.is_array()) ctx.fail("/objects", "expected an array");
   std::vector<std::shared_ptr<std::string>> build_errors;  // per entry, set by its failing factory
+  const std::vector<std::string> type_names = registry.names();
+  std::vector<std::string_view> entry_keys = {"name", "structure"};  // allowed in an entry (own format)
+  entry_keys.insert(entry_keys.end(), type_names.begin(), type_names.end());
   for (std::size_t i = 0; i < objects.size(); ++i) {
     const std::string p = at("/objects", i);
     const json& entry = objects[i];
@@ -304,7 +307,7 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
     if (library.find(name)) ctx.fail(at(p, "name"), "duplicate object name \"" + name + "\"");
     const ObjectTypeInfo* type = nullptr;
     std::string known;
-    for (const std::string& t : registry.names()) {
+    for (const std::string& t : type_names) {
       const ObjectTypeInfo* info = registry.find(t);
       if (v1 && !info->in_scene_json_v1) continue;
       known += (known.empty() ? "\"" : ", \"") + t + "\"";
@@ -313,11 +316,9 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
       type = info;
     }
     if (!type) ctx.fail(p, "no object type (expected exactly one of the keys " + known + ")");
-    std::vector<std::string_view> allowed = {"name", "structure"};
-    for (const std::string& t : registry.names()) allowed.push_back(t);
     if (ctx.strict)
       for (const auto& [key, value] : entry.items())
-        if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
+        if (std::find(entry_keys.begin(), entry_keys.end(), key) == entry_keys.end())
           ctx.fail(at(p, key), "unknown key \"" + key + "\"");
 
     ObjectSpecContext object_ctx = ctx;
