@@ -372,7 +372,9 @@ void expectSameFile(const fs::path& a, const fs::path& b) {
 
 // duplex-scene-v1 against scene-json-v1: the same rays (bounds of the visible instances), and
 // byte-identical closest-hit and --any-hit files, with 1 and 2 threads.
-int checkDocument(const std::string& duplex, const fs::path& dir) {
+// Each of these checks writes its own subfolder of the fixtures (CTest runs them in parallel).
+int checkDocument(const std::string& duplex, const fs::path& fixtures) {
+  const fs::path dir = fixtures / "document";
   writeDocumentFixtures(dir);
   const fs::path tree = dir / "doc_tree.json", flat = dir / "doc_flat.json";
   for (const auto& [name, mode] : std::vector<std::pair<std::string, std::vector<std::string>>>{
@@ -420,7 +422,8 @@ int checkDocument(const std::string& duplex, const fs::path& dir) {
 
 // `duplex prepare`: both formats; the copies load every structure instead of building it, give
 // the same hits, and a damaged structure is refused with its file named.
-int checkPrepare(const std::string& duplex, const fs::path& dir) {
+int checkPrepare(const std::string& duplex, const fs::path& fixtures) {
+  const fs::path dir = fixtures / "prepare";
   writeDocumentFixtures(dir);
   const fs::path rays = dir / "prep_rays.bin";
   runOk({duplex, "rays", "--scene", (dir / "doc_flat.json").string(), "--random", "3000", "--seed", "9", "--out",
@@ -491,9 +494,10 @@ int checkPrepareKoala(const std::string& duplex, const fs::path& dir, const fs::
 
 // `duplex bench update` on tiny scenes: the keys of the issue, positive times, and, with Embree,
 // agreement of the hits after the same edits.
-int checkBenchUpdate(const std::string& duplex, const fs::path& dir) {
+int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
+  const fs::path dir = fixtures / "bench_update";
   writeDocumentFixtures(dir);
-  for (const fs::path& scene : {dir / "quad.json", dir / "doc_tree.json"}) {
+  for (const fs::path& scene : {fixtures / "quad.json", dir / "doc_tree.json"}) {
     const nlohmann::json j = parseOneLine(runOk({duplex, "bench", "update", "--scene", scene.string(), "--moves", "2",
                                                  "--repeat", "3", "--seed", "4", "--threads", "2", "--primary", "48"},
                                                 dir)
