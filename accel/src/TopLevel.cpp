@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string>
 #include <unordered_map>
@@ -246,7 +247,11 @@ void TopLevel::commit() {
   s.last_edits = pending.size();
   s.last_full = false;
 
-  const bool incremental = config_.update == TopLevelUpdate::Incremental && !tree_.empty();
+  // A batch that edits a large part of the scene is cheaper, and gives a better tree, as one
+  // full rebuild than as as many re-insertions (the same holds for scenes of a few instances).
+  const bool large_batch =
+      static_cast<double>(pending.size()) > config_.max_incremental_fraction * static_cast<double>(live_count_);
+  const bool incremental = config_.update == TopLevelUpdate::Incremental && !tree_.empty() && !large_batch;
   const float ci = config_.build.intersection_cost;
   bool exact_cost_needed = false;
   std::vector<LeafVisit> grown;  // leaves that gained references
@@ -361,7 +366,7 @@ void TopLevel::commit() {
   }
   // Too few instances to bother, or the count drifted far from the last full build's: rebuild.
   const double drift = std::abs(static_cast<double>(live_count_) - static_cast<double>(s.fresh_count));
-  if (live_count_ < 16 || drift > 0.25 * static_cast<double>(std::max<std::size_t>(s.fresh_count, 1))) {
+  if (live_count_ < config_.min_incremental_instances || drift > 0.25 * static_cast<double>(std::max<std::size_t>(s.fresh_count, 1))) {
     fullRebuild();
     return;
   }
@@ -499,6 +504,29 @@ glm::vec3 normalToWorld(const Record& rec, const glm::vec3& ng_os) {
   return glm::vec3((glm::transpose(m) / glm::determinant(m)) * glm::dvec3(ng_os));
 }
 
+// Whether the ray meets `box` within [ray.tnear, t_max]: the instance's own world box, tested
+// before its ray transform and bottom-level setup. A leaf cell is usually much larger than the
+// boxes it holds (rotated instances, boxes cut by few planes), and most visits end here.
+inline bool meetsBox(const KdRay& ray, const Box& box, float t_max) {
+  float t0 = ray.tnear, t1 = t_max;
+  for (int k = 0; k < 3; ++k) {
+    if (ray.zero[k]) {
+      if (ray.origin[k] < box.lo[k] || ray.origin[k] > box.hi[k]) return false;
+      continue;
+    }
+    float a = (box.lo[k] - ray.origin[k]) * ray.inv_dir[k];
+    float b = (box.hi[k] - ray.origin[k]) * ray.inv_dir[k];
+    if (a > b) std::swap(a, b);
+    // Widened like clipRayToBox: rounding must never cull a hit on the box boundary.
+    b *= 1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
+    a = a >= 0.0f ? a * (1.0f - 2.0f * 3.0f * std::numeric_limits<float>::epsilon())
+                  : a * (1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon());
+    t0 = std::max(t0, a);
+    t1 = std::min(t1, b);
+  }
+  return t0 <= t1;
+}
+
 // A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
 // traversal of the same instance for the same ray is wasted work.
 struct Mailbox {
@@ -521,6 +549,7 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
   if (!isQueryable(ray_f) || tree_.empty()) return Hit{};
   const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_f);
   const Record* records = state_->records.data();
+  const Box* boxes = state_->boxes.data();
   Hit best;
   best.t = ray_f.tfar;
   const Record* winner = nullptr;
@@ -532,7 +561,9 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
       const Record& rec = records[slot];
-      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || mailbox.seen(slot)) continue;
+      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) ||
+          mailbox.seen(slot))
+        continue;
       ++ctx.stats.instance_visits;
       Ray ray_os = toObject(rec, w);
       ray_os.tfar = t;
@@ -566,6 +597,7 @@ bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask
   if (!isQueryable(ray_ws) || tree_.empty()) return false;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
+  const Box* boxes = state_->boxes.data();
   Mailbox mailbox;
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
@@ -573,7 +605,9 @@ bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
       const Record& rec = records[slot];
-      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || mailbox.seen(slot)) continue;
+      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
+          mailbox.seen(slot))
+        continue;
       ++ctx.stats.instance_visits;
       if (rec.object->occluded(toObject(rec, w), ctx)) return true;
     }

@@ -65,7 +65,10 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   for (int i = 0; i < 30; ++i)
     g.addInstance(parents[rng() % parents.size()], f.objects[rng() % 4], randomLocal(rng, 8.0));
   g.commit();
-  SceneTracer tracer(g);
+  TopLevelConfig config;  // small scene, large batches: keep them incremental to test that path
+  config.min_incremental_instances = 0;
+  config.max_incremental_fraction = 1.0;
+  SceneTracer tracer(g, config);
   const Box world(glm::vec3(-9.0f), glm::vec3(9.0f));
 
   std::size_t edits = 0, commits = 0, rejected = 0, rays_checked = 0, hits = 0;
@@ -142,6 +145,8 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   EXPECT_GT(hits, 1000u);  // enough rays met geometry for the comparison to mean something
   const TopLevelStats st = tracer.stats();
   EXPECT_GT(st.commits, 800u);
+  EXPECT_GT(st.subtree_rebuilds, 100u);                // the incremental path ran ...
+  EXPECT_LT(st.full_rebuilds, st.commits * 3 / 4);     // ... for a good part of the commits
   EXPECT_LE(st.sah_cost, tracer.topLevel().config().rebuild_ratio * st.fresh_sah_cost * (1.0 + 1e-9));
 }
 

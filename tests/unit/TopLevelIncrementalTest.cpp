@@ -60,6 +60,9 @@ EditRun runRandomEdits(TopLevelUpdate mode, std::size_t total_edits, std::uint64
   Model model;
   TopLevelConfig config;
   config.update = mode;
+  // Small scenes and large batches would otherwise be rebuilt in full: test the incremental path.
+  config.min_incremental_instances = 0;
+  config.max_incremental_fraction = 1.0;
   TopLevel top(config);
   std::uint32_t next_id = 1;
   std::vector<InstanceDesc> initial;

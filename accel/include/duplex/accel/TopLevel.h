@@ -64,6 +64,11 @@ struct TopLevelConfig {
   double rebuild_ratio = 1.1;
   /// A leaf that grows past this many references is rebuilt as a subtree.
   std::uint32_t leaf_split_size = 8;
+  /// Below this many instances every commit rebuilds the whole tree (it costs microseconds).
+  std::size_t min_incremental_instances = 64;
+  /// A commit that edits more than this fraction of the instances rebuilds the whole tree: cheaper
+  /// than as many re-insertions, and a better tree.
+  double max_incremental_fraction = 0.125;
 };
 
 /// Figures of the current tree and of the last commit (for tests and the benchmark).
