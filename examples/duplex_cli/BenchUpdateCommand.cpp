@@ -269,6 +269,7 @@ std::size_t parseMoves(const std::string& text, std::size_t instances) {
 
 nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   if (options.repeat < 1) throw InvalidArgument("--repeat must be at least 1");
+  if (options.baseline_repeat < 0) throw InvalidArgument("--baseline-repeat must not be negative");
   WorkerThreads workers(options.threads);
   tbb::task_arena& arena = workers.arena;
   const int threads = workers.count;
@@ -316,6 +317,12 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   out["bottom_build_ms"] = doc->figures.build_ms;
   out["top_build_ms"] = ours->topBuildMs();
   const Figures incremental = replay(*ours, plan, initial, arena, rays);
+  // The baselines replay a prefix of the same plan.
+  EditPlan baseline_plan = plan;
+  const int baseline_repeat = options.baseline_repeat > 0 ? std::min(options.baseline_repeat, options.repeat) : options.repeat;
+  baseline_plan.moves.resize(static_cast<std::size_t>(baseline_repeat));
+  baseline_plan.adds.resize(static_cast<std::size_t>(baseline_repeat));
+  out["baseline_repeat"] = baseline_repeat;
   putFigures(out, "", incremental, rays.size());
   const TopLevelStats stats = ours->tracer().stats();
   out["top_level_full_rebuilds"] = stats.full_rebuilds;
@@ -338,7 +345,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     std::cerr << "ours: full top-level rebuild per commit\n";
     std::unique_ptr<Ours> full;
     arena.execute([&] { full = std::make_unique<Ours>(graph, instances, TopLevelUpdate::FullRebuild); });
-    const Figures f = replay(*full, plan, initial, arena, rays);
+    const Figures f = replay(*full, baseline_plan, initial, arena, rays);
     out["full_rebuild_ms_median"] = median(f.update_ms);
     out["full_rebuild_add_ms_median"] = median(f.add_ms);
     out["full_rebuild_remove_ms_median"] = median(f.remove_ms);
@@ -375,7 +382,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     out[prefix + "build_ms"] = median(build_ms);
     out[prefix + "build_objects_ms"] = median(objects_ms);
     out[prefix + "build_top_ms"] = median(top_ms);
-    const Figures f = replay(*embree, plan, initial, arena, rays);
+    const Figures f = replay(*embree, baseline_plan, initial, arena, rays);
     putFigures(out, prefix, f, rays.size());
     if (mode == EmbreeTopLevelMode::Default) {
       // Both replayed the same plan: the same instance and triangle should be hit almost everywhere

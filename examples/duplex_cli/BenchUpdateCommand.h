@@ -42,6 +42,10 @@ struct BenchUpdateOptions {
   int threads = 0;          ///< builds, commits and tracing; 0 means all hardware threads
   std::uint32_t primary = 512;  ///< primary rays of a W x W image (the camera of `duplex rays`)
   int build_repeat = 3;     ///< full Embree builds timed per mode
+  /// Commits per measurement of the baselines (full top-level rebuild, Embree): the first ones of
+  /// the same plan. 0 means `repeat`. Lets ours run 1,000 commits (the trace after 1,000 commits)
+  /// without 1,000 full rebuilds of each baseline.
+  int baseline_repeat = 0;
 };
 
 /// Runs the benchmark and returns one JSON object. Keys: scene, objects, instances, triangles,

@@ -6,7 +6,7 @@
 //   duplex scene robot     --urdf U [--copies C] [--joints a1,a2,...] [--spacing D] --out S.json
 //   duplex prepare --scene S.json --out DIR [--threads N]
 //   duplex bench update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]
-//                       [--primary W] [--build-repeat B]
+//                       [--primary W] [--build-repeat B] [--baseline-repeat B]
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -167,6 +167,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 4096));
   update_cmd->add_option("--primary", bench_update.primary, "Primary rays of a W x W image (default 512)")
       ->check(CLI::Range(1u, 8192u));
+  update_cmd->add_option("--baseline-repeat", bench_update.baseline_repeat,
+                         "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
+      ->check(CLI::Range(0, 1000000));
   update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Full Embree builds timed per mode (default 3)")
       ->check(CLI::Range(1, 100));
 

@@ -65,7 +65,7 @@ struct TopLevelConfig {
   /// A leaf that grows past this many references is rebuilt as a subtree.
   std::uint32_t leaf_split_size = 8;
   /// Below this many instances every commit rebuilds the whole tree (it costs microseconds).
-  std::size_t min_incremental_instances = 64;
+  std::size_t min_incremental_instances = 16;
   /// A commit that edits more than this fraction of the instances rebuilds the whole tree: cheaper
   /// than as many re-insertions, and a better tree.
   double max_incremental_fraction = 0.125;

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# The update benchmark of the paper's table (issue 3, section 6): generates the scenes from
+# ../shared/data/meshes, runs `duplex bench update` on each (1 moved instance and 1% moved per
+# commit), and writes docs/bench/update/<scene>_<moves>.json and docs/bench/update/table.md
+# (ours beside the paper's figures and Embree's, as ratios from the same run).
+#
+#   paper-1   koala split into 19 objects
+#   paper-2   koala split into 6,804 objects
+#   paper-3   koala refined once by Loop subdivision, split into 20,968 objects
+#   robot5    the ABB IRB 6640 (9 parts placed by its URDF), 5 copies
+#   hammer1k  1,000 randomly rotated instances of the hammer
+#
+# Environment:
+#   BUILD_DIR   build directory with bin/duplex (default: build)
+#   OUTDIR      results (default: docs/bench/update)
+#   SCENE_DIR   generated scenes (default: out/paper)
+#   REPEAT      commits per measurement of ours (default 1000: the trace after 1,000 commits)
+#   BASELINE_REPEAT  commits per measurement of the full-rebuild and Embree baselines (default 30)
+#   SCENES      subset, e.g. "paper-1 robot5"
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+BUILD_DIR=${BUILD_DIR:-$ROOT/build}
+OUTDIR=${OUTDIR:-$ROOT/docs/bench/update}
+SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
+REPEAT=${REPEAT:-1000}
+BASELINE_REPEAT=${BASELINE_REPEAT:-30}
+SCENES=${SCENES:-"paper-1 paper-2 paper-3 robot5 hammer1k"}
+DATA=$ROOT/../shared/data/meshes
+DUPLEX=$BUILD_DIR/bin/duplex
+if [ ! -d "$DATA" ]; then echo "bench_update.sh: $DATA is absent; the paper's scenes need it" >&2; exit 1; fi
+cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$BUILD_DIR" -j2 --target duplex_cli >/dev/null
+mkdir -p "$OUTDIR" "$SCENE_DIR"
+
+make_scene() {
+  local name=$1 out=$SCENE_DIR/$1.json
+  [ -f "$out" ] && return
+  case "$name" in
+    paper-1) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --objects 19 --out "$out" ;;
+    paper-2) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --objects 6804 --out "$out" ;;
+    paper-3) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --loop 1 --objects 20968 --out "$out" ;;
+    robot5) "$DUPLEX" scene robot --urdf "$DATA/abb_irb6640/irb6640.urdf" --copies 5 --out "$out" ;;
+    hammer1k) "$DUPLEX" scene instances --mesh "$DATA/hammer.obj" --count 1000 --seed 1 --out "$out" ;;
+    *) echo "bench_update.sh: unknown scene $name" >&2; exit 2 ;;
+  esac >/dev/null
+}
+
+for scene in $SCENES; do
+  make_scene "$scene"
+  for moves in 1 1%; do
+    tag=${moves%\%}; [ "$moves" = "1%" ] && tag=1pct
+    echo "== $scene, $moves moved per commit" >&2
+    "$DUPLEX" bench update --scene "$SCENE_DIR/$scene.json" --moves "$moves" --repeat "$REPEAT" \
+      --baseline-repeat "$BASELINE_REPEAT" --seed 1 > "$OUTDIR/${scene}_${tag}.json"
+  done
+done
+python3 "$ROOT/scripts/update_table.py" "$OUTDIR" > "$OUTDIR/table.md"
+cat "$OUTDIR/table.md"
