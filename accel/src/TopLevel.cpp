@@ -509,22 +509,7 @@ glm::vec3 normalToWorld(const Record& rec, const glm::vec3& ng_os) {
 // boxes it holds (rotated instances, boxes cut by few planes), and most visits end here.
 inline bool meetsBox(const KdRay& ray, const Box& box, float t_max) {
   float t0 = ray.tnear, t1 = t_max;
-  for (int k = 0; k < 3; ++k) {
-    if (ray.zero[k]) {
-      if (ray.origin[k] < box.lo[k] || ray.origin[k] > box.hi[k]) return false;
-      continue;
-    }
-    float a = (box.lo[k] - ray.origin[k]) * ray.inv_dir[k];
-    float b = (box.hi[k] - ray.origin[k]) * ray.inv_dir[k];
-    if (a > b) std::swap(a, b);
-    // Widened like clipRayToBox: rounding must never cull a hit on the box boundary.
-    b *= 1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
-    a = a >= 0.0f ? a * (1.0f - 2.0f * 3.0f * std::numeric_limits<float>::epsilon())
-                  : a * (1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon());
-    t0 = std::max(t0, a);
-    t1 = std::min(t1, b);
-  }
-  return t0 <= t1;
+  return clipIntervalToBox(ray, box, t0, t1);
 }
 
 // A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level

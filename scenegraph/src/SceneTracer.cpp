@@ -124,28 +124,33 @@ SceneHit SceneTracer::intersectDetailed(const RayD& ray_ws, QueryContext& ctx, s
   return detail(graph_, impl_->top, ray_ws, impl_->top.intersect(ray_ws, ctx, mask));
 }
 
-void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask) const {
-  if (hits.size() != rays.size())
-    throw InvalidArgument("SceneTracer::intersect: " + std::to_string(rays.size()) + " rays but room for " +
-                          std::to_string(hits.size()) + " hits");
-  std::shared_lock lock(impl_->mutex);
-  const TopLevel& top = impl_->top;
+namespace {
+
+// Runs query(ray, ctx) over `rays` in parallel (one QueryContext per chunk) into `out`.
+template <class Out, class Query>
+void forEachRay(const char* what, std::span<const Ray> rays, std::span<Out> out, Query&& query) {
+  if (out.size() != rays.size())
+    throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) + " rays but room for " +
+                          std::to_string(out.size()) + " results");
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
     QueryContext ctx;
-    for (std::size_t i = range.begin(); i != range.end(); ++i) hits[i] = top.intersect(rays[i], ctx, mask);
+    for (std::size_t i = range.begin(); i != range.end(); ++i) out[i] = query(rays[i], ctx);
   });
 }
 
-void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask) const {
-  if (occluded.size() != rays.size())
-    throw InvalidArgument("SceneTracer::occluded: " + std::to_string(rays.size()) + " rays but room for " +
-                          std::to_string(occluded.size()) + " results");
+}  // namespace
+
+void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
-    QueryContext ctx;
-    for (std::size_t i = range.begin(); i != range.end(); ++i) occluded[i] = top.occluded(rays[i], ctx, mask) ? 1 : 0;
-  });
+  forEachRay("SceneTracer::intersect", rays, hits, [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
+}
+
+void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  forEachRay("SceneTracer::occluded", rays, occluded,
+             [&](const Ray& r, QueryContext& ctx) { return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0); });
 }
 
 namespace {

@@ -48,22 +48,15 @@ Model visibleModel(const SceneGraph& graph) {
   return m;
 }
 
-Affine randomLocal(std::mt19937_64& rng, double spread) {
-  std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.5, 1.5);
-  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
-  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, 3.14159 * u(rng), glm::dvec3(s(rng), s(rng), s(rng)),
-                                                          0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng))));
-}
-
 TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   Fixture f;
   SceneGraph& g = f.graph;
   std::mt19937_64 rng(2024);
   // Start: a few groups and transform nodes with instances below them.
   std::vector<NodeId> parents{kRootNode};
-  for (int i = 0; i < 6; ++i) parents.push_back(g.addTransform(parents[rng() % parents.size()], randomLocal(rng, 6.0)));
+  for (int i = 0; i < 6; ++i) parents.push_back(g.addTransform(parents[rng() % parents.size()], randomPlacement(rng, 6.0)));
   for (int i = 0; i < 30; ++i)
-    g.addInstance(parents[rng() % parents.size()], f.objects[rng() % 4], randomLocal(rng, 8.0));
+    g.addInstance(parents[rng() % parents.size()], f.objects[rng() % 4], randomPlacement(rng, 8.0));
   g.commit();
   TopLevelConfig config;  // small scene, large batches: keep them incremental to test that path
   config.min_incremental_instances = 0;
@@ -84,10 +77,10 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
       const int kind = static_cast<int>(rng() % 12);
       try {
         if (kind < 2 || inst.size() < 10) {
-          g.addInstance(containers[rng() % containers.size()], f.objects[rng() % 4], randomLocal(rng, 8.0), {},
+          g.addInstance(containers[rng() % containers.size()], f.objects[rng() % 4], randomPlacement(rng, 8.0), {},
                         rng() % 3 == 0 ? 2u : 0xFFFFFFFFu);
         } else if (kind < 3 && containers.size() < 12) {
-          parents.push_back(g.addTransform(containers[rng() % containers.size()], randomLocal(rng, 4.0)));
+          parents.push_back(g.addTransform(containers[rng() % containers.size()], randomPlacement(rng, 4.0)));
         } else if (kind < 4) {
           // Remove an instance, or now and then a whole transform node's subtree.
           if (rng() % 5 == 0 && containers.size() > 3) {
@@ -245,7 +238,7 @@ TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
   Fixture f;
   std::mt19937_64 rng(8);
   std::vector<NodeId> all;
-  for (int i = 0; i < 300; ++i) all.push_back(f.graph.addInstance(kRootNode, f.objects[i % 4], randomLocal(rng, 40.0)));
+  for (int i = 0; i < 300; ++i) all.push_back(f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 40.0)));
   f.graph.commit();
   SceneTracer tracer(f.graph);
   const PinholeCamera cam = PinholeCamera::looking_at_box(tracer.bounds());
@@ -299,7 +292,7 @@ TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
 TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
   Fixture f;
   std::mt19937_64 rng(12);
-  for (int i = 0; i < 200; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomLocal(rng, 20.0));
+  for (int i = 0; i < 200; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 20.0));
   f.graph.commit();
   SceneTracer tracer(f.graph);
   const std::vector<Ray> rays = randomRays(tracer.bounds(), 20000, 4);

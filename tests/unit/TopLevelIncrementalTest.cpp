@@ -42,13 +42,6 @@ const Objects& objects() {
   return o;
 }
 
-Affine randomPlacement(std::mt19937_64& rng, double spread) {
-  std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.3, 1.5);
-  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
-  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, 3.14159 * u(rng), glm::dvec3(s(rng), s(rng), s(rng)),
-                                                          0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng))));
-}
-
 struct EditRun {
   std::size_t edits = 0, commits = 0, rays_checked = 0, hits = 0;
 };

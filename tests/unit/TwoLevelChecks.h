@@ -10,15 +10,27 @@
 #include "duplex/accel/Ray.h"
 #include "duplex/accel/TopLevel.h"
 
+#include "TestSupport.h"
+
 #include <gtest/gtest.h>
 #include <glm/matrix.hpp>
 
 #include <map>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
 
 namespace duplex::test {
+
+/// A random rotation, non-uniform scale in [0.3, 1.5] and translation in a cube of side `spread`
+/// around the origin.
+inline Affine randomPlacement(std::mt19937_64& rng, double spread) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.3, 1.5);
+  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
+  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, 3.14159 * u(rng), glm::dvec3(s(rng), s(rng), s(rng)),
+                                                          0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng))));
+}
 
 /// The live instances as the test believes them to be.
 using Model = std::map<std::uint32_t, InstanceDesc>;

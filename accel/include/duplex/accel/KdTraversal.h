@@ -38,12 +38,10 @@ struct KdRay {
   }
 };
 
-/// Clips the ray's [tnear, tfar] to `box`. Axes with zero direction only test the origin against
-/// the slab (closed: a ray in a face plane is inside). The exit is widened by 2 ulp-style factors
-/// (Ize 2013) so that rounding never culls a hit on the box boundary.
-inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& tmax) {
-  tmin = ray.tnear;
-  tmax = ray.tfar;
+/// Clips the interval [tmin, tmax] (in and out) of the ray to `box`. Axes with zero direction only
+/// test the origin against the slab (closed: a ray in a face plane is inside). The exit is widened
+/// by 2 ulp-style factors (Ize 2013) so that rounding never culls a hit on the box boundary.
+inline bool clipIntervalToBox(const KdRay& ray, const Box& box, float& tmin, float& tmax) {
   if (!(tmin <= tmax)) return false;
   const float lo[3] = {box.lo.x, box.lo.y, box.lo.z};
   const float hi[3] = {box.hi.x, box.hi.y, box.hi.z};
@@ -62,6 +60,13 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
     tmax = std::min(tmax, t1);
   }
   return tmin <= tmax;
+}
+
+/// Clips the ray's [tnear, tfar] to `box` (see clipIntervalToBox).
+inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& tmax) {
+  tmin = ray.tnear;
+  tmax = ray.tfar;
+  return clipIntervalToBox(ray, box, tmin, tmax);
 }
 
 /// Relative slack in t when deciding whether a ray meets a child cell (see traverseKdTree).
