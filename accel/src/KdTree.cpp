@@ -31,9 +31,10 @@ KdTreeStats KdTree::stats(float traversal_cost, float intersection_cost) const {
     }
     ++s.inner_nodes;
     s.sah_cost += p * traversal_cost;
+    // Clamped: in an incrementally updated tree whose root shrank, a plane may lie outside its node.
     Box lower = box, upper = box;
-    lower.hi[n.axis()] = n.split();
-    upper.lo[n.axis()] = n.split();
+    lower.hi[n.axis()] = std::min(n.split(), box.hi[n.axis()]);
+    upper.lo[n.axis()] = std::max(n.split(), box.lo[n.axis()]);
     walk(i + 1, lower, depth + 1);
     walk(n.upperChild(), upper, depth + 1);
   };
@@ -58,8 +59,8 @@ Box KdTree::nodeBox(std::uint32_t index) const {
     }
     if (n.isLeaf()) continue;
     Box lower = box, upper = box;
-    lower.hi[n.axis()] = n.split();
-    upper.lo[n.axis()] = n.split();
+    lower.hi[n.axis()] = std::min(n.split(), box.hi[n.axis()]);
+    upper.lo[n.axis()] = std::max(n.split(), box.lo[n.axis()]);
     stack.emplace_back(n.upperChild(), upper);
     stack.emplace_back(i + 1, lower);
   }

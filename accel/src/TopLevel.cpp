@@ -131,14 +131,15 @@ void forEachLeaf(const KdTree& tree, const Box& box, F&& f) {
     }
     const int a = n.axis();
     const float s = n.split();
+    // Cells are clamped to their parent: after the root shrank, a plane may lie outside it.
     if (box.hi[a] >= s) {
       LeafVisit u{n.upperChild(), v.cell, v.depth + 1, v.root};
-      u.cell.lo[a] = s;
+      u.cell.lo[a] = std::max(s, v.cell.lo[a]);
       stack[top++] = u;
     }
     if (box.lo[a] <= s) {
       LeafVisit l{v.node + 1, v.cell, v.depth + 1, v.root};
-      l.cell.hi[a] = s;
+      l.cell.hi[a] = std::min(s, v.cell.hi[a]);
       stack[top++] = l;
     }
   }
@@ -302,11 +303,21 @@ void TopLevel::commit() {
     exact_cost_needed = true;
   };
 
+  // Whether a box that held up a face of the root bounds moved or vanished: the bounds may then
+  // shrink (rays that miss everything stop traversing the emptied margin).
+  bool boundary_left = false;
+  auto on_boundary = [&](const Box& b) {
+    const Box& r = tree_.bounds;
+    return !b.empty() && (b.lo.x <= r.lo.x || b.lo.y <= r.lo.y || b.lo.z <= r.lo.z || b.hi.x >= r.hi.x ||
+                          b.hi.y >= r.hi.y || b.hi.z >= r.hi.z);
+  };
+
   for (auto& [id, edit] : pending) {
     const auto it = s.slot_of_id.find(id);
     if (!edit) {
       if (it == s.slot_of_id.end()) continue;  // added and removed within this batch
       const std::uint32_t slot = it->second;
+      boundary_left |= on_boundary(s.boxes[slot]);
       if (incremental) forEachLeaf(tree_, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
       s.boxes[slot] = Box();
       s.records[slot] = Record{};
@@ -338,6 +349,7 @@ void TopLevel::commit() {
     s.owners[slot] = std::move(edit->owner);
     s.boxes[slot] = edit->box;
     if (!incremental || old_box == edit->box) continue;
+    boundary_left |= on_boundary(old_box);
     // Leave the leaves only the old box touches, join those only the new box touches.
     s.scratch_old.clear();
     s.scratch_new.clear();
@@ -371,6 +383,16 @@ void TopLevel::commit() {
     return;
   }
   if (s.refineLeaves(*this, grown)) exact_cost_needed = true;
+  if (boundary_left) {
+    // Shrinking the root is always valid: every box stays inside, and a split plane outside the
+    // smaller root just leaves one child empty (cells are clamped to the root when walked).
+    Box tight;
+    for (const Box& b : s.boxes) tight.extend(b);
+    if (!(tight == tree_.bounds)) {
+      tree_.bounds = tight;
+      exact_cost_needed = true;
+    }
+  }
   if (exact_cost_needed) {
     s.sah_cost = tree_.stats(config_.build.traversal_cost, ci).sah_cost;
   }
@@ -668,8 +690,8 @@ std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec
       continue;
     }
     Box lower = cell, upper = cell;
-    lower.hi[n.axis()] = n.split();
-    upper.lo[n.axis()] = n.split();
+    lower.hi[n.axis()] = std::min(n.split(), cell.hi[n.axis()]);
+    upper.lo[n.axis()] = std::max(n.split(), cell.lo[n.axis()]);
     stack.emplace_back(n.upperChild(), upper);
     stack.emplace_back(i + 1, lower);
   }

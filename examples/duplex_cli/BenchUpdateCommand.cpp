@@ -172,10 +172,13 @@ class Ours {
   }
   void remove(std::uint32_t instance) { graph_.remove(nodes_[instance]); }
   void commit() { graph_.commit(); }
-  TraceTiming trace(tbb::task_arena& arena, std::span<const Ray> rays) {
+  TraceTiming trace(tbb::task_arena& arena, std::span<const Ray> rays) { return traceWith(*tracer_, arena, rays); }
+  /// A second tracer on the same graph, its top level built from scratch now.
+  [[nodiscard]] std::unique_ptr<SceneTracer> freshTracer() { return std::make_unique<SceneTracer>(graph_); }
+  static TraceTiming traceWith(const SceneTracer& tracer, tbb::task_arena& arena, std::span<const Ray> rays) {
     std::vector<Hit> hits(rays.size());
     TraceTiming t;
-    t.time = bench::timeIt(arena.max_concurrency(), [&] { arena.execute([&] { tracer_->intersect(rays, hits); }); });
+    t.time = bench::timeIt(arena.max_concurrency(), [&] { arena.execute([&] { tracer.intersect(rays, hits); }); });
     for (const Hit& h : hits) t.hits += h.valid() ? 1u : 0u;
     return t;
   }
@@ -327,6 +330,32 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   const TopLevelStats stats = ours->tracer().stats();
   out["top_level_full_rebuilds"] = stats.full_rebuilds;
   out["top_level_subtree_rebuilds"] = stats.subtree_rebuilds;
+  // What the incremental commits cost the tracing: the incremental tree against a tree built from
+  // scratch over the same instances, traced alternately (7 pairs; the median of the per-pair CPU
+  // time ratios, robust to the load of a shared machine), and the instance visits per ray of both
+  // (deterministic, single-threaded over the same rays).
+  {
+    std::unique_ptr<SceneTracer> fresh;
+    arena.execute([&] { fresh = ours->freshTracer(); });
+    std::vector<double> ratios, inc_ms, fresh_pair_ms;
+    for (int k = 0; k < 7; ++k) {
+      const TraceTiming a = Ours::traceWith(ours->tracer(), arena, rays);
+      const TraceTiming b = Ours::traceWith(*fresh, arena, rays);
+      ratios.push_back(a.time.cpu_ms / b.time.cpu_ms);
+      inc_ms.push_back(a.time.wall_ms);
+      fresh_pair_ms.push_back(b.time.wall_ms);
+    }
+    out["trace_slowdown_paired_pct"] = 100.0 * (median(ratios) - 1.0);
+    out["mrays_per_s_paired"] = mraysPerS(rays.size(), median(inc_ms));
+    out["mrays_per_s_fresh_paired"] = mraysPerS(rays.size(), median(fresh_pair_ms));
+    auto visits = [&](const SceneTracer& t) {
+      QueryContext ctx;
+      for (const Ray& r : rays) (void)t.intersect(r, ctx);
+      return static_cast<double>(ctx.stats.instance_visits) / static_cast<double>(rays.size());
+    };
+    out["instance_visits_per_ray"] = visits(ours->tracer());
+    out["instance_visits_per_ray_fresh"] = visits(*fresh);
+  }
   // The same tree rebuilt from scratch: what the incremental commits cost the tracing.
   std::vector<double> rebuild_ms;
   for (int k = 0; k < 3; ++k) {

@@ -61,6 +61,7 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   TopLevelConfig config;  // small scene, large batches: keep them incremental to test that path
   config.min_incremental_instances = 0;
   config.max_incremental_fraction = 1.0;
+  config.rebuild_ratio = 1.5;  // few quality rebuilds, so that most commits stay incremental
   SceneTracer tracer(g, config);
   const Box world(glm::vec3(-9.0f), glm::vec3(9.0f));
 

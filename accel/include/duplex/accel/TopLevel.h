@@ -61,7 +61,7 @@ struct TopLevelConfig {
   TopLevelUpdate update = TopLevelUpdate::Incremental;
   /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
   /// scaled to the current instance count).
-  double rebuild_ratio = 1.1;
+  double rebuild_ratio = 1.05;
   /// A leaf that grows past this many references is rebuilt as a subtree.
   std::uint32_t leaf_split_size = 8;
   /// Below this many instances every commit rebuilds the whole tree (it costs microseconds).
