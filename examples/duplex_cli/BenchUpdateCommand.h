@@ -53,9 +53,14 @@ struct BenchUpdateOptions {
 /// bottom_build_ms, top_build_ms, update_ms_median, update_ms_max, add_ms_median,
 /// remove_ms_median, mrays_per_s, hits, top_level_full_rebuilds, top_level_subtree_rebuilds,
 /// top_rebuild_ms_median, mrays_per_s_fresh, trace_slowdown_pct, full_rebuild_ms_median,
-/// full_rebuild_add_ms_median, full_rebuild_remove_ms_median, full_rebuild_mrays_per_s; with
-/// Embree the same figures prefixed "embree_" and "embree_dynamic_low_" plus embree_*build*_ms,
-/// agreement_with_embree (fraction of primary rays with the same instance and triangle) and
+/// full_rebuild_add_ms_median, full_rebuild_remove_ms_median, full_rebuild_mrays_per_s,
+/// baseline_repeat, trace_slowdown_paired_pct (incremental tree against one built from scratch,
+/// alternated single-threaded runs, median CPU-time ratio), mrays_per_s_paired and
+/// mrays_per_s_fresh_paired (those runs, one thread),
+/// instance_visits_per_ray(_fresh), agreement_incremental_vs_fresh (same instance, triangle and t);
+/// with Embree the same figures prefixed "embree_" and "embree_dynamic_low_" plus
+/// embree_*build*_ms, agreement_with_embree (fraction of primary rays with the same instance and
+/// triangle as ours with full rebuilds, which replayed the same baseline plan) and
 /// embree_update_over_ours; machine. Times are wall-clock milliseconds. Progress goes to stderr.
 /// Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options);
