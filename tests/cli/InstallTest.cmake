@@ -9,7 +9,7 @@ file(REMOVE_RECURSE "${PREFIX}")
 execute_process(COMMAND "${CMAKE_COMMAND}" --install "${BUILD_DIR}" --prefix "${PREFIX}" --config "${BUILD_TYPE}"
                 OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
 foreach(f lib/cmake/duplex/duplexConfig.cmake lib/cmake/duplex/duplexConfigVersion.cmake
-          include/duplex/accel/TopLevel.h include/duplex/scenegraph/SceneFile.h bin/duplex)
+          include/duplex/accel/TopLevel.h include/duplex/scenegraph/SceneTracer.h bin/duplex)
   if(NOT EXISTS "${PREFIX}/${f}")
     message(FATAL_ERROR "install: ${PREFIX}/${f} is missing")
   endif()

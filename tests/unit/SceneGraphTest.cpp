@@ -2,12 +2,15 @@
 /// SceneGraph against a brute-force model: seeded random edit batches (valid and rejected edits,
 /// commits and rollbacks); after every edit the pending graph equals the model, after every commit
 /// world transforms and visibility equal a from-scratch recomputation and the ChangeSet lists exactly
-/// the instances that changed. Plus rejected edits, paths and names, observers.
+/// the instances that changed. Plus rejected edits, instances sharing one object, paths and names,
+/// observers.
 
 #include "duplex/accel/Error.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/scenegraph/SceneTracer.h"
 
+#include "MeshChecks.h"
 #include "TestSupport.h"
 
 #include <gtest/gtest.h>
@@ -547,6 +550,8 @@ TEST(SceneGraph, RejectedEditsLeaveEverythingUnchanged) {
       {"NaN transform", [&] { g.setTransform(s.car, nan_local); }},
       {"singular transform", [&] { g.setTransform(s.wheel0, singular); }},
       {"NaN new instance", [&] { (void)g.addInstance(s.car, 0, nan_local, "n"); }},
+      {"singular new instance", [&] { (void)g.addInstance(s.car, 0, singular, "n"); }},
+      {"unknown object, new instance", [&] { (void)g.addInstance(s.car, 42, Affine::identity(), "n"); }},
       {"singular new transform", [&] { (void)g.addTransform(s.car, singular, "n"); }},
       {"transform of a group", [&] { g.setTransform(s.hidden, translation(1, 0, 0)); }},
       {"instance under instance", [&] { (void)g.addInstance(s.body, 0); }},
@@ -587,6 +592,38 @@ TEST(SceneGraph, RejectedEditsLeaveEverythingUnchanged) {
   EXPECT_EQ(a.disappeared, std::vector<NodeId>{s.wheel1});
   EXPECT_EQ(a.mask_changed, std::vector<NodeId>{s.body});
   EXPECT_TRUE(a.object_changed.empty());
+}
+
+// Two instances of one library object: each is its own node, the object (and its bottom-level
+// structure) is shared, rejected instances change nothing, and the world bounds are those of the
+// placed objects.
+TEST(SceneGraph, InstancesShareTheirObjectAndRejectedOnesChangeNothing) {
+  auto lib = std::make_shared<ObjectLibrary>();
+  const auto sphere = test::buildChecked(test::icosphere(1));  // unit sphere: x in [-1, 1]
+  const ObjectId object = lib->add("sphere", sphere);
+  EXPECT_EQ(object, 0u);
+  SceneGraph g(lib);
+  const NodeId plain = g.addInstance(kRootNode, object);
+  // Object (x, y, z) -> world (2x + 5, 2y, 2z).
+  const NodeId scaled = g.addInstance(kRootNode, object, Affine::fromRowMajor3x4({2, 0, 0, 5, 0, 2, 0, 0, 0, 0, 2, 0}));
+  EXPECT_NE(plain, scaled);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW((void)g.addInstance(kRootNode, object + 1), InvalidArgument);  // unknown object
+  EXPECT_THROW((void)g.addInstance(kRootNode, object, Affine::fromRowMajor3x4({nan, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0})),
+               InvalidArgument);
+  EXPECT_THROW((void)g.addInstance(kRootNode, object, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0})),
+               InvalidArgument);  // singular
+  EXPECT_EQ(g.instances(), (std::vector<NodeId>{plain, scaled})) << "a rejected instance changed the graph";
+  (void)g.commit();
+  EXPECT_EQ(g.library().get(g.node(plain).object).get(), sphere.get());
+  EXPECT_EQ(g.library().get(g.node(scaled).object).get(), sphere.get());
+  EXPECT_TRUE(sameAffine(g.worldTransform(plain), Affine::identity()));
+  EXPECT_EQ(g.worldTransform(scaled).translation, glm::dvec3(5, 0, 0));
+  const SceneTracer tracer(g);
+  const Box wb = tracer.bounds();
+  EXPECT_TRUE(wb.contains(glm::vec3(7.0f, 0.0f, 0.0f)) && wb.contains(glm::vec3(-1.0f, 0.0f, 0.0f))) << wb;
+  EXPECT_LE(wb.hi.x, 7.001f);
+  EXPECT_GE(wb.lo.x, -1.001f);
 }
 
 TEST(SceneGraph, WorldTransformsFollowGroupsAndReparenting) {
