@@ -45,10 +45,7 @@ void EmbreeDevice::check(const std::string& what) const {
   }
 }
 
-EmbreeMesh::EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality) {
-  const std::int64_t bytes_before = device.allocatedBytes();
-  scene_ = rtcNewScene(device.get());
-  rtcSetSceneBuildQuality(scene_, quality);
+void attachTriangleMesh(EmbreeDevice& device, RTCScene scene, const TriangleMesh& mesh, RTCBuildQuality quality) {
   RTCGeometry geometry = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetGeometryBuildQuality(geometry, quality);
   const auto& positions = mesh.positions();
@@ -67,8 +64,17 @@ EmbreeMesh::EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQ
   std::memcpy(vertices, positions.data(), positions.size() * 3 * sizeof(float));
   std::memcpy(indices, triangles.data(), triangles.size() * 3 * sizeof(std::uint32_t));
   rtcCommitGeometry(geometry);
-  rtcAttachGeometry(scene_, geometry);
+  rtcAttachGeometry(scene, geometry);
   rtcReleaseGeometry(geometry);
+}
+
+EmbreeMesh::EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality) {
+  const std::int64_t bytes_before = device.allocatedBytes();
+  scene_ = rtcNewScene(device.get());
+  rtcSetSceneBuildQuality(scene_, quality);
+  attachTriangleMesh(device, scene_, mesh, quality);
+  const auto& positions = mesh.positions();
+  const auto& triangles = mesh.triangles();
   rtcCommitScene(scene_);
   device.check("rtcCommitScene");
   const std::int64_t total = device.allocatedBytes() - bytes_before;

@@ -51,6 +51,30 @@ class EmbreeDevice {
 };
 
 /// A committed Embree scene over one triangle mesh. Thread-safe queries after construction.
+/// Embree's ray-hit record of `ray` with t in [ray.tnear, tfar] and no hit yet.
+inline RTCRayHit toRayHit(const Ray& ray, float tfar) {
+  RTCRayHit rh;
+  rh.ray.org_x = ray.origin.x;
+  rh.ray.org_y = ray.origin.y;
+  rh.ray.org_z = ray.origin.z;
+  rh.ray.tnear = ray.tnear;
+  rh.ray.dir_x = ray.dir.x;
+  rh.ray.dir_y = ray.dir.y;
+  rh.ray.dir_z = ray.dir.z;
+  rh.ray.time = 0.0f;
+  rh.ray.tfar = tfar;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  return rh;
+}
+
+/// Copies `mesh` into a new triangle geometry built with `quality` and attaches it to `scene`
+/// (not committed). Throws std::runtime_error when Embree cannot allocate the buffers.
+void attachTriangleMesh(EmbreeDevice& device, RTCScene scene, const TriangleMesh& mesh, RTCBuildQuality quality);
+
 class EmbreeMesh {
  public:
   /// Copies the mesh into Embree buffers and commits with `quality` (the timed "build" is this
@@ -64,21 +88,7 @@ class EmbreeMesh {
   bool intersect(const Ray& ray, Hit& hit) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    RTCRayHit rh;
-    rh.ray.org_x = ray.origin.x;
-    rh.ray.org_y = ray.origin.y;
-    rh.ray.org_z = ray.origin.z;
-    rh.ray.tnear = ray.tnear;
-    rh.ray.dir_x = ray.dir.x;
-    rh.ray.dir_y = ray.dir.y;
-    rh.ray.dir_z = ray.dir.z;
-    rh.ray.time = 0.0f;
-    rh.ray.tfar = std::min(ray.tfar, hit.t);
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    RTCRayHit rh = toRayHit(ray, std::min(ray.tfar, hit.t));
     rtcIntersect1(scene_, &context, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
     hit.t = rh.ray.tfar;

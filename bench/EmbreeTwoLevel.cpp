@@ -24,23 +24,10 @@ std::array<float, 12> rowMajor3x4(const Affine& a) {
   return f;
 }
 
-// One object scene with Embree's default build flags (as EmbreeMesh, without its memory figures).
-RTCScene newObjectScene(RTCDevice device, const TriangleMesh& mesh) {
-  RTCScene scene = rtcNewScene(device);
-  RTCGeometry geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  const auto& positions = mesh.positions();
-  const auto& triangles = mesh.triangles();
-  void* vertices = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                           positions.size());
-  void* indices = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                          3 * sizeof(std::uint32_t), triangles.size());
-  if (vertices && indices) {
-    std::memcpy(vertices, positions.data(), positions.size() * 3 * sizeof(float));
-    std::memcpy(indices, triangles.data(), triangles.size() * 3 * sizeof(std::uint32_t));
-  }
-  rtcCommitGeometry(geometry);
-  rtcAttachGeometry(scene, geometry);
-  rtcReleaseGeometry(geometry);
+// One object scene with Embree's default (medium) build quality.
+RTCScene newObjectScene(EmbreeDevice& device, const TriangleMesh& mesh) {
+  RTCScene scene = rtcNewScene(device.get());
+  attachTriangleMesh(device, scene, mesh, RTC_BUILD_QUALITY_MEDIUM);
   rtcCommitScene(scene);
   return scene;
 }
@@ -57,7 +44,7 @@ EmbreeTwoLevel::EmbreeTwoLevel(EmbreeDevice& device, std::span<const TriangleMes
   const auto start = std::chrono::steady_clock::now();
   object_scenes_.assign(meshes.size(), nullptr);
   tbb::parallel_for(std::size_t{0}, meshes.size(),
-                    [&](std::size_t i) { object_scenes_[i] = newObjectScene(device.get(), *meshes[i]); });
+                    [&](std::size_t i) { object_scenes_[i] = newObjectScene(device, *meshes[i]); });
   device.check("object scenes");
   build_times_.objects_ms = msSince(start);
 
@@ -128,21 +115,7 @@ void EmbreeTwoLevel::commit() {
 Hit EmbreeTwoLevel::intersect(const Ray& ray_ws) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
-  RTCRayHit rh;
-  rh.ray.org_x = ray_ws.origin.x;
-  rh.ray.org_y = ray_ws.origin.y;
-  rh.ray.org_z = ray_ws.origin.z;
-  rh.ray.tnear = ray_ws.tnear;
-  rh.ray.dir_x = ray_ws.dir.x;
-  rh.ray.dir_y = ray_ws.dir.y;
-  rh.ray.dir_z = ray_ws.dir.z;
-  rh.ray.time = 0.0f;
-  rh.ray.tfar = ray_ws.tfar;
-  rh.ray.mask = 0xFFFFFFFFu;
-  rh.ray.id = 0;
-  rh.ray.flags = 0;
-  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  RTCRayHit rh = toRayHit(ray_ws, ray_ws.tfar);
   rtcIntersect1(top_, &context, &rh);
   Hit hit;
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
