@@ -102,6 +102,11 @@ struct TopLevel::State {
   std::size_t last_edits = 0;
   bool last_full = false;
 
+  std::size_t fresh_nodes = 0, fresh_refs = 0;  // of the last full build
+  bool cost_stale = false;     // sah_cost is an estimate (root bounds changed): recompute when it matters
+  bool boundary_left = false;  // a box on a root face moved or vanished: the root may shrink
+  bool needs_rebuild = false;  // a commit failed half way: the records are ahead of the tree
+
   std::vector<LeafVisit> scratch_old, scratch_new;
 
   // Re-splits grown leaves by local builds; returns whether the tree changed.
@@ -150,9 +155,33 @@ void forEachLeaf(const KdTree& tree, const Box& box, F&& f) {
 // ---------------------------------------------------------------------------------------------
 // Edits
 
+namespace {
+
+void validateConfig(const TopLevelConfig& c) {
+  const KdBuildConfig& b = c.build;
+  auto bad = [](const std::string& what) { throw InvalidArgument("top level configuration: " + what); };
+  if (!(std::isfinite(b.traversal_cost) && b.traversal_cost > 0.0f)) bad("traversal_cost must be finite and positive");
+  if (!(std::isfinite(b.intersection_cost) && b.intersection_cost > 0.0f)) bad("intersection_cost must be finite and positive");
+  if (!(b.empty_bonus >= 0.0f && b.empty_bonus < 1.0f)) bad("empty_bonus must be in [0, 1)");
+  if (b.max_depth < 0) bad("max_depth must not be negative (0 = automatic)");
+  if (!(c.rebuild_ratio >= 1.0)) bad("rebuild_ratio must be at least 1");
+  if (!(c.max_incremental_fraction >= 0.0)) bad("max_incremental_fraction must not be negative");
+  if (c.leaf_split_size < 1) bad("leaf_split_size must be at least 1");
+}
+
+}  // namespace
+
+TopLevel::TopLevel(const TopLevelConfig& config) : config_(config) { validateConfig(config_); }
+
+void TopLevel::setConfig(const TopLevelConfig& config) {
+  validateConfig(config);
+  config_ = config;
+}
+
 void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
   TopLevelConfig c = config_;
   c.build = config;
+  validateConfig(c);
   // Validate everything before touching the current state.
   std::vector<Prepared> prepared;
   prepared.reserve(instances.size());
@@ -176,10 +205,12 @@ void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfi
     state->full_rebuilds = state_->full_rebuilds;
     state->subtree_rebuilds = state_->subtree_rebuilds;
   }
+  // The tree first: if the build throws, nothing has changed.
+  KdTree tree = buildKdTreeOverBoxes(state->boxes, c.build);
   config_ = c;
   state_ = std::move(state);
   live_count_ = prepared.size();
-  fullRebuild();
+  install(std::move(tree));
 }
 
 void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances, config_.build); }
@@ -219,18 +250,26 @@ bool TopLevel::contains(std::uint32_t id) const {
 // ---------------------------------------------------------------------------------------------
 // Commit
 
-void TopLevel::fullRebuild() {
+void TopLevel::install(KdTree&& tree) {
   State& s = *state_;
-  // Free slots hold empty boxes, which the builder leaves out.
-  KdBuildConfig cfg = config_.build;
-  tree_ = buildKdTreeOverBoxes(s.boxes, cfg);
+  tree_ = std::move(tree);
   s.garbage = 0;
-  const KdTreeStats st = tree_.stats(cfg.traversal_cost, cfg.intersection_cost);
+  const KdTreeStats st = tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
   s.sah_cost = st.sah_cost;
   s.fresh_cost = st.sah_cost;
   s.fresh_count = live_count_;
+  s.fresh_nodes = tree_.nodes.size();
+  s.fresh_refs = tree_.prim_indices.size();
+  s.cost_stale = false;
+  s.boundary_left = false;
+  s.needs_rebuild = false;
   ++s.full_rebuilds;
   s.last_full = true;
+}
+
+void TopLevel::fullRebuild() {
+  // Free slots hold empty boxes, which the builder leaves out.
+  install(buildKdTreeOverBoxes(state_->boxes, config_.build));
 }
 
 void TopLevel::rebuild() {
@@ -239,8 +278,26 @@ void TopLevel::rebuild() {
 }
 
 void TopLevel::commit() {
-  if (!state_ || state_->pending.empty()) return;
-  State& s = *state_;
+  if (!state_ || (state_->pending.empty() && !state_->needs_rebuild)) return;
+  try {
+    commitEdits();
+  } catch (...) {
+    // The records already describe the new scene; a tree that no longer matches them must not be
+    // traversed. Rebuild from the records, or (when even that fails) answer nothing until the next
+    // commit rebuilds.
+    State& s = *state_;
+    try {
+      fullRebuild();
+    } catch (...) {
+      tree_ = KdTree{};
+      s.needs_rebuild = true;
+    }
+    throw;
+  }
+}
+
+void TopLevel::commitEdits() {
+  State& s = *state_;  // with needs_rebuild set, the edits go to the records and the tree is rebuilt
   auto pending = std::move(s.pending);
   s.pending.clear();
   s.pending_index.clear();
@@ -252,9 +309,9 @@ void TopLevel::commit() {
   // full rebuild than as as many re-insertions (the same holds for scenes of a few instances).
   const bool large_batch =
       static_cast<double>(pending.size()) > config_.max_incremental_fraction * static_cast<double>(live_count_);
-  const bool incremental = config_.update == TopLevelUpdate::Incremental && !tree_.empty() && !large_batch;
+  const bool incremental =
+      config_.update == TopLevelUpdate::Incremental && !tree_.empty() && !large_batch && !s.needs_rebuild;
   const float ci = config_.build.intersection_cost;
-  bool exact_cost_needed = false;
   std::vector<LeafVisit> grown;  // leaves that gained references
 
   auto leaf_area_weight = [&](const Box& cell) { return ci * boxArea(cell); };
@@ -299,13 +356,17 @@ void TopLevel::commit() {
     if (tree_.bounds.lo.x <= box.lo.x && tree_.bounds.lo.y <= box.lo.y && tree_.bounds.lo.z <= box.lo.z &&
         tree_.bounds.hi.x >= box.hi.x && tree_.bounds.hi.y >= box.hi.y && tree_.bounds.hi.z >= box.hi.z)
       return;
-    tree_.bounds.extend(box);  // boundary cells grow with it; their areas change, so recompute the cost
-    exact_cost_needed = true;
+    // Boundary cells grow with the root. Every node's weight is its area over the root's: rescale
+    // the tracked cost now (the boundary cells' growth is left to the next exact recomputation).
+    const double before = std::max(1e-30, boxArea(tree_.bounds));
+    tree_.bounds.extend(box);
+    s.sah_cost *= before / std::max(1e-30, boxArea(tree_.bounds));
+    s.cost_stale = true;
   };
 
   // Whether a box that held up a face of the root bounds moved or vanished: the bounds may then
   // shrink (rays that miss everything stop traversing the emptied margin).
-  bool boundary_left = false;
+  bool& boundary_left = s.boundary_left;
   auto on_boundary = [&](const Box& b) {
     const Box& r = tree_.bounds;
     return !b.empty() && (b.lo.x <= r.lo.x || b.lo.y <= r.lo.y || b.lo.z <= r.lo.z || b.hi.x >= r.hi.x ||
@@ -382,19 +443,33 @@ void TopLevel::commit() {
     fullRebuild();
     return;
   }
-  if (s.refineLeaves(*this, grown)) exact_cost_needed = true;
-  if (boundary_left) {
+  s.refineLeaves(*this, grown);
+  // Refinement without bound fragments cells (each local build is optimal only locally): a tree
+  // grown far beyond the last full build is rebuilt whatever its estimated cost.
+  const std::size_t live_refs = tree_.prim_indices.size() - s.garbage;
+  if (tree_.nodes.size() > 4 * s.fresh_nodes + 4096 || live_refs > 4 * s.fresh_refs + 4096) {
+    fullRebuild();
+    return;
+  }
+  // O(instances) and O(nodes) work, amortised: shrinking the root and recomputing the exact cost
+  // happen every kExactEvery commits at most (and before a rebuild decision rests on an estimate).
+  constexpr std::uint64_t kExactEvery = 32;
+  const bool periodic = s.commits % kExactEvery == 0;
+  if (s.boundary_left && periodic) {
     // Shrinking the root is always valid: every box stays inside, and a split plane outside the
     // smaller root just leaves one child empty (cells are clamped to the root when walked).
     Box tight;
     for (const Box& b : s.boxes) tight.extend(b);
     if (!(tight == tree_.bounds)) {
       tree_.bounds = tight;
-      exact_cost_needed = true;
+      s.cost_stale = true;
     }
+    s.boundary_left = false;
   }
-  if (exact_cost_needed) {
+  const bool over = s.sah_cost > config_.rebuild_ratio * s.fresh_cost;
+  if (s.cost_stale && (periodic || over)) {
     s.sah_cost = tree_.stats(config_.build.traversal_cost, ci).sah_cost;
+    s.cost_stale = false;
   }
   if (s.sah_cost > config_.rebuild_ratio * s.fresh_cost) {
     fullRebuild();
@@ -460,6 +535,14 @@ bool TopLevel::State::refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_
     for (const std::uint32_t p : sub.prim_indices) tree.prim_indices.push_back(slots[p]);
     garbage += cnt;
     tree.nodes[v.node] = KdNode::jump(node_base);
+    // The tracked cost: the leaf's term out, the subtree's in (its own cost is relative to its
+    // bounds' area; the subtree's root stands for the whole cell, an underestimate corrected at the
+    // next exact recomputation).
+    const double root_area = std::max(1e-30, boxArea(tree.bounds));
+    const double sub_cost = sub.stats(config.build.traversal_cost, config.build.intersection_cost).sah_cost;
+    sah_cost += sub_cost * boxArea(sub.bounds) / root_area -
+                config.build.intersection_cost * static_cast<double>(cnt) * boxArea(v.cell) / root_area;
+    cost_stale = true;
     ++subtree_rebuilds;
     changed = true;
   }

@@ -67,6 +67,9 @@ void checkTreeAgainstMesh(const KdTree& tree, const TriangleMesh& mesh) {
       ++depth;
       continue;
     }
+    // Jumps exist only in incrementally updated top levels; in a saved mesh tree one would send the
+    // traversal anywhere.
+    if (node.isJump()) fail(at() + "jump node in a bottom-level tree");
     const std::uint64_t end = std::uint64_t{node.primOffset()} + node.primCount();
     if (end > tree.prim_indices.size())
       fail(at() + "leaf range [" + std::to_string(node.primOffset()) + ", " + std::to_string(end) +

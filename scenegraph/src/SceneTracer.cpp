@@ -38,6 +38,9 @@ constexpr std::size_t kBatchGrain = 256;
 
 SceneTracer::SceneTracer(SceneGraph& graph, const TopLevelConfig& config)
     : graph_(graph), impl_(std::make_unique<Impl>(config)) {
+  // The tracer starts from the committed scene; pending edits would leak into it.
+  if (graph.hasPendingEdits())
+    throw InvalidArgument("SceneTracer: the scene graph has uncommitted edits (commit or roll back first)");
   std::vector<InstanceDesc> instances;
   for (const NodeId id : graph.visibleInstances()) instances.push_back(describeInstance(graph, id));
   impl_->top.build(instances);
@@ -48,7 +51,9 @@ SceneTracer::SceneTracer(SceneGraph& graph, const TopLevelConfig& config)
     std::unique_lock lock(impl->mutex);
     std::string failures;
     // Disappeared first, so that nothing is both removed and set.
-    for (const NodeId id : changes.disappeared) impl->top.remove(id);
+    // (An instance left out earlier, see below, is not in the top level.)
+    for (const NodeId id : changes.disappeared)
+      if (impl->top.contains(id)) impl->top.remove(id);
     auto set = [&](NodeId id) {
       try {
         impl->top.set(describeInstance(*g, id));
@@ -109,7 +114,9 @@ SceneHit detail(const SceneGraph& graph, const TopLevel& top, const RayD& ray_ws
   const glm::dvec3 o_os = object_from_world.point(ray_ws.origin);
   const glm::dvec3 d_os = object_from_world.vector(ray_ws.dir);
   const glm::dvec3 p_os = o_os + static_cast<double>(hit.t) * d_os;
-  out.position_ws = graph.worldTransform(hit.instance_id).point(p_os);
+  // world_from_object from the top level's record (as of the commit the hit comes from), not from
+  // the graph, which a concurrent commit may be rewriting.
+  out.position_ws = object_from_world.inverse().point(p_os);
   const glm::dvec3 n(hit.ng);
   const double len = glm::length(n);
   out.normal_ws = len > 0.0 ? n / len : n;

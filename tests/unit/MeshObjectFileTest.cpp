@@ -239,6 +239,10 @@ TEST(MeshObjectFromParts, RejectsEveryKindOfBrokenTree) {
   expectRejected(mesh, t, "after the end");
 
   t = good;
+  t.nodes[1] = KdNode::jump(0);  // a jump (top levels only) back to the root: an endless traversal
+  expectRejected(mesh, t, "jump node");
+
+  t = good;
   for (auto& n : t.nodes)
     if (n.isLeaf() && n.primCount() > 0) {
       n = KdNode::leaf(static_cast<std::uint32_t>(t.prim_indices.size()) - n.primCount() + 1, n.primCount());

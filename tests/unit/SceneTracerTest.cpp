@@ -168,6 +168,44 @@ TEST(SceneTracer, QueriesSeeEditsOnlyAfterCommit) {
   EXPECT_FALSE(tracer.intersect(r, ctx).valid());
 }
 
+TEST(SceneTracer, AnInstanceWhoseWorldTransformDegeneratesIsLeftOutWithoutDesync) {
+  // Valid local transforms whose product is singular (1e-60 * 1e-60 underflows the determinant):
+  // the graph accepts the edit, the tracer refuses the instance, reports it, and stays in step
+  // with the graph for every later commit.
+  Fixture f;
+  SceneGraph& g = f.graph;
+  const NodeId y = g.addInstance(kRootNode, f.objects[1], Affine::identity(), "y");
+  g.commit();
+  SceneTracer tracer(g);
+  const Affine tiny = Affine::fromRowMajor3x4({1e-60, 0, 0, 0, 0, 1e-60, 0, 0, 0, 0, 1e-60, 0});
+  const NodeId t = g.addTransform(kRootNode, tiny, "tiny");
+  const NodeId x = g.addInstance(t, f.objects[1], tiny, "x");
+  expectErrorNaming<InvalidArgument>([&] { g.commit(); }, "/tiny/x");
+  EXPECT_EQ(tracer.topLevel().size(), 1u);
+  // Hide the left-out instance and move the other one in the same batch.
+  g.setVisible(x, false);
+  g.setTransform(y, Affine::fromRowMajor3x4({1, 0, 0, 5, 0, 1, 0, 0, 0, 0, 1, 0}));
+  EXPECT_NO_THROW(g.commit());
+  Ray r;
+  r.origin = glm::vec3(5.0f, 0.0f, -10.0f);
+  r.dir = glm::vec3(0.0f, 0.0f, 1.0f);
+  QueryContext ctx;
+  const Hit h = tracer.intersect(r, ctx);
+  ASSERT_TRUE(h.valid());
+  EXPECT_EQ(h.instance_id, y);
+  r.origin.x = 0.0f;
+  EXPECT_FALSE(tracer.intersect(r, ctx).valid()) << "the old place of y";
+}
+
+TEST(SceneTracer, RefusesAGraphWithUncommittedEdits) {
+  Fixture f;
+  f.graph.addInstance(kRootNode, f.objects[0]);
+  expectErrorNaming<InvalidArgument>([&] { SceneTracer tracer(f.graph); }, "uncommitted");
+  f.graph.commit();
+  SceneTracer tracer(f.graph);
+  EXPECT_EQ(tracer.topLevel().size(), 1u);
+}
+
 TEST(SceneTracer, PickingModesAndPaths) {
   Fixture f;
   SceneGraph& g = f.graph;

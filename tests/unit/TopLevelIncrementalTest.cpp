@@ -22,6 +22,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace duplex::test {
@@ -234,6 +235,29 @@ TEST(TopLevelIncremental, SingleMoveTouchesOnlyTheTopLevelLocally) {
     for (const auto& d : all) m[d.id] = d;
     return m;
   }()));
+}
+
+TEST(TopLevelIncremental, BadConfigurationIsRefusedAndChangesNothing) {
+  static_assert(!std::is_copy_constructible_v<TopLevel>, "a copy would share the instance records");
+  const auto& objs = objects().list;
+  std::mt19937_64 rng(21);
+  std::vector<InstanceDesc> all;
+  for (std::uint32_t i = 0; i < 300; ++i) all.push_back({objs[i % objs.size()], randomPlacement(rng, 30.0), i});
+  TopLevel top;
+  top.build(all);
+  const std::vector<Ray> rays = randomRays(top.bounds(), 300, 4);
+  QueryContext ctx;
+  std::vector<Hit> before;
+  for (const Ray& r : rays) before.push_back(top.intersect(r, ctx));
+  KdBuildConfig bad;
+  bad.max_depth = -1;
+  expectErrorNaming<InvalidArgument>([&] { top.build(std::span(all).first(1), bad); }, "max_depth");
+  TopLevelConfig worse;
+  worse.build.intersection_cost = 0.0f;
+  expectErrorNaming<InvalidArgument>([&] { top.setConfig(worse); }, "intersection_cost");
+  expectErrorNaming<InvalidArgument>([&] { TopLevel t(worse); }, "intersection_cost");
+  EXPECT_EQ(top.size(), all.size());
+  for (std::size_t i = 0; i < rays.size(); ++i) ASSERT_TRUE(sameHit(top.intersect(rays[i], ctx), before[i])) << i;
 }
 
 TEST(TopLevelIncremental, RejectedEditsChangeNothing) {

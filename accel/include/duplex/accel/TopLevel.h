@@ -87,10 +87,18 @@ struct TopLevelStats {
 class TopLevel {
  public:
   TopLevel() = default;
-  explicit TopLevel(const TopLevelConfig& config) : config_(config) {}
+  /// Throws InvalidArgument for a configuration out of range (non-positive costs, empty_bonus
+  /// outside [0, 1), negative max_depth, rebuild_ratio below 1, ...).
+  explicit TopLevel(const TopLevelConfig& config);
+  // Not copyable: the copy would share the instance records. Movable.
+  TopLevel(const TopLevel&) = delete;
+  TopLevel& operator=(const TopLevel&) = delete;
+  TopLevel(TopLevel&&) noexcept = default;
+  TopLevel& operator=(TopLevel&&) noexcept = default;
 
   [[nodiscard]] const TopLevelConfig& config() const { return config_; }
-  void setConfig(const TopLevelConfig& config) { config_ = config; }
+  /// Takes effect at the next build or commit; validated as in the constructor.
+  void setConfig(const TopLevelConfig& config);
 
   /// Replaces everything by `instances` and builds a fresh tree. Throws InvalidArgument for a null
   /// object, a duplicate id, or a non-finite or singular transform (naming the instance id and its
@@ -107,7 +115,9 @@ class TopLevel {
   void remove(std::uint32_t id);
   /// Whether `id` is present (after the edits recorded so far).
   [[nodiscard]] bool contains(std::uint32_t id) const;
-  /// Applies the recorded edits. Cheap when nothing was recorded.
+  /// Applies the recorded edits. Cheap when nothing was recorded. If it throws (out of memory),
+  /// the edits are applied to the instance records and the tree is rebuilt from them, or, when
+  /// even that fails, queries miss until the next commit rebuilds it.
   void commit();
   /// Rebuilds the whole tree over the committed instances now (pending edits stay pending).
   void rebuild();
@@ -153,6 +163,8 @@ class TopLevel {
  private:
   struct State;  // instance records, id map, pending edits, leaf bookkeeping (TopLevel.cpp)
   void fullRebuild();
+  void install(KdTree&& tree);
+  void commitEdits();
   void compact();
   Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
   void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,

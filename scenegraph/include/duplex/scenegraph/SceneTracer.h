@@ -45,7 +45,8 @@ enum class PickMode : std::uint8_t {
 class SceneTracer {
  public:
   /// Subscribes to `graph` (which must outlive the tracer) and builds the top level over its
-  /// visible instances as of its last commit.
+  /// visible instances as of its last commit. Throws InvalidArgument when the graph has uncommitted
+  /// edits.
   explicit SceneTracer(SceneGraph& graph, const TopLevelConfig& config = {});
   ~SceneTracer();
   SceneTracer(const SceneTracer&) = delete;
@@ -56,8 +57,10 @@ class SceneTracer {
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Every hit along the ray within [tnear, tfar], sorted by t (sensors included when the mask selects them).
   [[nodiscard]] std::vector<Hit> intersectAll(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
-  /// Closest hit with position, normal and path; the ray is transformed in double. Reads node paths
-  /// from the graph: do not call while the graph is being edited (same for pick()).
+  /// Closest hit with position, normal and path; the ray is transformed in double. The node path is
+  /// read from the graph: call it (and pick()) from the thread that edits the graph, or while no
+  /// edit or commit runs; intersect(), occluded(), intersectAll() and the batch queries have no
+  /// such restriction.
   [[nodiscard]] SceneHit intersectDetailed(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Batch versions, in parallel over the rays with TBB (one QueryContext per task). `hits` /
