@@ -658,7 +658,7 @@ TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
 
 TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
   const auto names = ObjectTypeRegistry::builtin().names();
-  EXPECT_EQ(names, (std::vector<std::string>{"mesh", "sphere", "box", "plane"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"mesh", "sphere", "box", "plane", "volume"}));
   ObjectTypeRegistry registry = ObjectTypeRegistry::builtin();
   expectErrorNaming<InvalidArgument>([&] { registry.add({"mesh", ObjectTypeRegistry::builtin().find("mesh")->reader}); },
                                      "already registered");

@@ -1,0 +1,107 @@
+#pragma once
+/// \file VolumeObject.h
+/// The OpenVDB volume object type: a float grid that is either a level-set surface or a fog
+/// (density) medium. Its bottom-level structure is the VDB tree itself, walked with a
+/// hierarchical DDA over active tiles and leaves (empty space is skipped).
+///
+/// OpenVDB stays out of this header: grids made in memory come in through
+/// VolumeObjectVdb.h (which includes OpenVDB), files through load().
+///
+/// Spaces: index space is the grid's voxel lattice (voxel ijk centred at integer ijk); object space
+/// is the grid's world space (the grid transform maps index to object space); the instance
+/// transform is applied by the top level. Queries map the ray to index space without
+/// renormalising its direction, so t means the same in object and index space.
+
+#include "duplex/accel/Object.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <ostream>
+#include <string>
+#include <string_view>
+
+namespace duplex {
+
+/// What the grid's values mean.
+enum class VolumeKind : std::uint8_t {
+  /// From the grid class: level set when the grid says so (GRID_LEVEL_SET), fog otherwise.
+  Auto,
+  /// Signed distance (negative inside): role Surface, hits at the first zero crossing.
+  LevelSet,
+  /// Density (extinction per object-space unit length): role Medium, answered by transmittance().
+  Fog,
+};
+
+[[nodiscard]] std::string_view toString(VolumeKind kind);
+std::ostream& operator<<(std::ostream& os, VolumeKind kind);
+
+/// Options of VolumeObject::load.
+struct VolumeLoadOptions {
+  /// Name of the float grid to read; empty: the first float grid in OpenVDB's listing of the file
+  /// (by grid name, not the order the grids were written in).
+  std::string grid;
+  /// Auto: from the grid class.
+  VolumeKind kind = VolumeKind::Auto;
+  /// The object's name; empty: "<file stem>:<grid name>".
+  std::string name;
+};
+
+/// Immutable after construction; instances share it; all queries are thread-safe (each thread's
+/// OpenVDB accessor and scratch lists live in its QueryContext, see QueryContext::cached).
+class VolumeObject final : public Object {
+ public:
+  static constexpr std::string_view kTypeName = "volume";
+
+  /// Reads a float grid from a .vdb file (fully, no delayed loading: a truncated file fails here,
+  /// not in a query). Throws FileError naming the file (and grid) for a missing, unreadable,
+  /// truncated or malformed file, a file with no float grid, or a named grid that is absent or not
+  /// float; InvalidArgument naming the grid for an empty grid or a non-linear (frustum) transform.
+  [[nodiscard]] static std::shared_ptr<const VolumeObject> load(const std::filesystem::path& file,
+                                                                const VolumeLoadOptions& options = {});
+
+  ~VolumeObject() override;
+
+  [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
+  /// Object-space bounds of the active voxels (each voxel a unit cube around its centre in index
+  /// space; level sets get one more voxel of margin for the interpolated surface).
+  [[nodiscard]] Box bounds() const override;
+
+  /// Level sets: the first zero crossing of the trilinearly interpolated distance along
+  /// [tnear, min(tfar, hit.t)], found by stepping half a voxel through the active spans of the
+  /// tree and refining by bisection. A ray starting inside finds its exit. On a hit: t (object
+  /// space units of the ray's direction), prim_id = 0, u = v = 0, ng = unit object-space normal
+  /// from the distance gradient (pointing outwards, towards positive distance).
+  /// Fog: never hits.
+  bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
+  [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
+  /// Level sets: every zero crossing in [tnear, tfar] (entries and exits). Fog: none.
+  void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
+  /// Fog: exp(-optical depth) along [tnear, tfar], the density integrated exactly as piecewise
+  /// constant over active voxels (each voxel the unit cube around its centre in index space) and
+  /// lengths measured in object space (|dir_os| per unit t). An infinite tfar is clipped to the
+  /// bounds. Level sets: 0 when occluded, else 1.
+  [[nodiscard]] float transmittance(const Ray& ray_os, QueryContext& ctx) const override;
+
+  [[nodiscard]] std::size_t memoryBytes() const override;
+
+  [[nodiscard]] VolumeKind kind() const;
+  /// The grid's name in its file (or as made).
+  [[nodiscard]] const std::string& gridName() const;
+  /// Object-space size of a voxel along index x (the grid's voxel size; uniform scale assumed for
+  /// this figure only, queries handle any linear transform).
+  [[nodiscard]] double voxelSize() const;
+  /// Active voxels, tiles counted by the voxels they cover.
+  [[nodiscard]] std::uint64_t activeVoxelCount() const;
+
+  /// The OpenVDB side (defined in VolumeObject.cpp; VolumeObjectVdb.h builds one).
+  struct Grid;
+  struct ConstructTag {};
+  VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid, ConstructTag);
+  [[nodiscard]] const Grid& grid() const { return *grid_; }
+
+ private:
+  std::shared_ptr<const Grid> grid_;
+};
+
+}  // namespace duplex
