@@ -7,7 +7,8 @@
 ///
 /// Built in: "mesh" (`{"file": PATH}` or `{"positions": [...], "indices": [...]}`), and procedural
 /// meshes "sphere" (`{"radius": r, "subdivisions": s}`), "box" (`{"size": [x, y, z] | s}`) and
-/// "plane" (`{"size": [w, h] | s}`). Volumes and sensors register the same way.
+/// "plane" (`{"size": [w, h] | s}`), and "volume" (`{"file": PATH.vdb, "grid": G, "kind": "fog" |
+/// "levelset"}`, VolumeObject). Sensors will register the same way.
 
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/Object.h"
@@ -124,7 +125,7 @@ struct ObjectTypeInfo {
 /// A set of object types. Copy builtin() and add() your own. Not thread-safe for add().
 class ObjectTypeRegistry {
  public:
-  /// "mesh" (scene-json-v1, accepts structures), "sphere", "box", "plane".
+  /// "mesh" (scene-json-v1, accepts structures), "sphere", "box", "plane", "volume" (scene-json-v1).
   [[nodiscard]] static const ObjectTypeRegistry& builtin();
 
   /// Registers a type; throws InvalidArgument for an empty or taken name or a null reader.
