@@ -4,12 +4,14 @@
 // and new world boxes; it leaves the leaves only the old box touches and joins the leaves only the
 // new box touches. A leaf that gains references is re-split by a small SAH build over its own
 // references (clipped to its cell) when it overflows or when it now holds empty space worth cutting
-// off; the resulting subtrees are spliced into the depth-first node array in one pass. The SAH
-// cost of the tree is tracked per edit (exactly recomputed after splices); when it exceeds the cost
-// of the last full build by TopLevelConfig::rebuild_ratio, or the instance count drifted far from
-// that build's, the whole tree is rebuilt. A leaf that grows is moved to the end of the index list
-// (its old range becomes garbage, compacted when garbage outweighs live references), so an edit
-// costs O(leaves touched), independent of the scene size.
+// off; the subtree is appended to the node array and the leaf becomes a jump node to it, so no
+// other node moves. The SAH cost of the tree is tracked per edit and per refinement, and made exact
+// (with the root shrunk to its boxes) every 32 commits or before a rebuild decision; when it
+// exceeds the cost of the last full build by TopLevelConfig::rebuild_ratio, the instance count
+// drifted far from that build's, or the tree grew to 4 times its nodes or references, the whole
+// tree is rebuilt. A leaf that grows is moved to the end of the index list (its old range becomes
+// garbage, compacted when garbage outweighs live references), so an edit costs O(leaves touched),
+// independent of the scene size, apart from the amortised exact recomputations.
 
 #include "duplex/accel/TopLevel.h"
 
