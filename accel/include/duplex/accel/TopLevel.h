@@ -138,6 +138,12 @@ class TopLevel {
                     std::uint32_t mask = 0xFFFFFFFFu) const;
   /// The same for a double-precision world ray (object-space rays computed in double).
   void intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Fraction of light that passes along [tnear, tfar] of a world-space ray, in [0, 1]: 0 when a
+  /// blocking instance (role Surface) is hit within the segment, else the product of the
+  /// transmittances of every medium instance (role Medium) the segment crosses, each counted once
+  /// (Object::transmittance on the object-space ray, same t). Sensors are ignored. 1 for a ray that
+  /// cannot be queried (NaN, zero direction) or an empty scene. Defined in TopLevelTransmittance.cpp.
+  [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Ids of the instances whose world box meets the convex region {x : dot(n_i, x) <= d_i for all
   /// planes}, planes given as (n.x, n.y, n.z, d) in world space, mask-filtered; sorted by id. The
   /// test is conservative per box (a box is reported unless one plane has it fully outside), which
