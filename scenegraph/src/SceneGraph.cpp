@@ -266,6 +266,7 @@ struct SceneGraph::Impl {
   NodeId add(const ObjectLibrary& library, const char* call, NodeId parent, NewNode nn);
   void undoOne(const Undo& u);
   /// Recomputes world transforms and effective visibility of `root`'s subtree from its parent's.
+  void checkWorlds(NodeId root) const;
   void propagate(NodeId root);
   ChangeSet collectChanges();
 };
@@ -451,14 +452,39 @@ void SceneGraph::Impl::propagate(NodeId root) {
   }
 }
 
+void SceneGraph::Impl::checkWorlds(NodeId root) const {
+  // The same walk as propagate(), writing nothing: each local transform was checked on its own, but
+  // a product of valid transforms can still overflow to inf or lose its determinant to underflow
+  // (scales of 1e-200 twice), which the tracer could not invert.
+  std::vector<std::pair<NodeId, Affine>> todo;  // (node, world_from_parent)
+  const NodeId parent = nodes[root].parent;
+  todo.emplace_back(root, parent == kInvalidNode ? Affine::identity() : nodes[parent].world);
+  while (!todo.empty()) {
+    const auto [id, world_from_parent] = todo.back();
+    todo.pop_back();
+    const Node& n = nodes[id];
+    const Affine world = n.kind == NodeKind::Group ? world_from_parent : world_from_parent * n.local;
+    if (n.kind != NodeKind::Group && world.isSingular())
+      throw InvalidArgument("SceneGraph::commit: the world transform of " + describe(id) + " is " +
+                            (world.isFinite() ? "singular" : "not finite") +
+                            " (a product of the transforms on its path); nothing was committed, the edits are still "
+                            "pending (fix them or rollback())");
+    for (NodeId c = n.first_child; c != kInvalidNode; c = nodes[c].next_sibling) todo.emplace_back(c, world);
+  }
+}
+
 ChangeSet SceneGraph::Impl::collectChanges() {
   // Recompute below the outermost dirty roots only (a root with a dirty ancestor is covered by it).
+  std::vector<NodeId> roots;
   for (const NodeId r : dirty_roots) {
     if (!(nodes[r].flags & kAlive)) continue;
     bool covered = false;
     for (NodeId a = nodes[r].parent; a != kInvalidNode && !covered; a = nodes[a].parent) covered = (nodes[a].flags & kDirty) != 0;
-    if (!covered) propagate(r);
+    if (!covered) roots.push_back(r);
   }
+  // Validate every new world transform first, so that a commit that throws changes nothing.
+  for (const NodeId r : roots) checkWorlds(r);
+  for (const NodeId r : roots) propagate(r);
   // Compare every touched instance with its committed state.
   ChangeSet cs;
   for (const Touched& t : touched) {

@@ -676,6 +676,38 @@ TEST(SceneGraph, WorldTransformsFollowGroupsAndReparenting) {
   EXPECT_EQ(g.nodeCount(), 2u);
 }
 
+TEST(SceneGraph, ACommitWhoseWorldTransformDegeneratesThrowsAndCommitsNothing) {
+  // Each scale is a valid transform on its own (determinant 1e-180 or 1e180); in their product
+  // (scale 1e-120 or 1e120 per axis) the determinant underflows to 0 or overflows to inf.
+  for (const double s : {1e-60, 1e60}) {
+    Library lib;
+    SceneGraph g(lib.lib);
+    const Affine scale = Affine::fromRowMajor3x4({s, 0, 0, 0, 0, s, 0, 0, 0, 0, s, 0});
+    const NodeId t = g.addTransform(kRootNode, Affine::identity(), "t");
+    const NodeId i = g.addInstance(t, 0, Affine::identity(), "i");
+    (void)g.commit();
+    int calls = 0;
+    (void)g.subscribe([&calls](const ChangeSet&) { ++calls; });
+    g.setTransform(t, scale);
+    g.setTransform(i, scale);
+    try {
+      (void)g.commit();
+      ADD_FAILURE() << "a degenerate world transform was committed (scale " << s << ")";
+    } catch (const InvalidArgument& e) {
+      EXPECT_NE(std::string(e.what()).find("/t/i"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(calls, 0) << "observers saw a failed commit";
+    EXPECT_TRUE(sameAffine(g.worldTransform(i), Affine::identity())) << "the failed commit changed a world transform";
+    EXPECT_TRUE(g.hasPendingEdits());
+    g.rollback();
+    EXPECT_TRUE(g.commit().empty());
+    // A valid edit after the rollback commits normally.
+    g.setTransform(t, translation(1, 2, 3));
+    EXPECT_EQ(g.commit().moved, std::vector<NodeId>{i});
+    EXPECT_EQ(g.worldTransform(i).translation, glm::dvec3(1, 2, 3));
+  }
+}
+
 TEST(SceneGraph, PathsAndNames) {
   Library lib;
   SceneGraph g(lib.lib);

@@ -94,6 +94,9 @@ class SceneGraph {
   /// nil (renames, a transform set to its old value) does the same. An empty ChangeSet carries the
   /// number of the last commit that changed something. An observer that throws does not undo the
   /// commit; the exception propagates after the remaining observers ran.
+  /// Throws InvalidArgument, naming the node, when a new world transform (a product of valid local
+  /// transforms) overflows or becomes singular; nothing is committed then and the edits stay
+  /// pending, to be fixed or rolled back.
   /// Cost: O(edits + nodes below the edited ones + depth per edited node); no scan of the graph.
   ChangeSet commit();
   /// Undoes every edit since the last commit (children order included). Ids handed out by rolled-back
