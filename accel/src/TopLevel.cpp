@@ -29,25 +29,13 @@
 #include <unordered_map>
 #include <utility>
 
+#include "TopLevelState.h"
+
 namespace duplex {
 
+using namespace toplevel_detail;
+
 namespace {
-
-// What traversal reads for an instance: one record, no pointer chase but the object.
-struct Record {
-  const Object* object = nullptr;
-  Affine object_from_world;
-  std::uint32_t id = kInvalidId;
-  std::uint32_t mask = 0;
-  ObjectRole role = ObjectRole::Surface;
-  bool identity = false;  // skip the transform for instances placed as authored
-};
-
-struct Prepared {
-  Record record;
-  std::shared_ptr<const Object> owner;
-  Box box;
-};
 
 std::string describe(const InstanceDesc& d) {
   std::string s = "instance " + std::to_string(d.id);
@@ -75,45 +63,7 @@ Prepared prepare(const InstanceDesc& d) {
 
 double boxArea(const Box& b) { return static_cast<double>(b.area()); }
 
-// A leaf reached by routing a box, with the cell it covers.
-struct LeafVisit {
-  std::uint32_t node;
-  Box cell;
-  std::uint32_t depth;  // inner nodes above it (jumps do not count: they use no stack)
-  Box root;             // the root bounds the cell was derived from
-};
-
 }  // namespace
-
-struct TopLevel::State {
-  std::vector<Record> records;  // by slot; tree indices are slots
-  std::vector<std::shared_ptr<const Object>> owners;
-  std::vector<Box> boxes;  // world box by slot; empty for a free slot
-  std::vector<std::uint32_t> free_slots;
-  std::unordered_map<std::uint32_t, std::uint32_t> slot_of_id;
-
-  // Edits recorded since the last commit, in call order; nullopt = removal.
-  std::vector<std::pair<std::uint32_t, std::optional<Prepared>>> pending;
-  std::unordered_map<std::uint32_t, std::size_t> pending_index;
-
-  std::size_t garbage = 0;  // dead entries in tree.prim_indices
-  double sah_cost = 0.0;
-  double fresh_cost = 0.0;
-  std::size_t fresh_count = 0;
-  std::uint64_t commits = 0, full_rebuilds = 0, subtree_rebuilds = 0;
-  std::size_t last_edits = 0;
-  bool last_full = false;
-
-  std::size_t fresh_nodes = 0, fresh_refs = 0;  // of the last full build
-  bool cost_stale = false;     // sah_cost is an estimate (root bounds changed): recompute when it matters
-  bool boundary_left = false;  // a box on a root face moved or vanished: the root may shrink
-  bool needs_rebuild = false;  // a commit failed half way: the records are ahead of the tree
-
-  std::vector<LeafVisit> scratch_old, scratch_new;
-
-  // Re-splits grown leaves by local builds; returns whether the tree changed.
-  bool refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves);
-};
 
 namespace {
 
@@ -566,75 +516,7 @@ void TopLevel::compact() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Queries
-
-namespace {
-
-// The world ray in both precisions: float for the top-level traversal, double for the transform
-// into object space.
-struct WorldRay {
-  Ray f;
-  RayD d;
-};
-
-WorldRay fromFloat(const Ray& r) {
-  return {r, RayD{glm::dvec3(r.origin), glm::dvec3(r.dir), static_cast<double>(r.tnear), static_cast<double>(r.tfar)}};
-}
-
-WorldRay fromDouble(const RayD& r) {
-  Ray f;
-  f.origin = glm::vec3(r.origin);
-  f.dir = glm::vec3(r.dir);
-  f.tnear = static_cast<float>(r.tnear);
-  f.tfar = static_cast<float>(r.tfar);
-  return {f, r};
-}
-
-Ray toObject(const Record& rec, const WorldRay& w) {
-  if (rec.identity) return w.f;
-  Ray r;
-  r.origin = glm::vec3(rec.object_from_world.point(w.d.origin));
-  r.dir = glm::vec3(rec.object_from_world.vector(w.d.dir));
-  r.tnear = w.f.tnear;
-  r.tfar = w.f.tfar;
-  return r;
-}
-
-// The world-space geometric normal of a hit: the cofactor matrix det(L) L^-T of L =
-// world_from_object's linear part maps cross(v1 - v0, v2 - v0) of object space exactly to the same
-// cross product of the world-space vertices (the inverse transpose alone would lose the scale and
-// flip the winding of mirrored instances). With M = L^-1 (which the record holds) it is M^T / det M;
-// computed per reported hit rather than stored per instance.
-glm::vec3 normalToWorld(const Record& rec, const glm::vec3& ng_os) {
-  if (rec.identity) return ng_os;
-  const glm::dmat3& m = rec.object_from_world.linear;
-  return glm::vec3((glm::transpose(m) / glm::determinant(m)) * glm::dvec3(ng_os));
-}
-
-// Whether the ray meets `box` within [ray.tnear, t_max]: the instance's own world box, tested
-// before its ray transform and bottom-level setup. A leaf cell is usually much larger than the
-// boxes it holds (rotated instances, boxes cut by few planes), and most visits end here.
-inline bool meetsBox(const KdRay& ray, const Box& box, float t_max) {
-  float t0 = ray.tnear, t1 = t_max;
-  return clipIntervalToBox(ray, box, t0, t1);
-}
-
-// A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
-// traversal of the same instance for the same ray is wasted work.
-struct Mailbox {
-  std::uint32_t slots[8];
-  int count = 0, next = 0;
-  bool seen(std::uint32_t slot) {
-    for (int m = 0; m < count; ++m)
-      if (slots[m] == slot) return true;
-    slots[next] = slot;
-    next = (next + 1) & 7;
-    if (count < 8) ++count;
-    return false;
-  }
-};
-
-}  // namespace
+// Queries (the per-ray helpers are in TopLevelState.h)
 
 Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
