@@ -50,5 +50,11 @@ std::vector<Ray> readRayFile(const std::filesystem::path& path) { return readRec
 void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays) { writeRecords(path, rays, "ray"); }
 std::vector<HitRecord> readHitFile(const std::filesystem::path& path) { return readRecords<HitRecord>(path, "hit"); }
 void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits) { writeRecords(path, hits, "hit"); }
+std::vector<float> readTransmittanceFile(const std::filesystem::path& path) {
+  return readRecords<float>(path, "transmittance");
+}
+void writeTransmittanceFile(const std::filesystem::path& path, std::span<const float> transmittance) {
+  writeRecords(path, transmittance, "transmittance");
+}
 
 }  // namespace duplex

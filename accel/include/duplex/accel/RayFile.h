@@ -31,5 +31,9 @@ static_assert(sizeof(HitRecord) == 20, "HitRecord must match the 20-byte hit-fil
 void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays);
 [[nodiscard]] std::vector<HitRecord> readHitFile(const std::filesystem::path& path);
 void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits);
+/// Transmittance file (`duplex trace --transmittance`): one little-endian float32 per ray, in ray
+/// order, nothing else. Throws FileError naming the file.
+[[nodiscard]] std::vector<float> readTransmittanceFile(const std::filesystem::path& path);
+void writeTransmittanceFile(const std::filesystem::path& path, std::span<const float> transmittance);
 
 }  // namespace duplex
