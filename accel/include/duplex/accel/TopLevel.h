@@ -10,6 +10,7 @@
 /// set() / remove() / commit() / build() run (the caller serialises them; SceneTracer does).
 
 #include "duplex/accel/Affine.h"
+#include "duplex/accel/Crossing.h"
 #include "duplex/accel/Hit.h"
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/KdTree.h"
@@ -144,6 +145,14 @@ class TopLevel {
   /// (Object::transmittance on the object-space ray, same t). Sensors are ignored. 1 for a ray that
   /// cannot be queried (NaN, zero direction) or an empty scene. Defined in TopLevelTransmittance.cpp.
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Light transport's query, in one traversal: the closest blocking hit of a world-space ray among
+  /// instances selected by query.surface_mask, and in `crossings` (cleared first) every crossing of
+  /// a sensor instance selected by query.sensor_mask with t in [tnear, hit t (1 + kCrossingSlack)]
+  /// (all of [tnear, tfar] on a miss), each once, sorted by t (ties by instance id), with the
+  /// transmittance of the media selected by query.medium_mask from tnear to each crossing and to
+  /// the hit. Defined in TopLevelCrossings.cpp.
+  [[nodiscard]] SegmentEnd intersectWithCrossings(const Ray& ray_ws, std::vector<SensorCrossing>& crossings,
+                                                  QueryContext& ctx, const CrossingQuery& query = {}) const;
   /// Ids of the instances whose world box meets the convex region {x : dot(n_i, x) <= d_i for all
   /// planes}, planes given as (n.x, n.y, n.z, d) in world space, mask-filtered; sorted by id. The
   /// test is conservative per box (a box is reported unless one plane has it fully outside), which

@@ -1,0 +1,90 @@
+#pragma once
+/// \file SensorObject.h
+/// A light sensor: a flat rectangle or disk with a grid of bins that never blocks or changes a ray
+/// and reports every crossing (ObjectRole::Sensor). Crossings are found by the top level's
+/// crossing query (TopLevel::intersectWithCrossings) and turned into deposited power by SensorRun.
+///
+/// Geometry (object space, the scene file's convention, issue 5): the sensor lies in the plane
+/// z = 0, centred at the origin, normal +z; width w along x, height h along y (a disk has diameter
+/// w = h). Bins form an nx x ny grid over [-w/2, w/2] x [-h/2, h/2]; bin (0, 0) is at (-w/2, -h/2),
+/// bin index = iy * nx + ix (x fastest).
+///
+/// Edge rules (documented in docs/sensors.md, tested in SensorObjectTest):
+/// - The border is closed: a crossing exactly on the border counts (x = +-w/2 or y = +-h/2; for a
+///   disk x^2 + y^2 <= r^2).
+/// - A crossing on an inner bin edge goes to the bin above it (ix = floor((x + w/2) * nx / w));
+///   a crossing on the upper border goes to the last bin.
+/// - A ray parallel to the plane (dir.z == 0 in object space), including one lying in it, never
+///   crosses.
+/// - A one-sided sensor records rays that arrive at its front face (travelling against the normal,
+///   dir.z < 0); a two-sided sensor records both directions.
+
+#include "duplex/accel/Object.h"
+
+#include <cstdint>
+#include <string_view>
+#include <vector>
+
+namespace duplex {
+
+enum class SensorShape : std::uint8_t { Rectangle, Disk };
+
+/// What a sensor looks like. Lengths in object-space units.
+struct SensorSpec {
+  SensorShape shape = SensorShape::Rectangle;
+  double width = 1.0;   ///< along x (a disk's diameter)
+  double height = 1.0;  ///< along y (a disk: equal to width)
+  std::uint32_t nx = 1;
+  std::uint32_t ny = 1;
+  bool two_sided = true;
+};
+
+/// Where a crossing lands on a sensor (object space).
+struct SensorCell {
+  std::uint32_t bin = 0;  ///< iy * nx + ix
+  float x = 0.0f;         ///< local position of the crossing
+  float y = 0.0f;
+};
+
+class SensorObject final : public Object {
+ public:
+  static constexpr std::string_view kTypeName = "sensor";
+  /// Throws InvalidArgument (naming `name`) for non-finite or non-positive sizes, zero bins, more
+  /// than 2^26 bins, or a disk whose width and height differ.
+  SensorObject(std::string name, const SensorSpec& spec);
+
+  [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
+  [[nodiscard]] const SensorSpec& spec() const { return spec_; }
+  [[nodiscard]] std::uint32_t binCount() const { return spec_.nx * spec_.ny; }
+  /// Object-space area of bin `bin` that belongs to the sensor (for a disk, the exact area of the
+  /// bin's square inside the circle; zero for bins outside it).
+  [[nodiscard]] double binArea(std::uint32_t bin) const { return bin_area_[bin]; }
+  /// Object-space area of the whole sensor (w h, or pi w^2 / 4).
+  [[nodiscard]] double area() const;
+
+  /// The flat box [-w/2, w/2] x [-h/2, h/2] x [0, 0].
+  [[nodiscard]] Box bounds() const override;
+  /// Sensors never block: always false (the top level never asks).
+  bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
+  [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
+  /// Appends the crossing of `ray_os` with t in [tnear, tfar], if any (at most one): t, u = local
+  /// x, v = local y, prim_id = bin, ng = (0, 0, 1).
+  void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
+  [[nodiscard]] std::size_t memoryBytes() const override;
+
+  /// The crossing test itself: whether `ray_os` crosses the sensor within [tnear, tfar] (with the
+  /// side and border rules above); fills t (units of ray_os.dir) and the cell.
+  [[nodiscard]] bool cross(const Ray& ray_os, float& t, SensorCell& cell) const;
+  /// The bin of local point (x, y), or kInvalidId outside the sensor (border rules above).
+  [[nodiscard]] std::uint32_t binAt(double x, double y) const;
+
+ private:
+  SensorSpec spec_;
+  std::vector<double> bin_area_;
+};
+
+/// Area of the disk of radius r centred at the origin inside the rectangle [x0, x1] x [y0, y1]
+/// (exact, closed form). For disk sensors' bin areas; exposed for tests.
+[[nodiscard]] double diskRectangleArea(double r, double x0, double x1, double y0, double y1);
+
+}  // namespace duplex

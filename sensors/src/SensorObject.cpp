@@ -1,0 +1,129 @@
+#include "duplex/sensors/SensorObject.h"
+
+#include "duplex/accel/Error.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+namespace duplex {
+
+namespace {
+
+// Integral of sqrt(r^2 - x^2) over [a, b] (both clamped to [-r, r]); zero when b <= a.
+double chordIntegral(double r, double a, double b) {
+  a = std::clamp(a, -r, r);
+  b = std::clamp(b, -r, r);
+  if (b <= a) return 0.0;
+  auto f = [r](double x) { return 0.5 * (x * std::sqrt(std::max(0.0, r * r - x * x)) + r * r * std::asin(x / r)); };
+  return f(b) - f(a);
+}
+
+// Area of the disk inside the quadrant {X <= x, Y <= y}: the integral over X of the length of
+// {Y <= y} within the chord [-s(X), s(X)], split where the chord half-length s(X) equals |y|.
+double diskQuadrantArea(double r, double x, double y) {
+  const double xm = std::min(x, r);
+  if (xm <= -r || y <= -r) return 0.0;
+  const double full = chordIntegral(r, -r, xm);
+  if (y >= r) return 2.0 * full;
+  const double a = std::sqrt(r * r - y * y);  // chords longer than 2|y| are cut at Y = y
+  const double inner = std::max(0.0, std::min(a, xm) + a);
+  const double outer = chordIntegral(r, -r, std::min(-a, xm)) + chordIntegral(r, a, xm);
+  return full + y * inner + (y >= 0.0 ? outer : -outer);
+}
+
+}  // namespace
+
+double diskRectangleArea(double r, double x0, double x1, double y0, double y1) {
+  const double area = diskQuadrantArea(r, x1, y1) - diskQuadrantArea(r, x0, y1) - diskQuadrantArea(r, x1, y0) +
+                      diskQuadrantArea(r, x0, y0);
+  return std::max(0.0, area);
+}
+
+SensorObject::SensorObject(std::string name, const SensorSpec& spec) : Object(std::move(name), ObjectRole::Sensor), spec_(spec) {
+  auto bad = [this](const std::string& what) { throw InvalidArgument("sensor '" + this->name() + "': " + what); };
+  if (!(std::isfinite(spec.width) && spec.width > 0.0) || !(std::isfinite(spec.height) && spec.height > 0.0))
+    bad("size must be finite and > 0");
+  if (spec.nx == 0 || spec.ny == 0) bad("bins must be at least 1 x 1");
+  if (static_cast<std::uint64_t>(spec.nx) * spec.ny > (1u << 26)) bad("more than 2^26 bins");
+  if (spec.shape == SensorShape::Disk && spec.width != spec.height) bad("a disk has one diameter (width == height)");
+  // Bin areas once: a rectangle's bins are equal; a disk's are its squares cut by the circle.
+  bin_area_.resize(binCount());
+  const double bw = spec.width / spec.nx, bh = spec.height / spec.ny;
+  for (std::uint32_t iy = 0; iy < spec.ny; ++iy) {
+    for (std::uint32_t ix = 0; ix < spec.nx; ++ix) {
+      double a = bw * bh;
+      if (spec.shape == SensorShape::Disk) {
+        const double x0 = -0.5 * spec.width + ix * bw, y0 = -0.5 * spec.height + iy * bh;
+        a = diskRectangleArea(0.5 * spec.width, x0, x0 + bw, y0, y0 + bh);
+      }
+      bin_area_[iy * spec.nx + ix] = a;
+    }
+  }
+}
+
+double SensorObject::area() const {
+  if (spec_.shape == SensorShape::Disk) return std::numbers::pi * 0.25 * spec_.width * spec_.width;
+  return spec_.width * spec_.height;
+}
+
+Box SensorObject::bounds() const {
+  Box b;
+  b.lo = glm::vec3(static_cast<float>(-0.5 * spec_.width), static_cast<float>(-0.5 * spec_.height), 0.0f);
+  b.hi = glm::vec3(static_cast<float>(0.5 * spec_.width), static_cast<float>(0.5 * spec_.height), 0.0f);
+  // Float rounding of the half sizes must not cut off the closed border.
+  b.lo = glm::vec3(std::nextafter(b.lo.x, -INFINITY), std::nextafter(b.lo.y, -INFINITY), 0.0f);
+  b.hi = glm::vec3(std::nextafter(b.hi.x, INFINITY), std::nextafter(b.hi.y, INFINITY), 0.0f);
+  return b;
+}
+
+bool SensorObject::intersect(const Ray&, Hit&, QueryContext&) const { return false; }
+
+bool SensorObject::occluded(const Ray&, QueryContext&) const { return false; }
+
+std::uint32_t SensorObject::binAt(double x, double y) const {
+  const double hw = 0.5 * spec_.width, hh = 0.5 * spec_.height;
+  if (spec_.shape == SensorShape::Disk) {
+    if (x * x + y * y > hw * hw) return kInvalidId;
+  } else if (!(std::abs(x) <= hw && std::abs(y) <= hh)) {
+    return kInvalidId;
+  }
+  // floor puts an inner edge into the bin above it; the upper border belongs to the last bin.
+  const auto ix = std::min<std::uint32_t>(spec_.nx - 1, static_cast<std::uint32_t>(std::floor((x + hw) * spec_.nx / spec_.width)));
+  const auto iy = std::min<std::uint32_t>(spec_.ny - 1, static_cast<std::uint32_t>(std::floor((y + hh) * spec_.ny / spec_.height)));
+  return iy * spec_.nx + ix;
+}
+
+bool SensorObject::cross(const Ray& ray_os, float& t_out, SensorCell& cell) const {
+  const double dz = ray_os.dir.z;
+  if (dz == 0.0) return false;                      // parallel (or in the plane): no crossing
+  if (!spec_.two_sided && dz > 0.0) return false;   // one-sided: only rays arriving at the front (+z) face
+  // In double: the crossing point decides the bin, and a float product would move it by an ulp.
+  const double t = -static_cast<double>(ray_os.origin.z) / dz;
+  if (!(t >= ray_os.tnear && t <= ray_os.tfar)) return false;
+  const double x = ray_os.origin.x + t * ray_os.dir.x;
+  const double y = ray_os.origin.y + t * ray_os.dir.y;
+  const std::uint32_t bin = binAt(x, y);
+  if (bin == kInvalidId) return false;
+  t_out = static_cast<float>(t);
+  cell = {bin, static_cast<float>(x), static_cast<float>(y)};
+  return true;
+}
+
+void SensorObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
+  float t;
+  SensorCell cell;
+  if (!cross(ray_os, t, cell)) return;
+  Hit h;
+  h.t = t;
+  h.u = cell.x;
+  h.v = cell.y;
+  h.prim_id = cell.bin;
+  h.ng = glm::vec3(0.0f, 0.0f, 1.0f);
+  hits.push_back(h);
+}
+
+std::size_t SensorObject::memoryBytes() const { return sizeof(*this) + bin_area_.capacity() * sizeof(double); }
+
+}  // namespace duplex
