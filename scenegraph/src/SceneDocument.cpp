@@ -282,14 +282,18 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
   ctx.build = options.build;
   ctx.cache = std::make_shared<SceneLoadCache>();
 
-  const json root = parseFile(path);
+  const auto parsed = std::make_shared<const json>(parseFile(path));
+  const json& root = *parsed;
+  doc.parsed = parsed;
   if (!root.is_object()) ctx.fail("", "expected a JSON object at the top level");
   doc.format = ctx.string(ctx.member(root, "", "format"), "/format");
   if (doc.format != kV1 && doc.format != kOwn)
     ctx.fail("/format", "unknown format \"" + doc.format + "\" (this version reads \"" + kV1 + "\" and \"" + kOwn + "\")");
   const bool v1 = doc.format == kV1;
   ctx.strict = !v1;  // v1: unknown keys are ignored; own format: they are errors (typos)
-  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits"});
+  // "lights" and "sensors" (and an object's "material") belong to duplex::sensors, which reads them
+  // from doc.parsed.
+  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors"});
   DocumentReader reader(ctx, graph);
 
   // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).
@@ -297,7 +301,7 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
   if (!objects.is_array()) ctx.fail("/objects", "expected an array");
   std::vector<std::shared_ptr<std::string>> build_errors;  // per entry, set by its failing factory
   const std::vector<std::string> type_names = registry.names();
-  std::vector<std::string_view> entry_keys = {"name", "structure"};  // allowed in an entry (own format)
+  std::vector<std::string_view> entry_keys = {"name", "structure", "material"};  // allowed in an entry (own format)
   entry_keys.insert(entry_keys.end(), type_names.begin(), type_names.end());
   for (std::size_t i = 0; i < objects.size(); ++i) {
     const std::string p = at("/objects", i);

@@ -85,6 +85,9 @@ struct SceneDocument {
   std::vector<NodeId> instances;
   std::vector<SceneEdit> edits;          ///< sorted by time (stable: equal times keep file order)
   SceneLoadFigures figures;
+  /// The parsed file, for the layers above the graph: the top-level "lights" and "sensors" keys and
+  /// the objects' "material" keys are read by duplex::sensors (SensorScene), not here.
+  std::shared_ptr<const nlohmann::json> parsed;
 };
 
 /// Reads `path` (either format, by its "format" key). Objects are read through the registry; their
