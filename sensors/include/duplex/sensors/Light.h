@@ -1,0 +1,55 @@
+#pragma once
+/// \file Light.h
+/// Light sources of a sensor run, each with a total power in watts (radiometric, one band).
+/// Positions and directions are in world space (scene units; irradiance is reported per square
+/// scene unit, W/m^2 when the scene is in metres).
+
+#include "duplex/accel/Affine.h"
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <string>
+
+namespace duplex {
+
+enum class LightType : std::uint8_t {
+  Point,        ///< isotropic point: intensity P / (4 pi) W/sr in every direction
+  Spot,         ///< point emitting uniformly into a cone of half-angle cone_angle about direction
+  Directional,  ///< parallel rays along direction, uniform over a disk of `radius` centred at position
+  Area,         ///< Lambertian rectangle: local z = 0, width x height centred at the origin, emits towards +z
+};
+
+/// One light. Only the fields of its type are used; validate() checks them.
+struct Light {
+  LightType type = LightType::Point;
+  std::string name;             ///< for messages (the scene file's "name", or "lights/<k>")
+  double power_w = 1.0;         ///< total emitted power, > 0
+  glm::dvec3 position{0.0};     ///< Point, Spot; Directional: the centre of its disk
+  glm::dvec3 direction{0.0, 0.0, -1.0};  ///< Spot (cone axis), Directional (ray direction); any length > 0
+  double cone_angle = 0.5;      ///< Spot: half-angle in radians, in (0, pi]
+  double radius = 1.0;          ///< Directional: disk radius, > 0
+  double width = 1.0;           ///< Area: along local x, > 0
+  double height = 1.0;          ///< Area: along local y, > 0
+  Affine world_from_light;      ///< Area: placement of the local rectangle
+  bool two_sided = false;       ///< Area: also emits towards -z (half the power each side)
+
+  /// Throws InvalidArgument naming the light for non-finite values, power <= 0, a zero direction,
+  /// a cone angle outside (0, pi], or a non-positive size or radius, or a singular transform.
+  void validate() const;
+  /// Radiant intensity (W/sr) of a Point or Spot light towards world direction `dir_ws` (any
+  /// length); 0 outside a spot's cone. For analytic checks.
+  [[nodiscard]] double intensity(const glm::dvec3& dir_ws) const;
+};
+
+/// One emitted ray: world-space origin and unit direction.
+struct EmittedRay {
+  glm::dvec3 origin{0.0};
+  glm::dvec3 dir{0.0, 0.0, 1.0};
+};
+
+/// Samples a ray leaving `light` from four uniform numbers in [0, 1) (power-proportional over the
+/// light's emission: every ray of a light carries the same power).
+[[nodiscard]] EmittedRay sampleLight(const Light& light, const double u[4]);
+
+}  // namespace duplex

@@ -1,0 +1,59 @@
+#pragma once
+/// \file SensorResults.h
+/// What a sensor run measured, per sensor and per bin, with standard errors.
+///
+/// Estimator: every emitted ray i carries the scene's total power P (W) and deposits X_ib = P * w
+/// into bin b at each crossing (w: the path's throughput through materials and media). A bin's flux
+/// is the mean over the N emitted rays, F_b = (1/N) sum_i X_ib, where X_ib sums all crossings of
+/// path i with bin b (so rays that never reach the bin count as zeros). Its standard error is that
+/// of a mean of N independent samples: sqrt((sum X^2 - (sum X)^2 / N) / (N (N - 1))). Irradiance
+/// divides both by the bin's world area. A sensor's total flux uses the per-ray sums over its bins
+/// the same way.
+
+#include "duplex/scenegraph/NodeId.h"
+#include "duplex/sensors/SensorObject.h"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace duplex {
+
+struct SensorResult {
+  std::string name;
+  NodeId node = kInvalidNode;
+  SensorShape shape = SensorShape::Rectangle;
+  std::uint32_t nx = 0, ny = 0;
+  bool two_sided = true;
+  /// Row-major nx * ny arrays, bin (0, 0) at local (-w/2, -h/2), x fastest.
+  std::vector<double> flux_w;             ///< W
+  std::vector<double> flux_stderr_w;      ///< standard error of flux_w
+  std::vector<double> irradiance_w_m2;    ///< W per square scene unit (0 for bins of zero area)
+  std::vector<double> stderr_w_m2;        ///< standard error of irradiance_w_m2
+  std::vector<double> bin_area_m2;        ///< world area of each bin
+  std::vector<std::uint64_t> ray_count;   ///< emitted rays whose path crossed the bin
+  double total_flux_w = 0.0;
+  double total_flux_stderr_w = 0.0;
+  double relative_stderr = 0.0;  ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
+  double efficiency = 0.0;       ///< total_flux_w / emitted power
+};
+
+/// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
+/// emitted = escaped + absorbed + medium_absorbed + depth_limited + roulette up to rounding.
+struct EnergyBalance {
+  double emitted_w = 0.0;
+  double escaped_w = 0.0;          ///< left the scene (no blocking hit)
+  double absorbed_w = 0.0;         ///< absorbed by surfaces
+  double medium_absorbed_w = 0.0;  ///< attenuated by media
+  double depth_limited_w = 0.0;    ///< still travelling when the depth limit cut the path
+  double roulette_w = 0.0;         ///< net power removed by Russian roulette (zero in expectation)
+};
+
+struct SensorRunResults {
+  std::uint64_t rays = 0;  ///< emitted rays
+  std::uint64_t seed = 0;
+  EnergyBalance energy;
+  std::vector<SensorResult> sensors;  ///< in the scene's sensor order
+};
+
+}  // namespace duplex

@@ -1,0 +1,120 @@
+#pragma once
+/// \file SensorRun.h
+/// A light-tracing run that accumulates the power crossing the sensors of a SensorScene.
+///
+/// Rays start at the lights (chosen in proportion to their power), are traced with the top level's
+/// crossing query (closest blocking hit + every sensor crossing before it, media transmittance),
+/// and scatter at surfaces by their material with Russian roulette and a depth limit.
+///
+/// Determinism: ray i draws its random numbers from a CounterRng keyed by (seed, i); work is split
+/// into chunks of consecutive rays traced in parallel (TBB, lock-free: each chunk writes its own
+/// event list), and the chunks' per-ray deposits are added to the bins strictly in ray order. The
+/// results are therefore bit-identical for any thread count and chunk size, and a run extended to
+/// N rays in several calls (or resumed from a saved state) equals one run of N rays.
+///
+/// Threading: runUntil() runs on the caller's thread (using `threads` workers); cancel() may be
+/// called from any thread, including the progress callback.
+
+#include "duplex/accel/Crossing.h"
+#include "duplex/sensors/SensorResults.h"
+#include "duplex/sensors/SensorScene.h"
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <vector>
+
+namespace duplex {
+
+struct SensorRunConfig {
+  std::uint64_t seed = 1;
+  unsigned threads = 0;             ///< worker threads; 0 = all hardware threads
+  std::uint32_t max_depth = 32;     ///< surface interactions after which a path is cut (depth_limited_w)
+  /// Russian roulette: a path whose power falls below this fraction of an emitted ray's power (by
+  /// media or materials) survives with probability power / threshold and is then raised to it.
+  double roulette_threshold = 0.05;
+  std::uint32_t chunk_rays = 1024;  ///< rays per parallel work item (results do not depend on it)
+  /// Rays between progress reports and stop-rule checks; the stop point depends on it (not on the
+  /// thread count).
+  std::uint64_t batch_rays = 1u << 16;
+  CrossingQuery query;              ///< which instances block, record, attenuate
+  /// Benchmark baseline: trace the same paths with the plain closest-hit query, record nothing.
+  /// Paths are identical when the scene has no media (sensors never change a path).
+  bool closest_hit_only = false;
+};
+
+struct SensorProgress {
+  std::uint64_t rays_done = 0;    ///< emitted rays finished (the whole run, resumed rays included)
+  std::uint64_t rays_target = 0;  ///< the total asked of runUntil
+  double seconds = 0.0;           ///< wall time of this runUntil call so far
+  std::uint64_t rays_this_call = 0;
+};
+
+/// Stop when sensor `sensor`'s total-flux relative standard error is at most `target` (checked
+/// after each batch, once at least `min_rays` rays were traced). sensor < 0: no rule.
+struct SensorStopRule {
+  int sensor = -1;
+  double target = 0.0;
+  std::uint64_t min_rays = 10000;
+};
+
+enum class SensorRunStatus : std::uint8_t { Completed, TargetReached, Cancelled };
+
+/// Counters of the traced segments (for benchmarks).
+struct SensorRunCounters {
+  std::uint64_t segments = 0;   ///< crossing (or closest-hit) queries
+  std::uint64_t crossings = 0;  ///< sensor crossings recorded
+};
+
+class SensorRun {
+ public:
+  /// The scene must outlive the run and stay unchanged. Throws InvalidArgument for a bad config
+  /// (chunk_rays or batch_rays 0, max_depth > 1000, roulette_threshold outside [0, 1)).
+  SensorRun(const SensorScene& scene, const SensorRunConfig& config = {});
+  SensorRun(const SensorRun&) = delete;
+  SensorRun& operator=(const SensorRun&) = delete;
+
+  /// Traces rays until raysDone() == total_rays (extend: call again with a larger total), the
+  /// stop rule holds, or cancel() is called (the rays traced so far are kept; a cancelled run can
+  /// be continued). `progress` is called on this thread after each batch. Throws InvalidArgument
+  /// when the scene has no light; resets a pending cancel() at its start.
+  SensorRunStatus runUntil(std::uint64_t total_rays, const std::function<void(const SensorProgress&)>& progress = {},
+                           const SensorStopRule& stop = {});
+  /// Asks a running runUntil to stop after the chunks in flight. Thread-safe.
+  void cancel() { cancel_.store(true, std::memory_order_relaxed); }
+
+  [[nodiscard]] std::uint64_t raysDone() const { return rays_done_; }
+  [[nodiscard]] const SensorRunConfig& config() const { return config_; }
+  [[nodiscard]] SensorRunResults results() const;
+  /// Relative standard error of sensor `sensor`'s total flux now (infinity before any power arrived).
+  [[nodiscard]] double relativeStderr(int sensor) const;
+  [[nodiscard]] SensorRunCounters counters() const { return counters_; }
+
+  /// Saves the accumulators (exact binary doubles) so that a later process can resume. Throws
+  /// FileError naming the file.
+  void saveState(const std::filesystem::path& file) const;
+  /// Loads a saved state into this run (whose scene and seed must match the saved ones: checked by
+  /// a fingerprint of the sensors, bins and lights). Throws FileError naming the file.
+  void loadState(const std::filesystem::path& file);
+
+ private:
+  struct Chunk;
+  void traceChunk(Chunk& chunk) const;
+  void reduce(const Chunk& chunk);
+  [[nodiscard]] std::uint64_t fingerprint() const;
+
+  const SensorScene& scene_;
+  SensorRunConfig config_;
+  std::vector<double> light_cdf_;
+  std::atomic<bool> cancel_{false};
+  std::uint64_t rays_done_ = 0;
+  SensorRunCounters counters_;
+  // Accumulators, added to in ray order: per bin and per sensor sums of X and X^2, crossing counts.
+  std::vector<double> bin_sum_, bin_sum2_;
+  std::vector<std::uint64_t> bin_count_;
+  std::vector<double> sensor_sum_, sensor_sum2_;
+  EnergyBalance energy_sum_;  // sums over rays (divide by rays_done_)
+};
+
+}  // namespace duplex

@@ -1,0 +1,120 @@
+#include "duplex/sensors/Light.h"
+
+#include "duplex/accel/Error.h"
+
+#include <glm/geometric.hpp>
+
+#include <cmath>
+#include <numbers>
+
+namespace duplex {
+
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+bool finite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// An orthonormal basis (t, b) completing unit vector n (Duff et al. 2017, "Building an orthonormal
+// basis, revisited"): branch-free and continuous except at one sign flip.
+void basis(const glm::dvec3& n, glm::dvec3& t, glm::dvec3& b) {
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z);
+  const double c = n.x * n.y * a;
+  t = glm::dvec3(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
+  b = glm::dvec3(c, sign + n.y * n.y * a, -n.y);
+}
+
+}  // namespace
+
+void Light::validate() const {
+  auto bad = [this](const std::string& what) { throw InvalidArgument("light '" + name + "': " + what); };
+  if (!std::isfinite(power_w)) bad("power is not finite");
+  if (!(power_w > 0.0)) bad("power must be > 0 W (got " + std::to_string(power_w) + ")");
+  switch (type) {
+    case LightType::Spot:
+      if (!(cone_angle > 0.0 && cone_angle <= std::numbers::pi)) bad("cone angle must be in (0, 180] degrees");
+      [[fallthrough]];
+    case LightType::Point:
+      if (!finite(position)) bad("position is not finite");
+      if (type == LightType::Spot && !(finite(direction) && glm::length(direction) > 0.0)) bad("direction must be a finite non-zero vector");
+      break;
+    case LightType::Directional:
+      if (!finite(position)) bad("position is not finite");
+      if (!(finite(direction) && glm::length(direction) > 0.0)) bad("direction must be a finite non-zero vector");
+      if (!(std::isfinite(radius) && radius > 0.0)) bad("radius must be finite and > 0");
+      break;
+    case LightType::Area:
+      if (!(std::isfinite(width) && width > 0.0 && std::isfinite(height) && height > 0.0)) bad("size must be finite and > 0");
+      if (!world_from_light.isFinite() || world_from_light.isSingular()) bad("transform is not finite or singular");
+      break;
+  }
+}
+
+double Light::intensity(const glm::dvec3& dir_ws) const {
+  switch (type) {
+    case LightType::Point: return power_w / (4.0 * std::numbers::pi);
+    case LightType::Spot: {
+      const double c = glm::dot(glm::normalize(dir_ws), glm::normalize(direction));
+      return c >= std::cos(cone_angle) ? power_w / (kTwoPi * (1.0 - std::cos(cone_angle))) : 0.0;
+    }
+    default: return 0.0;
+  }
+}
+
+EmittedRay sampleLight(const Light& light, const double u[4]) {
+  EmittedRay r;
+  switch (light.type) {
+    case LightType::Point: {
+      // Uniform on the sphere (Archimedes: z uniform in [-1, 1]).
+      const double z = 1.0 - 2.0 * u[0], s = std::sqrt(std::max(0.0, 1.0 - z * z)), phi = kTwoPi * u[1];
+      r.origin = light.position;
+      r.dir = glm::dvec3(s * std::cos(phi), s * std::sin(phi), z);
+      break;
+    }
+    case LightType::Spot: {
+      // Uniform over the cone's solid angle: cos(theta) uniform in [cos(alpha), 1].
+      const glm::dvec3 n = glm::normalize(light.direction);
+      glm::dvec3 t, b;
+      basis(n, t, b);
+      const double c = 1.0 - u[0] * (1.0 - std::cos(light.cone_angle)), s = std::sqrt(std::max(0.0, 1.0 - c * c));
+      const double phi = kTwoPi * u[1];
+      r.origin = light.position;
+      r.dir = s * std::cos(phi) * t + s * std::sin(phi) * b + c * n;
+      break;
+    }
+    case LightType::Directional: {
+      const glm::dvec3 n = glm::normalize(light.direction);
+      glm::dvec3 t, b;
+      basis(n, t, b);
+      const double rad = light.radius * std::sqrt(u[0]), phi = kTwoPi * u[1];
+      r.origin = light.position + rad * std::cos(phi) * t + rad * std::sin(phi) * b;
+      r.dir = n;
+      break;
+    }
+    case LightType::Area: {
+      // Uniform over the (affinely mapped) rectangle, cosine-weighted about its world normal.
+      const glm::dvec3 p_ls((u[0] - 0.5) * light.width, (u[1] - 0.5) * light.height, 0.0);
+      r.origin = light.world_from_light.point(p_ls);
+      const glm::dvec3 ex = light.world_from_light.vector(glm::dvec3(1, 0, 0));
+      const glm::dvec3 ey = light.world_from_light.vector(glm::dvec3(0, 1, 0));
+      glm::dvec3 n = glm::normalize(glm::cross(ex, ey));
+      double v = u[2];
+      if (light.two_sided) {  // half the rays from each face
+        if (v < 0.5) {
+          n = -n;
+          v = 2.0 * v;
+        } else {
+          v = 2.0 * v - 1.0;
+        }
+      }
+      const glm::dvec3 t = glm::normalize(ex), b = glm::cross(n, t);
+      const double s = std::sqrt(v), phi = kTwoPi * u[3];
+      r.dir = s * std::cos(phi) * t + s * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - v)) * n;
+      break;
+    }
+  }
+  return r;
+}
+
+}  // namespace duplex

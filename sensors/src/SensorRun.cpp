@@ -1,0 +1,414 @@
+// The light-tracing loop of a sensor run and its ordered, lock-free accumulation.
+//
+// Work: chunks of consecutive rays, traced in parallel; each chunk writes its per-ray deposits
+// (merged per bin within the path, so that a bin's sum of squares is over emitted rays) and energy
+// tallies to its own lists. After each batch the finished chunks are reduced strictly in ray order,
+// so every sum sees its terms in the same order whatever the thread count.
+
+#include "duplex/sensors/SensorRun.h"
+
+#include "duplex/accel/Error.h"
+#include "duplex/sensors/CounterRng.h"
+
+#include <glm/geometric.hpp>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <numbers>
+
+namespace duplex {
+
+namespace {
+
+struct BinEvent {
+  std::uint32_t bin;
+  double value;
+};
+struct SensorEvent {
+  std::uint32_t sensor;
+  double value;
+};
+
+// Cosine-weighted direction about unit normal n.
+glm::dvec3 cosineDirection(const glm::dvec3& n, double u0, double u1) {
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z), c = n.x * n.y * a;
+  const glm::dvec3 t(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x), b(c, sign + n.y * n.y * a, -n.y);
+  const double r = std::sqrt(u0), phi = 2.0 * std::numbers::pi * u1;
+  return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - u0)) * n;
+}
+
+glm::dvec3 reflect(const glm::dvec3& d, const glm::dvec3& n) { return d - 2.0 * glm::dot(d, n) * n; }
+
+}  // namespace
+
+struct SensorRun::Chunk {
+  std::uint64_t first = 0, count = 0;
+  bool done = false;
+  // Per ray (path order): its merged bin and sensor deposits, delimited by offsets; its energy.
+  std::vector<BinEvent> bins;
+  std::vector<std::uint32_t> bin_end;  // per ray: end offset in bins
+  std::vector<SensorEvent> sensors;
+  std::vector<std::uint32_t> sensor_end;
+  std::vector<EnergyBalance> energy;  // per ray (emitted_w unused)
+  SensorRunCounters counters;
+};
+
+SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : scene_(scene), config_(config) {
+  if (config_.chunk_rays == 0 || config_.batch_rays == 0) throw InvalidArgument("SensorRun: chunk_rays and batch_rays must be > 0");
+  if (config_.max_depth > 1000) throw InvalidArgument("SensorRun: max_depth above 1000");
+  if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
+    throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
+  double acc = 0.0;
+  for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
+  bin_sum_.assign(scene_.binCount(), 0.0);
+  bin_sum2_.assign(scene_.binCount(), 0.0);
+  bin_count_.assign(scene_.binCount(), 0);
+  sensor_sum_.assign(scene_.sensors().size(), 0.0);
+  sensor_sum2_.assign(scene_.sensors().size(), 0.0);
+}
+
+void SensorRun::traceChunk(Chunk& chunk) const {
+  const TopLevel& top = scene_.tracer().topLevel();
+  const auto& lights = scene_.lights();
+  const auto& sensors = scene_.sensors();
+  const double power = scene_.totalPower();
+  const double rr_level = config_.roulette_threshold * power;
+  QueryContext ctx;
+  std::vector<SensorCrossing> crossings;
+  std::vector<BinEvent> path_bins;  // this path's deposits before merging
+  chunk.bins.clear();
+  chunk.bin_end.clear();
+  chunk.sensors.clear();
+  chunk.sensor_end.clear();
+  chunk.energy.assign(chunk.count, EnergyBalance{});
+  chunk.counters = {};
+
+  for (std::uint64_t k = 0; k < chunk.count; ++k) {
+    if (cancel_.load(std::memory_order_relaxed)) return;  // chunk stays not done
+    CounterRng rng(config_.seed, chunk.first + k);
+    EnergyBalance& e = chunk.energy[k];
+    // Light by power, then a ray of it.
+    const double pick = rng.uniform() * power;
+    const std::size_t li = std::min<std::size_t>(
+        lights.size() - 1, static_cast<std::size_t>(std::upper_bound(light_cdf_.begin(), light_cdf_.end(), pick) - light_cdf_.begin()));
+    double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
+    const EmittedRay emitted = sampleLight(lights[li], u);
+    glm::dvec3 origin = emitted.origin, dir = emitted.dir;
+    double w = power;
+    path_bins.clear();
+
+    for (std::uint32_t depth = 0;; ++depth) {
+      Ray ray;
+      ray.origin = glm::vec3(origin);
+      ray.dir = glm::vec3(dir);
+      ++chunk.counters.segments;
+      SegmentEnd end;
+      if (config_.closest_hit_only) {
+        end.hit = top.intersect(ray, ctx, config_.query.surface_mask);
+      } else {
+        end = top.intersectWithCrossings(ray, crossings, ctx, config_.query);
+        for (const SensorCrossing& c : crossings) {
+          const int s = scene_.sensorOf(c.hit.instance_id);
+          if (s < 0) continue;
+          path_bins.push_back({sensors[static_cast<std::size_t>(s)].first_bin + c.hit.prim_id, w * c.transmittance});
+          ++chunk.counters.crossings;
+        }
+      }
+      const double w_after = w * end.transmittance;
+      e.medium_absorbed_w += w - w_after;
+      w = w_after;
+      if (!end.hit.valid()) {
+        e.escaped_w += w;
+        break;
+      }
+      if (depth == config_.max_depth) {
+        e.depth_limited_w += w;
+        break;
+      }
+      // Scatter by the material; a path ends in an absorber or by the albedo's roulette.
+      const Material& m = scene_.materialOf(end.hit.instance_id);
+      const glm::dvec3 p = origin + static_cast<double>(end.hit.t) * dir;
+      glm::dvec3 n = glm::normalize(glm::dvec3(end.hit.ng));
+      const glm::dvec3 d = glm::normalize(dir);
+      const bool front = glm::dot(d, n) < 0.0;
+      const glm::dvec3 nf = front ? n : -n;  // faces the incoming ray
+      glm::dvec3 next;
+      if (m.type == MaterialType::Absorber) {
+        e.absorbed_w += w;
+        break;
+      } else if (m.type == MaterialType::Lambertian || m.type == MaterialType::Mirror) {
+        if (rng.uniform() >= m.reflectance) {
+          e.absorbed_w += w;
+          break;
+        }
+        next = m.type == MaterialType::Mirror ? reflect(d, nf) : cosineDirection(nf, rng.uniform(), rng.uniform());
+      } else {  // dielectric: exact Fresnel for unpolarised light, reflect or refract by it
+        const double eta_i = front ? 1.0 : m.ior, eta_t = front ? m.ior : 1.0;
+        const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
+        const double sin_t2 = (eta_i / eta_t) * (eta_i / eta_t) * (1.0 - cos_i * cos_i);
+        double fresnel = 1.0, cos_t = 0.0;
+        if (sin_t2 < 1.0) {
+          cos_t = std::sqrt(1.0 - sin_t2);
+          const double rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
+          const double rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
+          fresnel = 0.5 * (rs * rs + rp * rp);
+        }
+        if (rng.uniform() < fresnel) next = reflect(d, nf);
+        else next = (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - cos_t) * nf;
+      }
+      // Russian roulette on power lost to media (materials keep a surviving path's power).
+      if (w < rr_level) {
+        if (rng.uniform() * rr_level >= w) {
+          e.roulette_w += w;
+          break;
+        }
+        e.roulette_w -= rr_level - w;
+        w = rr_level;
+      }
+      // Leave the surface on the side the new direction points to, off by a relative epsilon.
+      const double scale = std::max({1.0, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+      origin = p + (glm::dot(next, n) >= 0.0 ? n : -n) * (1e-5 * scale);
+      dir = glm::normalize(next);
+    }
+
+    // Merge this path's deposits per bin (in path order within a bin) and per sensor.
+    std::stable_sort(path_bins.begin(), path_bins.end(), [](const BinEvent& a, const BinEvent& b) { return a.bin < b.bin; });
+    const std::size_t sensor_first = chunk.sensors.size();
+    for (std::size_t i = 0; i < path_bins.size();) {
+      BinEvent merged = path_bins[i];
+      for (++i; i < path_bins.size() && path_bins[i].bin == merged.bin; ++i) merged.value += path_bins[i].value;
+      chunk.bins.push_back(merged);
+    }
+    // Sensor totals: bins are sorted, and a sensor's bins are contiguous, so its sum follows.
+    for (std::size_t i = chunk.bin_end.empty() ? 0 : chunk.bin_end.back(); i < chunk.bins.size(); ++i) {
+      const BinEvent& b = chunk.bins[i];
+      // The sensor of a global bin: the last sensor whose first_bin <= bin.
+      const auto it = std::upper_bound(sensors.begin(), sensors.end(), b.bin,
+                                       [](std::uint32_t bin, const SensorInstance& s) { return bin < s.first_bin; });
+      const auto s = static_cast<std::uint32_t>(it - sensors.begin() - 1);
+      if (chunk.sensors.size() > sensor_first && chunk.sensors.back().sensor == s) chunk.sensors.back().value += b.value;
+      else chunk.sensors.push_back({s, b.value});
+    }
+    chunk.bin_end.push_back(static_cast<std::uint32_t>(chunk.bins.size()));
+    chunk.sensor_end.push_back(static_cast<std::uint32_t>(chunk.sensors.size()));
+  }
+  chunk.done = true;
+}
+
+void SensorRun::reduce(const Chunk& chunk) {
+  std::size_t b = 0, s = 0;
+  for (std::uint64_t k = 0; k < chunk.count; ++k) {
+    for (; b < chunk.bin_end[k]; ++b) {
+      const BinEvent& ev = chunk.bins[b];
+      bin_sum_[ev.bin] += ev.value;
+      bin_sum2_[ev.bin] += ev.value * ev.value;
+      ++bin_count_[ev.bin];
+    }
+    for (; s < chunk.sensor_end[k]; ++s) {
+      const SensorEvent& ev = chunk.sensors[s];
+      sensor_sum_[ev.sensor] += ev.value;
+      sensor_sum2_[ev.sensor] += ev.value * ev.value;
+    }
+    const EnergyBalance& e = chunk.energy[k];
+    energy_sum_.escaped_w += e.escaped_w;
+    energy_sum_.absorbed_w += e.absorbed_w;
+    energy_sum_.medium_absorbed_w += e.medium_absorbed_w;
+    energy_sum_.depth_limited_w += e.depth_limited_w;
+    energy_sum_.roulette_w += e.roulette_w;
+  }
+  rays_done_ += chunk.count;
+  counters_.segments += chunk.counters.segments;
+  counters_.crossings += chunk.counters.crossings;
+}
+
+SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays, const std::function<void(const SensorProgress&)>& progress,
+                                    const SensorStopRule& stop) {
+  if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
+  if (stop.sensor >= static_cast<int>(scene_.sensors().size()))
+    throw InvalidArgument("SensorRun: stop rule names sensor " + std::to_string(stop.sensor) + ", the scene has " +
+                          std::to_string(scene_.sensors().size()));
+  cancel_.store(false, std::memory_order_relaxed);
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::uint64_t start = rays_done_;
+  const unsigned threads = config_.threads ? config_.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
+  tbb::task_arena arena(static_cast<int>(threads));
+  std::vector<Chunk> chunks;
+  while (rays_done_ < total_rays) {
+    if (stop.sensor >= 0 && rays_done_ >= stop.min_rays && relativeStderr(stop.sensor) <= stop.target)
+      return SensorRunStatus::TargetReached;
+    // One batch: the rays up to the next multiple of batch_rays (so batches do not depend on how
+    // the run was split into calls), cut into chunks.
+    const std::uint64_t batch_end = std::min(total_rays, (rays_done_ / config_.batch_rays + 1) * config_.batch_rays);
+    chunks.resize((batch_end - rays_done_ + config_.chunk_rays - 1) / config_.chunk_rays);
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      chunks[c].first = rays_done_ + c * config_.chunk_rays;
+      chunks[c].count = std::min<std::uint64_t>(config_.chunk_rays, batch_end - chunks[c].first);
+      chunks[c].done = false;
+    }
+    arena.execute([&] {
+      tbb::parallel_for(std::size_t{0}, chunks.size(), [&](std::size_t c) { traceChunk(chunks[c]); });
+    });
+    // Reduce the finished prefix in ray order (after a cancel, later finished chunks are dropped).
+    for (const Chunk& c : chunks) {
+      if (!c.done) break;
+      reduce(c);
+    }
+    if (progress) {
+      SensorProgress p;
+      p.rays_done = rays_done_;
+      p.rays_target = total_rays;
+      p.rays_this_call = rays_done_ - start;
+      p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      progress(p);
+    }
+    if (cancel_.load(std::memory_order_relaxed)) return SensorRunStatus::Cancelled;
+  }
+  if (stop.sensor >= 0 && rays_done_ >= stop.min_rays && relativeStderr(stop.sensor) <= stop.target)
+    return SensorRunStatus::TargetReached;
+  return SensorRunStatus::Completed;
+}
+
+namespace {
+
+// Mean and standard error of the mean of N samples given their sum and sum of squares.
+void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, double& se) {
+  if (n == 0) {
+    mean = se = 0.0;
+    return;
+  }
+  const double nd = static_cast<double>(n);
+  mean = sum / nd;
+  se = n > 1 ? std::sqrt(std::max(0.0, (sum2 - sum * sum / nd) / (nd * (nd - 1.0)))) : 0.0;
+}
+
+}  // namespace
+
+double SensorRun::relativeStderr(int sensor) const {
+  double mean, se;
+  meanAndStderr(sensor_sum_[static_cast<std::size_t>(sensor)], sensor_sum2_[static_cast<std::size_t>(sensor)], rays_done_, mean, se);
+  return mean > 0.0 ? se / mean : std::numeric_limits<double>::infinity();
+}
+
+SensorRunResults SensorRun::results() const {
+  SensorRunResults r;
+  r.rays = rays_done_;
+  r.seed = config_.seed;
+  const double n = rays_done_ ? static_cast<double>(rays_done_) : 1.0;
+  r.energy.emitted_w = rays_done_ ? scene_.totalPower() : 0.0;
+  r.energy.escaped_w = energy_sum_.escaped_w / n;
+  r.energy.absorbed_w = energy_sum_.absorbed_w / n;
+  r.energy.medium_absorbed_w = energy_sum_.medium_absorbed_w / n;
+  r.energy.depth_limited_w = energy_sum_.depth_limited_w / n;
+  r.energy.roulette_w = energy_sum_.roulette_w / n;
+  for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
+    const SensorInstance& s = scene_.sensors()[k];
+    const SensorSpec& spec = s.object->spec();
+    SensorResult out;
+    out.name = s.name;
+    out.node = s.node;
+    out.shape = spec.shape;
+    out.nx = spec.nx;
+    out.ny = spec.ny;
+    out.two_sided = spec.two_sided;
+    const std::uint32_t bins = s.object->binCount();
+    for (std::uint32_t b = 0; b < bins; ++b) {
+      double mean, se;
+      meanAndStderr(bin_sum_[s.first_bin + b], bin_sum2_[s.first_bin + b], rays_done_, mean, se);
+      const double area = s.binAreaWorld(b);
+      out.flux_w.push_back(mean);
+      out.flux_stderr_w.push_back(se);
+      out.bin_area_m2.push_back(area);
+      out.irradiance_w_m2.push_back(area > 0.0 ? mean / area : 0.0);
+      out.stderr_w_m2.push_back(area > 0.0 ? se / area : 0.0);
+      out.ray_count.push_back(bin_count_[s.first_bin + b]);
+    }
+    meanAndStderr(sensor_sum_[k], sensor_sum2_[k], rays_done_, out.total_flux_w, out.total_flux_stderr_w);
+    out.relative_stderr = out.total_flux_w > 0.0 ? out.total_flux_stderr_w / out.total_flux_w : std::numeric_limits<double>::infinity();
+    out.efficiency = scene_.totalPower() > 0.0 ? out.total_flux_w / scene_.totalPower() : 0.0;
+    r.sensors.push_back(std::move(out));
+  }
+  return r;
+}
+
+// ---- saved state: "DXSENSR1", fingerprint, seed, rays, sizes, then the raw accumulators ----
+
+std::uint64_t SensorRun::fingerprint() const {
+  // FNV-1a over what the accumulators' meaning depends on.
+  std::uint64_t h = 1469598103934665603ull;
+  auto add = [&h](const void* p, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
+  };
+  for (const SensorInstance& s : scene_.sensors()) {
+    add(s.name.data(), s.name.size());
+    const std::uint32_t bins = s.object->binCount();
+    add(&bins, sizeof bins);
+  }
+  for (const Light& l : scene_.lights()) add(&l.power_w, sizeof l.power_w);
+  add(&config_.seed, sizeof config_.seed);
+  add(&config_.max_depth, sizeof config_.max_depth);
+  add(&config_.roulette_threshold, sizeof config_.roulette_threshold);
+  return h;
+}
+
+namespace {
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
+}
+
+void SensorRun::saveState(const std::filesystem::path& file) const {
+  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  if (!out) throw FileError(file.string() + ": cannot write the run state");
+  const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bin_sum_.size(), sensor_sum_.size()};
+  out.write(kStateMagic, sizeof kStateMagic);
+  out.write(reinterpret_cast<const char*>(header), sizeof header);
+  auto put = [&out](const auto& v) { out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(v[0]))); };
+  put(bin_sum_);
+  put(bin_sum2_);
+  put(bin_count_);
+  put(sensor_sum_);
+  put(sensor_sum2_);
+  const double energy[5] = {energy_sum_.escaped_w, energy_sum_.absorbed_w, energy_sum_.medium_absorbed_w,
+                            energy_sum_.depth_limited_w, energy_sum_.roulette_w};
+  out.write(reinterpret_cast<const char*>(energy), sizeof energy);
+  if (!out) throw FileError(file.string() + ": write failed");
+}
+
+void SensorRun::loadState(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw FileError(file.string() + ": cannot open the run state");
+  char magic[8];
+  std::uint64_t header[5];
+  in.read(magic, sizeof magic);
+  in.read(reinterpret_cast<char*>(header), sizeof header);
+  if (!in || std::memcmp(magic, kStateMagic, sizeof magic) != 0) throw FileError(file.string() + ": not a sensor run state");
+  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bin_sum_.size() || header[4] != sensor_sum_.size())
+    throw FileError(file.string() + ": the saved run is of another scene, seed or configuration (seed " +
+                    std::to_string(header[1]) + ", " + std::to_string(header[3]) + " bins)");
+  // Read into copies: a truncated file leaves this run as it was.
+  auto b1 = bin_sum_, b2 = bin_sum2_, s1 = sensor_sum_, s2 = sensor_sum2_;
+  auto bc = bin_count_;
+  auto get = [&in](auto& v) { in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(v[0]))); };
+  get(b1);
+  get(b2);
+  get(bc);
+  get(s1);
+  get(s2);
+  double energy[5];
+  in.read(reinterpret_cast<char*>(energy), sizeof energy);
+  if (!in) throw FileError(file.string() + ": truncated run state");
+  bin_sum_ = std::move(b1);
+  bin_sum2_ = std::move(b2);
+  bin_count_ = std::move(bc);
+  sensor_sum_ = std::move(s1);
+  sensor_sum2_ = std::move(s2);
+  energy_sum_ = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
+  rays_done_ = header[2];
+}
+
+}  // namespace duplex

@@ -1,0 +1,457 @@
+// Sensor runs against analytic answers (issue 5, section 3): a point source's irradiance on a small
+// sensor (I cos(theta) / d^2) and the exact per-bin flux over a large plane, directional light,
+// a mirror's image source, energy conservation in a closed box of sensors (with and without an
+// absorber), bit-identical results for any thread count, extension, resume, cancel and the stop
+// rule; scene-file errors.
+
+#include "duplex/accel/Error.h"
+#include "duplex/objects/MeshObject.h"
+#include "duplex/objects/TriangleMesh.h"
+#include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/sensors/SensorRun.h"
+#include "duplex/sensors/SensorScene.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <unistd.h>
+
+namespace duplex {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+std::shared_ptr<const Object> quad(double half, const std::string& name) {
+  const float h = static_cast<float>(half);
+  const std::vector<float> p = {-h, -h, 0, h, -h, 0, h, h, 0, -h, h, 0};
+  const std::vector<std::uint32_t> i = {0, 1, 2, 0, 2, 3};
+  return std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(p, i, name)));
+}
+
+std::shared_ptr<const Object> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided,
+                                     const std::string& name) {
+  SensorSpec s;
+  s.width = w;
+  s.height = h;
+  s.nx = nx;
+  s.ny = ny;
+  s.two_sided = two_sided;
+  return std::make_shared<const SensorObject>(name, s);
+}
+
+Affine translate(double x, double y, double z) {
+  Affine a;
+  a.translation = glm::dvec3(x, y, z);
+  return a;
+}
+
+// Rotation taking +z to unit vector n (about the axis z x n).
+Affine facing(const glm::dvec3& n_in, const glm::dvec3& at) {
+  const glm::dvec3 n = glm::normalize(n_in);
+  glm::dvec3 axis = glm::cross(glm::dvec3(0, 0, 1), n);
+  const double s = glm::length(axis), c = n.z;
+  Affine a = translate(at.x, at.y, at.z);
+  if (s < 1e-12) {
+    if (c < 0) a.linear = glm::dmat3(1, 0, 0, 0, -1, 0, 0, 0, -1);
+    return a;
+  }
+  axis /= s;
+  const double k = 1 - c, x = axis.x, y = axis.y, z = axis.z;
+  a.linear = glm::transpose(glm::dmat3(c + x * x * k, x * y * k - z * s, x * z * k + y * s,  //
+                                       y * x * k + z * s, c + y * y * k, y * z * k - x * s,  //
+                                       z * x * k - y * s, z * y * k + x * s, c + z * z * k));
+  return a;
+}
+
+Light pointLight(glm::dvec3 p, double power) {
+  Light l;
+  l.type = LightType::Point;
+  l.name = "point";
+  l.position = p;
+  l.power_w = power;
+  return l;
+}
+
+// A graph built by the test, kept alive with the scene.
+struct Fixture {
+  SceneGraph graph;
+  std::vector<Material> materials;
+  ObjectId add(std::shared_ptr<const Object> o, const Affine& world, const std::string& name, Material m = {}) {
+    const ObjectId id = graph.library().add(name, std::move(o));
+    materials.resize(graph.library().size());
+    materials[id] = m;
+    (void)graph.addInstance(kRootNode, id, world, name);
+    return id;
+  }
+  SensorScene scene(std::vector<Light> lights) {
+    (void)graph.commit();
+    return SensorScene(graph, std::move(lights), materials);
+  }
+};
+
+// Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
+double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
+  auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
+  return f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0);
+}
+
+TEST(SensorRun, PointSourceOnALargePlaneMatchesTheExactPerBinIntegral) {
+  Fixture f;
+  const double h = 1.0, w = 4.0;
+  const std::uint32_t n = 8;
+  f.add(sensor(w, w, n, n, /*two_sided=*/false, "floor"), Affine::identity(), "floor");
+  const double power = 4.0 * kPi;  // I = 1 W/sr
+  SensorScene scene = f.scene({pointLight({0.3, -0.2, h}, power)});
+  SensorRunConfig cfg;
+  cfg.seed = 11;
+  SensorRun run(scene, cfg);
+  ASSERT_EQ(run.runUntil(400000), SensorRunStatus::Completed);
+  const SensorRunResults r = run.results();
+  ASSERT_EQ(r.sensors.size(), 1u);
+  const SensorResult& s = r.sensors[0];
+  double z2 = 0.0, total = 0.0;
+  for (std::uint32_t iy = 0; iy < n; ++iy) {
+    for (std::uint32_t ix = 0; ix < n; ++ix) {
+      const double x0 = -w / 2 + ix * w / n - 0.3, y0 = -w / 2 + iy * w / n + 0.2;
+      const double expected = rectangleSolidAngle(x0, x0 + w / n, y0, y0 + w / n, h);  // I * Omega, I = 1
+      total += expected;
+      const std::size_t b = iy * n + ix;
+      ASSERT_GT(s.flux_stderr_w[b], 0.0);
+      const double z = (s.flux_w[b] - expected) / s.flux_stderr_w[b];
+      EXPECT_LT(std::abs(z), 4.5) << "bin " << ix << ", " << iy << ": " << s.flux_w[b] << " vs " << expected;
+      z2 += z * z;
+      EXPECT_NEAR(s.irradiance_w_m2[b], s.flux_w[b] / (w * w / (n * n)), 1e-12);
+    }
+  }
+  // The z-scores behave like standard normals: the standard errors are honest, not inflated.
+  EXPECT_GT(z2 / (n * n), 0.5);
+  EXPECT_LT(z2 / (n * n), 2.0);
+  EXPECT_LT(std::abs(s.total_flux_w - total), 4.5 * s.total_flux_stderr_w);
+  EXPECT_NEAR(s.efficiency, s.total_flux_w / power, 1e-15);
+}
+
+TEST(SensorRun, SmallSensorSeesICosThetaOverDSquared) {
+  // A spot light (I = P / (2 pi (1 - cos a))) aimed at a small sensor 2 m away, tilted 40 degrees.
+  Fixture f;
+  const double d = 2.0, theta = 40.0 * kPi / 180.0, side = 0.1;
+  const glm::dvec3 at(0.0, 0.0, d);
+  f.add(sensor(side, side, 1, 1, true, "small"), facing({std::sin(theta), 0.0, -std::cos(theta)}, at), "small");
+  Light spot;
+  spot.type = LightType::Spot;
+  spot.name = "spot";
+  spot.direction = {0, 0, 1};
+  spot.cone_angle = 5.0 * kPi / 180.0;
+  spot.power_w = 10.0;
+  const double intensity = spot.intensity({0, 0, 1});
+  SensorScene scene = f.scene({spot});
+  SensorRun run(scene);
+  (void)run.runUntil(200000);
+  const SensorResult s = run.results().sensors[0];
+  const double expected = intensity * std::cos(theta) / (d * d);
+  EXPECT_LT(std::abs(s.irradiance_w_m2[0] - expected), 4.0 * s.stderr_w_m2[0]) << s.irradiance_w_m2[0] << " vs " << expected;
+  EXPECT_LT(s.relative_stderr, 0.02);  // the check above is a sharp one
+}
+
+TEST(SensorRun, DirectionalLightFluxIsItsPowerTimesProjectedArea) {
+  Fixture f;
+  const double side = 0.5, tilt = 60.0 * kPi / 180.0;
+  f.add(sensor(side, side, 2, 2, true, "tilted"), facing({0.0, std::sin(tilt), std::cos(tilt)}, {0.1, 0.0, 0.0}), "tilted");
+  Light sun;
+  sun.type = LightType::Directional;
+  sun.name = "sun";
+  sun.position = {0, 0, 5};
+  sun.direction = {0, 0, -1};
+  sun.radius = 1.0;
+  sun.power_w = 3.0;
+  SensorScene scene = f.scene({sun});
+  SensorRun run(scene);
+  (void)run.runUntil(100000);
+  const SensorResult s = run.results().sensors[0];
+  const double expected = sun.power_w * side * side * std::cos(tilt) / (kPi * sun.radius * sun.radius);
+  EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w);
+  // Irradiance on a surface tilted by 60 degrees: E = (P / pi r^2) cos(tilt), the same in every bin.
+  for (double e : s.irradiance_w_m2) EXPECT_NEAR(e, sun.power_w / kPi * std::cos(tilt), 0.1 * sun.power_w / kPi * std::cos(tilt));
+}
+
+TEST(SensorRun, MirrorMakesAnImageSource) {
+  // Point source at height 1 over a mirror (z = 0, reflectance 0.8); a one-sided sensor facing
+  // down at height 2 sees the source (distance 1) and its image at z = -1 (distance 3).
+  Fixture f;
+  Material mirror{MaterialType::Mirror, 0.8, 1.5};
+  f.add(quad(50.0, "mirror"), Affine::identity(), "mirror", mirror);
+  f.add(sensor(0.4, 0.4, 1, 1, /*two_sided=*/false, "up"), facing({0, 0, -1}, {0, 0, 2}), "up");
+  SensorScene scene = f.scene({pointLight({0, 0, 1}, 4.0 * kPi)});
+  SensorRun run(scene);
+  (void)run.runUntil(300000);
+  const SensorResult s = run.results().sensors[0];
+  const double expected = rectangleSolidAngle(-0.2, 0.2, -0.2, 0.2, 1.0) + 0.8 * rectangleSolidAngle(-0.2, 0.2, -0.2, 0.2, 3.0);
+  EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w) << s.total_flux_w << " vs " << expected;
+}
+
+// Six two-sided sensors closing the cube [-1, 1]^3 around a point source.
+void closeBox(Fixture& f) {
+  const glm::dvec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (int k = 0; k < 6; ++k) {
+    const std::string name = "face" + std::to_string(k);
+    f.add(sensor(2.0, 2.0, 3, 3, true, name), facing(normals[k], normals[k]), name);
+  }
+}
+
+double sensorSum(const SensorRunResults& r) {
+  double sum = 0.0;
+  for (const SensorResult& s : r.sensors) sum += s.total_flux_w;
+  return sum;
+}
+
+TEST(SensorRun, ClosedBoxOfSensorsRecordsAllEmittedPower) {
+  Fixture f;
+  closeBox(f);
+  SensorScene scene = f.scene({pointLight({0.1, 0.2, -0.3}, 5.0)});
+  SensorRun run(scene);
+  (void)run.runUntil(50000);
+  const SensorRunResults r = run.results();
+  EXPECT_NEAR(sensorSum(r), 5.0, 1e-12);
+  EXPECT_NEAR(r.energy.escaped_w, 5.0, 1e-12);
+  EXPECT_EQ(r.energy.absorbed_w, 0.0);
+}
+
+TEST(SensorRun, WithAnAbsorberInsideMissingPowerEqualsAbsorbedPower) {
+  Fixture f;
+  closeBox(f);
+  f.add(quad(0.5, "absorber"), translate(0, 0, 0.5), "absorber");  // absorber (default material)
+  Material white{MaterialType::Lambertian, 0.7, 1.5};
+  f.add(quad(0.4, "white"), facing({1, 0, 0}, {-0.6, 0, 0}), "white", white);
+  Material glass{MaterialType::Dielectric, 0.0, 1.5};
+  f.add(quad(0.3, "glass"), facing({0, 1, 0}, {0, -0.5, 0}), "glass", glass);
+  SensorScene scene = f.scene({pointLight({0, 0, 0}, 2.0)});
+  SensorRun run(scene);
+  (void)run.runUntil(50000);
+  const SensorRunResults r = run.results();
+  EXPECT_GT(r.energy.absorbed_w, 0.1);
+  EXPECT_NEAR(sensorSum(r) + r.energy.absorbed_w, 2.0, 1e-12);
+  EXPECT_NEAR(sensorSum(r), r.energy.escaped_w, 1e-12);
+  EXPECT_EQ(r.energy.depth_limited_w, 0.0);
+}
+
+SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32_t chunk, std::uint64_t rays) {
+  SensorRunConfig cfg;
+  cfg.seed = 99;
+  cfg.threads = threads;
+  cfg.chunk_rays = chunk;
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(rays);
+  return run.results();
+}
+
+void expectIdentical(const SensorRunResults& a, const SensorRunResults& b) {
+  ASSERT_EQ(a.rays, b.rays);
+  ASSERT_EQ(a.sensors.size(), b.sensors.size());
+  for (std::size_t k = 0; k < a.sensors.size(); ++k) {
+    EXPECT_EQ(a.sensors[k].flux_w, b.sensors[k].flux_w);
+    EXPECT_EQ(a.sensors[k].stderr_w_m2, b.sensors[k].stderr_w_m2);
+    EXPECT_EQ(a.sensors[k].ray_count, b.sensors[k].ray_count);
+    EXPECT_EQ(a.sensors[k].total_flux_w, b.sensors[k].total_flux_w);
+  }
+  EXPECT_EQ(a.energy.absorbed_w, b.energy.absorbed_w);
+  EXPECT_EQ(a.energy.escaped_w, b.energy.escaped_w);
+}
+
+SensorScene reflectingBox(Fixture& f) {
+  closeBox(f);
+  Material white{MaterialType::Lambertian, 0.9, 1.5};
+  f.add(quad(0.5, "white"), translate(0, 0, -0.5), "white", white);
+  return f.scene({pointLight({0, 0, 0.2}, 1.0)});
+}
+
+TEST(SensorRun, BitIdenticalForAnyThreadCountAndChunkSize) {
+  Fixture f;
+  const SensorScene scene = reflectingBox(f);
+  const SensorRunResults one = runWith(scene, 1, 1024, 70000);
+  expectIdentical(one, runWith(scene, 2, 1024, 70000));
+  expectIdentical(one, runWith(scene, 2, 97, 70000));
+  EXPECT_GT(one.sensors[0].total_flux_w, 0.0);
+}
+
+TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
+  Fixture f;
+  const SensorScene scene = reflectingBox(f);
+  const SensorRunResults whole = runWith(scene, 2, 1024, 150000);
+  SensorRunConfig cfg;
+  cfg.seed = 99;
+  cfg.batch_rays = 20000;
+  {
+    // Extended in calls that do not fall on batch or chunk boundaries.
+    SensorRun run(scene, cfg);
+    (void)run.runUntil(33333);
+    (void)run.runUntil(100001);
+    (void)run.runUntil(150000);
+    expectIdentical(whole, run.results());
+  }
+  {
+    // Cancelled from the progress callback after the first batch, then continued.
+    SensorRun run(scene, cfg);
+    std::uint64_t calls = 0;
+    EXPECT_EQ(run.runUntil(150000, [&](const SensorProgress& p) {
+      ++calls;
+      EXPECT_LE(p.rays_done, p.rays_target);
+      run.cancel();
+    }), SensorRunStatus::Cancelled);
+    EXPECT_EQ(calls, 1u);
+    EXPECT_EQ(run.raysDone(), 20000u);
+    EXPECT_EQ(run.runUntil(150000), SensorRunStatus::Completed);
+    expectIdentical(whole, run.results());
+  }
+  {
+    // Saved and loaded into a fresh run (another process would do the same).
+    const auto file = std::filesystem::temp_directory_path() / ("duplex_sensor_state_" + std::to_string(::getpid()) + ".bin");
+    SensorRun first(scene, cfg);
+    (void)first.runUntil(60000);
+    first.saveState(file);
+    SensorRun second(scene, cfg);
+    second.loadState(file);
+    EXPECT_EQ(second.raysDone(), 60000u);
+    (void)second.runUntil(150000);
+    expectIdentical(whole, second.results());
+    // Another seed refuses the state.
+    SensorRunConfig other = cfg;
+    other.seed = 5;
+    SensorRun third(scene, other);
+    EXPECT_THROW(third.loadState(file), FileError);
+    EXPECT_EQ(third.raysDone(), 0u);
+    std::filesystem::remove(file);
+  }
+}
+
+TEST(SensorRun, StopsWhenTheChosenSensorIsPreciseEnough) {
+  Fixture f;
+  const SensorScene scene = reflectingBox(f);
+  SensorRunConfig cfg;
+  cfg.batch_rays = 5000;
+  SensorRun run(scene, cfg);
+  SensorStopRule stop;
+  stop.sensor = 4;  // the top face
+  stop.target = 0.02;
+  stop.min_rays = 5000;
+  EXPECT_EQ(run.runUntil(10000000, {}, stop), SensorRunStatus::TargetReached);
+  EXPECT_LE(run.relativeStderr(4), 0.02);
+  EXPECT_LT(run.raysDone(), 10000000u);
+  EXPECT_EQ(run.raysDone() % 5000, 0u);
+}
+
+TEST(SensorRun, ClosestHitBaselineTracesTheSamePaths) {
+  Fixture f;
+  const SensorScene scene = reflectingBox(f);
+  SensorRunConfig cfg;
+  SensorRun with(scene, cfg);
+  cfg.closest_hit_only = true;
+  SensorRun without(scene, cfg);
+  (void)with.runUntil(20000);
+  (void)without.runUntil(20000);
+  EXPECT_EQ(with.counters().segments, without.counters().segments);
+  EXPECT_EQ(with.results().energy.absorbed_w, without.results().energy.absorbed_w);
+  EXPECT_GT(with.counters().crossings, 0u);
+  EXPECT_EQ(without.counters().crossings, 0u);
+}
+
+TEST(SensorRun, BadLightsAndConfigurationsAreRefused) {
+  Fixture f;
+  f.add(sensor(1, 1, 1, 1, true, "s"), Affine::identity(), "s");
+  EXPECT_THROW((void)f.scene({pointLight({0, 0, 1}, 0.0)}), InvalidArgument);
+  EXPECT_THROW((void)f.scene({pointLight({0, 0, 1}, -1.0)}), InvalidArgument);
+  EXPECT_THROW((void)f.scene({pointLight({0, 0, NAN}, 1.0)}), InvalidArgument);
+  const SensorScene dark = f.scene({});
+  SensorRun run(dark);
+  EXPECT_THROW((void)run.runUntil(10), InvalidArgument);
+  SensorRunConfig bad;
+  bad.chunk_rays = 0;
+  EXPECT_THROW(SensorRun(dark, bad), InvalidArgument);
+}
+
+// ---- scene files ----
+
+std::filesystem::path writeScene(const std::string& name, const std::string& text) {
+  const auto dir = std::filesystem::temp_directory_path() / ("duplex_sensor_scenes_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const auto path = dir / name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+const char* kQuadObject = R"({"name": "floor", "mesh": {"positions": [-5,-5,0, 5,-5,0, 5,5,0, -5,5,0], "indices": [0,1,2, 0,2,3]}})";
+
+TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
+  const std::string text = std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
+                           R"(], "instances": [{"object": "floor", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]}],
+    "lights": [{"type": "point", "position": [0, 0, 1], "power": 12.5},
+               {"type": "spot", "position": [0, 0, 3], "direction": [0, 0, -1], "half_angle": 30, "power": 1},
+               {"type": "directional", "position": [0, 0, 3], "direction": [0, 0, -1], "radius": 2, "power": 1},
+               {"type": "area", "size": [1, 2], "transform": [1,0,0,0, 0,-1,0,0, 0,0,-1,4], "power": 1}],
+    "sensors": [{"name": "top", "shape": "rectangle", "size": [2, 1], "bins": [4, 2], "two_sided": true,
+                 "transform": [1,0,0,0, 0,1,0,0, 0,0,1,2]},
+                {"name": "round", "shape": "disk", "size": 1, "bins": [3, 3], "two_sided": false,
+                 "transform": [2,0,0,0, 0,2,0,0, 0,0,2,1]}]})";
+  const SensorScene scene = SensorScene::load(writeScene("ok.json", text));
+  ASSERT_EQ(scene.lights().size(), 4u);
+  EXPECT_EQ(scene.totalPower(), 15.5);
+  ASSERT_EQ(scene.sensors().size(), 2u);
+  EXPECT_EQ(scene.sensors()[0].name, "top");
+  EXPECT_EQ(scene.sensors()[0].object->binCount(), 8u);
+  EXPECT_EQ(scene.sensors()[1].area_scale, 4.0);
+  EXPECT_EQ(scene.binCount(), 17u);
+  EXPECT_EQ(scene.materialOf(scene.document()->instances[0]).type, MaterialType::Absorber);
+}
+
+TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
+  const std::string text = R"({"format": "duplex-scene-v1",
+    "objects": [{"name": "floor", "plane": {"size": 10}, "material": {"type": "lambertian", "reflectance": 0.5}},
+                {"name": "cell", "sensor": {"size": [1, 1], "bins": 2}}],
+    "nodes": [{"instance": "floor", "object": "floor"},
+              {"group": "row", "translate": [0, 0, 1], "children": [
+                {"instance": "a", "object": "cell"}, {"instance": "b", "object": "cell", "transform": {"translate": [2, 0, 0]}}]}],
+    "lights": [{"type": "point", "position": [0, 0, 3], "power": 1}]})";
+  const SensorScene scene = SensorScene::load(writeScene("own.json", text));
+  ASSERT_EQ(scene.sensors().size(), 2u);
+  EXPECT_EQ(scene.sensors()[0].name, "a");
+  EXPECT_EQ(scene.sensors()[1].name, "b");
+  const Material& m = scene.materialOf(scene.document()->instances[0]);
+  EXPECT_EQ(m.type, MaterialType::Lambertian);
+  EXPECT_EQ(m.reflectance, 0.5);
+}
+
+void expectFileError(const std::string& name, const std::string& body, const std::string& needle) {
+  const auto path = writeScene(name, std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
+                                         R"(], "instances": [], )" + body + "}");
+  try {
+    (void)SensorScene::load(path);
+    ADD_FAILURE() << name << ": no error";
+  } catch (const FileError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path.string()), std::string::npos) << what;
+    EXPECT_NE(what.find(needle), std::string::npos) << what;
+  }
+}
+
+TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {
+  expectFileError("zero_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": 0}])", "/lights/0/power");
+  expectFileError("negative_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": -2}])", "power must be > 0");
+  expectFileError("no_position.json", R"("lights": [{"type": "point", "power": 1}])", "/lights/0: missing key \"position\"");
+  expectFileError("bad_type.json", R"("lights": [{"type": "laser", "power": 1}])", "/lights/0/type");
+  expectFileError("spot_angle.json", R"("lights": [{"type": "spot", "position": [0,0,1], "direction": [0,0,-1], "half_angle": 0, "power": 1}])", "/lights/0/half_angle");
+  expectFileError("zero_dir.json", R"("lights": [{"type": "directional", "position": [0,0,1], "direction": [0,0,0], "radius": 1, "power": 1}])", "/lights/0/direction");
+  expectFileError("no_size.json", R"("sensors": [{"name": "s", "bins": [2, 2]}])", "/sensors/0: missing key \"size\"");
+  expectFileError("zero_bins.json", R"("sensors": [{"name": "s", "size": [1, 1], "bins": [0, 2]}])", "/sensors/0/bins/0");
+  expectFileError("bad_shape.json", R"("sensors": [{"name": "s", "shape": "hexagon", "size": 1}])", "/sensors/0/shape");
+  expectFileError("disk_oval.json", R"("sensors": [{"name": "s", "shape": "disk", "size": [1, 2]}])", "/sensors/0/size");
+  expectFileError("short_transform.json", R"("sensors": [{"name": "s", "size": 1, "transform": [1, 0, 0]}])", "/sensors/0/transform");
+  expectFileError("singular.json", R"("sensors": [{"name": "s", "size": 1, "transform": [0,0,0,0, 0,0,0,0, 0,0,0,0]}])", "singular");
+  expectFileError("no_name.json", R"("sensors": [{"size": 1}])", "missing key \"name\"");
+  expectFileError("twice.json", R"("sensors": [{"name": "s", "size": 1}, {"name": "s", "size": 1}])", "/sensors/1");
+  expectFileError("sensors_not_array.json", R"("sensors": {"name": "s"})", "/sensors");
+}
+
+}  // namespace
+}  // namespace duplex
