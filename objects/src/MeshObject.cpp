@@ -5,11 +5,13 @@
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/accel/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
+#include "TriangleBlock4.h"
 #include "WatertightTriangle4.h"
 
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -19,15 +21,8 @@ namespace duplex {
 
 namespace {
 
-// One 4-wide group of a leaf: the references [i, i + min(4, end - i)) of `refs` (padded, so the
-// extra lanes read valid triangles and are masked off).
-template <int KX, int KY, int KZ, class TriangleVertices>
-inline detail::Watertight4 testGroup(const WatertightRay& wray, const TriangleVertices* tris, const std::uint32_t* refs,
-                                     std::uint32_t i, int n, float t_max) {
-  const float* lane[4];
-  for (int k = 0; k < 4; ++k) lane[k] = &tris[refs[i + k]].v0.x;
-  return detail::intersectWatertight4<KX, KY, KZ>(wray, lane, n, t_max);
-}
+// Lane masks of a block holding n (1..4) of the leaf's triangles.
+constexpr int kLaneMask[5] = {0x0, 0x1, 0x3, 0x7, 0xF};
 
 // The checks of MeshObject::fromParts (see MeshObject.h): what traversal and the leaf tests rely
 // on, so that a tree from a file, however damaged, can only be refused, never crash a query.
@@ -110,12 +105,12 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
         return clipTriangleToBox(v[0], v[1], v[2], box);
       },
       config);
-  orderTrianglesByLeaves();
+  buildLeafBlocks();
 }
 
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag)
     : Object(mesh->name()), mesh_(std::move(mesh)), tree_(std::move(tree)) {
-  orderTrianglesByLeaves();
+  buildLeafBlocks();
 }
 
 std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const TriangleMesh> mesh, KdTree tree) {
@@ -124,29 +119,33 @@ std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const Tr
   return std::shared_ptr<const MeshObject>(new MeshObject(std::move(mesh), std::move(tree), PartsTag{}));
 }
 
-void MeshObject::orderTrianglesByLeaves() {
+MeshObject::~MeshObject() = default;
+
+void MeshObject::buildLeafBlocks() {
   const TriangleMesh& m = *mesh_;
   const std::vector<glm::vec3>& positions = m.positions();
-  std::vector<std::uint32_t> renumbered(m.triangleCount(), kInvalidId);
-  leaf_refs_.reserve(tree_.prim_indices.size() + 3);
-  prim_ids_.reserve(m.triangleCount());
-  triangles_.reserve(m.triangleCount() + 1);
-  for (const std::uint32_t prim : tree_.prim_indices) {
-    if (renumbered[prim] == kInvalidId) {
-      renumbered[prim] = static_cast<std::uint32_t>(prim_ids_.size());
-      prim_ids_.push_back(prim);
-      const TriangleMesh::Triangle& t = m.triangles()[prim];
-      triangles_.push_back({positions[t[0]], positions[t[1]], positions[t[2]]});
+  const std::vector<std::uint32_t>& refs = tree_.prim_indices;
+  block_tree_.bounds = tree_.bounds;
+  block_tree_.nodes = tree_.nodes;
+  std::size_t block_count = 0;
+  for (const KdNode& node : tree_.nodes)
+    if (node.isLeaf() && !node.isJump()) block_count += (node.primCount() + 3) / 4;
+  blocks_.clear();
+  blocks_.reserve(block_count);
+  for (KdNode& node : block_tree_.nodes) {
+    if (!node.isLeaf() || node.isJump() || node.primCount() == 0) continue;
+    const std::uint32_t begin = node.primOffset(), end = begin + node.primCount();
+    node.setPrimOffset(static_cast<std::uint32_t>(blocks_.size()));
+    for (std::uint32_t i = begin; i < end; i += 4) {
+      detail::TriangleBlock4& block = blocks_.emplace_back();
+      for (std::uint32_t k = 0; k < 4; ++k) {
+        // Padding lanes repeat the leaf's last triangle (masked off by the leaf's count).
+        const std::uint32_t prim = refs[std::min(i + k, end - 1)];
+        const TriangleMesh::Triangle& t = m.triangles()[prim];
+        block.set(static_cast<int>(k), positions[t[0]], positions[t[1]], positions[t[2]], prim);
+      }
     }
-    leaf_refs_.push_back(renumbered[prim]);
   }
-  // Three spare references so that a 4-wide group never reads past the list (the extra lanes
-  // are masked off), and one spare triangle: the 4-wide test reads 12 floats from each start.
-  leaf_refs_.insert(leaf_refs_.end(), 3, 0u);
-  leaf_refs_.shrink_to_fit();
-  triangles_.push_back(triangles_.empty() ? TriangleVertices{} : triangles_.back());
-  triangles_.shrink_to_fit();
-  prim_ids_.shrink_to_fit();
 }
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
@@ -154,50 +153,53 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
   float t_best = std::min(hit.t, ray_os.tfar);
-  std::uint32_t best = kInvalidId;
-  const TriangleVertices* tris = triangles_.data();
-  const std::uint32_t* refs = leaf_refs_.data();
+  const detail::TriangleBlock4* best_block = nullptr;
+  int best_lane = 0;
+  float best_u = 0.0f, best_v = 0.0f;
+  const detail::TriangleBlock4* blocks = blocks_.data();
   // One dispatch per ray on the axis permutation; traversal and triangle tests below are
   // instantiated for each of the six permutations.
   dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
       bool found = false;
-      // Four triangles per step; lanes are resolved in order with the scalar interval test so
+      // Four triangles per block; lanes are resolved in order with the scalar interval test so
       // that the result equals testing them one by one.
-      for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
-        const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
-        const detail::Watertight4 r = testGroup<KX, KY, KZ>(wray, tris, refs, i, n, t_max);
-        if ((r.fast | r.exact) == 0) continue;
-        for (int k = 0; k < n; ++k) {
+      const detail::TriangleBlock4* block = blocks + begin;
+      for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
+        const detail::Watertight4 r =
+            detail::intersectWatertight4<KX, KY, KZ>(wray, *block, kLaneMask[std::min(left, 4)], t_max);
+        for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
+          const int k = std::countr_zero(static_cast<unsigned>(lanes));
           float t, u, v;
-          bool hit = false;
           if (r.exact >> k & 1) {
-            const TriangleVertices& tri = tris[refs[i + k]];
-            hit = intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v);
-          } else if ((r.fast >> k & 1) && !(r.sT[k] > t_max * r.abs_det[k])) {
-            t = r.T[k] * (1.0f / r.det[k]);  // the scalar test's final step
-            hit = true;
+            if (!intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
+                                                 t_max, t, u, v))
+              continue;
+          } else {
+            if (r.sT[k] > t_max * r.abs_det[k]) continue;
+            const float inv = 1.0f / r.det[k];  // the scalar test's final step
+            t = r.T[k] * inv;
+            u = r.V[k] * inv;
+            v = r.W[k] * inv;
           }
-          if (hit) {
-            t_max = t;
-            best = refs[i + k];
-            found = true;
-          }
+          t_max = t;
+          best_block = block;
+          best_lane = k;
+          best_u = u;
+          best_v = v;
+          found = true;
         }
       }
       return found;
     });
   });
-  if (best == kInvalidId) return false;
-  const TriangleVertices& tri = tris[best];
-  // Barycentrics only for the winner, from the scalar test (its arithmetic is the 4-wide one).
-  float t, u = 0.0f, v = 0.0f;
-  (void)intersectWatertight(wray, tri.v0, tri.v1, tri.v2, std::numeric_limits<float>::infinity(), t, u, v);
+  if (best_block == nullptr) return false;
+  const glm::vec3 v0 = best_block->vertex(best_lane, 0);
   hit.t = t_best;
-  hit.u = u;
-  hit.v = v;
-  hit.prim_id = prim_ids_[best];
-  hit.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+  hit.u = best_u;
+  hit.v = best_v;
+  hit.prim_id = best_block->prim[best_lane];
+  hit.ng = glm::cross(best_block->vertex(best_lane, 1) - v0, best_block->vertex(best_lane, 2) - v0);
   return true;
 }
 
@@ -206,19 +208,20 @@ bool MeshObject::occluded(const Ray& ray_os) const {
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
   float t_best = ray_os.tfar;
-  const TriangleVertices* tris = triangles_.data();
-  const std::uint32_t* refs = leaf_refs_.data();
+  const detail::TriangleBlock4* blocks = blocks_.data();
   return dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-      for (std::uint32_t i = begin, end = begin + count; i < end; i += 4) {
-        const int n = static_cast<int>(std::min<std::uint32_t>(4, end - i));
-        const detail::Watertight4 r = testGroup<KX, KY, KZ>(wray, tris, refs, i, n, t_max);
+    return traverseKdTree<true>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      const detail::TriangleBlock4* block = blocks + begin;
+      for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
+        const detail::Watertight4 r =
+            detail::intersectWatertight4<KX, KY, KZ>(wray, *block, kLaneMask[std::min(left, 4)], t_max);
         if (r.fast) return true;
-        for (int k = 0; k < n; ++k) {
-          if (!(r.exact >> k & 1)) continue;
-          const TriangleVertices& tri = tris[refs[i + k]];
+        for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
+          const int k = std::countr_zero(static_cast<unsigned>(lanes));
           float t, u, v;
-          if (intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) return true;
+          if (intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
+                                              t_max, t, u, v))
+            return true;
         }
       }
       return false;
@@ -233,18 +236,20 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
   float t_best = ray_os.tfar;  // never lowered: every leaf along the ray is visited
   const std::size_t first = hits.size();
   dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-      for (std::uint32_t i = begin; i < begin + count; ++i) {
-        const std::uint32_t ref = leaf_refs_[i];
-        const TriangleVertices& tri = triangles_[ref];
+    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      const detail::TriangleBlock4* block = blocks_.data() + begin;
+      for (std::uint32_t i = 0; i < count; ++i) {
+        const detail::TriangleBlock4& b = block[i / 4];
+        const int k = static_cast<int>(i % 4);
+        const glm::vec3 v0 = b.vertex(k, 0), v1 = b.vertex(k, 1), v2 = b.vertex(k, 2);
         float t, u, v;
-        if (!intersectWatertight<KX, KY, KZ>(wray, tri.v0, tri.v1, tri.v2, t_max, t, u, v)) continue;
+        if (!intersectWatertight<KX, KY, KZ>(wray, v0, v1, v2, t_max, t, u, v)) continue;
         Hit h;
         h.t = t;
         h.u = u;
         h.v = v;
-        h.prim_id = prim_ids_[ref];
-        h.ng = glm::cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+        h.prim_id = b.prim[k];
+        h.ng = glm::cross(v1 - v0, v2 - v0);
         hits.push_back(h);
       }
       return false;
@@ -270,8 +275,7 @@ bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occlu
 
 std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
-         leaf_refs_.size() * sizeof(std::uint32_t) +
-         triangles_.size() * (sizeof(TriangleVertices) + sizeof(std::uint32_t));
+         blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode);
 }
 
 std::size_t MeshObject::memoryBytes() const {

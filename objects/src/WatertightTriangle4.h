@@ -1,6 +1,7 @@
 #pragma once
-// Four watertight ray/triangle tests at once with SSE2 (baseline x86-64, no run-time dispatch).
-// Private to the objects library: MeshObject's leaves call it.
+// Four watertight ray/triangle tests at once with SSE2 (baseline x86-64, no run-time dispatch) on
+// a TriangleBlock4 (structure of arrays: no gather, no transpose). Private to the objects library:
+// MeshObject's leaves call it.
 //
 // Every lane computes exactly the operations of the scalar intersectWatertight<KX, KY, KZ>, in the
 // same order (SSE2 has no fused multiply-add), so a vertex shared by two triangles gets the same
@@ -8,6 +9,7 @@
 // with an edge function exactly zero are handed to the scalar test, which redoes them in double.
 
 #include "duplex/objects/WatertightTriangle.h"
+#include "TriangleBlock4.h"
 
 #include <emmintrin.h>
 
@@ -16,7 +18,7 @@
 namespace duplex::detail {
 
 /// Result lanes of one 4-wide test: for lane i, bit i of `fast` means "hit candidate decided in
-/// float" (then t/u/v/abs_det/sT hold its values); bit i of `exact` means "edge function zero:
+/// float" (then sT/abs_det/T/det/V/W hold its values); bit i of `exact` means "edge function zero:
 /// decide with the scalar test".
 struct Watertight4 {
   int fast = 0;
@@ -25,24 +27,17 @@ struct Watertight4 {
   alignas(16) float abs_det[4];
   alignas(16) float T[4];
   alignas(16) float det[4];
+  alignas(16) float V[4];  // edge functions weighing v1 and v2: u = V / det, v = W / det
+  alignas(16) float W[4];
 };
 
-/// `tri[i]` points to 9 floats (v0, v1, v2) of lane i's triangle; 12 floats must be readable from
-/// there (the vertex array is padded). Lanes >= count may point at any triangle: they are masked off.
+/// Tests the lanes in `lanes` (bit i: lane i holds one of the leaf's triangles) of `block`.
 template <int KX, int KY, int KZ>
-inline Watertight4 intersectWatertight4(const WatertightRay& ray, const float* const tri[4], int count, float t_max) {
-  // Load and transpose: rows are triangles, columns x y z (the 4th column is ignored).
-  __m128 v[3][4];
-  for (int k = 0; k < 3; ++k) {
-    __m128 r0 = _mm_loadu_ps(tri[0] + 3 * k);
-    __m128 r1 = _mm_loadu_ps(tri[1] + 3 * k);
-    __m128 r2 = _mm_loadu_ps(tri[2] + 3 * k);
-    __m128 r3 = _mm_loadu_ps(tri[3] + 3 * k);
-    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
-    v[k][0] = r0;  // x of the 4 triangles' vertex k
-    v[k][1] = r1;
-    v[k][2] = r2;
-  }
+inline Watertight4 intersectWatertight4(const WatertightRay& ray, const TriangleBlock4& block, int lanes, float t_max) {
+  // v[k][c]: coordinate c of vertex k of the 4 triangles.
+  __m128 v[3][3];
+  for (int k = 0; k < 3; ++k)
+    for (int c = 0; c < 3; ++c) v[k][c] = _mm_load_ps(block.v[3 * k + c]);
   const __m128 o[3] = {_mm_set1_ps(ray.origin[0]), _mm_set1_ps(ray.origin[1]), _mm_set1_ps(ray.origin[2])};
   const __m128 sx = _mm_set1_ps(ray.sx), sy = _mm_set1_ps(ray.sy), sz = _mm_set1_ps(ray.sz);
   __m128 A[3], B[3], C[3];
@@ -61,7 +56,6 @@ inline Watertight4 intersectWatertight4(const WatertightRay& ray, const float* c
   const __m128 V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
   const __m128 W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
   const __m128 zero = _mm_setzero_ps();
-  const int lanes = (1 << count) - 1;
 
   Watertight4 r;
   const __m128 any_zero = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(U, zero), _mm_cmpeq_ps(V, zero)), _mm_cmpeq_ps(W, zero));
@@ -84,6 +78,8 @@ inline Watertight4 intersectWatertight4(const WatertightRay& ray, const float* c
   _mm_store_ps(r.abs_det, abs_det);
   _mm_store_ps(r.T, T);
   _mm_store_ps(r.det, det);
+  _mm_store_ps(r.V, V);
+  _mm_store_ps(r.W, W);
   return r;
 }
 

@@ -24,6 +24,9 @@ struct KdRay {
   /// 1/dir with tiny or zero components replaced by +-inf of the same sign, so that +0 and -0
   /// directions classify as "never crosses" and a ray lying in a split plane visits both sides.
   float inv_dir[3];
+  /// All bits set where the direction is negative (sign bit of inv_dir): swaps near and far child
+  /// without a branch.
+  std::uint32_t neg_mask[3];
   bool zero[3];
   float tnear;
   float tfar;
@@ -34,6 +37,7 @@ struct KdRay {
       const float inv = 1.0f / d[k];
       zero[k] = !std::isfinite(inv);  // |d| so small that 1/d overflows behaves like 0
       inv_dir[k] = zero[k] ? std::copysign(std::numeric_limits<float>::infinity(), d[k]) : inv;
+      neg_mask[k] = std::signbit(inv_dir[k]) ? ~std::uint32_t{0} : 0u;
     }
   }
 };
@@ -106,17 +110,17 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
   float tmin_lo = widen_down(tmin), tmax_hi = widen_up(tmax);
 
   while (true) {
-    const KdNode& node = nodes[index];
+    const KdNode node = nodes[index];
     if (!node.isLeaf()) {
       const int axis = node.axis();
       const float t_plane = (node.split() - ray.origin[axis]) * ray.inv_dir[axis];
       // The near child is the one the ray is in before it crosses the plane; with a zero
       // direction the infinite inverse makes t_plane +-inf (or NaN on the plane: both children).
+      // Branch free: a negative direction swaps the children by xor.
       const std::uint32_t lower = index + 1;
       const std::uint32_t upper = node.upperChild();
-      const bool positive = !std::signbit(ray.inv_dir[axis]);
-      const std::uint32_t near_child = positive ? lower : upper;
-      const std::uint32_t far_child = positive ? upper : lower;
+      const std::uint32_t swap = (lower ^ upper) & ray.neg_mask[axis];
+      const std::uint32_t near_child = lower ^ swap;
       // Closed intervals with a few ulps of slack: a ray through a vertex that lies on split
       // planes touches the cells meeting there at a single point, and the t of two planes at
       // that point differ by rounding. Skipping such a cell can skip every triangle around the
@@ -124,10 +128,10 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       if (t_plane > tmax_hi) {
         index = near_child;
       } else if (t_plane < tmin_lo) {
-        index = far_child;
+        index = upper ^ swap;  // the far child
       } else {
         // Both; argument order makes a NaN t_plane (ray inside the plane) keep the full interval.
-        stack[top++] = {far_child, std::max(tmin, t_plane), tmax};
+        stack[top++] = {upper ^ swap, std::max(tmin, t_plane), tmax};
         index = near_child;
         tmax = std::min(tmax, t_plane);
         tmax_hi = widen_up(tmax);

@@ -13,6 +13,10 @@
 
 namespace duplex {
 
+namespace detail {
+struct TriangleBlock4;
+}
+
 /// Immutable after construction; all queries are thread-safe.
 class MeshObject final : public Object {
  public:
@@ -20,6 +24,7 @@ class MeshObject final : public Object {
 
   /// Builds the kd-tree over the mesh's valid triangles (object space).
   explicit MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config = {});
+  ~MeshObject() override;
 
   /// From a kd-tree built before (e.g. read from a file by loadMeshObject) over `mesh`'s triangles:
   /// no build. The tree is checked first, so that no later query can read out of bounds or loop:
@@ -43,28 +48,26 @@ class MeshObject final : public Object {
 
   [[nodiscard]] const TriangleMesh& mesh() const { return *mesh_; }
   [[nodiscard]] const KdTree& tree() const { return tree_; }
-  /// Bytes of the acceleration structure (nodes, index list, leaf-ordered triangle copies).
+  /// Bytes of the acceleration structure (nodes, index list, per-leaf triangle blocks).
   [[nodiscard]] std::size_t accelBytes() const;
 
  private:
   struct PartsTag {};
   MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag);
-  /// Fills leaf_refs_, triangles_ and prim_ids_ from tree_ (the leaf-order renumbering below).
-  void orderTrianglesByLeaves();
+  /// Fills blocks_ and block_tree_ from tree_ (see below).
+  void buildLeafBlocks();
 
-  // Vertices of each triangle by triangle id (36 bytes), so that a leaf reference is a 4-byte
-  // index: random rays are bound by memory latency, and copying triangles per reference
-  // (40 bytes each, 2-4 references per triangle) made the working set several times larger.
-  struct TriangleVertices {
-    glm::vec3 v0, v1, v2;
-  };
   std::shared_ptr<const TriangleMesh> mesh_;
   KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
-  std::vector<std::uint32_t> leaf_refs_;  // tree_.prim_indices renumbered into triangles_
-  // Triangles renumbered in the order the leaves first reference them (depth first), so that
-  // the triangles of one leaf and of neighbouring leaves share cache lines.
-  std::vector<TriangleVertices> triangles_;
-  std::vector<std::uint32_t> prim_ids_;  // renumbered index -> triangle index in the mesh
+  // Each non-empty leaf's triangles copied into consecutive 4-wide blocks (structure of arrays, in
+  // the leaf's reference order, the last block padded), so that a leaf is a few sequential loads
+  // and its test needs neither an index list nor a transpose. A triangle referenced by several
+  // leaves is copied into each (about 40 bytes per reference).
+  std::vector<detail::TriangleBlock4> blocks_;
+  // What queries traverse: tree_'s bounds and nodes, with each leaf's offset pointing at its first
+  // block instead of into prim_indices (which stays empty), so reaching a leaf's triangles costs no
+  // dependent load through an index list.
+  KdTree block_tree_;
 };
 
 }  // namespace duplex
