@@ -7,6 +7,8 @@
 //   duplex prepare --scene S.json --out DIR [--threads N]
 //   duplex bench update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]
 //                       [--primary W] [--build-repeat B] [--baseline-repeat B]
+//   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
+//                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--progress MODE]
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -17,6 +19,7 @@
 #include "SceneInstancesCommand.h"
 #include "SceneRobotCommand.h"
 #include "SceneSplitCommand.h"
+#include "SensorCommand.h"
 #include "TraceCommand.h"
 
 #include <duplex/accel/Error.h>
@@ -173,6 +176,31 @@ int main(int argc, char** argv) {
   update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Full Embree builds timed per mode (default 3)")
       ->check(CLI::Range(1, 100));
 
+  // duplex sensor (issue 5)
+  duplex::cli::SensorOptions sensor;
+  CLI::App* sensor_cmd = app.add_subcommand(
+      "sensor", "Light-tracing run: power from the scene's lights arriving at its sensors (irradiance maps)");
+  sensor_cmd->add_option("--scene", sensor.scene, "scene-json-v1 or duplex-scene-v1 file with \"lights\" and \"sensors\"")
+      ->required();
+  sensor_cmd->add_option("--rays", sensor.rays, "Total emitted rays (with --resume: including the saved ones)")
+      ->required()
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
+  sensor_cmd->add_option("--threads", sensor.threads, "Worker threads (default: all hardware threads)")
+      ->check(CLI::Range(1, 4096));
+  sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")->check(kNotNegative);
+  sensor_cmd->add_option("--out", sensor.out, "Folder for <sensor>.json/.csv/.png, run.json, run_state.bin (default .)");
+  sensor_cmd->add_flag("--resume", sensor.resume,
+                       "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
+  sensor_cmd->add_option("--target-error", sensor.target_error,
+                         "Stop once the target sensor's total flux has this relative standard error (e.g. 0.01)")
+      ->check(CLI::Range(0.0, 1.0));
+  sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)");
+  sensor_cmd->add_option("--max-depth", sensor.max_depth, "Surface interactions per path (default 32)")
+      ->check(CLI::Range(0, 1000));
+  sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
+      ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
+  sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -185,6 +213,7 @@ int main(int argc, char** argv) {
                         : *split_cmd     ? "duplex scene split"
                         : *instances_cmd ? "duplex scene instances"
                         : *robot_cmd     ? "duplex scene robot"
+                        : *sensor_cmd    ? "duplex sensor"
                         : *prepare_cmd   ? "duplex prepare"
                                          : "duplex bench update";
   try {
@@ -195,6 +224,8 @@ int main(int argc, char** argv) {
       result = duplex::cli::runSceneSplit(split);
     } else if (*instances_cmd) {
       result = duplex::cli::runSceneInstances(scatter);
+    } else if (*sensor_cmd) {
+      result = duplex::cli::runSensor(sensor);
     } else if (*prepare_cmd) {
       result = duplex::cli::runPrepare(prepare);
     } else if (*update_cmd) {

@@ -1,0 +1,200 @@
+#include "SensorCommand.h"
+
+#include "SensorImage.h"
+#include "WorkerThreads.h"
+
+#include <duplex/accel/Error.h>
+#include <duplex/sensors/SensorRun.h>
+#include <duplex/sensors/SensorScene.h>
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <limits>
+
+namespace duplex::cli {
+
+namespace {
+
+std::string fileName(const std::string& name) {
+  std::string s = name;
+  for (char& c : s)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) c = '_';
+  return s.empty() ? "_" : s;
+}
+
+// JSON has no infinity: a relative error with nothing measured is written as null.
+nlohmann::ordered_json finiteOrNull(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }
+
+void writeText(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out << text;
+  if (!out) throw FileError(path.string() + ": cannot write");
+}
+
+std::string duration(double s) {
+  char buf[32];
+  if (!std::isfinite(s)) return "?";
+  if (s < 60) std::snprintf(buf, sizeof buf, "%.0f s", s);
+  else if (s < 3600) std::snprintf(buf, sizeof buf, "%.0f min %02.0f s", std::floor(s / 60), std::fmod(s, 60));
+  else std::snprintf(buf, sizeof buf, "%.0f h %02.0f min", std::floor(s / 3600), std::fmod(s / 60, 60));
+  return buf;
+}
+
+// Progress on stderr: a bar redrawn in place on a terminal, a plain line at most every 2 s otherwise.
+class ProgressPrinter {
+ public:
+  ProgressPrinter(std::string mode, std::uint64_t start) : start_(start) {
+    if (mode == "auto") mode = ::isatty(2) ? "bar" : "lines";
+    bar_ = mode == "bar";
+    lines_ = mode == "lines";
+  }
+  void operator()(const SensorProgress& p) {
+    const double rate = p.seconds > 0 ? static_cast<double>(p.rays_this_call) / p.seconds : 0.0;
+    const double left = rate > 0 ? static_cast<double>(p.rays_target - p.rays_done) / rate : INFINITY;
+    const double frac = p.rays_target ? static_cast<double>(p.rays_done) / static_cast<double>(p.rays_target) : 1.0;
+    char line[256];
+    if (bar_) {
+      const int width = 30, filled = static_cast<int>(frac * width);
+      std::string bar(static_cast<std::size_t>(filled), '#');
+      bar.resize(width, '.');
+      std::snprintf(line, sizeof line, "\r[%s] %5.1f%%  %llu / %llu rays  %.3g rays/s  ETA %s   ", bar.c_str(), 100 * frac,
+                    static_cast<unsigned long long>(p.rays_done), static_cast<unsigned long long>(p.rays_target), rate,
+                    duration(left).c_str());
+      std::cerr << line << std::flush;
+      drawn_ = true;
+    } else if (lines_ && (p.seconds - last_ >= 2.0 || p.rays_done == p.rays_target)) {
+      last_ = p.seconds;
+      std::snprintf(line, sizeof line, "progress: %llu / %llu rays (%.1f%%), %.3g rays/s, ETA %s\n",
+                    static_cast<unsigned long long>(p.rays_done), static_cast<unsigned long long>(p.rays_target), 100 * frac,
+                    rate, duration(left).c_str());
+      std::cerr << line << std::flush;
+    }
+  }
+  ~ProgressPrinter() {
+    if (drawn_) std::cerr << '\n';
+  }
+
+ private:
+  std::uint64_t start_;
+  bool bar_ = false, lines_ = false, drawn_ = false;
+  double last_ = -1e9;
+};
+
+void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
+                      const SensorRunResults& r) {
+  const std::string base = fileName(s.name);
+  const SensorSpec& spec = inst.object->spec();
+  nlohmann::ordered_json j;
+  j["name"] = s.name;
+  j["rays"] = r.rays;
+  j["seed"] = r.seed;
+  j["shape"] = spec.shape == SensorShape::Disk ? "disk" : "rectangle";
+  j["size"] = {spec.width, spec.height};
+  j["bins"] = {s.nx, s.ny};
+  j["two_sided"] = s.two_sided;
+  j["emitted_power_w"] = r.energy.emitted_w;
+  j["total_flux_w"] = s.total_flux_w;
+  j["total_flux_stderr_w"] = s.total_flux_stderr_w;
+  j["relative_stderr"] = finiteOrNull(s.relative_stderr);
+  j["efficiency"] = s.efficiency;
+  j["irradiance_w_m2"] = s.irradiance_w_m2;
+  j["stderr_w_m2"] = s.stderr_w_m2;
+  j["flux_w"] = s.flux_w;
+  j["ray_count"] = s.ray_count;
+  j["bin_area_m2"] = s.bin_area_m2;
+  writeText(dir / (base + ".json"), j.dump() + "\n");
+
+  // CSV: one row per bin with its centre in sensor-local coordinates.
+  std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count\n";
+  char row[256];
+  for (std::uint32_t iy = 0; iy < s.ny; ++iy) {
+    for (std::uint32_t ix = 0; ix < s.nx; ++ix) {
+      const std::size_t b = static_cast<std::size_t>(iy) * s.nx + ix;
+      const double x = -0.5 * spec.width + (ix + 0.5) * spec.width / s.nx;
+      const double y = -0.5 * spec.height + (iy + 0.5) * spec.height / s.ny;
+      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu\n", ix, iy, x, y, s.flux_w[b],
+                    s.irradiance_w_m2[b], s.stderr_w_m2[b], static_cast<unsigned long long>(s.ray_count[b]));
+      csv += row;
+    }
+  }
+  writeText(dir / (base + ".csv"), csv);
+  demo::writePng(dir / (base + ".png"), falseColourImage(s.irradiance_w_m2, s.nx, s.ny));
+}
+
+}  // namespace
+
+nlohmann::ordered_json runSensor(const SensorOptions& o) {
+  if (o.rays == 0) throw InvalidArgument("--rays must be at least 1");
+  if (o.target_error < 0.0 || !std::isfinite(o.target_error)) throw InvalidArgument("--target-error must be a finite number >= 0");
+  WorkerThreads workers(o.threads);
+  const SensorScene scene = workers.arena.execute([&] { return SensorScene::load(o.scene); });
+  if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
+  if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
+
+  SensorRunConfig cfg;
+  cfg.seed = o.seed;
+  cfg.threads = static_cast<unsigned>(workers.count);
+  cfg.max_depth = o.max_depth;
+  SensorRun run(scene, cfg);
+  std::error_code ec;
+  std::filesystem::create_directories(o.out, ec);
+  if (ec) throw FileError(o.out.string() + ": cannot create the output folder (" + ec.message() + ")");
+  const std::filesystem::path state = o.out / "run_state.bin";
+  if (o.resume) run.loadState(state);
+  if (run.raysDone() > o.rays)
+    throw InvalidArgument(state.string() + " holds " + std::to_string(run.raysDone()) + " rays, more than --rays " +
+                          std::to_string(o.rays));
+
+  SensorStopRule stop;
+  if (o.target_error > 0.0) {
+    stop.sensor = o.target_sensor.empty() ? 0 : scene.findSensor(o.target_sensor);
+    if (stop.sensor < 0) throw InvalidArgument("--target-sensor: the scene has no sensor named '" + o.target_sensor + "'");
+    stop.target = o.target_error;
+    stop.min_rays = std::min<std::uint64_t>(10000, o.rays);
+  }
+  const std::uint64_t start = run.raysDone();
+  const auto t0 = std::chrono::steady_clock::now();
+  SensorRunStatus status;
+  {
+    ProgressPrinter printer(o.progress, start);
+    status = run.runUntil(o.rays, [&](const SensorProgress& p) { printer(p); }, stop);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  run.saveState(state);
+
+  const SensorRunResults r = run.results();
+  nlohmann::ordered_json report;
+  report["rays"] = r.rays;
+  report["seed"] = r.seed;
+  report["threads"] = workers.count;
+  report["status"] = status == SensorRunStatus::TargetReached ? "target_reached" : "completed";
+  report["resumed_from"] = start;
+  report["seconds"] = seconds;
+  report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;
+  report["emitted_power_w"] = r.energy.emitted_w;
+  report["energy"] = {{"escaped_w", r.energy.escaped_w},
+                      {"absorbed_w", r.energy.absorbed_w},
+                      {"medium_absorbed_w", r.energy.medium_absorbed_w},
+                      {"depth_limited_w", r.energy.depth_limited_w},
+                      {"roulette_w", r.energy.roulette_w}};
+  nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
+  for (std::size_t k = 0; k < r.sensors.size(); ++k) {
+    const SensorResult& s = r.sensors[k];
+    writeSensorFiles(o.out, s, scene.sensors()[k], r);
+    sensors.push_back({{"name", s.name},
+                       {"file", (o.out / (fileName(s.name) + ".json")).string()},
+                       {"total_flux_w", s.total_flux_w},
+                       {"relative_stderr", finiteOrNull(s.relative_stderr)},
+                       {"efficiency", s.efficiency}});
+  }
+  report["sensors"] = sensors;
+  writeText(o.out / "run.json", report.dump() + "\n");
+  return report;
+}
+
+}  // namespace duplex::cli

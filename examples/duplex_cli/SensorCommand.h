@@ -1,0 +1,40 @@
+#pragma once
+/// \file SensorCommand.h
+/// `duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR]` (issue 5, exact):
+/// a light-tracing run over the scene's lights and sensors (SensorRun). Writes for each sensor
+/// DIR/<name>.json (keys: name, rays, seed, shape, size, bins, two_sided, emitted_power_w,
+/// total_flux_w, total_flux_stderr_w, relative_stderr, efficiency, and row-major nx * ny arrays
+/// irradiance_w_m2, stderr_w_m2, flux_w, ray_count), DIR/<name>.csv (one row per bin) and
+/// DIR/<name>.png (false-colour irradiance with a scale bar), plus DIR/run_state.bin (the exact
+/// accumulators, for --resume) and DIR/run.json (the report printed on stdout). Characters of a
+/// sensor name other than [A-Za-z0-9._-] become '_' in file names.
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+namespace duplex::cli {
+
+struct SensorOptions {
+  std::filesystem::path scene;
+  std::uint64_t rays = 0;  ///< total emitted rays of the run (with --resume: including the saved ones)
+  int threads = 0;         ///< 0: all hardware threads
+  std::uint64_t seed = 1;
+  std::filesystem::path out = ".";
+  bool resume = false;            ///< continue from DIR/run_state.bin (same scene and seed) up to `rays`
+  double target_error = 0.0;      ///< > 0: stop once the target sensor's relative standard error is at most this
+  std::string target_sensor;      ///< the sensor of target_error (default: the first)
+  std::uint32_t max_depth = 32;
+  /// "auto": a progress bar when stderr is a terminal, plain lines otherwise; "bar", "lines", "none".
+  std::string progress = "auto";
+};
+
+/// Runs the command; returns the report (keys: rays, seed, threads, status ("completed",
+/// "target_reached"), seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w,
+/// medium_absorbed_w, depth_limited_w, roulette_w}, sensors [{name, file, total_flux_w,
+/// relative_stderr, efficiency}]). Throws duplex::Error for bad input.
+[[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
+
+}  // namespace duplex::cli

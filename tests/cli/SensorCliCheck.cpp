@@ -1,0 +1,171 @@
+// `duplex sensor` as an outside tool drives it (issue 5): output files and keys, the closed box of
+// sensors registering all emitted power, bit-identical results for 1 and 2 threads, --resume equal
+// to one longer run, --target-error, and clear errors for bad lights and sensors.
+//   duplex_sensor_cli_check DUPLEX DIR
+
+#include "Subprocess.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using namespace duplex::clitest;
+
+namespace {
+
+struct Failure : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+void expect(bool ok, const std::string& what) {
+  if (!ok) throw Failure(what);
+}
+
+std::string joined(const std::vector<std::string>& argv) {
+  std::string s;
+  for (const auto& a : argv) s += a + " ";
+  return s;
+}
+
+nlohmann::json runJson(const std::vector<std::string>& argv, const fs::path& dir) {
+  const RunResult r = run(argv, dir.string());
+  expect(r.exited && r.exit_code == 0, "`" + joined(argv) + "` ended with " + describe(r) + "; stderr:\n" + r.err);
+  expect(!r.out.empty() && r.out.find('\n') == r.out.size() - 1, "stdout is not one line:\n" + r.out);
+  return nlohmann::json::parse(r.out);
+}
+
+nlohmann::json readJson(const fs::path& p) {
+  std::ifstream in(p);
+  expect(static_cast<bool>(in), p.string() + " was not written");
+  return nlohmann::json::parse(in);
+}
+
+// Six two-sided sensors closing [-1, 1]^3 (4 x 3 bins each) around a point light of `power` W.
+std::string boxScene(const std::string& power) {
+  const char* faces[6] = {"0,0,1,1, 0,1,0,0, -1,0,0,0",  "0,0,-1,-1, 0,1,0,0, 1,0,0,0", "1,0,0,0, 0,0,1,1, 0,-1,0,0",
+                          "1,0,0,0, 0,0,-1,-1, 0,1,0,0", "1,0,0,0, 0,1,0,0, 0,0,1,1",   "1,0,0,0, 0,-1,0,0, 0,0,-1,-1"};
+  std::string s = R"({"format": "scene-json-v1", "objects": [], "instances": [],
+  "lights": [{"type": "point", "position": [0.1, 0.2, -0.3], "power": )" + power + R"(}], "sensors": [)";
+  for (int k = 0; k < 6; ++k)
+    s += std::string(k ? ", " : "") + R"({"name": "face)" + std::to_string(k) +
+         R"(", "shape": "rectangle", "size": [2, 2], "bins": [4, 3], "two_sided": true, "transform": [)" + faces[k] + "]}";
+  return s + "]}";
+}
+
+void write(const fs::path& p, const std::string& text) {
+  std::ofstream out(p);
+  out << text;
+  expect(static_cast<bool>(out), "cannot write " + p.string());
+}
+
+std::vector<std::string> sensorArgs(const std::string& duplex, const fs::path& scene, const std::string& rays,
+                                    const std::string& threads, const fs::path& out) {
+  return {duplex, "sensor", "--scene", scene.string(), "--rays", rays, "--threads", threads, "--seed", "3",
+          "--out", out.string(), "--progress", "lines"};
+}
+
+void expectSameMaps(const fs::path& a, const fs::path& b, const std::string& what) {
+  for (int k = 0; k < 6; ++k) {
+    const std::string name = "face" + std::to_string(k) + ".json";
+    const nlohmann::json ja = readJson(a / name), jb = readJson(b / name);
+    for (const char* key : {"irradiance_w_m2", "stderr_w_m2", "total_flux_w", "rays"})
+      expect(ja[key] == jb[key], what + ": " + name + " differs in \"" + key + "\"");
+  }
+}
+
+int check(const std::string& duplex, const fs::path& dir) {
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path scene = dir / "box.json";
+  write(scene, boxScene("7"));
+
+  // Output keys and files.
+  const nlohmann::json report = runJson(sensorArgs(duplex, scene, "20000", "1", dir / "one"), dir);
+  expect(report["rays"] == 20000 && report["status"] == "completed", "report: " + report.dump());
+  expect(report["sensors"].size() == 6, "six sensors expected: " + report.dump());
+  double total = 0.0;
+  for (int k = 0; k < 6; ++k) {
+    const std::string name = "face" + std::to_string(k);
+    const nlohmann::json j = readJson(dir / "one" / (name + ".json"));
+    for (const char* key : {"rays", "total_flux_w", "irradiance_w_m2", "stderr_w_m2", "efficiency"})
+      expect(j.contains(key), name + ".json lacks \"" + std::string(key) + "\"");
+    expect(j["rays"] == 20000, name + ".json: rays is not the emitted count");
+    expect(j["irradiance_w_m2"].size() == 12 && j["stderr_w_m2"].size() == 12, name + ".json: arrays are not nx * ny = 12");
+    total += j["total_flux_w"].get<double>();
+    std::ifstream csv(dir / "one" / (name + ".csv"));
+    std::string line;
+    int lines = 0;
+    while (std::getline(csv, line)) ++lines;
+    expect(lines == 13, name + ".csv: expected a header and 12 rows, got " + std::to_string(lines) + " lines");
+    std::ifstream png(dir / "one" / (name + ".png"), std::ios::binary);
+    char sig[8] = {};
+    png.read(sig, 8);
+    expect(std::string(sig + 1, 3) == "PNG", name + ".png is not a PNG file");
+  }
+  // Sensors never block: the closed box registers all the emitted power.
+  expect(std::abs(total - 7.0) < 1e-9, "the box's sensors registered " + std::to_string(total) + " W of 7 W");
+
+  // Bit-identical for 2 threads; --resume from 8,000 rays equals the 20,000-ray run.
+  (void)runJson(sensorArgs(duplex, scene, "20000", "2", dir / "two"), dir);
+  expectSameMaps(dir / "one", dir / "two", "1 vs 2 threads");
+  (void)runJson(sensorArgs(duplex, scene, "8000", "2", dir / "resumed"), dir);
+  std::vector<std::string> resume = sensorArgs(duplex, scene, "20000", "1", dir / "resumed");
+  resume.push_back("--resume");
+  const nlohmann::json resumed = runJson(resume, dir);
+  expect(resumed["resumed_from"] == 8000, "resume did not start from the saved rays: " + resumed.dump());
+  expectSameMaps(dir / "one", dir / "resumed", "resumed run");
+
+  // Stop on a target relative error.
+  std::vector<std::string> target = sensorArgs(duplex, scene, "50000000", "2", dir / "target");
+  for (const char* a : {"--target-error", "0.05", "--target-sensor", "face4"}) target.push_back(a);
+  const nlohmann::json stopped = runJson(target, dir);
+  expect(stopped["status"] == "target_reached" && stopped["rays"].get<double>() < 5e7, "target not reached: " + stopped.dump());
+  expect(stopped["sensors"][4]["relative_stderr"].get<double>() <= 0.05, "relative error above target: " + stopped.dump());
+
+  // Bad input: a clear message naming the file and the JSON pointer, a non-zero exit.
+  struct Bad {
+    const char* file;
+    std::string text;
+    const char* needle;
+  };
+  const std::vector<Bad> bad = {
+      {"zero_power.json", boxScene("0"), "/lights/0/power"},
+      {"negative_power.json", boxScene("-3"), "power must be > 0"},
+      {"bad_bins.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
+        "sensors": [{"name": "s", "shape": "rectangle", "size": [1, 1], "bins": [0, 3]}]})", "/sensors/0/bins/0"},
+      {"no_lights.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "sensors": [{"name": "s", "size": 1}]})", "no lights"}};
+  for (const Bad& b : bad) {
+    write(dir / b.file, b.text);
+    const RunResult r = run(sensorArgs(duplex, dir / b.file, "100", "1", dir / "bad"), dir.string());
+    expect(r.exited && r.exit_code != 0, std::string(b.file) + ": expected a non-zero exit, got " + describe(r));
+    expect(r.err.find((dir / b.file).string()) != std::string::npos && r.err.find(b.needle) != std::string::npos,
+           std::string(b.file) + ": message does not name the file and '" + b.needle + "':\n" + r.err);
+  }
+  std::cout << "duplex sensor: files, keys, closed box " << total << " W of 7 W, 1 = 2 threads, resume, target, errors: ok\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 3) {
+    std::cerr << "usage: duplex_sensor_cli_check DUPLEX DIR\n";
+    return 2;
+  }
+  try {
+    return check(argv[1], argv[2]);
+  } catch (const Failure& f) {
+    std::cerr << "FAIL: " << f.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "ERROR: " << e.what() << "\n";
+    return 1;
+  }
+}
