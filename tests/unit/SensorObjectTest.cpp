@@ -8,6 +8,7 @@
 #include "duplex/objects/TriangleMesh.h"
 #include "duplex/sensors/SensorObject.h"
 #include "duplex/sensors/SensorTypes.h"
+#include "SlabMedium.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -281,41 +282,13 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
   }
 }
 
-// A medium of constant extinction sigma inside its box: transmittance exp(-sigma * length).
-class SlabMedium final : public Object {
- public:
-  SlabMedium(double sigma, Box box) : Object("slab", ObjectRole::Medium), sigma_(sigma), box_(box) {}
-  std::string_view typeName() const override { return "slab"; }
-  Box bounds() const override { return box_; }
-  bool intersect(const Ray&, Hit&, QueryContext&) const override { return false; }
-  bool occluded(const Ray&, QueryContext&) const override { return false; }
-  void intersectAll(const Ray&, std::vector<Hit>&, QueryContext&) const override {}
-  float transmittance(const Ray& r, QueryContext&) const override {
-    double t0 = r.tnear, t1 = r.tfar;
-    for (int k = 0; k < 3; ++k) {
-      const double inv = 1.0 / r.dir[k];
-      double a = (box_.lo[k] - r.origin[k]) * inv, b = (box_.hi[k] - r.origin[k]) * inv;
-      if (a > b) std::swap(a, b);
-      t0 = std::max(t0, a);
-      t1 = std::min(t1, b);
-    }
-    const double len = std::max(0.0, t1 - t0) * glm::length(glm::dvec3(r.dir));
-    return static_cast<float>(std::exp(-sigma_ * len));
-  }
-  std::size_t memoryBytes() const override { return sizeof(*this); }
-
- private:
-  double sigma_;
-  Box box_;
-};
-
 TEST(CrossingQuery, MediaAttenuateEachSegment) {
   Box slab;
   slab.lo = glm::vec3(-5, -5, 0.5f);
   slab.hi = glm::vec3(5, 5, 1.5f);
   std::vector<InstanceDesc> inst = {{sensor(4, 4, 1, 1), translate(0, 0, 1), 1},
                                     {sensor(4, 4, 1, 1), translate(0, 0, 2), 2},
-                                    {std::make_shared<const SlabMedium>(0.7, slab), Affine::identity(), 3},
+                                    {std::make_shared<const test::SlabMedium>(0.7, slab), Affine::identity(), 3},
                                     {quad(5, 3, "wall"), Affine::identity(), 4}};
   TopLevel top;
   top.build(inst);

@@ -10,6 +10,7 @@
 #include "duplex/scenegraph/SceneGraph.h"
 #include "duplex/sensors/SensorRun.h"
 #include "duplex/sensors/SensorScene.h"
+#include "SlabMedium.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -192,6 +193,65 @@ TEST(SensorRun, MirrorMakesAnImageSource) {
   EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w) << s.total_flux_w << " vs " << expected;
 }
 
+std::shared_ptr<const Object> disk(double diameter, std::uint32_t bins, const std::string& name) {
+  SensorSpec s;
+  s.shape = SensorShape::Disk;
+  s.width = s.height = diameter;
+  s.nx = s.ny = bins;
+  return std::make_shared<const SensorObject>(name, s);
+}
+
+TEST(SensorRun, PointSourceThroughACoaxialDisk) {
+  // Flux through a disk of radius R at distance h from an isotropic source: I 2 pi (1 - h / sqrt(h^2 + R^2)).
+  Fixture f;
+  const double h = 1.5, radius = 1.0;
+  f.add(disk(2.0 * radius, 16, "disk"), translate(0, 0, h), "disk");
+  SensorScene scene = f.scene({pointLight({0, 0, 0}, 4.0 * kPi)});
+  SensorRun run(scene);
+  (void)run.runUntil(200000);
+  const SensorResult s = run.results().sensors[0];
+  const double expected = 2.0 * kPi * (1.0 - h / std::sqrt(h * h + radius * radius));
+  EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w) << s.total_flux_w << " vs " << expected;
+  // Corner bins of the bounding square lie outside the disk: no area, no flux.
+  EXPECT_EQ(s.bin_area_m2[0], 0.0);
+  EXPECT_EQ(s.flux_w[0], 0.0);
+  // Bin (8, 8) is the square [0, 1/8] x [0, 1/8], wholly inside the disk: its exact solid angle.
+  const std::size_t centre = 8 * 16 + 8;
+  const double bin_flux = rectangleSolidAngle(0.0, 0.125, 0.0, 0.125, h);
+  EXPECT_LT(std::abs(s.flux_w[centre] - bin_flux), 4.5 * s.flux_stderr_w[centre]) << s.flux_w[centre] << " vs " << bin_flux;
+  EXPECT_DOUBLE_EQ(s.bin_area_m2[centre], 0.125 * 0.125);
+}
+
+TEST(SensorRun, LambertianAreaLightToAParallelCoaxialDisk) {
+  // A square Lambertian source (side a, at z = 0, facing +z) and a disk of radius R at height h.
+  // Reference: the power-weighted mean over the source of the view factor from a point at radial
+  // offset r to the disk, F = (1 - (h^2 + r^2 - R^2) / sqrt((h^2 + r^2 + R^2)^2 - 4 r^2 R^2)) / 2
+  // (the configuration factor of a differential area to a parallel disk), by midpoint quadrature.
+  Fixture f;
+  const double a = 0.6, h = 0.8, radius = 0.5, power = 3.0;
+  f.add(disk(2.0 * radius, 4, "disk"), translate(0, 0, h), "disk");
+  Light area;
+  area.type = LightType::Area;
+  area.name = "panel";
+  area.width = area.height = a;
+  area.power_w = power;
+  SensorScene scene = f.scene({area});
+  SensorRun run(scene);
+  (void)run.runUntil(200000);
+  const SensorResult s = run.results().sensors[0];
+  const int n = 400;
+  double sum = 0.0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const double x = -a / 2 + (i + 0.5) * a / n, y = -a / 2 + (j + 0.5) * a / n, r2 = x * x + y * y;
+      const double q = h * h + r2 + radius * radius;
+      sum += 0.5 * (1.0 - (h * h + r2 - radius * radius) / std::sqrt(q * q - 4.0 * r2 * radius * radius));
+    }
+  const double expected = power * sum / (n * n);
+  EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w) << s.total_flux_w << " vs " << expected;
+  EXPECT_LT(s.relative_stderr, 0.01);
+}
+
 // Six two-sided sensors closing the cube [-1, 1]^3 around a point source.
 void closeBox(Fixture& f) {
   const glm::dvec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
@@ -199,6 +259,43 @@ void closeBox(Fixture& f) {
     const std::string name = "face" + std::to_string(k);
     f.add(sensor(2.0, 2.0, 3, 3, true, name), facing(normals[k], normals[k]), name);
   }
+}
+
+TEST(SensorRun, FogAttenuatesAndTheBalanceCloses) {
+  // A slab of fog (sigma = 0.8, 0.5 thick) between a point source and a sensor plane: the sensor
+  // receives exp(-sigma L) of the direct flux along each ray, L = 0.5 / cos(theta) for a ray at
+  // angle theta; at the bin right above the source, about exp(-0.4).
+  Fixture f;
+  Box slab;
+  slab.lo = glm::vec3(-0.9f, -0.9f, 0.25f);  // inside the box of sensors
+  slab.hi = glm::vec3(0.9f, 0.9f, 0.75f);
+  f.add(std::make_shared<const test::SlabMedium>(0.8, slab), Affine::identity(), "fog");
+  f.add(sensor(0.2, 0.2, 1, 1, true, "above"), translate(0, 0, 1), "above");
+  closeBox(f);  // everything that leaves is counted
+  SensorScene scene = f.scene({pointLight({0, 0, 0}, 4.0 * kPi)});
+  SensorRunConfig cfg;
+  cfg.roulette_threshold = 0.0;  // deterministic attenuation only: the balance closes per ray
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(300000);
+  const SensorRunResults r = run.results();
+  const SensorResult& above = r.sensors[0];
+  ASSERT_EQ(above.name, "above");
+  // Reference: the solid-angle integral of exp(-0.8 * 0.5 / cos(theta)) over the 0.2 x 0.2 square at
+  // height 1 (midpoint quadrature; d Omega = cos(theta) dA / d^2 = dA / d^3 at height 1).
+  const int n = 200;
+  double expected = 0.0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const double x = -0.1 + (i + 0.5) * 0.2 / n, y = -0.1 + (j + 0.5) * 0.2 / n, d = std::sqrt(x * x + y * y + 1.0);
+      expected += std::exp(-0.8 * 0.5 * d) / (d * d * d) * (0.2 / n) * (0.2 / n);
+    }
+  EXPECT_LT(std::abs(above.total_flux_w - expected), 4.0 * above.total_flux_stderr_w) << above.total_flux_w << " vs " << expected;
+  // What reaches the box faces plus what the fog took is what was emitted.
+  double faces = 0.0;
+  for (std::size_t k = 1; k < r.sensors.size(); ++k) faces += r.sensors[k].total_flux_w;
+  EXPECT_GT(r.energy.medium_absorbed_w, 0.5);
+  EXPECT_NEAR(faces + r.energy.medium_absorbed_w, 4.0 * kPi, 1e-9);
+  EXPECT_EQ(r.energy.roulette_w, 0.0);
 }
 
 double sensorSum(const SensorRunResults& r) {
