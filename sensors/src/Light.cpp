@@ -2,6 +2,8 @@
 
 #include "duplex/accel/Error.h"
 
+#include "OrthonormalBasis.h"
+
 #include <glm/geometric.hpp>
 
 #include <cmath>
@@ -14,16 +16,6 @@ namespace {
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
 bool finite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-
-// An orthonormal basis (t, b) completing unit vector n (Duff et al. 2017, "Building an orthonormal
-// basis, revisited"): branch-free and continuous except at one sign flip.
-void basis(const glm::dvec3& n, glm::dvec3& t, glm::dvec3& b) {
-  const double sign = std::copysign(1.0, n.z);
-  const double a = -1.0 / (sign + n.z);
-  const double c = n.x * n.y * a;
-  t = glm::dvec3(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
-  b = glm::dvec3(c, sign + n.y * n.y * a, -n.y);
-}
 
 }  // namespace
 
@@ -76,7 +68,7 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
       // Uniform over the cone's solid angle: cos(theta) uniform in [cos(alpha), 1].
       const glm::dvec3 n = glm::normalize(light.direction);
       glm::dvec3 t, b;
-      basis(n, t, b);
+      detail::orthonormalBasis(n, t, b);
       const double c = 1.0 - u[0] * (1.0 - std::cos(light.cone_angle)), s = std::sqrt(std::max(0.0, 1.0 - c * c));
       const double phi = kTwoPi * u[1];
       r.origin = light.position;
@@ -86,7 +78,7 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
     case LightType::Directional: {
       const glm::dvec3 n = glm::normalize(light.direction);
       glm::dvec3 t, b;
-      basis(n, t, b);
+      detail::orthonormalBasis(n, t, b);
       const double rad = light.radius * std::sqrt(u[0]), phi = kTwoPi * u[1];
       r.origin = light.position + rad * std::cos(phi) * t + rad * std::sin(phi) * b;
       r.dir = n;

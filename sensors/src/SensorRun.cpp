@@ -10,6 +10,8 @@
 #include "duplex/accel/Error.h"
 #include "duplex/sensors/CounterRng.h"
 
+#include "OrthonormalBasis.h"
+
 #include <glm/geometric.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -37,9 +39,8 @@ struct SensorEvent {
 
 // Cosine-weighted direction about unit normal n.
 glm::dvec3 cosineDirection(const glm::dvec3& n, double u0, double u1) {
-  const double sign = std::copysign(1.0, n.z);
-  const double a = -1.0 / (sign + n.z), c = n.x * n.y * a;
-  const glm::dvec3 t(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x), b(c, sign + n.y * n.y * a, -n.y);
+  glm::dvec3 t, b;
+  detail::orthonormalBasis(n, t, b);
   const double r = std::sqrt(u0), phi = 2.0 * std::numbers::pi * u1;
   return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - u0)) * n;
 }
