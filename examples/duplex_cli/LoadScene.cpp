@@ -3,6 +3,7 @@
 #include <duplex/accel/Error.h>
 #include <duplex/accel/Hit.h>
 #include <duplex/objects/MeshObject.h>
+#include <duplex/sensors/SensorTypes.h>
 
 #include <algorithm>
 #include <exception>
@@ -13,7 +14,10 @@ namespace duplex::cli {
 
 SceneDocument loadDocumentNamed(const std::filesystem::path& path, const SceneDocumentOptions& options) {
   try {
-    return loadSceneDocument(path, options);
+    // Every command reads sensor objects of duplex-scene-v1 files (they never block a ray).
+    SceneDocumentOptions with_sensors = options;
+    if (!with_sensors.registry) with_sensors.registry = &sensorTypeRegistry();
+    return loadSceneDocument(path, with_sensors);
   } catch (const Error&) {
     throw;  // already names the file
   } catch (const std::bad_alloc&) {
