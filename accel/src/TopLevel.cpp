@@ -148,6 +148,7 @@ void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfi
   state->records.reserve(prepared.size());
   for (Prepared& p : prepared) {
     state->records.push_back(p.record);
+    state->filters.push_back(filterOf(p.record));
     state->owners.push_back(std::move(p.owner));
     state->boxes.push_back(p.box);
   }
@@ -325,6 +326,14 @@ void TopLevel::commitEdits() {
                           b.hi.y >= r.hi.y || b.hi.z >= r.hi.z);
   };
 
+  // The per-slot arrays grow together: reserve them all first, so that a bad_alloc cannot leave
+  // one longer than another (queries index all of them by the tree's slots).
+  const std::size_t max_slots = s.records.size() + pending.size();
+  s.records.reserve(max_slots);
+  s.filters.reserve(max_slots);
+  s.owners.reserve(max_slots);
+  s.boxes.reserve(max_slots);
+
   for (auto& [id, edit] : pending) {
     const auto it = s.slot_of_id.find(id);
     if (!edit) {
@@ -334,6 +343,7 @@ void TopLevel::commitEdits() {
       if (incremental) forEachLeaf(tree_, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
       s.boxes[slot] = Box();
       s.records[slot] = Record{};
+      s.filters[slot] = SlotFilter{};
       s.owners[slot].reset();
       s.free_slots.push_back(slot);
       s.slot_of_id.erase(it);
@@ -352,6 +362,7 @@ void TopLevel::commitEdits() {
       } else {
         slot = static_cast<std::uint32_t>(s.records.size());
         s.records.emplace_back();
+        s.filters.emplace_back();
         s.owners.emplace_back();
         s.boxes.emplace_back();
       }
@@ -359,6 +370,7 @@ void TopLevel::commitEdits() {
       ++live_count_;
     }
     s.records[slot] = edit->record;
+    s.filters[slot] = filterOf(edit->record);
     s.owners[slot] = std::move(edit->owner);
     s.boxes[slot] = edit->box;
     if (!incremental || old_box == edit->box) continue;
@@ -523,6 +535,7 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
   if (!isQueryable(ray_f) || tree_.empty()) return Hit{};
   const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_f);
   const Record* records = state_->records.data();
+  const SlotFilter* filters = state_->filters.data();
   const Box* boxes = state_->boxes.data();
   Hit best;
   best.t = ray_f.tfar;
@@ -534,10 +547,10 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
     bool found = false;
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
-      const Record& rec = records[slot];
-      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) ||
-          mailbox.seen(slot))
+      const SlotFilter f = filters[slot];
+      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) || mailbox.seen(slot))
         continue;
+      const Record& rec = records[slot];
       ++ctx.stats.instance_visits;
       Ray ray_os = toObject(rec, w);
       ray_os.tfar = t;
@@ -571,6 +584,7 @@ bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask
   if (!isQueryable(ray_ws) || tree_.empty()) return false;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
+  const SlotFilter* filters = state_->filters.data();
   const Box* boxes = state_->boxes.data();
   Mailbox mailbox;
   const KdRay kray(ray_ws);
@@ -578,10 +592,11 @@ bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask
   return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
-      const Record& rec = records[slot];
-      if ((rec.mask & mask) == 0 || rec.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
+      const SlotFilter f = filters[slot];
+      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
           mailbox.seen(slot))
         continue;
+      const Record& rec = records[slot];
       ++ctx.stats.instance_visits;
       if (rec.object->occluded(toObject(rec, w), ctx)) return true;
     }
@@ -604,14 +619,15 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
   if (!isQueryable(ray_ws) || tree_.empty()) return;
   const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
   const Record* records = state_->records.data();
+  const SlotFilter* filters = state_->filters.data();
   std::vector<std::uint32_t> visited;  // every instance once, however many leaves hold it
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;  // never lowered: all leaves along the ray
   traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
+      if ((filters[slot].mask & mask) == 0 || std::find(visited.begin(), visited.end(), slot) != visited.end()) continue;
       const Record& rec = records[slot];
-      if ((rec.mask & mask) == 0 || std::find(visited.begin(), visited.end(), slot) != visited.end()) continue;
       visited.push_back(slot);
       ++ctx.stats.instance_visits;
       const std::size_t first = hits.size();

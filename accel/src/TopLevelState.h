@@ -31,6 +31,16 @@ struct Record {
   bool identity = false;  // skip the transform for instances placed as authored
 };
 
+// The part of a record every reference test reads first, kept in its own dense array (8 bytes
+// per slot): with many instances (10,000 sensors) the records (~120 bytes each) fall out of the
+// cache, and rejecting a reference by role or mask must not cost a miss on its record.
+struct SlotFilter {
+  std::uint32_t mask = 0;  // 0 for a free slot: no query matches it
+  ObjectRole role = ObjectRole::Surface;
+};
+
+inline SlotFilter filterOf(const Record& r) { return {r.mask, r.role}; }
+
 struct Prepared {
   Record record;
   std::shared_ptr<const Object> owner;
@@ -116,6 +126,7 @@ struct TopLevel::State {
   using LeafVisit = toplevel_detail::LeafVisit;
   using Prepared = toplevel_detail::Prepared;
   std::vector<Record> records;  // by slot; tree indices are slots
+  std::vector<toplevel_detail::SlotFilter> filters;  // by slot: filterOf(records[slot])
   std::vector<std::shared_ptr<const Object>> owners;
   std::vector<Box> boxes;  // world box by slot; empty for a free slot
   std::vector<std::uint32_t> free_slots;

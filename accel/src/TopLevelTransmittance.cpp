@@ -32,6 +32,7 @@ float TopLevel::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_
   if (!isQueryable(ray_ws) || tree_.empty()) return 1.0f;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
+  const SlotFilter* filters = state_->filters.data();
   const Box* boxes = state_->boxes.data();
   std::vector<std::uint32_t>& seen = ctx.cached<SeenSlots>(&kSeenSlotsKey, [] { return SeenSlots{}; }).slots;
   seen.clear();
@@ -41,10 +42,11 @@ float TopLevel::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_
   const bool blocked = traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
-      const Record& rec = records[slot];
-      if ((rec.mask & mask) == 0 || rec.role == ObjectRole::Sensor || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
+      const SlotFilter f = filters[slot];
+      if ((f.mask & mask) == 0 || f.role == ObjectRole::Sensor || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
           std::find(seen.begin(), seen.end(), slot) != seen.end())
         continue;
+      const Record& rec = records[slot];
       seen.push_back(slot);
       ++ctx.stats.instance_visits;
       const Ray ray_os = toObject(rec, w);
