@@ -19,11 +19,13 @@ using namespace toplevel_detail;
 
 namespace {
 
-// Per-thread scratch list of the media a ray met (kept in the QueryContext: no allocation per ray).
-struct MediaScratch {
-  std::vector<const Record*> records;
+// Per-thread scratch lists (kept in the QueryContext: no allocation per ray): the media a ray met,
+// and one sensor's crossings.
+struct CrossingScratch {
+  std::vector<const Record*> media;
+  std::vector<Hit> hits;
 };
-const char kMediaScratchKey = 0;
+const char kScratchKey = 0;
 
 }  // namespace
 
@@ -35,11 +37,12 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   if (!isQueryable(ray_ws) || tree_.empty()) return end;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
+  const SlotFilter* filters = state_->filters.data();
   const Box* boxes = state_->boxes.data();
-  std::vector<const Record*>& media =
-      ctx.cached<MediaScratch>(&kMediaScratchKey, [] { return MediaScratch{}; }).records;
+  CrossingScratch& scratch_lists = ctx.cached<CrossingScratch>(&kScratchKey, [] { return CrossingScratch{}; });
+  std::vector<const Record*>& media = scratch_lists.media;
+  std::vector<Hit>& scratch = scratch_lists.hits;
   media.clear();
-  std::vector<Hit> scratch;  // a sensor's crossings (at most one for a plane); capacity stays small
   Hit best;
   best.t = ray_ws.tfar;
   const Record* winner = nullptr;
@@ -50,12 +53,13 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     bool found = false;
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
+      const SlotFilter f = filters[slot];
+      const std::uint32_t role_mask = f.role == ObjectRole::Surface  ? query.surface_mask
+                                      : f.role == ObjectRole::Sensor ? query.sensor_mask
+                                                                     : query.medium_mask;
+      const float t_reach = f.role == ObjectRole::Surface ? t : t * (1.0f + kCrossingSlack);
+      if ((f.mask & role_mask) == 0 || !meetsBox(kray, boxes[slot], t_reach) || mailbox.seen(slot)) continue;
       const Record& rec = records[slot];
-      const std::uint32_t role_mask = rec.role == ObjectRole::Surface  ? query.surface_mask
-                                      : rec.role == ObjectRole::Sensor ? query.sensor_mask
-                                                                       : query.medium_mask;
-      const float t_reach = rec.role == ObjectRole::Surface ? t : t * (1.0f + kCrossingSlack);
-      if ((rec.mask & role_mask) == 0 || !meetsBox(kray, boxes[slot], t_reach) || mailbox.seen(slot)) continue;
       ++ctx.stats.instance_visits;
       if (rec.role == ObjectRole::Surface) {
         Ray ray_os = toObject(rec, w);
