@@ -192,7 +192,11 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
   double recorded = 0.0;
   for (const SensorResult& s : results.sensors) recorded += s.total_flux_w;
   const double t_with = median(with), t_without = median(without);
+  const TopLevelStats top = setup->scene->tracer().topLevel().stats();
   return {{"sensors", sensors},
+          {"top_level", {{"nodes", top.tree.nodes}, {"leaves", top.tree.leaves}, {"empty_leaves", top.tree.empty_leaves},
+                         {"references", top.tree.references}, {"max_depth", top.tree.max_depth},
+                         {"sah_cost", top.tree.sah_cost}}},
           {"bins", setup->scene->binCount()},
           {"instances", setup->graph.instances().size()},
           {"meshes", meshes},
@@ -256,6 +260,7 @@ struct Exact {
   std::unique_ptr<Setup> setup;
   double flux_w = 0.0;
   std::string what;
+  std::string label;  // short, for chart legends
 };
 
 Exact pointOnSquare() {
@@ -270,6 +275,7 @@ Exact pointOnSquare() {
   const double a = 0.1, d = 1.0;
   e.flux_w = 4.0 * std::asin(a * a / (a * a + d * d));
   e.what = "isotropic point source (1 W/sr) 1 unit above the centre of a 0.2 x 0.2 sensor";
+  e.label = "point source -> square sensor";
   return e;
 }
 
@@ -290,6 +296,7 @@ Exact areaOnDisk() {
   e.setup->finish({l});
   e.flux_w = rectangleToDiskFactor(1.0, 0.5, 0.3, 0.8);
   e.what = "1 W Lambertian 1 x 0.5 rectangle facing a coaxial disk of radius 0.3 at distance 0.8";
+  e.label = "Lambertian rectangle -> coaxial disk";
   return e;
 }
 
@@ -315,7 +322,7 @@ nlohmann::json convergence(const Exact& e, std::uint64_t max_rays, int seeds, un
                       {"mean_reported_relative_stderr", reported / seeds},
                       {"mean_seconds", time / seeds}});
   }
-  return {{"case", e.what}, {"exact_flux_w", e.flux_w}, {"seeds", seeds}, {"points", points}};
+  return {{"case", e.what}, {"label", e.label}, {"exact_flux_w", e.flux_w}, {"seeds", seeds}, {"points", points}};
 }
 
 }  // namespace
