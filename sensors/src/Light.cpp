@@ -5,6 +5,7 @@
 #include "OrthonormalBasis.h"
 
 #include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
 
 #include <cmath>
 #include <numbers>
@@ -36,6 +37,19 @@ void Light::validate() const {
       if (!(finite(direction) && glm::length(direction) > 0.0)) bad("direction must be a finite non-zero vector");
       if (!(std::isfinite(radius) && radius > 0.0)) bad("radius must be finite and > 0");
       break;
+    case LightType::Goniometric: {
+      if (!profile) bad("no intensity profile");
+      if (!finite(position)) bad("position is not finite");
+      // A rotation keeps the table's solid angles: L^T L = I and det L = 1.
+      const glm::dmat3& l = world_from_light.linear;
+      const glm::dmat3 g = glm::transpose(l) * l;
+      double off = 0.0;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) off = std::max(off, std::abs(g[i][j] - (i == j ? 1.0 : 0.0)));
+      if (!world_from_light.isFinite() || !(off < 1e-9) || !(glm::determinant(l) > 0.0))
+        bad("the transform's linear part must be a rotation");
+      break;
+    }
     case LightType::Area:
       if (!(std::isfinite(width) && width > 0.0 && std::isfinite(height) && height > 0.0)) bad("size must be finite and > 0");
       if (!world_from_light.isFinite() || world_from_light.isSingular()) bad("transform is not finite or singular");
@@ -50,6 +64,9 @@ double Light::intensity(const glm::dvec3& dir_ws) const {
       const double c = glm::dot(glm::normalize(dir_ws), glm::normalize(direction));
       return c >= std::cos(cone_angle) ? power_w / (kTwoPi * (1.0 - std::cos(cone_angle))) : 0.0;
     }
+    case LightType::Goniometric:
+      // The luminaire frame is the transpose (inverse) of the rotation applied to world directions.
+      return power_w * profile->intensity(glm::transpose(world_from_light.linear) * dir_ws) / profile->integral();
     default: return 0.0;
   }
 }
@@ -82,6 +99,15 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
       const double rad = light.radius * std::sqrt(u[0]), phi = kTwoPi * u[1];
       r.origin = light.position + rad * std::cos(phi) * t + rad * std::sin(phi) * b;
       r.dir = n;
+      break;
+    }
+    case LightType::Goniometric: {
+      // The table's own importance sampling: directions distributed as the intensity, with weights
+      // intensity / (pdf * integral) of mean 1 (IesProfile::sample).
+      const IesProfile::Sample s = light.profile->sample(u[0], u[1]);
+      r.origin = light.position;
+      r.dir = glm::normalize(light.world_from_light.linear * s.direction_lf);
+      r.weight = s.weight;
       break;
     }
     case LightType::Area: {

@@ -102,7 +102,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
     const EmittedRay emitted = sampleLight(lights[li], u);
     glm::dvec3 origin = emitted.origin, dir = emitted.dir;
-    double w = power;
+    double w = power * emitted.weight;
     path_bins.clear();
 
     for (std::uint32_t depth = 0;; ++depth) {

@@ -77,8 +77,25 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       if (!v["two_sided"].is_boolean()) ctx.fail(at(p, "two_sided"), "expected true or false");
       l.two_sided = v["two_sided"].get<bool>();
     }
+  } else if (type == "ies") {
+    ctx.onlyKeys(v, p, {"type", "name", "power", "file", "position", "transform"});
+    l.type = LightType::Goniometric;
+    if (v.contains("position") == v.contains("transform"))
+      ctx.fail(p, "an \"ies\" light has either \"position\" or \"transform\" (rotation and translation)");
+    if (v.contains("transform")) {
+      l.world_from_light = transform12(v["transform"], at(p, "transform"), ctx);
+      l.position = l.world_from_light.translation;
+    } else {
+      l.position = vec3(v["position"], at(p, "position"), ctx);
+    }
+    const std::filesystem::path file = ctx.resolve(ctx.string(ctx.member(v, p, "file"), at(p, "file")));
+    try {
+      l.profile = std::make_shared<const IesProfile>(IesProfile::load(file));
+    } catch (const Error& e) {
+      ctx.fail(at(p, "file"), e.what());
+    }
   } else {
-    ctx.fail(at(p, "type"), "unknown light type \"" + type + "\" (expected \"point\", \"spot\", \"directional\" or \"area\")");
+    ctx.fail(at(p, "type"), "unknown light type \"" + type + "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
   }
   try {
     l.validate();

@@ -193,6 +193,54 @@ TEST(SensorRun, MirrorMakesAnImageSource) {
   EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w) << s.total_flux_w << " vs " << expected;
 }
 
+// Flux through a small square sensor (side a, centre c, unit normal n facing the light at the
+// origin) by midpoint quadrature of I(d) cos / r^2 with the light's own intensity().
+double quadratureFlux(const Light& light, const glm::dvec3& c, const glm::dvec3& n, double a) {
+  glm::dvec3 t = glm::normalize(glm::cross(n, std::abs(n.z) < 0.9 ? glm::dvec3(0, 0, 1) : glm::dvec3(1, 0, 0)));
+  const glm::dvec3 b = glm::cross(n, t);
+  const int m = 100;
+  double sum = 0.0;
+  for (int i = 0; i < m; ++i)
+    for (int j = 0; j < m; ++j) {
+      const glm::dvec3 p = c + ((i + 0.5) / m - 0.5) * a * t + ((j + 0.5) / m - 0.5) * a * b - light.position;
+      const double r = glm::length(p);
+      sum += light.intensity(p) * std::abs(glm::dot(n, p)) / (r * r * r) * (a / m) * (a / m);
+    }
+  return sum;
+}
+
+TEST(SensorRun, GoniometricLightFollowsItsTableAndOrientation) {
+  // A rotationally symmetric table (100 cd at the nadir, 50 at the horizon, 0 at the zenith),
+  // its nadir turned from -z to -x by a rotation of 90 degrees about y.
+  Light lamp;
+  lamp.type = LightType::Goniometric;
+  lamp.name = "lamp";
+  lamp.power_w = 20.0;
+  lamp.profile = std::make_shared<const IesProfile>(IesProfile::fromTable({0, 90, 180}, {0}, {100, 50, 0}, "table"));
+  lamp.world_from_light.linear = glm::transpose(glm::dmat3(0, 0, 1, 0, 1, 0, -1, 0, 0));  // rows of R_y(90)
+  EXPECT_NEAR(lamp.intensity({-1, 0, 0}), 20.0 * 100.0 / lamp.profile->integral(), 1e-12);
+  EXPECT_NEAR(lamp.intensity({0, 0, -1}), 20.0 * 50.0 / lamp.profile->integral(), 1e-12);
+  Fixture f;
+  const double a = 0.3;
+  f.add(sensor(a, a, 1, 1, true, "nadir"), facing({1, 0, 0}, {-2, 0, 0}), "nadir");
+  f.add(sensor(a, a, 1, 1, true, "side"), facing({0, 0, 1}, {0, 0, -2}), "side");
+  f.add(sensor(a, a, 1, 1, true, "oblique"), facing({1, 0, 1}, {-1.2, 0, -1.2}), "oblique");
+  SensorScene scene = f.scene({lamp});
+  SensorRun run(scene);
+  (void)run.runUntil(400000);
+  const SensorRunResults r = run.results();
+  const glm::dvec3 centres[3] = {{-2, 0, 0}, {0, 0, -2}, {-1.2, 0, -1.2}};
+  const glm::dvec3 normals[3] = {{1, 0, 0}, {0, 0, 1}, glm::normalize(glm::dvec3(1, 0, 1))};
+  for (int k = 0; k < 3; ++k) {
+    const double expected = quadratureFlux(lamp, centres[k], normals[k], a);
+    EXPECT_LT(std::abs(r.sensors[k].total_flux_w - expected), 4.0 * r.sensors[k].total_flux_stderr_w)
+        << r.sensors[k].name << ": " << r.sensors[k].total_flux_w << " vs " << expected;
+  }
+  Light skewed = lamp;
+  skewed.world_from_light.linear[0][0] = 1.1;
+  EXPECT_THROW(skewed.validate(), InvalidArgument);
+}
+
 std::shared_ptr<const Object> disk(double diameter, std::uint32_t bins, const std::string& name) {
   SensorSpec s;
   s.shape = SensorShape::Disk;
@@ -519,6 +567,24 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
   EXPECT_EQ(m.reflectance, 0.5);
 }
 
+// An LM-63 file next to the scenes: rotationally symmetric, 100 cd at the nadir, 50 at the horizon.
+void writeLampIes() {
+  (void)writeScene("lamp.ies", "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
+                               "0 90 180\n0\n100 50 0\n");
+}
+
+TEST(SensorSceneFile, ReadsAnIesLight) {
+  writeLampIes();
+  const std::string text = R"({"format": "scene-json-v1", "objects": [], "instances": [],
+    "lights": [{"type": "ies", "file": "lamp.ies", "position": [0, 0, 3], "power": 5}],
+    "sensors": [{"name": "floor", "size": 1}]})";
+  const SensorScene scene = SensorScene::load(writeScene("ies.json", text));
+  ASSERT_EQ(scene.lights().size(), 1u);
+  const Light& l = scene.lights()[0];
+  EXPECT_EQ(l.type, LightType::Goniometric);
+  EXPECT_NEAR(l.intensity({0, 0, -1}), 5.0 * 100.0 / l.profile->integral(), 1e-12);
+}
+
 void expectFileError(const std::string& name, const std::string& body, const std::string& needle) {
   const auto path = writeScene(name, std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
                                          R"(], "instances": [], )" + body + "}");
@@ -533,6 +599,7 @@ void expectFileError(const std::string& name, const std::string& body, const std
 }
 
 TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {
+  writeLampIes();
   expectFileError("zero_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": 0}])", "/lights/0/power");
   expectFileError("negative_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": -2}])", "power must be > 0");
   expectFileError("no_position.json", R"("lights": [{"type": "point", "power": 1}])", "/lights/0: missing key \"position\"");
@@ -547,6 +614,8 @@ TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {
   expectFileError("singular.json", R"("sensors": [{"name": "s", "size": 1, "transform": [0,0,0,0, 0,0,0,0, 0,0,0,0]}])", "singular");
   expectFileError("no_name.json", R"("sensors": [{"size": 1}])", "missing key \"name\"");
   expectFileError("twice.json", R"("sensors": [{"name": "s", "size": 1}, {"name": "s", "size": 1}])", "/sensors/1");
+  expectFileError("missing_ies.json", R"("lights": [{"type": "ies", "file": "no_such.ies", "position": [0,0,1], "power": 1}])", "/lights/0/file");
+  expectFileError("ies_sheared.json", R"("lights": [{"type": "ies", "file": "lamp.ies", "transform": [2,0,0,0, 0,1,0,0, 0,0,1,0], "power": 1}])", "rotation");
   expectFileError("sensors_not_array.json", R"("sensors": {"name": "s"})", "/sensors");
 }
 

@@ -5,10 +5,12 @@
 /// scene unit, W/m^2 when the scene is in metres).
 
 #include "duplex/accel/Affine.h"
+#include "duplex/sensors/IesProfile.h"
 
 #include <glm/vec3.hpp>
 
 #include <cstdint>
+#include <memory>
 #include <string>
 
 namespace duplex {
@@ -18,6 +20,9 @@ enum class LightType : std::uint8_t {
   Spot,         ///< point emitting uniformly into a cone of half-angle cone_angle about direction
   Directional,  ///< parallel rays along direction, uniform over a disk of `radius` centred at position
   Area,         ///< Lambertian rectangle: local z = 0, width x height centred at the origin, emits towards +z
+  /// Point with a goniometric intensity table (IES LM-63): intensity P * profile(d_lf) / integral,
+  /// d_lf the direction in the luminaire frame (world_from_light's rotation; nadir = local -z).
+  Goniometric,
 };
 
 /// One light. Only the fields of its type are used; validate() checks them.
@@ -31,14 +36,16 @@ struct Light {
   double radius = 1.0;          ///< Directional: disk radius, > 0
   double width = 1.0;           ///< Area: along local x, > 0
   double height = 1.0;          ///< Area: along local y, > 0
-  Affine world_from_light;      ///< Area: placement of the local rectangle
+  Affine world_from_light;      ///< Area: placement of the local rectangle; Goniometric: its rotation orients the luminaire
+  std::shared_ptr<const IesProfile> profile;  ///< Goniometric: the intensity table (its shape; power_w scales it)
   bool two_sided = false;       ///< Area: also emits towards -z (half the power each side)
 
   /// Throws InvalidArgument naming the light for non-finite values, power <= 0, a zero direction,
-  /// a cone angle outside (0, pi], or a non-positive size or radius, or a singular transform.
+  /// a cone angle outside (0, pi], or a non-positive size or radius, or a singular transform; a
+  /// goniometric light without a profile or whose transform's linear part is not a rotation.
   void validate() const;
-  /// Radiant intensity (W/sr) of a Point or Spot light towards world direction `dir_ws` (any
-  /// length); 0 outside a spot's cone. For analytic checks.
+  /// Radiant intensity (W/sr) of a Point, Spot or Goniometric light towards world direction
+  /// `dir_ws` (any length); 0 outside a spot's cone. For analytic checks.
   [[nodiscard]] double intensity(const glm::dvec3& dir_ws) const;
 };
 
@@ -46,6 +53,9 @@ struct Light {
 struct EmittedRay {
   glm::dvec3 origin{0.0};
   glm::dvec3 dir{0.0, 0.0, 1.0};
+  /// Power of this ray relative to the light's mean ray power (1 for all but goniometric lights,
+  /// whose directions are importance-sampled from the table with weights of mean 1).
+  double weight = 1.0;
 };
 
 /// Samples a ray leaving `light` from four uniform numbers in [0, 1) (power-proportional over the
