@@ -39,6 +39,10 @@ HitRecord occlusionRecord(bool blocked) {
 
 nlohmann::ordered_json runTrace(const TraceOptions& options) {
   if (options.repeat < 1) throw InvalidArgument("--repeat must be at least 1");
+  const bool want_transmittance = !options.transmittance.empty();
+  if (want_transmittance == !options.hits.empty())
+    throw InvalidArgument("give exactly one of --hits and --transmittance");
+  if (want_transmittance && options.any_hit) throw InvalidArgument("--transmittance cannot be combined with --any-hit");
   WorkerThreads workers(options.threads);
   tbb::task_arena& arena = workers.arena;
   const int threads = workers.count;
@@ -58,13 +62,16 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   });
 
   // Batch queries: the tracer splits the rays into tasks of the arena, one query context each.
-  std::vector<Hit> hits(options.any_hit ? 0 : rays.size());
+  std::vector<Hit> hits(options.any_hit || want_transmittance ? 0 : rays.size());
   std::vector<std::uint8_t> blocked(options.any_hit ? rays.size() : 0);
+  std::vector<float> transmittance(want_transmittance ? rays.size() : 0);
   std::vector<double> trace_ms;
   for (int run = 0; run < options.repeat; ++run) {
     const auto t0 = Clock::now();
     arena.execute([&] {
-      if (options.any_hit)
+      if (want_transmittance)
+        tracer->transmittance(rays, transmittance);
+      else if (options.any_hit)
         tracer->occluded(rays, blocked);
       else
         tracer->intersect(rays, hits);
@@ -72,22 +79,31 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
     trace_ms.push_back(msSince(t0));
   }
 
-  // Hit records: the tracer names instances by node id, the hit file by position in the document.
-  const InstanceIds ids(*doc);
-  std::vector<HitRecord> records(rays.size());
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    if (options.any_hit) {
-      records[i] = occlusionRecord(blocked[i] != 0);
-    } else {
-      Hit h = hits[i];
-      if (h.valid()) h.instance_id = ids.of(h.instance_id);
-      records[i] = HitRecord::from(h);
+  std::size_t hit_count = 0;
+  double transmittance_sum = 0.0;
+  if (want_transmittance) {
+    writeTransmittanceFile(options.transmittance, transmittance);
+    for (const float t : transmittance) {
+      hit_count += t == 0.0f ? 1u : 0u;
+      transmittance_sum += t;
     }
+  } else {
+    // Hit records: the tracer names instances by node id, the hit file by position in the document.
+    const InstanceIds ids(*doc);
+    std::vector<HitRecord> records(rays.size());
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (options.any_hit) {
+        records[i] = occlusionRecord(blocked[i] != 0);
+      } else {
+        Hit h = hits[i];
+        if (h.valid()) h.instance_id = ids.of(h.instance_id);
+        records[i] = HitRecord::from(h);
+      }
+    }
+    writeHitFile(options.hits, records);
+    hit_count = static_cast<std::size_t>(std::count_if(
+        records.begin(), records.end(), [](const HitRecord& r) { return r.instance_id != kInvalidId; }));
   }
-  writeHitFile(options.hits, records);
-
-  const auto hit_count = static_cast<std::size_t>(std::count_if(
-      records.begin(), records.end(), [](const HitRecord& r) { return r.instance_id != kInvalidId; }));
   const double trace_median = median(trace_ms);
   const double mrays_per_s = trace_median > 0.0 ? static_cast<double>(rays.size()) / (trace_median * 1e3) : 0.0;
   const SceneLoadFigures& figures = doc->figures;
@@ -112,6 +128,10 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   report["format"] = doc->format;
   report["structures_loaded"] = figures.structures_loaded;
   report["graph_ms"] = figures.graph_ms;
+  if (want_transmittance) {
+    report["transmittance"] = true;
+    report["mean_transmittance"] = rays.empty() ? 0.0 : transmittance_sum / static_cast<double>(rays.size());
+  }
   return report;
 }
 

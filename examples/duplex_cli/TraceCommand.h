@@ -23,6 +23,10 @@ struct TraceOptions {
   /// prim 0xFFFFFFFF} when the ray is blocked and the miss record {t=+inf, 0, 0, 0xFFFFFFFF,
   /// 0xFFFFFFFF} when it is free.
   bool any_hit = false;
+  /// Transmittance instead of hits (exact contract): when set, `hits` is not written (and may be
+  /// empty) and this file gets one float32 per ray, the transmittance along [tnear, tfar] through
+  /// all fog volumes, 0 where a surface blocks the ray (SceneTracer::transmittance).
+  std::filesystem::path transmittance;
   /// Trace this many times (>= 1); the reported trace time is the median.
   int repeat = 1;
 };
@@ -34,11 +38,14 @@ struct TraceOptions {
 /// triangles (in the object library), instanced_triangles (summed over instances),
 /// bottom_build_ms, top_build_ms, trace_ms_all, format, structures_loaded (prepared bottom levels
 /// read instead of built), graph_ms (part of load_ms). Times are wall-clock milliseconds.
+/// With `transmittance`: hits counts the blocked rays (transmittance 0), and the extra keys
+/// transmittance (true) and mean_transmittance are added.
 ///
 /// A hit record's instance_id is the position of the instance in SceneDocument::instances: for
 /// scene-json-v1 its position in "instances" (the contract); for duplex-scene-v1 its position in
 /// depth-first file order of the node tree, hidden instances included (never hit, but counted).
-/// Throws duplex::Error (naming the file) for bad input.
+/// Throws duplex::Error (naming the file) for bad input, and InvalidArgument when neither or both
+/// of hits and transmittance are given, or transmittance with any_hit.
 [[nodiscard]] nlohmann::ordered_json runTrace(const TraceOptions& options);
 
 }  // namespace duplex::cli

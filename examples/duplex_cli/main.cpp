@@ -1,5 +1,6 @@
 // The `duplex` command-line tool: the interchange contract used by tools outside the project.
-//   duplex trace --scene S.json --rays R.bin --hits H.bin [--threads N] [--any-hit] [--repeat R]
+//   duplex trace --scene S.json --rays R.bin (--hits H.bin | --transmittance T.bin) [--threads N] [--any-hit]
+//                [--repeat R]
 //   duplex rays  --scene S.json (--primary W H | --random N --seed X) --out R.bin
 //   duplex scene split     --mesh M --objects K [--loop N] --out S.json
 //   duplex scene instances --mesh M --count N --seed X --out S.json
@@ -61,8 +62,13 @@ int main(int argc, char** argv) {
   CLI::App* trace_cmd = app.add_subcommand("trace", "Trace a ray file against a scene and write a hit file");
   trace_cmd->add_option("--scene", trace.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
   trace_cmd->add_option("--rays", trace.rays, "Ray file: 32-byte records ox oy oz tnear dx dy dz tfar")->required();
-  trace_cmd->add_option("--hits", trace.hits, "Hit file to write: 20-byte records t u v instance_id prim_id")
-      ->required();
+  CLI::Option* hits_opt =
+      trace_cmd->add_option("--hits", trace.hits, "Hit file to write: 20-byte records t u v instance_id prim_id");
+  CLI::Option* transmittance_opt = trace_cmd->add_option(
+      "--transmittance", trace.transmittance,
+      "Instead of hits: one float32 per ray, the transmittance along [tnear, tfar] through all fog volumes "
+      "(0 where a surface blocks the ray)");
+  hits_opt->excludes(transmittance_opt);
   trace_cmd->add_option("--threads", trace.threads, "Worker threads (default: all hardware threads)")
       ->check(CLI::Range(1, 4096));
   trace_cmd->add_flag("--any-hit", trace.any_hit,

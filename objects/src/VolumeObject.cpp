@@ -9,13 +9,12 @@
 // openvdb::math::Ray::worldToIndex), so every time below is in units of the object-space ray's
 // direction: no conversion of times is needed between object and index space.
 
-#include "duplex/objects/VolumeObjectVdb.h"
+#include "VolumeGrid.h"
+#include "VdbFileCheck.h"
 
 #include "duplex/accel/Error.h"
 
 #include <openvdb/io/File.h>
-#include <openvdb/math/DDA.h>
-#include <openvdb/math/Ray.h>
 #include <openvdb/tools/Interpolation.h>
 
 #include <algorithm>
@@ -27,64 +26,28 @@
 
 namespace duplex {
 
-namespace vdb = openvdb;
+using namespace volume_detail;
 
 namespace {
 
-using TreeT = vdb::FloatTree;
-using RayI = vdb::math::Ray<double>;  // index space, direction not normalised
-using TimeSpan = RayI::TimeSpan;
-using AccessorT = vdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
 // Entry level of the hierarchical DDA: the root's children (the upper internal nodes).
-using HddaT = vdb::math::VolumeHDDA<TreeT, RayI, TreeT::RootNodeType::ChildNodeType::LEVEL>;
+using HddaT = vdb::math::VolumeHDDA<TreeT, RayI, Upper::LEVEL>;
+
+}  // namespace
+
+namespace volume_detail {
 
 void initializeOpenVdb() {
   static std::once_flag once;
   std::call_once(once, [] { vdb::initialize(); });
 }
 
-}  // namespace
-
-std::string_view toString(VolumeKind kind) {
-  switch (kind) {
-    case VolumeKind::Auto: return "auto";
-    case VolumeKind::LevelSet: return "levelset";
-    case VolumeKind::Fog: return "fog";
-  }
-  return "?";
-}
-
-std::ostream& operator<<(std::ostream& os, VolumeKind kind) { return os << toString(kind); }
-
-struct VolumeObject::Grid {
-  vdb::FloatGrid::ConstPtr grid;
-  VolumeKind kind = VolumeKind::Fog;
-  std::string grid_name;
-  // Continuous index-space box that queries clip rays to (voxel ijk is centred at ijk): the active
-  // voxels' cells, plus one voxel for level sets (the interpolated surface reaches that far).
-  vdb::Vec3d clip_min_is, clip_max_is;
-  Box bounds_os;
-};
-
-namespace {
-
-// Per-thread state of one volume, kept in the QueryContext. Holds the grid so that the accessor
-// never outlives its tree, and so that a new object at a dead object's address is recognised.
-struct ThreadState {
-  vdb::FloatGrid::ConstPtr grid;
-  AccessorT acc;
-  std::vector<TimeSpan> spans;  // scratch for the HDDA
-  explicit ThreadState(const vdb::FloatGrid::ConstPtr& g) : grid(g), acc(g->constTree()) {}
-};
-
-ThreadState& threadState(const void* key, const VolumeObject::Grid& g, QueryContext& ctx) {
-  ThreadState& s = ctx.cached<ThreadState>(key, [&] { return ThreadState(g.grid); });
-  if (s.grid != g.grid) s = ThreadState(g.grid);
+ThreadState& threadState(const void* key, const std::shared_ptr<const VolumeObject::Grid>& g, QueryContext& ctx) {
+  ThreadState& s = ctx.cached<ThreadState>(key, [&] { return ThreadState(g); });
+  if (s.data != g) s = ThreadState(g);
   return s;
 }
 
-// `ray_os` in index space (origin shifted by `shift` voxels on each axis), clipped to [tmin, tmax]
-// and to the clip box. False when nothing is left. Times are unchanged by the mapping.
 bool indexRay(const VolumeObject::Grid& g, const Ray& ray_os, double tmin, double tmax, double shift, RayI& out) {
   if (!isQueryable(ray_os) || !(tmin <= tmax)) return false;
   const vdb::math::Transform& xf = g.grid->transform();
@@ -110,7 +73,6 @@ bool indexRay(const VolumeObject::Grid& g, const Ray& ray_os, double tmin, doubl
   return true;
 }
 
-// The spans [t0, t1] of `ray` that cross active leaves or tiles, in order.
 const std::vector<TimeSpan>& activeSpans(const RayI& ray, ThreadState& s) {
   RayI r = ray;  // the HDDA rewrites the ray's times
   HddaT hdda;
@@ -118,17 +80,33 @@ const std::vector<TimeSpan>& activeSpans(const RayI& ray, ThreadState& s) {
   return s.spans;
 }
 
+}  // namespace volume_detail
+
+std::string_view toString(VolumeKind kind) {
+  switch (kind) {
+    case VolumeKind::Auto: return "auto";
+    case VolumeKind::LevelSet: return "levelset";
+    case VolumeKind::Fog: return "fog";
+  }
+  return "?";
+}
+
+std::ostream& operator<<(std::ostream& os, VolumeKind kind) { return os << toString(kind); }
+
+namespace {
+
 double sampleIS(AccessorT& acc, const vdb::Vec3d& p_is) { return vdb::tools::BoxSampler::sample(acc, p_is); }
 
 // Calls on(t) for each zero crossing of the interpolated level set along `ray` in order, until it
 // returns true. Samples every half voxel inside the active spans; across the gaps between spans the
 // distance is constant (background), so a sign change between the last sample before a gap and the
-// first after it is refined over the gap. Refinement: bisection to 1e-4 voxel, then a secant step.
+// first after it is refined over the gap. Refinement: bisection until the bracket is at most
+// step / 2^refine_steps, then a secant step (config.levelset_step, config.refine_steps).
 template <class OnCrossing>
-void forEachCrossing(const RayI& ray, ThreadState& s, OnCrossing on) {
+void forEachCrossing(const RayI& ray, ThreadState& s, const VolumeQueryConfig& config, OnCrossing on) {
   const double dir_len = ray.dir().length();
-  const double dt = 0.5 / dir_len;
-  const double tol = 1e-4 / dir_len;
+  const double dt = config.levelset_step / dir_len;
+  const double tol = std::ldexp(dt, -config.refine_steps);
   auto f = [&](double t) { return sampleIS(s.acc, ray(t)); };
   double tp = ray.t0();
   double fp = f(tp);
@@ -192,11 +170,74 @@ std::string describeGrid(const std::string& where, const std::string& grid_name)
   return where.empty() ? "grid \"" + grid_name + "\"" : where + ": grid \"" + grid_name + "\"";
 }
 
+void validate(const VolumeQueryConfig& c, const std::string& what) {
+  auto bad = [&](const std::string& m) { throw InvalidArgument(what + ": query config: " + m); };
+  if (c.samples < 1) bad("samples must be at least 1");
+  if (!(c.march_step > 0.0) || !std::isfinite(c.march_step)) bad("march_step must be positive and finite");
+  if (c.majorant_level < 0 || c.majorant_level >= kLevels) bad("majorant_level must be 0, 1 or 2");
+  if (!(c.levelset_step > 0.0 && c.levelset_step <= 1.0)) bad("levelset_step must be in (0, 1] voxel");
+  if (c.refine_steps < 0 || c.refine_steps > 60) bad("refine_steps must be in [0, 60]");
+  switch (c.transmittance) {
+    case FogMethod::Exact:
+    case FogMethod::RatioTracking:
+    case FogMethod::DeltaTracking:
+    case FogMethod::RayMarching: break;
+    default: bad("unknown transmittance method");
+  }
+}
+
+// Density range (effective values) over one node, inactive voxels and tiles counting as 0.
+struct Range {
+  float lo = std::numeric_limits<float>::infinity(), hi = 0.0f;
+  void add(float v) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  void add(const Range& r) {
+    lo = std::min(lo, r.lo);
+    hi = std::max(hi, r.hi);
+  }
+  [[nodiscard]] vdb::Vec2s value() const { return {lo, hi}; }
+};
+
+// The majorant / minorant trees of a fog grid: one (min, max) voxel per leaf, lower and upper
+// internal node, keyed by node origin >> log2(node size). Tiles need none (the walk reads their
+// value); a node's range includes its tiles and counts inactive ones as 0.
+void buildRanges(VolumeObject::Grid& g) {
+  for (auto& r : g.ranges) r = std::make_shared<RangeTree>(vdb::Vec2s(0.0f));
+  const TreeT& tree = g.grid->constTree();
+  auto key = [](const vdb::Coord& origin, int level) {
+    const int s = kLog2Size[level];
+    return vdb::Coord(origin.x() >> s, origin.y() >> s, origin.z() >> s);
+  };
+  for (auto u = tree.root().cbeginChildOn(); u; ++u) {
+    Range ru;
+    for (auto l = u->cbeginChildOn(); l; ++l) {
+      Range rl;
+      for (auto leaf = l->cbeginChildOn(); leaf; ++leaf) {
+        Range r0;
+        for (vdb::Index i = 0; i < LeafT::SIZE; ++i)
+          r0.add(leaf->isValueOn(i) ? effectiveDensity(leaf->getValue(i)) : 0.0f);
+        g.ranges[0]->setValue(key(leaf->origin(), 0), r0.value());
+        rl.add(r0);
+      }
+      for (auto v = l->cbeginValueOn(); v; ++v) rl.add(effectiveDensity(*v));
+      if (l->cbeginValueOff()) rl.add(0.0f);
+      g.ranges[1]->setValue(key(l->origin(), 1), rl.value());
+      ru.add(rl);
+    }
+    for (auto v = u->cbeginValueOn(); v; ++v) ru.add(effectiveDensity(*v));
+    if (u->cbeginValueOff()) ru.add(0.0f);
+    g.ranges[2]->setValue(key(u->origin(), 2), ru.value());
+  }
+}
+
 // The object over a float grid; `where` names its source in messages ("" for grids made in memory).
 std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, VolumeKind kind, std::string name,
-                                                 const std::string& where) {
+                                                 const std::string& where, const VolumeQueryConfig& config) {
   if (!grid) throw InvalidArgument("VolumeObject: null grid");
   const std::string what = describeGrid(where, grid->getName());
+  validate(config, what);
   if (!grid->transform().isLinear())
     throw InvalidArgument(what + ": non-linear (" + grid->transform().mapType() +
                           ") transform; only linear (affine) grid transforms are supported");
@@ -222,15 +263,22 @@ std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, 
     b.extend(glm::vec3(static_cast<float>(p_os.x()), static_cast<float>(p_os.y()), static_cast<float>(p_os.z())));
   }
   g->bounds_os = b;
+  if (g->kind == VolumeKind::Fog) buildRanges(*g);
   if (name.empty()) name = g->grid_name;
   const ObjectRole role = g->kind == VolumeKind::LevelSet ? ObjectRole::Surface : ObjectRole::Medium;
-  return std::make_shared<const VolumeObject>(std::move(name), role, std::move(g), VolumeObject::ConstructTag{});
+  return std::make_shared<const VolumeObject>(std::move(name), role, std::move(g), config, VolumeObject::ConstructTag{});
 }
 
 }  // namespace
 
-VolumeObject::VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid, ConstructTag)
-    : Object(std::move(name), role), grid_(std::move(grid)) {}
+VolumeObject::VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid,
+                           const VolumeQueryConfig& config, ConstructTag)
+    : Object(std::move(name), role), grid_(std::move(grid)), config_(config) {}
+
+std::shared_ptr<const VolumeObject> VolumeObject::withConfig(const VolumeQueryConfig& config) const {
+  validate(config, "volume '" + name() + "'");
+  return std::make_shared<const VolumeObject>(name(), role(), grid_, config, ConstructTag{});
+}
 
 VolumeObject::~VolumeObject() = default;
 
@@ -239,15 +287,29 @@ VolumeKind VolumeObject::kind() const { return grid_->kind; }
 const std::string& VolumeObject::gridName() const { return grid_->grid_name; }
 double VolumeObject::voxelSize() const { return grid_->grid->voxelSize().x(); }
 std::uint64_t VolumeObject::activeVoxelCount() const { return grid_->grid->activeVoxelCount(); }
-std::size_t VolumeObject::memoryBytes() const { return sizeof(*this) + sizeof(Grid) + grid_->grid->memUsage(); }
+std::size_t VolumeObject::memoryBytes() const {
+  std::size_t bytes = sizeof(*this) + sizeof(Grid) + grid_->grid->memUsage();
+  for (const auto& r : grid_->ranges)
+    if (r) bytes += r->memUsage();
+  return bytes;
+}
+
+float VolumeObject::maxDensity() const {
+  float m = 0.0f;
+  if (grid_->kind != VolumeKind::Fog) return m;
+  // The upper nodes' maxima, and root-level tiles (which have no node).
+  for (auto v = grid_->ranges[2]->cbeginValueOn(); v; ++v) m = std::max(m, v->y());
+  for (auto t = grid_->grid->constTree().root().cbeginValueOn(); t; ++t) m = std::max(m, effectiveDensity(*t));
+  return m;
+}
 
 bool VolumeObject::intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const {
   if (grid_->kind != VolumeKind::LevelSet) return false;
   RayI ray;
   if (!indexRay(*grid_, ray_os, ray_os.tnear, std::min<double>(ray_os.tfar, hit.t), 0.0, ray)) return false;
-  ThreadState& s = threadState(this, *grid_, ctx);
+  ThreadState& s = threadState(this, grid_, ctx);
   bool found = false;
-  forEachCrossing(ray, s, [&](double t) {
+  forEachCrossing(ray, s, config_, [&](double t) {
     if (static_cast<float>(t) > hit.t) return true;  // rounding at the end of the range
     const std::uint32_t instance = hit.instance_id;
     hit = crossingHit(*grid_, s.acc, ray, t);
@@ -263,7 +325,7 @@ bool VolumeObject::occluded(const Ray& ray_os, QueryContext& ctx) const {
   RayI ray;
   if (!indexRay(*grid_, ray_os, ray_os.tnear, ray_os.tfar, 0.0, ray)) return false;
   bool found = false;
-  forEachCrossing(ray, threadState(this, *grid_, ctx), [&](double) { return found = true; });
+  forEachCrossing(ray, threadState(this, grid_, ctx), config_, [&](double) { return found = true; });
   return found;
 }
 
@@ -271,37 +333,17 @@ void VolumeObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, Query
   if (grid_->kind != VolumeKind::LevelSet) return;
   RayI ray;
   if (!indexRay(*grid_, ray_os, ray_os.tnear, ray_os.tfar, 0.0, ray)) return;
-  ThreadState& s = threadState(this, *grid_, ctx);
-  forEachCrossing(ray, s, [&](double t) {
+  ThreadState& s = threadState(this, grid_, ctx);
+  forEachCrossing(ray, s, config_, [&](double t) {
     hits.push_back(crossingHit(*grid_, s.acc, ray, t));
     return false;
   });
 }
 
-float VolumeObject::transmittance(const Ray& ray_os, QueryContext& ctx) const {
-  if (grid_->kind != VolumeKind::Fog) return Object::transmittance(ray_os, ctx);
-  // Shifted by half a voxel, voxel ijk is the integer cell [ijk, ijk + 1): what the DDA walks.
-  RayI ray;
-  if (!indexRay(*grid_, ray_os, ray_os.tnear, ray_os.tfar, 0.5, ray)) return 1.0f;
-  ThreadState& s = threadState(this, *grid_, ctx);
-  // Optical depth in t units: sum over active voxels of density times the time spent in them.
-  double depth_t = 0.0;
-  for (const TimeSpan& span : activeSpans(ray, s)) {
-    const double a = std::max(span.t0, ray.t0()), b = std::min(span.t1, ray.t1());
-    if (!(a < b)) continue;
-    vdb::math::DDA<RayI, 0> dda(ray, a, b);
-    do {
-      float density = 0.0f;
-      if (s.acc.probeValue(dda.voxel(), density) && density > 0.0f) depth_t += density * (dda.next() - dda.time());
-    } while (dda.step());
-  }
-  const double len_per_t = vdb::Vec3d(ray_os.dir.x, ray_os.dir.y, ray_os.dir.z).length();
-  return static_cast<float>(std::exp(-depth_t * len_per_t));
-}
-
-std::shared_ptr<const VolumeObject> makeVolumeObject(vdb::FloatGrid::ConstPtr grid, VolumeKind kind, std::string name) {
+std::shared_ptr<const VolumeObject> makeVolumeObject(vdb::FloatGrid::ConstPtr grid, VolumeKind kind, std::string name,
+                                                     const VolumeQueryConfig& config) {
   initializeOpenVdb();
-  return makeFromGrid(std::move(grid), kind, std::move(name), "");
+  return makeFromGrid(std::move(grid), kind, std::move(name), "", config);
 }
 
 std::shared_ptr<const VolumeObject> VolumeObject::load(const std::filesystem::path& file,
@@ -310,6 +352,8 @@ std::shared_ptr<const VolumeObject> VolumeObject::load(const std::filesystem::pa
   std::error_code ec;
   if (!std::filesystem::is_regular_file(file, ec)) throw FileError(f + ": no such file");
   initializeOpenVdb();
+  // Our own walk of the file's layout first: OpenVDB must never see a grid that runs past the end.
+  (void)checkVdbFileStructure(file);
   vdb::FloatGrid::Ptr grid;
   try {
     vdb::io::File in(f);
@@ -342,7 +386,7 @@ std::shared_ptr<const VolumeObject> VolumeObject::load(const std::filesystem::pa
     throw FileError(f + ": not a readable .vdb file (truncated or malformed?): " + e.what());
   }
   std::string name = options.name.empty() ? file.stem().string() + ":" + grid->getName() : options.name;
-  return makeFromGrid(std::move(grid), options.kind, std::move(name), f);
+  return makeFromGrid(std::move(grid), options.kind, std::move(name), f, options.query);
 }
 
 }  // namespace duplex

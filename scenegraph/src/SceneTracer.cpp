@@ -94,6 +94,11 @@ bool SceneTracer::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t m
   return impl_->top.occluded(ray_ws, ctx, mask);
 }
 
+float SceneTracer::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  return impl_->top.transmittance(ray_ws, ctx, mask);
+}
+
 std::vector<Hit> SceneTracer::intersectAll(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   std::shared_lock lock(impl_->mutex);
   std::vector<Hit> hits;
@@ -158,6 +163,13 @@ void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> oc
   const TopLevel& top = impl_->top;
   forEachRay("SceneTracer::occluded", rays, occluded,
              [&](const Ray& r, QueryContext& ctx) { return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0); });
+}
+
+void SceneTracer::transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  forEachRay("SceneTracer::transmittance", rays, transmittance,
+             [&](const Ray& r, QueryContext& ctx) { return top.transmittance(r, ctx, mask); });
 }
 
 namespace {

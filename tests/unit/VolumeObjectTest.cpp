@@ -370,13 +370,13 @@ TEST(VolumeObject, LoadsFilesByGridNameOrFirstFloatGrid) {
   EXPECT_EQ(first->gridName(), "density");
   EXPECT_EQ(first->kind(), VolumeKind::Fog);
   EXPECT_EQ(first->name(), "two:density");
-  const auto sphere = VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Auto, .name = {}});
+  const auto sphere = VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Auto, .name = {}, .query = {}});
   EXPECT_EQ(sphere->kind(), VolumeKind::LevelSet);
-  const auto named = VolumeObject::load(dir / "two.vdb", {.grid = "density", .kind = VolumeKind::Auto, .name = "d"});
+  const auto named = VolumeObject::load(dir / "two.vdb", {.grid = "density", .kind = VolumeKind::Auto, .name = "d", .query = {}});
   EXPECT_EQ(named->kind(), VolumeKind::Fog);
   EXPECT_EQ(named->name(), "d");
   EXPECT_GT(named->memoryBytes(), 0u);
-  const auto forced = VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Fog, .name = {}});
+  const auto forced = VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Fog, .name = {}, .query = {}});
   EXPECT_EQ(forced->role(), ObjectRole::Medium);
 }
 
@@ -389,10 +389,10 @@ TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
   vec->tree().setValue(openvdb::Coord(1, 2, 3), openvdb::Vec3s(1, 0, 0));
   writeGrids(dir / "vec.vdb", {vec});
   expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "vec.vdb"); }, "no float grid");
-  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "vec.vdb", {.grid = "velocity", .kind = {}, .name = {}}); },
+  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "vec.vdb", {.grid = "velocity", .kind = {}, .name = {}, .query = {}}); },
                                "not float");
   writeGrids(dir / "sphere.vdb", {sphereGrid(0.1)});
-  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "sphere.vdb", {.grid = "smoke", .kind = {}, .name = {}}); },
+  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "sphere.vdb", {.grid = "smoke", .kind = {}, .name = {}, .query = {}}); },
                                "no grid named \"smoke\"");
   // Truncated at several lengths, and not a VDB file at all: errors, never a crash.
   const auto bytes = test::readBinaryFile(dir / "sphere.vdb");

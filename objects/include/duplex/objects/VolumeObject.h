@@ -13,10 +13,12 @@
 /// renormalising its direction, so t means the same in object and index space.
 
 #include "duplex/accel/Object.h"
+#include "duplex/objects/VolumeQueryConfig.h"
 
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <ostream>
 #include <string>
 #include <string_view>
@@ -45,6 +47,8 @@ struct VolumeLoadOptions {
   VolumeKind kind = VolumeKind::Auto;
   /// The object's name; empty: "<file stem>:<grid name>".
   std::string name;
+  /// How queries are answered (validated as by VolumeObject::withConfig).
+  VolumeQueryConfig query;
 };
 
 /// Immutable after construction; instances share it; all queries are thread-safe (each thread's
@@ -54,9 +58,13 @@ class VolumeObject final : public Object {
   static constexpr std::string_view kTypeName = "volume";
 
   /// Reads a float grid from a .vdb file (fully, no delayed loading: a truncated file fails here,
-  /// not in a query). Throws FileError naming the file (and grid) for a missing, unreadable,
-  /// truncated or malformed file, a file with no float grid, or a named grid that is absent or not
-  /// float; InvalidArgument naming the grid for an empty grid or a non-linear (frustum) transform.
+  /// not in a query). The file's structure (header, metadata, grid descriptors and every grid's
+  /// extent) is checked against the file size before OpenVDB reads any grid data, so a truncated
+  /// file is refused up front (OpenVDB 10 itself trusts block lengths it reads from a short
+  /// stream). Throws FileError naming the file (and grid) for a missing, unreadable, truncated or
+  /// malformed file, a file without grid offsets (written by io::Stream), a file with no float
+  /// grid, or a named grid that is absent or not float; InvalidArgument naming the grid for an
+  /// empty grid or a non-linear (frustum) transform, or for an invalid `options.query`.
   [[nodiscard]] static std::shared_ptr<const VolumeObject> load(const std::filesystem::path& file,
                                                                 const VolumeLoadOptions& options = {});
 
@@ -77,11 +85,26 @@ class VolumeObject final : public Object {
   [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
   /// Level sets: every zero crossing in [tnear, tfar] (entries and exits). Fog: none.
   void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
-  /// Fog: exp(-optical depth) along [tnear, tfar], the density integrated exactly as piecewise
-  /// constant over active voxels (each voxel the unit cube around its centre in index space) and
-  /// lengths measured in object space (|dir_os| per unit t). An infinite tfar is clipped to the
+  /// Fog: exp(-optical depth) along [tnear, tfar] of the piecewise-constant density (each active
+  /// voxel the unit cube around its centre in index space; extinction per object-space unit
+  /// length, lengths measured in object space: |dir_os| per unit t), by config().transmittance:
+  /// exact by default; stochastic methods seed from a hash of the ray and config().seed, so a
+  /// ray's estimate is the same on every thread and run. An infinite tfar is clipped to the
   /// bounds. Level sets: 0 when occluded, else 1.
   [[nodiscard]] float transmittance(const Ray& ray_os, QueryContext& ctx) const override;
+  /// Fog: one transmittance estimate by `method` (samples, step and majorant level from config())
+  /// from the random stream `seed` (ignored by Exact and RayMarching). Level sets: as above.
+  [[nodiscard]] float transmittance(const Ray& ray_os, QueryContext& ctx, FogMethod method, std::uint64_t seed) const;
+  /// Fog: a free-flight distance by delta tracking with the node majorants of
+  /// config().majorant_level: the t (object-space ray units) of the first real collision in
+  /// [tnear, tfar], distributed with density sigma(t) |dir| T(tnear, t); nullopt when the flight
+  /// leaves the segment (probability T(tnear, tfar)). Deterministic for a given `seed`.
+  /// Level sets: nullopt.
+  [[nodiscard]] std::optional<float> sampleFreeFlight(const Ray& ray_os, QueryContext& ctx, std::uint64_t seed) const;
+  /// Fog picking: the t where the ray first enters a voxel whose density exceeds `threshold`
+  /// (>= tnear, <= tfar), nullopt if none. Nodes whose maximum is at most `threshold` are skipped
+  /// whole. Level sets: the first zero crossing, as intersect().
+  [[nodiscard]] std::optional<float> firstDensityAbove(const Ray& ray_os, float threshold, QueryContext& ctx) const;
 
   [[nodiscard]] std::size_t memoryBytes() const override;
 
@@ -93,15 +116,25 @@ class VolumeObject final : public Object {
   [[nodiscard]] double voxelSize() const;
   /// Active voxels, tiles counted by the voxels they cover.
   [[nodiscard]] std::uint64_t activeVoxelCount() const;
+  /// Fog: the largest effective density (0 for level sets).
+  [[nodiscard]] float maxDensity() const;
+
+  [[nodiscard]] const VolumeQueryConfig& config() const { return config_; }
+  /// The same volume (the grid is shared, not copied) answering queries with `config`, under the
+  /// same name. Throws InvalidArgument for samples 0, a non-positive or non-finite march_step, a
+  /// majorant_level outside [0, 2], levelset_step outside (0, 1] or negative refine_steps.
+  [[nodiscard]] std::shared_ptr<const VolumeObject> withConfig(const VolumeQueryConfig& config) const;
 
   /// The OpenVDB side (defined in VolumeObject.cpp; VolumeObjectVdb.h builds one).
   struct Grid;
   struct ConstructTag {};
-  VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid, ConstructTag);
+  VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid, const VolumeQueryConfig& config,
+               ConstructTag);
   [[nodiscard]] const Grid& grid() const { return *grid_; }
 
  private:
   std::shared_ptr<const Grid> grid_;
+  VolumeQueryConfig config_;
 };
 
 }  // namespace duplex

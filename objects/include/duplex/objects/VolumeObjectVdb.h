@@ -15,9 +15,11 @@ namespace duplex {
 
 /// A volume object over `grid` (shared, not copied: the caller must not modify the grid
 /// afterwards). `kind` Auto: from the grid class. `name` empty: the grid's name. Throws
-/// InvalidArgument naming the grid for a null or empty grid or a non-linear (frustum) transform.
+/// InvalidArgument naming the grid for a null or empty grid or a non-linear (frustum) transform,
+/// and for an invalid `config` (see VolumeObject::withConfig).
 [[nodiscard]] std::shared_ptr<const VolumeObject> makeVolumeObject(openvdb::FloatGrid::ConstPtr grid,
                                                                    VolumeKind kind = VolumeKind::Auto,
-                                                                   std::string name = {});
+                                                                   std::string name = {},
+                                                                   const VolumeQueryConfig& config = {});
 
 }  // namespace duplex

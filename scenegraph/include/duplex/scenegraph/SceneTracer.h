@@ -55,6 +55,9 @@ class SceneTracer {
   /// Closest blocking hit (preliminary: world t, u, v, prim_id, instance_id = node id, world ng).
   [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Fraction of light passing along [tnear, tfar] of a world ray: 0 when a surface blocks it, else
+  /// the product of the transmittances of the media (fog volumes) it crosses (TopLevel::transmittance).
+  [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Every hit along the ray within [tnear, tfar], sorted by t (sensors included when the mask selects them).
   [[nodiscard]] std::vector<Hit> intersectAll(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Closest hit with position, normal and path; the ray is transformed in double. The node path is
@@ -67,6 +70,7 @@ class SceneTracer {
   /// `occluded` must have the size of `rays`.
   void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu) const;
   void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu) const;
+  void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Picking through pixel (px, py) (continuous pixel coordinates, (0, 0) the top-left corner,
   /// (w, h) the bottom-right) of a width x height image seen by `camera`.
