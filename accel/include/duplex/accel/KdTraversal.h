@@ -73,6 +73,9 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   return clipIntervalToBox(ray, box, tmin, tmax);
 }
 
+/// A leaf without primitives (not a jump: a jump's count field is all ones).
+inline bool isEmptyLeaf(const KdNode& node) { return node.isLeaf() && node.primCount() == 0; }
+
 /// Relative slack in t when deciding whether a ray meets a child cell (see traverseKdTree).
 inline constexpr float kKdPlaneSlack = 8.0f * std::numeric_limits<float>::epsilon();
 
@@ -131,10 +134,24 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
         index = upper ^ swap;  // the far child
       } else {
         // Both; argument order makes a NaN t_plane (ray inside the plane) keep the full interval.
-        stack[top++] = {upper ^ swap, std::max(tmin, t_plane), tmax};
-        index = near_child;
-        tmax = std::min(tmax, t_plane);
-        tmax_hi = widen_up(tmax);
+        // An empty leaf child (about four in five leaves a random ray meets) is dropped here
+        // rather than pushed, popped and visited: the lower child is usually in the same cache
+        // line, and the upper one is needed soon anyway.
+        const std::uint32_t far_child = upper ^ swap;
+        if (isEmptyLeaf(nodes[far_child])) {
+          index = near_child;
+          tmax = std::min(tmax, t_plane);
+          tmax_hi = widen_up(tmax);
+        } else if (isEmptyLeaf(nodes[near_child]) && !(std::max(tmin, t_plane) > t_best)) {
+          index = far_child;
+          tmin = std::max(tmin, t_plane);
+          tmin_lo = widen_down(tmin);
+        } else {
+          stack[top++] = {far_child, std::max(tmin, t_plane), tmax};
+          index = near_child;
+          tmax = std::min(tmax, t_plane);
+          tmax_hi = widen_up(tmax);
+        }
       }
       continue;
     }
