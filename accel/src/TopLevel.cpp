@@ -27,6 +27,7 @@
 #include <optional>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 
 #include "TopLevelState.h"
@@ -125,12 +126,48 @@ void validateConfig(const TopLevelConfig& c) {
 
 TopLevel::TopLevel(const TopLevelConfig& config) : config_(config) { validateConfig(config_); }
 
+TopLevel::TopLevel(const TopLevelConfig& config, SensorLevelTag) : TopLevel(config) { separate_sensors_ = false; }
+
+TopLevel& TopLevel::sensorLevelForEdit() {
+  if (!sensors_) sensors_.reset(new TopLevel(config_, SensorLevelTag{}));
+  return *sensors_;
+}
+
+namespace {
+bool isSensor(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Sensor; }
+}  // namespace
+
 void TopLevel::setConfig(const TopLevelConfig& config) {
   validateConfig(config);
   config_ = config;
+  if (sensors_) sensors_->setConfig(config);
 }
 
 void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
+  const bool any_sensor = std::any_of(instances.begin(), instances.end(), isSensor);
+  if (!separate_sensors_ || (!any_sensor && !sensors_)) {
+    buildHere(instances, config);
+    return;
+  }
+  // Ids are unique over both levels; the sensors' level is built aside first, so that a failure of
+  // either build leaves everything as it was.
+  std::vector<InstanceDesc> others, sensors;
+  std::unordered_set<std::uint32_t> ids;
+  ids.reserve(instances.size());
+  for (const InstanceDesc& d : instances) {
+    if (!ids.insert(d.id).second) throw InvalidArgument(describe(d) + ": duplicate instance id");
+    (isSensor(d) ? sensors : others).push_back(d);
+  }
+  TopLevelConfig c = config_;
+  c.build = config;
+  validateConfig(c);
+  std::unique_ptr<TopLevel> level(new TopLevel(c, SensorLevelTag{}));
+  level->buildHere(sensors, config);
+  buildHere(others, config);
+  sensors_ = std::move(level);
+}
+
+void TopLevel::buildHere(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
   TopLevelConfig c = config_;
   c.build = config;
   validateConfig(c);
@@ -169,6 +206,31 @@ void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfi
 void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances, config_.build); }
 
 void TopLevel::set(const InstanceDesc& instance) {
+  // Set on the level the instance belongs to first (it validates and throws before recording
+  // anything), then take it out of the other one (an object that changed role moves).
+  if (separate_sensors_ && isSensor(instance)) {
+    if (!state_) state_ = std::make_shared<State>();  // queries read the (empty) records of this level
+    sensorLevelForEdit().set(instance);
+    if (containsHere(instance.id)) removeHere(instance.id);
+    return;
+  }
+  setHere(instance);
+  if (sensors_ && sensors_->contains(instance.id)) sensors_->remove(instance.id);
+}
+
+void TopLevel::remove(std::uint32_t id) {
+  if (containsHere(id)) {
+    removeHere(id);
+  } else if (sensors_ && sensors_->contains(id)) {
+    sensors_->remove(id);
+  } else {
+    throw InvalidArgument("top level: remove of instance " + std::to_string(id) + ", which is not present");
+  }
+}
+
+bool TopLevel::contains(std::uint32_t id) const { return containsHere(id) || (sensors_ && sensors_->contains(id)); }
+
+void TopLevel::setHere(const InstanceDesc& instance) {
   if (!state_) state_ = std::make_shared<State>();
   Prepared p = prepare(instance);
   State& s = *state_;
@@ -181,8 +243,7 @@ void TopLevel::set(const InstanceDesc& instance) {
   }
 }
 
-void TopLevel::remove(std::uint32_t id) {
-  if (!contains(id)) throw InvalidArgument("top level: remove of instance " + std::to_string(id) + ", which is not present");
+void TopLevel::removeHere(std::uint32_t id) {
   State& s = *state_;
   const auto it = s.pending_index.find(id);
   if (it != s.pending_index.end()) {
@@ -193,7 +254,7 @@ void TopLevel::remove(std::uint32_t id) {
   }
 }
 
-bool TopLevel::contains(std::uint32_t id) const {
+bool TopLevel::containsHere(std::uint32_t id) const {
   if (!state_) return false;
   const auto it = state_->pending_index.find(id);
   if (it != state_->pending_index.end()) return state_->pending[it->second].second.has_value();
@@ -226,11 +287,26 @@ void TopLevel::fullRebuild() {
 }
 
 void TopLevel::rebuild() {
+  if (sensors_) sensors_->rebuild();
   if (!state_) return;
   fullRebuild();
 }
 
 void TopLevel::commit() {
+  // Both levels commit even when one throws (each then keeps its own promise below).
+  std::exception_ptr failure;
+  if (sensors_) {
+    try {
+      sensors_->commit();
+    } catch (...) {
+      failure = std::current_exception();
+    }
+  }
+  commitHere();
+  if (failure) std::rethrow_exception(failure);
+}
+
+void TopLevel::commitHere() {
   if (!state_ || (state_->pending.empty() && !state_->needs_rebuild)) return;
   try {
     commitEdits();
@@ -612,12 +688,9 @@ void TopLevel::intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryCon
   intersectAllImpl(fromDouble(ray_ws).f, &ray_ws, hits, ctx, mask);
 }
 
-void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
-                                std::uint32_t mask) const {
-  ++ctx.stats.rays;
-  hits.clear();
-  if (!isQueryable(ray_ws) || tree_.empty()) return;
-  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
+void TopLevel::collectAllHere(const toplevel_detail::WorldRay& w, std::vector<Hit>& hits, QueryContext& ctx,
+                              std::uint32_t mask) const {
+  const Ray& ray_ws = w.f;
   const Record* records = state_->records.data();
   const SlotFilter* filters = state_->filters.data();
   std::vector<std::uint32_t> visited;  // every instance once, however many leaves hold it
@@ -639,6 +712,20 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
     }
     return false;
   });
+}
+
+void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
+                                std::uint32_t mask) const {
+  ++ctx.stats.rays;
+  hits.clear();
+  if (!isQueryable(ray_ws)) return;
+  if (!tree_.empty()) collectAllHere(ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws), hits, ctx, mask);
+  if (sensors_) {
+    std::vector<Hit> more;
+    sensors_->intersectAllImpl(ray_ws, ray_d, more, ctx, mask);
+    --ctx.stats.rays;  // one query, two levels
+    hits.insert(hits.end(), more.begin(), more.end());
+  }
   std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
     if (a.t != b.t) return a.t < b.t;
     if (a.instance_id != b.instance_id) return a.instance_id < b.instance_id;
@@ -647,7 +734,7 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
 }
 
 std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {
-  std::vector<std::uint32_t> out;
+  std::vector<std::uint32_t> out = sensors_ ? sensors_->instancesInRegion(planes, mask) : std::vector<std::uint32_t>{};
   if (tree_.empty()) return out;
   // A box is outside when its corner furthest along a plane's normal is still outside it.
   auto outside = [&](const Box& b) {
@@ -693,6 +780,7 @@ const Affine& TopLevel::objectFromWorld(std::uint32_t id) const {
     const auto it = state_->slot_of_id.find(id);
     if (it != state_->slot_of_id.end()) return state_->records[it->second].object_from_world;
   }
+  if (sensors_) return sensors_->objectFromWorld(id);
   throw InvalidArgument("top level: unknown instance " + std::to_string(id));
 }
 
@@ -701,6 +789,7 @@ Box TopLevel::instanceBounds(std::uint32_t id) const {
     const auto it = state_->slot_of_id.find(id);
     if (it != state_->slot_of_id.end()) return state_->boxes[it->second];
   }
+  if (sensors_) return sensors_->instanceBounds(id);
   throw InvalidArgument("top level: unknown instance " + std::to_string(id));
 }
 
@@ -722,7 +811,20 @@ TopLevelStats TopLevel::stats() const {
     st.last_commit_edits = state_->last_edits;
     st.last_commit_full_rebuild = state_->last_full;
   }
+  if (sensors_) {
+    st.sensor_instances = sensors_->live_count_;
+    st.sensor_tree = sensors_->tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
+  }
   return st;
+}
+
+Box TopLevel::bounds() const {
+  Box b = tree_.bounds;
+  if (sensors_ && !sensors_->tree_.empty()) {
+    const Box& o = sensors_->tree_.bounds;
+    b = tree_.empty() ? o : Box{glm::min(b.lo, o.lo), glm::max(b.hi, o.hi)};
+  }
+  return b;
 }
 
 std::size_t TopLevel::bytesPerInstance() {

@@ -1,11 +1,11 @@
 // The crossing query of light transport (TopLevel::intersectWithCrossings): one closest-hit
 // traversal of the top level that also collects sensor crossings and the media the ray passes.
 //
-// Sensors never lower t_best, so the traversal visits exactly the leaves a closest-hit query
-// visits. A sensor instance met in a leaf is asked for its crossing up to the current t_best (t
-// only decreases, so a crossing beyond it is beyond the final hit too); each instance is asked
-// once (mailbox, then a check of the crossings kept). After the traversal the crossings beyond
-// the final hit are dropped and the rest sorted. Media met along the way are kept and their
+// Sensors live in a level of their own (TopLevel::sensors_): the first traversal, of the other
+// instances, finds the closest blocking hit and the media; the second walks the sensors' tree only
+// up to that hit (a sensor behind a wall costs nothing). A sensor instance is asked for its
+// crossing up to the current limit; each instance is asked once (mailbox, then a check of the
+// crossings kept). The crossings beyond the final hit are dropped and the rest sorted. Media met along the way are kept and their
 // transmittance is applied segment by segment between the sorted crossings, so each medium is
 // integrated once over [tnear, t_hit].
 
@@ -34,7 +34,8 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   ++ctx.stats.rays;
   crossings.clear();
   SegmentEnd end;
-  if (!isQueryable(ray_ws) || tree_.empty()) return end;
+  const bool have_sensors = sensors_ && !sensors_->tree_.empty();
+  if (!isQueryable(ray_ws) || (tree_.empty() && !have_sensors)) return end;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
   const SlotFilter* filters = state_->filters.data();
@@ -46,10 +47,25 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   Hit best;
   best.t = ray_ws.tfar;
   const Record* winner = nullptr;
+  // A sensor's crossings within [tnear, t_reach] (world t). The mailbox holds 8 slots: an instance
+  // in many leaves may come back; it is asked once.
+  auto addCrossings = [&](const Record& rec, float t_reach) {
+    if (std::any_of(crossings.begin(), crossings.end(), [&](const SensorCrossing& c) { return c.hit.instance_id == rec.id; }))
+      return;
+    Ray ray_os = toObject(rec, w);
+    ray_os.tfar = t_reach;
+    scratch.clear();
+    rec.object->intersectAll(ray_os, scratch, ctx);
+    for (Hit& h : scratch) {
+      h.instance_id = rec.id;
+      h.ng = normalToWorld(rec, h.ng);
+      crossings.push_back({h, 1.0f});
+    }
+  };
   Mailbox mailbox;
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
-  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
+  if (!tree_.empty()) traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
     bool found = false;
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
@@ -73,18 +89,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
           found = true;
         }
       } else if (rec.role == ObjectRole::Sensor) {
-        // The mailbox holds 8 slots: an instance in many leaves may come back; ask it once.
-        if (std::any_of(crossings.begin(), crossings.end(), [&](const SensorCrossing& c) { return c.hit.instance_id == rec.id; }))
-          continue;
-        Ray ray_os = toObject(rec, w);
-        ray_os.tfar = t_reach;
-        scratch.clear();
-        rec.object->intersectAll(ray_os, scratch, ctx);
-        for (Hit& h : scratch) {
-          h.instance_id = rec.id;
-          h.ng = normalToWorld(rec, h.ng);
-          crossings.push_back({h, 1.0f});
-        }
+        addCrossings(rec, t_reach);
       } else if (std::find(media.begin(), media.end(), &rec) == media.end()) {
         media.push_back(&rec);
       }
@@ -99,6 +104,28 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   }
   const float t_end = winner ? best.t : ray_ws.tfar;
   const float t_keep = t_end * (1.0f + kCrossingSlack);
+
+  // The sensors' level, up to the blocking hit.
+  if (have_sensors && query.sensor_mask != 0) {
+    const State& ss = *sensors_->state_;
+    const Record* s_records = ss.records.data();
+    const SlotFilter* s_filters = ss.filters.data();
+    const Box* s_boxes = ss.boxes.data();
+    Mailbox s_mailbox;
+    float t_limit = t_keep;
+    (void)traverseKdTree<false>(sensors_->tree_, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
+      for (std::uint32_t i = begin; i < begin + count; ++i) {
+        const std::uint32_t slot = sensors_->tree_.prim_indices[i];
+        const SlotFilter f = s_filters[slot];
+        if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || !meetsBox(kray, s_boxes[slot], t_keep) ||
+            s_mailbox.seen(slot))
+          continue;
+        ++ctx.stats.instance_visits;
+        addCrossings(s_records[slot], t_keep);
+      }
+      return false;
+    });
+  }
   crossings.erase(std::remove_if(crossings.begin(), crossings.end(),
                                  [&](const SensorCrossing& c) { return !(c.hit.t <= t_keep); }),
                   crossings.end());

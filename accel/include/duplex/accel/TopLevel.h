@@ -4,6 +4,11 @@
 /// instances, built with the same builder and traversed with the same code as the bottom level,
 /// and updated incrementally when instances move, appear or disappear.
 ///
+/// Sensors (ObjectRole::Sensor) live in a second tree of their own, kept by the same rules: closest-
+/// hit, occlusion and transmittance queries never traverse it, so rendering costs the same with
+/// 10,000 sensors in the scene as without; intersectAll, instancesInRegion and the crossing query
+/// traverse both. An instance whose object changes role moves between the two on commit.
+///
 /// Lifecycle (after Embree's edit -> commit -> trace): set() / remove() record edits; commit()
 /// applies them to the tree; queries see the state of the last commit. Queries are const and may
 /// run from any number of threads at once, each with its own QueryContext, but not while
@@ -26,6 +31,10 @@
 #include <vector>
 
 namespace duplex {
+
+namespace toplevel_detail {
+struct WorldRay;  // the world ray in float and double (src/TopLevelState.h)
+}  // namespace toplevel_detail
 
 /// One instance as the top level sees it.
 struct InstanceDesc {
@@ -83,6 +92,10 @@ struct TopLevelStats {
   std::uint64_t subtree_rebuilds = 0;
   std::size_t last_commit_edits = 0;   ///< instances set or removed by the last commit
   bool last_commit_full_rebuild = false;
+  /// The sensors' own tree (see TopLevel): its instances and figures. `instances` and `tree` above
+  /// count the other instances only.
+  std::size_t sensor_instances = 0;
+  KdTreeStats sensor_tree;
 };
 
 class TopLevel {
@@ -167,16 +180,32 @@ class TopLevel {
   /// The id of the instance that tree().prim_indices entry `slot` refers to (for tests and tools);
   /// kInvalidId for a free slot.
   [[nodiscard]] std::uint32_t idAt(std::uint32_t slot) const;
-  /// World-space bounds of everything (last commit).
-  [[nodiscard]] Box bounds() const { return tree_.bounds; }
-  [[nodiscard]] std::size_t size() const { return live_count_; }
+  /// World-space bounds of everything, sensors included (last commit).
+  [[nodiscard]] Box bounds() const;
+  /// Instances of the last commit, sensors included.
+  [[nodiscard]] std::size_t size() const { return live_count_ + (sensors_ ? sensors_->size() : 0); }
+  /// The tree over every instance except sensors (idAt() maps its slots to ids).
   [[nodiscard]] const KdTree& tree() const { return tree_; }
+  /// The sensors' own level (nullptr before the first sensor arrives); its tree() and idAt() are
+  /// those of the sensor instances.
+  [[nodiscard]] const TopLevel* sensorLevel() const { return sensors_.get(); }
   [[nodiscard]] TopLevelStats stats() const;
   /// Bytes the top level holds per instance, excluding tree references (instance record and id map).
   [[nodiscard]] static std::size_t bytesPerInstance();
 
  private:
   struct State;  // instance records, id map, pending edits, leaf bookkeeping (TopLevel.cpp)
+  struct SensorLevelTag {};
+  TopLevel(const TopLevelConfig& config, SensorLevelTag);  // the nested level: keeps every role
+  [[nodiscard]] bool isSensorLevel() const { return !separate_sensors_; }
+  TopLevel& sensorLevelForEdit();
+  void buildHere(std::span<const InstanceDesc> instances, const KdBuildConfig& config);
+  void setHere(const InstanceDesc& instance);
+  void removeHere(std::uint32_t id);
+  [[nodiscard]] bool containsHere(std::uint32_t id) const;
+  void commitHere();
+  void collectAllHere(const toplevel_detail::WorldRay& w, std::vector<Hit>& hits, QueryContext& ctx,
+                      std::uint32_t mask) const;
   void fullRebuild();
   void install(KdTree&& tree);
   void commitEdits();
@@ -188,6 +217,9 @@ class TopLevel {
   KdTree tree_;
   std::size_t live_count_ = 0;
   std::shared_ptr<State> state_;
+  /// Sensor instances, in a nested level of their own (see the class comment).
+  std::unique_ptr<TopLevel> sensors_;
+  bool separate_sensors_ = true;  // false in the nested level itself
 };
 
 }  // namespace duplex

@@ -1,0 +1,217 @@
+/// \file TopLevelSensorsTest.cpp
+/// The top level keeps sensors in a level of their own. Randomised edits (add, remove, move, mask,
+/// and objects that change role from mesh to sensor and back) against a brute force over every
+/// instance: closest hits see no sensor, intersectAll sees everything, and the crossing query
+/// reports exactly the sensor crossings before the blocking hit.
+
+#include "duplex/accel/Crossing.h"
+#include "duplex/accel/RayGenerator.h"
+#include "duplex/accel/TopLevel.h"
+#include "duplex/objects/MeshObject.h"
+#include "duplex/sensors/SensorObject.h"
+
+#include "MeshChecks.h"
+#include "TestSupport.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <map>
+#include <random>
+#include <vector>
+
+namespace duplex {
+namespace {
+
+std::shared_ptr<const Object> squareSensor(const std::string& name, std::uint32_t bins) {
+  SensorSpec s;
+  s.width = 2.5;
+  s.height = 2.0;
+  s.nx = bins;
+  s.ny = bins;
+  s.two_sided = true;
+  return std::make_shared<const SensorObject>(name, s);
+}
+
+/// Brute force over the model: every instance asked directly in object space.
+struct Model {
+  std::map<std::uint32_t, InstanceDesc> instances;
+
+  [[nodiscard]] Hit closest(const Ray& ray, std::uint32_t mask) const {
+    Hit best;
+    best.t = ray.tfar;
+    QueryContext ctx;
+    bool found = false;
+    for (const auto& [id, d] : instances) {
+      if (!d.object->blocks() || (d.mask & mask) == 0) continue;
+      Ray r = d.world_from_object.inverse().apply(ray);
+      r.tfar = best.t;
+      Hit h = best;
+      if (d.object->intersect(r, h, ctx)) {
+        best = h;
+        best.instance_id = id;
+        found = true;
+      }
+    }
+    return found ? best : Hit{};
+  }
+  /// (instance id, bin, t) of every sensor crossing with t <= t_max, sorted by t then id.
+  [[nodiscard]] std::vector<Hit> crossings(const Ray& ray, float t_max, std::uint32_t mask) const {
+    std::vector<Hit> out;
+    QueryContext ctx;
+    for (const auto& [id, d] : instances) {
+      if (d.object->role() != ObjectRole::Sensor || (d.mask & mask) == 0) continue;
+      Ray r = d.world_from_object.inverse().apply(ray);
+      r.tfar = t_max;
+      std::vector<Hit> hits;
+      d.object->intersectAll(r, hits, ctx);
+      for (Hit& h : hits) {
+        h.instance_id = id;
+        out.push_back(h);
+      }
+    }
+    std::sort(out.begin(), out.end(), [](const Hit& a, const Hit& b) {
+      return a.t != b.t ? a.t < b.t : a.instance_id < b.instance_id;
+    });
+    return out;
+  }
+};
+
+Affine randomPlacement(std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
+  return Affine::fromRowMajor3x4(test::rotationScaleTranslation(axis, 3.0 * u(rng), glm::dvec3(0.8 + 0.3 * u(rng)),
+                                                                glm::dvec3(4.0 * u(rng), 4.0 * u(rng), 4.0 * u(rng))));
+}
+
+TEST(TopLevelSensors, RandomEditsWithRoleChangesAgreeWithBruteForce) {
+  const std::vector<std::shared_ptr<const Object>> objects{
+      test::buildChecked(test::icosphere(1)), test::buildChecked(test::boxMesh({-1, -0.5f, -0.3f}, {1, 0.5f, 0.3f})),
+      squareSensor("s1", 1), squareSensor("s4", 4)};
+  std::mt19937_64 rng(2024);
+  std::uniform_int_distribution<int> pick_object(0, 3);
+  Model model;
+  TopLevelConfig config;
+  config.min_incremental_instances = 4;  // exercise the incremental path of both levels
+  TopLevel top(config);
+  std::uint32_t next_id = 0;
+  auto describe = [&](std::uint32_t id) {
+    InstanceDesc d;
+    d.id = id;
+    d.object = objects[static_cast<std::size_t>(pick_object(rng))];
+    d.world_from_object = randomPlacement(rng);
+    d.mask = (rng() % 4 == 0) ? 2u : 1u | 2u;
+    return d;
+  };
+  std::vector<InstanceDesc> initial;
+  for (; next_id < 40; ++next_id) {
+    initial.push_back(describe(next_id));
+    model.instances[next_id] = initial.back();
+  }
+  top.build(initial);
+  std::size_t role_changes = 0, crossings_seen = 0, blocked_crossings = 0;
+  for (int round = 0; round < 60; ++round) {
+    const int edits = 1 + static_cast<int>(rng() % 8);
+    for (int e = 0; e < edits; ++e) {
+      const int kind = static_cast<int>(rng() % 4);
+      if (kind == 0 || model.instances.empty()) {  // add
+        const InstanceDesc d = describe(next_id++);
+        top.set(d);
+        model.instances[d.id] = d;
+      } else {
+        auto it = model.instances.begin();
+        std::advance(it, static_cast<long>(rng() % model.instances.size()));
+        if (kind == 1) {  // remove
+          top.remove(it->first);
+          model.instances.erase(it);
+        } else {  // move, or replace the object (possibly changing its role), and the mask
+          InstanceDesc d = describe(it->first);
+          if (kind == 2) d.object = it->second.object;
+          role_changes += d.object->role() != it->second.object->role();
+          top.set(d);
+          it->second = d;
+        }
+      }
+    }
+    top.commit();
+    ASSERT_EQ(top.size(), model.instances.size());
+    const std::size_t sensors = static_cast<std::size_t>(std::count_if(
+        model.instances.begin(), model.instances.end(), [](const auto& kv) { return kv.second.object->role() == ObjectRole::Sensor; }));
+    ASSERT_EQ(top.stats().sensor_instances, sensors);
+    ASSERT_EQ(top.stats().instances + sensors, model.instances.size());
+    for (const auto& [id, d] : model.instances) ASSERT_TRUE(top.contains(id)) << id;
+
+    const auto rays = randomRays(top.bounds(), 250, 900 + static_cast<std::uint64_t>(round));
+    QueryContext ctx;
+    std::vector<SensorCrossing> crossings;
+    std::vector<Hit> all;
+    for (const Ray& ray : rays) {
+      for (const std::uint32_t mask : {0xFFFFFFFFu, 1u}) {
+        const Hit expect = model.closest(ray, mask);
+        const Hit got = top.intersect(ray, ctx, mask);
+        ASSERT_EQ(got.valid(), expect.valid()) << "round " << round;
+        if (expect.valid()) {
+          ASSERT_EQ(got.instance_id, expect.instance_id);
+          ASSERT_NEAR(got.t, expect.t, 1e-4f * (1.0f + expect.t));
+        }
+        CrossingQuery q;
+        q.surface_mask = mask;
+        q.sensor_mask = mask;
+        const SegmentEnd end = top.intersectWithCrossings(ray, crossings, ctx, q);
+        ASSERT_EQ(end.hit.valid(), expect.valid());
+        if (expect.valid()) {
+          ASSERT_EQ(end.hit.instance_id, expect.instance_id);
+        }
+        const float t_end = expect.valid() ? expect.t : ray.tfar;
+        const auto want = model.crossings(ray, t_end * (1.0f + kCrossingSlack), mask);
+        ASSERT_EQ(crossings.size(), want.size()) << "round " << round;
+        for (std::size_t k = 0; k < want.size(); ++k) {
+          ASSERT_EQ(crossings[k].hit.instance_id, want[k].instance_id);
+          ASSERT_EQ(crossings[k].hit.prim_id, want[k].prim_id);
+          ASSERT_NEAR(crossings[k].hit.t, want[k].t, 1e-4f * (1.0f + want[k].t));
+        }
+        crossings_seen += want.size();
+        blocked_crossings += model.crossings(ray, ray.tfar, mask).size() - want.size();
+      }
+      // intersectAll sees both levels.
+      top.intersectAll(ray, all, ctx);
+      std::size_t sensor_hits = 0;
+      for (const Hit& h : all) sensor_hits += model.instances.at(h.instance_id).object->role() == ObjectRole::Sensor;
+      ASSERT_EQ(sensor_hits, model.crossings(ray, ray.tfar, 0xFFFFFFFFu).size());
+    }
+  }
+  // The randomised run exercised what it is meant to.
+  EXPECT_GT(role_changes, 20u);
+  EXPECT_GT(crossings_seen, 500u);
+  EXPECT_GT(blocked_crossings, 100u) << "no sensor was ever behind a surface";
+}
+
+TEST(TopLevelSensors, ClosestHitNeverTraversesTheSensors) {
+  // 2,000 sensors and one sphere: a closest-hit query visits the sphere's level only.
+  std::vector<InstanceDesc> instances;
+  const auto sensor = squareSensor("s", 2);
+  std::mt19937_64 rng(5);
+  for (std::uint32_t i = 0; i < 2000; ++i) instances.push_back({sensor, randomPlacement(rng), i, 0xFFFFFFFFu});
+  instances.push_back({test::buildChecked(test::icosphere(2)), Affine::identity(), 5000, 0xFFFFFFFFu});
+  TopLevel top;
+  top.build(instances);
+  EXPECT_EQ(top.stats().instances, 1u);
+  EXPECT_EQ(top.stats().sensor_instances, 2000u);
+  EXPECT_EQ(top.tree().prim_indices.size(), 1u);
+  ASSERT_NE(top.sensorLevel(), nullptr);
+  QueryContext ctx;
+  for (const Ray& ray : randomRays(top.bounds(), 500, 6)) (void)top.intersect(ray, ctx);
+  EXPECT_LE(ctx.stats.instance_visits, 500u) << "closest-hit queries reached sensor instances";
+  // The sensors' level is still complete: every sensor's box holds its own instance.
+  EXPECT_EQ(top.sensorLevel()->size(), 2000u);
+  EXPECT_FALSE(top.bounds().empty());
+  for (std::uint32_t i = 0; i < 2000; i += 97) EXPECT_TRUE(top.contains(i));
+  EXPECT_THROW(top.remove(99999), InvalidArgument);
+  // A duplicate id across the two levels is refused by build, which changes nothing.
+  instances.push_back({sensor, Affine::identity(), 5000, 0xFFFFFFFFu});
+  EXPECT_THROW(top.build(instances), InvalidArgument);
+  EXPECT_EQ(top.size(), 2001u);
+}
+
+}  // namespace
+}  // namespace duplex
