@@ -173,8 +173,14 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         e.roulette_w -= rr_level - w;
         w = rr_level;
       }
-      // Leave the surface on the side the new direction points to, off by a relative epsilon.
-      const double scale = std::max({1.0, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+      // Leave the surface on the side the new direction points to. The float hit's error grows
+      // with the magnitude of the primitive's coordinates (a few ulps of them, not of the hit
+      // point: a large triangle hit near the origin is off by ulps of its far vertices), so the
+      // offset scales with the hit instance's world box as well as with the point.
+      const Box box = top.instanceBounds(end.hit.instance_id);
+      const double scale = std::max({1.0, std::abs(p.x), std::abs(p.y), std::abs(p.z), std::abs(double(box.lo.x)),
+                                     std::abs(double(box.lo.y)), std::abs(double(box.lo.z)), std::abs(double(box.hi.x)),
+                                     std::abs(double(box.hi.y)), std::abs(double(box.hi.z))});
       origin = p + (glm::dot(next, n) >= 0.0 ? n : -n) * (1e-5 * scale);
       dir = glm::normalize(next);
     }

@@ -300,6 +300,34 @@ TEST(SensorRun, LambertianAreaLightToAParallelCoaxialDisk) {
   EXPECT_LT(s.relative_stderr, 0.01);
 }
 
+TEST(SensorRun, DielectricReflectsTheFresnelFraction) {
+  // A collimated beam onto a large glass interface (ior 1.5) at z = 0; a one-sided sensor facing
+  // down at z = 1 records only upward rays: the reflected fraction, Fresnel's R for unpolarised
+  // light: 0.04 at normal incidence, 0.0892 at 60 degrees, 0.253 at 75.
+  for (const double deg : {0.0, 30.0, 45.0, 60.0, 75.0}) {
+    Fixture f;
+    f.add(quad(500.0, "glass"), Affine::identity(), "glass", Material{MaterialType::Dielectric, 0.0, 1.5});
+    f.add(sensor(1000.0, 1000.0, 1, 1, /*two_sided=*/false, "sky"), facing({0, 0, -1}, {0, 0, 1}), "sky");
+    const double th = deg * kPi / 180.0;
+    Light beam;
+    beam.type = LightType::Directional;
+    beam.name = "beam";
+    beam.position = {-std::sin(th), 0.0, std::cos(th)};  // the whole disk above the glass
+    beam.direction = {std::sin(th), 0.0, -std::cos(th)};
+    beam.radius = 0.2;
+    beam.power_w = 1.0;
+    SensorScene scene = f.scene({beam});
+    SensorRun run(scene);
+    (void)run.runUntil(200000);
+    const SensorResult s = run.results().sensors[0];
+    const double n = 1.5, ci = std::cos(th), ct = std::sqrt(1.0 - std::sin(th) * std::sin(th) / (n * n));
+    const double rs = (ci - n * ct) / (ci + n * ct), rp = (n * ci - ct) / (n * ci + ct);
+    const double fresnel = 0.5 * (rs * rs + rp * rp);
+    EXPECT_LT(std::abs(s.total_flux_w - fresnel), 4.0 * s.total_flux_stderr_w) << deg << " deg: " << s.total_flux_w << " vs " << fresnel;
+    EXPECT_GT(s.total_flux_w, 0.0);
+  }
+}
+
 // Six two-sided sensors closing the cube [-1, 1]^3 around a point source.
 void closeBox(Fixture& f) {
   const glm::dvec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
