@@ -1,18 +1,28 @@
-// Kd-tree construction: binned SAH refined to exact events, perfect splits, TBB subtree tasks.
+// Kd-tree construction: binned SAH with exact empty-space cuts, exact events where they matter,
+// perfect splits, TBB subtree tasks and parallel partitions.
 //
-// Why binned + refinement rather than the full Wald & Havran event sweep: the sweep needs the
-// events of all three axes kept sorted through every split (three event lists per node, merged on
-// each partition), which costs memory traffic and is hard to run in parallel. Binning is one
-// streaming pass per node; the refinement then sweeps only the exact events that fall into the two
-// bins around the best bin boundary, so the chosen plane sits on a primitive bound just like in
-// the exact sweep whenever the exact optimum lies in that window (almost always: the binned cost
-// is a close upper envelope of the exact one). Both are O(N log N) overall.
+// Cost model of the build. A kd-tree with empty-space cuts is deep (koala: 26 levels for 100k
+// triangles, half the inner nodes cut off empty space), and every level used to cost three passes
+// over its references (binning, collecting the exact events near the binned plane, the partition)
+// plus, in nodes of up to 12 references, a sorted sweep of every axis. Now:
+//  - The partition of a node bins its children on the fly (the child boxes are known before the
+//    partition) and keeps their exact extent (min / max of the clipped bounds), so binning costs
+//    no pass of its own.
+//  - Empty-space cuts are taken at that exact extent: no reference moves, none is clipped, the
+//    bins stay valid, so a chain of up to six such cuts costs no pass at all.
+//  - The binned plane is refined to the best exact event in the two bins around it (one pass that
+//    collects the few events there; KdBuildConfig::refine_max bounds the node size), so the plane
+//    sits on a primitive bound as in Wald & Havran's event sweep. Only nodes of at most
+//    exact_sweep_max references sweep every event, and a single reference has only its faces.
+//  - Partitions of large nodes run in parallel chunks (concatenated in order: the tree does not
+//    depend on the thread count); subtrees are TBB tasks.
 
 #include "duplex/accel/KdTreeBuilder.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/Log.h"
 
+#include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
 
 #include <emmintrin.h>
@@ -20,6 +30,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 
 namespace duplex {
@@ -27,14 +38,19 @@ namespace duplex {
 namespace {
 
 // Bounds as plain arrays: the builder indexes by a run-time axis everywhere, and GLM's
-// operator[] is a switch.
+// operator[] is a switch. 28 bytes; the SSE loads of lo[0..3] and hi[0..3] read one float past
+// each triple (hi[0], id), which the code ignores.
 struct PrimRef {
   float lo[3], hi[3];  // primitive bounds clipped to the current node
   std::uint32_t id;
 
+  PrimRef() = default;
   PrimRef(const Box& b, std::uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z}, hi{b.hi.x, b.hi.y, b.hi.z}, id(i) {}
   [[nodiscard]] Box box() const { return Box({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}); }
 };
+static_assert(sizeof(PrimRef) == 28);
+
+using RefVec = std::vector<PrimRef>;
 
 struct Subtree {
   std::vector<KdNode> nodes;
@@ -46,62 +62,217 @@ struct Split {
   float pos = 0.0f;
   float cost = std::numeric_limits<float>::infinity();
   bool planar_left = true;  // primitives lying in the plane go to the lower child
+  // References on each side (planar ones on their side); exact when `exact`, else the binned
+  // estimate (rounding of bin indices may move a reference between neighbouring bins).
+  std::size_t n_lower = 0, n_upper = 0;
+  bool exact = false;
 };
 
-constexpr int kBins = 32;
+constexpr int kMaxBins = 32;
+
+int binsFor(std::size_t n) { return n < 64 ? 8 : (n < 1024 ? 16 : kMaxBins); }
+
+// Exact extent of a set of references.
+struct Extent {
+  float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                 std::numeric_limits<float>::infinity()};
+  float hi[3] = {-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                 -std::numeric_limits<float>::infinity()};
+  void merge(const Extent& o) {
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], o.lo[k]);
+      hi[k] = std::max(hi[k], o.hi[k]);
+    }
+  }
+};
+
+// SSE accumulator of an Extent.
+struct ExtentAcc {
+  __m128 lo = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  __m128 hi = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+  void add(__m128 rlo, __m128 rhi) {
+    lo = _mm_min_ps(lo, rlo);
+    hi = _mm_max_ps(hi, rhi);
+  }
+  [[nodiscard]] Extent extent() const {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, lo);
+    _mm_store_ps(h, hi);
+    Extent e;
+    for (int k = 0; k < 3; ++k) e.lo[k] = l[k], e.hi[k] = h[k];
+    return e;
+  }
+};
+
+// Counts of reference starts and ends per bin on each axis, over a frame (a box containing every
+// counted reference). Bin boundary j of an axis is frame_lo + (frame_hi - frame_lo) * j / count.
+struct Bins {
+  int count = 0;
+  float frame_lo[3] = {}, frame_hi[3] = {};
+  __m128 sse_lo, sse_scale, sse_max;
+  std::uint32_t start[3][kMaxBins], end[3][kMaxBins];
+
+  void init(const float lo[3], const float hi[3], int bins) {
+    count = bins;
+    float scale[3];
+    for (int k = 0; k < 3; ++k) {
+      frame_lo[k] = lo[k];
+      frame_hi[k] = hi[k];
+      scale[k] = hi[k] > lo[k] ? static_cast<float>(bins) / (hi[k] - lo[k]) : 0.0f;
+    }
+    sse_lo = _mm_setr_ps(lo[0], lo[1], lo[2], 0.0f);
+    sse_scale = _mm_setr_ps(scale[0], scale[1], scale[2], 0.0f);  // the fourth lane bins to 0
+    sse_max = _mm_set1_ps(static_cast<float>(bins - 1));
+    std::fill_n(&start[0][0], 3 * kMaxBins, 0u);
+    std::fill_n(&end[0][0], 3 * kMaxBins, 0u);
+  }
+  // Bin indices of the three axes at once. Clamping in float before the conversion keeps values
+  // outside the frame (rounding at its faces) and the ignored fourth lane defined.
+  void add(__m128 rlo, __m128 rhi) {
+    alignas(16) std::int32_t b0[4], b1[4];
+    const __m128 f0 = _mm_mul_ps(_mm_sub_ps(rlo, sse_lo), sse_scale);
+    const __m128 f1 = _mm_mul_ps(_mm_sub_ps(rhi, sse_lo), sse_scale);
+    _mm_store_si128(reinterpret_cast<__m128i*>(b0), _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), sse_max)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(b1), _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), sse_max)));
+    for (int k = 0; k < 3; ++k) {
+      ++start[k][b0[k]];
+      ++end[k][b1[k]];
+    }
+  }
+  void merge(const Bins& o) {
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < count; ++j) {
+        start[k][j] += o.start[k][j];
+        end[k][j] += o.end[k][j];
+      }
+  }
+  [[nodiscard]] float boundary(int axis, int j) const {
+    return frame_lo[axis] + (frame_hi[axis] - frame_lo[axis]) * (static_cast<float>(j) / static_cast<float>(count));
+  }
+};
+
+// What a partition produces for one child: its references (clipped to its box), their exact
+// extent, and (when the child is large enough to be binned) their bins over the child's box
+// intersected with the parent's extent.
+struct Child {
+  Box box;
+  RefVec refs;
+  Extent extent;
+  bool binned = false;
+  Bins bins;
+};
+
+// SAH cost terms of one node: the surface area of a child is 2 (ab + len (a + b)) where a, b are
+// the node's extents on the other two axes and len its extent on the split axis.
+struct NodeGeometry {
+  float lo[3], hi[3];
+  float ab[3], a_plus_b[3];
+  float inv_half_area;
+  explicit NodeGeometry(const Box& box) {
+    lo[0] = box.lo.x, lo[1] = box.lo.y, lo[2] = box.lo.z;
+    hi[0] = box.hi.x, hi[1] = box.hi.y, hi[2] = box.hi.z;
+    const float e[3] = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+    for (int axis = 0; axis < 3; ++axis) {
+      const float a = e[(axis + 1) % 3], b = e[(axis + 2) % 3];
+      ab[axis] = a * b;
+      a_plus_b[axis] = a + b;
+    }
+    const float half_area = e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
+    inv_half_area = half_area > 0.0f ? 1.0f / half_area : 0.0f;
+  }
+};
+
+// References per chunk of a parallel partition, and the node size from which it is used.
+constexpr std::size_t kPartitionChunk = 16384;
 
 class Builder {
  public:
-  Builder(const KdClipFunction& clip, const KdBuildConfig& config, int max_depth)
-      : clip_(clip), cfg_(config), max_depth_(max_depth) {}
+  // Exactly one of `clip` and `split` is non-null.
+  Builder(const KdClipFunction* clip, const KdSplitFunction* split, const KdBuildConfig& config, int max_depth)
+      : clip_(clip), split_(split), cfg_(config), max_depth_(max_depth) {}
 
-  void build(std::vector<PrimRef>&& refs, const Box& box, int depth, int bad_refines, Subtree& out) const {
-    const std::size_t n = refs.size();
-    Split split;
-    if (n > 0 && depth < max_depth_) {
-      if (cfg_.heuristic == KdHeuristic::Sah) {
-        split = findSahSplit(refs, box);
-        const float leaf_cost = cfg_.intersection_cost * static_cast<float>(n);
-        if (split.axis >= 0 && split.cost > leaf_cost) ++bad_refines;
-        // As in pbrt: accept a few splits that look worse than a leaf, since later splits may
-        // pay for them, but stop when the estimate is clearly hopeless.
-        if ((split.cost > 4.0f * leaf_cost && n < 16) || bad_refines >= 3) split.axis = -1;
-      } else if (n > cfg_.max_leaf_size) {
-        split = findSimpleSplit(refs, box);
+  // Builds the subtree of a node with references `refs` (clipped to `box`), their exact extent
+  // `extent`, and optionally their bins (`bins`, may be null), appending it to `out`.
+  void build(RefVec&& refs, Box box, const Bins* bins, const Extent& extent, int depth, int bad_refines,
+             Subtree& out) const {
+    // Nodes whose upper child is an empty leaf still to be written after their lower subtree.
+    std::array<std::uint32_t, 64> pending;  // depth <= 60
+    int n_pending = 0;
+    Bins own;  // bins made here when the parent did not bin this node (or they are too coarse)
+    for (;;) {
+      const std::size_t n = refs.size();
+      Split split;
+      if (n > 0 && depth < max_depth_) {
+        if (cfg_.heuristic == KdHeuristic::Sah) {
+          split = findSahSplit(refs, box, bins, own, extent);
+          const float leaf_cost = cfg_.intersection_cost * static_cast<float>(n);
+          if (split.axis >= 0 && split.cost > leaf_cost) ++bad_refines;
+          // As in pbrt: accept a few splits that look worse than a leaf, since later splits may
+          // pay for them, but stop when the estimate is clearly hopeless.
+          if ((split.cost > 4.0f * leaf_cost && n < 16) || bad_refines >= 3) split.axis = -1;
+        } else if (n > cfg_.max_leaf_size) {
+          split = findSimpleSplit(refs, box);
+        }
       }
-    }
-    if (split.axis < 0) {
-      makeLeaf(refs, out);
-      return;
-    }
+      if (split.axis < 0) {
+        makeLeaf(refs, out);
+        break;
+      }
+      const std::size_t self = out.nodes.size();
+      out.nodes.push_back(KdNode::inner(split.axis, split.pos, 0));
 
-    Box lower_box = box, upper_box = box;
-    lower_box.hi[split.axis] = split.pos;
-    upper_box.lo[split.axis] = split.pos;
-    std::vector<PrimRef> lower, upper;
-    partition(refs, split, lower_box, upper_box, lower, upper);
-    std::vector<PrimRef>().swap(refs);  // release before recursing
+      if (split.exact && (split.n_lower == 0 || split.n_upper == 0)) {
+        // Empty-space cut: every reference lies on one side (planar ones go there too), so none
+        // moves or is clipped and the bins remain those of the remaining node.
+        if (split.n_lower == 0) {
+          out.nodes.push_back(KdNode::leaf(static_cast<std::uint32_t>(out.prims.size()), 0));
+          out.nodes[self].setUpperChild(static_cast<std::uint32_t>(out.nodes.size()));
+          box.lo[split.axis] = split.pos;
+        } else {
+          pending[static_cast<std::size_t>(n_pending++)] = static_cast<std::uint32_t>(self);
+          box.hi[split.axis] = split.pos;
+        }
+        ++depth;
+        continue;
+      }
 
-    const std::size_t self = out.nodes.size();
-    out.nodes.push_back(KdNode::inner(split.axis, split.pos, 0));
-    if (cfg_.parallel_threshold > 0 && n >= cfg_.parallel_threshold) {
-      Subtree lo_tree, hi_tree;
-      tbb::task_group tasks;
-      tasks.run([&] { build(std::move(lower), lower_box, depth + 1, bad_refines, lo_tree); });
-      build(std::move(upper), upper_box, depth + 1, bad_refines, hi_tree);
-      tasks.wait();
-      append(lo_tree, out);
-      out.nodes[self].setUpperChild(static_cast<std::uint32_t>(out.nodes.size()));
-      append(hi_tree, out);
-    } else {
-      build(std::move(lower), lower_box, depth + 1, bad_refines, out);
-      out.nodes[self].setUpperChild(static_cast<std::uint32_t>(out.nodes.size()));
-      build(std::move(upper), upper_box, depth + 1, bad_refines, out);
+      Child lower, upper;
+      lower.box = box;
+      upper.box = box;
+      lower.box.hi[split.axis] = split.pos;
+      upper.box.lo[split.axis] = split.pos;
+      partition(refs, split, extent, lower, upper);
+      RefVec().swap(refs);  // release before recursing
+
+      if (cfg_.parallel_threshold > 0 && n >= cfg_.parallel_threshold) {
+        Subtree lo_tree, hi_tree;
+        tbb::task_group tasks;
+        tasks.run([&] { buildChild(lower, depth + 1, bad_refines, lo_tree); });
+        buildChild(upper, depth + 1, bad_refines, hi_tree);
+        tasks.wait();
+        append(lo_tree, out);
+        out.nodes[self].setUpperChild(static_cast<std::uint32_t>(out.nodes.size()));
+        append(hi_tree, out);
+      } else {
+        buildChild(lower, depth + 1, bad_refines, out);
+        out.nodes[self].setUpperChild(static_cast<std::uint32_t>(out.nodes.size()));
+        buildChild(upper, depth + 1, bad_refines, out);
+      }
+      break;
+    }
+    while (n_pending > 0) {
+      const std::uint32_t node = pending[static_cast<std::size_t>(--n_pending)];
+      out.nodes[node].setUpperChild(static_cast<std::uint32_t>(out.nodes.size()));
+      out.nodes.push_back(KdNode::leaf(static_cast<std::uint32_t>(out.prims.size()), 0));
     }
   }
 
  private:
-  static void makeLeaf(const std::vector<PrimRef>& refs, Subtree& out) {
+  void buildChild(Child& c, int depth, int bad_refines, Subtree& out) const {
+    build(std::move(c.refs), c.box, c.binned ? &c.bins : nullptr, c.extent, depth, bad_refines, out);
+  }
+
+  static void makeLeaf(const RefVec& refs, Subtree& out) {
     out.nodes.push_back(KdNode::leaf(static_cast<std::uint32_t>(out.prims.size()), static_cast<std::uint32_t>(refs.size())));
     for (const PrimRef& r : refs) out.prims.push_back(r.id);
   }
@@ -121,26 +292,6 @@ class Builder {
     out.prims.insert(out.prims.end(), sub.prims.begin(), sub.prims.end());
   }
 
-  // SAH cost terms of one node: the surface area of a child is 2 (ab + len (a + b)) where a, b
-  // are the node's extents on the other two axes and len its extent on the split axis.
-  struct NodeGeometry {
-    float lo[3], hi[3];
-    float ab[3], a_plus_b[3];
-    float inv_half_area;
-    explicit NodeGeometry(const Box& box) {
-      lo[0] = box.lo.x, lo[1] = box.lo.y, lo[2] = box.lo.z;
-      hi[0] = box.hi.x, hi[1] = box.hi.y, hi[2] = box.hi.z;
-      const float e[3] = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
-      for (int axis = 0; axis < 3; ++axis) {
-        const float a = e[(axis + 1) % 3], b = e[(axis + 2) % 3];
-        ab[axis] = a * b;
-        a_plus_b[axis] = a + b;
-      }
-      const float half_area = e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
-      inv_half_area = half_area > 0.0f ? 1.0f / half_area : 0.0f;
-    }
-  };
-
   float splitCost(const NodeGeometry& g, int axis, float pos, std::size_t n_lower, std::size_t n_upper) const {
     const float p_lower = (g.ab[axis] + (pos - g.lo[axis]) * g.a_plus_b[axis]) * g.inv_half_area;
     const float p_upper = (g.ab[axis] + (g.hi[axis] - pos) * g.a_plus_b[axis]) * g.inv_half_area;
@@ -150,13 +301,37 @@ class Builder {
     return cost;
   }
 
-  // Nodes this small are swept exactly on all axes; binning would cost more than it saves.
-  static constexpr std::size_t kExactSweepMax = 12;
+  // Bins are too coarse for the node when its references span less than half of them on each
+  // axis: a chain of empty-space cuts shrank the node inside its parent's frame.
+  static bool tooCoarse(const Bins& b, const Extent& e) {
+    for (int k = 0; k < 3; ++k) {
+      const float w = b.frame_hi[k] - b.frame_lo[k];
+      if (w > 0.0f && (e.hi[k] - e.lo[k]) >= 0.5f * w) return false;
+    }
+    return true;
+  }
 
-  Split findSahSplit(const std::vector<PrimRef>& refs, const Box& box) const {
+  Split findSahSplit(const RefVec& refs, const Box& box, const Bins*& bins, Bins& own, const Extent& extent) const {
     const NodeGeometry g(box);
     if (!(g.inv_half_area > 0.0f)) return {};
-    if (refs.size() <= kExactSweepMax) {
+    const std::size_t n = refs.size();
+    if (n == 1) {
+      // One reference (most top-level leaves): the only useful planes are its faces.
+      const PrimRef& r = refs[0];
+      Split best;
+      for (int axis = 0; axis < 3; ++axis) {
+        if (r.lo[axis] > g.lo[axis] && r.lo[axis] < g.hi[axis]) {
+          const float cost = splitCost(g, axis, r.lo[axis], 0, 1);
+          if (cost < best.cost) best = {axis, r.lo[axis], cost, false, 0, 1, true};
+        }
+        if (r.hi[axis] < g.hi[axis] && r.hi[axis] > g.lo[axis]) {
+          const float cost = splitCost(g, axis, r.hi[axis], 1, 0);
+          if (cost < best.cost) best = {axis, r.hi[axis], cost, true, 1, 0, true};
+        }
+      }
+      return best;
+    }
+    if (n <= cfg_.exact_sweep_max) {
       Split best;
       for (int axis = 0; axis < 3; ++axis) {
         if (!(g.hi[axis] > g.lo[axis])) continue;
@@ -165,111 +340,114 @@ class Builder {
       }
       return best;
     }
-
-    // 1. Binned estimate on every axis with a positive extent, one pass over the references.
-    // Fewer bins for smaller nodes: the window refinement below recovers the exact plane, and
-    // evaluating 3 x 31 candidates dominated the build time of the many mid-sized nodes.
-    const int bins = refs.size() < 64 ? 8 : (refs.size() < 1024 ? 16 : kBins);
-    float scale[3];
-    for (int axis = 0; axis < 3; ++axis)
-      scale[axis] = g.hi[axis] > g.lo[axis] ? static_cast<float>(bins) / (g.hi[axis] - g.lo[axis]) : 0.0f;
-    std::array<std::array<std::uint32_t, kBins>, 3> starts_bin{}, ends_bin{};
-    // Bin indices of the three axes at once (SSE2): this loop runs over every reference of every
-    // node and was a fifth of the build. Clamping in float before the conversion also keeps
-    // out-of-range values (rounding at the box faces) defined.
-    const __m128 node_lo = _mm_setr_ps(g.lo[0], g.lo[1], g.lo[2], 0.0f);
-    const __m128 node_scale = _mm_setr_ps(scale[0], scale[1], scale[2], 0.0f);
-    const __m128 max_bin = _mm_set1_ps(static_cast<float>(bins - 1));
-    alignas(16) std::int32_t b0[4], b1[4];
-    for (const PrimRef& r : refs) {
-      // lo[0..2] then hi[0]; hi[0..2] then the id: the fourth lanes are scaled by 0 and ignored.
-      const __m128 lo = _mm_loadu_ps(r.lo);
-      const __m128 hi = _mm_loadu_ps(r.hi);
-      const __m128 f0 = _mm_mul_ps(_mm_sub_ps(lo, node_lo), node_scale);
-      const __m128 f1 = _mm_mul_ps(_mm_sub_ps(hi, node_lo), node_scale);
-      _mm_store_si128(reinterpret_cast<__m128i*>(b0),
-                      _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), max_bin)));
-      _mm_store_si128(reinterpret_cast<__m128i*>(b1),
-                      _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), max_bin)));
-      for (int axis = 0; axis < 3; ++axis) {
-        ++starts_bin[axis][b0[axis]];
-        ++ends_bin[axis][b1[axis]];
+    if (bins == nullptr || tooCoarse(*bins, extent)) {
+      // Over the references' extent (inside the box), so that every bin can hold a plane.
+      float lo[3], hi[3];
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::max(g.lo[k], extent.lo[k]);
+        hi[k] = std::min(g.hi[k], extent.hi[k]);
       }
+      own.init(lo, hi, binsFor(n));
+      for (const PrimRef& r : refs) own.add(_mm_loadu_ps(r.lo), _mm_loadu_ps(r.hi));
+      bins = &own;
     }
+    const Bins& b = *bins;
+
     Split best;
-    int best_bin = -1;
+    int best_bin = -1;  // bin boundary of the best split; -1 for an empty-space cut at the extent
     for (int axis = 0; axis < 3; ++axis) {
       const float lo = g.lo[axis], hi = g.hi[axis];
       if (!(hi > lo)) continue;
-      std::size_t n_lower = 0, n_upper = refs.size();
-      for (int j = 1; j < bins; ++j) {
-        n_lower += starts_bin[axis][j - 1];
-        n_upper -= ends_bin[axis][j - 1];
-        const float pos = lo + (hi - lo) * (static_cast<float>(j) / static_cast<float>(bins));
-        if (!(pos > lo && pos < hi)) continue;
+      // Empty-space cuts at the exact extent: no reference below (above) the plane, and those
+      // lying in it go to the occupied side.
+      if (extent.lo[axis] > lo && extent.lo[axis] < hi) {
+        const float cost = splitCost(g, axis, extent.lo[axis], 0, n);
+        if (cost < best.cost) best = {axis, extent.lo[axis], cost, false, 0, n, true}, best_bin = -1;
+      }
+      if (extent.hi[axis] < hi && extent.hi[axis] > lo) {
+        const float cost = splitCost(g, axis, extent.hi[axis], n, 0);
+        if (cost < best.cost) best = {axis, extent.hi[axis], cost, true, n, 0, true}, best_bin = -1;
+      }
+      std::size_t n_lower = 0, n_upper = n;
+      for (int j = 1; j < b.count; ++j) {
+        n_lower += b.start[axis][j - 1];
+        n_upper -= b.end[axis][j - 1];
+        const float pos = b.boundary(axis, j);
+        // A plane that every reference straddles separates nothing; it only duplicates.
+        if (!(pos > lo && pos < hi) || (n_lower == n && n_upper == n)) continue;
         const float cost = splitCost(g, axis, pos, n_lower, n_upper);
         if (cost < best.cost) {
-          best = {axis, pos, cost, true};
+          best = {axis, pos, cost, true, n_lower, n_upper, false};
           best_bin = j;
         }
       }
     }
-    if (best.axis < 0) return best;
+    if (best.axis < 0 || best_bin < 0 || n > cfg_.refine_max) return best;
 
-    // 2. Exact events in the window of the two bins around the chosen boundary. Only primitive
-    // bounds are candidates (the SAH optimum lies on one): a bin boundary that is not an event
-    // would let empty-space splits go on forever around a single primitive. When no event falls
-    // into the window, the whole axis is swept.
+    // Exact events in the window of the two bins around the chosen boundary: the plane then sits
+    // on a primitive bound, as in an exact sweep, whenever the exact optimum lies in the window.
     const int axis = best.axis;
-    const float lo = g.lo[axis], hi = g.hi[axis];
-    const float win_lo = std::max(lo, lo + (hi - lo) * (static_cast<float>(best_bin - 1) / static_cast<float>(bins)));
-    const float win_hi = std::min(hi, lo + (hi - lo) * (static_cast<float>(best_bin + 1) / static_cast<float>(bins)));
-    Split refined = sweepEvents(refs, g, axis, win_lo, win_hi);
-    if (refined.axis < 0) refined = sweepEvents(refs, g, axis, lo, hi);
-    return refined;
+    const float win_lo = std::max(g.lo[axis], b.boundary(axis, best_bin - 1));
+    const float win_hi = std::min(g.hi[axis], b.boundary(axis, best_bin + 1));
+    // When no event falls into the window the binned plane stays (it separates some references:
+    // planes that separate nothing are no candidates).
+    const Split refined = sweepEvents(refs, g, axis, win_lo, win_hi);
+    return refined.axis >= 0 ? refined : best;
   }
 
   // Exact SAH over the events (clipped bounds) of `axis` that lie in [win_lo, win_hi], after
   // Wald & Havran: a primitive counts below a plane p if its lower bound is < p, above if its
   // upper bound is > p; a primitive lying in p goes to the cheaper side.
-  Split sweepEvents(const std::vector<PrimRef>& refs, const NodeGeometry& g, int axis, float win_lo, float win_hi) const {
+  Split sweepEvents(const RefVec& refs, const NodeGeometry& g, int axis, float win_lo, float win_hi) const {
     std::size_t below_window = 0, above_window = 0;  // lo < win_lo, hi > win_hi
-    // Per-thread scratch: this runs once or three times per node, and allocation dominated.
-    thread_local std::vector<float> starts, ends, planars;
-    starts.clear();
-    ends.clear();
-    planars.clear();
+    // Scratch for the three event lists: on the stack for small nodes (the many tiny nodes of a
+    // top level), per thread otherwise (allocation dominated).
+    const std::size_t n = refs.size();
+    constexpr std::size_t kStack = 32;
+    float stack_events[3 * kStack];
+    float* events = stack_events;
+    if (n > kStack) {
+      thread_local std::vector<float> scratch;
+      if (scratch.size() < 3 * n) scratch.resize(3 * n);
+      events = scratch.data();
+    }
+    float* const starts = events;
+    float* const ends = events + n;
+    float* const planars = events + 2 * n;
+    std::size_t n_starts = 0, n_ends = 0, n_planars = 0;
     for (const PrimRef& r : refs) {
       const float a = r.lo[axis], b = r.hi[axis];
-      if (a < win_lo) ++below_window; else if (a <= win_hi) starts.push_back(a);
-      if (b > win_hi) ++above_window; else if (b >= win_lo) ends.push_back(b);
-      if (a == b && a >= win_lo && a <= win_hi) planars.push_back(a);
+      if (a < win_lo) ++below_window; else if (a <= win_hi) starts[n_starts++] = a;
+      if (b > win_hi) ++above_window; else if (b >= win_lo) ends[n_ends++] = b;
+      if (a == b && a >= win_lo && a <= win_hi) planars[n_planars++] = a;
     }
     Split best;
-    if (starts.empty() && ends.empty()) return best;
-    std::sort(starts.begin(), starts.end());
-    std::sort(ends.begin(), ends.end());
-    std::sort(planars.begin(), planars.end());
+    if (n_starts == 0 && n_ends == 0) return best;
+    std::sort(starts, starts + n_starts);
+    std::sort(ends, ends + n_ends);
+    std::sort(planars, planars + n_planars);
     const float lo = g.lo[axis], hi = g.hi[axis];
     std::size_t i_start = 0, i_end = 0, i_planar = 0;
     // Merge the two sorted lists; each distinct value is one candidate plane.
-    while (i_start < starts.size() || i_end < ends.size()) {
-      const float p = i_end >= ends.size() ? starts[i_start]
-                      : i_start >= starts.size() ? ends[i_end]
-                                                 : std::min(starts[i_start], ends[i_end]);
-      while (i_planar < planars.size() && planars[i_planar] < p) ++i_planar;
+    while (i_start < n_starts || i_end < n_ends) {
+      const float p = i_end >= n_ends ? starts[i_start]
+                      : i_start >= n_starts ? ends[i_end]
+                                            : std::min(starts[i_start], ends[i_end]);
+      while (i_planar < n_planars && planars[i_planar] < p) ++i_planar;
       std::size_t n_planar = 0;
-      while (i_planar + n_planar < planars.size() && planars[i_planar + n_planar] == p) ++n_planar;
-      const std::size_t n_lower = below_window + i_start;                // lo < p
-      while (i_end < ends.size() && ends[i_end] <= p) ++i_end;
-      const std::size_t n_upper = above_window + (ends.size() - i_end);  // hi > p
+      while (i_planar + n_planar < n_planars && planars[i_planar + n_planar] == p) ++n_planar;
+      const std::size_t n_lower = below_window + i_start;          // lo < p
+      while (i_end < n_ends && ends[i_end] <= p) ++i_end;
+      const std::size_t n_upper = above_window + (n_ends - i_end);  // hi > p
       if (p > lo && p < hi) {
         const float cost_l = splitCost(g, axis, p, n_lower + n_planar, n_upper);
-        const float cost_u = splitCost(g, axis, p, n_lower, n_upper + n_planar);
-        if (cost_l < best.cost) best = {axis, p, cost_l, true};
-        if (cost_u < best.cost) best = {axis, p, cost_u, false};
+        if (cost_l < best.cost) best = {axis, p, cost_l, true, n_lower + n_planar, n_upper, true};
+        if (n_planar > 0) {
+          const float cost_u = splitCost(g, axis, p, n_lower, n_upper + n_planar);
+          if (cost_u < best.cost) best = {axis, p, cost_u, false, n_lower, n_upper + n_planar, true};
+        }
       }
-      while (i_start < starts.size() && starts[i_start] <= p) ++i_start;
+      while (i_start < n_starts && starts[i_start] <= p) ++i_start;
     }
     return best;
   }
@@ -278,7 +456,7 @@ class Builder {
   // than the node: otherwise the split only duplicates references (overlapping boxes would then
   // grow the tree to the depth limit). The SAH rejects such splits by cost; these heuristics need
   // the explicit check.
-  Split findSimpleSplit(const std::vector<PrimRef>& refs, const Box& box) const {
+  Split findSimpleSplit(const RefVec& refs, const Box& box) const {
     const glm::vec3 e = box.extent();
     int order[3] = {0, 1, 2};
     std::sort(order, order + 3, [&](int a, int b) { return e[a] > e[b]; });
@@ -300,43 +478,127 @@ class Builder {
         n_upper += r.hi[axis] > pos ? 1 : 0;
       }
       if (n_lower == refs.size() || n_upper == refs.size()) continue;
-      return {axis, pos, 0.0f, true};
+      return {axis, pos, 0.0f, true, n_lower, n_upper, true};
     }
     return {};
   }
 
-  void partition(const std::vector<PrimRef>& refs, const Split& s, const Box& lower_box, const Box& upper_box,
-                 std::vector<PrimRef>& lower, std::vector<PrimRef>& upper) const {
-    lower.reserve(refs.size());
-    upper.reserve(refs.size());
+  // One child's side of a partition pass: its references, extent and bins.
+  struct Sink {
+    RefVec* refs;
+    ExtentAcc extent;
+    Bins* bins;  // null: not binned
+    void put(const PrimRef& r) {
+      refs->push_back(r);
+      const __m128 lo = _mm_loadu_ps(r.lo), hi = _mm_loadu_ps(r.hi);
+      extent.add(lo, hi);
+      if (bins) bins->add(lo, hi);
+    }
+  };
+
+  // Sends refs[begin, end) to the children's sinks; straddling primitives are re-clipped to each
+  // child ("perfect splits").
+  void partitionRange(const RefVec& refs, std::size_t begin, std::size_t end, const Split& s, const Box& lower_box,
+                      const Box& upper_box, Sink& lower, Sink& upper) const {
     const int axis = s.axis;
-    for (const PrimRef& r : refs) {
+    const float pos = s.pos;
+    for (std::size_t i = begin; i < end; ++i) {
+      const PrimRef& r = refs[i];
       const float a = r.lo[axis], b = r.hi[axis];
-      if (a == s.pos && b == s.pos) {
-        (s.planar_left ? lower : upper).push_back(r);
-        continue;
-      }
-      const bool to_lower = a < s.pos, to_upper = b > s.pos;
-      if (to_lower && !to_upper) {
-        lower.push_back(r);
-      } else if (to_upper && !to_lower) {
-        upper.push_back(r);
+      if (b <= pos) {
+        // Below the plane, or lying in it.
+        (a == pos && !s.planar_left ? upper : lower).put(r);
+      } else if (a >= pos) {
+        upper.put(r);
       } else {
-        // Straddles the plane: re-clip to each child (perfect split). If the clipped part turns
-        // out empty on one side the primitive only touched the plane there and is dropped there;
-        // the plain box intersection is the fallback when clipping is off.
-        for (int side = 0; side < 2; ++side) {
-          const Box& child = side == 0 ? lower_box : upper_box;
-          const Box bounded = intersection(r.box(), child);
-          const Box clipped = cfg_.clip_primitives ? clip_(r.id, bounded) : bounded;
-          if (clipped.empty()) continue;
-          (side == 0 ? lower : upper).emplace_back(clipped, r.id);
+        // Straddles the plane. If the clipped part turns out empty on one side the primitive only
+        // touched the plane there and is dropped there; the plain box intersection is the
+        // fallback when clipping is off.
+        const Box bounds = r.box();
+        Box parts[2];
+        if (cfg_.clip_primitives && split_) {
+          (*split_)(r.id, bounds, axis, pos, parts[0], parts[1]);
+        } else {
+          for (int side = 0; side < 2; ++side) {
+            const Box bounded = intersection(bounds, side == 0 ? lower_box : upper_box);
+            parts[side] = cfg_.clip_primitives ? (*clip_)(r.id, bounded) : bounded;
+          }
         }
+        if (!parts[0].empty()) lower.put(PrimRef(parts[0], r.id));
+        if (!parts[1].empty()) upper.put(PrimRef(parts[1], r.id));
       }
     }
   }
 
-  const KdClipFunction& clip_;
+  // Splits `refs` into the two children, binning each child expected to be large enough, over its
+  // box intersected with the parent's extent (which contains every reference of the child).
+  void partition(const RefVec& refs, const Split& s, const Extent& parent_extent, Child& lower, Child& upper) const {
+    const bool sah = cfg_.heuristic == KdHeuristic::Sah;
+    for (Child* c : {&lower, &upper}) {
+      const std::size_t expected = c == &lower ? s.n_lower : s.n_upper;
+      c->binned = sah && expected > cfg_.exact_sweep_max;
+      if (c->binned) {
+        float lo[3], hi[3];
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = std::max(c->box.lo[k], parent_extent.lo[k]);
+          hi[k] = std::min(c->box.hi[k], parent_extent.hi[k]);
+        }
+        c->bins.init(lo, hi, binsFor(expected));
+      }
+    }
+    const std::size_t n = refs.size();
+    const std::size_t chunks = cfg_.parallel_threshold > 0 && n >= 4 * kPartitionChunk ? (n + kPartitionChunk - 1) / kPartitionChunk : 1;
+    if (chunks == 1) {
+      lower.refs.reserve(s.n_lower + (s.exact ? 0 : s.n_lower / 8 + 8));
+      upper.refs.reserve(s.n_upper + (s.exact ? 0 : s.n_upper / 8 + 8));
+      Sink lo{&lower.refs, {}, lower.binned ? &lower.bins : nullptr};
+      Sink hi{&upper.refs, {}, upper.binned ? &upper.bins : nullptr};
+      partitionRange(refs, 0, n, s, lower.box, upper.box, lo, hi);
+      lower.extent = lo.extent.extent();
+      upper.extent = hi.extent.extent();
+      return;
+    }
+    // Large node: chunks in parallel, each with its own output and bins, then concatenated.
+    struct ChunkOut {
+      RefVec refs[2];
+      ExtentAcc extent[2];
+      Bins bins[2];
+    };
+    std::vector<ChunkOut> parts(chunks);
+    tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+      ChunkOut& p = parts[c];
+      const std::size_t begin = c * kPartitionChunk, end = std::min(n, begin + kPartitionChunk);
+      p.refs[0].reserve(end - begin);
+      p.refs[1].reserve(end - begin);
+      Sink sinks[2];
+      for (int side = 0; side < 2; ++side) {
+        const Child& child = side == 0 ? lower : upper;
+        if (child.binned) p.bins[side] = child.bins;  // zeroed counts, same frame
+        sinks[side] = {&p.refs[side], {}, child.binned ? &p.bins[side] : nullptr};
+      }
+      partitionRange(refs, begin, end, s, lower.box, upper.box, sinks[0], sinks[1]);
+      p.extent[0] = sinks[0].extent;
+      p.extent[1] = sinks[1].extent;
+    });
+    for (int side = 0; side < 2; ++side) {
+      Child& child = side == 0 ? lower : upper;
+      std::vector<std::size_t> offset(chunks + 1, 0);
+      for (std::size_t c = 0; c < chunks; ++c) offset[c + 1] = offset[c] + parts[c].refs[side].size();
+      child.refs.resize(offset[chunks]);
+      tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+        std::copy(parts[c].refs[side].begin(), parts[c].refs[side].end(), child.refs.begin() + static_cast<std::ptrdiff_t>(offset[c]));
+      });
+      Extent e;
+      for (std::size_t c = 0; c < chunks; ++c) {
+        e.merge(parts[c].extent[side].extent());
+        if (child.binned) child.bins.merge(parts[c].bins[side]);
+      }
+      child.extent = e;
+    }
+  }
+
+  const KdClipFunction* clip_;
+  const KdSplitFunction* split_;
   const KdBuildConfig& cfg_;
   int max_depth_;
 };
@@ -368,10 +630,14 @@ KdHeuristic parseKdHeuristic(std::string_view name) {
 std::ostream& operator<<(std::ostream& os, const KdBuildConfig& c) {
   return os << "KdBuildConfig{" << toString(c.heuristic) << ", Ct=" << c.traversal_cost << ", Ci=" << c.intersection_cost
             << ", empty_bonus=" << c.empty_bonus << ", max_depth=" << c.max_depth << ", leaf=" << c.max_leaf_size
-            << ", clip=" << c.clip_primitives << "}";
+            << ", clip=" << c.clip_primitives << ", exact_sweep_max=" << c.exact_sweep_max
+            << ", refine_max=" << c.refine_max << "}";
 }
 
-KdTree buildKdTree(std::span<const Box> prim_bounds, const KdClipFunction& clip, const KdBuildConfig& config) {
+namespace {
+
+KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const KdSplitFunction* split,
+             const KdBuildConfig& config) {
   if (prim_bounds.size() > KdNode::kMaxIndex)
     throw InvalidArgument("kd-tree build: " + std::to_string(prim_bounds.size()) + " primitives exceed the limit of 2^30");
   if (!(config.traversal_cost > 0.0f) || !(config.intersection_cost > 0.0f) || !(config.empty_bonus >= 0.0f) ||
@@ -379,7 +645,7 @@ KdTree buildKdTree(std::span<const Box> prim_bounds, const KdClipFunction& clip,
     throw InvalidArgument("kd-tree build: invalid configuration");
 
   KdTree tree;
-  std::vector<PrimRef> refs;
+  RefVec refs;
   refs.reserve(prim_bounds.size());
   for (std::size_t i = 0; i < prim_bounds.size(); ++i) {
     if (!finiteBox(prim_bounds[i])) continue;
@@ -393,11 +659,13 @@ KdTree buildKdTree(std::span<const Box> prim_bounds, const KdClipFunction& clip,
     max_depth = static_cast<int>(std::lround(8.0 + 1.3 * std::log2(static_cast<double>(refs.size()))));
   max_depth = std::min(max_depth, 60);  // traversal stack holds 64 entries
 
-  Builder builder(clip, config, max_depth);
+  Builder builder(clip, split, config, max_depth);
+  Extent extent;  // the root box is the references' exact extent
+  for (int k = 0; k < 3; ++k) extent.lo[k] = tree.bounds.lo[k], extent.hi[k] = tree.bounds.hi[k];
   Subtree out;
   out.nodes.reserve(refs.size() * 2);
   out.prims.reserve(refs.size() * 2);
-  builder.build(std::move(refs), tree.bounds, 0, 0, out);
+  builder.build(std::move(refs), tree.bounds, nullptr, extent, 0, 0, out);
   if (out.nodes.size() > KdNode::kMaxIndex || out.prims.size() > 0xFFFFFFFFu)
     throw InvalidArgument("kd-tree build: tree exceeds 2^30 nodes");
   tree.nodes = std::move(out.nodes);
@@ -405,6 +673,16 @@ KdTree buildKdTree(std::span<const Box> prim_bounds, const KdClipFunction& clip,
   tree.nodes.shrink_to_fit();
   tree.prim_indices.shrink_to_fit();
   return tree;
+}
+
+}  // namespace
+
+KdTree buildKdTree(std::span<const Box> prim_bounds, const KdClipFunction& clip, const KdBuildConfig& config) {
+  return build(prim_bounds, &clip, nullptr, config);
+}
+
+KdTree buildKdTree(std::span<const Box> prim_bounds, const KdSplitFunction& split, const KdBuildConfig& config) {
+  return build(prim_bounds, nullptr, &split, config);
 }
 
 KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config) {

@@ -3,74 +3,198 @@
 #include <glm/vec3.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 
 namespace duplex {
 
-Box clipTriangleToBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box) {
-  if (box.empty()) return {};
-  // Sutherland-Hodgman in double: a triangle clipped by 6 planes has at most 9 vertices.
-  // Points as plain double[3] (indexed by a run-time axis; GLM's operator[] is a switch).
-  struct P {
-    double v[3];
-  };
+namespace {
+
+// Neighbouring floats of a finite f (std::nextafter is a library call, and this runs for every
+// straddling triangle of a kd-tree build).
+float nextDown(float f) {
+  if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
+  const auto u = std::bit_cast<std::uint32_t>(f);
+  return std::bit_cast<float>(f > 0.0f ? u - 1 : u + 1);
+}
+float nextUp(float f) { return -nextDown(-f); }
+
+// Largest float <= d and smallest float >= d, for d within the float range.
+float floatBelow(double d) {
+  const auto f = static_cast<float>(d);
+  return static_cast<double>(f) > d ? nextDown(f) : f;
+}
+float floatAbove(double d) {
+  const auto f = static_cast<float>(d);
+  return static_cast<double>(f) < d ? nextUp(f) : f;
+}
+
+struct P {
+  double v[3];
+};
+
+// A triangle clipped by six planes has at most 9 corners; rounding can add a few more where the
+// polygon is nearly degenerate. Past this capacity the clip gives up and returns a safe box.
+constexpr int kMaxCorners = 24;
+
+// The triangle clipped to `box` as a polygon in `poly` (capacity kMaxCorners); returns its corner
+// count (0: misses the box), or -1 when the triangle lies inside the box (poly untouched) or
+// rounding made the polygon too complex (the caller then uses the triangle's bounds in the box).
+int clipPolygon(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, const Box& own,
+                P* buffers_a, P* buffers_b, P*& poly) {
   const float box_lo[3] = {box.lo.x, box.lo.y, box.lo.z};
   const float box_hi[3] = {box.hi.x, box.hi.y, box.hi.z};
-  P poly[12], next[12];
+  bool inside = true;
+  for (int k = 0; k < 3; ++k) {
+    if (own.hi[k] < box_lo[k] || own.lo[k] > box_hi[k]) return 0;
+    inside = inside && own.lo[k] >= box_lo[k] && own.hi[k] <= box_hi[k];
+  }
+  if (inside) return -1;
+  // Sutherland-Hodgman in double against the planes the polygon crosses, between two buffers.
+  poly = buffers_a;
+  P* next = buffers_b;
   int n = 3;
   poly[0] = {{a.x, a.y, a.z}};
   poly[1] = {{b.x, b.y, b.z}};
   poly[2] = {{c.x, c.y, c.z}};
-  for (int axis = 0; axis < 3 && n > 0; ++axis) {
-    // Skip planes no vertex crosses: the common case for a triangle mostly inside the box.
+  for (int axis = 0; axis < 3; ++axis) {
     double vmin = poly[0].v[axis], vmax = vmin;
     for (int i = 1; i < n; ++i) {
       vmin = std::min(vmin, poly[i].v[axis]);
       vmax = std::max(vmax, poly[i].v[axis]);
     }
-    for (int side = 0; side < 2 && n > 0; ++side) {
+    // vmin/vmax stay valid for the second face: clipping one face only moves corners onto it.
+    for (int side = 0; side < 2; ++side) {
       const double plane = side == 0 ? box_lo[axis] : box_hi[axis];
+      const double sign = side == 0 ? 1.0 : -1.0;  // distance inside the face is >= 0
       if (side == 0 ? vmin >= plane : vmax <= plane) continue;
-      // inside: coordinate >= plane (lower face) or <= plane (upper face)
-      auto inside = [&](const P& p) { return side == 0 ? p.v[axis] >= plane : p.v[axis] <= plane; };
+      if (side == 0 ? vmax < plane : vmin > plane) return 0;
+      // Cannot happen for a convex polygon (each plane adds at most one corner); stay safe.
+      if (2 * n > kMaxCorners) return -1;
       int m = 0;
+      const P* prev = &poly[n - 1];
+      double d_prev = sign * (prev->v[axis] - plane);
       for (int i = 0; i < n; ++i) {
-        const P& p = poly[i];
-        const P& q = poly[(i + 1) % n];
-        const bool pin = inside(p), qin = inside(q);
-        if (pin) next[m++] = p;
-        if (pin != qin) {
-          const double t = (plane - p.v[axis]) / (q.v[axis] - p.v[axis]);
+        const P& cur = poly[i];
+        const double d_cur = sign * (cur.v[axis] - plane);
+        if ((d_prev >= 0.0) != (d_cur >= 0.0)) {
+          // The edge crosses the plane: the crossing, exactly on the plane along `axis`.
+          const double t = d_prev / (d_prev - d_cur);
           P x;
-          for (int k = 0; k < 3; ++k) x.v[k] = p.v[k] + t * (q.v[k] - p.v[k]);
-          x.v[axis] = plane;  // exactly on the plane
+          for (int k = 0; k < 3; ++k) x.v[k] = prev->v[k] + t * (cur.v[k] - prev->v[k]);
+          x.v[axis] = plane;
           next[m++] = x;
         }
+        if (d_cur >= 0.0) next[m++] = cur;
+        prev = &cur;
+        d_prev = d_cur;
       }
+      std::swap(poly, next);
       n = m;
-      for (int i = 0; i < n; ++i) poly[i] = next[i];
-      // vmin/vmax of this axis stay valid for the other side: clipping one side only moves
-      // vertices onto that plane.
+      if (n == 0) return 0;
     }
   }
-  if (n == 0) return {};
-  double lo[3] = {poly[0].v[0], poly[0].v[1], poly[0].v[2]};
-  double hi[3] = {lo[0], lo[1], lo[2]};
-  for (int i = 1; i < n; ++i)
+  return n;
+}
+
+// Bounds in double of points, extended by `p`.
+struct DBox {
+  double lo[3] = {INFINITY, INFINITY, INFINITY};
+  double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  bool any = false;
+  void extend(const P& p) {
+    any = true;
     for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], poly[i].v[k]);
-      hi[k] = std::max(hi[k], poly[i].v[k]);
+      lo[k] = std::min(lo[k], p.v[k]);
+      hi[k] = std::max(hi[k], p.v[k]);
     }
-  Box out;
-  for (int k = 0; k < 3; ++k) {
-    // Round outward so the float box contains the exact clipped polygon, then stay inside `box`.
-    float l = static_cast<float>(lo[k]), h = static_cast<float>(hi[k]);
-    if (static_cast<double>(l) > lo[k]) l = std::nextafter(l, -INFINITY);
-    if (static_cast<double>(h) < hi[k]) h = std::nextafter(h, INFINITY);
-    out.lo[k] = std::max(l, box_lo[k]);
-    out.hi[k] = std::min(h, box_hi[k]);
   }
-  return out;
+  // Rounded outward to float, so that it contains the exact points, then limited to `box`.
+  [[nodiscard]] Box rounded(const Box& box) const {
+    if (!any) return {};
+    Box out;
+    for (int k = 0; k < 3; ++k) {
+      out.lo[k] = std::max(floatBelow(lo[k]), box.lo[k]);
+      out.hi[k] = std::min(floatAbove(hi[k]), box.hi[k]);
+    }
+    return out;
+  }
+};
+
+Box ownBounds(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
+  Box own;
+  own.extend(a);
+  own.extend(b);
+  own.extend(c);
+  return own;
+}
+
+}  // namespace
+
+Box clipTriangleToBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box) {
+  if (box.empty()) return {};
+  // A triangle inside the box needs no clipping, one whose bounds miss the box is empty.
+  const Box own = ownBounds(a, b, c);
+  P buffers[2][kMaxCorners];
+  P* poly = nullptr;
+  const int n = clipPolygon(a, b, c, box, own, buffers[0], buffers[1], poly);
+  if (n < 0) return intersection(own, box);
+  DBox bounds;
+  for (int i = 0; i < n; ++i) bounds.extend(poly[i]);
+  return bounds.rounded(box);
+}
+
+void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, int axis,
+                        float pos, Box& lower, Box& upper) {
+  lower = upper = Box();
+  if (box.empty()) return;
+  Box lower_box = box, upper_box = box;
+  lower_box.hi[axis] = std::min(lower_box.hi[axis], pos);
+  upper_box.lo[axis] = std::max(upper_box.lo[axis], pos);
+  const Box own = ownBounds(a, b, c);
+  P buffers[2][kMaxCorners];
+  P* poly = buffers[0];
+  int n = clipPolygon(a, b, c, box, own, buffers[0], buffers[1], poly);
+  if (n == 0) return;
+  if (n < 0) {
+    // Inside the box (or too complex): split the triangle itself (the fallback clips each side).
+    if (intersection(own, box) != own) {
+      lower = clipTriangleToBox(a, b, c, lower_box);
+      upper = clipTriangleToBox(a, b, c, upper_box);
+      return;
+    }
+    poly = buffers[0];
+    poly[0] = {{a.x, a.y, a.z}};
+    poly[1] = {{b.x, b.y, b.z}};
+    poly[2] = {{c.x, c.y, c.z}};
+    n = 3;
+  }
+  // Each side gets the corners on its closed side of the plane and the crossings of the edges
+  // (exactly on the plane along `axis`), as clipping to each half box would give.
+  DBox lo_bounds, hi_bounds;
+  const double plane = pos;
+  const P* prev = &poly[n - 1];
+  double d_prev = prev->v[axis] - plane;
+  for (int i = 0; i < n; ++i) {
+    const P& cur = poly[i];
+    const double d_cur = cur.v[axis] - plane;
+    if ((d_prev < 0.0 && d_cur > 0.0) || (d_prev > 0.0 && d_cur < 0.0)) {
+      const double t = d_prev / (d_prev - d_cur);
+      P x;
+      for (int k = 0; k < 3; ++k) x.v[k] = prev->v[k] + t * (cur.v[k] - prev->v[k]);
+      x.v[axis] = plane;
+      lo_bounds.extend(x);
+      hi_bounds.extend(x);
+    }
+    if (d_cur <= 0.0) lo_bounds.extend(cur);
+    if (d_cur >= 0.0) hi_bounds.extend(cur);
+    prev = &cur;
+    d_prev = d_cur;
+  }
+  lower = lo_bounds.rounded(lower_box);
+  upper = hi_bounds.rounded(upper_box);
 }
 
 }  // namespace duplex

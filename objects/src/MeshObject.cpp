@@ -100,9 +100,10 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
   }
   tree_ = buildKdTree(
       bounds,
-      [&m](std::uint32_t prim, const Box& box) {
+      // A straddling triangle is clipped once per split, not once per child.
+      [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
         const auto v = m.vertices(prim);
-        return clipTriangleToBox(v[0], v[1], v[2], box);
+        splitTriangleInBox(v[0], v[1], v[2], box, axis, pos, lower, upper);
       },
       config);
   buildLeafBlocks();

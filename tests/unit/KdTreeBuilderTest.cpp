@@ -16,8 +16,10 @@
 #include "duplex/accel/TriangleClip.h"
 
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -222,6 +224,55 @@ TEST(KdTreeBuilder, ExplicitDepthLimitIsHonoured) {
     EXPECT_TRUE(checkBoxKdTree(tree, boxes, depth));
     EXPECT_LE(tree.stats(1.0f, 1.5f).max_depth, static_cast<std::uint32_t>(depth));
   }
+}
+
+/// Every node's fields, so that two trees can be compared node for node.
+std::vector<std::array<std::uint32_t, 3>> nodeFields(const KdTree& tree) {
+  std::vector<std::array<std::uint32_t, 3>> out;
+  for (const KdNode& n : tree.nodes)
+    out.push_back(n.isLeaf() ? std::array<std::uint32_t, 3>{3u, n.primOffset(), n.primCount()}
+                             : std::array<std::uint32_t, 3>{static_cast<std::uint32_t>(n.axis()),
+                                                            std::bit_cast<std::uint32_t>(n.split()), n.upperChild()});
+  return out;
+}
+
+TEST(KdTreeBuilder, ParallelBuildEqualsSerialBuild) {
+  // 70,000 small triangles: the root's partition runs in parallel chunks (from 65,536 references)
+  // and subtrees run as tasks. Chunks are concatenated in order and their bins summed, so the tree
+  // must be the serial one, node for node.
+  std::mt19937_64 rng(123);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f), d(-0.01f, 0.01f);
+  std::vector<std::array<glm::vec3, 3>> tris;
+  while (tris.size() < 70000) {
+    const glm::vec3 c(u(rng), u(rng), 0.2f * u(rng));
+    tris.push_back({c, c + glm::vec3(d(rng), d(rng), d(rng)), c + glm::vec3(d(rng), d(rng), d(rng))});
+  }
+  KdBuildConfig serial;
+  serial.parallel_threshold = 0;
+  KdBuildConfig parallel;
+  parallel.parallel_threshold = 512;
+  const KdTree a = buildOverTriangles(tris, serial);
+  KdTree b;
+  tbb::task_arena arena(4);
+  arena.execute([&] { b = buildOverTriangles(tris, parallel); });
+  EXPECT_EQ(nodeFields(a), nodeFields(b));
+  EXPECT_EQ(a.prim_indices, b.prim_indices);
+  EXPECT_GT(a.nodes.size(), 10000u);
+}
+
+TEST(KdTreeBuilder, BinningKnobsKeepInvariants) {
+  // Exact sweeps everywhere / nowhere, refinement never / only in small nodes.
+  const auto tris = randomTriangles(2500, 41);
+  const auto boxes = randomBoxes(2500, 42);
+  for (const std::uint32_t exact : {0u, 1u, 64u})
+    for (const std::uint32_t refine : {0u, 16u}) {
+      KdBuildConfig c;
+      c.exact_sweep_max = exact;
+      c.refine_max = refine;
+      SCOPED_TRACE(::testing::Message() << c);
+      EXPECT_TRUE(checkTriangleKdTree(buildOverTriangles(tris, c), tris, std::vector<char>(tris.size(), 1)));
+      EXPECT_TRUE(checkBoxKdTree(buildKdTreeOverBoxes(boxes, c), boxes));
+    }
 }
 
 TEST(KdTreeBuilder, InvalidConfigurationThrows) {
@@ -505,46 +556,120 @@ TEST(Box, BasicOperations) {
 
 // ---------------------------------------------------------------------------------------------
 
+/// A box of half-size 0.01-0.06 around the centroid of triangle `t`, or (every fourth `i`)
+/// anywhere in [0, 1]^3.
+Box boxNearTriangle(const std::array<glm::vec3, 3>& t, std::size_t i, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const glm::vec3 centre = i % 4 == 0 ? glm::vec3(u(rng), u(rng), u(rng)) : (t[0] + t[1] + t[2]) / 3.0f;
+  const glm::vec3 half(0.01f + 0.05f * static_cast<float>(u(rng)), 0.01f + 0.05f * static_cast<float>(u(rng)),
+                       0.01f + 0.05f * static_cast<float>(u(rng)));
+  return Box(centre - half, centre + half);
+}
+
+/// Sample `s` of triangle `t` in double: the corners (s < 3), edge points (s < 6), then any point.
+glm::dvec3 trianglePoint(const std::array<glm::vec3, 3>& t, int s, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  double a = u(rng), b = u(rng);
+  if (s < 3) {
+    a = s == 1 ? 1.0 : 0.0;
+    b = s == 2 ? 1.0 : 0.0;
+  }
+  if (a + b > 1.0) a = 1.0 - a, b = 1.0 - b;
+  if (s >= 3 && s < 6) b = 0.0;
+  return (1.0 - a - b) * glm::dvec3(t[0]) + a * glm::dvec3(t[1]) + b * glm::dvec3(t[2]);
+}
+
+/// False when `p` lies in `box` but outside `clipped` (allowing the 1e-16 relative rounding of the
+/// sample itself).
+bool keptIfInside(const glm::dvec3& p, const Box& box, const Box& clipped) {
+  bool in_box = true, in_clip = !clipped.empty();
+  for (int k = 0; k < 3; ++k) {
+    const double slack = 1e-12 * (1.0 + std::abs(p[k]));
+    in_box = in_box && p[k] >= box.lo[k] && p[k] <= box.hi[k];
+    in_clip = in_clip && p[k] >= clipped.lo[k] - slack && p[k] <= clipped.hi[k] + slack;
+  }
+  return !in_box || in_clip;
+}
+
 TEST(TriangleClip, ContainsEveryPointOfTheTriangleInsideTheBox) {
   std::mt19937_64 rng(77);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   const auto tris = randomTriangles(400, 78);
   std::size_t nonempty = 0;
   for (std::size_t i = 0; i < tris.size(); ++i) {
     const auto& t = tris[i];
-    // A box around a point of the triangle, or (every fourth) anywhere.
-    const glm::vec3 centre = i % 4 == 0 ? glm::vec3(u(rng), u(rng), u(rng)) : (t[0] + t[1] + t[2]) / 3.0f;
-    const glm::vec3 half(0.01f + 0.05f * static_cast<float>(u(rng)), 0.01f + 0.05f * static_cast<float>(u(rng)),
-                         0.01f + 0.05f * static_cast<float>(u(rng)));
-    const Box box(centre - half, centre + half);
+    const Box box = boxNearTriangle(t, i, rng);
     const Box clipped = clipTriangleToBox(t[0], t[1], t[2], box);
     if (!clipped.empty()) {
       ++nonempty;
       EXPECT_TRUE(box.contains(clipped.lo) && box.contains(clipped.hi)) << clipped << " not inside " << box;
     }
-    // Sample the triangle (and its corners and edges) in double; points in the box must be in the result.
+    // Points of the triangle in the box must be in the result.
     for (int s = 0; s < 300; ++s) {
-      double a = u(rng), b = u(rng);
-      if (s < 3) {  // the corners
-        a = s == 1 ? 1.0 : 0.0;
-        b = s == 2 ? 1.0 : 0.0;
-      }
-      if (a + b > 1.0) a = 1.0 - a, b = 1.0 - b;
-      if (s >= 3 && s < 6) b = 0.0;  // edge points
-      const glm::dvec3 p = (1.0 - a - b) * glm::dvec3(t[0]) + a * glm::dvec3(t[1]) + b * glm::dvec3(t[2]);
-      // The sample is rounded in double (1e-16 relative): allow that much outside the result.
-      bool in_box = true, in_clip = !clipped.empty();
-      for (int k = 0; k < 3; ++k) {
-        const double slack = 1e-12 * (1.0 + std::abs(p[k]));
-        in_box = in_box && p[k] >= box.lo[k] && p[k] <= box.hi[k];
-        in_clip = in_clip && p[k] >= clipped.lo[k] - slack && p[k] <= clipped.hi[k] + slack;
-      }
-      if (in_box) {
-        ASSERT_TRUE(in_clip) << "triangle " << i << " point inside " << box << " outside clipped " << clipped;
-      }
+      ASSERT_TRUE(keptIfInside(trianglePoint(t, s, rng), box, clipped))
+          << "triangle " << i << " point inside " << box << " outside clipped " << clipped;
     }
   }
   EXPECT_GT(nonempty, 250u);
+}
+
+TEST(TriangleClip, SplitEqualsClippingEachHalf) {
+  // splitTriangleInBox clips once and cuts the polygon; each side must hold every sampled point of
+  // the triangle in that half box, stay inside the half, and match clipTriangleToBox on the half up
+  // to rounding of the crossings (they are computed in another order).
+  std::mt19937_64 rng(79);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const auto tris = randomTriangles(400, 80);
+  std::size_t both = 0;
+  for (std::size_t i = 0; i < tris.size(); ++i) {
+    const auto& t = tris[i];
+    const Box box = boxNearTriangle(t, i, rng);
+    const int axis = static_cast<int>(i % 3);
+    // Planes through the box, on a vertex now and then.
+    const float pos = i % 5 == 0 ? t[0][axis] : box.lo[axis] + static_cast<float>(u(rng)) * (box.hi[axis] - box.lo[axis]);
+    Box parts[2];
+    splitTriangleInBox(t[0], t[1], t[2], box, axis, pos, parts[0], parts[1]);
+    Box halves[2] = {box, box};
+    halves[0].hi[axis] = std::min(box.hi[axis], pos);
+    halves[1].lo[axis] = std::max(box.lo[axis], pos);
+    both += !parts[0].empty() && !parts[1].empty();
+    for (int side = 0; side < 2; ++side) {
+      const Box& part = parts[side];
+      const Box reference = clipTriangleToBox(t[0], t[1], t[2], halves[side]);
+      if (!part.empty()) {
+        EXPECT_TRUE(halves[side].contains(part.lo) && halves[side].contains(part.hi)) << part << " not inside " << halves[side];
+      }
+      EXPECT_EQ(part.empty(), reference.empty()) << "triangle " << i << " side " << side;
+      if (!part.empty() && !reference.empty())
+        for (int k = 0; k < 3; ++k) {
+          const float tol = 1e-5f * (1.0f + std::abs(reference.lo[k]) + std::abs(reference.hi[k]));
+          EXPECT_NEAR(part.lo[k], reference.lo[k], tol) << "triangle " << i << " side " << side;
+          EXPECT_NEAR(part.hi[k], reference.hi[k], tol) << "triangle " << i << " side " << side;
+        }
+      for (int s = 0; s < 300; ++s) {
+        ASSERT_TRUE(keptIfInside(trianglePoint(t, s, rng), halves[side], part))
+            << "triangle " << i << " side " << side << " point inside " << halves[side] << " outside " << part;
+      }
+    }
+  }
+  EXPECT_GT(both, 100u);
+}
+
+TEST(KdTreeBuilder, SplitFunctionBuildsAValidTree) {
+  // The one-clip-per-split path (what meshes use) against the invariant checker, for every config.
+  const auto tris = randomTriangles(2500, 43);
+  std::vector<Box> bounds(tris.size());
+  for (std::size_t i = 0; i < tris.size(); ++i)
+    for (const auto& v : tris[i]) bounds[i].extend(v);
+  for (const ConfigCase& c : allConfigCases()) {
+    SCOPED_TRACE(c.name);
+    const KdTree tree = buildKdTree(
+        bounds,
+        [&](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
+          splitTriangleInBox(tris[prim][0], tris[prim][1], tris[prim][2], box, axis, pos, lower, upper);
+        },
+        c.config);
+    EXPECT_TRUE(checkTriangleKdTree(tree, tris, std::vector<char>(tris.size(), 1), c.config.max_depth));
+  }
 }
 
 TEST(TriangleClip, ExactCases) {
