@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """Charts of duplex_bench_volume's JSON (issue 4, section 3) into docs/volumes/*.png.
 
     build/bench/duplex_bench_volume > out/volume_bench.json
@@ -52,7 +52,7 @@ def fog_chart(report, key, title, path):
         ax.set_xlabel("time per ray (ns, one thread)")
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].set_ylabel(title)
-    axes[0][-1].legend(fontsize=7, loc="lower left")
+    axes[0][-1].legend(fontsize=7, loc="upper right")
     fig.suptitle(f"Fog transmittance: {title} vs time ({report['rays']} rays; "
                  "labels: march step in voxels, samples per query)", fontsize=10)
     fig.tight_layout()
