@@ -628,13 +628,7 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
         continue;
       const Record& rec = records[slot];
       ++ctx.stats.instance_visits;
-      Ray ray_os = toObject(rec, w);
-      ray_os.tfar = t;
-      Hit h = best;
-      h.t = t;
-      if (rec.object->intersect(ray_os, h, ctx)) {
-        best = h;
-        t = h.t;
+      if (closerHit(rec, w, best, t, ctx)) {
         winner = &rec;
         found = true;
       }

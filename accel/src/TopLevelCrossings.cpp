@@ -78,13 +78,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
       const Record& rec = records[slot];
       ++ctx.stats.instance_visits;
       if (rec.role == ObjectRole::Surface) {
-        Ray ray_os = toObject(rec, w);
-        ray_os.tfar = t;
-        Hit h = best;
-        h.t = t;
-        if (rec.object->intersect(ray_os, h, ctx)) {
-          best = h;
-          t = h.t;
+        if (closerHit(rec, w, best, t, ctx)) {
           winner = &rec;
           found = true;
         }

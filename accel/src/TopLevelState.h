@@ -104,6 +104,20 @@ inline bool meetsBox(const KdRay& ray, const Box& box, float t_max) {
   return clipIntervalToBox(ray, box, t0, t1);
 }
 
+// Asks blocking instance `rec` for a hit closer than t (world units of w's direction); on one,
+// overwrites `best` (object-space normal, instance id not set) and t and returns true. The leaf step
+// of every closest-hit traversal (intersect and the crossing query).
+inline bool closerHit(const Record& rec, const WorldRay& w, Hit& best, float& t, QueryContext& ctx) {
+  Ray ray_os = toObject(rec, w);
+  ray_os.tfar = t;
+  Hit h = best;
+  h.t = t;
+  if (!rec.object->intersect(ray_os, h, ctx)) return false;
+  best = h;
+  t = h.t;
+  return true;
+}
+
 // A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
 // traversal of the same instance for the same ray is wasted work.
 struct Mailbox {
