@@ -16,6 +16,7 @@
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
+#include "CheckSupport.h"
 #include "Subprocess.h"
 
 #include <nlohmann/json.hpp>
@@ -41,15 +42,6 @@ namespace {
 
 constexpr int kSkip = 77;
 
-/// A failed expectation; main prints it and exits 1.
-struct Failure : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
-void expect(bool ok, const std::string& what) {
-  if (!ok) throw Failure(what);
-}
-
 std::string show(const HitRecord& h) {
   std::ostringstream s;
   s << "{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", instance=" << h.instance_id << ", prim=" << h.prim_id << "}";
@@ -61,14 +53,6 @@ std::string show(const RayRecord& r) {
   s << "{o=(" << r.ox << ", " << r.oy << ", " << r.oz << "), d=(" << r.dx << ", " << r.dy << ", " << r.dz << "), t=["
     << r.tnear << ", " << r.tfar << "]}";
   return s.str();
-}
-
-RunResult runOk(const std::vector<std::string>& argv, const fs::path& dir) {
-  RunResult r = run(argv, dir.string());
-  std::string cmd;
-  for (const std::string& a : argv) cmd += a + " ";
-  expect(r.exited && r.exit_code == 0, "`" + cmd + "` ended with " + describe(r) + "; stderr:\n" + r.err);
-  return r;
 }
 
 // stdout must be exactly one JSON object on one line.
@@ -528,7 +512,7 @@ int usage() {
 
 int main(int argc, char** argv) {
   const std::vector<std::string> args(argv + 1, argv + argc);
-  try {
+  return reportFailures([&] {
     if (args.size() == 2 && args[0] == "fixtures") {
       writeFixtures(args[1]);
       std::cout << "fixtures written to " << args[1] << "\n";
@@ -546,11 +530,5 @@ int main(int argc, char** argv) {
     if (args.size() == 4 && args[0] == "prepare-koala") return checkPrepareKoala(args[1], args[2], args[3]);
     if (args.size() == 3 && args[0] == "bench-update") return checkBenchUpdate(args[1], args[2]);
     return usage();
-  } catch (const Failure& f) {
-    std::cerr << "FAIL: " << f.what() << "\n";
-    return 1;
-  } catch (const std::exception& e) {
-    std::cerr << "ERROR: " << e.what() << "\n";
-    return 1;
-  }
+  });
 }

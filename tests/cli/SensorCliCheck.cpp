@@ -3,6 +3,7 @@
 // to one longer run, --target-error, and clear errors for bad lights and sensors.
 //   duplex_sensor_cli_check DUPLEX DIR
 
+#include "CheckSupport.h"
 #include "Subprocess.h"
 
 #include <nlohmann/json.hpp>
@@ -20,23 +21,8 @@ using namespace duplex::clitest;
 
 namespace {
 
-struct Failure : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
-void expect(bool ok, const std::string& what) {
-  if (!ok) throw Failure(what);
-}
-
-std::string joined(const std::vector<std::string>& argv) {
-  std::string s;
-  for (const auto& a : argv) s += a + " ";
-  return s;
-}
-
 nlohmann::json runJson(const std::vector<std::string>& argv, const fs::path& dir) {
-  const RunResult r = run(argv, dir.string());
-  expect(r.exited && r.exit_code == 0, "`" + joined(argv) + "` ended with " + describe(r) + "; stderr:\n" + r.err);
+  const RunResult r = runOk(argv, dir);
   expect(!r.out.empty() && r.out.find('\n') == r.out.size() - 1, "stdout is not one line:\n" + r.out);
   return nlohmann::json::parse(r.out);
 }
@@ -159,13 +145,5 @@ int main(int argc, char** argv) {
     std::cerr << "usage: duplex_sensor_cli_check DUPLEX DIR\n";
     return 2;
   }
-  try {
-    return check(argv[1], argv[2]);
-  } catch (const Failure& f) {
-    std::cerr << "FAIL: " << f.what() << "\n";
-    return 1;
-  } catch (const std::exception& e) {
-    std::cerr << "ERROR: " << e.what() << "\n";
-    return 1;
-  }
+  return reportFailures([&] { return check(argv[1], argv[2]); });
 }

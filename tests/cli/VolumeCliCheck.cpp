@@ -7,6 +7,7 @@
 //
 //   duplex_volume_cli_check <duplex> <scratch dir>
 
+#include "CheckSupport.h"
 #include "Subprocess.h"
 
 #include <nlohmann/json.hpp>
@@ -28,9 +29,7 @@
 #include <vector>
 
 namespace fs = std::filesystem;
-using duplex::clitest::describe;
-using duplex::clitest::run;
-using duplex::clitest::RunResult;
+using namespace duplex::clitest;
 
 namespace {
 
@@ -56,10 +55,6 @@ struct HitRec {
   std::uint32_t instance_id, prim_id;
 };
 static_assert(sizeof(HitRec) == 20);
-
-void expect(bool ok, const std::string& what) {
-  if (!ok) throw std::runtime_error(what);
-}
 
 std::string show(const RayRec& r) {
   return "{o=(" + std::to_string(r.o[0]) + ", " + std::to_string(r.o[1]) + ", " + std::to_string(r.o[2]) + "), d=(" +
@@ -108,14 +103,6 @@ std::vector<char> readBytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   expect(bool(in), "cannot read " + p.string());
   return std::vector<char>(std::istreambuf_iterator<char>(in), {});
-}
-
-RunResult runOk(const std::vector<std::string>& argv, const fs::path& dir) {
-  RunResult r = run(argv, dir.string());
-  std::string cmd;
-  for (const std::string& a : argv) cmd += a + " ";
-  expect(r.exited && r.exit_code == 0, "`" + cmd + "` ended with " + describe(r) + "; stderr:\n" + r.err);
-  return r;
 }
 
 void expectFails(const std::vector<std::string>& argv, const fs::path& dir, const std::string& needle) {
@@ -256,12 +243,9 @@ int check(const std::string& duplex, const fs::path& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    if (argc == 3) return check(argv[1], argv[2]);
+  if (argc != 3) {
     std::cerr << "usage: duplex_volume_cli_check <duplex> <scratch dir>\n";
     return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "FAILED: " << e.what() << "\n";
-    return 1;
   }
+  return reportFailures([&] { return check(argv[1], argv[2]); });
 }
