@@ -69,10 +69,11 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     bool found = false;
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
+      // Surfaces and media only: sensors live in the sensors' level, walked below.
       const SlotFilter f = filters[slot];
       const std::uint32_t role_mask = f.role == ObjectRole::Surface  ? query.surface_mask
-                                      : f.role == ObjectRole::Sensor ? query.sensor_mask
-                                                                     : query.medium_mask;
+                                      : f.role == ObjectRole::Medium ? query.medium_mask
+                                                                     : 0u;
       const float t_reach = f.role == ObjectRole::Surface ? t : t * (1.0f + kCrossingSlack);
       if ((f.mask & role_mask) == 0 || !meetsBox(kray, boxes[slot], t_reach) || mailbox.seen(slot)) continue;
       const Record& rec = records[slot];
@@ -82,8 +83,6 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
           winner = &rec;
           found = true;
         }
-      } else if (rec.role == ObjectRole::Sensor) {
-        addCrossings(rec, t_reach);
       } else if (std::find(media.begin(), media.end(), &rec) == media.end()) {
         media.push_back(&rec);
       }
