@@ -291,9 +291,9 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
     ctx.fail("/format", "unknown format \"" + doc.format + "\" (this version reads \"" + kV1 + "\" and \"" + kOwn + "\")");
   const bool v1 = doc.format == kV1;
   ctx.strict = !v1;  // v1: unknown keys are ignored; own format: they are errors (typos)
-  // "lights" and "sensors" (and an object's "material") belong to duplex::sensors, which reads them
+  // "lights", "sensors", "bands" (and an object's "material") belong to duplex::sensors, which reads them
   // from doc.parsed.
-  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors"});
+  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors", "bands"});
   DocumentReader reader(ctx, graph);
 
   // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).

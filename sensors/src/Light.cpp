@@ -24,6 +24,12 @@ void Light::validate() const {
   auto bad = [this](const std::string& what) { throw InvalidArgument("light '" + name + "': " + what); };
   if (!std::isfinite(power_w)) bad("power is not finite");
   if (!(power_w > 0.0)) bad("power must be > 0 W (got " + std::to_string(power_w) + ")");
+  double spectrum_sum = 0.0;
+  for (const double s : spectrum) {
+    if (!(std::isfinite(s) && s >= 0.0)) bad("spectrum entries must be finite and >= 0");
+    spectrum_sum += s;
+  }
+  if (!spectrum.empty() && !(spectrum_sum > 0.0)) bad("spectrum must have a positive entry");
   switch (type) {
     case LightType::Spot:
       if (!(cone_angle > 0.0 && cone_angle <= std::numbers::pi)) bad("cone angle must be in (0, 180] degrees");

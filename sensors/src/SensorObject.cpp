@@ -48,6 +48,8 @@ SensorObject::SensorObject(std::string name, const SensorSpec& spec) : Object(st
   if (spec.nx == 0 || spec.ny == 0) bad("bins must be at least 1 x 1");
   if (static_cast<std::uint64_t>(spec.nx) * spec.ny > (1u << 26)) bad("more than 2^26 bins");
   if (spec.shape == SensorShape::Disk && spec.width != spec.height) bad("a disk has one diameter (width == height)");
+  if (spec.theta_bins > 0 && spec.phi_bins == 0) bad("angular bins need at least one phi bin");
+  if (static_cast<std::uint64_t>(spec.theta_bins) * spec.phi_bins > (1u << 20)) bad("more than 2^20 angular bins");
   // Bin areas once: a rectangle's bins are equal; a disk's are its squares cut by the circle.
   bin_area_.resize(binCount());
   const double bw = spec.width / spec.nx, bh = spec.height / spec.ny;
@@ -61,6 +63,23 @@ SensorObject::SensorObject(std::string name, const SensorSpec& spec) : Object(st
       bin_area_[iy * spec.nx + ix] = a;
     }
   }
+}
+
+std::uint32_t SensorObject::angleBinAt(double cos_theta, double phi) const {
+  if (spec_.theta_bins == 0) return kInvalidId;
+  constexpr double kHalfPi = 0.5 * std::numbers::pi, kTwoPi = 2.0 * std::numbers::pi;
+  const double theta = std::acos(std::min(1.0, std::abs(cos_theta)));
+  const auto it = std::min(spec_.theta_bins - 1, static_cast<std::uint32_t>(theta / kHalfPi * spec_.theta_bins));
+  double p = std::fmod(phi, kTwoPi);
+  if (p < 0.0) p += kTwoPi;
+  const auto ip = std::min(spec_.phi_bins - 1, static_cast<std::uint32_t>(p / kTwoPi * spec_.phi_bins));
+  return ip * spec_.theta_bins + it;
+}
+
+double SensorObject::angleBinSolidAngle(std::uint32_t bin) const {
+  const std::uint32_t it = bin % spec_.theta_bins;
+  const double dt = 0.5 * std::numbers::pi / spec_.theta_bins;
+  return (std::cos(it * dt) - std::cos((it + 1) * dt)) * 2.0 * std::numbers::pi / spec_.phi_bins;
 }
 
 double SensorObject::area() const {

@@ -9,6 +9,7 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/sensors/CounterRng.h"
+#include "duplex/sensors/HenyeyGreenstein.h"
 
 #include "OrthonormalBasis.h"
 
@@ -23,6 +24,7 @@
 #include <fstream>
 #include <limits>
 #include <numbers>
+#include <optional>
 
 namespace duplex {
 
@@ -47,6 +49,32 @@ glm::dvec3 cosineDirection(const glm::dvec3& n, double u0, double u1) {
 
 glm::dvec3 reflect(const glm::dvec3& d, const glm::dvec3& n) { return d - 2.0 * glm::dot(d, n) * n; }
 
+// A direction scattered from unit propagation direction d by phase function hg.
+glm::dvec3 phaseDirection(const glm::dvec3& d, const HenyeyGreenstein& hg, double u0, double u1) {
+  const double c = hg.sampleCos(u0), sn = std::sqrt(std::max(0.0, 1.0 - c * c)), phi = 2.0 * std::numbers::pi * u1;
+  glm::dvec3 t, b;
+  detail::orthonormalBasis(d, t, b);
+  return glm::normalize(sn * std::cos(phi) * t + sn * std::sin(phi) * b + c * d);
+}
+
+// Whether the segment origin + t dir, t in [0, t_max], meets the box [lo, hi] (slab test; an
+// infinite t_max is a ray).
+bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_max, const glm::dvec3& lo, const glm::dvec3& hi) {
+  double t0 = 0.0, t1 = t_max;
+  for (int a = 0; a < 3; ++a) {
+    const double inv = 1.0 / dir[a];
+    double ta = (lo[a] - origin[a]) * inv, tb = (hi[a] - origin[a]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    if (!(ta <= t1 && tb >= t0)) {
+      if (std::isnan(ta) || std::isnan(tb)) continue;  // dir[a] == 0 with the origin on a face: keep
+      return false;
+    }
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 <= t1;
+}
+
 }  // namespace
 
 struct SensorRun::Chunk {
@@ -58,6 +86,7 @@ struct SensorRun::Chunk {
   std::vector<SensorEvent> sensors;
   std::vector<std::uint32_t> sensor_end;
   std::vector<EnergyBalance> energy;  // per ray (emitted_w unused)
+  std::vector<std::uint16_t> band;    // per ray, when the scene has several bands
   SensorRunCounters counters;
 };
 
@@ -68,11 +97,20 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
   double acc = 0.0;
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
-  bin_sum_.assign(scene_.binCount(), 0.0);
-  bin_sum2_.assign(scene_.binCount(), 0.0);
-  bin_count_.assign(scene_.binCount(), 0);
+  // Spatial bins, then the angular bins, in one index space.
+  const std::size_t all_bins = static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount();
+  bin_sum_.assign(all_bins, 0.0);
+  bin_sum2_.assign(all_bins, 0.0);
+  bin_count_.assign(all_bins, 0);
   sensor_sum_.assign(scene_.sensors().size(), 0.0);
   sensor_sum2_.assign(scene_.sensors().size(), 0.0);
+  if (!scene_.bands().empty()) {
+    const std::size_t nb = scene_.bandCount();
+    band_bin_sum_.assign(bin_sum_.size() * nb, 0.0);
+    band_bin_sum2_.assign(bin_sum_.size() * nb, 0.0);
+    band_sensor_sum_.assign(sensor_sum_.size() * nb, 0.0);
+    band_sensor_sum2_.assign(sensor_sum_.size() * nb, 0.0);
+  }
 }
 
 void SensorRun::traceChunk(Chunk& chunk) const {
@@ -81,6 +119,13 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   const auto& sensors = scene_.sensors();
   const double power = scene_.totalPower();
   const double rr_level = config_.roulette_threshold * power;
+  const std::uint32_t bands = scene_.bandCount();
+  const std::uint32_t angle_base = scene_.binCount();  // angular bins follow the spatial ones
+  // In a scene whose fogs scatter, every fog acts through sampled free flights, not through the
+  // crossing query's transmittance.
+  const bool scatter = scene_.scatters();
+  CrossingQuery query = config_.query;
+  if (scatter) query.medium_mask = 0;
   QueryContext ctx;
   std::vector<SensorCrossing> crossings;
   std::vector<BinEvent> path_bins;  // this path's deposits before merging
@@ -88,6 +133,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   chunk.bin_end.clear();
   chunk.sensors.clear();
   chunk.sensor_end.clear();
+  chunk.band.assign(bands > 1 ? chunk.count : 0, 0);
   chunk.energy.assign(chunk.count, EnergyBalance{});
   chunk.counters = {};
 
@@ -99,28 +145,70 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     const double pick = rng.uniform() * power;
     const std::size_t li = std::min<std::size_t>(
         lights.size() - 1, static_cast<std::size_t>(std::upper_bound(light_cdf_.begin(), light_cdf_.end(), pick) - light_cdf_.begin()));
+    // The band by the light's spectrum, from where `pick` fell inside the light's share: the path's
+    // other random numbers stay those of a single-band run (equal reflectances: equal paths).
+    std::uint32_t band = 0;
+    if (bands > 1) {
+      const double lo = li ? light_cdf_[li - 1] : 0.0;
+      const double ub = std::clamp((pick - lo) / lights[li].power_w, 0.0, 1.0);
+      const std::vector<double>& cdf = scene_.bandCdf(li);
+      band = std::min(bands - 1, static_cast<std::uint32_t>(std::upper_bound(cdf.begin(), cdf.end(), ub) - cdf.begin()));
+      chunk.band[k] = static_cast<std::uint16_t>(band);
+    }
     double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
     const EmittedRay emitted = sampleLight(lights[li], u);
     glm::dvec3 origin = emitted.origin, dir = emitted.dir;
     double w = power * emitted.weight;
     path_bins.clear();
 
-    for (std::uint32_t depth = 0;; ++depth) {
+    std::uint32_t depth = 0, scatterings = 0;
+    for (;;) {
       Ray ray;
       ray.origin = glm::vec3(origin);
       ray.dir = glm::vec3(dir);
       ++chunk.counters.segments;
       SegmentEnd end;
-      if (config_.closest_hit_only) {
-        end.hit = top.intersect(ray, ctx, config_.query.surface_mask);
-      } else {
-        end = top.intersectWithCrossings(ray, crossings, ctx, config_.query);
+      if (config_.closest_hit_only) end.hit = top.intersect(ray, ctx, config_.query.surface_mask);
+      else end = top.intersectWithCrossings(ray, crossings, ctx, query);
+      // A collision in a scattering fog before the blocking hit ends the segment there.
+      const MediumInstance* collided = nullptr;
+      double t_collision = std::numeric_limits<double>::infinity();
+      if (scatter) {
+        collided = sampleCollision(origin, dir, end.hit.valid() ? end.hit.t : std::numeric_limits<float>::infinity(), rng, ctx, t_collision);
+      }
+      if (!config_.closest_hit_only) {
         for (const SensorCrossing& c : crossings) {
+          if (c.hit.t > t_collision) break;  // sorted by t
           const int s = scene_.sensorOf(c.hit.instance_id);
           if (s < 0) continue;
-          path_bins.push_back({sensors[static_cast<std::size_t>(s)].first_bin + c.hit.prim_id, w * c.transmittance});
+          const SensorInstance& si = sensors[static_cast<std::size_t>(s)];
+          const double value = w * c.transmittance;
+          path_bins.push_back({si.first_bin + c.hit.prim_id, value});
+          if (si.object->spec().theta_bins != 0) {  // the incoming direction, in the sensor's world frame
+            const glm::dvec3 in = -dir;
+            const std::uint32_t ab = si.object->angleBinAt(glm::dot(in, si.normal),
+                                                           std::atan2(glm::dot(in, si.frame_y), glm::dot(in, si.frame_x)));
+            path_bins.push_back({angle_base + si.first_angle_bin + ab, value});
+          }
           ++chunk.counters.crossings;
         }
+      }
+      if (collided) {
+        ++chunk.counters.scatterings;
+        if (scatterings == config_.max_scatterings) {
+          e.depth_limited_w += w;
+          break;
+        }
+        ++scatterings;
+        const double albedo = collided->material.type == MaterialType::Medium ? collided->material.reflectanceIn(band) : 0.0;
+        if (!(rng.uniform() < albedo)) {
+          e.medium_absorbed_w += w;
+          break;
+        }
+        const glm::dvec3 d = glm::normalize(dir);
+        origin = origin + t_collision * dir;
+        dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, rng.uniform(), rng.uniform());
+        continue;
       }
       const double w_after = w * end.transmittance;
       e.medium_absorbed_w += w - w_after;
@@ -133,6 +221,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         e.depth_limited_w += w;
         break;
       }
+      ++depth;
       // Scatter by the material; a path ends in an absorber or by the albedo's roulette.
       const Material& m = scene_.materialOf(end.hit.instance_id);
       const glm::dvec3 p = origin + static_cast<double>(end.hit.t) * dir;
@@ -141,11 +230,11 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       const bool front = glm::dot(d, n) < 0.0;
       const glm::dvec3 nf = front ? n : -n;  // faces the incoming ray
       glm::dvec3 next;
-      if (m.type == MaterialType::Absorber) {
+      if (m.type == MaterialType::Absorber || m.type == MaterialType::Medium) {
         e.absorbed_w += w;
         break;
       } else if (m.type == MaterialType::Lambertian || m.type == MaterialType::Mirror) {
-        if (rng.uniform() >= m.reflectance) {
+        if (rng.uniform() >= m.reflectanceIn(band)) {
           e.absorbed_w += w;
           break;
         }
@@ -193,9 +282,10 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       for (++i; i < path_bins.size() && path_bins[i].bin == merged.bin; ++i) merged.value += path_bins[i].value;
       chunk.bins.push_back(merged);
     }
-    // Sensor totals: bins are sorted, and a sensor's bins are contiguous, so its sum follows.
+    // Sensor totals: bins are sorted, and a sensor's spatial bins are contiguous, so its sum follows.
     for (std::size_t i = chunk.bin_end.empty() ? 0 : chunk.bin_end.back(); i < chunk.bins.size(); ++i) {
       const BinEvent& b = chunk.bins[i];
+      if (b.bin >= angle_base) break;  // angular bins (sorted after the spatial ones) repeat the same power
       // The sensor of a global bin: the last sensor whose first_bin <= bin.
       const auto it = std::upper_bound(sensors.begin(), sensors.end(), b.bin,
                                        [](std::uint32_t bin, const SensorInstance& s) { return bin < s.first_bin; });
@@ -209,19 +299,55 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   chunk.done = true;
 }
 
+const MediumInstance* SensorRun::sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max, CounterRng& rng,
+                                                 QueryContext& ctx, double& t_collision) const {
+  // The first collision among independent free flights is a free flight through the summed
+  // density; each later medium only needs to be sampled up to the best collision so far.
+  const MediumInstance* found = nullptr;
+  float t_best = t_max;
+  for (const MediumInstance& m : scene_.scatteringMedia()) {
+    const std::uint64_t seed = rng.next();  // drawn for every medium: the stream does not depend on the geometry
+    if ((m.mask & config_.query.medium_mask) == 0) continue;
+    if (!segmentMeetsBox(origin, dir, t_best, m.world_lo, m.world_hi)) continue;
+    Ray ray_os;  // object space, direction not renormalised: t is the world t
+    ray_os.origin = glm::vec3(m.object_from_world.point(origin));
+    ray_os.dir = glm::vec3(m.object_from_world.vector(dir));
+    ray_os.tnear = 0.0f;
+    ray_os.tfar = t_best;
+    if (const std::optional<float> t = m.volume->sampleFreeFlight(ray_os, ctx, seed); t && *t < t_best) {
+      t_best = *t;
+      found = &m;
+    }
+  }
+  t_collision = found ? static_cast<double>(t_best) : std::numeric_limits<double>::infinity();
+  return found;
+}
+
 void SensorRun::reduce(const Chunk& chunk) {
   std::size_t b = 0, s = 0;
+  const bool spectral = !band_bin_sum_.empty();
+  const std::size_t nb = scene_.bandCount();
   for (std::uint64_t k = 0; k < chunk.count; ++k) {
+    // A ray carries one band: its deposits are also that band's samples (zeros in the others).
+    const std::size_t band = chunk.band.empty() ? 0 : chunk.band[k];
     for (; b < chunk.bin_end[k]; ++b) {
       const BinEvent& ev = chunk.bins[b];
       bin_sum_[ev.bin] += ev.value;
       bin_sum2_[ev.bin] += ev.value * ev.value;
       ++bin_count_[ev.bin];
+      if (spectral) {
+        band_bin_sum_[ev.bin * nb + band] += ev.value;
+        band_bin_sum2_[ev.bin * nb + band] += ev.value * ev.value;
+      }
     }
     for (; s < chunk.sensor_end[k]; ++s) {
       const SensorEvent& ev = chunk.sensors[s];
       sensor_sum_[ev.sensor] += ev.value;
       sensor_sum2_[ev.sensor] += ev.value * ev.value;
+      if (spectral) {
+        band_sensor_sum_[ev.sensor * nb + band] += ev.value;
+        band_sensor_sum2_[ev.sensor * nb + band] += ev.value * ev.value;
+      }
     }
     const EnergyBalance& e = chunk.energy[k];
     energy_sum_.escaped_w += e.escaped_w;
@@ -233,6 +359,7 @@ void SensorRun::reduce(const Chunk& chunk) {
   rays_done_ += chunk.count;
   counters_.segments += chunk.counters.segments;
   counters_.crossings += chunk.counters.crossings;
+  counters_.scatterings += chunk.counters.scatterings;
 }
 
 SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays, const std::function<void(const SensorProgress&)>& progress,
@@ -314,6 +441,16 @@ SensorRunResults SensorRun::results() const {
   r.energy.medium_absorbed_w = energy_sum_.medium_absorbed_w / n;
   r.energy.depth_limited_w = energy_sum_.depth_limited_w / n;
   r.energy.roulette_w = energy_sum_.roulette_w / n;
+  const bool spectral = !band_bin_sum_.empty();
+  const std::size_t nb = scene_.bandCount();
+  if (spectral) {
+    r.bands = scene_.bands();
+    r.band_emitted_w.assign(nb, 0.0);
+    for (std::size_t l = 0; l < scene_.lights().size(); ++l) {
+      const std::vector<double>& cdf = scene_.bandCdf(l);
+      for (std::size_t k = 0; k < nb; ++k) r.band_emitted_w[k] += scene_.lights()[l].power_w * (cdf[k] - (k ? cdf[k - 1] : 0.0));
+    }
+  }
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& s = scene_.sensors()[k];
     const SensorSpec& spec = s.object->spec();
@@ -337,6 +474,40 @@ SensorRunResults SensorRun::results() const {
       out.ray_count.push_back(bin_count_[s.first_bin + b]);
     }
     meanAndStderr(sensor_sum_[k], sensor_sum2_[k], rays_done_, out.total_flux_w, out.total_flux_stderr_w);
+    out.theta_bins = spec.theta_bins;
+    out.phi_bins = spec.theta_bins ? spec.phi_bins : 0;
+    const std::size_t angle_first = static_cast<std::size_t>(scene_.binCount()) + s.first_angle_bin;
+    for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a) {
+      double mean, se;
+      meanAndStderr(bin_sum_[angle_first + a], bin_sum2_[angle_first + a], rays_done_, mean, se);
+      out.angular_flux_w.push_back(mean);
+      out.angular_stderr_w.push_back(se);
+      out.angular_solid_angle_sr.push_back(s.object->angleBinSolidAngle(a));
+      out.angular_ray_count.push_back(bin_count_[angle_first + a]);
+    }
+    if (spectral) {
+      out.band_flux_w.assign(nb, {});
+      out.band_irradiance_w_m2.assign(nb, {});
+      out.band_stderr_w_m2.assign(nb, {});
+      out.band_total_flux_w.assign(nb, 0.0);
+      out.band_total_flux_stderr_w.assign(nb, 0.0);
+      for (std::size_t band = 0; band < nb; ++band) {
+        for (std::uint32_t b = 0; b < bins; ++b) {
+          const std::size_t i = (s.first_bin + b) * nb + band;
+          double mean, se;
+          meanAndStderr(band_bin_sum_[i], band_bin_sum2_[i], rays_done_, mean, se);
+          const double area = out.bin_area_m2[b];
+          out.band_flux_w[band].push_back(mean);
+          out.band_irradiance_w_m2[band].push_back(area > 0.0 ? mean / area : 0.0);
+          out.band_stderr_w_m2[band].push_back(area > 0.0 ? se / area : 0.0);
+        }
+        if (spec.angleBinCount() != 0) out.band_angular_flux_w.resize(nb);
+        for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a)
+          out.band_angular_flux_w[band].push_back(band_bin_sum_[(angle_first + a) * nb + band] / n);
+        meanAndStderr(band_sensor_sum_[k * nb + band], band_sensor_sum2_[k * nb + band], rays_done_, out.band_total_flux_w[band],
+                      out.band_total_flux_stderr_w[band]);
+      }
+    }
     out.relative_stderr = out.total_flux_w > 0.0 ? out.total_flux_stderr_w / out.total_flux_w : std::numeric_limits<double>::infinity();
     out.efficiency = scene_.totalPower() > 0.0 ? out.total_flux_w / scene_.totalPower() : 0.0;
     r.sensors.push_back(std::move(out));
@@ -361,6 +532,21 @@ std::uint64_t SensorRun::fingerprint() const {
   add(&config_.seed, sizeof config_.seed);
   add(&config_.max_depth, sizeof config_.max_depth);
   add(&config_.roulette_threshold, sizeof config_.roulette_threshold);
+  // Added only where a scene uses them, so that states saved before they existed still resume.
+  for (std::size_t l = 0; !scene_.bands().empty() && l < scene_.lights().size(); ++l) {
+    const std::vector<double>& cdf = scene_.bandCdf(l);
+    add(cdf.data(), cdf.size() * sizeof(double));
+  }
+  for (const std::string& b : scene_.bands()) add(b.data(), b.size() + 1);
+  for (const SensorInstance& s : scene_.sensors()) {
+    const SensorSpec& spec = s.object->spec();
+    if (spec.theta_bins != 0) {
+      add(s.name.data(), s.name.size());
+      add(&spec.theta_bins, sizeof spec.theta_bins);
+      add(&spec.phi_bins, sizeof spec.phi_bins);
+    }
+  }
+  if (scene_.scatters()) add(&config_.max_scatterings, sizeof config_.max_scatterings);
   return h;
 }
 
@@ -383,6 +569,10 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
   const double energy[5] = {energy_sum_.escaped_w, energy_sum_.absorbed_w, energy_sum_.medium_absorbed_w,
                             energy_sum_.depth_limited_w, energy_sum_.roulette_w};
   out.write(reinterpret_cast<const char*>(energy), sizeof energy);
+  put(band_bin_sum_);  // empty unless the scene has bands
+  put(band_bin_sum2_);
+  put(band_sensor_sum_);
+  put(band_sensor_sum2_);
   if (!out) throw FileError(file.string() + ": write failed");
 }
 
@@ -408,7 +598,16 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   get(s2);
   double energy[5];
   in.read(reinterpret_cast<char*>(energy), sizeof energy);
+  auto bb1 = band_bin_sum_, bb2 = band_bin_sum2_, bs1 = band_sensor_sum_, bs2 = band_sensor_sum2_;
+  get(bb1);
+  get(bb2);
+  get(bs1);
+  get(bs2);
   if (!in) throw FileError(file.string() + ": truncated run state");
+  band_bin_sum_ = std::move(bb1);
+  band_bin_sum2_ = std::move(bb2);
+  band_sensor_sum_ = std::move(bs1);
+  band_sensor_sum2_ = std::move(bs2);
   bin_sum_ = std::move(b1);
   bin_sum2_ = std::move(b2);
   bin_count_ = std::move(bc);

@@ -40,6 +40,14 @@ glm::dvec3 direction(const json& v, const std::string& p, const ObjectSpecContex
   return d;
 }
 
+// A non-empty array of numbers (per-band values).
+std::vector<double> numbers(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  if (!v.is_array() || v.empty()) ctx.fail(p, "expected a non-empty array of numbers (one per band)");
+  std::vector<double> out;
+  for (std::size_t k = 0; k < v.size(); ++k) out.push_back(ctx.number(v[k], at(p, k)));
+  return out;
+}
+
 Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
   if (!v.is_object()) ctx.fail(p, "expected a light (an object with \"type\")");
   Light l;
@@ -49,11 +57,11 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
   l.power_w = power;
   if (type == "point") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "position"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position"});
     l.type = LightType::Point;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
   } else if (type == "spot") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "position", "direction", "half_angle"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position", "direction", "half_angle"});
     l.type = LightType::Spot;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
@@ -61,13 +69,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
     l.cone_angle = deg * std::numbers::pi / 180.0;
   } else if (type == "directional") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "position", "direction", "radius"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position", "direction", "radius"});
     l.type = LightType::Directional;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
     l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
   } else if (type == "area") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "size", "transform", "two_sided"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "size", "transform", "two_sided"});
     l.type = LightType::Area;
     const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
     l.width = size[0];
@@ -78,7 +86,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       l.two_sided = v["two_sided"].get<bool>();
     }
   } else if (type == "ies") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "file", "position", "transform"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "file", "position", "transform"});
     l.type = LightType::Goniometric;
     if (v.contains("position") == v.contains("transform"))
       ctx.fail(p, "an \"ies\" light has either \"position\" or \"transform\" (rotation and translation)");
@@ -97,6 +105,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   } else {
     ctx.fail(at(p, "type"), "unknown light type \"" + type + "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
   }
+  if (v.contains("spectrum")) l.spectrum = numbers(v["spectrum"], at(p, "spectrum"), ctx);
   try {
     l.validate();
   } catch (const InvalidArgument& e) {
@@ -109,11 +118,20 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
   if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
   Material m;
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  auto reflectance = [&] {
-    const double r = ctx.number(ctx.member(v, p, "reflectance"), at(p, "reflectance"));
-    if (!(r >= 0.0 && r <= 1.0)) ctx.fail(at(p, "reflectance"), "expected a reflectance in [0, 1]");
-    return r;
+  // A number in [0, 1], or one per band (then `reflectance` keeps their mean, for messages).
+  auto fraction = [&](const char* key) {
+    const json& x = ctx.member(v, p, key);
+    const std::vector<double> values = x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
+    double sum = 0.0;
+    for (std::size_t k = 0; k < values.size(); ++k) {
+      if (!(values[k] >= 0.0 && values[k] <= 1.0))
+        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key), std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key + " in [0, 1]");
+      sum += values[k];
+    }
+    if (x.is_array()) m.band_reflectance = values;
+    return sum / static_cast<double>(values.size());
   };
+  auto reflectance = [&] { return fraction("reflectance"); };
   if (type == "absorber") {
     ctx.onlyKeys(v, p, {"type"});
   } else if (type == "lambertian") {
@@ -128,8 +146,17 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
     ctx.onlyKeys(v, p, {"type", "ior"});
     m.type = MaterialType::Dielectric;
     m.ior = ctx.positiveNumber(ctx.member(v, p, "ior"), at(p, "ior"));
+  } else if (type == "medium") {
+    ctx.onlyKeys(v, p, {"type", "albedo", "g"});
+    m.type = MaterialType::Medium;
+    m.reflectance = fraction("albedo");
+    if (v.contains("g")) {
+      m.g = ctx.number(v["g"], at(p, "g"));
+      if (!(m.g > -1.0 && m.g < 1.0)) ctx.fail(at(p, "g"), "expected a Henyey-Greenstein g in (-1, 1)");
+    }
   } else {
-    ctx.fail(at(p, "type"), "unknown material \"" + type + "\" (expected \"absorber\", \"lambertian\", \"mirror\" or \"dielectric\")");
+    ctx.fail(at(p, "type"), "unknown material \"" + type +
+                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\" or \"medium\")");
   }
   return m;
 }
@@ -154,11 +181,34 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     if (objects[i].contains("material"))
       materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx);
 
+  std::vector<std::string> bands;
+  if (root.contains("bands")) {
+    const json& list = root["bands"];
+    if (!list.is_array() || list.empty()) ctx.fail("/bands", "expected a non-empty array of band names");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      bands.push_back(ctx.string(list[i], at("/bands", i)));
+      for (std::size_t j = 0; j < i; ++j)
+        if (bands[j] == bands[i] || bands[i].empty()) ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
+    }
+  }
+  auto bandCount = [&](const std::vector<double>& values, const std::string& p) {
+    if (!values.empty() && values.size() != std::max<std::size_t>(1, bands.size()))
+      ctx.fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
+                      (bands.empty() ? std::string("no \"bands\"") : std::to_string(bands.size()) + " bands"));
+  };
+  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
+    const Material& m = materials[doc->objects[i]];
+    bandCount(m.band_reflectance, at(at(at("/objects", i), "material"), m.type == MaterialType::Medium ? "albedo" : "reflectance"));
+  }
+
   std::vector<Light> lights;
   if (root.contains("lights")) {
     const json& list = root["lights"];
     if (!list.is_array()) ctx.fail("/lights", "expected an array of lights");
-    for (std::size_t i = 0; i < list.size(); ++i) lights.push_back(readLight(list[i], at("/lights", i), ctx));
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      lights.push_back(readLight(list[i], at("/lights", i), ctx));
+      bandCount(lights.back().spectrum, at(at("/lights", i), "spectrum"));
+    }
   }
 
   if (root.contains("sensors")) {
@@ -183,11 +233,11 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     (void)graph.commit();
   }
   try {
-    SensorScene scene(graph, std::move(lights), std::move(materials));
+    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {
-    ctx.fail("/sensors", ex.what());
+    ctx.fail("", ex.what());  // names the object, light or sensor
   }
 }
 

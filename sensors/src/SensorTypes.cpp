@@ -26,7 +26,7 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::i
   if (!spec.is_object()) ctx.fail(p, "expected an object");
   if (ctx.strict) {
     for (const auto& [key, value] : spec.items()) {
-      bool known = key == "shape" || key == "size" || key == "bins" || key == "two_sided";
+      bool known = key == "shape" || key == "size" || key == "bins" || key == "two_sided" || key == "angular_bins";
       for (const std::string_view k : extra_keys) known = known || key == k;
       if (!known) ctx.fail(p + "/" + key, "unknown key \"" + key + "\"");
     }
@@ -57,6 +57,17 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::i
   if (spec.contains("two_sided")) {
     if (!spec["two_sided"].is_boolean()) ctx.fail(p + "/two_sided", "expected true or false");
     s.two_sided = spec["two_sided"].get<bool>();
+  }
+  if (spec.contains("angular_bins")) {  // n_theta, or [n_theta, n_phi]
+    const json& a = spec["angular_bins"];
+    if (a.is_number()) {
+      s.theta_bins = binCount(a, p + "/angular_bins", ctx);
+    } else {
+      if (!a.is_array() || a.size() != 2) ctx.fail(p + "/angular_bins", "expected n_theta or [n_theta, n_phi] (integers >= 1)");
+      s.theta_bins = binCount(a[0], p + "/angular_bins/0", ctx);
+      s.phi_bins = binCount(a[1], p + "/angular_bins/1", ctx);
+    }
+    if (static_cast<std::uint64_t>(s.theta_bins) * s.phi_bins > (1u << 20)) ctx.fail(p + "/angular_bins", "more than 2^20 angular bins");
   }
   return s;
 }

@@ -8,6 +8,7 @@
 #include "duplex/objects/TriangleMesh.h"
 #include "duplex/sensors/SensorObject.h"
 #include "duplex/sensors/SensorTypes.h"
+#include "SensorFixture.h"
 #include "SlabMedium.h"
 
 #include <gtest/gtest.h>
@@ -30,15 +31,7 @@ Ray downRay(double x, double y, double z = 1.0) {
   return r;
 }
 
-std::shared_ptr<const SensorObject> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true) {
-  SensorSpec s;
-  s.width = w;
-  s.height = h;
-  s.nx = nx;
-  s.ny = ny;
-  s.two_sided = two_sided;
-  return std::make_shared<const SensorObject>("sensor", s);
-}
+using test::sensor;
 
 SensorObject rectangle(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true) {
   return *sensor(w, h, nx, ny, two_sided);

@@ -1,6 +1,7 @@
 #pragma once
 /// \file Light.h
-/// Light sources of a sensor run, each with a total power in watts (radiometric, one band).
+/// Light sources of a sensor run, each with a total power in watts (radiometric; in spectral scenes
+/// shared among the bands by `spectrum`).
 /// Positions and directions are in world space (scene units; irradiance is reported per square
 /// scene unit, W/m^2 when the scene is in metres).
 
@@ -12,6 +13,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace duplex {
 
@@ -39,10 +41,14 @@ struct Light {
   Affine world_from_light;      ///< Area: placement of the local rectangle; Goniometric: its rotation orients the luminaire
   std::shared_ptr<const IesProfile> profile;  ///< Goniometric: the intensity table (its shape; power_w scales it)
   bool two_sided = false;       ///< Area: also emits towards -z (half the power each side)
+  /// Spectral scenes: relative power per band (>= 0, not all 0; normalised by the scene); empty:
+  /// the power is shared equally among the bands. Its length must be the scene's band count.
+  std::vector<double> spectrum;
 
   /// Throws InvalidArgument naming the light for non-finite values, power <= 0, a zero direction,
   /// a cone angle outside (0, pi], or a non-positive size or radius, or a singular transform; a
-  /// goniometric light without a profile or whose transform's linear part is not a rotation.
+  /// goniometric light without a profile or whose transform's linear part is not a rotation, a
+  /// spectrum with a negative or non-finite entry or without a positive one.
   void validate() const;
   /// Radiant intensity (W/sr) of a Point, Spot or Goniometric light towards world direction
   /// `dir_ws` (any length); 0 outside a spot's cone. For analytic checks.

@@ -1,9 +1,10 @@
 #pragma once
 /// \file Material.h
-/// The surface materials of light transport (issue 5): no more than a scene needs.
+/// The surface and medium materials of light transport (issue 5): no more than a scene needs.
 
 #include <cstdint>
 #include <ostream>
+#include <vector>
 
 namespace duplex {
 
@@ -12,17 +13,35 @@ enum class MaterialType : std::uint8_t {
   Lambertian,  ///< diffuse reflection with albedo `reflectance`, both faces
   Mirror,      ///< specular reflection of a fraction `reflectance`, both faces
   Dielectric,  ///< smooth glass-like interface of index `ior` (outside: 1): Fresnel reflection or refraction
+  /// Scattering fog (on a medium object only): at each collision (free flights sampled through the
+  /// density) the ray scatters with probability `reflectance` (the single-scattering albedo) into a
+  /// Henyey-Greenstein lobe of asymmetry `g`, else it is absorbed.
+  Medium,
 };
 
 struct Material {
   MaterialType type = MaterialType::Absorber;
-  double reflectance = 0.0;  ///< Lambertian, Mirror: in [0, 1]
+  double reflectance = 0.0;  ///< Lambertian, Mirror: in [0, 1]; Medium: single-scattering albedo in [0, 1]
   double ior = 1.5;          ///< Dielectric: > 0; the mesh's geometric normal points outside
+  double g = 0.0;            ///< Medium: Henyey-Greenstein mean cosine, in (-1, 1)
+  /// Spectral scenes: the reflectance (albedo) in each band; empty: `reflectance` in every band.
+  std::vector<double> band_reflectance{};
+
+  /// Reflectance (Medium: albedo) in spectral band `band` (< the scene's band count).
+  [[nodiscard]] double reflectanceIn(std::uint32_t band) const {
+    return band_reflectance.empty() ? reflectance : band_reflectance[band];
+  }
 };
 
 inline std::ostream& operator<<(std::ostream& os, const Material& m) {
-  static const char* names[] = {"absorber", "lambertian", "mirror", "dielectric"};
-  return os << "Material{" << names[static_cast<int>(m.type)] << ", rho=" << m.reflectance << ", ior=" << m.ior << "}";
+  static const char* names[] = {"absorber", "lambertian", "mirror", "dielectric", "medium"};
+  os << "Material{" << names[static_cast<int>(m.type)] << ", rho=" << m.reflectance << ", ior=" << m.ior << ", g=" << m.g;
+  if (!m.band_reflectance.empty()) {
+    os << ", bands=[";
+    for (std::size_t k = 0; k < m.band_reflectance.size(); ++k) os << (k ? ", " : "") << m.band_reflectance[k];
+    os << "]";
+  }
+  return os << "}";
 }
 
 }  // namespace duplex

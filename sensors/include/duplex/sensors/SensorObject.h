@@ -37,6 +37,16 @@ struct SensorSpec {
   std::uint32_t nx = 1;
   std::uint32_t ny = 1;
   bool two_sided = true;
+  /// Optional angular bins of the incoming direction (per sensor, not per spatial bin): 0 = none.
+  /// theta: the angle between the incoming direction (towards where the light came from) and the
+  /// normal of the face it arrives at, [0, 90] degrees in theta_bins equal steps; phi: its azimuth
+  /// in the sensor's frame (from local +x towards +y, [0, 360) degrees) in phi_bins equal steps.
+  /// Angular bin index: iphi * theta_bins + itheta (theta fastest); an angle on an inner edge goes
+  /// to the bin above it, 90 degrees to the last theta bin.
+  std::uint32_t theta_bins = 0;
+  std::uint32_t phi_bins = 1;
+
+  [[nodiscard]] std::uint32_t angleBinCount() const { return theta_bins * phi_bins; }
 };
 
 /// Where a crossing lands on a sensor (object space).
@@ -50,7 +60,8 @@ class SensorObject final : public Object {
  public:
   static constexpr std::string_view kTypeName = "sensor";
   /// Throws InvalidArgument (naming `name`) for non-finite or non-positive sizes, zero bins, more
-  /// than 2^26 bins, or a disk whose width and height differ.
+  /// than 2^26 bins, or a disk whose width and height differ; phi_bins 0 with theta bins, or more
+  /// than 2^20 angular bins.
   SensorObject(std::string name, const SensorSpec& spec);
 
   [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
@@ -59,6 +70,12 @@ class SensorObject final : public Object {
   /// Object-space area of bin `bin` that belongs to the sensor (for a disk, the exact area of the
   /// bin's square inside the circle; zero for bins outside it).
   [[nodiscard]] double binArea(std::uint32_t bin) const { return bin_area_[bin]; }
+  /// Angular bin of an incoming direction given by the cosine of its angle to the crossed face's
+  /// normal (sign ignored) and its azimuth phi (radians, any real number); kInvalidId without
+  /// angular bins.
+  [[nodiscard]] std::uint32_t angleBinAt(double cos_theta, double phi) const;
+  /// Solid angle (sr) of angular bin `bin` on one face: (cos theta0 - cos theta1) (phi1 - phi0).
+  [[nodiscard]] double angleBinSolidAngle(std::uint32_t bin) const;
   /// Object-space area of the whole sensor (w h, or pi w^2 / 4).
   [[nodiscard]] double area() const;
 

@@ -36,10 +36,29 @@ struct SensorResult {
   double total_flux_stderr_w = 0.0;
   double relative_stderr = 0.0;  ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
   double efficiency = 0.0;       ///< total_flux_w / emitted power
+  /// Angular bins of the incoming direction (SensorSpec::theta_bins; empty without): index
+  /// iphi * theta_bins + itheta. Flux (W) that arrived from directions in the bin, its standard
+  /// error, the bin's solid angle on one face, and the emitted rays that crossed with such a direction.
+  std::uint32_t theta_bins = 0, phi_bins = 0;
+  std::vector<double> angular_flux_w;
+  std::vector<double> angular_stderr_w;
+  std::vector<double> angular_solid_angle_sr;
+  std::vector<std::uint64_t> angular_ray_count;
+  /// Spectral scenes with angular bins: [band][angular bin], W.
+  std::vector<std::vector<double>> band_angular_flux_w;
+  /// Spectral scenes (SensorRunResults::bands not empty): per band, the same quantities; the
+  /// arrays above are their sums over the bands (the standard errors are each band's own).
+  std::vector<std::vector<double>> band_flux_w;           ///< [band][bin], W
+  std::vector<std::vector<double>> band_irradiance_w_m2;  ///< [band][bin]
+  std::vector<std::vector<double>> band_stderr_w_m2;      ///< [band][bin]
+  std::vector<double> band_total_flux_w;                  ///< [band]
+  std::vector<double> band_total_flux_stderr_w;           ///< [band]
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
 /// emitted = escaped + absorbed + medium_absorbed + depth_limited + roulette up to rounding.
+/// medium_absorbed counts attenuation (fogs that do not scatter) and absorbing collisions (fogs
+/// that do); depth_limited also paths cut after SensorRunConfig::max_scatterings collisions.
 struct EnergyBalance {
   double emitted_w = 0.0;
   double escaped_w = 0.0;          ///< left the scene (no blocking hit)
@@ -53,6 +72,8 @@ struct SensorRunResults {
   std::uint64_t rays = 0;  ///< emitted rays
   std::uint64_t seed = 0;
   EnergyBalance energy;
+  std::vector<std::string> bands;       ///< the scene's band names (empty: one radiometric band)
+  std::vector<double> band_emitted_w;   ///< per band: the lights' power in it (exact, from their spectra)
   std::vector<SensorResult> sensors;  ///< in the scene's sensor order
 };
 

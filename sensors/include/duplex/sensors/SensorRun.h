@@ -4,7 +4,9 @@
 ///
 /// Rays start at the lights (chosen in proportion to their power), are traced with the top level's
 /// crossing query (closest blocking hit + every sensor crossing before it, media transmittance),
-/// and scatter at surfaces by their material with Russian roulette and a depth limit.
+/// and scatter at surfaces by their material with Russian roulette and a depth limit. In a scene
+/// whose fogs scatter (SensorScene::scatters), free flights are sampled through the fogs and rays
+/// scatter inside them by the Henyey-Greenstein phase function, or are absorbed by the albedo.
 ///
 /// Determinism: ray i draws its random numbers from a CounterRng keyed by (seed, i); work is split
 /// into chunks of consecutive rays traced in parallel (TBB, lock-free: each chunk writes its own
@@ -16,6 +18,7 @@
 /// called from any thread, including the progress callback.
 
 #include "duplex/accel/Crossing.h"
+#include "duplex/sensors/CounterRng.h"
 #include "duplex/sensors/SensorResults.h"
 #include "duplex/sensors/SensorScene.h"
 
@@ -31,6 +34,9 @@ struct SensorRunConfig {
   std::uint64_t seed = 1;
   unsigned threads = 0;             ///< worker threads; 0 = all hardware threads
   std::uint32_t max_depth = 32;     ///< surface interactions after which a path is cut (depth_limited_w)
+  /// Scattering fogs: collisions after which a path is cut (depth_limited_w); 1 keeps single
+  /// scattering only.
+  std::uint32_t max_scatterings = 100000;
   /// Russian roulette: a path whose power falls below this fraction of an emitted ray's power (by
   /// media or materials) survives with probability power / threshold and is then raised to it.
   double roulette_threshold = 0.05;
@@ -65,6 +71,7 @@ enum class SensorRunStatus : std::uint8_t { Completed, TargetReached, Cancelled 
 struct SensorRunCounters {
   std::uint64_t segments = 0;   ///< crossing (or closest-hit) queries
   std::uint64_t crossings = 0;  ///< sensor crossings recorded
+  std::uint64_t scatterings = 0;  ///< collisions in scattering fogs
 };
 
 class SensorRun {
@@ -102,6 +109,10 @@ class SensorRun {
   struct Chunk;
   void traceChunk(Chunk& chunk) const;
   void reduce(const Chunk& chunk);
+  /// The first collision in the scene's scattering fogs along world-space origin + t dir, t in
+  /// [0, t_max] (t_max infinite: the whole ray): the medium, with t_collision, or nullptr.
+  const MediumInstance* sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max, CounterRng& rng,
+                                        QueryContext& ctx, double& t_collision) const;
   [[nodiscard]] std::uint64_t fingerprint() const;
 
   const SensorScene& scene_;
@@ -114,6 +125,8 @@ class SensorRun {
   std::vector<double> bin_sum_, bin_sum2_;
   std::vector<std::uint64_t> bin_count_;
   std::vector<double> sensor_sum_, sensor_sum2_;
+  // Spectral scenes only: the same per (bin, band) and (sensor, band), index * bands + band.
+  std::vector<double> band_bin_sum_, band_bin_sum2_, band_sensor_sum_, band_sensor_sum2_;
   EnergyBalance energy_sum_;  // sums over rays (divide by rays_done_)
 };
 

@@ -10,6 +10,7 @@
 /// object. Every visible instance of a SensorObject is a sensor of the run, named after its
 /// instance node.
 
+#include "duplex/objects/VolumeObject.h"
 #include "duplex/scenegraph/SceneDocument.h"
 #include "duplex/scenegraph/SceneGraph.h"
 #include "duplex/scenegraph/SceneTracer.h"
@@ -35,9 +36,28 @@ struct SensorInstance {
   /// part L of world_from_object.
   double area_scale = 1.0;
   std::uint32_t first_bin = 0;  ///< offset of its bins in the run's global bin array
+  /// Offset of its angular bins in the run's global angular-bin array (SensorScene::angleBinCount).
+  std::uint32_t first_angle_bin = 0;
+  /// World-space orthonormal frame of the sensor: frame_x along its local x, normal its +z side
+  /// (right-handed), frame_y = cross(normal, frame_x). Angular bins are measured in it.
+  glm::dvec3 frame_x{1.0, 0.0, 0.0}, frame_y{0.0, 1.0, 0.0}, normal{0.0, 0.0, 1.0};
 
   /// World-space area (square scene units) of bin `bin`.
   [[nodiscard]] double binAreaWorld(std::uint32_t bin) const { return object->binArea(bin) * area_scale; }
+};
+
+/// A fog instance of a scene whose media scatter (SensorScene::scatteringMedia()): light tracing
+/// samples free flights through it (VolumeObject::sampleFreeFlight) instead of weighting rays by
+/// its transmittance.
+struct MediumInstance {
+  NodeId node = kInvalidNode;
+  std::shared_ptr<const VolumeObject> volume;
+  Affine object_from_world;
+  glm::dvec3 world_lo{0.0}, world_hi{0.0};  ///< world-space box of the instance
+  std::uint32_t mask = 0xFFFFFFFFu;         ///< the instance's mask (tested against the run's medium_mask)
+  /// Medium (scatters with its albedo and g) or Absorber (a fog without "material": every collision
+  /// absorbs, which is pure attenuation in expectation).
+  Material material;
 };
 
 class SensorScene {
@@ -50,9 +70,14 @@ class SensorScene {
 
   /// A scene over a committed `graph` (kept by reference: it must outlive this scene and must not
   /// be edited while a run traces it). `materials` is indexed by ObjectId; objects beyond its end
-  /// are absorbers. Validates the lights (InvalidArgument naming the light). A scene without lights
-  /// is valid (a run then emits nothing).
-  SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {});
+  /// are absorbers. `bands` names the spectral bands (empty: one radiometric band, no per-band
+  /// output). Validates the lights (InvalidArgument naming the light). A scene without lights is
+  /// valid (a run then emits nothing). Throws InvalidArgument naming the object or light for a
+  /// "medium" material on an object that is not a fog, a surface material on a fog, a fog that
+  /// cannot be sampled (a medium of another type) in a scene whose media scatter, per-band values
+  /// whose count is not the band count, or empty or repeated band names.
+  SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
+              std::vector<std::string> bands = {});
   SensorScene(SensorScene&&) noexcept;
   SensorScene& operator=(SensorScene&&) noexcept;
   ~SensorScene();
@@ -66,6 +91,8 @@ class SensorScene {
   [[nodiscard]] int findSensor(const std::string& name) const;
   /// Total number of bins over all sensors.
   [[nodiscard]] std::uint32_t binCount() const { return bin_count_; }
+  /// Total number of angular bins over all sensors.
+  [[nodiscard]] std::uint32_t angleBinCount() const { return angle_bin_count_; }
   /// Sensor index of instance `node` (a hit's instance_id), or -1 when it is not a sensor.
   [[nodiscard]] int sensorOf(NodeId node) const {
     return node < sensor_of_node_.size() ? sensor_of_node_[node] : -1;
@@ -74,6 +101,16 @@ class SensorScene {
   [[nodiscard]] const Material& materialOf(NodeId node) const {
     return node < material_of_node_.size() ? material_of_node_[node] : kAbsorber;
   }
+  /// Spectral band names (empty: a single radiometric band).
+  [[nodiscard]] const std::vector<std::string>& bands() const { return bands_; }
+  /// Number of bands transported (1 when the scene has no "bands").
+  [[nodiscard]] std::uint32_t bandCount() const { return bands_.empty() ? 1u : static_cast<std::uint32_t>(bands_.size()); }
+  /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1).
+  [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return band_cdf_[light]; }
+  /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
+  /// scatteringMedia() and transported by free flights, else fogs only attenuate.
+  [[nodiscard]] bool scatters() const { return !media_.empty(); }
+  [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return media_; }
   [[nodiscard]] const SceneTracer& tracer() const { return *tracer_; }
   [[nodiscard]] const SceneGraph& graph() const { return *graph_; }
   /// The document when the scene was loaded from a file, else nullptr.
@@ -89,8 +126,12 @@ class SensorScene {
   double total_power_ = 0.0;
   std::vector<SensorInstance> sensors_;
   std::uint32_t bin_count_ = 0;
+  std::uint32_t angle_bin_count_ = 0;
   std::vector<int> sensor_of_node_;
   std::vector<Material> material_of_node_;
+  std::vector<std::string> bands_;
+  std::vector<std::vector<double>> band_cdf_;
+  std::vector<MediumInstance> media_;
 };
 
 }  // namespace duplex

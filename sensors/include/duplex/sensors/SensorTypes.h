@@ -4,9 +4,9 @@
 ///
 /// Object entry (duplex-scene-v1; the sensor is then instanced like any object):
 ///   {"name": N, "sensor": {"shape": "rectangle" | "disk", "size": [w, h] | s, "bins": [nx, ny] | n,
-///                          "two_sided": true | false}}
-/// Defaults: shape "rectangle", bins [1, 1], two_sided true; "size" is required (a disk's size is its
-/// diameter: a number or [d, d]). The same keys (plus "name" and "transform") make an entry of the
+///                          "two_sided": true | false, "angular_bins": n_theta | [n_theta, n_phi]}}
+/// Defaults: shape "rectangle", bins [1, 1], two_sided true, no angular bins (n_phi default 1);
+/// "size" is required (a disk's size is its diameter: a number or [d, d]). The same keys (plus "name" and "transform") make an entry of the
 /// top-level "sensors" list (SensorScene.h).
 
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
@@ -24,7 +24,8 @@ void registerSensorTypes(ObjectTypeRegistry& registry);
 [[nodiscard]] const ObjectTypeRegistry& sensorTypeRegistry();
 
 /// Reads the shape keys of a sensor description at ctx.pointer ("shape", "size", "bins",
-/// "two_sided"); `extra_keys` are further keys the caller reads itself (strict mode refuses others).
+/// "two_sided", "angular_bins"); `extra_keys` are further keys the caller reads itself (strict
+/// mode refuses others).
 /// Errors throw FileError naming the file and the JSON pointer.
 [[nodiscard]] SensorSpec readSensorSpec(const nlohmann::json& spec, const ObjectSpecContext& ctx,
                                         std::initializer_list<std::string_view> extra_keys = {});

@@ -1,0 +1,34 @@
+#pragma once
+/// \file HenyeyGreenstein.h
+/// The Henyey-Greenstein phase function of scattering fog (Henyey, Greenstein 1941, "Diffuse
+/// radiation in the galaxy"): one parameter g in (-1, 1), the mean cosine of the scattering angle
+/// (g > 0 forward, g < 0 backward, 0 isotropic). Angles are between the propagation directions
+/// before and after the event (not pbrt's convention of the reversed incoming direction).
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace duplex {
+
+struct HenyeyGreenstein {
+  double g = 0.0;
+
+  /// Density per steradian of the new direction at scattering-angle cosine `cos_theta`:
+  /// (1 - g^2) / (4 pi (1 + g^2 - 2 g cos_theta)^1.5). Integrates to 1 over the sphere.
+  [[nodiscard]] double pdf(double cos_theta) const {
+    const double d = 1.0 + g * g - 2.0 * g * cos_theta;
+    return (1.0 - g * g) / (4.0 * std::numbers::pi * d * std::sqrt(d));
+  }
+
+  /// A scattering-angle cosine with density 2 pi pdf(cos) from a uniform u in [0, 1), by inverting
+  /// the closed-form CDF (increasing in u; near g = 0, where that form cancels badly, the
+  /// isotropic 2u - 1).
+  [[nodiscard]] double sampleCos(double u) const {
+    if (std::abs(g) < 1e-3) return std::clamp(2.0 * u - 1.0, -1.0, 1.0);
+    const double s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
+    return std::clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
+  }
+};
+
+}  // namespace duplex

@@ -1,0 +1,128 @@
+#pragma once
+/// \file SensorFixture.h
+/// Scene building blocks of the sensor-run tests: quads, sensors, placements, a point light, a graph
+/// with per-object materials, a closed box of sensors, and comparisons of run results.
+
+#include "duplex/objects/MeshObject.h"
+#include "duplex/objects/TriangleMesh.h"
+#include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/sensors/SensorRun.h"
+#include "duplex/sensors/SensorScene.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+
+#include <cmath>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <vector>
+
+namespace duplex::test {
+
+inline constexpr double kPi = std::numbers::pi;
+
+inline std::shared_ptr<const Object> quad(double half, const std::string& name) {
+  const float h = static_cast<float>(half);
+  const std::vector<float> p = {-h, -h, 0, h, -h, 0, h, h, 0, -h, h, 0};
+  const std::vector<std::uint32_t> i = {0, 1, 2, 0, 2, 3};
+  return std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(p, i, name)));
+}
+
+inline std::shared_ptr<const SensorObject> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true,
+                                                 const std::string& name = "sensor") {
+  SensorSpec s;
+  s.width = w;
+  s.height = h;
+  s.nx = nx;
+  s.ny = ny;
+  s.two_sided = two_sided;
+  return std::make_shared<const SensorObject>(name, s);
+}
+
+inline Affine translate(double x, double y, double z) {
+  Affine a;
+  a.translation = glm::dvec3(x, y, z);
+  return a;
+}
+
+// Rotation taking +z to unit vector n (about the axis z x n).
+inline Affine facing(const glm::dvec3& n_in, const glm::dvec3& at) {
+  const glm::dvec3 n = glm::normalize(n_in);
+  glm::dvec3 axis = glm::cross(glm::dvec3(0, 0, 1), n);
+  const double s = glm::length(axis), c = n.z;
+  Affine a = translate(at.x, at.y, at.z);
+  if (s < 1e-12) {
+    if (c < 0) a.linear = glm::dmat3(1, 0, 0, 0, -1, 0, 0, 0, -1);
+    return a;
+  }
+  axis /= s;
+  const double k = 1 - c, x = axis.x, y = axis.y, z = axis.z;
+  a.linear = glm::transpose(glm::dmat3(c + x * x * k, x * y * k - z * s, x * z * k + y * s,  //
+                                       y * x * k + z * s, c + y * y * k, y * z * k - x * s,  //
+                                       z * x * k - y * s, z * y * k + x * s, c + z * z * k));
+  return a;
+}
+
+inline Light pointLight(glm::dvec3 p, double power) {
+  Light l;
+  l.type = LightType::Point;
+  l.name = "point";
+  l.position = p;
+  l.power_w = power;
+  return l;
+}
+
+// A graph built by the test, kept alive with the scene.
+struct Fixture {
+  SceneGraph graph;
+  std::vector<Material> materials;
+  ObjectId add(std::shared_ptr<const Object> o, const Affine& world, const std::string& name, Material m = {}) {
+    const ObjectId id = graph.library().add(name, std::move(o));
+    materials.resize(graph.library().size());
+    materials[id] = m;
+    (void)graph.addInstance(kRootNode, id, world, name);
+    return id;
+  }
+  SensorScene scene(std::vector<Light> lights, std::vector<std::string> bands = {}) {
+    (void)graph.commit();
+    return SensorScene(graph, std::move(lights), materials, std::move(bands));
+  }
+};
+
+// Six two-sided sensors closing the cube [-1, 1]^3 around a point source.
+inline void closeBox(Fixture& f) {
+  const glm::dvec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (int k = 0; k < 6; ++k) {
+    const std::string name = "face" + std::to_string(k);
+    f.add(sensor(2.0, 2.0, 3, 3, true, name), facing(normals[k], normals[k]), name);
+  }
+}
+
+inline double sensorSum(const SensorRunResults& r) {
+  double sum = 0.0;
+  for (const SensorResult& s : r.sensors) sum += s.total_flux_w;
+  return sum;
+}
+
+inline void expectIdentical(const SensorRunResults& a, const SensorRunResults& b) {
+  ASSERT_EQ(a.rays, b.rays);
+  ASSERT_EQ(a.sensors.size(), b.sensors.size());
+  for (std::size_t k = 0; k < a.sensors.size(); ++k) {
+    EXPECT_EQ(a.sensors[k].flux_w, b.sensors[k].flux_w);
+    EXPECT_EQ(a.sensors[k].stderr_w_m2, b.sensors[k].stderr_w_m2);
+    EXPECT_EQ(a.sensors[k].ray_count, b.sensors[k].ray_count);
+    EXPECT_EQ(a.sensors[k].total_flux_w, b.sensors[k].total_flux_w);
+  }
+  EXPECT_EQ(a.energy.absorbed_w, b.energy.absorbed_w);
+  EXPECT_EQ(a.energy.escaped_w, b.energy.escaped_w);
+  EXPECT_EQ(a.energy.medium_absorbed_w, b.energy.medium_absorbed_w);
+  EXPECT_EQ(a.energy.depth_limited_w, b.energy.depth_limited_w);
+  for (std::size_t k = 0; k < a.sensors.size(); ++k) {
+    EXPECT_EQ(a.sensors[k].band_flux_w, b.sensors[k].band_flux_w);
+    EXPECT_EQ(a.sensors[k].band_stderr_w_m2, b.sensors[k].band_stderr_w_m2);
+    EXPECT_EQ(a.sensors[k].band_total_flux_w, b.sensors[k].band_total_flux_w);
+  }
+}
+
+}  // namespace duplex::test
