@@ -107,6 +107,23 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["flux_w"] = s.flux_w;
   j["ray_count"] = s.ray_count;
   j["bin_area_m2"] = s.bin_area_m2;
+  // Only what the scene asked for: per-band arrays (the keys above are their sums) and angular bins.
+  if (!r.bands.empty()) {
+    j["bands"] = r.bands;
+    j["band_total_flux_w"] = s.band_total_flux_w;
+    j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
+    j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
+    j["band_stderr_w_m2"] = s.band_stderr_w_m2;
+    j["band_flux_w"] = s.band_flux_w;
+  }
+  if (s.theta_bins != 0) {
+    j["angular_bins"] = {s.theta_bins, s.phi_bins};
+    j["angular_flux_w"] = s.angular_flux_w;
+    j["angular_stderr_w"] = s.angular_stderr_w;
+    j["angular_solid_angle_sr"] = s.angular_solid_angle_sr;
+    j["angular_ray_count"] = s.angular_ray_count;
+    if (!r.bands.empty()) j["band_angular_flux_w"] = s.band_angular_flux_w;
+  }
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
   // CSV: one row per bin with its centre in sensor-local coordinates.
@@ -182,6 +199,11 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
                       {"medium_absorbed_w", r.energy.medium_absorbed_w},
                       {"depth_limited_w", r.energy.depth_limited_w},
                       {"roulette_w", r.energy.roulette_w}};
+  if (!r.bands.empty()) {
+    report["bands"] = r.bands;
+    report["band_emitted_w"] = r.band_emitted_w;
+  }
+  if (scene.scatters()) report["scatterings"] = run.counters().scatterings;
   nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];

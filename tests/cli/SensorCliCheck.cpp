@@ -1,6 +1,7 @@
 // `duplex sensor` as an outside tool drives it (issue 5): output files and keys, the closed box of
 // sensors registering all emitted power, bit-identical results for 1 and 2 threads, --resume equal
-// to one longer run, --target-error, and clear errors for bad lights and sensors.
+// to one longer run, --target-error, and clear errors for bad lights and sensors; spectral bands
+// and angular bins in the sensor files.
 //   duplex_sensor_cli_check DUPLEX DIR
 
 #include "CheckSupport.h"
@@ -138,6 +139,41 @@ int check(const std::string& duplex, const fs::path& dir) {
   return 0;
 }
 
+// Spectral bands and angular bins: the per-band arrays and angular bins are added beside the
+// exact keys, which hold the sums over the bands; a floor that reflects no red sends no red to a
+// sensor that sees only the floor; the angular bins hold the sensor's whole flux.
+void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
+  fs::create_directories(dir);
+  write(dir / "bands.json", R"({"format": "scene-json-v1", "bands": ["blue", "red"],
+    "objects": [{"name": "floor", "mesh": {"positions": [-2,-2,0, 2,-2,0, 2,2,0, -2,2,0], "indices": [0,1,2, 0,2,3]},
+                 "material": {"type": "lambertian", "reflectance": [0.5, 0]}}],
+    "instances": [{"object": "floor", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]}],
+    "lights": [{"type": "point", "position": [0, 0, 0.2], "power": 2, "spectrum": [1, 3]}],
+    "sensors": [{"name": "looks_down", "size": [2, 2], "bins": [2, 2], "two_sided": false, "angular_bins": [3, 4],
+                 "transform": [1,0,0,0, 0,-1,0,0, 0,0,-1,0.1]}]})");
+  const nlohmann::json report = runJson(sensorArgs(duplex, dir / "bands.json", "20000", "2", dir / "bands"), dir);
+  expect(report["bands"] == nlohmann::json({"blue", "red"}), "run.json lacks the bands");
+  expect(std::abs(report["band_emitted_w"][0].get<double>() - 0.5) < 1e-12 &&
+             std::abs(report["band_emitted_w"][1].get<double>() - 1.5) < 1e-12,
+         "band_emitted_w is not the spectrum's share of 2 W: " + report["band_emitted_w"].dump());
+  const nlohmann::json j = readJson(dir / "bands" / "looks_down.json");
+  for (const char* key : {"rays", "total_flux_w", "irradiance_w_m2", "stderr_w_m2"})
+    expect(j.contains(key), std::string("looks_down.json lacks the exact key ") + key);
+  const double total = j["total_flux_w"];
+  expect(total > 0.0, "the sensor under the light saw nothing of the floor");
+  expect(j["band_total_flux_w"][1].get<double>() == 0.0, "red arrived from a floor that reflects no red");
+  expect(std::abs(j["band_total_flux_w"][0].get<double>() - total) <= 1e-12 * total, "the bands do not sum to total_flux_w");
+  for (std::size_t b = 0; b < 4; ++b) {
+    const double e = j["irradiance_w_m2"][b], blue = j["band_irradiance_w_m2"][0][b], red = j["band_irradiance_w_m2"][1][b];
+    expect(red == 0.0 && std::abs(blue - e) <= 1e-12 * e, "bin " + std::to_string(b) + ": bands do not sum to the irradiance");
+  }
+  expect(j["angular_bins"] == nlohmann::json({3, 4}) && j["angular_flux_w"].size() == 12 && j["angular_solid_angle_sr"].size() == 12,
+         "looks_down.json lacks its 3 x 4 angular bins");
+  double angular = 0.0;
+  for (const auto& x : j["angular_flux_w"]) angular += x.get<double>();
+  expect(std::abs(angular - total) <= 1e-12 * total, "the angular bins do not hold the sensor's flux");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -145,5 +181,9 @@ int main(int argc, char** argv) {
     std::cerr << "usage: duplex_sensor_cli_check DUPLEX DIR\n";
     return 2;
   }
-  return reportFailures([&] { return check(argv[1], argv[2]); });
+  return reportFailures([&] {
+    const int status = check(argv[1], argv[2]);  // clears DIR first
+    checkBandsAndAngles(argv[1], fs::path(argv[2]) / "spectral");
+    return status;
+  });
 }
