@@ -1,5 +1,6 @@
 #include "SensorCommand.h"
 
+#include "SensorExr.h"
 #include "SensorImage.h"
 #include "WorkerThreads.h"
 
@@ -141,6 +142,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   }
   writeText(dir / (base + ".csv"), csv);
   demo::writePng(dir / (base + ".png"), falseColourImage(s.irradiance_w_m2, s.nx, s.ny));
+  if (sensorExrAvailable()) writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
 }
 
 }  // namespace

@@ -194,7 +194,7 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option("--threads", sensor.threads, "Worker threads (default: all hardware threads)")
       ->check(CLI::Range(1, 4096));
   sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")->check(kNotNegative);
-  sensor_cmd->add_option("--out", sensor.out, "Folder for <sensor>.json/.csv/.png, run.json, run_state.bin (default .)");
+  sensor_cmd->add_option("--out", sensor.out, "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
   sensor_cmd->add_flag("--resume", sensor.resume,
                        "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
   sensor_cmd->add_option("--target-error", sensor.target_error,

@@ -9,6 +9,14 @@
 
 #include <nlohmann/json.hpp>
 
+#ifdef DUPLEX_CHECK_EXR
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#endif
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -58,6 +66,36 @@ std::vector<std::string> sensorArgs(const std::string& duplex, const fs::path& s
           "--out", out.string(), "--progress", "lines"};
 }
 
+// The EXR copy of a map (built with OpenEXR): Y and stderr equal the JSON arrays as floats, with the
+// sensor's local +y up (first scanline = last bin row), and the header names the sensor.
+void expectExrMatches(const fs::path& exr, const nlohmann::json& j) {
+#ifdef DUPLEX_CHECK_EXR
+  const std::uint32_t nx = j["bins"][0], ny = j["bins"][1];
+  Imf::InputFile file(exr.c_str());
+  const Imath::Box2i w = file.header().dataWindow();
+  expect(w.max.x - w.min.x + 1 == static_cast<int>(nx) && w.max.y - w.min.y + 1 == static_cast<int>(ny),
+         exr.string() + ": image size is not the bins");
+  const auto* name = file.header().findTypedAttribute<Imf::StringAttribute>("sensor");
+  expect(name && name->value() == j["name"].get<std::string>(), exr.string() + ": header lacks the sensor's name");
+  std::vector<float> y(nx * ny), e(nx * ny);
+  Imf::FrameBuffer fb;
+  fb.insert("Y", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(y.data()), sizeof(float), sizeof(float) * nx));
+  fb.insert("stderr", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(e.data()), sizeof(float), sizeof(float) * nx));
+  file.setFrameBuffer(fb);
+  file.readPixels(w.min.y, w.max.y);
+  for (std::uint32_t iy = 0; iy < ny; ++iy)
+    for (std::uint32_t ix = 0; ix < nx; ++ix) {
+      const std::size_t b = iy * nx + ix, p = (ny - 1 - iy) * nx + ix;
+      expect(y[p] == static_cast<float>(j["irradiance_w_m2"][b].get<double>()) &&
+                 e[p] == static_cast<float>(j["stderr_w_m2"][b].get<double>()),
+             exr.string() + ": pixel of bin " + std::to_string(b) + " differs from the JSON");
+    }
+#else
+  expect(!fs::exists(exr), exr.string() + " written by a build without OpenEXR");
+  (void)j;
+#endif
+}
+
 void expectSameMaps(const fs::path& a, const fs::path& b, const std::string& what) {
   for (int k = 0; k < 6; ++k) {
     const std::string name = "face" + std::to_string(k) + ".json";
@@ -95,6 +133,7 @@ int check(const std::string& duplex, const fs::path& dir) {
     char sig[8] = {};
     png.read(sig, 8);
     expect(std::string(sig + 1, 3) == "PNG", name + ".png is not a PNG file");
+    expectExrMatches(dir / "one" / (name + ".exr"), j);
   }
   // Sensors never block: the closed box registers all the emitted power.
   expect(std::abs(total - 7.0) < 1e-9, "the box's sensors registered " + std::to_string(total) + " W of 7 W");

@@ -1,0 +1,64 @@
+#include "SensorExr.h"
+
+#include <duplex/accel/Error.h>
+
+#ifdef DUPLEX_HAVE_OPENEXR
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#endif
+
+#include <exception>
+
+namespace duplex::cli {
+
+bool sensorExrAvailable() noexcept {
+#ifdef DUPLEX_HAVE_OPENEXR
+  return true;
+#else
+  return false;
+#endif
+}
+
+void writeSensorExr(const std::filesystem::path& path, const std::string& sensor, const std::vector<double>& irradiance,
+                    const std::vector<double>& stderr_w_m2, std::uint32_t nx, std::uint32_t ny) {
+  const std::size_t n = static_cast<std::size_t>(nx) * ny;
+  if (nx == 0 || ny == 0 || irradiance.size() != n || stderr_w_m2.size() != n)
+    throw InvalidArgument(path.string() + ": sensor '" + sensor + "' map has " + std::to_string(irradiance.size()) +
+                          " values for " + std::to_string(nx) + " x " + std::to_string(ny) + " bins");
+#ifdef DUPLEX_HAVE_OPENEXR
+  // Flip rows once into float planes: EXR's first scanline is the top of the picture.
+  std::vector<float> y(n), e(n);
+  for (std::uint32_t row = 0; row < ny; ++row) {
+    const std::size_t src = static_cast<std::size_t>(ny - 1 - row) * nx, dst = static_cast<std::size_t>(row) * nx;
+    for (std::uint32_t ix = 0; ix < nx; ++ix) {
+      y[dst + ix] = static_cast<float>(irradiance[src + ix]);
+      e[dst + ix] = static_cast<float>(stderr_w_m2[src + ix]);
+    }
+  }
+  try {
+    Imf::Header header(static_cast<int>(nx), static_cast<int>(ny));
+    header.compression() = Imf::ZIP_COMPRESSION;
+    header.channels().insert("Y", Imf::Channel(Imf::FLOAT));
+    header.channels().insert("stderr", Imf::Channel(Imf::FLOAT));
+    header.insert("sensor", Imf::StringAttribute(sensor));
+    header.insert("units", Imf::StringAttribute("W/m^2"));
+    Imf::FrameBuffer fb;
+    const std::size_t xs = sizeof(float), ys = sizeof(float) * nx;
+    fb.insert("Y", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(y.data()), xs, ys));
+    fb.insert("stderr", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(e.data()), xs, ys));
+    Imf::OutputFile file(path.c_str(), header);
+    file.setFrameBuffer(fb);
+    file.writePixels(static_cast<int>(ny));
+  } catch (const std::exception& ex) {
+    // OpenEXR reports I/O failures as Iex exceptions; keep our error type and name the file.
+    throw FileError(path.string() + ": cannot write EXR (" + ex.what() + ")");
+  }
+#else
+  throw Error(path.string() + ": this build of duplex has no OpenEXR support (install libopenexr-dev and rebuild)");
+#endif
+}
+
+}  // namespace duplex::cli
