@@ -10,6 +10,10 @@
 /// overhead_vs_no_sensors compares the sensor run with closest-hit tracing of the scene without
 /// sensors (the measure: what adding the sensors costs in all).
 ///
+/// "sensor_level": the crossing query alone on the 10,000 small sensors, the sensors' tree built
+/// with several SAH parameters (TopLevelConfig::sensor_build), CPU time per query against the
+/// main level's defaults (sensorLevelSweep; --sweep-segments 0 skips it).
+///
 /// "convergence": two configurations with exact answers, the relative error of the total flux
 /// against emitted rays and seconds, root mean square over --seeds seeds, beside the standard error
 /// the run reports and the 1/sqrt(N) law:
@@ -17,10 +21,12 @@
 /// - a Lambertian rectangle facing a parallel coaxial disk: flux = P * F, the configuration factor
 ///   F = (1/A) integral over the rectangle of the point-to-disk factor (Gauss-Legendre).
 
+#include "duplex/accel/TopLevel.h"
 #include "duplex/objects/MeshLoader.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/ProceduralMesh.h"
 #include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/sensors/SensorObject.h"
 #include "duplex/sensors/SensorRun.h"
 #include "duplex/sensors/SensorScene.h"
 
@@ -31,8 +37,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <random>
@@ -107,6 +115,20 @@ Light pointLight(const glm::dvec3& p, double power) {
   return l;
 }
 
+/// Where the overhead scene's small sensors go: random places in the room (10 x 10 x 4, 0.2 from
+/// the walls), random orientations.
+std::vector<Affine> smallSensorPlacements(std::size_t count) {
+  std::vector<Affine> out;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (std::size_t k = 0; k < count; ++k) {
+    const glm::dvec3 at(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
+    const double z = 2.0 * u(rng) - 1.0, phi = 2.0 * kPi * u(rng), r = std::sqrt(1.0 - z * z);
+    out.push_back(facing({r * std::cos(phi), r * std::sin(phi), z}, at));
+  }
+  return out;
+}
+
 /// The overhead scene: a 10 x 10 x 4 room (Lambertian walls, albedo 0.5), meshes on the floor
 /// (the shared data's spot and koala when present, else spheres), a 100 W point light under the
 /// ceiling, and `sensors` sensors: one 1 x 1 sensor of 32 x 32 bins, or small 0.1 x 0.1 sensors
@@ -146,13 +168,8 @@ std::unique_ptr<Setup> roomScene(std::size_t sensors, const std::string& data_di
              "sensor0");
   } else if (sensors > 1) {
     const ObjectId small = s->object(sensorObject(0.1, 0.1, 4, 4, SensorShape::Rectangle, "small"), "small");
-    std::mt19937_64 rng(5);
-    std::uniform_real_distribution<double> u(0.0, 1.0);
-    for (std::size_t k = 0; k < sensors; ++k) {
-      const glm::dvec3 at(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
-      const double z = 2.0 * u(rng) - 1.0, phi = 2.0 * kPi * u(rng), r = std::sqrt(1.0 - z * z);
-      s->place(small, facing({r * std::cos(phi), r * std::sin(phi), z}, at), "sensor" + std::to_string(k));
-    }
+    const std::vector<Affine> at = smallSensorPlacements(sensors);
+    for (std::size_t k = 0; k < sensors; ++k) s->place(small, at[k], "sensor" + std::to_string(k));
   }
   s->finish({pointLight({0.3, -0.2, 3.5}, 100.0)});
   return s;
@@ -212,6 +229,94 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
           {"closest_hit_rays_per_s", static_cast<double>(rays) / t_without},
           {"overhead_ratio", t_with / t_without},
           {"recorded_flux_w", recorded}};
+}
+
+/// "sensor_level": the crossing query alone on the overhead scene's 10,000 small sensors (no
+/// meshes), with the sensors' tree built with several intersection costs and empty bonuses
+/// (TopLevelConfig::sensor_build): process CPU time per query (best of `repeat` interleaved
+/// rounds; CPU time, because the machine may be shared) on wall-to-wall segments of the room, each
+/// from a random wall point (by area) in a cosine-distributed direction, as diffuse bounces leave.
+nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int repeat) {
+  SensorSpec spec;
+  spec.width = 0.1;
+  spec.height = 0.1;
+  spec.nx = 4;
+  spec.ny = 4;
+  const auto small = std::make_shared<const SensorObject>("small", spec);
+  std::vector<InstanceDesc> instances;
+  const std::vector<Affine> at = smallSensorPlacements(sensors);
+  for (std::size_t k = 0; k < sensors; ++k) instances.push_back({small, at[k], static_cast<std::uint32_t>(k)});
+  std::vector<Ray> rays;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const glm::dvec3 lo(-5, -5, 0), hi(5, 5, 4);
+  while (rays.size() < segments) {
+    const double pick = 180.0 * u(rng);  // wall areas: 2 x 40 (x), 2 x 40 (y), 2 x 100 (z)
+    const int axis = pick < 40.0 ? 0 : pick < 80.0 ? 1 : 2;
+    const bool upper = u(rng) < 0.5;
+    glm::dvec3 o(lo.x + 10.0 * u(rng), lo.y + 10.0 * u(rng), lo.z + 4.0 * u(rng));
+    o[axis] = upper ? hi[axis] : lo[axis];
+    const double r1 = u(rng), phi = 2.0 * kPi * u(rng), s = std::sqrt(r1);
+    glm::dvec3 d(0.0);
+    d[(axis + 1) % 3] = s * std::cos(phi);
+    d[(axis + 2) % 3] = s * std::sin(phi);
+    d[axis] = (upper ? -1.0 : 1.0) * std::sqrt(1.0 - r1);
+    double t_exit = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k) {
+      if (d[k] > 0.0) t_exit = std::min(t_exit, (hi[k] - o[k]) / d[k]);
+      if (d[k] < 0.0) t_exit = std::min(t_exit, (lo[k] - o[k]) / d[k]);
+    }
+    Ray ray;
+    ray.origin = glm::vec3(o);
+    ray.dir = glm::vec3(d);
+    ray.tfar = static_cast<float>(t_exit);
+    rays.push_back(ray);
+  }
+  struct Variant {
+    float intersection_cost, empty_bonus;
+  };
+  const KdBuildConfig shipped = sensorLevelBuildDefaults(), main_level = topLevelBuildDefaults();
+  const std::vector<Variant> variants{{main_level.intersection_cost, main_level.empty_bonus},
+                                      {0.3f, 0.0f}, {0.1f, 0.0f}, {0.1f, 0.2f}, {0.05f, 0.0f}, {0.02f, 0.0f},
+                                      {shipped.intersection_cost, shipped.empty_bonus}};
+  std::vector<std::unique_ptr<TopLevel>> tops;
+  for (const Variant& v : variants) {
+    TopLevelConfig c;
+    c.sensor_build.intersection_cost = v.intersection_cost;
+    c.sensor_build.empty_bonus = v.empty_bonus;
+    tops.push_back(std::make_unique<TopLevel>(c));
+    tops.back()->build(instances);
+  }
+  std::vector<double> best(variants.size(), std::numeric_limits<double>::infinity());
+  std::vector<std::uint64_t> crossings(variants.size(), 0);
+  for (int round = 0; round < repeat; ++round) {
+    for (std::size_t k = 0; k < tops.size(); ++k) {
+      QueryContext ctx;
+      std::vector<SensorCrossing> found;
+      std::uint64_t n = 0;
+      const std::clock_t c0 = std::clock();
+      for (const Ray& r : rays) {
+        (void)tops[k]->intersectWithCrossings(r, found, ctx);
+        n += found.size();
+      }
+      best[k] = std::min(best[k], static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
+      crossings[k] = n;
+    }
+  }
+  nlohmann::json rows = nlohmann::json::array();
+  for (std::size_t k = 0; k < variants.size(); ++k) {
+    const KdTreeStats st = tops[k]->stats().sensor_tree;
+    rows.push_back({{"intersection_cost", variants[k].intersection_cost},
+                    {"empty_bonus", variants[k].empty_bonus},
+                    {"shipped", k + 1 == variants.size()},
+                    {"nodes", st.nodes},
+                    {"references", st.references},
+                    {"sah_cost", st.sah_cost},
+                    {"crossings", crossings[k]},
+                    {"cpu_ns_per_query", best[k] * 1e9 / static_cast<double>(rays.size())},
+                    {"vs_main_level_defaults", best[k] / best[0]}});
+  }
+  return {{"sensors", sensors}, {"segments", segments}, {"repeat", repeat}, {"variants", rows}};
 }
 
 /// Gauss-Legendre nodes and weights on [-1, 1] (Newton on the Legendre recurrence).
@@ -340,6 +445,7 @@ int main(int argc, char** argv) {
   std::vector<std::size_t> counts{0, 1, 100, 10000};
   std::string data_dir = DUPLEX_BENCH_DATA_DIR;
   bool quick = false;
+  std::size_t sweep_segments = 50000;
   app.add_option("--rays", rays, "emitted rays per overhead run")->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "worker threads (0: all)");
   app.add_option("--repeat", repeat, "runs per configuration (median)")->check(CLI::PositiveNumber);
@@ -347,6 +453,8 @@ int main(int argc, char** argv) {
   app.add_option("--max-rays", max_rays, "largest run of the convergence series (1000 * 4^k)")->check(CLI::PositiveNumber);
   app.add_option("--seeds", seeds, "runs per convergence point")->check(CLI::PositiveNumber);
   app.add_option("--data", data_dir, "shared data folder (meshes/spot.obj, meshes/koala.obj)");
+  app.add_option("--sweep-segments", sweep_segments,
+                 "segments of the sensors' tree sweep (crossing query alone, 10,000 sensors; 0: skip)");
   app.add_flag("--quick", quick, "small run for tests: 20,000 rays, one repeat, convergence up to 64,000 rays, 4 seeds");
   CLI11_PARSE(app, argc, argv);
   if (quick) {
@@ -354,6 +462,7 @@ int main(int argc, char** argv) {
     repeat = 1;
     max_rays = 64000;
     seeds = 4;
+    sweep_segments = 2000;
   }
   try {
     nlohmann::json out;
@@ -368,6 +477,7 @@ int main(int argc, char** argv) {
         for (auto& row : rows)
           row["overhead_vs_no_sensors"] = row["sensor_run_s"].get<double>() / base["closest_hit_s"].get<double>();
     out["overhead"] = rows;
+    if (sweep_segments > 0) out["sensor_level"] = sensorLevelSweep(10000, sweep_segments, std::max(repeat, 3));
     out["convergence"] = {convergence(pointOnSquare(), max_rays, seeds, threads),
                           convergence(areaOnDisk(), max_rays, seeds, threads)};
     std::cout << out.dump(2) << "\n";

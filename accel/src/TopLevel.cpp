@@ -110,13 +110,18 @@ void forEachLeaf(const KdTree& tree, const Box& box, F&& f) {
 
 namespace {
 
-void validateConfig(const TopLevelConfig& c) {
-  const KdBuildConfig& b = c.build;
-  auto bad = [](const std::string& what) { throw InvalidArgument("top level configuration: " + what); };
+void validateBuild(const KdBuildConfig& b, const std::string& which) {
+  auto bad = [&](const std::string& what) { throw InvalidArgument("top level configuration: " + which + what); };
   if (!(std::isfinite(b.traversal_cost) && b.traversal_cost > 0.0f)) bad("traversal_cost must be finite and positive");
   if (!(std::isfinite(b.intersection_cost) && b.intersection_cost > 0.0f)) bad("intersection_cost must be finite and positive");
   if (!(b.empty_bonus >= 0.0f && b.empty_bonus < 1.0f)) bad("empty_bonus must be in [0, 1)");
   if (b.max_depth < 0) bad("max_depth must not be negative (0 = automatic)");
+}
+
+void validateConfig(const TopLevelConfig& c) {
+  auto bad = [](const std::string& what) { throw InvalidArgument("top level configuration: " + what); };
+  validateBuild(c.build, "");
+  validateBuild(c.sensor_build, "sensor_build.");
   if (!(c.rebuild_ratio >= 1.0)) bad("rebuild_ratio must be at least 1");
   if (!(c.max_incremental_fraction >= 0.0)) bad("max_incremental_fraction must not be negative");
   if (c.leaf_split_size < 1) bad("leaf_split_size must be at least 1");
@@ -126,7 +131,11 @@ void validateConfig(const TopLevelConfig& c) {
 
 TopLevel::TopLevel(const TopLevelConfig& config) : config_(config) { validateConfig(config_); }
 
-TopLevel::TopLevel(const TopLevelConfig& config, SensorLevelTag) : TopLevel(config) { separate_sensors_ = false; }
+// The nested level builds with the sensors' configuration (TopLevelConfig::sensor_build).
+TopLevel::TopLevel(const TopLevelConfig& config, SensorLevelTag) : TopLevel(config) {
+  separate_sensors_ = false;
+  config_.build = config.sensor_build;
+}
 
 TopLevel& TopLevel::sensorLevelForEdit() {
   if (!sensors_) sensors_.reset(new TopLevel(config_, SensorLevelTag{}));
@@ -140,6 +149,7 @@ bool isSensor(const InstanceDesc& d) { return d.object && d.object->role() == Ob
 void TopLevel::setConfig(const TopLevelConfig& config) {
   validateConfig(config);
   config_ = config;
+  if (!separate_sensors_) config_.build = config.sensor_build;
   if (sensors_) sensors_->setConfig(config);
 }
 
@@ -162,7 +172,7 @@ void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfi
   c.build = config;
   validateConfig(c);
   std::unique_ptr<TopLevel> level(new TopLevel(c, SensorLevelTag{}));
-  level->buildHere(sensors, config);
+  level->buildHere(sensors, c.sensor_build);
   buildHere(others, config);
   sensors_ = std::move(level);
 }
@@ -279,6 +289,7 @@ void TopLevel::install(KdTree&& tree) {
   s.needs_rebuild = false;
   ++s.full_rebuilds;
   s.last_full = true;
+  if (!separate_sensors_) s.refreshLeafBoxes(tree_);
 }
 
 void TopLevel::fullRebuild() {
@@ -310,6 +321,7 @@ void TopLevel::commitHere() {
   if (!state_ || (state_->pending.empty() && !state_->needs_rebuild)) return;
   try {
     commitEdits();
+    if (!separate_sensors_) state_->refreshLeafBoxes(tree_);
   } catch (...) {
     // The records already describe the new scene; a tree that no longer matches them must not be
     // traversed. Rebuild from the records, or (when even that fails) answer nothing until the next
@@ -807,7 +819,8 @@ TopLevelStats TopLevel::stats() const {
   }
   if (sensors_) {
     st.sensor_instances = sensors_->live_count_;
-    st.sensor_tree = sensors_->tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
+    const KdBuildConfig& b = sensors_->config_.build;
+    st.sensor_tree = sensors_->tree_.stats(b.traversal_cost, b.intersection_cost);
   }
   return st;
 }

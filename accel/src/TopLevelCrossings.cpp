@@ -3,11 +3,12 @@
 //
 // Sensors live in a level of their own (TopLevel::sensors_): the first traversal, of the other
 // instances, finds the closest blocking hit and the media; the second walks the sensors' tree only
-// up to that hit (a sensor behind a wall costs nothing). A sensor instance is asked for its
-// crossing up to the current limit; each instance is asked once (mailbox, then a check of the
-// crossings kept). The crossings beyond the final hit are dropped and the rest sorted. Media met along the way are kept and their
-// transmittance is applied segment by segment between the sorted crossings, so each medium is
-// integrated once over [tnear, t_hit].
+// up to that hit (a sensor behind a wall costs nothing). The sensors' tree is shallow, with leaves
+// of several sensors whose boxes are tested four at a time from a leaf-ordered copy (LeafBoxes.h,
+// TopLevelConfig::sensor_build); a sensor whose box the ray meets is asked for its crossings up
+// to the hit, once (mailbox, then a check of the crossings kept), and they are inserted in order.
+// Media met along the way are kept and their transmittance is applied segment by segment between
+// the sorted crossings, so each medium is integrated once over [tnear, t_hit].
 
 #include "TopLevelState.h"
 
@@ -47,8 +48,9 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   Hit best;
   best.t = ray_ws.tfar;
   const Record* winner = nullptr;
-  // A sensor's crossings within [tnear, t_reach] (world t). The mailbox holds 8 slots: an instance
-  // in many leaves may come back; it is asked once.
+  // A sensor's crossings within [tnear, t_reach] (world t), inserted in order (t, then instance
+  // id): a ray meets few sensors, so keeping the list sorted costs less than sorting it. An
+  // instance in many leaves may come back after the mailbox forgot it; it is asked once.
   auto addCrossings = [&](const Record& rec, float t_reach) {
     if (std::any_of(crossings.begin(), crossings.end(), [&](const SensorCrossing& c) { return c.hit.instance_id == rec.id; }))
       return;
@@ -57,9 +59,13 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     scratch.clear();
     rec.object->intersectAll(ray_os, scratch, ctx);
     for (Hit& h : scratch) {
+      if (!(h.t <= t_reach)) continue;
       h.instance_id = rec.id;
       h.ng = normalToWorld(rec, h.ng);
-      crossings.push_back({h, 1.0f});
+      const auto at = std::upper_bound(crossings.begin(), crossings.end(), h, [](const Hit& a, const SensorCrossing& b) {
+        return a.t < b.hit.t || (a.t == b.hit.t && a.instance_id < b.hit.instance_id);
+      });
+      crossings.insert(at, {h, 1.0f});
     }
   };
   Mailbox mailbox;
@@ -98,34 +104,35 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   const float t_end = winner ? best.t : ray_ws.tfar;
   const float t_keep = t_end * (1.0f + kCrossingSlack);
 
-  // The sensors' level, up to the blocking hit.
+  // The sensors' level, up to the blocking hit. A leaf's boxes are read from the leaf-ordered copy
+  // (one contiguous run, four boxes per test) and tested first: most references a ray meets are
+  // missed, and a miss then reads nothing else (filter, mailbox and record come after).
   if (have_sensors && query.sensor_mask != 0) {
     const State& ss = *sensors_->state_;
+    const KdTree& s_tree = sensors_->tree_;
+    const std::uint32_t* s_prims = s_tree.prim_indices.data();
     const Record* s_records = ss.records.data();
     const SlotFilter* s_filters = ss.filters.data();
     const Box* s_boxes = ss.boxes.data();
+    const LeafBoxes* leaf_boxes = ss.leaf_boxes.count == s_tree.prim_indices.size() ? &ss.leaf_boxes : nullptr;
     Mailbox s_mailbox;
+    auto visit = [&](std::uint32_t slot) {
+      const SlotFilter f = s_filters[slot];
+      if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
+      ++ctx.stats.instance_visits;
+      addCrossings(s_records[slot], t_keep);
+    };
     float t_limit = t_keep;
-    (void)traverseKdTree<false>(sensors_->tree_, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
-      for (std::uint32_t i = begin; i < begin + count; ++i) {
-        const std::uint32_t slot = sensors_->tree_.prim_indices[i];
-        const SlotFilter f = s_filters[slot];
-        if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || !meetsBox(kray, s_boxes[slot], t_keep) ||
-            s_mailbox.seen(slot))
-          continue;
-        ++ctx.stats.instance_visits;
-        addCrossings(s_records[slot], t_keep);
+    (void)traverseKdTree<false>(s_tree, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
+      if (leaf_boxes) {
+        leaf_boxes->forEachMet(kray, begin, count, t_keep, [&](std::uint32_t i) { visit(s_prims[i]); });
+      } else {
+        for (std::uint32_t i = begin; i < begin + count; ++i)
+          if (meetsBox(kray, s_boxes[s_prims[i]], t_keep)) visit(s_prims[i]);
       }
       return false;
     });
   }
-  crossings.erase(std::remove_if(crossings.begin(), crossings.end(),
-                                 [&](const SensorCrossing& c) { return !(c.hit.t <= t_keep); }),
-                  crossings.end());
-  std::sort(crossings.begin(), crossings.end(), [](const SensorCrossing& a, const SensorCrossing& b) {
-    if (a.hit.t != b.hit.t) return a.hit.t < b.hit.t;
-    return a.hit.instance_id < b.hit.instance_id;
-  });
 
   // Media: the product of each medium's transmittance over consecutive segments
   // [tnear, t_1], [t_1, t_2], ..., [t_k, t_end] (transmittance is multiplicative along a ray).

@@ -7,6 +7,7 @@
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/TopLevel.h"
+#include "LeafBoxes.h"
 
 #include <glm/matrix.hpp>
 
@@ -164,6 +165,12 @@ struct TopLevel::State {
   bool needs_rebuild = false;  // a commit failed half way: the records are ahead of the tree
 
   std::vector<LeafVisit> scratch_old, scratch_new;
+
+  // The sensors' level only: the boxes in leaf order (LeafBoxes.h), refreshed after every commit
+  // and build (O(references)); a count that differs from tree.prim_indices (a failed commit) means
+  // "not available", and the crossing query reads `boxes` by slot instead.
+  toplevel_detail::LeafBoxes leaf_boxes;
+  void refreshLeafBoxes(const KdTree& tree) { leaf_boxes.refresh(boxes, tree.prim_indices); }
 
   // Re-splits grown leaves by local builds; returns whether the tree changed.
   bool refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves);
