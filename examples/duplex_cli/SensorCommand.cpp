@@ -94,7 +94,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["name"] = s.name;
   j["rays"] = r.rays;
   j["seed"] = r.seed;
-  j["shape"] = spec.shape == SensorShape::Disk ? "disk" : "rectangle";
+  j["shape"] = spec.shape == SensorShape::Disk ? "disk" : spec.shape == SensorShape::Sphere ? "sphere" : "rectangle";
   j["size"] = {spec.width, spec.height};
   j["bins"] = {s.nx, s.ny};
   j["two_sided"] = s.two_sided;
@@ -127,14 +127,16 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   }
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
-  // CSV: one row per bin with its centre in sensor-local coordinates.
+  // CSV: one row per bin with its centre in sensor-local coordinates (a sphere: its direction).
   std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count\n";
   char row[256];
   for (std::uint32_t iy = 0; iy < s.ny; ++iy) {
     for (std::uint32_t ix = 0; ix < s.nx; ++ix) {
       const std::size_t b = static_cast<std::size_t>(iy) * s.nx + ix;
-      const double x = -0.5 * spec.width + (ix + 0.5) * spec.width / s.nx;
-      const double y = -0.5 * spec.height + (iy + 0.5) * spec.height / s.ny;
+      // A sphere's bin centre: azimuth in degrees and the normal's z.
+      const bool sphere = spec.shape == SensorShape::Sphere;
+      const double x = sphere ? (ix + 0.5) * 360.0 / s.nx : -0.5 * spec.width + (ix + 0.5) * spec.width / s.nx;
+      const double y = sphere ? -1.0 + (iy + 0.5) * 2.0 / s.ny : -0.5 * spec.height + (iy + 0.5) * spec.height / s.ny;
       std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu\n", ix, iy, x, y, s.flux_w[b],
                     s.irradiance_w_m2[b], s.stderr_w_m2[b], static_cast<unsigned long long>(s.ray_count[b]));
       csv += row;

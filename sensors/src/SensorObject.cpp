@@ -2,6 +2,8 @@
 
 #include "duplex/accel/Error.h"
 
+#include <glm/geometric.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -47,11 +49,17 @@ SensorObject::SensorObject(std::string name, const SensorSpec& spec) : Object(st
     bad("size must be finite and > 0");
   if (spec.nx == 0 || spec.ny == 0) bad("bins must be at least 1 x 1");
   if (static_cast<std::uint64_t>(spec.nx) * spec.ny > (1u << 26)) bad("more than 2^26 bins");
-  if (spec.shape == SensorShape::Disk && spec.width != spec.height) bad("a disk has one diameter (width == height)");
+  if (spec.shape != SensorShape::Rectangle && spec.width != spec.height) bad("a disk or sphere has one diameter (width == height)");
+  if (spec.shape == SensorShape::Sphere && spec.theta_bins != 0) bad("a sphere takes no angular bins (its bins are directions)");
   if (spec.theta_bins > 0 && spec.phi_bins == 0) bad("angular bins need at least one phi bin");
   if (static_cast<std::uint64_t>(spec.theta_bins) * spec.phi_bins > (1u << 20)) bad("more than 2^20 angular bins");
-  // Bin areas once: a rectangle's bins are equal; a disk's are its squares cut by the circle.
+  // Bin areas once: a rectangle's bins are equal; a disk's are its squares cut by the circle; a
+  // sphere's are equal (equal steps of z and of the azimuth cut equal areas).
   bin_area_.resize(binCount());
+  if (spec.shape == SensorShape::Sphere) {
+    std::fill(bin_area_.begin(), bin_area_.end(), area() / binCount());
+    return;
+  }
   const double bw = spec.width / spec.nx, bh = spec.height / spec.ny;
   for (std::uint32_t iy = 0; iy < spec.ny; ++iy) {
     for (std::uint32_t ix = 0; ix < spec.nx; ++ix) {
@@ -84,10 +92,15 @@ double SensorObject::angleBinSolidAngle(std::uint32_t bin) const {
 
 double SensorObject::area() const {
   if (spec_.shape == SensorShape::Disk) return std::numbers::pi * 0.25 * spec_.width * spec_.width;
+  if (spec_.shape == SensorShape::Sphere) return std::numbers::pi * spec_.width * spec_.width;
   return spec_.width * spec_.height;
 }
 
 Box SensorObject::bounds() const {
+  if (spec_.shape == SensorShape::Sphere) {
+    const float r = std::nextafter(static_cast<float>(0.5 * spec_.width), INFINITY);
+    return Box(glm::vec3(-r), glm::vec3(r));
+  }
   Box b;
   b.lo = glm::vec3(static_cast<float>(-0.5 * spec_.width), static_cast<float>(-0.5 * spec_.height), 0.0f);
   b.hi = glm::vec3(static_cast<float>(0.5 * spec_.width), static_cast<float>(0.5 * spec_.height), 0.0f);
@@ -114,7 +127,43 @@ std::uint32_t SensorObject::binAt(double x, double y) const {
   return iy * spec_.nx + ix;
 }
 
+namespace {
+
+// The crossings of a sphere sensor of radius r: the roots of |o + t d|^2 = r^2 in [tnear, tfar]
+// (in double, with the numerically stable form of the quadratic), in order.
+void sphereCrossings(const SensorObject& s, double r, const Ray& ray_os, std::vector<Hit>& hits) {
+  const glm::dvec3 o(ray_os.origin), d(ray_os.dir);
+  const double a = glm::dot(d, d), b = glm::dot(o, d), c = glm::dot(o, o) - r * r;
+  const double disc = b * b - a * c;
+  if (!(a > 0.0) || !(disc > 0.0)) return;  // degenerate direction, miss or tangent: no crossing
+  const double q = -(b + std::copysign(std::sqrt(disc), b));
+  double t0 = q / a, t1 = c / q;
+  if (t0 > t1) std::swap(t0, t1);
+  for (const double t : {t0, t1}) {
+    if (!(t >= ray_os.tnear && t <= ray_os.tfar)) continue;
+    const glm::dvec3 n = (o + t * d) / r;
+    if (!s.spec().two_sided && glm::dot(n, d) >= 0.0) continue;  // one-sided: entering rays only
+    Hit h;
+    h.t = static_cast<float>(t);
+    h.u = static_cast<float>(std::atan2(n.y, n.x));
+    h.v = static_cast<float>(n.z);
+    h.prim_id = s.sphereBinAt(n);
+    h.ng = glm::vec3(n);
+    hits.push_back(h);
+  }
+}
+
+}  // namespace
+
 bool SensorObject::cross(const Ray& ray_os, float& t_out, SensorCell& cell) const {
+  if (spec_.shape == SensorShape::Sphere) {  // the first crossing
+    std::vector<Hit> hits;
+    sphereCrossings(*this, 0.5 * spec_.width, ray_os, hits);
+    if (hits.empty()) return false;
+    t_out = hits[0].t;
+    cell = {hits[0].prim_id, hits[0].u, hits[0].v};
+    return true;
+  }
   const double dz = ray_os.dir.z;
   if (dz == 0.0) return false;                      // parallel (or in the plane): no crossing
   if (!spec_.two_sided && dz > 0.0) return false;   // one-sided: only rays arriving at the front (+z) face
@@ -130,7 +179,21 @@ bool SensorObject::cross(const Ray& ray_os, float& t_out, SensorCell& cell) cons
   return true;
 }
 
+std::uint32_t SensorObject::sphereBinAt(const glm::dvec3& n) const {
+  constexpr double kTwoPi = 2.0 * std::numbers::pi;
+  double phi = std::atan2(n.y, n.x);
+  if (phi < 0.0) phi += kTwoPi;
+  const auto ix = std::min<std::uint32_t>(spec_.nx - 1, static_cast<std::uint32_t>(phi / kTwoPi * spec_.nx));
+  const auto iy = std::min<std::uint32_t>(spec_.ny - 1, static_cast<std::uint32_t>(std::max(0.0, (n.z + 1.0) * 0.5 * spec_.ny)));
+  return iy * spec_.nx + ix;
+}
+
+
 void SensorObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
+  if (spec_.shape == SensorShape::Sphere) {
+    sphereCrossings(*this, 0.5 * spec_.width, ray_os, hits);
+    return;
+  }
   float t;
   SensorCell cell;
   if (!cross(ray_os, t, cell)) return;

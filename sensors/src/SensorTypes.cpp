@@ -36,13 +36,14 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::i
     const std::string shape = ctx.string(spec["shape"], p + "/shape");
     if (shape == "rectangle") s.shape = SensorShape::Rectangle;
     else if (shape == "disk") s.shape = SensorShape::Disk;
-    else ctx.fail(p + "/shape", "expected \"rectangle\" or \"disk\", got \"" + shape + "\"");
+    else if (shape == "sphere") s.shape = SensorShape::Sphere;
+    else ctx.fail(p + "/shape", "expected \"rectangle\", \"disk\" or \"sphere\", got \"" + shape + "\"");
   }
   const std::vector<double> size = ctx.positiveSizes(ctx.member(spec, p, "size"), p + "/size", 2);
   s.width = size[0];
   s.height = size[1];
-  if (s.shape == SensorShape::Disk && s.width != s.height)
-    ctx.fail(p + "/size", "a disk has one diameter: a number or [d, d]");
+  if (s.shape != SensorShape::Rectangle && s.width != s.height)
+    ctx.fail(p + "/size", std::string("a ") + (s.shape == SensorShape::Disk ? "disk" : "sphere") + " has one diameter: a number or [d, d]");
   if (spec.contains("bins")) {
     const json& b = spec["bins"];
     if (b.is_number()) {
@@ -68,6 +69,7 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::i
       s.phi_bins = binCount(a[1], p + "/angular_bins/1", ctx);
     }
     if (static_cast<std::uint64_t>(s.theta_bins) * s.phi_bins > (1u << 20)) ctx.fail(p + "/angular_bins", "more than 2^20 angular bins");
+    if (s.shape == SensorShape::Sphere) ctx.fail(p + "/angular_bins", "a sphere takes no angular bins (its bins are directions)");
   }
   return s;
 }

@@ -180,7 +180,8 @@ int check(const std::string& duplex, const fs::path& dir) {
 
 // Spectral bands and angular bins: the per-band arrays and angular bins are added beside the
 // exact keys, which hold the sums over the bands; a floor that reflects no red sends no red to a
-// sensor that sees only the floor; the angular bins hold the sensor's whole flux.
+// sensor that sees only the floor; the angular bins hold the sensor's whole flux. A sphere sensor
+// around a light sees all its power.
 void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
   fs::create_directories(dir);
   write(dir / "bands.json", R"({"format": "scene-json-v1", "bands": ["blue", "red"],
@@ -211,6 +212,15 @@ void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
   double angular = 0.0;
   for (const auto& x : j["angular_flux_w"]) angular += x.get<double>();
   expect(std::abs(angular - total) <= 1e-12 * total, "the angular bins do not hold the sensor's flux");
+
+  // A sphere sensor around a point light: all the power leaves through it, by direction.
+  write(dir / "sphere.json", R"({"format": "scene-json-v1", "objects": [], "instances": [],
+    "lights": [{"type": "point", "position": [0, 0, 0], "power": 3}],
+    "sensors": [{"name": "far", "shape": "sphere", "size": 4, "bins": [8, 4]}]})");
+  (void)runJson(sensorArgs(duplex, dir / "sphere.json", "5000", "1", dir / "sphere"), dir);
+  const nlohmann::json sj = readJson(dir / "sphere" / "far.json");
+  expect(sj["shape"] == "sphere" && sj["irradiance_w_m2"].size() == 32, "far.json is not a 8 x 4 sphere");
+  expect(std::abs(sj["total_flux_w"].get<double>() - 3.0) < 1e-12, "the sphere around the light did not see all 3 W");
 }
 
 }  // namespace

@@ -1,6 +1,6 @@
 #pragma once
 /// \file SensorObject.h
-/// A light sensor: a flat rectangle or disk with a grid of bins that never blocks or changes a ray
+/// A light sensor: a flat rectangle or disk (or a sphere) with a grid of bins that never blocks or changes a ray
 /// and reports every crossing (ObjectRole::Sensor). Crossings are found by the top level's
 /// crossing query (TopLevel::intersectWithCrossings) and turned into deposited power by SensorRun.
 ///
@@ -18,8 +18,19 @@
 ///   crosses.
 /// - A one-sided sensor records rays that arrive at its front face (travelling against the normal,
 ///   dir.z < 0); a two-sided sensor records both directions.
+///
+/// Sphere sensors (flux through a sphere, by direction): the sphere of diameter w = h centred at
+/// the origin. Bins are equal-area cells of the outward normal n at the crossing point: nx azimuth
+/// steps of phi = atan2(n.y, n.x) in [0, 360) degrees from +x towards +y, times ny steps of n.z in
+/// [-1, 1] (equal steps of z cut equal areas, Archimedes); bin index iy * nx + ix. Every crossing
+/// of the ray's line in [tnear, tfar] counts (up to two: in and out); a one-sided sphere records
+/// the rays entering it (travelling against the outward normal), a two-sided sphere both. A ray
+/// tangent to the sphere (one touching point) does not cross it. Instances must be similarities
+/// (rotation and uniform scale: SensorScene checks), and spheres take no angular bins.
 
 #include "duplex/accel/Object.h"
+
+#include <glm/vec3.hpp>
 
 #include <cstdint>
 #include <string_view>
@@ -27,13 +38,13 @@
 
 namespace duplex {
 
-enum class SensorShape : std::uint8_t { Rectangle, Disk };
+enum class SensorShape : std::uint8_t { Rectangle, Disk, Sphere };
 
 /// What a sensor looks like. Lengths in object-space units.
 struct SensorSpec {
   SensorShape shape = SensorShape::Rectangle;
-  double width = 1.0;   ///< along x (a disk's diameter)
-  double height = 1.0;  ///< along y (a disk: equal to width)
+  double width = 1.0;   ///< along x (a disk's or sphere's diameter)
+  double height = 1.0;  ///< along y (a disk or sphere: equal to width)
   std::uint32_t nx = 1;
   std::uint32_t ny = 1;
   bool two_sided = true;
@@ -60,8 +71,8 @@ class SensorObject final : public Object {
  public:
   static constexpr std::string_view kTypeName = "sensor";
   /// Throws InvalidArgument (naming `name`) for non-finite or non-positive sizes, zero bins, more
-  /// than 2^26 bins, or a disk whose width and height differ; phi_bins 0 with theta bins, or more
-  /// than 2^20 angular bins.
+  /// than 2^26 bins, or a disk or sphere whose width and height differ; phi_bins 0 with theta
+  /// bins, more than 2^20 angular bins, or angular bins on a sphere.
   SensorObject(std::string name, const SensorSpec& spec);
 
   [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
@@ -76,24 +87,28 @@ class SensorObject final : public Object {
   [[nodiscard]] std::uint32_t angleBinAt(double cos_theta, double phi) const;
   /// Solid angle (sr) of angular bin `bin` on one face: (cos theta0 - cos theta1) (phi1 - phi0).
   [[nodiscard]] double angleBinSolidAngle(std::uint32_t bin) const;
-  /// Object-space area of the whole sensor (w h, or pi w^2 / 4).
+  /// Object-space area of the whole sensor (w h, pi w^2 / 4, or a sphere's pi w^2).
   [[nodiscard]] double area() const;
 
-  /// The flat box [-w/2, w/2] x [-h/2, h/2] x [0, 0].
+  /// The flat box [-w/2, w/2] x [-h/2, h/2] x [0, 0]; a sphere's cube [-w/2, w/2]^3.
   [[nodiscard]] Box bounds() const override;
   /// Sensors never block: always false (the top level never asks).
   bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
   [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
   /// Appends the crossing of `ray_os` with t in [tnear, tfar], if any (at most one): t, u = local
-  /// x, v = local y, prim_id = bin, ng = (0, 0, 1).
+  /// x, v = local y, prim_id = bin, ng = (0, 0, 1). Spheres: up to two crossings in order of t,
+  /// u = azimuth phi (radians), v = n.z, ng = the outward normal.
   void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
 
   /// The crossing test itself: whether `ray_os` crosses the sensor within [tnear, tfar] (with the
-  /// side and border rules above); fills t (units of ray_os.dir) and the cell.
+  /// side and border rules above); fills t (units of ray_os.dir) and the cell. Spheres: the first
+  /// crossing, cell x = azimuth (radians), y = n.z.
   [[nodiscard]] bool cross(const Ray& ray_os, float& t, SensorCell& cell) const;
   /// The bin of local point (x, y), or kInvalidId outside the sensor (border rules above).
   [[nodiscard]] std::uint32_t binAt(double x, double y) const;
+  /// Sphere sensors: the bin of a point with outward unit normal n (object space).
+  [[nodiscard]] std::uint32_t sphereBinAt(const glm::dvec3& n) const;
 
  private:
   SensorSpec spec_;

@@ -3,10 +3,11 @@
 /// The sensor object type in the scene-file registry, and the reader of a sensor description.
 ///
 /// Object entry (duplex-scene-v1; the sensor is then instanced like any object):
-///   {"name": N, "sensor": {"shape": "rectangle" | "disk", "size": [w, h] | s, "bins": [nx, ny] | n,
-///                          "two_sided": true | false, "angular_bins": n_theta | [n_theta, n_phi]}}
+///   {"name": N, "sensor": {"shape": "rectangle" | "disk" | "sphere", "size": [w, h] | s,
+///                          "bins": [nx, ny] | n, "two_sided": true | false,
+///                          "angular_bins": n_theta | [n_theta, n_phi]}}
 /// Defaults: shape "rectangle", bins [1, 1], two_sided true, no angular bins (n_phi default 1);
-/// "size" is required (a disk's size is its diameter: a number or [d, d]). The same keys (plus "name" and "transform") make an entry of the
+/// "size" is required (a disk's or sphere's size is its diameter: a number or [d, d]). The same keys (plus "name" and "transform") make an entry of the
 /// top-level "sensors" list (SensorScene.h).
 
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
