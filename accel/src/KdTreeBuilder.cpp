@@ -636,8 +636,9 @@ std::ostream& operator<<(std::ostream& os, const KdBuildConfig& c) {
 
 namespace {
 
+// `root`: the root box (null: the primitives' bounds); it must contain them.
 KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const KdSplitFunction* split,
-             const KdBuildConfig& config) {
+             const KdBuildConfig& config, const Box* root = nullptr) {
   if (prim_bounds.size() > KdNode::kMaxIndex)
     throw InvalidArgument("kd-tree build: " + std::to_string(prim_bounds.size()) + " primitives exceed the limit of 2^30");
   if (!(config.traversal_cost > 0.0f) || !(config.intersection_cost > 0.0f) || !(config.empty_bonus >= 0.0f) ||
@@ -660,8 +661,9 @@ KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const
   max_depth = std::min(max_depth, 60);  // traversal stack holds 64 entries
 
   Builder builder(clip, split, config, max_depth);
-  Extent extent;  // the root box is the references' exact extent
+  Extent extent;  // the references' exact extent; the root box unless one is given
   for (int k = 0; k < 3; ++k) extent.lo[k] = tree.bounds.lo[k], extent.hi[k] = tree.bounds.hi[k];
+  if (root) tree.bounds = *root;
   Subtree out;
   out.nodes.reserve(refs.size() * 2);
   out.prims.reserve(refs.size() * 2);
@@ -688,6 +690,18 @@ KdTree buildKdTree(std::span<const Box> prim_bounds, const KdSplitFunction& spli
 KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config) {
   // Clipping a box primitive to a node is plain intersection; `box` is already that.
   return buildKdTree(boxes, [](std::uint32_t, const Box& box) { return box; }, config);
+}
+
+KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config, const Box& root_bounds) {
+  Box all;
+  for (const Box& b : boxes)
+    if (finiteBox(b)) all.extend(b);
+  if (all.empty()) return {};
+  if (!finiteBox(root_bounds) || !(root_bounds.lo.x <= all.lo.x && root_bounds.lo.y <= all.lo.y && root_bounds.lo.z <= all.lo.z &&
+                                   root_bounds.hi.x >= all.hi.x && root_bounds.hi.y >= all.hi.y && root_bounds.hi.z >= all.hi.z))
+    throw InvalidArgument("kd-tree build: the given root bounds do not contain every box");
+  const KdClipFunction clip = [](std::uint32_t, const Box& box) { return box; };
+  return build(boxes, &clip, nullptr, config, &root_bounds);
 }
 
 }  // namespace duplex

@@ -5,7 +5,11 @@
 // new box touches. A leaf that gains references is re-split by a small SAH build over its own
 // references (clipped to its cell) when it overflows or when it now holds empty space worth cutting
 // off; the subtree is appended to the node array and the leaf becomes a jump node to it, so no
-// other node moves. The SAH cost of the tree is tracked per edit and per refinement, and made exact
+// other node moves. Local builds are redone when their boxes change: a small jump subtree whose
+// references changed is rebuilt over them, and a frontier subtree of the last full build (at most
+// 1/64 of the references) is rebuilt once edits changed 5% of its references, one per commit as
+// the edits pay for it (TopLevelRefine.cpp); replaced nodes are garbage until the tree is compacted
+// depth first. The SAH cost of the tree is tracked per edit and per refinement, and made exact
 // (with the root shrunk to its boxes) every 32 commits or before a rebuild decision; when it
 // exceeds the cost of the last full build by TopLevelConfig::rebuild_ratio, the instance count
 // drifted far from that build's, or the tree grew to 4 times its nodes or references, the whole
@@ -70,16 +74,21 @@ namespace {
 
 // Calls f(LeafVisit) for every leaf whose closed cell meets `box` (a superset of the leaves the
 // builder put the box in: touching counts on both sides of a plane).
+// `frontier_of` maps node indices to frontier indices (TopLevel::State::frontiers).
 template <class F>
-void forEachLeaf(const KdTree& tree, const Box& box, F&& f) {
+void forEachLeaf(const KdTree& tree, const std::vector<std::uint32_t>& frontier_of, const Box& box, F&& f) {
   if (tree.nodes.empty()) return;
   LeafVisit stack[kKdStackSize + 1];
   int top = 0;
-  stack[top++] = {0, tree.bounds, 0, tree.bounds};
+  stack[top++] = {0, tree.bounds, 0, tree.bounds, kNoJump, {}, 0, kNoJump};
   while (top > 0) {
     LeafVisit v = stack[--top];
+    if (v.node < frontier_of.size() && frontier_of[v.node] != kNoJump) v.frontier = frontier_of[v.node];
     KdNode n = tree.nodes[v.node];
     while (n.isJump()) {
+      v.jump = v.node;
+      v.jump_cell = v.cell;
+      v.jump_depth = v.depth;
       v.node = n.jumpTarget();
       n = tree.nodes[v.node];
     }
@@ -91,12 +100,16 @@ void forEachLeaf(const KdTree& tree, const Box& box, F&& f) {
     const float s = n.split();
     // Cells are clamped to their parent: after the root shrank, a plane may lie outside it.
     if (box.hi[a] >= s) {
-      LeafVisit u{n.upperChild(), v.cell, v.depth + 1, v.root};
+      LeafVisit u = v;
+      u.node = n.upperChild();
+      ++u.depth;
       u.cell.lo[a] = std::max(s, v.cell.lo[a]);
       stack[top++] = u;
     }
     if (box.lo[a] <= s) {
-      LeafVisit l{v.node + 1, v.cell, v.depth + 1, v.root};
+      LeafVisit l = v;
+      ++l.node;
+      ++l.depth;
       l.cell.hi[a] = std::min(s, v.cell.hi[a]);
       stack[top++] = l;
     }
@@ -278,6 +291,9 @@ void TopLevel::install(KdTree&& tree) {
   State& s = *state_;
   tree_ = std::move(tree);
   s.garbage = 0;
+  s.garbage_nodes = 0;
+  s.touched_jumps.clear();
+  s.markFrontiers(tree_);
   const KdTreeStats st = tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
   s.sah_cost = st.sah_cost;
   s.fresh_cost = st.sah_cost;
@@ -345,6 +361,8 @@ void TopLevel::commitEdits() {
   ++s.commits;
   s.last_edits = pending.size();
   s.last_full = false;
+  s.touched_jumps.clear();
+  s.touched_frontiers.clear();
 
   // A batch that edits a large part of the scene is cheaper, and gives a better tree, as one
   // full rebuild than as as many re-insertions (the same holds for scenes of a few instances).
@@ -368,6 +386,8 @@ void TopLevel::commitEdits() {
       n = KdNode::leaf(off, cnt - 1);
       ++s.garbage;
       s.sah_cost -= leaf_area_weight(v.cell) / root_area_before;
+      if (v.jump != kNoJump) s.touched_jumps.push_back(v);  // its local build no longer fits
+      s.countEdit(v);
       return;
     }
     // Not there: the builder placed a box that only touches a plane on one side only.
@@ -391,6 +411,8 @@ void TopLevel::commitEdits() {
     n = KdNode::leaf(n.primOffset(), cnt + 1);
     s.sah_cost += leaf_area_weight(v.cell) / root_area_before;
     grown.push_back(v);
+    if (v.jump != kNoJump) s.touched_jumps.push_back(v);
+    s.countEdit(v);
   };
   auto grow_root = [&](const Box& box) {
     if (box.empty()) return;
@@ -428,7 +450,7 @@ void TopLevel::commitEdits() {
       if (it == s.slot_of_id.end()) continue;  // added and removed within this batch
       const std::uint32_t slot = it->second;
       boundary_left |= on_boundary(s.boxes[slot]);
-      if (incremental) forEachLeaf(tree_, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
+      if (incremental) forEachLeaf(tree_, s.frontier_of, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
       s.boxes[slot] = Box();
       s.records[slot] = Record{};
       s.filters[slot] = SlotFilter{};
@@ -466,9 +488,9 @@ void TopLevel::commitEdits() {
     // Leave the leaves only the old box touches, join those only the new box touches.
     s.scratch_old.clear();
     s.scratch_new.clear();
-    if (!old_box.empty()) forEachLeaf(tree_, old_box, [&](const LeafVisit& v) { s.scratch_old.push_back(v); });
+    if (!old_box.empty()) forEachLeaf(tree_, s.frontier_of, old_box, [&](const LeafVisit& v) { s.scratch_old.push_back(v); });
     grow_root(edit->box);
-    if (!edit->box.empty()) forEachLeaf(tree_, edit->box, [&](const LeafVisit& v) { s.scratch_new.push_back(v); });
+    if (!edit->box.empty()) forEachLeaf(tree_, s.frontier_of, edit->box, [&](const LeafVisit& v) { s.scratch_new.push_back(v); });
     auto in = [](const std::vector<LeafVisit>& list, std::uint32_t node) {
       return std::any_of(list.begin(), list.end(), [&](const LeafVisit& v) { return v.node == node; });
     };
@@ -499,7 +521,8 @@ void TopLevel::commitEdits() {
   // Refinement without bound fragments cells (each local build is optimal only locally): a tree
   // grown far beyond the last full build is rebuilt whatever its estimated cost.
   const std::size_t live_refs = tree_.prim_indices.size() - s.garbage;
-  if (tree_.nodes.size() > 4 * s.fresh_nodes + 4096 || live_refs > 4 * s.fresh_refs + 4096) {
+  const std::size_t live_nodes = tree_.nodes.size() - s.garbage_nodes;
+  if (live_nodes > 4 * s.fresh_nodes + 4096 || live_refs > 4 * s.fresh_refs + 4096) {
     fullRebuild();
     return;
   }
@@ -527,92 +550,9 @@ void TopLevel::commitEdits() {
     fullRebuild();
     return;
   }
-  if (s.garbage > 1024 && s.garbage > tree_.prim_indices.size() / 2) compact();
-}
-
-bool TopLevel::State::refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves) {
-  KdTree& tree = top.tree_;
-  const TopLevelConfig& config = top.config_;
-  if (grown_leaves.empty()) return false;
-  std::sort(grown_leaves.begin(), grown_leaves.end(),
-            [](const LeafVisit& a, const LeafVisit& b) { return a.node < b.node; });
-  grown_leaves.erase(std::unique(grown_leaves.begin(), grown_leaves.end(),
-                                 [](const LeafVisit& a, const LeafVisit& b) { return a.node == b.node; }),
-                     grown_leaves.end());
-  std::vector<Box> clipped;
-  std::vector<std::uint32_t> slots;
-  bool changed = false;
-  for (LeafVisit& v : grown_leaves) {
-    const KdNode n = tree.nodes[v.node];
-    const std::uint32_t cnt = n.primCount();
-    if (cnt < 2) continue;
-    // A cell on the root's boundary grew with the root since the visit.
-    for (int a = 0; a < 3; ++a) {
-      if (v.cell.lo[a] <= v.root.lo[a]) v.cell.lo[a] = tree.bounds.lo[a];
-      if (v.cell.hi[a] >= v.root.hi[a]) v.cell.hi[a] = tree.bounds.hi[a];
-    }
-    clipped.clear();
-    slots.clear();
-    Box content;
-    for (std::uint32_t i = 0; i < cnt; ++i) {
-      const std::uint32_t slot = tree.prim_indices[n.primOffset() + i];
-      const Box c = intersection(boxes[slot], v.cell);
-      clipped.push_back(c);
-      slots.push_back(slot);
-      content.extend(c);
-    }
-    // Worth a local build: an overflowing leaf, or one whose references cover much less than its
-    // cell (empty space an SAH split would cut off).
-    const bool overflow = cnt > config.leaf_split_size;
-    const bool loose = boxArea(content) < 0.5 * boxArea(v.cell);
-    if (!overflow && !loose) continue;
-    const int depth_left = kKdStackSize - 4 - static_cast<int>(v.depth);
-    if (depth_left < 2) continue;
-    KdBuildConfig cfg = config.build;
-    cfg.parallel_threshold = 0;  // a handful of boxes: task overhead would dominate
-    const int auto_depth = 8 + static_cast<int>(1.3 * std::log2(static_cast<double>(cnt)));
-    cfg.max_depth = std::min(cfg.max_depth > 0 ? cfg.max_depth : auto_depth, depth_left);
-    const KdTree sub = buildKdTreeOverBoxes(clipped, cfg);
-    if (sub.nodes.size() <= 1) continue;
-    // Append the subtree (its child and leaf offsets shifted) and turn the leaf into a jump to it.
-    const std::uint32_t node_base = static_cast<std::uint32_t>(tree.nodes.size());
-    const std::uint32_t prim_base = static_cast<std::uint32_t>(tree.prim_indices.size());
-    for (KdNode m : sub.nodes) {
-      if (m.isLeaf())
-        m = KdNode::leaf(m.primCount() ? m.primOffset() + prim_base : 0, m.primCount());
-      else
-        m.setUpperChild(m.upperChild() + node_base);
-      tree.nodes.push_back(m);
-    }
-    for (const std::uint32_t p : sub.prim_indices) tree.prim_indices.push_back(slots[p]);
-    garbage += cnt;
-    tree.nodes[v.node] = KdNode::jump(node_base);
-    // The tracked cost: the leaf's term out, the subtree's in (its own cost is relative to its
-    // bounds' area; the subtree's root stands for the whole cell, an underestimate corrected at the
-    // next exact recomputation).
-    const double root_area = std::max(1e-30, boxArea(tree.bounds));
-    const double sub_cost = sub.stats(config.build.traversal_cost, config.build.intersection_cost).sah_cost;
-    sah_cost += sub_cost * boxArea(sub.bounds) / root_area -
-                config.build.intersection_cost * static_cast<double>(cnt) * boxArea(v.cell) / root_area;
-    cost_stale = true;
-    ++subtree_rebuilds;
-    changed = true;
-  }
-  return changed;
-}
-
-void TopLevel::compact() {
-  std::vector<std::uint32_t> indices;
-  indices.reserve(tree_.prim_indices.size() - state_->garbage);
-  for (KdNode& n : tree_.nodes) {
-    if (!n.isLeaf() || n.isJump() || n.primCount() == 0) continue;
-    const std::uint32_t off = static_cast<std::uint32_t>(indices.size());
-    indices.insert(indices.end(), tree_.prim_indices.begin() + n.primOffset(),
-                   tree_.prim_indices.begin() + n.primOffset() + n.primCount());
-    n.setPrimOffset(off);
-  }
-  tree_.prim_indices = std::move(indices);
-  state_->garbage = 0;
+  if ((s.garbage > 1024 && s.garbage > tree_.prim_indices.size() / 2) ||
+      (s.garbage_nodes > 4096 && s.garbage_nodes > tree_.nodes.size() / 4))
+    compact();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -816,6 +756,7 @@ TopLevelStats TopLevel::stats() const {
     st.subtree_rebuilds = state_->subtree_rebuilds;
     st.last_commit_edits = state_->last_edits;
     st.last_commit_full_rebuild = state_->last_full;
+    st.garbage_nodes = state_->garbage_nodes;
   }
   if (sensors_) {
     st.sensor_instances = sensors_->live_count_;

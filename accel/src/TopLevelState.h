@@ -48,12 +48,32 @@ struct Prepared {
   Box box;
 };
 
+inline constexpr std::uint32_t kNoJump = 0xFFFFFFFFu;
+
 // A leaf reached by routing a box, with the cell it covers.
 struct LeafVisit {
   std::uint32_t node;
   Box cell;
   std::uint32_t depth;  // inner nodes above it (jumps do not count: they use no stack)
   Box root;             // the root bounds the cell was derived from
+  // The innermost jump node on the path (a subtree that a commit built locally), its cell and
+  // depth; kNoJump when the leaf belongs to the last full build.
+  std::uint32_t jump = kNoJump;
+  Box jump_cell;
+  std::uint32_t jump_depth = 0;
+  std::uint32_t frontier = kNoJump;  // the frontier subtree it belongs to (TopLevel::State::frontiers)
+};
+
+// A subtree of the last full build that is rebuilt on its own once edits changed a good part of
+// its references: the nodes where a walk from the root first meets a subtree of at most
+// max(256, references / 64) references (leaves included).
+struct Frontier {
+  std::uint32_t node;   // stays valid: frontier nodes are never garbage (a rebuild makes them jumps)
+  Box cell;             // derived from `root`
+  Box root;
+  std::uint32_t depth;  // inner nodes above it
+  std::uint32_t refs;   // references after its last build
+  std::uint32_t edits;  // references added or removed in it since
 };
 
 // The world ray in both precisions: float for the top-level traversal, double for the transform
@@ -172,8 +192,31 @@ struct TopLevel::State {
   toplevel_detail::LeafBoxes leaf_boxes;
   void refreshLeafBoxes(const KdTree& tree) { leaf_boxes.refresh(boxes, tree.prim_indices); }
 
-  // Re-splits grown leaves by local builds; returns whether the tree changed.
+  std::size_t garbage_nodes = 0;  // nodes no longer reachable (replaced local subtrees)
+  std::vector<toplevel_detail::Frontier> frontiers;
+  std::vector<std::uint32_t> frontier_of;  // by node index (nodes of the last full build): frontier or kNoJump
+  std::vector<std::uint32_t> touched_frontiers;  // frontiers edited in this commit (repeats)
+  double frontier_credit = 0.0;  // references of frontier rebuild work the edits have paid for
+  void countEdit(const LeafVisit& v) {
+    if (v.frontier == toplevel_detail::kNoJump) return;
+    ++frontiers[v.frontier].edits;
+    touched_frontiers.push_back(v.frontier);
+  }
+  // Finds the frontiers of a freshly built tree (TopLevelRefine.cpp).
+  void markFrontiers(const KdTree& tree);
+  // Rebuilds the touched frontiers whose edits exceed a fraction of their references; returns them.
+  std::vector<std::uint32_t> rebuildEditedFrontiers(TopLevel& top);
+  // Jump subtrees whose references changed in this commit (visits of their leaves).
+  std::vector<LeafVisit> touched_jumps;
+
+  // Re-splits grown leaves by local builds, after rebuilding the small jump subtrees in
+  // touched_jumps over their current references (TopLevelRefine.cpp); returns whether the tree
+  // changed.
   bool refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves);
+  // Rebuilds the jump subtrees of touched_jumps that hold at most kMaxJumpRebuild references;
+  // returns the jump nodes whose subtrees are gone (rebuilt, or inside a rebuilt one).
+  // Visits of rebuilt frontiers (`rebuilt_frontiers`) are skipped.
+  std::vector<std::uint32_t> rebuildTouchedJumps(TopLevel& top, const std::vector<std::uint32_t>& rebuilt_frontiers);
 };
 
 }  // namespace duplex

@@ -124,6 +124,41 @@ TEST(KdTreeBuilder, NaNAndEmptyBoxesAreLeftOut) {
   }
 }
 
+// A subtree that replaces a cell of an enclosing tree (the incremental top level) is built with
+// the cell as its root: the tree's bounds are the cell, the empty margin around the boxes ends in
+// empty leaves, and every box is still covered. A root that does not hold every box is refused.
+TEST(KdTreeBuilder, GivenRootBoundsFrameTheTree) {
+  const std::vector<Box> boxes = randomBoxes(200, 12);
+  Box all;
+  for (const Box& b : boxes) all.extend(b);
+  const glm::vec3 margin = all.extent();
+  const Box root(all.lo - margin, all.hi + 2.0f * margin);
+  const KdTree tree = buildKdTreeOverBoxes(boxes, KdBuildConfig{}, root);
+  EXPECT_TRUE(tree.bounds == root);
+  for (std::uint32_t i = 0; i < boxes.size(); ++i) {
+    const glm::dvec3 lo(boxes[i].lo), hi(boxes[i].hi);
+    EXPECT_TRUE(kdcheck_detail::pointCovered(tree, 0.5 * (lo + hi), i)) << "box " << i;
+    EXPECT_TRUE(kdcheck_detail::pointCovered(tree, lo, i)) << "box " << i;
+    EXPECT_TRUE(kdcheck_detail::pointCovered(tree, hi, i)) << "box " << i;
+  }
+  // Points of the margin, near the root's corners, lie in leaves without references.
+  for (int corner = 0; corner < 8; ++corner) {
+    glm::vec3 p;
+    for (int k = 0; k < 3; ++k) p[k] = (corner >> k) & 1 ? root.hi[k] - 0.01f * margin[k] : root.lo[k] + 0.01f * margin[k];
+    std::uint32_t i = 0;
+    while (!tree.nodes[i].isLeaf()) i = p[tree.nodes[i].axis()] < tree.nodes[i].split() ? i + 1 : tree.nodes[i].upperChild();
+    EXPECT_EQ(tree.nodes[i].primCount(), 0u) << "corner " << corner;
+  }
+  // The cost is that of a ray through the root: cutting off the margin costs a few node steps more
+  // than the tree over the boxes' own bounds, scaled by the area ratio.
+  const KdTree tight = buildKdTreeOverBoxes(boxes);
+  const double area_ratio = static_cast<double>(all.area()) / static_cast<double>(root.area());
+  EXPECT_LT(tree.stats(1.0f, 0.1f).sah_cost, tight.stats(1.0f, 0.1f).sah_cost * area_ratio + 6.0);
+  const Box too_small(all.lo, all.hi - 0.5f * margin);
+  expectErrorNaming<InvalidArgument>([&] { (void)buildKdTreeOverBoxes(boxes, KdBuildConfig{}, too_small); }, "root bounds");
+  EXPECT_TRUE(buildKdTreeOverBoxes(std::vector<Box>{Box()}, KdBuildConfig{}, root).empty());
+}
+
 TEST(KdTreeBuilder, SingleBoxIsOneLeaf) {
   const std::vector<Box> boxes = {Box(glm::vec3(1.0f, 2.0f, 3.0f), glm::vec3(2.0f, 4.0f, 3.5f))};
   const KdTree tree = buildKdTreeOverBoxes(boxes);

@@ -46,5 +46,10 @@ using KdSplitFunction = std::function<void(std::uint32_t prim, const Box& box, i
 
 /// Convenience for box primitives (the top level): clipping is box intersection.
 [[nodiscard]] KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config = {});
+/// The same with `root_bounds` as the tree's bounds instead of the boxes' (a cell of an enclosing
+/// tree that a subtree replaces): the space between them is cut off where the SAH finds it worth
+/// it, and the tree's SAH cost is that of a ray through `root_bounds`. Throws InvalidArgument when
+/// `root_bounds` is not finite or does not contain every box. No usable box: an empty tree.
+[[nodiscard]] KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config, const Box& root_bounds);
 
 }  // namespace duplex

@@ -108,6 +108,9 @@ struct TopLevelStats {
   std::uint64_t full_rebuilds = 0;
   std::uint64_t subtree_rebuilds = 0;
   std::size_t last_commit_edits = 0;   ///< instances set or removed by the last commit
+  /// Nodes of tree().nodes that no traversal reaches: subtrees that a local rebuild replaced,
+  /// dropped when the tree is compacted (TopLevelRefine.cpp).
+  std::size_t garbage_nodes = 0;
   bool last_commit_full_rebuild = false;
   /// The sensors' own tree (see TopLevel): its instances and figures. `instances` and `tree` above
   /// count the other instances only.
