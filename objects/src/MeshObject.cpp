@@ -153,6 +153,7 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   if (!isQueryable(ray_os)) return false;
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
+  const detail::WatertightRay4 wray4(wray);
   float t_best = std::min(hit.t, ray_os.tfar);
   const detail::TriangleBlock4* best_block = nullptr;
   int best_lane = 0;
@@ -168,7 +169,7 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
       const detail::TriangleBlock4* block = blocks + begin;
       for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
         const detail::Watertight4 r =
-            detail::intersectWatertight4<KX, KY, KZ>(wray, *block, kLaneMask[std::min(left, 4)], t_max);
+            detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, kLaneMask[std::min(left, 4)], t_max);
         for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
           const int k = std::countr_zero(static_cast<unsigned>(lanes));
           float t, u, v;
@@ -208,6 +209,7 @@ bool MeshObject::occluded(const Ray& ray_os) const {
   if (!isQueryable(ray_os)) return false;
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
+  const detail::WatertightRay4 wray4(wray);
   float t_best = ray_os.tfar;
   const detail::TriangleBlock4* blocks = blocks_.data();
   return dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
@@ -215,7 +217,7 @@ bool MeshObject::occluded(const Ray& ray_os) const {
       const detail::TriangleBlock4* block = blocks + begin;
       for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
         const detail::Watertight4 r =
-            detail::intersectWatertight4<KX, KY, KZ>(wray, *block, kLaneMask[std::min(left, 4)], t_max);
+            detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, kLaneMask[std::min(left, 4)], t_max);
         if (r.fast) return true;
         for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
           const int k = std::countr_zero(static_cast<unsigned>(lanes));

@@ -31,15 +31,30 @@ struct Watertight4 {
   alignas(16) float W[4];
 };
 
+/// The per-ray constants of WatertightRay broadcast to four lanes, once per ray rather than once
+/// per block (the compiler does not hoist them out of the traversal's leaf calls).
+struct WatertightRay4 {
+  __m128 o[3];
+  __m128 sx, sy, sz;
+  __m128 tnear;
+
+  explicit WatertightRay4(const WatertightRay& ray)
+      : o{_mm_set1_ps(ray.origin[0]), _mm_set1_ps(ray.origin[1]), _mm_set1_ps(ray.origin[2])},
+        sx(_mm_set1_ps(ray.sx)),
+        sy(_mm_set1_ps(ray.sy)),
+        sz(_mm_set1_ps(ray.sz)),
+        tnear(_mm_set1_ps(ray.tnear)) {}
+};
+
 /// Tests the lanes in `lanes` (bit i: lane i holds one of the leaf's triangles) of `block`.
 template <int KX, int KY, int KZ>
-inline Watertight4 intersectWatertight4(const WatertightRay& ray, const TriangleBlock4& block, int lanes, float t_max) {
+inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const TriangleBlock4& block, int lanes, float t_max) {
   // v[k][c]: coordinate c of vertex k of the 4 triangles.
   __m128 v[3][3];
   for (int k = 0; k < 3; ++k)
     for (int c = 0; c < 3; ++c) v[k][c] = _mm_load_ps(block.v[3 * k + c]);
-  const __m128 o[3] = {_mm_set1_ps(ray.origin[0]), _mm_set1_ps(ray.origin[1]), _mm_set1_ps(ray.origin[2])};
-  const __m128 sx = _mm_set1_ps(ray.sx), sy = _mm_set1_ps(ray.sy), sz = _mm_set1_ps(ray.sz);
+  const __m128* o = ray.o;
+  const __m128 sx = ray.sx, sy = ray.sy, sz = ray.sz;
   __m128 A[3], B[3], C[3];
   for (int k = 0; k < 3; ++k) {
     A[k] = _mm_sub_ps(v[0][k], o[k]);
@@ -71,7 +86,7 @@ inline Watertight4 intersectWatertight4(const WatertightRay& ray, const Triangle
   const __m128 sign = _mm_and_ps(det, _mm_set1_ps(-0.0f));
   const __m128 abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), det);
   const __m128 sT = _mm_xor_ps(T, sign);
-  const __m128 outside = _mm_or_ps(_mm_cmplt_ps(sT, _mm_mul_ps(_mm_set1_ps(ray.tnear), abs_det)),
+  const __m128 outside = _mm_or_ps(_mm_cmplt_ps(sT, _mm_mul_ps(ray.tnear, abs_det)),
                                    _mm_cmpgt_ps(sT, _mm_mul_ps(_mm_set1_ps(t_max), abs_det)));
   r.fast = candidates & ~_mm_movemask_ps(outside);
   _mm_store_ps(r.sT, sT);

@@ -41,6 +41,8 @@ class KdNode {
   /// without jumps).
   [[nodiscard]] bool isLeaf() const { return (bits_ & 3u) == kLeafTag; }
   [[nodiscard]] bool isJump() const { return bits_ == 0xFFFFFFFFu; }
+  /// A leaf with no primitives (one compare: the traversal tests it on both children of a step).
+  [[nodiscard]] bool isEmptyLeaf() const { return bits_ == kLeafTag; }
   [[nodiscard]] std::uint32_t jumpTarget() const { return payload_; }
   [[nodiscard]] int axis() const { return static_cast<int>(bits_ & 3u); }
   [[nodiscard]] float split() const { return std::bit_cast<float>(payload_); }

@@ -43,10 +43,13 @@ struct KdRay {
 };
 
 /// Clips the interval [tmin, tmax] (in and out) of the ray to `box`. Axes with zero direction only
-/// test the origin against the slab (closed: a ray in a face plane is inside). The exit is widened
-/// by 2 ulp-style factors (Ize 2013) so that rounding never culls a hit on the box boundary.
+/// test the origin against the slab (closed: a ray in a face plane is inside). Entry and exit are
+/// widened by 6 ulp-style steps (Ize 2013) so that rounding never culls a hit on the box boundary.
+/// Entry and exit per axis come from min / max rather than a compare and swap: the order is a coin
+/// flip for random directions, and a branch on it mispredicts every other ray.
 inline bool clipIntervalToBox(const KdRay& ray, const Box& box, float& tmin, float& tmax) {
   if (!(tmin <= tmax)) return false;
+  constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
   const float lo[3] = {box.lo.x, box.lo.y, box.lo.z};
   const float hi[3] = {box.hi.x, box.hi.y, box.hi.z};
   for (int k = 0; k < 3; ++k) {
@@ -54,14 +57,11 @@ inline bool clipIntervalToBox(const KdRay& ray, const Box& box, float& tmin, flo
       if (ray.origin[k] < lo[k] || ray.origin[k] > hi[k]) return false;
       continue;
     }
-    float t0 = (lo[k] - ray.origin[k]) * ray.inv_dir[k];
-    float t1 = (hi[k] - ray.origin[k]) * ray.inv_dir[k];
-    if (t0 > t1) std::swap(t0, t1);
-    t1 *= 1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
-    t0 = t0 >= 0.0f ? t0 * (1.0f - 2.0f * 3.0f * std::numeric_limits<float>::epsilon())
-                    : t0 * (1.0f + 2.0f * 3.0f * std::numeric_limits<float>::epsilon());
-    tmin = std::max(tmin, t0);
-    tmax = std::min(tmax, t1);
+    const float t0 = (lo[k] - ray.origin[k]) * ray.inv_dir[k];
+    const float t1 = (hi[k] - ray.origin[k]) * ray.inv_dir[k];
+    const float t_in = std::min(t0, t1), t_out = std::max(t0, t1);
+    tmin = std::max(tmin, t_in - std::abs(t_in) * kWiden);
+    tmax = std::min(tmax, t_out + std::abs(t_out) * kWiden);
   }
   return tmin <= tmax;
 }
@@ -74,7 +74,7 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
 }
 
 /// A leaf without primitives (not a jump: a jump's count field is all ones).
-inline bool isEmptyLeaf(const KdNode& node) { return node.isLeaf() && node.primCount() == 0; }
+inline bool isEmptyLeaf(const KdNode& node) { return node.isEmptyLeaf(); }
 
 /// Relative slack in t when deciding whether a ray meets a child cell (see traverseKdTree).
 inline constexpr float kKdPlaneSlack = 8.0f * std::numeric_limits<float>::epsilon();
@@ -98,19 +98,24 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
   float tmin, tmax;
   if (!clipRayToBox(ray, tree.bounds, tmin, tmax)) return false;
 
+  // The current cell's interval [lo, hi] is kept widened by the slack: closed intervals with a few
+  // ulps of slack, because a ray through a vertex that lies on split planes touches the cells
+  // meeting there at a single point, and the t of two planes at that point differ by rounding.
+  // Skipping such a cell can skip every triangle around the vertex, so a child is dropped only
+  // when the plane is clearly outside the interval. Widening is monotonic, so a bound cut at a
+  // plane is simply the widened plane distance (no exact copy of the interval is needed).
+  auto widen_up = [](float t) { return t + std::abs(t) * kKdPlaneSlack; };
+  auto widen_down = [](float t) { return t - std::abs(t) * kKdPlaneSlack; };
   struct Entry {
     std::uint32_t node;
-    float tmin, tmax;
+    float lo, hi;
   };
   Entry stack[kKdStackSize];
   int top = 0;
   const KdNode* nodes = tree.nodes.data();
   std::uint32_t index = 0;
   bool found = false;
-  // The interval widened by the slack (see below), updated only where tmin / tmax change.
-  auto widen_up = [](float t) { return t + std::abs(t) * kKdPlaneSlack; };
-  auto widen_down = [](float t) { return t - std::abs(t) * kKdPlaneSlack; };
-  float tmin_lo = widen_down(tmin), tmax_hi = widen_up(tmax);
+  float lo = widen_down(tmin), hi = widen_up(tmax);
 
   while (true) {
     const KdNode node = nodes[index];
@@ -118,39 +123,34 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       const int axis = node.axis();
       const float t_plane = (node.split() - ray.origin[axis]) * ray.inv_dir[axis];
       // The near child is the one the ray is in before it crosses the plane; with a zero
-      // direction the infinite inverse makes t_plane +-inf (or NaN on the plane: both children).
+      // direction the infinite inverse makes t_plane +-inf (or NaN on the plane: every comparison
+      // below is false, and min / max keep the full interval: both children).
       // Branch free: a negative direction swaps the children by xor.
       const std::uint32_t lower = index + 1;
       const std::uint32_t upper = node.upperChild();
       const std::uint32_t swap = (lower ^ upper) & ray.neg_mask[axis];
       const std::uint32_t near_child = lower ^ swap;
-      // Closed intervals with a few ulps of slack: a ray through a vertex that lies on split
-      // planes touches the cells meeting there at a single point, and the t of two planes at
-      // that point differ by rounding. Skipping such a cell can skip every triangle around the
-      // vertex, so a child is dropped only when the plane is clearly outside [tmin, tmax].
-      if (t_plane > tmax_hi) {
+      if (t_plane > hi) {
         index = near_child;
-      } else if (t_plane < tmin_lo) {
+      } else if (t_plane < lo) {
         index = upper ^ swap;  // the far child
       } else {
-        // Both; argument order makes a NaN t_plane (ray inside the plane) keep the full interval.
-        // An empty leaf child (about four in five leaves a random ray meets) is dropped here
+        // Both. An empty leaf child (most leaves a random ray meets are empty) is dropped here
         // rather than pushed, popped and visited: the lower child is usually in the same cache
         // line, and the upper one is needed soon anyway.
         const std::uint32_t far_child = upper ^ swap;
+        const float far_lo = std::max(lo, widen_down(t_plane));
         if (isEmptyLeaf(nodes[far_child])) {
           index = near_child;
-          tmax = std::min(tmax, t_plane);
-          tmax_hi = widen_up(tmax);
-        } else if (isEmptyLeaf(nodes[near_child]) && !(std::max(tmin, t_plane) > t_best)) {
+          hi = std::min(hi, widen_up(t_plane));
+        } else if (isEmptyLeaf(nodes[near_child])) {
+          if (far_lo > t_best) goto pop;
           index = far_child;
-          tmin = std::max(tmin, t_plane);
-          tmin_lo = widen_down(tmin);
+          lo = far_lo;
         } else {
-          stack[top++] = {far_child, std::max(tmin, t_plane), tmax};
+          stack[top++] = {far_child, far_lo, hi};
           index = near_child;
-          tmax = std::min(tmax, t_plane);
-          tmax_hi = widen_up(tmax);
+          hi = std::min(hi, widen_up(t_plane));
         }
       }
       continue;
@@ -164,16 +164,15 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       found = true;
       if constexpr (AnyHit) return true;
     }
-    // Pop the next node that can still hold a closer hit.
+  pop:
+    // The next node that can still hold a closer hit.
     do {
       if (top == 0) return found;
       --top;
       index = stack[top].node;
-      tmin = stack[top].tmin;
-      tmax = stack[top].tmax;
-    } while (tmin > t_best);
-    tmin_lo = widen_down(tmin);
-    tmax_hi = widen_up(tmax);
+      lo = stack[top].lo;
+      hi = stack[top].hi;
+    } while (lo > t_best);
   }
 }
 

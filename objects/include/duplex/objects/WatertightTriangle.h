@@ -25,10 +25,15 @@ struct WatertightRay {
   explicit WatertightRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear) {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     const float a[3] = {std::abs(d[0]), std::abs(d[1]), std::abs(d[2])};
-    kz = (a[0] >= a[1] && a[0] >= a[2]) ? 0 : (a[1] >= a[2] ? 1 : 2);
-    kx = (kz + 1) % 3;
-    ky = (kx + 1) % 3;
-    if (d[kz] < 0.0f) std::swap(kx, ky);  // keep the winding, so the sign of det is meaningful
+    // Without branches: for random directions each of these choices is a coin flip.
+    const int x_dominant = static_cast<int>(a[0] >= a[1]) & static_cast<int>(a[0] >= a[2]);
+    kz = (1 - x_dominant) * (2 - static_cast<int>(a[1] >= a[2]));
+    kx = kz == 2 ? 0 : kz + 1;
+    ky = kx == 2 ? 0 : kx + 1;
+    // Keep the winding, so the sign of det is meaningful: swap kx and ky when d[kz] < 0.
+    const int flip = (kx ^ ky) & -static_cast<int>(d[kz] < 0.0f);
+    kx ^= flip;
+    ky ^= flip;
     sx = d[kx] / d[kz];
     sy = d[ky] / d[kz];
     sz = 1.0f / d[kz];
