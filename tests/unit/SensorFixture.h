@@ -122,6 +122,9 @@ inline void expectIdentical(const SensorRunResults& a, const SensorRunResults& b
     EXPECT_EQ(a.sensors[k].band_flux_w, b.sensors[k].band_flux_w);
     EXPECT_EQ(a.sensors[k].band_stderr_w_m2, b.sensors[k].band_stderr_w_m2);
     EXPECT_EQ(a.sensors[k].band_total_flux_w, b.sensors[k].band_total_flux_w);
+    EXPECT_EQ(a.sensors[k].angular_flux_w, b.sensors[k].angular_flux_w);
+    EXPECT_EQ(a.sensors[k].angular_stderr_w, b.sensors[k].angular_stderr_w);
+    EXPECT_EQ(a.sensors[k].band_angular_flux_w, b.sensors[k].band_angular_flux_w);
   }
 }
 
