@@ -182,6 +182,17 @@ struct NodeGeometry {
   }
 };
 
+// The sorted events (clipped bounds) of every axis of a small node's references, for the full sweep
+// of nodes up to KdBuildConfig::exact_sweep_max references. An empty-space cut moves no reference
+// and lies at their extent, so the events stay those of the node inside the cut: a chain of cuts
+// (the many tiny nodes of a top level) sorts them once.
+struct SmallEvents {
+  static constexpr std::size_t kMax = 32;
+  bool valid = false;
+  std::uint8_t n_starts[3], n_ends[3], n_planars[3];
+  float starts[3][kMax], ends[3][kMax], planars[3][kMax];
+};
+
 // References per chunk of a parallel partition, and the node size from which it is used.
 constexpr std::size_t kPartitionChunk = 16384;
 
@@ -199,12 +210,13 @@ class Builder {
     std::array<std::uint32_t, 64> pending;  // depth <= 60
     int n_pending = 0;
     Bins own;  // bins made here when the parent did not bin this node (or they are too coarse)
+    SmallEvents events;  // valid while `refs` stay (empty-space cuts)
     for (;;) {
       const std::size_t n = refs.size();
       Split split;
       if (n > 0 && depth < max_depth_) {
         if (cfg_.heuristic == KdHeuristic::Sah) {
-          split = findSahSplit(refs, box, bins, own, extent);
+          split = findSahSplit(refs, box, bins, own, extent, events);
           const float leaf_cost = cfg_.intersection_cost * static_cast<float>(n);
           if (split.axis >= 0 && split.cost > leaf_cost) ++bad_refines;
           // As in pbrt: accept a few splits that look worse than a leaf, since later splits may
@@ -311,7 +323,8 @@ class Builder {
     return true;
   }
 
-  Split findSahSplit(const RefVec& refs, const Box& box, const Bins*& bins, Bins& own, const Extent& extent) const {
+  Split findSahSplit(const RefVec& refs, const Box& box, const Bins*& bins, Bins& own, const Extent& extent,
+                     SmallEvents& events) const {
     const NodeGeometry g(box);
     if (!(g.inv_half_area > 0.0f)) return {};
     const std::size_t n = refs.size();
@@ -332,10 +345,14 @@ class Builder {
       return best;
     }
     if (n <= cfg_.exact_sweep_max) {
+      if (n <= SmallEvents::kMax && !events.valid) collectSmallEvents(refs, events);
       Split best;
       for (int axis = 0; axis < 3; ++axis) {
         if (!(g.hi[axis] > g.lo[axis])) continue;
-        const Split s = sweepEvents(refs, g, axis, g.lo[axis], g.hi[axis]);
+        const Split s = n <= SmallEvents::kMax
+                            ? sweepSorted(g, axis, events.starts[axis], events.n_starts[axis], events.ends[axis],
+                                          events.n_ends[axis], events.planars[axis], events.n_planars[axis], 0, 0)
+                            : sweepEvents(refs, g, axis, g.lo[axis], g.hi[axis]);
         if (s.cost < best.cost) best = s;
       }
       return best;
@@ -421,11 +438,40 @@ class Builder {
       if (b > win_hi) ++above_window; else if (b >= win_lo) ends[n_ends++] = b;
       if (a == b && a >= win_lo && a <= win_hi) planars[n_planars++] = a;
     }
-    Split best;
-    if (n_starts == 0 && n_ends == 0) return best;
     std::sort(starts, starts + n_starts);
     std::sort(ends, ends + n_ends);
     std::sort(planars, planars + n_planars);
+    return sweepSorted(g, axis, starts, n_starts, ends, n_ends, planars, n_planars, below_window, above_window);
+  }
+
+  // The events of every axis of a small node (every event lies in the node: references are clipped
+  // to it), sorted.
+  static void collectSmallEvents(const RefVec& refs, SmallEvents& e) {
+    for (int axis = 0; axis < 3; ++axis) {
+      std::uint8_t n_planars = 0;
+      std::size_t k = 0;
+      for (const PrimRef& r : refs) {
+        e.starts[axis][k] = r.lo[axis];
+        e.ends[axis][k] = r.hi[axis];
+        ++k;
+        if (r.lo[axis] == r.hi[axis]) e.planars[axis][n_planars++] = r.lo[axis];
+      }
+      e.n_starts[axis] = e.n_ends[axis] = static_cast<std::uint8_t>(refs.size());
+      e.n_planars[axis] = n_planars;
+      std::sort(e.starts[axis], e.starts[axis] + refs.size());
+      std::sort(e.ends[axis], e.ends[axis] + refs.size());
+      std::sort(e.planars[axis], e.planars[axis] + n_planars);
+    }
+    e.valid = true;
+  }
+
+  // The sweep over sorted events of `axis` (starts: lower bounds, ends: upper bounds, planars: both)
+  // inside a window, with `below_window` references starting and `above_window` ending outside it.
+  Split sweepSorted(const NodeGeometry& g, int axis, const float* starts, std::size_t n_starts, const float* ends,
+                    std::size_t n_ends, const float* planars, std::size_t n_planars, std::size_t below_window,
+                    std::size_t above_window) const {
+    Split best;
+    if (n_starts == 0 && n_ends == 0) return best;
     const float lo = g.lo[axis], hi = g.hi[axis];
     std::size_t i_start = 0, i_end = 0, i_planar = 0;
     // Merge the two sorted lists; each distinct value is one candidate plane.

@@ -37,7 +37,7 @@ constexpr std::size_t kMaxJumpRebuild = 64;
 // Frontier subtrees (TopLevelState.h) hold at most max(kMinFrontierRefs, references /
 // kFrontiersPerTree) references.
 constexpr std::uint32_t kMinFrontierRefs = 256;
-constexpr std::size_t kFrontiersPerTree = 64;
+constexpr std::uint32_t kFrontiersPerTree = 64;
 // A frontier is due for a rebuild when the references added to or removed from it since its last
 // build exceed this share of its references (plus 4). Measured on paper-3 (1,000 commits of one
 // moved instance, then 1,000 added and removed ones): SAH cost +0.5% over a fresh build at 0.05,
@@ -188,15 +188,20 @@ void TopLevel::State::markFrontiers(const KdTree& tree) {
     const KdNode& n = tree.nodes[i];
     refs[i] = n.isLeaf() ? n.primCount() : refs[i + 1] + refs[n.upperChild()];
   }
-  const std::uint32_t max_refs = std::max<std::uint32_t>(kMinFrontierRefs, static_cast<std::uint32_t>(tree.prim_indices.size() / kFrontiersPerTree));
+  // At most an eighth of the tree: a small tree has no frontiers (a full rebuild costs microseconds,
+  // and the SAH check in TopLevel.cpp orders it).
+  const auto total = static_cast<std::uint32_t>(tree.prim_indices.size());
+  const std::uint32_t max_refs = std::min(std::max(kMinFrontierRefs, total / kFrontiersPerTree), total / 8);
   std::vector<std::tuple<std::uint32_t, Box, std::uint32_t>> stack{{0u, tree.bounds, 0u}};
   while (!stack.empty()) {
     const auto [i, cell, depth] = stack.back();
     stack.pop_back();
     const KdNode& n = tree.nodes[i];
-    if (n.isLeaf() || refs[i] <= max_refs) {
-      frontier_of[i] = static_cast<std::uint32_t>(frontiers.size());
-      frontiers.push_back({i, cell, tree.bounds, depth, refs[i], 0});
+    if (refs[i] <= max_refs || n.isLeaf()) {
+      if (i != 0) {  // never the whole tree
+        frontier_of[i] = static_cast<std::uint32_t>(frontiers.size());
+        frontiers.push_back({i, cell, tree.bounds, depth, refs[i], 0});
+      }
       continue;
     }
     Box lower = cell, upper = cell;
