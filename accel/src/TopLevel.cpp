@@ -5,9 +5,9 @@
 // new box touches. A leaf that gains references is re-split by a small SAH build over its own
 // references (clipped to its cell) when it overflows or when it now holds empty space worth cutting
 // off; the subtree is appended to the node array and the leaf becomes a jump node to it, so no
-// other node moves. Local builds are redone when their boxes change: a small jump subtree whose
-// references changed is rebuilt over them, and a frontier subtree of the last full build (at most
-// 1/64 of the references) is rebuilt once edits changed 5% of its references, one per commit as
+// other node moves. Local builds are redone when their boxes change: a small jump subtree that lost
+// a quarter of its references is rebuilt over the rest, and a frontier subtree of the last full
+// build (max(1,024, 1/64) of the references, at most 1/8) is rebuilt once edits changed 5% of its references, one per commit as
 // the edits pay for it (TopLevelRefine.cpp); replaced nodes are garbage until the tree is compacted
 // depth first. The SAH cost of the tree is tracked per edit and per refinement, and made exact
 // (with the root shrunk to its boxes) every 32 commits or before a rebuild decision; when it
@@ -293,6 +293,7 @@ void TopLevel::install(KdTree&& tree) {
   s.garbage = 0;
   s.garbage_nodes = 0;
   s.touched_jumps.clear();
+  s.jump_losses.clear();
   s.markFrontiers(tree_);
   const KdTreeStats st = tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
   s.sah_cost = st.sah_cost;
@@ -411,7 +412,6 @@ void TopLevel::commitEdits() {
     n = KdNode::leaf(n.primOffset(), cnt + 1);
     s.sah_cost += leaf_area_weight(v.cell) / root_area_before;
     grown.push_back(v);
-    if (v.jump != kNoJump) s.touched_jumps.push_back(v);
     s.countEdit(v);
   };
   auto grow_root = [&](const Box& box) {

@@ -3,11 +3,13 @@
 // - A leaf that grew is re-split by a small SAH build over its references clipped to its cell,
 //   rooted at the cell (so empty space between the cell and its content is cut off where it pays);
 //   the subtree is appended to the node array and the leaf becomes a jump node to it.
-// - A jump subtree (an earlier local build) whose references changed, by a box leaving or joining
-//   one of its leaves, is rebuilt over its current references when it holds at most
-//   kMaxJumpRebuild of them: a local build is optimal only for the boxes it was built over, and
-//   left alone it keeps the planes of boxes that are gone (an added then removed instance leaves
-//   a subtree of empty leaves behind) and grows chains of jumps. Its old nodes become garbage.
+// - A jump subtree (an earlier local build) of at most kMaxJumpRebuild references that lost a
+//   quarter of its references since it was built is rebuilt over its current ones: a local build
+//   is optimal only for the boxes it was built over, and left alone it keeps the planes of boxes
+//   that are gone (an added then removed instance leaves a subtree of empty leaves behind). Its
+//   old nodes become garbage.
+// - Frontier subtrees of the last full build are rebuilt once edits changed 5% of their
+//   references, one per commit as the edits pay for it (rebuildEditedFrontiers).
 // - Compaction rewrites the tree depth first without garbage, jumps flattened: the layout of a
 //   fresh build, at O(nodes + references), when garbage outweighs a quarter of the nodes or half
 //   of the references.
@@ -36,7 +38,7 @@ constexpr std::size_t kMaxJumpRebuild = 64;
 
 // Frontier subtrees (TopLevelState.h) hold at most max(kMinFrontierRefs, references /
 // kFrontiersPerTree) references.
-constexpr std::uint32_t kMinFrontierRefs = 256;
+constexpr std::uint32_t kMinFrontierRefs = 1024;  // 256: the same quality, twice the commits with a rebuild
 constexpr std::uint32_t kFrontiersPerTree = 64;
 // A frontier is due for a rebuild when the references added to or removed from it since its last
 // build exceed this share of its references (plus 4). Measured on paper-3 (1,000 commits of one
@@ -58,12 +60,19 @@ struct SubtreeScan {
   std::size_t nodes = 0, refs = 0;
   double area_cost = 0.0;
   std::vector<std::uint32_t> jumps;
+  bool complete = true;
 };
 
-SubtreeScan scanSubtree(const KdTree& tree, std::uint32_t root, const Box& cell, const KdBuildConfig& cfg) {
+// Stops early (with `complete` false) once more than `max_refs` references were seen.
+SubtreeScan scanSubtree(const KdTree& tree, std::uint32_t root, const Box& cell, const KdBuildConfig& cfg,
+                        std::size_t max_refs = static_cast<std::size_t>(-1)) {
   SubtreeScan out;
   std::vector<std::pair<std::uint32_t, Box>> stack{{root, cell}};
   while (!stack.empty()) {
+    if (out.refs > max_refs) {
+      out.complete = false;
+      return out;
+    }
     auto [i, box] = stack.back();
     stack.pop_back();
     const KdNode n = tree.nodes[i];
@@ -267,14 +276,22 @@ std::vector<std::uint32_t> TopLevel::State::rebuildTouchedJumps(TopLevel& top,
   const TopLevelConfig& config = top.config_;
   std::vector<std::uint32_t> gone;
   if (touched_jumps.empty()) return gone;
+  for (const LeafVisit& v : touched_jumps) ++jump_losses[v.jump];
   uniqueBy(touched_jumps, &LeafVisit::jump);
   const double root_area = std::max(1e-30, boxArea(tree.bounds));
   for (LeafVisit& v : touched_jumps) {
     if (std::find(gone.begin(), gone.end(), v.jump) != gone.end() || inRebuilt(v, rebuilt_frontiers)) continue;
     Box cell = v.jump_cell;
     growWithRoot(cell, v.root, tree.bounds);
-    const SubtreeScan old = scanSubtree(tree, v.jump, cell, config.build);  // the jump and its subtree
-    if (old.slots.size() > kMaxJumpRebuild) continue;
+    // Rebuilt once it lost a quarter of its references (a rebuild at every loss would put a local
+    // build into most commits of scenes with many jumps).
+    // A frontier that a frontier rebuild turned into a jump is left to the frontier rules.
+    if (v.jump < frontier_of.size() && frontier_of[v.jump] != kNoJump) continue;
+    // The jump and its subtree (a subtree that holds more than 4 references per allowed instance is
+    // too large: the scan stops).
+    const SubtreeScan old = scanSubtree(tree, v.jump, cell, config.build, 4 * kMaxJumpRebuild);
+    if (!old.complete || old.slots.size() > kMaxJumpRebuild || 4 * jump_losses[v.jump] < old.refs) continue;
+    jump_losses.erase(v.jump);
     std::uint32_t new_refs = 0;
     const double new_area_cost = rebuildInPlace(tree, v.jump, cell, v.jump_depth, old, boxes, config, new_refs);
     garbage += old.refs;
@@ -362,6 +379,7 @@ void TopLevel::compact() {
   };
   emit(emit, 0);
   tree_ = std::move(out);
+  s.jump_losses.clear();  // no jumps left
   s.frontier_of.assign(tree_.nodes.size(), kNoJump);
   for (std::size_t f = 0; f < s.frontiers.size(); ++f) s.frontier_of[s.frontiers[f].node] = static_cast<std::uint32_t>(f);
   s.garbage = 0;

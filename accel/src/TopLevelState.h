@@ -206,8 +206,10 @@ struct TopLevel::State {
   void markFrontiers(const KdTree& tree);
   // Rebuilds the touched frontiers whose edits exceed a fraction of their references; returns them.
   std::vector<std::uint32_t> rebuildEditedFrontiers(TopLevel& top);
-  // Jump subtrees whose references changed in this commit (visits of their leaves).
+  // Jump subtrees that lost references in this commit (visits of their leaves), and the references
+  // each jump subtree lost since it was built (cleared by full builds and compaction).
   std::vector<LeafVisit> touched_jumps;
+  std::unordered_map<std::uint32_t, std::uint32_t> jump_losses;
 
   // Re-splits grown leaves by local builds, after rebuilding the small jump subtrees in
   // touched_jumps over their current references (TopLevelRefine.cpp); returns whether the tree
