@@ -7,9 +7,9 @@
 // off; the subtree is appended to the node array and the leaf becomes a jump node to it, so no
 // other node moves. Local builds are redone when their boxes change: a small jump subtree that lost
 // a quarter of its references is rebuilt over the rest, and a frontier subtree of the last full
-// build (max(1,024, 1/64) of the references, at most 1/8) is rebuilt once edits changed 5% of its references, one per commit as
-// the edits pay for it (TopLevelRefine.cpp); replaced nodes are garbage until the tree is compacted
-// depth first. The SAH cost of the tree is tracked per edit and per refinement, and made exact
+// build (max(1,024, 1/64) of the references, at most 1/8) is rebuilt once edits changed 5% of its
+// references, one per commit as the edits pay for it (TopLevelRefine.cpp); replaced nodes are
+// garbage until the tree is compacted depth first. The SAH cost of the tree is tracked per edit and per refinement, and made exact
 // (with the root shrunk to its boxes) every 32 commits or before a rebuild decision; when it
 // exceeds the cost of the last full build by TopLevelConfig::rebuild_ratio, the instance count
 // drifted far from that build's, or the tree grew to 4 times its nodes or references, the whole

@@ -159,7 +159,8 @@ double rebuildInPlace(KdTree& tree, std::uint32_t node, const Box& cell, std::ui
     content.extend(c);
   }
   KdTree sub;
-  if (worthSplitting(clipped.size(), content, cell, config.leaf_split_size)) sub = localBuild(config.build, clipped, cell, depth);
+  if (worthSplitting(clipped.size(), content, cell, config.leaf_split_size))
+    sub = localBuild(config.build, clipped, cell, depth);
   if (sub.nodes.size() > 1) {
     tree.nodes[node] = KdNode::jump(appendSubtree(tree, sub, slots));
     new_refs = static_cast<std::uint32_t>(sub.prim_indices.size());
@@ -175,8 +176,8 @@ double rebuildInPlace(KdTree& tree, std::uint32_t node, const Box& cell, std::ui
 // Sorts visits by `key` and keeps one per value.
 void uniqueBy(std::vector<LeafVisit>& visits, std::uint32_t LeafVisit::*key) {
   std::sort(visits.begin(), visits.end(), [&](const LeafVisit& a, const LeafVisit& b) { return a.*key < b.*key; });
-  visits.erase(std::unique(visits.begin(), visits.end(), [&](const LeafVisit& a, const LeafVisit& b) { return a.*key == b.*key; }),
-               visits.end());
+  const auto same = [&](const LeafVisit& a, const LeafVisit& b) { return a.*key == b.*key; };
+  visits.erase(std::unique(visits.begin(), visits.end(), same), visits.end());
 }
 
 // Whether the visit's leaf lies in a frontier subtree that was rebuilt (and is garbage now).

@@ -388,6 +388,9 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     };
     out["instance_visits_per_ray"] = visits(ours->tracer());
     out["instance_visits_per_ray_fresh"] = visits(*fresh);
+    // The same comparison by the top level's SAH cost (deterministic, independent of the load).
+    out["top_level_sah_cost"] = ours->tracer().stats().tree.sah_cost;
+    out["top_level_sah_cost_fresh"] = fresh->stats().tree.sah_cost;
     // The incremental tree must answer exactly as the fresh one (same instance, triangle and t).
     std::vector<Hit> a(rays.size()), b(rays.size());
     arena.execute([&] {

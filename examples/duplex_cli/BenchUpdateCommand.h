@@ -57,7 +57,9 @@ struct BenchUpdateOptions {
 /// baseline_repeat, trace_slowdown_paired_pct (incremental tree against one built from scratch,
 /// alternated single-threaded runs, median CPU-time ratio), mrays_per_s_paired and
 /// mrays_per_s_fresh_paired (those runs, one thread),
-/// instance_visits_per_ray(_fresh), agreement_incremental_vs_fresh (same instance, triangle and t);
+/// instance_visits_per_ray(_fresh), top_level_sah_cost(_fresh) (the incremental tree's SAH cost and
+/// a fresh build's over the same instances), agreement_incremental_vs_fresh (same instance, triangle
+/// and t);
 /// with Embree the same figures prefixed "embree_" and "embree_dynamic_low_" plus
 /// embree_*build*_ms, agreement_with_embree (fraction of primary rays with the same instance and
 /// triangle as ours with full rebuilds, which replayed the same baseline plan) and
