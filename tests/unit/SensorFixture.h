@@ -105,6 +105,16 @@ inline double sensorSum(const SensorRunResults& r) {
   return sum;
 }
 
+// The results of `rays` rays of a run with `cfg` on `threads` threads in chunks of `chunk` rays.
+inline SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32_t chunk, std::uint64_t rays,
+                                SensorRunConfig cfg = {}) {
+  cfg.threads = threads;
+  cfg.chunk_rays = chunk;
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(rays);
+  return run.results();
+}
+
 inline void expectIdentical(const SensorRunResults& a, const SensorRunResults& b) {
   ASSERT_EQ(a.rays, b.rays);
   ASSERT_EQ(a.sensors.size(), b.sensors.size());
@@ -118,6 +128,9 @@ inline void expectIdentical(const SensorRunResults& a, const SensorRunResults& b
   EXPECT_EQ(a.energy.escaped_w, b.energy.escaped_w);
   EXPECT_EQ(a.energy.medium_absorbed_w, b.energy.medium_absorbed_w);
   EXPECT_EQ(a.energy.depth_limited_w, b.energy.depth_limited_w);
+  EXPECT_EQ(a.energy.roulette_w, b.energy.roulette_w);
+  EXPECT_EQ(a.bands, b.bands);
+  EXPECT_EQ(a.band_emitted_w, b.band_emitted_w);
   for (std::size_t k = 0; k < a.sensors.size(); ++k) {
     EXPECT_EQ(a.sensors[k].band_flux_w, b.sensors[k].band_flux_w);
     EXPECT_EQ(a.sensors[k].band_stderr_w_m2, b.sensors[k].band_stderr_w_m2);
