@@ -30,6 +30,7 @@ void Light::validate() const {
     spectrum_sum += s;
   }
   if (!spectrum.empty() && !(spectrum_sum > 0.0)) bad("spectrum must have a positive entry");
+  if (!std::isfinite(spectrum_sum)) bad("spectrum entries sum to more than the largest double");
   switch (type) {
     case LightType::Spot:
       if (!(cone_angle > 0.0 && cone_angle <= std::numbers::pi)) bad("cone angle must be in (0, 180] degrees");

@@ -92,15 +92,8 @@ void SensorScene::prepare(std::vector<Material> materials) {
     s.normal = glm::normalize(glm::cross(ex, ey));
     s.frame_x = glm::normalize(ex);
     s.frame_y = glm::cross(s.normal, s.frame_x);
-    if (s.object->spec().shape == SensorShape::Sphere) {  // bins keep equal areas only under similarities
-      const glm::dmat3 g = glm::transpose(s.world_from_object.linear) * s.world_from_object.linear;
-      const double s2 = g[0][0];
-      double off = 0.0;
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) off = std::max(off, std::abs(g[i][j] - (i == j ? s2 : 0.0)));
-      if (!(off <= 1e-9 * s2))
-        throw InvalidArgument("sensor '" + s.name + "': a sphere sensor's transform must be a rotation with uniform scale");
-    }
+    if (s.object->spec().shape == SensorShape::Sphere && !isSimilarity(s.world_from_object.linear))
+      throw InvalidArgument("sensor '" + s.name + "': a sphere sensor's transform must be a rotation with uniform scale");
     if (!names.insert(s.name).second) throw InvalidArgument("SensorScene: two sensors named '" + s.name + "'");
     s.first_bin = bin_count_;
     if (static_cast<std::uint64_t>(bin_count_) + s.object->binCount() > 0xFFFFFFF0ull)
@@ -136,6 +129,15 @@ void SensorScene::prepare(std::vector<Material> materials) {
     mi.material = material_of_node_[node];
     media_.push_back(std::move(mi));
   }
+}
+
+bool SensorScene::isSimilarity(const glm::dmat3& linear) {
+  const glm::dmat3 g = glm::transpose(linear) * linear;
+  const double s2 = g[0][0];
+  double off = 0.0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) off = std::max(off, std::abs(g[i][j] - (i == j ? s2 : 0.0)));
+  return off <= 1e-9 * s2;  // false for NaN
 }
 
 int SensorScene::findSensor(const std::string& name) const {

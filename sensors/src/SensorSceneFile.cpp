@@ -185,6 +185,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   if (root.contains("bands")) {
     const json& list = root["bands"];
     if (!list.is_array() || list.empty()) ctx.fail("/bands", "expected a non-empty array of band names");
+    if (list.size() > 256) ctx.fail("/bands", std::to_string(list.size()) + " bands, at most 256");
     for (std::size_t i = 0; i < list.size(); ++i) {
       bands.push_back(ctx.string(list[i], at("/bands", i)));
       for (std::size_t j = 0; j < i; ++j)
@@ -223,6 +224,8 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const std::string name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
       if (name.empty()) ctx.fail(at(p, "name"), "expected a non-empty sensor name");
       const Affine world = e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();
+      if (spec.shape == SensorShape::Sphere && !SensorScene::isSimilarity(world.linear))
+        ctx.fail(at(p, "transform"), "a sphere sensor's transform must be a rotation with uniform scale");
       try {
         const ObjectId id = graph.library().add("sensors/" + name, std::make_shared<const SensorObject>(name, spec));
         (void)graph.addInstance(kRootNode, id, world, name);

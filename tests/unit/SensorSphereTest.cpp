@@ -184,7 +184,10 @@ TEST(SensorSphere, BadSpheresAreRefused) {
   for (const auto& [bad, pointer] : std::vector<std::pair<std::string, std::string>>{
            {R"({"name": "b", "shape": "sphere", "size": [3, 2]})", "/sensors/0/size"},
            {R"({"name": "b", "shape": "sphere", "size": 3, "angular_bins": 4})", "/sensors/0/angular_bins"},
-           {R"({"name": "b", "shape": "ball", "size": 3})", "/sensors/0/shape"}}) {
+           {R"({"name": "b", "shape": "ball", "size": 3})", "/sensors/0/shape"},
+           // Not a similarity: the error names the transform's pointer (it named no pointer).
+           {R"({"name": "b", "shape": "sphere", "size": 3, "transform": [1,0,0,0, 0,1,0,0, 0,0,0.5,0]})", "/sensors/0/transform"},
+           {R"({"name": "b", "shape": "sphere", "size": 3, "transform": [1,0.5,0,0, 0,1,0,0, 0,0,1,0]})", "/sensors/0/transform"}}) {
     try {
       (void)load(bad);
       ADD_FAILURE() << bad << ": no error";

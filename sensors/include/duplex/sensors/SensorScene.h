@@ -109,6 +109,9 @@ class SensorScene {
   [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return band_cdf_[light]; }
   /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
   /// scatteringMedia() and transported by free flights, else fogs only attenuate.
+  /// Whether `linear` is a rotation (or reflection) times a uniform scale, to relative 1e-9: the
+  /// transforms a sphere sensor accepts (its bins keep equal areas only under these).
+  [[nodiscard]] static bool isSimilarity(const glm::dmat3& linear);
   [[nodiscard]] bool scatters() const { return !media_.empty(); }
   [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return media_; }
   [[nodiscard]] const SceneTracer& tracer() const { return *tracer_; }
