@@ -18,6 +18,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -99,6 +100,17 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
   // Spatial bins, then the angular bins, in one index space.
   const std::size_t all_bins = static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount();
+  {
+    const std::uint64_t nb = scene_.bands().empty() ? 0 : scene_.bandCount();
+    const std::uint64_t cells = all_bins + scene_.sensors().size();
+    const std::uint64_t bytes = cells * (3 * sizeof(double) + 2 * sizeof(double) * nb);
+    if (bytes > config_.max_accumulator_bytes)
+      throw InvalidArgument("SensorRun: the sensors' " + std::to_string(scene_.binCount()) + " bins and " +
+                            std::to_string(scene_.angleBinCount()) + " angular bins" +
+                            (nb ? " in " + std::to_string(nb) + " bands" : std::string()) + " need " +
+                            std::to_string(bytes >> 20) + " MiB of accumulators, more than max_accumulator_bytes (" +
+                            std::to_string(config_.max_accumulator_bytes >> 20) + " MiB)");
+  }
   bin_sum_.assign(all_bins, 0.0);
   bin_sum2_.assign(all_bins, 0.0);
   bin_count_.assign(all_bins, 0);
@@ -153,6 +165,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       const double ub = std::clamp((pick - lo) / lights[li].power_w, 0.0, 1.0);
       const std::vector<double>& cdf = scene_.bandCdf(li);
       band = std::min(bands - 1, static_cast<std::uint32_t>(std::upper_bound(cdf.begin(), cdf.end(), ub) - cdf.begin()));
+      // ub rounded up to 1 lands past the end: never in a band of zero share.
+      while (band > 0 && cdf[band] == cdf[band - 1]) --band;
       chunk.band[k] = static_cast<std::uint16_t>(band);
     }
     double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
@@ -547,6 +561,43 @@ std::uint64_t SensorRun::fingerprint() const {
     }
   }
   if (scene_.scatters()) add(&config_.max_scatterings, sizeof config_.max_scatterings);
+  // What the paths depend on: every visible instance's object name, placement, mask and material,
+  // the sensors' shapes and the lights' geometry (a state of a scene where any of these changed
+  // would be mixed silently into the continued run). Mesh and grid contents are not hashed.
+  auto addAffine = [&add](const Affine& a) {
+    const std::array<double, 12> m = a.toRowMajor3x4();
+    add(m.data(), sizeof m);
+  };
+  auto addDouble = [&add](double x) { add(&x, sizeof x); };
+  std::vector<NodeId> instances = scene_.graph().visibleInstances();
+  std::sort(instances.begin(), instances.end());
+  for (const NodeId node : instances) {
+    const NodeInfo info = scene_.graph().node(node);
+    const std::string_view object = scene_.graph().library().name(info.object);
+    add(object.data(), object.size() + 1);
+    addAffine(scene_.graph().worldTransform(node));
+    add(&info.mask, sizeof info.mask);
+    const Material& m = scene_.materialOf(node);
+    add(&m.type, sizeof m.type);
+    for (const double x : {m.reflectance, m.ior, m.g}) addDouble(x);
+    add(m.band_reflectance.data(), m.band_reflectance.size() * sizeof(double));
+  }
+  for (const SensorInstance& s : scene_.sensors()) {
+    const SensorSpec& spec = s.object->spec();
+    add(&spec.shape, sizeof spec.shape);
+    for (const double x : {spec.width, spec.height}) addDouble(x);
+    const std::uint32_t grid[3] = {spec.nx, spec.ny, spec.two_sided ? 1u : 0u};
+    add(grid, sizeof grid);
+  }
+  for (const Light& l : scene_.lights()) {
+    add(&l.type, sizeof l.type);
+    for (const glm::dvec3& v : {l.position, l.direction}) addDouble(v.x), addDouble(v.y), addDouble(v.z);
+    for (const double x : {l.cone_angle, l.radius, l.width, l.height}) addDouble(x);
+    addAffine(l.world_from_light);
+    const std::uint8_t two_sided = l.two_sided ? 1 : 0;
+    add(&two_sided, 1);
+    if (l.profile) addDouble(l.profile->integral());
+  }
   return h;
 }
 

@@ -136,19 +136,40 @@ TEST(SensorAngular, BitIdenticalForAnyThreadCountWithBandsAndSpheres) {
   Light l = pointLight({0.1, 0, 0}, 2.0);
   l.spectrum = {1, 1};
   SensorScene scene = f.scene({l}, {"a", "b"});
-  auto results = [&](unsigned threads, std::uint32_t chunk) {
-    SensorRunConfig cfg;
-    cfg.threads = threads;
-    cfg.chunk_rays = chunk;
-    SensorRun run(scene, cfg);
-    (void)run.runUntil(40000);
-    return run.results();
-  };
+  auto results = [&](unsigned threads, std::uint32_t chunk) { return runWith(scene, threads, chunk, 40000); };
   const SensorRunResults one = results(1, 1024);
   expectIdentical(one, results(2, 1024));
   expectIdentical(one, results(2, 77));
   EXPECT_GT(one.sensors[scene.findSensor("angles")].angular_flux_w[0], 0.0);
   EXPECT_NEAR(one.sensors[scene.findSensor("ball")].total_flux_w, one.energy.escaped_w, 1e-12);  // encloses all
+}
+
+// Each sensor may have up to 2^20 angular bins; many such sensors in many bands would need more
+// accumulator memory than the machine has: the run is refused at construction with a message
+// giving the sizes (before, the allocation threw std::bad_alloc or the process was killed).
+TEST(SensorAngular, RunsWhoseAccumulatorsDoNotFitAreRefused) {
+  Fixture f;
+  for (int k = 0; k < 64; ++k) {
+    const std::string name = "wide" + std::to_string(k);
+    f.add(angularSensor(0.1, 1024, 1024, true, name), translate(0.2 * k, 0, 1), name);
+  }
+  std::vector<std::string> bands;
+  for (int b = 0; b < 256; ++b) bands.push_back("band" + std::to_string(b));
+  const SensorScene scene = f.scene({pointLight({0, 0, 0}, 1.0)}, bands);
+  try {
+    SensorRun run(scene, SensorRunConfig{});
+    FAIL() << "a run needing 256 GiB of accumulators was accepted";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("67108864 angular bins in 256 bands"), std::string::npos) << e.what();
+  }
+  // A smaller limit refuses a small run too; the default accepts it.
+  Fixture g;
+  g.add(angularSensor(0.1, 4, 4, true, "small"), translate(0, 0, 1), "small");
+  const SensorScene small = g.scene({pointLight({0, 0, 0}, 1.0)});
+  SensorRunConfig tight;
+  tight.max_accumulator_bytes = 100;
+  EXPECT_THROW(SensorRun(small, tight), InvalidArgument);
+  EXPECT_NO_THROW(SensorRun(small, SensorRunConfig{}));
 }
 
 TEST(SensorAngular, SceneFilesDeclareAngularBins) {

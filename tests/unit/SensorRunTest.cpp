@@ -299,6 +299,39 @@ TEST(SensorRun, FogAttenuatesAndTheBalanceCloses) {
   EXPECT_EQ(r.energy.roulette_w, 0.0);
 }
 
+TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
+  // The fog slab between a point source and a Lambertian ceiling: paths reach the ceiling with
+  // e^-(0.4 / cos) of their power, below a roulette threshold of 0.9 of it. Per path the roulette
+  // term is what it killed minus what it added, so the five terms still sum to the emitted power
+  // exactly, and the box's flux agrees with the run without roulette.
+  Fixture f;
+  Box slab;
+  slab.lo = glm::vec3(-0.9f, -0.9f, 0.25f);
+  slab.hi = glm::vec3(0.9f, 0.9f, 0.75f);
+  f.add(std::make_shared<const test::SlabMedium>(0.8, slab), Affine::identity(), "fog");
+  f.add(quad(0.8, "ceiling"), translate(0, 0, 0.9), "ceiling", Material{MaterialType::Lambertian, 0.9});
+  closeBox(f);
+  SensorScene scene = f.scene({pointLight({0, 0, 0}, 2.0)});
+  auto run = [&](double threshold) {
+    SensorRunConfig cfg;
+    cfg.roulette_threshold = threshold;
+    cfg.seed = 3;
+    SensorRun r(scene, cfg);
+    (void)r.runUntil(200000);
+    return r.results();
+  };
+  const SensorRunResults with = run(0.9), without = run(0.0);
+  const EnergyBalance& e = with.energy;
+  EXPECT_GT(std::abs(e.roulette_w), 1e-4);  // the roulette acted
+  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w, e.emitted_w, 1e-12 * e.emitted_w);
+  EXPECT_NEAR(sensorSum(with), e.escaped_w, 1e-12);  // the closed box of sensors sees every escaping path
+  for (const std::size_t k : {std::size_t{0}, std::size_t{1}, std::size_t{4}, std::size_t{5}}) {
+    const SensorResult &a = with.sensors[k], &b = without.sensors[k];
+    const double se = std::hypot(a.total_flux_stderr_w, b.total_flux_stderr_w);
+    EXPECT_LT(std::abs(a.total_flux_w - b.total_flux_w), 4.5 * se) << a.name << ": " << a.total_flux_w << " vs " << b.total_flux_w;
+  }
+}
+
 
 TEST(SensorRun, ClosedBoxOfSensorsRecordsAllEmittedPower) {
   Fixture f;

@@ -140,6 +140,62 @@ TEST(SensorSpectral, BitIdenticalForAnyThreadCountAndResumable) {
   std::filesystem::remove(state);
 }
 
+// A saved state holds sums whose meaning depends on the whole scene: a state of a scene with
+// another reflectance, per-band albedo, light position or sensor placement must be refused (it
+// would otherwise be silently mixed into the continued run).
+TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
+  const Material white{MaterialType::Lambertian, 0.8};
+  const std::filesystem::path state =
+      std::filesystem::temp_directory_path() / ("duplex_spectral_changed_" + std::to_string(::getpid()) + ".bin");
+  SensorRunConfig cfg;
+  cfg.seed = 21;
+  {
+    Fixture f;
+    const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, white);
+    SensorRun first(scene, cfg);
+    (void)first.runUntil(5000);
+    first.saveState(state);
+    SensorRun same(scene, cfg);
+    EXPECT_NO_THROW(same.loadState(state));
+  }
+  auto refused = [&](const SensorScene& scene) {
+    SensorRun other(scene, cfg);
+    try {
+      other.loadState(state);
+    } catch (const FileError&) {
+      return other.raysDone() == 0;
+    }
+    return false;
+  };
+  {
+    Fixture f;  // another reflectance
+    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Lambertian, 0.5})));
+  }
+  {
+    Fixture f;  // the same mean, other per-band values
+    Material m = white;
+    m.band_reflectance = {0.8, 0.8, 0.5};
+    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, m)));
+  }
+  {
+    Fixture f;  // a mirror instead of the Lambertian floor
+    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Mirror, 0.8})));
+  }
+  // diffuseBox with the floor at height z and the blue light at p.
+  auto moved = [&](double z, glm::dvec3 p) {
+    Fixture f;
+    closeBox(f);
+    f.add(quad(0.6, "white"), translate(0, 0, z), "white", white);
+    Light second = spectralPoint(p, 1.0, {0, 0, 1});
+    second.name = "blue";
+    return refused(f.scene({spectralPoint({0, 0, 0.2}, 3.0, {1, 2, 1}), second}, {"b", "g", "r"}));
+  };
+  EXPECT_FALSE(moved(-0.5, {0.3, 0.1, 0.4}));  // the same scene again: accepted
+  EXPECT_TRUE(moved(-0.4, {0.3, 0.1, 0.4}));   // the floor moved
+  EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.3}));   // a light moved
+  std::filesystem::remove(state);
+}
+
 TEST(SensorSpectral, BandCountsMustAgree) {
   {
     Fixture f;
@@ -164,6 +220,8 @@ TEST(SensorSpectral, BandCountsMustAgree) {
     EXPECT_THROW((void)f.scene({pointLight({0, 0, 0}, 1.0)}, {"a", "a"}), InvalidArgument);
     EXPECT_THROW((void)f.scene({spectralPoint({0, 0, 0}, 1.0, {0, 0})}, {"a", "b"}), InvalidArgument);
     EXPECT_THROW((void)f.scene({spectralPoint({0, 0, 0}, 1.0, {1, -1})}, {"a", "b"}), InvalidArgument);
+    // Finite entries whose sum overflows would give a spectrum of NaN shares.
+    EXPECT_THROW((void)f.scene({spectralPoint({0, 0, 0}, 1.0, {1e308, 1e308})}, {"a", "b"}), InvalidArgument);
   }
 }
 
@@ -206,6 +264,11 @@ TEST(SensorSpectral, SceneFilesDeclareBandsSpectraAndPerBandReflectance) {
   EXPECT_NE(error(R"("bands": ["a", "b"],)", "", "[0.5, 1.5]").find("/objects/0/material/reflectance/1"), std::string::npos);
   EXPECT_NE(error(R"("bands": ["a", "a"],)", "", "0.5").find("/bands/1"), std::string::npos);
   EXPECT_NE(error(R"("bands": [],)", "", "0.5").find("/bands"), std::string::npos);
+  {
+    std::string many = R"("bands": [)";
+    for (int b = 0; b < 257; ++b) many += (b ? ", \"b" : "\"b") + std::to_string(b) + "\"";
+    EXPECT_NE(error(many + "],", "", "0.5").find("/bands: 257 bands, at most 256"), std::string::npos) << error(many + "],", "", "0.5");
+  }
   EXPECT_NE(error(R"("bands": ["a", "b"],)", R"(, "spectrum": [0, -1])", "0.5").find("/lights/0"), std::string::npos);
   std::filesystem::remove(file);
 }

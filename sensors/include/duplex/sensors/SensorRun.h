@@ -48,6 +48,10 @@ struct SensorRunConfig {
   /// Benchmark baseline: trace the same paths with the plain closest-hit query, record nothing.
   /// Paths are identical when the scene has no media (sensors never change a path).
   bool closest_hit_only = false;
+  /// Upper bound on the accumulators' memory (sums, squares and counts of every spatial and
+  /// angular bin, and per band in spectral scenes): a run above it is refused at construction
+  /// rather than failing to allocate (or being killed) part-way.
+  std::uint64_t max_accumulator_bytes = std::uint64_t{4} << 30;
 };
 
 struct SensorProgress {
