@@ -546,7 +546,7 @@ std::uint64_t SensorRun::fingerprint() const {
   add(&config_.seed, sizeof config_.seed);
   add(&config_.max_depth, sizeof config_.max_depth);
   add(&config_.roulette_threshold, sizeof config_.roulette_threshold);
-  // Added only where a scene uses them, so that states saved before they existed still resume.
+  // Bands, angular bins and free flights are added only where a scene uses them.
   for (std::size_t l = 0; !scene_.bands().empty() && l < scene_.lights().size(); ++l) {
     const std::vector<double>& cdf = scene_.bandCdf(l);
     add(cdf.data(), cdf.size() * sizeof(double));
