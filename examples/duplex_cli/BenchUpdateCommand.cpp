@@ -398,6 +398,17 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     // The same comparison by the top level's SAH cost (deterministic, independent of the load).
     out["top_level_sah_cost"] = ours->tracer().stats().tree.sah_cost;
     out["top_level_sah_cost_fresh"] = fresh->stats().tree.sah_cost;
+    // Shape of both trees: the SAH cost is normalised by the root box's area, so a looser root can
+    // hide a costlier tree; nodes and the root's extent say what the cost does not.
+    for (const auto& [suffix, t] : {std::pair<std::string, const SceneTracer*>{"", &ours->tracer()}, {"_fresh", fresh.get()}}) {
+      const KdTreeStats ts = t->stats().tree;
+      const Box root = t->bounds();
+      out["top_level_nodes" + suffix] = ts.nodes;
+      out["top_level_empty_leaves" + suffix] = ts.empty_leaves;
+      out["top_level_references" + suffix] = ts.references;
+      out["top_level_max_depth" + suffix] = ts.max_depth;
+      out["top_level_root_extent" + suffix] = {root.hi.x - root.lo.x, root.hi.y - root.lo.y, root.hi.z - root.lo.z};
+    }
     // The incremental tree must answer exactly as the fresh one (same instance, triangle and t).
     std::vector<Hit> a(rays.size()), b(rays.size());
     arena.execute([&] {
