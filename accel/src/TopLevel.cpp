@@ -530,7 +530,10 @@ void TopLevel::commitEdits() {
   // happen every kExactEvery commits at most (and before a rebuild decision rests on an estimate).
   constexpr std::uint64_t kExactEvery = 32;
   const bool periodic = s.commits % kExactEvery == 0;
-  if (s.boundary_left && periodic) {
+  // A small top level shrinks its root at once (the loop costs less than the rest of the commit):
+  // a root left loose for up to kExactEvery commits made rays that miss everything walk the margin.
+  constexpr std::size_t kShrinkAlwaysBelow = 256;
+  if (s.boundary_left && (periodic || s.boxes.size() <= kShrinkAlwaysBelow)) {
     // Shrinking the root is always valid: every box stays inside, and a split plane outside the
     // smaller root just leaves one child empty (cells are clamped to the root when walked).
     Box tight;

@@ -120,6 +120,13 @@ EditRun runRandomEdits(TopLevelUpdate mode, std::size_t total_edits, std::uint64
     for (const auto& [id, d] : model) live.push_back(d);
     TopLevel fresh;
     fresh.build(live);
+    // A top level of at most 256 instances keeps its root tight after every commit (a loose root
+    // makes rays that miss everything walk the margin); a fresh build's root is the boxes' union.
+    if (live.size() <= 256 && !(top.tree().bounds == fresh.tree().bounds)) {
+      ADD_FAILURE() << "commit " << run.commits << ": root " << top.tree().bounds << " is not the tight "
+                    << fresh.tree().bounds;
+      break;
+    }
     const std::vector<Ray> rays = randomRays(world, 60, seed * 1000 + run.commits);
     QueryContext ctx;
     std::size_t failures = 0;

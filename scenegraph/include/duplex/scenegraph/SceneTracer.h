@@ -83,8 +83,9 @@ class SceneTracer {
                                                     double y1, std::uint32_t width, std::uint32_t height,
                                                     std::uint32_t mask = 0xFFFFFFFFu) const;
 
-  /// World bounds of the top level (last commit): contains every visible instance; may be larger
-  /// than tight after instances moved inwards or disappeared, until the next full rebuild.
+  /// World bounds of the top level (last commit): contains every visible instance. Tight after
+  /// every commit for up to 256 instances; above that it may stay larger than tight for up to 32
+  /// commits after instances moved inwards or disappeared (the shrink is amortised).
   [[nodiscard]] Box bounds() const;
   [[nodiscard]] TopLevelStats stats() const;
   /// Milliseconds the last commit spent in the tracer (top-level update).
