@@ -1,6 +1,7 @@
 /// \file SceneGraph.cpp
-/// Layout: a flat node table indexed by NodeId (ids are sequential and never reused; removed nodes
-/// stay as dead slots), children as intrusive doubly linked sibling lists (O(1) add, remove and
+/// Layout: a flat node table addressed by NodeId (ids are sequential and never reused; the record
+/// of a node removed by a commit, or added by a rolled-back batch, is released and its slot taken
+/// by a later node: a dead id costs 4 bytes, `SlotTable`), children as intrusive doubly linked sibling lists (O(1) add, remove and
 /// re-parent), and one hash index (parent, name) -> node for path lookup and name collisions.
 ///
 /// A batch keeps three lists, so that no edit and no commit scans the whole graph:
@@ -17,6 +18,7 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/Log.h"
+#include "SlotTable.h"
 
 #include <algorithm>
 #include <exception>
@@ -119,7 +121,7 @@ struct NewNode {
 }  // namespace
 
 struct SceneGraph::Impl {
-  std::vector<Node> nodes;
+  SlotTable<Node> nodes;
   /// (parent, name) hash -> child; collisions resolved by comparing the node's parent and name.
   /// Holds exactly the alive nodes except the root.
   std::unordered_multimap<std::uint64_t, NodeId> name_index;
@@ -135,7 +137,7 @@ struct SceneGraph::Impl {
   std::size_t alive = 0;
 
   // ---- lookups ----
-  [[nodiscard]] bool contains(NodeId id) const { return id < nodes.size() && (nodes[id].flags & kAlive) != 0; }
+  [[nodiscard]] bool contains(NodeId id) const { return nodes.has(id) && (nodes[id].flags & kAlive) != 0; }
 
   [[nodiscard]] std::string path(NodeId id) const {
     if (id == kRootNode) return "/";
@@ -276,7 +278,7 @@ SceneGraph::SceneGraph(std::shared_ptr<ObjectLibrary> library)
     : library_(library ? std::move(library) : std::make_shared<ObjectLibrary>()), impl_(std::make_unique<Impl>()) {
   Node root;
   root.flags = kAlive | kVisible | kEffVisible;
-  impl_->nodes.push_back(std::move(root));
+  (void)impl_->nodes.push(std::move(root));  // kRootNode
   impl_->alive = 1;
 }
 
@@ -287,8 +289,8 @@ SceneGraph::~SceneGraph() = default;
 
 NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, NodeId parent, NewNode nn) {
   checkParent(call, parent);
-  if (nodes.size() >= kInvalidNode) throw InvalidArgument(std::string("SceneGraph::") + call + ": node ids exhausted");
-  const auto id = static_cast<NodeId>(nodes.size());
+  if (nodes.idCount() >= kInvalidNode) throw InvalidArgument(std::string("SceneGraph::") + call + ": node ids exhausted");
+  const auto id = static_cast<NodeId>(nodes.idCount());
   std::string name = checkName(call, parent, id, nn.kind, std::move(nn.name));
   const auto who = [&] { return "new " + std::string(kindName(nn.kind)) + " '" + name + "' under '" + path(parent) + "'"; };
   if (nn.kind != NodeKind::Group) checkTransform(call, who, nn.local);
@@ -297,7 +299,7 @@ NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, Nod
   reserveOneMore(undo);
   reserveOneMore(dirty_roots);
   reserveOneMore(touched);
-  reserveOneMore(nodes);
+  nodes.reserveOneMore();
   Node n;
   n.local = nn.local;
   n.name = std::move(name);
@@ -306,11 +308,11 @@ NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, Nod
   n.mask = nn.mask;
   n.parent = parent;  // the name index key; link() below sets it again
   n.flags = kAlive | kVisible;  // not kEffVisible: it was not visible at the last commit
-  nodes.push_back(std::move(n));
+  (void)nodes.push(std::move(n));  // == id
   try {
     indexInsert(id);
   } catch (...) {
-    nodes.pop_back();
+    nodes.popLast();
     throw;
   }
   link(id, parent, nodes[parent].last_child);
@@ -501,7 +503,13 @@ ChangeSet SceneGraph::Impl::collectChanges() {
   }
   for (auto* list : {&cs.appeared, &cs.disappeared, &cs.moved, &cs.object_changed, &cs.mask_changed})
     std::sort(list->begin(), list->end());
+  // The nodes removed in this batch are gone for good now: release their records (their ids stay
+  // dead). After clearBatch(), which still reads the touched records.
+  std::vector<NodeId> dead;
+  for (const Undo& u : undo)
+    if (u.kind == UndoKind::Removed) forEachInSubtree(u.node, [&dead](NodeId id) { dead.push_back(id); });
   clearBatch();
+  for (const NodeId id : dead) nodes.releaseId(id);
   return cs;
 }
 
@@ -581,8 +589,15 @@ void SceneGraph::rollback() {
   // Edits only changed pending state (world transforms and committed visibility are written by
   // commit() alone), so undoing them in reverse order restores the committed graph exactly,
   // children order included.
-  for (auto it = m.undo.rbegin(); it != m.undo.rend(); ++it) m.undoOne(*it);
+  // Nodes added in the batch are gone for good: their records are released (ids not reused).
+  std::vector<NodeId> dead;
+  dead.reserve(m.undo.size());
+  for (auto it = m.undo.rbegin(); it != m.undo.rend(); ++it) {
+    m.undoOne(*it);
+    if (it->kind == UndoKind::Added) dead.push_back(it->node);
+  }
   m.clearBatch();
+  for (const NodeId id : dead) m.nodes.releaseId(id);
 }
 
 // ---- observers ----
@@ -664,10 +679,12 @@ bool SceneGraph::isVisibleInstance(NodeId id) const {
 
 namespace {
 /// Instance nodes with `flag` set, by id (a scan of the node table: a query, not on the update path).
-std::vector<NodeId> instancesWith(const std::vector<Node>& nodes, std::uint8_t flag) {
+std::vector<NodeId> instancesWith(const SlotTable<Node>& nodes, std::uint8_t flag) {
   std::vector<NodeId> out;
-  for (std::size_t i = 0; i < nodes.size(); ++i)
-    if (nodes[i].kind == NodeKind::Instance && (nodes[i].flags & flag)) out.push_back(static_cast<NodeId>(i));
+  nodes.forEach([&](NodeId id, const Node& n) {
+    if (n.kind == NodeKind::Instance && (n.flags & flag)) out.push_back(id);
+  });
+  std::sort(out.begin(), out.end());
   return out;
 }
 }  // namespace
@@ -678,6 +695,7 @@ std::vector<NodeId> SceneGraph::instances() const { return instancesWith(impl_->
 std::vector<NodeId> SceneGraph::visibleInstances() const { return instancesWith(impl_->nodes, kEffVisible); }
 
 std::size_t SceneGraph::nodeCount() const { return impl_->alive; }
+std::size_t SceneGraph::nodeSlots() const { return impl_->nodes.slotCount(); }
 std::uint64_t SceneGraph::commitCount() const { return impl_->commits; }
 
 std::size_t SceneGraph::bytesPerInstance() {

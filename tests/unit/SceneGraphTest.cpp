@@ -837,5 +837,71 @@ TEST(SceneGraph, MovingOneInstanceOfManyTouchesOnlyIt) {
   EXPECT_GT(SceneGraph::bytesPerInstance(), 2 * sizeof(Affine));
 }
 
+TEST(SceneGraph, ALongSessionOfAddsAndRemovesReusesNodeRecords) {
+  // A CAD session: parts come and go for a long time. Ids keep growing (a caller may still hold a
+  // removed one), but the node records of removed nodes are reused, so the table does not grow.
+  Library lib;
+  SceneGraph g(lib.lib);
+  const NodeId grp = g.addTransform(kRootNode, translation(1, 2, 3), "parts");
+  std::vector<NodeId> parts;
+  for (int k = 0; k < 50; ++k) parts.push_back(g.addInstance(grp, static_cast<ObjectId>(k % 3), translation(k, 0, 0)));
+  (void)g.commit();
+  const std::size_t base_slots = g.nodeSlots();
+  EXPECT_EQ(base_slots, 52u);  // root, group, 50 instances
+  std::mt19937_64 rng(7);
+  std::vector<NodeId> gone;
+  NodeId last_id = 0;
+  for (int cycle = 0; cycle < 2000; ++cycle) {
+    // Five new parts, hidden or masked now and then (a reused record must not keep old flags).
+    std::vector<NodeId> added;
+    for (int j = 0; j < 5; ++j) {
+      const NodeId id = g.addInstance(grp, static_cast<ObjectId>(j % 3), translation(cycle, j, 0), {}, 1u + j);
+      ASSERT_GT(id, last_id);
+      last_id = id;
+      added.push_back(id);
+    }
+    if (cycle % 7 == 0) {
+      g.rollback();  // their records are released, their ids stay dead
+      for (const NodeId id : added) ASSERT_FALSE(g.contains(id));
+      continue;
+    }
+    const ChangeSet cs = g.commit();
+    ASSERT_EQ(cs.appeared, added);
+    for (std::size_t j = 0; j < added.size(); ++j) {
+      const NodeInfo info = g.node(added[j]);
+      ASSERT_EQ(info.mask, 1u + j);
+      ASSERT_TRUE(info.visible);
+      ASSERT_TRUE(g.isVisibleInstance(added[j]));
+      ASSERT_EQ(g.worldTransform(added[j]).translation, glm::dvec3(1 + cycle, 2 + double(j), 3));
+      ASSERT_EQ(g.find(g.path(added[j])), std::optional<NodeId>(added[j]));
+    }
+    parts.insert(parts.end(), added.begin(), added.end());
+    // Five random parts leave.
+    std::vector<NodeId> removed;
+    for (int j = 0; j < 5; ++j) {
+      const std::size_t pick = std::uniform_int_distribution<std::size_t>(0, parts.size() - 1)(rng);
+      removed.push_back(parts[pick]);
+      g.remove(parts[pick]);
+      parts.erase(parts.begin() + static_cast<std::ptrdiff_t>(pick));
+    }
+    std::sort(removed.begin(), removed.end());
+    ASSERT_EQ(g.commit().disappeared, removed);
+    gone.insert(gone.end(), removed.begin(), removed.end());
+    ASSERT_LE(g.nodeSlots(), base_slots + 5) << "cycle " << cycle;
+  }
+  EXPECT_GT(last_id, 10000u);
+  EXPECT_EQ(g.nodeCount(), 52u);
+  EXPECT_EQ(g.nodeSlots(), base_slots + 5);
+  std::sort(parts.begin(), parts.end());
+  EXPECT_EQ(g.instances(), parts);
+  EXPECT_EQ(g.visibleInstances(), parts);
+  // Dead ids stay dead: not contained, rejected by name, never reused by a new node.
+  for (const NodeId id : gone) ASSERT_FALSE(g.contains(id));
+  expectErrorNaming<InvalidArgument>([&] { (void)g.node(gone.front()); }, "unknown node id " + std::to_string(gone.front()));
+  expectErrorNaming<InvalidArgument>([&] { g.setTransform(gone.back(), translation(0, 0, 0)); },
+                                     "unknown node id " + std::to_string(gone.back()));
+  EXPECT_GT(g.addGroup(kRootNode), last_id);
+}
+
 }  // namespace
 }  // namespace duplex

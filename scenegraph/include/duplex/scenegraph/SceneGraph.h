@@ -136,8 +136,14 @@ class SceneGraph {
   /// Bytes the graph holds per instance node (documented in the README): the node record (local and
   /// committed world transform, links, object, mask, flags, name in the small-string buffer) plus its
   /// entry in the (parent, name) index. Names longer than 15 characters and the pending batch's
-  /// transient lists are not counted. Removed nodes keep their slot (ids are never reused).
+  /// transient lists are not counted. A removed node's record is freed by the commit that removes
+  /// it (by rollback() for a node added in the batch) and its slot taken by a later node; its id is
+  /// never reused and costs 4 bytes for the graph's lifetime.
   [[nodiscard]] static std::size_t bytesPerInstance();
+  /// Node records the graph holds: alive nodes, nodes removed in the pending batch, and freed
+  /// slots awaiting reuse (at most the largest number of nodes alive at once since creation, plus
+  /// a pending batch's removals).
+  [[nodiscard]] std::size_t nodeSlots() const;
 
  private:
   struct Impl;
