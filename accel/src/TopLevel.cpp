@@ -668,13 +668,10 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
   ++ctx.stats.rays;
   hits.clear();
   if (!isQueryable(ray_ws)) return;
-  if (!tree_.empty()) collectAllHere(ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws), hits, ctx, mask);
-  if (sensors_) {
-    std::vector<Hit> more;
-    sensors_->intersectAllImpl(ray_ws, ray_d, more, ctx, mask);
-    --ctx.stats.rays;  // one query, two levels
-    hits.insert(hits.end(), more.begin(), more.end());
-  }
+  const toplevel_detail::WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
+  if (!tree_.empty()) collectAllHere(w, hits, ctx, mask);
+  // The sensors' level answers the same query (one ray in the statistics, not two).
+  if (sensors_ && !sensors_->tree_.empty()) sensors_->collectAllHere(w, hits, ctx, mask);
   std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
     if (a.t != b.t) return a.t < b.t;
     if (a.instance_id != b.instance_id) return a.instance_id < b.instance_id;
