@@ -29,6 +29,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -71,6 +72,47 @@ struct Split {
 constexpr int kMaxBins = 32;
 
 int binsFor(std::size_t n) { return n < 64 ? 8 : (n < 1024 ? 16 : kMaxBins); }
+
+// j / count for j = 0 .. count (count 8, 16 or 32) and a padding entry, as Bins::boundary computes
+// it, so a boundary can be formed without a division per candidate.
+const float* binFractions(int count) {
+  struct Table {
+    float f[3][kMaxBins + 2];
+    Table() {
+      for (int t = 0; t < 3; ++t)
+        for (int j = 0; j < kMaxBins + 2; ++j) f[t][j] = static_cast<float>(j) / static_cast<float>(8 << t);
+    }
+  };
+  static const Table table;
+  return table.f[count == 8 ? 0 : count == 16 ? 1 : 2];
+}
+
+// Sorts x[0, n) ascending. Up to 32 values (the events of most nodes) are placed by rank, without
+// the data-dependent branches of an insertion sort (a fifth of a build's mispredicted branches):
+// a value's position is the number of smaller values plus the equal ones before it.
+void sortEvents(float* x, std::size_t n) {
+  constexpr std::size_t kRankMax = 32;
+  if (n > kRankMax) {
+    std::sort(x, x + n);
+    return;
+  }
+  if (n < 2) return;
+  alignas(16) float in[kRankMax];
+  std::copy(x, x + n, in);
+  std::fill(in + n, in + ((n + 3) & ~std::size_t{3}), std::numeric_limits<float>::infinity());  // events are finite
+  const std::size_t blocks = (n + 3) / 4;
+  for (std::size_t i = 0; i < n; ++i) {
+    const __m128 v = _mm_set1_ps(in[i]);
+    std::uint32_t less = 0, equal = 0;
+    for (std::size_t j = 0; j < blocks; ++j) {
+      const __m128 c = _mm_load_ps(in + 4 * j);
+      less |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmplt_ps(c, v))) << (4 * j);
+      equal |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmpeq_ps(c, v))) << (4 * j);
+    }
+    const std::uint32_t before = (std::uint32_t{1} << i) - 1u;  // i < 32
+    x[std::popcount(less) + std::popcount(equal & before)] = in[i];
+  }
+}
 
 // Exact extent of a set of references.
 struct Extent {
@@ -295,10 +337,10 @@ class Builder {
     const auto prim_base = static_cast<std::uint32_t>(out.prims.size());
     out.nodes.reserve(out.nodes.size() + sub.nodes.size());
     for (KdNode node : sub.nodes) {
-      if (node.isLeaf())
-        node.setPrimOffset(node.primOffset() + prim_base);
-      else
-        node.setUpperChild(node.upperChild() + node_base);
+      // Masks instead of a branch (leaves and inner nodes alternate unpredictably).
+      const std::uint32_t leaf = 0u - static_cast<std::uint32_t>(node.isLeaf());
+      node.setPrimOffset(node.primOffset() + (prim_base & leaf));
+      node.setUpperChild(node.upperChild() + (node_base & ~leaf));
       out.nodes.push_back(node);
     }
     out.prims.insert(out.prims.end(), sub.prims.begin(), sub.prims.end());
@@ -321,6 +363,66 @@ class Builder {
       if (w > 0.0f && (e.hi[k] - e.lo[k]) >= 0.5f * w) return false;
     }
     return true;
+  }
+
+  // Index of the first least entry of cost[0 .. count) (count a multiple of 4; no NaN), without
+  // the data-dependent branches of a scan.
+  static int firstMinimum(const float* cost, int count) {
+    __m128 least = _mm_load_ps(cost);
+    for (int j = 4; j < count; j += 4) least = _mm_min_ps(least, _mm_load_ps(cost + j));
+    least = _mm_min_ps(least, _mm_shuffle_ps(least, least, _MM_SHUFFLE(2, 3, 0, 1)));
+    least = _mm_min_ps(least, _mm_shuffle_ps(least, least, _MM_SHUFFLE(1, 0, 3, 2)));
+    std::uint32_t mask = 0;
+    for (int j = 0; j < count; j += 4)
+      mask |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmpeq_ps(_mm_load_ps(cost + j), least))) << j;
+    return std::countr_zero(mask);
+  }
+
+  // Costs of the bin boundaries j = 1 .. count - 1 of `axis` into cost[j - 1], with their planes and
+  // reference counts below / above: splitCost's operations in the same order on four lanes (the
+  // same results, bit for bit), +inf for planes outside the node or straddled by all n references
+  // (they separate nothing). The bin counts are the hot part of a build's SAH evaluation.
+  void binnedCosts(const NodeGeometry& g, const Bins& b, int axis, std::int32_t n, float* pos, std::int32_t* n_lower,
+                   std::int32_t* n_upper, float* cost) const {
+    const int m = b.count - 1;  // candidates; count is 8, 16 or 32, so m + 1 is a multiple of 4
+    std::int32_t below = 0, above = n;
+    for (int j = 0; j < m; ++j) {
+      below += static_cast<std::int32_t>(b.start[axis][j]);
+      above -= static_cast<std::int32_t>(b.end[axis][j]);
+      n_lower[j] = below;
+      n_upper[j] = above;
+    }
+    n_lower[m] = n;  // padding lane: straddled by all, so +inf
+    n_upper[m] = n;
+    const float* frac = binFractions(b.count);
+    const __m128 frame_lo = _mm_set1_ps(b.frame_lo[axis]);
+    const __m128 frame_w = _mm_set1_ps(b.frame_hi[axis] - b.frame_lo[axis]);
+    const __m128 lo = _mm_set1_ps(g.lo[axis]), hi = _mm_set1_ps(g.hi[axis]);
+    const __m128 ab = _mm_set1_ps(g.ab[axis]), a_plus_b = _mm_set1_ps(g.a_plus_b[axis]);
+    const __m128 inv_half_area = _mm_set1_ps(g.inv_half_area);
+    const __m128 ct = _mm_set1_ps(cfg_.traversal_cost), ci = _mm_set1_ps(cfg_.intersection_cost);
+    const __m128 bonus = _mm_set1_ps(1.0f - cfg_.empty_bonus);
+    const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+    const __m128i all = _mm_set1_epi32(n), zero = _mm_setzero_si128();
+    for (int j = 0; j <= m; j += 4) {
+      // boundary(axis, j + 1): frame_lo + (frame_hi - frame_lo) * ((j + 1) / count).
+      const __m128 p = _mm_add_ps(frame_lo, _mm_mul_ps(frame_w, _mm_loadu_ps(frac + j + 1)));
+      _mm_store_ps(pos + j, p);
+      const __m128i nl = _mm_load_si128(reinterpret_cast<const __m128i*>(n_lower + j));
+      const __m128i nu = _mm_load_si128(reinterpret_cast<const __m128i*>(n_upper + j));
+      const __m128 p_lower = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(p, lo), a_plus_b)), inv_half_area);
+      const __m128 p_upper = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(hi, p), a_plus_b)), inv_half_area);
+      __m128 c = _mm_add_ps(ct, _mm_mul_ps(ci, _mm_add_ps(_mm_mul_ps(p_lower, _mm_cvtepi32_ps(nl)),
+                                                           _mm_mul_ps(p_upper, _mm_cvtepi32_ps(nu)))));
+      const __m128 one_empty = _mm_castsi128_ps(_mm_or_si128(_mm_cmpeq_epi32(nl, zero), _mm_cmpeq_epi32(nu, zero)));
+      c = _mm_or_ps(_mm_and_ps(one_empty, _mm_mul_ps(c, bonus)), _mm_andnot_ps(one_empty, c));
+      const __m128 inside = _mm_and_ps(_mm_cmpgt_ps(p, lo), _mm_cmplt_ps(p, hi));
+      const __m128 separates =
+          _mm_castsi128_ps(_mm_andnot_si128(_mm_and_si128(_mm_cmpeq_epi32(nl, all), _mm_cmpeq_epi32(nu, all)),
+                                            _mm_set1_epi32(-1)));
+      const __m128 keep = _mm_and_ps(inside, separates);
+      _mm_store_ps(cost + j, _mm_or_ps(_mm_and_ps(keep, c), _mm_andnot_ps(keep, inf)));
+    }
   }
 
   Split findSahSplit(const RefVec& refs, const Box& box, const Bins*& bins, Bins& own, const Extent& extent,
@@ -385,18 +487,17 @@ class Builder {
         const float cost = splitCost(g, axis, extent.hi[axis], n, 0);
         if (cost < best.cost) best = {axis, extent.hi[axis], cost, true, n, 0, true}, best_bin = -1;
       }
-      std::size_t n_lower = 0, n_upper = n;
-      for (int j = 1; j < b.count; ++j) {
-        n_lower += b.start[axis][j - 1];
-        n_upper -= b.end[axis][j - 1];
-        const float pos = b.boundary(axis, j);
-        // A plane that every reference straddles separates nothing; it only duplicates.
-        if (!(pos > lo && pos < hi) || (n_lower == n && n_upper == n)) continue;
-        const float cost = splitCost(g, axis, pos, n_lower, n_upper);
-        if (cost < best.cost) {
-          best = {axis, pos, cost, true, n_lower, n_upper, false};
-          best_bin = j;
-        }
+      // The bin boundaries j = 1 .. count - 1, costed four at a time (binnedCosts), then scanned in
+      // order as before, so ties resolve the same way.
+      alignas(16) float pos[kMaxBins], cost[kMaxBins];
+      alignas(16) std::int32_t n_lower[kMaxBins], n_upper[kMaxBins];
+      binnedCosts(g, b, axis, static_cast<std::int32_t>(n), pos, n_lower, n_upper, cost);
+      // The first boundary of least cost, as a scan in order with a strict comparison would find.
+      const int i = firstMinimum(cost, b.count);
+      if (cost[i] < best.cost) {
+        best = {axis, pos[i], cost[i], true, static_cast<std::size_t>(n_lower[i]), static_cast<std::size_t>(n_upper[i]),
+                false};
+        best_bin = i + 1;
       }
     }
     if (best.axis < 0 || best_bin < 0 || n > cfg_.refine_max) return best;
@@ -432,15 +533,23 @@ class Builder {
     float* const ends = events + n;
     float* const planars = events + 2 * n;
     std::size_t n_starts = 0, n_ends = 0, n_planars = 0;
+    // Without branches: whether a bound falls into the window is a coin flip per reference, and
+    // mispredicted branches here cost more than the stores (every slot written lies below n).
     for (const PrimRef& r : refs) {
       const float a = r.lo[axis], b = r.hi[axis];
-      if (a < win_lo) ++below_window; else if (a <= win_hi) starts[n_starts++] = a;
-      if (b > win_hi) ++above_window; else if (b >= win_lo) ends[n_ends++] = b;
-      if (a == b && a >= win_lo && a <= win_hi) planars[n_planars++] = a;
+      const bool a_in = (a >= win_lo) & (a <= win_hi);
+      below_window += a < win_lo;
+      starts[n_starts] = a;
+      n_starts += a_in;
+      above_window += b > win_hi;
+      ends[n_ends] = b;
+      n_ends += (b >= win_lo) & (b <= win_hi);
+      planars[n_planars] = a;
+      n_planars += a_in & (a == b);
     }
-    std::sort(starts, starts + n_starts);
-    std::sort(ends, ends + n_ends);
-    std::sort(planars, planars + n_planars);
+    sortEvents(starts, n_starts);
+    sortEvents(ends, n_ends);
+    sortEvents(planars, n_planars);
     return sweepSorted(g, axis, starts, n_starts, ends, n_ends, planars, n_planars, below_window, above_window);
   }
 
@@ -458,9 +567,9 @@ class Builder {
       }
       e.n_starts[axis] = e.n_ends[axis] = static_cast<std::uint8_t>(refs.size());
       e.n_planars[axis] = n_planars;
-      std::sort(e.starts[axis], e.starts[axis] + refs.size());
-      std::sort(e.ends[axis], e.ends[axis] + refs.size());
-      std::sort(e.planars[axis], e.planars[axis] + n_planars);
+      sortEvents(e.starts[axis], refs.size());
+      sortEvents(e.ends[axis], refs.size());
+      sortEvents(e.planars[axis], n_planars);
     }
     e.valid = true;
   }

@@ -14,21 +14,23 @@ namespace {
 
 // Neighbouring floats of a finite f (std::nextafter is a library call, and this runs for every
 // straddling triangle of a kd-tree build).
-float nextDown(float f) {
-  if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
-  const auto u = std::bit_cast<std::uint32_t>(f);
-  return std::bit_cast<float>(f > 0.0f ? u - 1 : u + 1);
-}
-float nextUp(float f) { return -nextDown(-f); }
-
-// Largest float <= d and smallest float >= d, for d within the float range.
+// Largest float <= d and smallest float >= d, for d within the float range. The step to the
+// neighbouring float is integer arithmetic on the bits rather than a branch: whether a crossing
+// rounds up or down is a coin flip. A step down from f happens only when d < f, so f is not +0
+// (d < 0 rounds to -0 or below); -0 steps to -denorm_min. Likewise a step up never starts at -0.
 float floatBelow(double d) {
   const auto f = static_cast<float>(d);
-  return static_cast<double>(f) > d ? nextDown(f) : f;
+  const auto u = std::bit_cast<std::uint32_t>(f);
+  const std::uint32_t step = 2u * (u >> 31) - 1u;  // +1 for negative f (away from 0), -1 for positive
+  const std::uint32_t need = 0u - static_cast<std::uint32_t>(static_cast<double>(f) > d);
+  return std::bit_cast<float>(u + (step & need));
 }
 float floatAbove(double d) {
   const auto f = static_cast<float>(d);
-  return static_cast<double>(f) < d ? nextUp(f) : f;
+  const auto u = std::bit_cast<std::uint32_t>(f);
+  const std::uint32_t step = 1u - 2u * (u >> 31);  // +1 for positive f (away from 0), -1 for negative
+  const std::uint32_t need = 0u - static_cast<std::uint32_t>(static_cast<double>(f) < d);
+  return std::bit_cast<float>(u + (step & need));
 }
 
 struct P {
@@ -123,6 +125,70 @@ struct DBox {
   }
 };
 
+// splitTriangleInBox for a triangle inside the box (two thirds of the calls in a mesh build): the
+// corners are floats and enter the bounds as they are; only the edge crossings are computed in
+// double and rounded outward, once for both sides. Rounding outward is monotonic, so this gives
+// the bounds of the polygon loop below (same points, same order) rounded at the end.
+void splitInsideTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& lower_box,
+                         const Box& upper_box, int axis, float pos, Box& lower, Box& upper) {
+  const float v[3][3] = {{a.x, a.y, a.z}, {b.x, b.y, b.z}, {c.x, c.y, c.z}};
+  const double plane = pos;
+  const double d[3] = {static_cast<double>(v[0][axis]) - plane, static_cast<double>(v[1][axis]) - plane,
+                       static_cast<double>(v[2][axis]) - plane};
+  constexpr float inf = std::numeric_limits<float>::infinity();
+  float lo[2][3] = {{inf, inf, inf}, {inf, inf, inf}};
+  float hi[2][3] = {{-inf, -inf, -inf}, {-inf, -inf, -inf}};
+  bool any[2] = {false, false};
+  auto extend = [&](int side, const float* p) {
+    any[side] = true;
+    for (int k = 0; k < 3; ++k) {
+      lo[side][k] = std::min(lo[side][k], p[k]);
+      hi[side][k] = std::max(hi[side][k], p[k]);
+    }
+  };
+  int prev = 2;
+  for (int i = 0; i < 3; ++i) {
+    const double d_prev = d[prev], d_cur = d[i];
+    if ((d_prev < 0.0 && d_cur > 0.0) || (d_prev > 0.0 && d_cur < 0.0)) {
+      // The crossing, exactly on the plane along `axis`, rounded outward on the other axes.
+      const double t = d_prev / (d_prev - d_cur);
+      float x_lo[3], x_hi[3];
+      for (int k = 0; k < 3; ++k) {
+        if (k == axis) {
+          x_lo[k] = x_hi[k] = pos;
+          continue;
+        }
+        const double p = static_cast<double>(v[prev][k]);
+        const double x = p + t * (static_cast<double>(v[i][k]) - p);
+        x_lo[k] = floatBelow(x);
+        x_hi[k] = floatAbove(x);
+      }
+      for (int side = 0; side < 2; ++side) {
+        any[side] = true;
+        for (int k = 0; k < 3; ++k) {
+          lo[side][k] = std::min(lo[side][k], x_lo[k]);
+          hi[side][k] = std::max(hi[side][k], x_hi[k]);
+        }
+      }
+    }
+    if (d_cur <= 0.0) extend(0, v[i]);
+    if (d_cur >= 0.0) extend(1, v[i]);
+    prev = i;
+  }
+  // Limited to each half box, as DBox::rounded does.
+  auto limited = [&](int side, const Box& box) {
+    if (!any[side]) return Box();
+    Box out;
+    for (int k = 0; k < 3; ++k) {
+      out.lo[k] = std::max(lo[side][k], box.lo[k]);
+      out.hi[k] = std::min(hi[side][k], box.hi[k]);
+    }
+    return out;
+  };
+  lower = limited(0, lower_box);
+  upper = limited(1, upper_box);
+}
+
 Box ownBounds(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
   Box own;
   own.extend(a);
@@ -165,11 +231,8 @@ void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3&
       upper = clipTriangleToBox(a, b, c, upper_box);
       return;
     }
-    poly = buffers[0];
-    poly[0] = {{a.x, a.y, a.z}};
-    poly[1] = {{b.x, b.y, b.z}};
-    poly[2] = {{c.x, c.y, c.z}};
-    n = 3;
+    splitInsideTriangle(a, b, c, lower_box, upper_box, axis, pos, lower, upper);
+    return;
   }
   // Each side gets the corners on its closed side of the plane and the crossings of the edges
   // (exactly on the plane along `axis`), as clipping to each half box would give.
