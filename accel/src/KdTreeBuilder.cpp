@@ -87,33 +87,6 @@ const float* binFractions(int count) {
   return table.f[count == 8 ? 0 : count == 16 ? 1 : 2];
 }
 
-// Sorts x[0, n) ascending. Up to 32 values (the events of most nodes) are placed by rank, without
-// the data-dependent branches of an insertion sort (a fifth of a build's mispredicted branches):
-// a value's position is the number of smaller values plus the equal ones before it.
-void sortEvents(float* x, std::size_t n) {
-  constexpr std::size_t kRankMax = 32;
-  if (n > kRankMax) {
-    std::sort(x, x + n);
-    return;
-  }
-  if (n < 2) return;
-  alignas(16) float in[kRankMax];
-  std::copy(x, x + n, in);
-  std::fill(in + n, in + ((n + 3) & ~std::size_t{3}), std::numeric_limits<float>::infinity());  // events are finite
-  const std::size_t blocks = (n + 3) / 4;
-  for (std::size_t i = 0; i < n; ++i) {
-    const __m128 v = _mm_set1_ps(in[i]);
-    std::uint32_t less = 0, equal = 0;
-    for (std::size_t j = 0; j < blocks; ++j) {
-      const __m128 c = _mm_load_ps(in + 4 * j);
-      less |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmplt_ps(c, v))) << (4 * j);
-      equal |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmpeq_ps(c, v))) << (4 * j);
-    }
-    const std::uint32_t before = (std::uint32_t{1} << i) - 1u;  // i < 32
-    x[std::popcount(less) + std::popcount(equal & before)] = in[i];
-  }
-}
-
 // Exact extent of a set of references.
 struct Extent {
   float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
@@ -547,9 +520,9 @@ class Builder {
       planars[n_planars] = a;
       n_planars += a_in & (a == b);
     }
-    sortEvents(starts, n_starts);
-    sortEvents(ends, n_ends);
-    sortEvents(planars, n_planars);
+    std::sort(starts, starts + n_starts);
+    std::sort(ends, ends + n_ends);
+    std::sort(planars, planars + n_planars);
     return sweepSorted(g, axis, starts, n_starts, ends, n_ends, planars, n_planars, below_window, above_window);
   }
 
@@ -567,9 +540,9 @@ class Builder {
       }
       e.n_starts[axis] = e.n_ends[axis] = static_cast<std::uint8_t>(refs.size());
       e.n_planars[axis] = n_planars;
-      sortEvents(e.starts[axis], refs.size());
-      sortEvents(e.ends[axis], refs.size());
-      sortEvents(e.planars[axis], n_planars);
+      std::sort(e.starts[axis], e.starts[axis] + refs.size());
+      std::sort(e.ends[axis], e.ends[axis] + refs.size());
+      std::sort(e.planars[axis], e.planars[axis] + n_planars);
     }
     e.valid = true;
   }
