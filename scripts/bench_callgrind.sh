@@ -5,9 +5,12 @@
 # Builds duplex_bench_mesh in its own build dir with -O3 plus -g (same code as Release, but with line
 # info, so our instructions can be split between traversal and triangle test), runs
 #   duplex_bench_mesh --callgrind   (koala, 20,000 random rays; only the trace loops are instrumented)
-# under valgrind, and prints Ir/ray for both plus where ours go.
+# under valgrind (--branch-sim=yes: mispredicted conditional branches too), and prints Ir/ray for
+# both plus where ours go; "ours" is MeshObject's default (binary kd-tree) traversal, "ours-wide" the
+# same queries over wide nodes (MeshObject::intersectWide), for A/B.
 #
 # Environment: BUILD_DIR (default build-callgrind), MESH (koala.obj), RAYS (20000),
+#              WHAT (tracers: ours,wide,embree),
 #              OUT (docs/bench/callgrind.json; empty: do not write), KEEP (1: keep the dumps).
 set -euo pipefail
 
@@ -15,6 +18,7 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build-callgrind}
 MESH=${MESH:-koala.obj}
 RAYS=${RAYS:-20000}
+WHAT=${WHAT:-ours,wide,embree}
 OUT=${OUT-$ROOT/docs/bench/callgrind.json}
 JOBS=${JOBS:-2}
 
@@ -35,8 +39,9 @@ cleanup() { if [ "${KEEP:-0}" != 1 ]; then rm -rf "$DUMPS"; else echo "dumps kep
 trap cleanup EXIT
 
 echo "running the workload under callgrind (a minute or two: the build runs uninstrumented but still under valgrind)" >&2
-valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file="$DUMPS/callgrind.out" \
-  "$BIN" --callgrind --callgrind-mesh "$MESH" --callgrind-rays "$RAYS" --out "$DUMPS/workload.json" \
+valgrind --tool=callgrind --instr-atstart=no --branch-sim=yes --callgrind-out-file="$DUMPS/callgrind.out" \
+  "$BIN" --callgrind --callgrind-mesh "$MESH" --callgrind-rays "$RAYS" --callgrind-what "$WHAT" \
+  --out "$DUMPS/workload.json" \
   >"$DUMPS/valgrind.log" 2>&1 || { tail -30 "$DUMPS/valgrind.log" >&2; exit 1; }
 
 if [ -n "$OUT" ]; then

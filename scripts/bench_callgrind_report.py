@@ -38,10 +38,11 @@ class Names:
 
 
 def parse_part(path):
-    """Self cost (first event, Ir) per source file and per function, the total, and the trigger name."""
+    """Self cost (first event, Ir) per source file and per function, the totals of every event, and the
+    trigger name."""
     files, fns = Names(), Names()
     per_file, per_fn, per_line = defaultdict(int), defaultdict(int), defaultdict(int)
-    trigger, totals = None, None
+    trigger, totals, events, event_totals = None, None, ["Ir"], {}
     fl = cur_file = cur_fn = "???"
     skip_next_cost = False
     n_positions = 1
@@ -57,8 +58,13 @@ def parse_part(path):
             if line.startswith("positions:"):
                 n_positions = len(line.split(":", 1)[1].split())
                 continue
+            if line.startswith("events:"):
+                events = line.split(":", 1)[1].split()
+                continue
             if line.startswith("totals:"):
-                totals = int(line.split(":", 1)[1].split()[0])
+                values = [int(x) for x in line.split(":", 1)[1].split()]
+                totals = values[0]
+                event_totals = dict(zip(events, values))
                 continue
             key, sep, value = line.partition("=")
             if sep:
@@ -94,7 +100,7 @@ def parse_part(path):
                     per_line[(cur_file, line_no)] += cost
     if totals is None:
         totals = sum(per_fn.values())
-    return trigger, totals, per_file, per_fn, per_line
+    return trigger, totals, per_file, per_fn, per_line, event_totals
 
 
 def short_file(path):
@@ -106,13 +112,15 @@ def short_fn(name, width=90):
 
 
 # Where our instructions go, by the file the (inlined) code is written in. A heuristic mapping, kept
-# next to the raw per-file list: traversal = the kd-tree walk, triangle = the triangle tests (SIMD
-# intrinsics headers count here: the traversal is scalar), everything else = per-ray setup and the
-# bench loop.
+# next to the raw per-file list: traversal = the kd-tree walk (binary or wide nodes), triangle = the
+# triangle tests, SSE intrinsics = the intrinsics headers (used by both the wide traversal and the
+# 4-wide triangle test), everything else = per-ray setup and the bench loop.
 def category(file_name):
-    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h"):
+    if file_name.endswith("intrin.h"):
+        return "SSE intrinsics"
+    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h", "KdWideTraversal.h", "KdWideNode.h"):
         return "traversal"
-    if "Triangle" in file_name or file_name.endswith("intrin.h"):
+    if "Triangle" in file_name:
         return "triangle tests"
     return "setup and other"
 
@@ -129,9 +137,9 @@ def main():
     rays = workload["rays"]
     parts = {}
     for path in sorted(glob.glob(os.path.join(args.dump_dir, "callgrind.out*"))):
-        trigger, totals, per_file, per_fn, per_line = parse_part(path)
-        if trigger and re.match(r"^(ours|embree)-(closest|any)$", trigger):
-            parts[trigger] = (totals, per_file, per_fn, per_line)
+        trigger, totals, per_file, per_fn, per_line, event_totals = parse_part(path)
+        if trigger and re.match(r"^(ours|ours-wide|embree)-(closest|any)$", trigger):
+            parts[trigger] = (totals, per_file, per_fn, per_line, event_totals)
     if not parts:
         sys.exit("no callgrind parts named ours-*/embree-* in %s (was the bench built with valgrind/callgrind.h?)"
                  % args.dump_dir)
@@ -149,11 +157,28 @@ def main():
     }
     print("callgrind: %s (%s triangles), %d random rays, single thread, instructions of the trace loop only"
           % (workload["mesh"], format(workload["triangles"], ","), rays))
-    print("%-10s %14s %14s %10s" % ("query", "ours Ir/ray", "Embree Ir/ray", "ours/Embree"))
+    print("%-10s %14s %14s %10s %16s %10s %10s %12s" % ("query", "ours Ir/ray", "Embree Ir/ray", "ours/Embree",
+                                                        "wide Ir/ray", "ours Bcm", "Embree Bcm", "wide Bcm"))
+    def mispredicts(part):
+        # Mispredicted conditional and indirect branches per ray (only with --branch-sim=yes).
+        ev = part[4]
+        return (ev["Bcm"] + ev.get("Bim", 0)) / rays if "Bcm" in ev else None
+
+    def fmt(v, spec="%.0f"):
+        return spec % v if v is not None else "-"
+
     for query in ("closest", "any"):
         ours = parts.get("ours-" + query)
         emb = parts.get("embree-" + query)
+        wide = parts.get("ours-wide-" + query)
         rec = {}
+        if wide:
+            rec["ours_wide_ir_per_ray"] = wide[0] / rays
+            rec["ours_wide_mispredicts_per_ray"] = mispredicts(wide)
+        if ours:
+            rec["ours_mispredicts_per_ray"] = mispredicts(ours)
+        if emb:
+            rec["embree_medium_mispredicts_per_ray"] = mispredicts(emb)
         if ours:
             rec["ours_ir_per_ray"] = ours[0] / rays
             files = sorted(ours[1].items(), key=lambda kv: -kv[1])
@@ -168,11 +193,15 @@ def main():
         if ours and emb:
             rec["ratio_ours_over_embree"] = ours[0] / emb[0]
         result["queries"][query] = rec
-        print("%-10s %14s %14s %10s" % (
+        print("%-10s %14s %14s %10s %16s %10s %10s %12s" % (
             query,
             "%.0f" % rec["ours_ir_per_ray"] if ours else "-",
             "%.0f" % rec["embree_medium_ir_per_ray"] if emb else "-",
-            "%.2fx" % rec["ratio_ours_over_embree"] if ours and emb else "-"))
+            "%.2fx" % rec["ratio_ours_over_embree"] if ours and emb else "-",
+            fmt(rec.get("ours_wide_ir_per_ray")),
+            fmt(rec.get("ours_mispredicts_per_ray"), "%.1f"),
+            fmt(rec.get("embree_medium_mispredicts_per_ray"), "%.1f"),
+            fmt(rec.get("ours_wide_mispredicts_per_ray"), "%.1f")))
 
     if "ours" in workload:
         result["ours_tree"] = {k: workload["ours"][k] for k in ("nodes", "sah_cost") if k in workload["ours"]}
@@ -193,7 +222,7 @@ def main():
                 cats[category(name)] += v
             rec["ours_by_category"] = dict(cats)
             print("  => " + ", ".join("%s %.0f (%.0f%%)" % (k, cats[k], 100.0 * cats[k] / total)
-                                      for k in ("traversal", "triangle tests", "setup and other")))
+                                      for k in ("traversal", "triangle tests", "SSE intrinsics", "setup and other")))
             print("  hottest lines: " + ", ".join("%s:%d %.0f" % (h["file"], h["line"], h["ir_per_ray"])
                                                   for h in rec["ours_hot_lines"][:6]))
             if query == "closest" and trav and trav["triangle_tests_per_ray"] > 0 and cats["triangle tests"] > 0:
