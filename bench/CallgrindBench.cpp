@@ -55,13 +55,6 @@ template <class Accel>
   return hits;
 }
 
-// MeshObject's queries through the wide nodes (not the default), for A/B.
-struct WideQueries {
-  const MeshObject& object;
-  bool intersect(const Ray& r, Hit& hit) const { return object.intersectWide(r, hit); }
-  [[nodiscard]] bool occluded(const Ray& r) const { return object.occludedWide(r); }
-};
-
 }  // namespace
 
 nlohmann::json runCallgrind(const Options& options) {
@@ -95,11 +88,6 @@ nlohmann::json runCallgrind(const Options& options) {
     doc["ours"]["closest_hits"] = callgrindLoop("ours-closest", *object, rays, Query::Closest);
     doc["ours"]["any_hits"] = callgrindLoop("ours-any", *object, rays, Query::Any);
     doc["ours"]["traversal"] = countTraversal(arenas.get(1), *object, rays).toJson();
-    if (wants("wide")) {
-      const WideQueries wide{*object};
-      doc["ours_wide"]["closest_hits"] = callgrindLoop("ours-wide-closest", wide, rays, Query::Closest);
-      doc["ours_wide"]["any_hits"] = callgrindLoop("ours-wide-any", wide, rays, Query::Any);
-    }
   }
 #if DUPLEX_BENCH_HAVE_EMBREE
   if (wants("embree") && options.with_embree) {

@@ -6,11 +6,10 @@
 # info, so our instructions can be split between traversal and triangle test), runs
 #   duplex_bench_mesh --callgrind   (koala, 20,000 random rays; only the trace loops are instrumented)
 # under valgrind (--branch-sim=yes: mispredicted conditional branches too), and prints Ir/ray for
-# both plus where ours go; "ours" is MeshObject's default (binary kd-tree) traversal, "ours-wide" the
-# same queries over wide nodes (MeshObject::intersectWide), for A/B.
+# both plus where ours go.
 #
 # Environment: BUILD_DIR (default build-callgrind), MESH (koala.obj), RAYS (20000),
-#              WHAT (tracers: ours,wide,embree),
+#              WHAT (tracers: ours,embree),
 #              OUT (docs/bench/callgrind.json; empty: do not write), KEEP (1: keep the dumps).
 set -euo pipefail
 
@@ -18,7 +17,7 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build-callgrind}
 MESH=${MESH:-koala.obj}
 RAYS=${RAYS:-20000}
-WHAT=${WHAT:-ours,wide,embree}
+WHAT=${WHAT:-ours,embree}
 OUT=${OUT-$ROOT/docs/bench/callgrind.json}
 JOBS=${JOBS:-2}
 

@@ -112,15 +112,13 @@ def short_fn(name, width=90):
 
 
 # Where our instructions go, by the file the (inlined) code is written in. A heuristic mapping, kept
-# next to the raw per-file list: traversal = the kd-tree walk (binary or wide nodes), triangle = the
-# triangle tests, SSE intrinsics = the intrinsics headers (used by both the wide traversal and the
-# 4-wide triangle test), everything else = per-ray setup and the bench loop.
+# next to the raw per-file list: traversal = the kd-tree walk, triangle = the triangle tests (SIMD
+# intrinsics headers count here: the traversal is scalar), everything else = per-ray setup and the
+# bench loop.
 def category(file_name):
-    if file_name.endswith("intrin.h"):
-        return "SSE intrinsics"
-    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h", "KdWideTraversal.h", "KdWideNode.h"):
+    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h"):
         return "traversal"
-    if "Triangle" in file_name:
+    if "Triangle" in file_name or file_name.endswith("intrin.h"):
         return "triangle tests"
     return "setup and other"
 
@@ -138,7 +136,7 @@ def main():
     parts = {}
     for path in sorted(glob.glob(os.path.join(args.dump_dir, "callgrind.out*"))):
         trigger, totals, per_file, per_fn, per_line, event_totals = parse_part(path)
-        if trigger and re.match(r"^(ours|ours-wide|embree)-(closest|any)$", trigger):
+        if trigger and re.match(r"^(ours|embree)-(closest|any)$", trigger):
             parts[trigger] = (totals, per_file, per_fn, per_line, event_totals)
     if not parts:
         sys.exit("no callgrind parts named ours-*/embree-* in %s (was the bench built with valgrind/callgrind.h?)"
@@ -157,10 +155,11 @@ def main():
     }
     print("callgrind: %s (%s triangles), %d random rays, single thread, instructions of the trace loop only"
           % (workload["mesh"], format(workload["triangles"], ","), rays))
-    print("%-10s %14s %14s %10s %16s %10s %10s %12s" % ("query", "ours Ir/ray", "Embree Ir/ray", "ours/Embree",
-                                                        "wide Ir/ray", "ours Bcm", "Embree Bcm", "wide Bcm"))
+    print("%-10s %14s %14s %10s %10s %10s" % ("query", "ours Ir/ray", "Embree Ir/ray", "ours/Embree", "ours mispr",
+                                              "Embree mispr"))
     def mispredicts(part):
-        # Mispredicted conditional and indirect branches per ray (only with --branch-sim=yes).
+        # Mispredicted branches per ray, conditional (Bcm) plus indirect (Bim; ours: the per-ray dispatch on
+        # the triangle test's axis permutation); only with --branch-sim=yes.
         ev = part[4]
         return (ev["Bcm"] + ev.get("Bim", 0)) / rays if "Bcm" in ev else None
 
@@ -170,11 +169,7 @@ def main():
     for query in ("closest", "any"):
         ours = parts.get("ours-" + query)
         emb = parts.get("embree-" + query)
-        wide = parts.get("ours-wide-" + query)
         rec = {}
-        if wide:
-            rec["ours_wide_ir_per_ray"] = wide[0] / rays
-            rec["ours_wide_mispredicts_per_ray"] = mispredicts(wide)
         if ours:
             rec["ours_mispredicts_per_ray"] = mispredicts(ours)
         if emb:
@@ -193,15 +188,13 @@ def main():
         if ours and emb:
             rec["ratio_ours_over_embree"] = ours[0] / emb[0]
         result["queries"][query] = rec
-        print("%-10s %14s %14s %10s %16s %10s %10s %12s" % (
+        print("%-10s %14s %14s %10s %10s %10s" % (
             query,
             "%.0f" % rec["ours_ir_per_ray"] if ours else "-",
             "%.0f" % rec["embree_medium_ir_per_ray"] if emb else "-",
             "%.2fx" % rec["ratio_ours_over_embree"] if ours and emb else "-",
-            fmt(rec.get("ours_wide_ir_per_ray")),
             fmt(rec.get("ours_mispredicts_per_ray"), "%.1f"),
-            fmt(rec.get("embree_medium_mispredicts_per_ray"), "%.1f"),
-            fmt(rec.get("ours_wide_mispredicts_per_ray"), "%.1f")))
+            fmt(rec.get("embree_medium_mispredicts_per_ray"), "%.1f")))
 
     if "ours" in workload:
         result["ours_tree"] = {k: workload["ours"][k] for k in ("nodes", "sah_cost") if k in workload["ours"]}
@@ -222,7 +215,7 @@ def main():
                 cats[category(name)] += v
             rec["ours_by_category"] = dict(cats)
             print("  => " + ", ".join("%s %.0f (%.0f%%)" % (k, cats[k], 100.0 * cats[k] / total)
-                                      for k in ("traversal", "triangle tests", "SSE intrinsics", "setup and other")))
+                                      for k in ("traversal", "triangle tests", "setup and other")))
             print("  hottest lines: " + ", ".join("%s:%d %.0f" % (h["file"], h["line"], h["ir_per_ray"])
                                                   for h in rec["ours_hot_lines"][:6]))
             if query == "closest" and trav and trav["triangle_tests_per_ray"] > 0 and cats["triangle tests"] > 0:

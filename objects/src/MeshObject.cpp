@@ -5,8 +5,6 @@
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/accel/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
-#include "KdWideTraversal.h"
-#include "KdWideTree.h"
 #include "TriangleBlock4.h"
 #include "WatertightTriangle4.h"
 
@@ -149,111 +147,65 @@ void MeshObject::buildLeafBlocks() {
       }
     }
   }
-  wide_tree_ = std::make_unique<detail::KdWideTree>(detail::buildKdWideTree(block_tree_));
 }
 
-namespace {
-
-// Tests the leaf's blocks [first, first + blocks) in order over [tnear, t_max]; `last_lanes` masks
-// the last block (the wide tree passes all four: padding lanes repeat the leaf's last triangle, so
-// they can only find that triangle's hit again, with the same t, u, v). Lanes are resolved in order
-// with the scalar interval test, so the result equals testing the triangles one by one.
-struct ClosestLeaf {
-  const WatertightRay& wray;
-  const detail::WatertightRay4& wray4;
-  const detail::TriangleBlock4* blocks;
-  const detail::TriangleBlock4* best_block = nullptr;
-  int best_lane = 0;
-  float best_u = 0.0f, best_v = 0.0f;
-
-  template <int KX, int KY, int KZ>
-  bool test(std::uint32_t first, std::uint32_t count, int last_lanes, float& t_max) {
-    bool found = false;
-    const detail::TriangleBlock4* block = blocks + first;
-    for (std::uint32_t b = 0; b < count; ++b, ++block) {
-      const detail::Watertight4 r =
-          detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, b + 1 == count ? last_lanes : 0xF, t_max);
-      for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
-        const int k = std::countr_zero(static_cast<unsigned>(lanes));
-        float t, u, v;
-        if (r.exact >> k & 1) {
-          if (!intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
-                                               t_max, t, u, v))
-            continue;
-        } else {
-          if (r.sT[k] > t_max * r.abs_det[k]) continue;
-          const float inv = 1.0f / r.det[k];  // the scalar test's final step
-          t = r.T[k] * inv;
-          u = r.V[k] * inv;
-          v = r.W[k] * inv;
-        }
-        t_max = t;
-        best_block = block;
-        best_lane = k;
-        best_u = u;
-        best_v = v;
-        found = true;
-      }
-    }
-    return found;
-  }
-};
-
-// Any hit in the leaf's blocks (see ClosestLeaf for `last_lanes`).
-template <int KX, int KY, int KZ>
-bool anyHitInBlocks(const WatertightRay& wray, const detail::WatertightRay4& wray4,
-                    const detail::TriangleBlock4* block, std::uint32_t count, int last_lanes, float t_max) {
-  for (std::uint32_t b = 0; b < count; ++b, ++block) {
-    const detail::Watertight4 r =
-        detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, b + 1 == count ? last_lanes : 0xF, t_max);
-    if (r.fast) return true;
-    for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
-      const int k = std::countr_zero(static_cast<unsigned>(lanes));
-      float t, u, v;
-      if (intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t,
-                                          u, v))
-        return true;
-    }
-  }
-  return false;
-}
-
-}  // namespace
-
-template <bool Wide>
-bool MeshObject::closestHit(const Ray& ray_os, Hit& hit) const {
+bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
   if (!isQueryable(ray_os)) return false;
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
   const detail::WatertightRay4 wray4(wray);
   float t_best = std::min(hit.t, ray_os.tfar);
-  ClosestLeaf leaf{wray, wray4, blocks_.data()};
+  const detail::TriangleBlock4* best_block = nullptr;
+  int best_lane = 0;
+  float best_u = 0.0f, best_v = 0.0f;
+  const detail::TriangleBlock4* blocks = blocks_.data();
   // One dispatch per ray on the axis permutation; traversal and triangle tests below are
   // instantiated for each of the six permutations.
   dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    if constexpr (Wide) {
-      detail::traverseKdWideTree<false>(*wide_tree_, kray, t_best, [&](std::uint32_t first, std::uint32_t blocks, float& t_max) {
-        return leaf.template test<KX, KY, KZ>(first, blocks, 0xF, t_max);
-      });
-    } else {
-      traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t first, std::uint32_t count, float& t_max) {
-        return leaf.template test<KX, KY, KZ>(first, (count + 3) / 4, kLaneMask[count - 4 * ((count - 1) / 4)], t_max);
-      });
-    }
+    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      bool found = false;
+      // Four triangles per block; lanes are resolved in order with the scalar interval test so
+      // that the result equals testing them one by one.
+      const detail::TriangleBlock4* block = blocks + begin;
+      for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
+        const detail::Watertight4 r =
+            detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, kLaneMask[std::min(left, 4)], t_max);
+        for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
+          const int k = std::countr_zero(static_cast<unsigned>(lanes));
+          float t, u, v;
+          if (r.exact >> k & 1) {
+            if (!intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
+                                                 t_max, t, u, v))
+              continue;
+          } else {
+            if (r.sT[k] > t_max * r.abs_det[k]) continue;
+            const float inv = 1.0f / r.det[k];  // the scalar test's final step
+            t = r.T[k] * inv;
+            u = r.V[k] * inv;
+            v = r.W[k] * inv;
+          }
+          t_max = t;
+          best_block = block;
+          best_lane = k;
+          best_u = u;
+          best_v = v;
+          found = true;
+        }
+      }
+      return found;
+    });
   });
-  if (leaf.best_block == nullptr) return false;
-  const detail::TriangleBlock4& best = *leaf.best_block;
-  const glm::vec3 v0 = best.vertex(leaf.best_lane, 0);
+  if (best_block == nullptr) return false;
+  const glm::vec3 v0 = best_block->vertex(best_lane, 0);
   hit.t = t_best;
-  hit.u = leaf.best_u;
-  hit.v = leaf.best_v;
-  hit.prim_id = best.prim[leaf.best_lane];
-  hit.ng = glm::cross(best.vertex(leaf.best_lane, 1) - v0, best.vertex(leaf.best_lane, 2) - v0);
+  hit.u = best_u;
+  hit.v = best_v;
+  hit.prim_id = best_block->prim[best_lane];
+  hit.ng = glm::cross(best_block->vertex(best_lane, 1) - v0, best_block->vertex(best_lane, 2) - v0);
   return true;
 }
 
-template <bool Wide>
-bool MeshObject::anyHit(const Ray& ray_os) const {
+bool MeshObject::occluded(const Ray& ray_os) const {
   if (!isQueryable(ray_os)) return false;
   const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
@@ -261,23 +213,24 @@ bool MeshObject::anyHit(const Ray& ray_os) const {
   float t_best = ray_os.tfar;
   const detail::TriangleBlock4* blocks = blocks_.data();
   return dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    if constexpr (Wide) {
-      return detail::traverseKdWideTree<true>(*wide_tree_, kray, t_best, [&](std::uint32_t first, std::uint32_t count, float& t_max) {
-        return anyHitInBlocks<KX, KY, KZ>(wray, wray4, blocks + first, count, 0xF, t_max);
-      });
-    } else {
-      return traverseKdTree<true>(block_tree_, kray, t_best, [&](std::uint32_t first, std::uint32_t count, float& t_max) {
-        return anyHitInBlocks<KX, KY, KZ>(wray, wray4, blocks + first, (count + 3) / 4,
-                                          kLaneMask[count - 4 * ((count - 1) / 4)], t_max);
-      });
-    }
+    return traverseKdTree<true>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+      const detail::TriangleBlock4* block = blocks + begin;
+      for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
+        const detail::Watertight4 r =
+            detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, kLaneMask[std::min(left, 4)], t_max);
+        if (r.fast) return true;
+        for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
+          const int k = std::countr_zero(static_cast<unsigned>(lanes));
+          float t, u, v;
+          if (intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
+                                              t_max, t, u, v))
+            return true;
+        }
+      }
+      return false;
+    });
   });
 }
-
-bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const { return closestHit<false>(ray_os, hit); }
-bool MeshObject::occluded(const Ray& ray_os) const { return anyHit<false>(ray_os); }
-bool MeshObject::intersectWide(const Ray& ray_os, Hit& hit) const { return closestHit<true>(ray_os, hit); }
-bool MeshObject::occludedWide(const Ray& ray_os) const { return anyHit<true>(ray_os); }
 
 void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
   if (!isQueryable(ray_os)) return;
@@ -325,9 +278,7 @@ bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occlu
 
 std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
-         blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode) +
-         wide_tree_->nodes.size() * sizeof(detail::KdWideNode) +
-         wide_tree_->big_leaves.size() * sizeof(wide_tree_->big_leaves[0]);
+         blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode);
 }
 
 std::size_t MeshObject::memoryBytes() const {

@@ -15,7 +15,6 @@ namespace duplex {
 
 namespace detail {
 struct TriangleBlock4;
-struct KdWideTree;
 }
 
 /// Immutable after construction; all queries are thread-safe.
@@ -46,11 +45,6 @@ class MeshObject final : public Object {
   /// The same queries without the virtual call and context (for benchmarks and the bottom level).
   bool intersect(const Ray& ray_os, Hit& hit) const;
   [[nodiscard]] bool occluded(const Ray& ray_os) const;
-  /// The same queries through wide nodes (two binary kd-tree levels per node, SSE2; docs/kdtree.md
-  /// "Traversal"): same hits (t exactly; where two triangles tie at t, either one). Not the default:
-  /// measured no faster on random rays and 25-43% slower on primary rays; kept for A/B benchmarks.
-  bool intersectWide(const Ray& ray_os, Hit& hit) const;
-  [[nodiscard]] bool occludedWide(const Ray& ray_os) const;
 
   [[nodiscard]] const TriangleMesh& mesh() const { return *mesh_; }
   [[nodiscard]] const KdTree& tree() const { return tree_; }
@@ -60,12 +54,8 @@ class MeshObject final : public Object {
  private:
   struct PartsTag {};
   MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag);
-  /// Fills blocks_, block_tree_ and wide_tree_ from tree_ (see below).
+  /// Fills blocks_ and block_tree_ from tree_ (see below).
   void buildLeafBlocks();
-  template <bool Wide>
-  bool closestHit(const Ray& ray_os, Hit& hit) const;
-  template <bool Wide>
-  bool anyHit(const Ray& ray_os) const;
 
   std::shared_ptr<const TriangleMesh> mesh_;
   KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
@@ -78,8 +68,6 @@ class MeshObject final : public Object {
   // block instead of into prim_indices (which stays empty), so reaching a leaf's triangles costs no
   // dependent load through an index list.
   KdTree block_tree_;
-  // block_tree_ with two levels per node, for intersectWide / occludedWide (objects/src/KdWideTree.h).
-  std::unique_ptr<detail::KdWideTree> wide_tree_;
 };
 
 }  // namespace duplex
