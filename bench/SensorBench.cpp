@@ -10,9 +10,10 @@
 /// overhead_vs_no_sensors compares the sensor run with closest-hit tracing of the scene without
 /// sensors (the measure: what adding the sensors costs in all).
 ///
-/// "sensor_level": the crossing query alone on the 10,000 small sensors, the sensors' tree built
-/// with several SAH parameters (TopLevelConfig::sensor_build), CPU time per query against the
-/// main level's defaults (sensorLevelSweep; --sweep-segments 0 skips it).
+/// "sensor_level": the crossing query alone on the 10,000 small sensors: the sensors' tree built
+/// with several SAH parameters (TopLevelConfig::sensor_build, sensor_grid off) and the shipped
+/// walk (the uniform grid, TopLevelConfig::sensor_grid), CPU time per query against the main
+/// level's tree defaults (sensorLevelSweep; --sweep-segments 0 skips it).
 ///
 /// "convergence": two configurations with exact answers, the relative error of the total flux
 /// against emitted rays and seconds, root mean square over --seeds seeds, beside the standard error
@@ -216,7 +217,8 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
                          {"sah_cost", top.tree.sah_cost}}},
           {"sensor_level", {{"nodes", top.sensor_tree.nodes}, {"leaves", top.sensor_tree.leaves},
                             {"empty_leaves", top.sensor_tree.empty_leaves}, {"references", top.sensor_tree.references},
-                            {"max_depth", top.sensor_tree.max_depth}, {"sah_cost", top.sensor_tree.sah_cost}}},
+                            {"max_depth", top.sensor_tree.max_depth}, {"sah_cost", top.sensor_tree.sah_cost},
+                            {"grid_cells", top.sensor_grid_cells}, {"grid_entries", top.sensor_grid_entries}}},
           {"bins", setup->scene->binCount()},
           {"instances", setup->graph.instances().size()},
           {"meshes", meshes},
@@ -233,7 +235,7 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
 
 /// "sensor_level": the crossing query alone on the overhead scene's 10,000 small sensors (no
 /// meshes), with the sensors' tree built with several intersection costs and empty bonuses
-/// (TopLevelConfig::sensor_build): process CPU time per query (best of `repeat` interleaved
+/// (TopLevelConfig::sensor_build, walked without the grid), and as shipped (the grid): process CPU time per query (best of `repeat` interleaved
 /// rounds; CPU time, because the machine may be shared) on wall-to-wall segments of the room, each
 /// from a random wall point (by area) in a cosine-distributed direction, as diffuse bounces leave.
 nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int repeat) {
@@ -274,16 +276,19 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   }
   struct Variant {
     float intersection_cost, empty_bonus;
+    bool grid;  // TopLevelConfig::sensor_grid: the uniform grid instead of the tree
   };
   const KdBuildConfig shipped = sensorLevelBuildDefaults(), main_level = topLevelBuildDefaults();
-  const std::vector<Variant> variants{{main_level.intersection_cost, main_level.empty_bonus},
-                                      {0.3f, 0.0f}, {0.1f, 0.0f}, {0.1f, 0.2f}, {0.05f, 0.0f}, {0.02f, 0.0f},
-                                      {shipped.intersection_cost, shipped.empty_bonus}};
+  const std::vector<Variant> variants{{main_level.intersection_cost, main_level.empty_bonus, false},
+                                      {0.3f, 0.0f, false}, {0.1f, 0.0f, false}, {0.1f, 0.2f, false},
+                                      {0.05f, 0.0f, false}, {0.02f, 0.0f, false}, {0.01f, 0.0f, false},
+                                      {shipped.intersection_cost, shipped.empty_bonus, true}};
   std::vector<std::unique_ptr<TopLevel>> tops;
   for (const Variant& v : variants) {
     TopLevelConfig c;
     c.sensor_build.intersection_cost = v.intersection_cost;
     c.sensor_build.empty_bonus = v.empty_bonus;
+    c.sensor_grid = v.grid;
     tops.push_back(std::make_unique<TopLevel>(c));
     tops.back()->build(instances);
   }
@@ -305,9 +310,13 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   }
   nlohmann::json rows = nlohmann::json::array();
   for (std::size_t k = 0; k < variants.size(); ++k) {
-    const KdTreeStats st = tops[k]->stats().sensor_tree;
+    const TopLevelStats tst = tops[k]->stats();
+    const KdTreeStats& st = tst.sensor_tree;
     rows.push_back({{"intersection_cost", variants[k].intersection_cost},
                     {"empty_bonus", variants[k].empty_bonus},
+                    {"grid", variants[k].grid},
+                    {"grid_cells", tst.sensor_grid_cells},
+                    {"grid_entries", tst.sensor_grid_entries},
                     {"shipped", k + 1 == variants.size()},
                     {"nodes", st.nodes},
                     {"references", st.references},

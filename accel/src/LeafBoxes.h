@@ -1,35 +1,40 @@
 #pragma once
 // Private to accel/src: the world boxes of a kd-tree's references in leaf order, structure of
-// arrays, for a leaf step that tests many boxes per leaf (the sensors' level: leaves of a few
-// small sensors, most of which a ray misses). A leaf's boxes are one contiguous run, tested four
-// at a time (SSE2 where available), and nothing else about a reference is read unless its box is
-// met.
+// arrays, for a leaf step that tests many boxes per leaf (the sensors' level: leaves of a dozen or
+// more small sensors, most of which a ray misses). A leaf's boxes are one contiguous run, tested
+// 16, 8 or 4 at a time (AVX-512, AVX2 or SSE2: the widest the CPU runs, chosen once at refresh()),
+// and nothing else about a reference is read unless its box is met.
 
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
+#if defined(__GNUC__) && defined(__x86_64__)
+#define DUPLEX_LEAF_BOXES_X86 1
+#include <immintrin.h>
 #endif
 
 namespace duplex::toplevel_detail {
 
 struct LeafBoxes {
   // lo[k][i], hi[k][i]: axis k of the box of reference i (tree.prim_indices order), padded by
-  // kPad entries so that a 4-wide load at the last reference stays inside.
-  static constexpr std::size_t kPad = 3;
+  // kPad entries so that a 16-wide load at the last reference stays inside.
+  static constexpr std::size_t kPad = 15;
   std::vector<float> lo[3], hi[3];
   std::size_t count = 0;
+  // Boxes per vector test: 16 (AVX-512F), 8 (AVX2), 4 (SSE2) or 1 (scalar); set by refresh().
+  std::uint32_t lanes = 1;
 
   // Copies boxes[prim_indices[i]] for every reference (O(references)).
   void refresh(const std::vector<Box>& boxes, const std::vector<std::uint32_t>& prim_indices) {
     count = 0;
+    lanes = widestTest();
     for (int k = 0; k < 3; ++k) {
       lo[k].assign(prim_indices.size() + kPad, 0.0f);
       hi[k].assign(prim_indices.size() + kPad, 0.0f);
@@ -45,48 +50,163 @@ struct LeafBoxes {
   }
 
   // Calls hit(i) for every reference i in [begin, begin + n) whose box the ray meets within
-  // [ray.tnear, t_max], in order; the same answer as clipIntervalToBox (a superset of its "yes"
-  // only where the two round differently: the widening is the same, NaN counts as "meets").
+  // [ray.tnear, t_max], in order: every box that clipIntervalToBox accepts (the same slabs and
+  // widening; the vector tests widen the largest entry and the smallest exit once instead of every
+  // axis's, which gives the same bounds because the widening is monotonic; NaN counts as "meets").
+  // A superset is harmless: a met box only selects the sensors the exact test is asked about.
   template <class F>
   void forEachMet(const KdRay& ray, std::uint32_t begin, std::uint32_t n, float t_max, F&& hit) const {
-#if defined(__SSE2__)
-    if (!(ray.zero[0] | ray.zero[1] | ray.zero[2])) {
-      constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
-      const __m128 widen = _mm_set1_ps(kWiden);
-      const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
-      const __m128 t_near = _mm_set1_ps(ray.tnear), t_far = _mm_set1_ps(t_max);
-      for (std::uint32_t j = 0; j < n; j += 4) {
-        const std::uint32_t i = begin + j;
-        __m128 t_in = t_near, t_out = t_far;
-        for (int k = 0; k < 3; ++k) {
-          const __m128 o = _mm_set1_ps(ray.origin[k]), inv = _mm_set1_ps(ray.inv_dir[k]);
-          const __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(&lo[k][i]), o), inv);
-          const __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(&hi[k][i]), o), inv);
-          __m128 a = _mm_min_ps(t0, t1), b = _mm_max_ps(t0, t1);
-          a = _mm_sub_ps(a, _mm_mul_ps(_mm_and_ps(a, abs_mask), widen));
-          b = _mm_add_ps(b, _mm_mul_ps(_mm_and_ps(b, abs_mask), widen));
-          // The ray's bound as the second operand: a NaN slab bound (0 * inf) leaves it.
-          t_in = _mm_max_ps(a, t_in);
-          t_out = _mm_min_ps(b, t_out);
-        }
-        int met = _mm_movemask_ps(_mm_cmple_ps(t_in, t_out));
-        if (n - j < 4) met &= (1 << (n - j)) - 1;
-        while (met != 0) {
-          const int m = std::countr_zero(static_cast<unsigned>(met));
-          hit(i + static_cast<std::uint32_t>(m));
-          met &= met - 1;
-        }
+#if defined(DUPLEX_LEAF_BOXES_X86)
+    if (lanes > 1 && !(ray.zero[0] | ray.zero[1] | ray.zero[2])) {
+      // Up to 64 references per call: one call covers a leaf, and the ray's broadcasts stay in
+      // registers across its vectors.
+      std::uint32_t met[64];
+      for (std::uint32_t j = 0; j < n; j += 64) {
+        const std::uint32_t run[2] = {begin + j, begin + std::min<std::uint32_t>(n, j + 64)};
+        const std::uint32_t count_met = metInRuns(ray, t_max, run, 1, met);
+        for (std::uint32_t k = 0; k < count_met; ++k) hit(met[k]);
       }
       return;
     }
 #endif
-    // Rays with a zero direction component (and targets without SSE2): the scalar test.
+    // Rays with a zero direction component (and targets without the vector tests): the scalar test.
     for (std::uint32_t i = begin; i < begin + n; ++i) {
       const Box b(glm::vec3(lo[0][i], lo[1][i], lo[2][i]), glm::vec3(hi[0][i], hi[1][i], hi[2][i]));
       float t0 = ray.tnear, t1 = t_max;
       if (clipIntervalToBox(ray, b, t0, t1)) hit(i);
     }
   }
+
+  // The vector test over several runs of references at once (the grid walk: the runs of the cells
+  // a ray passes, one call per ray): for each run [runs[2r], runs[2r + 1]) appends the references
+  // whose box the ray meets within [ray.tnear, t_max] to `out` (room for every reference of the
+  // runs), in order; returns how many. Needs lanes > 1 and a ray without zero direction components.
+  std::uint32_t metInRuns(const KdRay& ray, float t_max, const std::uint32_t* runs, std::uint32_t run_count,
+                          std::uint32_t* out) const {
+#if defined(DUPLEX_LEAF_BOXES_X86)
+    if (lanes == 16) return runs16(ray, t_max, runs, run_count, out);
+    if (lanes == 8) return runs8(ray, t_max, runs, run_count, out);
+    if (lanes == 4) return runs4(ray, t_max, runs, run_count, out);
+#endif
+    std::uint32_t n = 0;
+    for (std::uint32_t r = 0; r < run_count; ++r)
+      forEachMet(ray, runs[2 * r], runs[2 * r + 1] - runs[2 * r], t_max, [&](std::uint32_t i) { out[n++] = i; });
+    return n;
+  }
+
+ private:
+  static constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
+
+  static std::uint32_t widestTest() {
+#if defined(DUPLEX_LEAF_BOXES_X86)
+    if (__builtin_cpu_supports("avx512f")) return 16;
+    if (__builtin_cpu_supports("avx2")) return 8;
+    return 4;  // SSE2 is part of x86-64
+#else
+    return 1;
+#endif
+  }
+
+#if defined(DUPLEX_LEAF_BOXES_X86)
+  // The slab tests of the references of each run, `lanes` at a time; the indices of the boxes met
+  // go to `out`. Per axis the entry is min(t0, t1) and the exit max(t0, t1); the largest entry
+  // and the smallest exit are widened by their magnitude times kWiden (as clipIntervalToBox
+  // widens each axis's) and clipped to [tnear, t_max]. The running bound is the second operand of
+  // max / min: a NaN slab bound (0 * inf) leaves it. Loads past a run's end read the next run or
+  // the padding; their bits are cleared. The three differ only in vector width.
+  __attribute__((target("avx512f"))) std::uint32_t runs16(const KdRay& ray, float t_max, const std::uint32_t* runs,
+                                                          std::uint32_t run_count, std::uint32_t* out) const {
+    constexpr __mmask16 kAll = 0xFFFF;
+    const __m512 o[3] = {_mm512_set1_ps(ray.origin[0]), _mm512_set1_ps(ray.origin[1]), _mm512_set1_ps(ray.origin[2])};
+    const __m512 inv[3] = {_mm512_set1_ps(ray.inv_dir[0]), _mm512_set1_ps(ray.inv_dir[1]), _mm512_set1_ps(ray.inv_dir[2])};
+    const __m512 widen = _mm512_set1_ps(kWiden), t_near = _mm512_set1_ps(ray.tnear), t_far = _mm512_set1_ps(t_max);
+    const __m512 minus_inf = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
+    const __m512 plus_inf = _mm512_set1_ps(std::numeric_limits<float>::infinity());
+    const float* lo_k[3] = {lo[0].data(), lo[1].data(), lo[2].data()};
+    const float* hi_k[3] = {hi[0].data(), hi[1].data(), hi[2].data()};
+    std::uint32_t n = 0;
+    for (std::uint32_t r = 0; r < run_count; ++r) {
+      const std::uint32_t end = runs[2 * r + 1];
+      for (std::uint32_t i = runs[2 * r]; i < end; i += 16) {
+        __m512 enter = minus_inf, leave = plus_inf;
+        for (int k = 0; k < 3; ++k) {
+          const __m512 t0 = _mm512_mul_ps(_mm512_sub_ps(_mm512_loadu_ps(lo_k[k] + i), o[k]), inv[k]);
+          const __m512 t1 = _mm512_mul_ps(_mm512_sub_ps(_mm512_loadu_ps(hi_k[k] + i), o[k]), inv[k]);
+          enter = _mm512_maskz_max_ps(kAll, _mm512_maskz_min_ps(kAll, t0, t1), enter);
+          leave = _mm512_maskz_min_ps(kAll, _mm512_maskz_max_ps(kAll, t0, t1), leave);
+        }
+        enter = _mm512_maskz_max_ps(kAll, _mm512_sub_ps(enter, _mm512_mul_ps(_mm512_abs_ps(enter), widen)), t_near);
+        leave = _mm512_maskz_min_ps(kAll, _mm512_add_ps(leave, _mm512_mul_ps(_mm512_abs_ps(leave), widen)), t_far);
+        std::uint32_t met = _mm512_cmp_ps_mask(enter, leave, _CMP_LE_OQ);
+        if (end - i < 16) met &= (1u << (end - i)) - 1u;
+        for (; met != 0; met &= met - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(met));
+      }
+    }
+    return n;
+  }
+
+  __attribute__((target("avx2"))) std::uint32_t runs8(const KdRay& ray, float t_max, const std::uint32_t* runs,
+                                                       std::uint32_t run_count, std::uint32_t* out) const {
+    const __m256 o[3] = {_mm256_set1_ps(ray.origin[0]), _mm256_set1_ps(ray.origin[1]), _mm256_set1_ps(ray.origin[2])};
+    const __m256 inv[3] = {_mm256_set1_ps(ray.inv_dir[0]), _mm256_set1_ps(ray.inv_dir[1]), _mm256_set1_ps(ray.inv_dir[2])};
+    const __m256 widen = _mm256_set1_ps(kWiden), t_near = _mm256_set1_ps(ray.tnear), t_far = _mm256_set1_ps(t_max);
+    const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+    const __m256 minus_inf = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+    const __m256 plus_inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
+    const float* lo_k[3] = {lo[0].data(), lo[1].data(), lo[2].data()};
+    const float* hi_k[3] = {hi[0].data(), hi[1].data(), hi[2].data()};
+    std::uint32_t n = 0;
+    for (std::uint32_t r = 0; r < run_count; ++r) {
+      const std::uint32_t end = runs[2 * r + 1];
+      for (std::uint32_t i = runs[2 * r]; i < end; i += 8) {
+        __m256 enter = minus_inf, leave = plus_inf;
+        for (int k = 0; k < 3; ++k) {
+          const __m256 t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(lo_k[k] + i), o[k]), inv[k]);
+          const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(hi_k[k] + i), o[k]), inv[k]);
+          enter = _mm256_max_ps(_mm256_min_ps(t0, t1), enter);
+          leave = _mm256_min_ps(_mm256_max_ps(t0, t1), leave);
+        }
+        enter = _mm256_max_ps(_mm256_sub_ps(enter, _mm256_mul_ps(_mm256_and_ps(enter, abs_mask), widen)), t_near);
+        leave = _mm256_min_ps(_mm256_add_ps(leave, _mm256_mul_ps(_mm256_and_ps(leave, abs_mask), widen)), t_far);
+        std::uint32_t met = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ)));
+        if (end - i < 8) met &= (1u << (end - i)) - 1u;
+        for (; met != 0; met &= met - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(met));
+      }
+    }
+    return n;
+  }
+
+  std::uint32_t runs4(const KdRay& ray, float t_max, const std::uint32_t* runs, std::uint32_t run_count,
+                      std::uint32_t* out) const {
+    const __m128 o[3] = {_mm_set1_ps(ray.origin[0]), _mm_set1_ps(ray.origin[1]), _mm_set1_ps(ray.origin[2])};
+    const __m128 inv[3] = {_mm_set1_ps(ray.inv_dir[0]), _mm_set1_ps(ray.inv_dir[1]), _mm_set1_ps(ray.inv_dir[2])};
+    const __m128 widen = _mm_set1_ps(kWiden), t_near = _mm_set1_ps(ray.tnear), t_far = _mm_set1_ps(t_max);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+    const __m128 minus_inf = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+    const __m128 plus_inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+    const float* lo_k[3] = {lo[0].data(), lo[1].data(), lo[2].data()};
+    const float* hi_k[3] = {hi[0].data(), hi[1].data(), hi[2].data()};
+    std::uint32_t n = 0;
+    for (std::uint32_t r = 0; r < run_count; ++r) {
+      const std::uint32_t end = runs[2 * r + 1];
+      for (std::uint32_t i = runs[2 * r]; i < end; i += 4) {
+        __m128 enter = minus_inf, leave = plus_inf;
+        for (int k = 0; k < 3; ++k) {
+          const __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(lo_k[k] + i), o[k]), inv[k]);
+          const __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(hi_k[k] + i), o[k]), inv[k]);
+          enter = _mm_max_ps(_mm_min_ps(t0, t1), enter);
+          leave = _mm_min_ps(_mm_max_ps(t0, t1), leave);
+        }
+        enter = _mm_max_ps(_mm_sub_ps(enter, _mm_mul_ps(_mm_and_ps(enter, abs_mask), widen)), t_near);
+        leave = _mm_min_ps(_mm_add_ps(leave, _mm_mul_ps(_mm_and_ps(leave, abs_mask), widen)), t_far);
+        std::uint32_t met = static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(enter, leave)));
+        if (end - i < 4) met &= (1u << (end - i)) - 1u;
+        for (; met != 0; met &= met - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(met));
+      }
+    }
+    return n;
+  }
+#endif
 };
 
 }  // namespace duplex::toplevel_detail

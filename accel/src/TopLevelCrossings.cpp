@@ -25,6 +25,7 @@ namespace {
 struct CrossingScratch {
   std::vector<const Record*> media;
   std::vector<Hit> hits;
+  std::vector<std::uint32_t> grid_runs, grid_met;  // the grid walk's cells and met entries
 };
 const char kScratchKey = 0;
 
@@ -116,14 +117,20 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     const Box* s_boxes = ss.boxes.data();
     const LeafBoxes* leaf_boxes = ss.leaf_boxes.count == s_tree.prim_indices.size() ? &ss.leaf_boxes : nullptr;
     Mailbox s_mailbox;
+    // Flat sensors' bounds, when they describe this level's slots (refreshed with the leaf boxes).
+    const FlatBound* flat = leaf_boxes && ss.flat.size() == ss.records.size() ? ss.flat.data() : nullptr;
+    const double t_keep_d = t_keep;
     auto visit = [&](std::uint32_t slot) {
       const SlotFilter f = s_filters[slot];
       if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
       ++ctx.stats.instance_visits;
+      if (flat && flat[slot].valid && clearlyMisses(s_records[slot], flat[slot], w.d, t_keep_d)) return;
       addCrossings(s_records[slot], t_keep);
     };
+    const bool by_grid = leaf_boxes && config_.sensor_grid && ss.grid.usable() &&
+                         ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met, [&](std::uint32_t slot) { visit(slot); });
     float t_limit = t_keep;
-    (void)traverseKdTree<false>(s_tree, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
+    if (!by_grid) (void)traverseKdTree<false>(s_tree, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
       if (leaf_boxes) {
         leaf_boxes->forEachMet(kray, begin, count, t_keep, [&](std::uint32_t i) { visit(s_prims[i]); });
       } else {

@@ -206,6 +206,12 @@ void SensorObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, Query
   hits.push_back(h);
 }
 
+std::optional<FlatCrossings> SensorObject::flatCrossings() const {
+  if (spec_.shape == SensorShape::Sphere) return std::nullopt;
+  const Box b = bounds();  // the half sizes rounded outwards: never inside the closed border
+  return FlatCrossings{b.hi.x, b.hi.y, !spec_.two_sided};
+}
+
 std::size_t SensorObject::memoryBytes() const { return sizeof(*this) + bin_area_.capacity() * sizeof(double); }
 
 }  // namespace duplex

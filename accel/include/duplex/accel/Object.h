@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -27,6 +28,15 @@ enum class ObjectRole : std::uint8_t {
   /// Never blocks or changes a ray; records the rays that cross it (light sensors). Closest-hit
   /// and any-hit queries ignore it; intersectAll() reports its crossings.
   Sensor,
+};
+
+/// Where a flat object's crossings can lie (see Object::flatCrossings): object space, the closed
+/// rectangle |x| <= half_width, |y| <= half_height of the plane z = 0, and, when front_only, only
+/// for rays travelling towards -z.
+struct FlatCrossings {
+  float half_width = 0.0f;
+  float half_height = 0.0f;
+  bool front_only = false;
 };
 
 /// An immutable, shareable object (a mesh, a volume, a sensor). Any number of instances refer to
@@ -59,6 +69,11 @@ class Object {
   /// epsilons (relative) in t into one.
   /// For picking through layers and, for sensors, the crossings a ray deposits energy in.
   virtual void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const = 0;
+  /// Optional: a bound of where intersectAll() can report crossings, for objects whose crossings
+  /// all lie in a rectangle of their plane z = 0 (flat sensors). The crossing query then skips,
+  /// without calling intersectAll(), an instance that a ray clearly misses (by a margin well above
+  /// rounding); the crossings themselves always come from intersectAll(). Default: none.
+  [[nodiscard]] virtual std::optional<FlatCrossings> flatCrossings() const { return std::nullopt; }
   /// Fraction of light that passes along [tnear, tfar] of `ray_os`, in [0, 1]. Surfaces: 0 when
   /// occluded, else 1; media override it.
   [[nodiscard]] virtual float transmittance(const Ray& ray_os, QueryContext& ctx) const {

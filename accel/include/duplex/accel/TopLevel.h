@@ -85,6 +85,11 @@ struct TopLevelConfig {
   /// The same for the sensors' own level (see TopLevel); build() with an explicit configuration
   /// sets `build` only.
   KdBuildConfig sensor_build = sensorLevelBuildDefaults();
+  /// The crossing query walks a uniform grid over the sensors' boxes instead of their kd-tree
+  /// when the level holds many sensors (at least 256, each spanning few cells) and the ray's
+  /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
+  /// "The crossing query"). false: always the kd-tree (for comparisons).
+  bool sensor_grid = true;
   TopLevelUpdate update = TopLevelUpdate::Incremental;
   /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
   /// scaled to the current instance count).
@@ -116,6 +121,10 @@ struct TopLevelStats {
   /// count the other instances only.
   std::size_t sensor_instances = 0;
   KdTreeStats sensor_tree;
+  /// The uniform grid the crossing query walks over the sensors (TopLevelConfig::sensor_grid):
+  /// its cells and entries (sensors times the cells each is listed in); 0 when it walks the tree.
+  std::size_t sensor_grid_cells = 0;
+  std::size_t sensor_grid_entries = 0;
 };
 
 class TopLevel {

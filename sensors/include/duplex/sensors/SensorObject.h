@@ -100,6 +100,9 @@ class SensorObject final : public Object {
   /// u = azimuth phi (radians), v = n.z, ng = the outward normal.
   void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
+  /// Rectangles and disks: the rectangle of bounds() (a disk's bounding square), front_only for a
+  /// one-sided sensor; spheres: none.
+  [[nodiscard]] std::optional<FlatCrossings> flatCrossings() const override;
 
   /// The crossing test itself: whether `ray_os` crosses the sensor within [tnear, tfar] (with the
   /// side and border rules above); fills t (units of ray_os.dir) and the cell. Spheres: the first

@@ -1,0 +1,285 @@
+/// \file SensorCrossingPathsTest.cpp
+/// The crossing query's fast paths against its general path and a brute force. With many sensors
+/// the query walks a uniform grid over the sensors' boxes (TopLevelConfig::sensor_grid), tests
+/// boxes 16, 8 or 4 at a time, and skips flat sensors a ray clearly misses (Object::flatCrossings)
+/// before asking intersectAll; the general path walks the sensors' kd-tree. Both must report the
+/// same crossings (instance, bin, t, u, v, normal, bit for bit) as every sensor asked directly, on
+/// rays aimed at borders, corners and inner bin edges, rays parallel to a sensor (in its plane and
+/// beside it), one-sided sensors hit from the front and from the back, rays from far away (which
+/// leave the grid for the tree), rays with zero direction components, and sensors far from the
+/// origin.
+
+#include "duplex/accel/Crossing.h"
+#include "duplex/accel/TopLevel.h"
+#include "duplex/sensors/SensorObject.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace duplex {
+namespace {
+
+std::shared_ptr<const SensorObject> sensor(SensorShape shape, double size, std::uint32_t bins, bool two_sided) {
+  SensorSpec s;
+  s.shape = shape;
+  s.width = size;
+  s.height = size;
+  s.nx = bins;
+  s.ny = bins;
+  s.two_sided = two_sided;
+  return std::make_shared<const SensorObject>("s", s);
+}
+
+/// A rotation taking +z to the unit vector n (Duff et al. 2017), then a turn by `spin` about n.
+Affine facing(const glm::dvec3& n, double spin, const glm::dvec3& at) {
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z), b = n.x * n.y * a;
+  const glm::dvec3 t(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+  const glm::dvec3 s(b, sign + n.y * n.y * a, -n.y);
+  Affine m;
+  m.linear = glm::dmat3(std::cos(spin) * t + std::sin(spin) * s, -std::sin(spin) * t + std::cos(spin) * s, n);
+  m.translation = at;
+  return m;
+}
+
+struct Scene {
+  std::vector<InstanceDesc> instances;
+  std::vector<double> half;  // half size of each instance's object (flat sensors and spheres)
+};
+
+/// 2,000 sensors at random places and orientations in a 10 x 10 x 4 room offset by `offset`:
+/// two- and one-sided squares (0.1, 4 x 4 bins), disks (0.12, 3 x 3) and a few spheres (0.1).
+Scene makeScene(const glm::dvec3& offset) {
+  const auto square = sensor(SensorShape::Rectangle, 0.1, 4, true);
+  const auto square_front = sensor(SensorShape::Rectangle, 0.1, 4, false);
+  const auto disk = sensor(SensorShape::Disk, 0.12, 3, true);
+  const auto disk_front = sensor(SensorShape::Disk, 0.12, 3, false);
+  const auto ball = sensor(SensorShape::Sphere, 0.1, 4, true);
+  std::mt19937_64 rng(2026);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Scene s;
+  for (std::uint32_t id = 0; id < 2000; ++id) {
+    InstanceDesc d;
+    d.id = id;
+    const int kind = static_cast<int>(id % 10);
+    d.object = kind < 4 ? square : kind < 6 ? square_front : kind < 8 ? disk : kind < 9 ? disk_front : ball;
+    s.half.push_back(kind < 6 || kind == 9 ? 0.05 : 0.06);
+    const glm::dvec3 at = offset + glm::dvec3(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
+    if (id % 8 == 0) {  // axis-aligned: flat world boxes, the border in a box face
+      d.world_from_object.translation = at;
+    } else {
+      const double z = 2.0 * u(rng) - 1.0, phi = 2.0 * std::numbers::pi * u(rng), r = std::sqrt(1.0 - z * z);
+      d.world_from_object = facing({r * std::cos(phi), r * std::sin(phi), z}, 6.3 * u(rng), at);
+    }
+    d.mask = id % 7 == 0 ? 2u : 3u;
+    s.instances.push_back(d);
+  }
+  return s;
+}
+
+/// Every sensor asked directly (object-space ray as the top level computes it), sorted by t then
+/// instance id.
+std::vector<Hit> bruteForce(const Scene& s, const Ray& ray, float t_max, std::uint32_t mask) {
+  std::vector<Hit> out;
+  QueryContext ctx;
+  for (const InstanceDesc& d : s.instances) {
+    if ((d.mask & mask) == 0) continue;
+    const Affine inv = d.world_from_object.inverse();
+    Ray r = inv.apply(ray);
+    r.tfar = t_max;
+    std::vector<Hit> hits;
+    d.object->intersectAll(r, hits, ctx);
+    for (Hit& h : hits) {
+      h.instance_id = d.id;
+      out.push_back(h);
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.instance_id < b.instance_id; });
+  return out;
+}
+
+struct Counts {
+  std::size_t rays = 0, crossings = 0;
+};
+
+void expectSame(const std::vector<SensorCrossing>& got, const std::vector<Hit>& want, const Ray& ray, const char* path) {
+  ASSERT_EQ(got.size(), want.size()) << path << " " << ray;
+  for (std::size_t k = 0; k < want.size(); ++k) {
+    const Hit& g = got[k].hit;
+    ASSERT_EQ(g.instance_id, want[k].instance_id) << path << " " << ray;
+    ASSERT_EQ(g.prim_id, want[k].prim_id) << path << " " << ray;
+    ASSERT_EQ(g.t, want[k].t) << path << " " << ray;
+    ASSERT_EQ(g.u, want[k].u) << path << " " << ray;
+    ASSERT_EQ(g.v, want[k].v) << path << " " << ray;
+  }
+}
+
+/// One ray through both paths and the brute force; the two paths must also agree on the normal.
+void checkRay(const Scene& s, const TopLevel& fast, const TopLevel& general, const Ray& ray, std::uint32_t mask,
+              Counts& counts) {
+  CrossingQuery q;
+  q.sensor_mask = mask;
+  QueryContext ctx;
+  std::vector<SensorCrossing> a, b;
+  const SegmentEnd end_a = fast.intersectWithCrossings(ray, a, ctx, q);
+  const SegmentEnd end_b = general.intersectWithCrossings(ray, b, ctx, q);
+  ASSERT_FALSE(end_a.hit.valid());  // sensors never block
+  ASSERT_FALSE(end_b.hit.valid());
+  const std::vector<Hit> want = bruteForce(s, ray, ray.tfar * (1.0f + kCrossingSlack), mask);
+  ASSERT_NO_FATAL_FAILURE(expectSame(a, want, ray, "grid"));
+  ASSERT_NO_FATAL_FAILURE(expectSame(b, want, ray, "tree"));
+  for (std::size_t k = 0; k < a.size(); ++k) ASSERT_EQ(a[k].hit.ng, b[k].hit.ng) << ray;
+  ++counts.rays;
+  counts.crossings += want.size();
+}
+
+void checkPaths(const glm::dvec3& offset) {
+  const Scene s = makeScene(offset);
+  TopLevel fast;
+  TopLevelConfig tree_only;
+  tree_only.sensor_grid = false;
+  TopLevel general(tree_only);
+  fast.build(s.instances);
+  general.build(s.instances);
+  // The fast path is the one under test: the grid must be there (and only there).
+  ASSERT_GT(fast.stats().sensor_grid_cells, 0u);
+  EXPECT_EQ(general.stats().sensor_grid_cells, 0u);
+
+  std::mt19937_64 r(99);
+  std::uniform_real_distribution<double> v(0.0, 1.0);
+  auto inRoom = [&] { return offset + glm::dvec3(-5.0 + 10.0 * v(r), -5.0 + 10.0 * v(r), 4.0 * v(r)); };
+  auto flatSensor = [&]() -> const InstanceDesc& {
+    while (true) {
+      const InstanceDesc& d = s.instances[r() % s.instances.size()];
+      if (d.id % 10 != 9) return d;  // not a sphere
+    }
+  };
+  Counts random, aimed, parallel, front, back, far;
+  // Random segments, some with zero direction components (the scalar box test, the tree).
+  for (int i = 0; i < 2000; ++i) {
+    Ray ray;
+    ray.origin = glm::vec3(inRoom());
+    glm::dvec3 dir(v(r) - 0.5, v(r) - 0.5, v(r) - 0.5);
+    if (i % 5 == 1) dir[static_cast<int>(r() % 3)] = 0.0;
+    ray.dir = glm::vec3(dir);
+    ray.tnear = i % 3 == 0 ? static_cast<float>(3.0 * v(r)) : 0.0f;
+    ray.tfar = static_cast<float>(4.0 + 20.0 * v(r));
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, i % 2 ? 0xFFFFFFFFu : 1u, random));
+  }
+  // Aimed exactly at a border, corner or inner bin edge (local x or y on an edge of the grid of
+  // bins, or on the border), from inside the room; each segment ends past its target.
+  for (int i = 0; i < 3000; ++i) {
+    const InstanceDesc& d = flatSensor();
+    const double h = s.half[d.id];
+    const double edges[5] = {-h, -0.5 * h, 0.0, 0.5 * h, h};
+    glm::dvec3 local(edges[r() % 5], -h + 2.0 * h * v(r), 0.0);
+    if (i % 2) std::swap(local.x, local.y);
+    if (i % 3 == 0) local.y = edges[r() % 5];  // a corner of bins, or of the sensor
+    const glm::dvec3 target = d.world_from_object.point(local);
+    const glm::dvec3 from = inRoom();
+    Ray ray;
+    ray.origin = glm::vec3(from);
+    ray.dir = glm::vec3(target - from);
+    ray.tfar = 1.5f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 0xFFFFFFFFu, aimed));
+  }
+  // Parallel to a sensor: in its plane through its middle, and just beside the plane.
+  for (int i = 0; i < 1000; ++i) {
+    const InstanceDesc& d = flatSensor();
+    const double a = 2.0 * std::numbers::pi * v(r);
+    const glm::dvec3 dir_os(std::cos(a), std::sin(a), 0.0);
+    const glm::dvec3 start_os = -0.5 * dir_os + glm::dvec3(0.0, 0.0, i % 2 ? 0.0 : 1e-7);
+    Ray ray;
+    ray.origin = glm::vec3(d.world_from_object.point(start_os));
+    ray.dir = glm::vec3(d.world_from_object.vector(dir_os));
+    ray.tfar = 1.0f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 0xFFFFFFFFu, parallel));
+  }
+  // One-sided sensors through their middle, from the front (+z side) and from the back.
+  for (int i = 0; i < 1000; ++i) {
+    const InstanceDesc* d = &flatSensor();
+    while (d->id % 10 != 4 && d->id % 10 != 5 && d->id % 10 != 8) d = &flatSensor();
+    const bool from_front = i % 2 == 0;
+    const glm::dvec3 off(0.3 * (v(r) - 0.5), 0.3 * (v(r) - 0.5), from_front ? 1.0 : -1.0);
+    Ray ray;
+    ray.origin = glm::vec3(d->world_from_object.point(off));
+    ray.dir = glm::vec3(d->world_from_object.vector(glm::dvec3(0.02 * (v(r) - 0.5), 0.02 * (v(r) - 0.5), 0.0) - off));
+    ray.tfar = 2.0f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 0xFFFFFFFFu, from_front ? front : back));
+  }
+  // From far away (rounding too large for the grid's margin: the tree answers), through the room.
+  for (int i = 0; i < 300; ++i) {
+    const glm::dvec3 target = inRoom();
+    const double z = 2.0 * v(r) - 1.0, phi = 2.0 * std::numbers::pi * v(r), rr = std::sqrt(1.0 - z * z);
+    const glm::dvec3 from = target + 1e6 * glm::dvec3(rr * std::cos(phi), rr * std::sin(phi), z);
+    Ray ray;
+    ray.origin = glm::vec3(from);
+    ray.dir = glm::vec3((target - from) / 1e6);
+    ray.tfar = 2e6f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 0xFFFFFFFFu, far));
+  }
+  EXPECT_GT(random.crossings, 100u);
+  EXPECT_GT(aimed.crossings, 2000u);   // most aimed rays end past a border they count on
+  EXPECT_GT(front.crossings, 400u);     // one-sided sensors record rays arriving at the front...
+  EXPECT_EQ(parallel.rays, 1000u);
+  EXPECT_EQ(back.rays, 500u);
+  EXPECT_GT(far.crossings, 10u);
+}
+
+TEST(SensorCrossingPaths, GridAndFlatTestsAgreeWithTheTreeAndBruteForce) {
+  ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(0.0)));
+}
+
+TEST(SensorCrossingPaths, AgreeFarFromTheOrigin) {
+  ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(1e4, -5e3, 2e3)));
+}
+
+TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
+  Scene s = makeScene(glm::dvec3(0.0));
+  TopLevel top;
+  top.build(s.instances);
+  const TopLevelStats before = top.stats();
+  ASSERT_GT(before.sensor_grid_cells, 0u);
+  // Moving sensors far away (a commit rebuilds the grid over the new bounds): still exact.
+  std::mt19937_64 r(5);
+  for (std::uint32_t id = 0; id < 2000; id += 97) {
+    s.instances[id].world_from_object.translation += glm::dvec3(40.0, 0.0, 0.0);
+    top.set(s.instances[id]);
+  }
+  top.commit();
+  TopLevelConfig tree_only;
+  tree_only.sensor_grid = false;
+  TopLevel general(tree_only);
+  general.build(s.instances);
+  Counts counts;
+  std::uniform_real_distribution<double> v(0.0, 1.0);
+  for (int i = 0; i < 1000; ++i) {
+    Ray ray;
+    ray.origin = glm::vec3(-5.0 + 10.0 * v(r), -5.0 + 10.0 * v(r), 4.0 * v(r));
+    ray.dir = glm::vec3(glm::dvec3(v(r) - 0.2, v(r) - 0.5, v(r) - 0.5));
+    ray.tfar = 60.0f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, top, general, ray, 0xFFFFFFFFu, counts));
+  }
+  EXPECT_GT(counts.crossings, 40u);
+  // Few sensors: no grid, the tree alone.
+  TopLevel few;
+  few.build(std::vector<InstanceDesc>(s.instances.begin(), s.instances.begin() + 100));
+  EXPECT_EQ(few.stats().sensor_grid_cells, 0u);
+  // Large sensors spanning many cells: no grid either.
+  std::vector<InstanceDesc> large = s.instances;
+  const auto big = sensor(SensorShape::Rectangle, 8.0, 4, true);
+  for (InstanceDesc& d : large) d.object = big;
+  TopLevel spanning;
+  spanning.build(large);
+  EXPECT_EQ(spanning.stats().sensor_grid_cells, 0u);
+}
+
+}  // namespace
+}  // namespace duplex
