@@ -689,6 +689,75 @@ TEST(TriangleClip, SplitEqualsClippingEachHalf) {
   EXPECT_GT(both, 100u);
 }
 
+TEST(TriangleClip, SplitOfATriangleInsideTheBoxIsTightAndContainsItsPart) {
+  // A triangle inside the box is cut from its float corners with the edge crossings rounded
+  // outward (two thirds of the splits of a mesh build). Against the exact part on each side
+  // (corners and crossings in long double): the bounds must contain it and be at most one float
+  // step looser, at coordinates from 1e-3 to 1e3 of either sign, with planes through a vertex and
+  // at zero next to a -0 corner.
+  std::mt19937_64 rng(81);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::size_t crossings = 0;
+  for (int i = 0; i < 3000; ++i) {
+    const double scale = std::pow(10.0, -3 + i % 7);
+    std::array<glm::vec3, 3> t;
+    for (auto& v : t)
+      for (int k = 0; k < 3; ++k) v[k] = static_cast<float>((u(rng) - 0.3) * scale);
+    const int axis = i % 3;
+    float pos = static_cast<float>((u(rng) - 0.3) * scale);
+    if (i % 5 == 0) pos = t[1][axis];
+    if (i % 7 == 0) t[0][axis] = -0.0f, pos = 0.0f;
+    Box box;
+    for (const auto& v : t) box.extend(v);
+    box.lo -= glm::vec3(0.25f * static_cast<float>(scale));
+    box.hi += glm::vec3(0.25f * static_cast<float>(scale));
+    if (!(pos > box.lo[axis] && pos < box.hi[axis])) continue;
+    Box parts[2];
+    splitTriangleInBox(t[0], t[1], t[2], box, axis, pos, parts[0], parts[1]);
+    // The exact parts: corners on each closed side, and the crossings of the edges.
+    using L = long double;
+    L lo[2][3], hi[2][3];
+    bool any[2] = {false, false};
+    auto extend = [&](int side, const L* p) {
+      for (int k = 0; k < 3; ++k) {
+        lo[side][k] = any[side] ? std::min(lo[side][k], p[k]) : p[k];
+        hi[side][k] = any[side] ? std::max(hi[side][k], p[k]) : p[k];
+      }
+      any[side] = true;
+    };
+    for (int e = 0; e < 3; ++e) {
+      const glm::vec3& a = t[static_cast<std::size_t>(e)];
+      const glm::vec3& b = t[static_cast<std::size_t>((e + 1) % 3)];
+      const L da = static_cast<L>(a[axis]) - pos, db = static_cast<L>(b[axis]) - pos;
+      const L pa[3] = {a.x, a.y, a.z};
+      if (da <= 0) extend(0, pa);
+      if (da >= 0) extend(1, pa);
+      if ((da < 0 && db > 0) || (da > 0 && db < 0)) {
+        ++crossings;
+        L x[3];
+        for (int k = 0; k < 3; ++k) x[k] = static_cast<L>(a[k]) + da / (da - db) * (static_cast<L>(b[k]) - a[k]);
+        x[axis] = pos;
+        extend(0, x);
+        extend(1, x);
+      }
+    }
+    for (int side = 0; side < 2; ++side) {
+      ASSERT_EQ(parts[side].empty(), !any[side]) << "triangle " << i << " side " << side;
+      if (!any[side]) continue;
+      for (int k = 0; k < 3; ++k) {
+        const float part_lo = parts[side].lo[k], part_hi = parts[side].hi[k];
+        EXPECT_LE(static_cast<L>(part_lo), lo[side][k]) << "triangle " << i << " side " << side << " axis " << k;
+        EXPECT_GE(static_cast<L>(part_hi), hi[side][k]) << "triangle " << i << " side " << side << " axis " << k;
+        EXPECT_GT(static_cast<L>(std::nextafter(part_lo, std::numeric_limits<float>::infinity())), lo[side][k])
+            << "loose lower bound: triangle " << i << " side " << side << " axis " << k;
+        EXPECT_LT(static_cast<L>(std::nextafter(part_hi, -std::numeric_limits<float>::infinity())), hi[side][k])
+            << "loose upper bound: triangle " << i << " side " << side << " axis " << k;
+      }
+    }
+  }
+  EXPECT_GT(crossings, 2000u);
+}
+
 TEST(KdTreeBuilder, SplitFunctionBuildsAValidTree) {
   // The one-clip-per-split path (what meshes use) against the invariant checker, for every config.
   const auto tris = randomTriangles(2500, 43);
