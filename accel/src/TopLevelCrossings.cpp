@@ -3,10 +3,13 @@
 //
 // Sensors live in a level of their own (TopLevel::sensors_): the first traversal, of the other
 // instances, finds the closest blocking hit and the media; the second walks the sensors' tree only
-// up to that hit (a sensor behind a wall costs nothing). The sensors' tree is shallow, with leaves
-// of several sensors whose boxes are tested four at a time from a leaf-ordered copy (LeafBoxes.h,
-// TopLevelConfig::sensor_build); a sensor whose box the ray meets is asked for its crossings up
-// to the hit, once (mailbox, then a check of the crossings kept), and they are inserted in order.
+// up to that hit (a sensor behind a wall costs nothing): through a uniform grid over the sensors'
+// boxes (SensorGrid.h, TopLevelConfig::sensor_grid) or else their shallow kd-tree, whose leaves'
+// boxes are tested 16, 8 or 4 at a time from a leaf-ordered copy (LeafBoxes.h,
+// TopLevelConfig::sensor_build). A flat sensor the ray clearly misses is dropped
+// (Object::flatCrossings, clearlyMisses); any other whose box the ray meets is asked for its
+// crossings up to the hit, once (mailbox, then a check of the crossings kept), and they are
+// inserted in order.
 // Media met along the way are kept and their transmittance is applied segment by segment between
 // the sorted crossings, so each medium is integrated once over [tnear, t_hit].
 
