@@ -12,7 +12,9 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
+#include <string_view>
 #include <vector>
 
 #if defined(__GNUC__) && defined(__x86_64__)
@@ -97,10 +99,18 @@ struct LeafBoxes {
  private:
   static constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
 
+  // The widest test the CPU runs, capped by the environment variable DUPLEX_ISA ("sse2", "avx2",
+  // "avx512"; unset or anything else: no cap), so that tests and benchmarks can run every path on
+  // one machine (the results are equal: the paths differ only in vector width).
   static std::uint32_t widestTest() {
 #if defined(DUPLEX_LEAF_BOXES_X86)
-    if (__builtin_cpu_supports("avx512f")) return 16;
-    if (__builtin_cpu_supports("avx2")) return 8;
+    std::uint32_t cap = 16;
+    if (const char* isa = std::getenv("DUPLEX_ISA")) {
+      const std::string_view v(isa);
+      cap = v == "sse2" ? 4 : v == "avx2" ? 8 : 16;
+    }
+    if (cap >= 16 && __builtin_cpu_supports("avx512f")) return 16;
+    if (cap >= 8 && __builtin_cpu_supports("avx2")) return 8;
     return 4;  // SSE2 is part of x86-64
 #else
     return 1;

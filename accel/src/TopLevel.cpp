@@ -762,6 +762,7 @@ TopLevelStats TopLevel::stats() const {
     st.sensor_instances = sensors_->live_count_;
     const KdBuildConfig& b = sensors_->config_.build;
     st.sensor_tree = sensors_->tree_.stats(b.traversal_cost, b.intersection_cost);
+    if (sensors_->state_) st.sensor_box_lanes = sensors_->state_->leaf_boxes.lanes;
     if (sensors_->state_ && config_.sensor_grid && sensors_->state_->grid.usable()) {
       const auto& g = sensors_->state_->grid;
       st.sensor_grid_cells = std::size_t{g.dims[0]} * g.dims[1] * g.dims[2];

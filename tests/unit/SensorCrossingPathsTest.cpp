@@ -17,10 +17,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <memory>
 #include <numbers>
 #include <random>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace duplex {
@@ -151,6 +153,19 @@ void checkPaths(const glm::dvec3& offset) {
   // The fast path is the one under test: the grid must be there (and only there).
   ASSERT_GT(fast.stats().sensor_grid_cells, 0u);
   EXPECT_EQ(general.stats().sensor_grid_cells, 0u);
+  // ctest runs this file again with DUPLEX_ISA=sse2 and avx2: the box test must use that width
+  // (SSE2 always; AVX2 where the CPU has it), so every vector path is tested on one machine.
+#if defined(__GNUC__) && defined(__x86_64__)
+  const std::uint32_t lanes = fast.stats().sensor_box_lanes;
+  const char* isa = std::getenv("DUPLEX_ISA");
+  if (isa && std::string_view(isa) == "sse2") {
+    EXPECT_EQ(lanes, 4u);
+  } else if (isa && std::string_view(isa) == "avx2") {
+    EXPECT_EQ(lanes, __builtin_cpu_supports("avx2") ? 8u : 4u);
+  } else {
+    EXPECT_GE(lanes, 4u);
+  }
+#endif
 
   std::mt19937_64 r(99);
   std::uniform_real_distribution<double> v(0.0, 1.0);

@@ -125,6 +125,10 @@ struct TopLevelStats {
   /// its cells and entries (sensors times the cells each is listed in); 0 when it walks the tree.
   std::size_t sensor_grid_cells = 0;
   std::size_t sensor_grid_entries = 0;
+  /// Sensor boxes per vector test: 16 (AVX-512F), 8 (AVX2) or 4 (SSE2), the widest the CPU runs,
+  /// capped by the environment variable DUPLEX_ISA ("sse2", "avx2") when the level was last
+  /// committed; 1 on other CPUs or without sensors.
+  std::uint32_t sensor_box_lanes = 1;
 };
 
 class TopLevel {
