@@ -79,14 +79,7 @@ std::shared_ptr<const Object> meshObject(TriangleMesh mesh) {
 
 std::shared_ptr<const Object> sensorObject(double w, double h, std::uint32_t nx, std::uint32_t ny, SensorShape shape,
                                            const std::string& name) {
-  SensorSpec s;
-  s.shape = shape;
-  s.width = w;
-  s.height = h;
-  s.nx = nx;
-  s.ny = ny;
-  s.two_sided = true;
-  return std::make_shared<const SensorObject>(name, s);
+  return std::make_shared<const SensorObject>(name, SensorSpec{.shape = shape, .width = w, .height = h, .nx = nx, .ny = ny});
 }
 
 Affine translate(const glm::dvec3& t) {

@@ -19,12 +19,8 @@ using namespace test;
 
 std::shared_ptr<const SensorObject> angularSensor(double size, std::uint32_t nt, std::uint32_t np, bool two_sided,
                                                   const std::string& name) {
-  SensorSpec s;
-  s.width = s.height = size;
-  s.two_sided = two_sided;
-  s.theta_bins = nt;
-  s.phi_bins = np;
-  return std::make_shared<const SensorObject>(name, s);
+  return std::make_shared<const SensorObject>(
+      name, SensorSpec{.width = size, .height = size, .two_sided = two_sided, .theta_bins = nt, .phi_bins = np});
 }
 
 TEST(SensorAngular, BinGeometry) {

@@ -29,14 +29,8 @@ namespace duplex {
 namespace {
 
 std::shared_ptr<const SensorObject> sensor(SensorShape shape, double size, std::uint32_t bins, bool two_sided) {
-  SensorSpec s;
-  s.shape = shape;
-  s.width = size;
-  s.height = size;
-  s.nx = bins;
-  s.ny = bins;
-  s.two_sided = two_sided;
-  return std::make_shared<const SensorObject>("s", s);
+  return std::make_shared<const SensorObject>(
+      "s", SensorSpec{.shape = shape, .width = size, .height = size, .nx = bins, .ny = bins, .two_sided = two_sided});
 }
 
 /// A rotation taking +z to the unit vector n (Duff et al. 2017), then a turn by `spin` about n.

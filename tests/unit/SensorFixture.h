@@ -31,13 +31,7 @@ inline std::shared_ptr<const Object> quad(double half, const std::string& name) 
 
 inline std::shared_ptr<const SensorObject> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true,
                                                  const std::string& name = "sensor") {
-  SensorSpec s;
-  s.width = w;
-  s.height = h;
-  s.nx = nx;
-  s.ny = ny;
-  s.two_sided = two_sided;
-  return std::make_shared<const SensorObject>(name, s);
+  return std::make_shared<const SensorObject>(name, SensorSpec{.width = w, .height = h, .nx = nx, .ny = ny, .two_sided = two_sided});
 }
 
 inline Affine translate(double x, double y, double z) {

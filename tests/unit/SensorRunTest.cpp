@@ -176,11 +176,8 @@ TEST(SensorRun, GoniometricLightFollowsItsTableAndOrientation) {
 }
 
 std::shared_ptr<const Object> disk(double diameter, std::uint32_t bins, const std::string& name) {
-  SensorSpec s;
-  s.shape = SensorShape::Disk;
-  s.width = s.height = diameter;
-  s.nx = s.ny = bins;
-  return std::make_shared<const SensorObject>(name, s);
+  return std::make_shared<const SensorObject>(
+      name, SensorSpec{.shape = SensorShape::Disk, .width = diameter, .height = diameter, .nx = bins, .ny = bins});
 }
 
 TEST(SensorRun, PointSourceThroughACoaxialDisk) {

@@ -19,13 +19,8 @@ using namespace test;
 
 std::shared_ptr<const SensorObject> sphere(double diameter, std::uint32_t nx, std::uint32_t ny, bool two_sided,
                                            const std::string& name) {
-  SensorSpec s;
-  s.shape = SensorShape::Sphere;
-  s.width = s.height = diameter;
-  s.nx = nx;
-  s.ny = ny;
-  s.two_sided = two_sided;
-  return std::make_shared<const SensorObject>(name, s);
+  return std::make_shared<const SensorObject>(name, SensorSpec{.shape = SensorShape::Sphere, .width = diameter, .height = diameter,
+                                                                .nx = nx, .ny = ny, .two_sided = two_sided});
 }
 
 Ray ray(glm::vec3 o, glm::vec3 d) {

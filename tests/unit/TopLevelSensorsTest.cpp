@@ -27,13 +27,7 @@ namespace duplex {
 namespace {
 
 std::shared_ptr<const Object> squareSensor(const std::string& name, std::uint32_t bins) {
-  SensorSpec s;
-  s.width = 2.5;
-  s.height = 2.0;
-  s.nx = bins;
-  s.ny = bins;
-  s.two_sided = true;
-  return std::make_shared<const SensorObject>(name, s);
+  return std::make_shared<const SensorObject>(name, SensorSpec{.width = 2.5, .height = 2.0, .nx = bins, .ny = bins});
 }
 
 /// Brute force over the model: every instance asked directly in object space.
