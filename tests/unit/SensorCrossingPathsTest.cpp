@@ -290,5 +290,58 @@ TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
   EXPECT_EQ(spanning.stats().sensor_grid_cells, 0u);
 }
 
+// Segments that end exactly on one of the grid's cell planes, on the border two tiles share: a floor
+// of 1 x 1 tiles whose borders lie on the cell planes (30 x 30 tiles on two levels give cells of
+// exactly 3 units), and rays reaching (3k, y) at t = tfar = 1. Borders are closed, so both tiles
+// are crossed: the walk must still enter the cell beyond the plane although the plane's t is the
+// segment's end (rounded either way). (Removing the grid's margin does not make this fail: the
+// interval clipped to the grid's bounds is widened past the end; no ray here or above comes
+// near enough to a cell plane for the margin itself to matter.)
+TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
+  Scene s;
+  const auto tile = sensor(SensorShape::Rectangle, 1.0, 1, true);
+  for (int level = 0; level < 2; ++level)
+    for (int i = 0; i < 30; ++i)
+      for (int j = 0; j < 30; ++j) {
+        InstanceDesc d;
+        d.id = static_cast<std::uint32_t>(s.instances.size());
+        d.object = tile;
+        d.world_from_object.translation = glm::dvec3(i + 0.5, j + 0.5, 7.0 * level);
+        d.mask = 1u;
+        s.instances.push_back(d);
+        s.half.push_back(0.5);
+      }
+  TopLevel fast;
+  TopLevelConfig tree_only;
+  tree_only.sensor_grid = false;
+  TopLevel general(tree_only);
+  fast.build(s.instances);
+  general.build(s.instances);
+  ASSERT_GT(fast.stats().sensor_grid_cells, 0u);
+  Counts counts;
+  std::size_t two_tiles = 0;
+  for (const float a : {3.0f, 6.0f, 0.75f, 2.25f, 1.5f})
+    for (const float b : {0.5f, 1.0f, 2.0f, 3.0f})
+      for (int k = 1; k < 10; ++k)
+        for (int j = 0; j < 30; j += 7)
+          for (int axis = 0; axis < 2; ++axis) {
+            // From above the floor to (3k, j + 0.25) at t = 1 exactly, along x or along y.
+            const glm::vec3 end = axis == 0 ? glm::vec3(3.0f * k, j + 0.25f, 0.0f) : glm::vec3(j + 0.25f, 3.0f * k, 0.0f);
+            Ray ray;
+            ray.dir = axis == 0 ? glm::vec3(a, 0.125f, -b) : glm::vec3(0.125f, a, -b);
+            ray.origin = end - ray.dir;
+            ray.tfar = 1.0f;
+            ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 1u, counts));
+            std::vector<SensorCrossing> got;
+            QueryContext ctx;
+            CrossingQuery q;
+            q.sensor_mask = 1u;
+            (void)fast.intersectWithCrossings(ray, got, ctx, q);
+            two_tiles += got.size() == 2;
+          }
+  // The rays do end on the shared borders: every one crosses the two tiles meeting there.
+  EXPECT_EQ(two_tiles, counts.rays);
+}
+
 }  // namespace
 }  // namespace duplex
