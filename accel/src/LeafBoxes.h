@@ -101,20 +101,24 @@ struct LeafBoxes {
 
   // The widest test the CPU runs, capped by the environment variable DUPLEX_ISA ("sse2", "avx2",
   // "avx512"; unset or anything else: no cap), so that tests and benchmarks can run every path on
-  // one machine (the results are equal: the paths differ only in vector width).
+  // one machine (the results are equal: the paths differ only in vector width). Decided once per
+  // process, not at every commit's refresh.
   static std::uint32_t widestTest() {
+    static const std::uint32_t widest = [] {
 #if defined(DUPLEX_LEAF_BOXES_X86)
-    std::uint32_t cap = 16;
-    if (const char* isa = std::getenv("DUPLEX_ISA")) {
-      const std::string_view v(isa);
-      cap = v == "sse2" ? 4 : v == "avx2" ? 8 : 16;
-    }
-    if (cap >= 16 && __builtin_cpu_supports("avx512f")) return 16;
-    if (cap >= 8 && __builtin_cpu_supports("avx2")) return 8;
-    return 4;  // SSE2 is part of x86-64
+      std::uint32_t cap = 16;
+      if (const char* isa = std::getenv("DUPLEX_ISA")) {
+        const std::string_view v(isa);
+        cap = v == "sse2" ? 4 : v == "avx2" ? 8 : 16;
+      }
+      if (cap >= 16 && __builtin_cpu_supports("avx512f")) return 16u;
+      if (cap >= 8 && __builtin_cpu_supports("avx2")) return 8u;
+      return 4u;  // SSE2 is part of x86-64
 #else
-    return 1;
+      return 1u;
 #endif
+    }();
+    return widest;
   }
 
 #if defined(DUPLEX_LEAF_BOXES_X86)

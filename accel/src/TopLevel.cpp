@@ -9,11 +9,11 @@
 // a quarter of its references is rebuilt over the rest, and a frontier subtree of the last full
 // build (max(1,024, 1/64) of the references, at most 1/8) is rebuilt once edits changed 5% of its
 // references, one per commit as the edits pay for it (TopLevelRefine.cpp); replaced nodes are
-// garbage until the tree is compacted depth first. The SAH cost of the tree is tracked per edit and per refinement, and made exact
-// (with the root shrunk to its boxes) every 32 commits or before a rebuild decision; when it
-// exceeds the cost of the last full build by TopLevelConfig::rebuild_ratio, the instance count
-// drifted far from that build's, or the tree grew to 4 times its nodes or references, the whole
-// tree is rebuilt. A leaf that grows is moved to the end of the index list (its old range becomes
+// garbage until the tree is compacted depth first. The SAH cost of the tree is tracked per edit
+// and per refinement, and made exact (with the root shrunk to its boxes) every 32 commits or
+// before a rebuild decision; when it exceeds the cost of the last full build by
+// TopLevelConfig::rebuild_ratio, the instance count drifted far from that build's, or the tree
+// grew to 4 times its nodes or references, the whole tree is rebuilt. A leaf that grows is moved to the end of the index list (its old range becomes
 // garbage, compacted when garbage outweighs live references), so an edit costs O(leaves touched),
 // independent of the scene size, apart from the amortised exact recomputations.
 
