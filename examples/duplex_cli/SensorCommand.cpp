@@ -152,6 +152,8 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
 nlohmann::ordered_json runSensor(const SensorOptions& o) {
   if (o.rays == 0) throw InvalidArgument("--rays must be at least 1");
   if (o.target_error < 0.0 || !std::isfinite(o.target_error)) throw InvalidArgument("--target-error must be a finite number >= 0");
+  if (!(o.roulette >= 0.0 && o.roulette < 1.0))
+    throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
   WorkerThreads workers(o.threads);
   const SensorScene scene = workers.arena.execute([&] { return SensorScene::load(o.scene); });
   if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
@@ -161,6 +163,8 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   cfg.seed = o.seed;
   cfg.threads = static_cast<unsigned>(workers.count);
   cfg.max_depth = o.max_depth;
+  cfg.max_scatterings = o.max_scatterings;
+  cfg.roulette_threshold = o.roulette;
   SensorRun run(scene, cfg);
   std::error_code ec;
   std::filesystem::create_directories(o.out, ec);
@@ -193,6 +197,9 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   report["rays"] = r.rays;
   report["seed"] = r.seed;
   report["threads"] = workers.count;
+  report["max_depth"] = o.max_depth;
+  report["max_scatterings"] = o.max_scatterings;
+  report["roulette_threshold"] = o.roulette;
   report["status"] = status == SensorRunStatus::TargetReached ? "target_reached" : "completed";
   report["resumed_from"] = start;
   report["seconds"] = seconds;

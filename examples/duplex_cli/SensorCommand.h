@@ -9,6 +9,8 @@
 /// accumulators, for --resume) and DIR/run.json (the report printed on stdout). Characters of a
 /// sensor name other than [A-Za-z0-9._-] become '_' in file names.
 
+#include "duplex/sensors/SensorRun.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -26,12 +28,17 @@ struct SensorOptions {
   bool resume = false;            ///< continue from DIR/run_state.bin (same scene and seed) up to `rays`
   double target_error = 0.0;      ///< > 0: stop once the target sensor's relative standard error is at most this
   std::string target_sensor;      ///< the sensor of target_error (default: the first)
-  std::uint32_t max_depth = 32;
+  // Path limits: SensorRunConfig's fields and defaults (surface interactions; fog collisions; the
+  // Russian-roulette threshold, a fraction of a ray's emitted power in [0, 1)).
+  std::uint32_t max_depth = SensorRunConfig{}.max_depth;
+  std::uint32_t max_scatterings = SensorRunConfig{}.max_scatterings;
+  double roulette = SensorRunConfig{}.roulette_threshold;
   /// "auto": a progress bar when stderr is a terminal, plain lines otherwise; "bar", "lines", "none".
   std::string progress = "auto";
 };
 
-/// Runs the command; returns the report (keys: rays, seed, threads, status ("completed",
+/// Runs the command; returns the report (keys: rays, seed, threads, max_depth, max_scatterings,
+/// roulette_threshold, status ("completed",
 /// "target_reached"), seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w,
 /// medium_absorbed_w, depth_limited_w, roulette_w}, sensors [{name, file, total_flux_w,
 /// relative_stderr, efficiency}]). Throws duplex::Error for bad input.

@@ -9,7 +9,8 @@
 //   duplex bench update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]
 //                       [--primary W] [--build-repeat B] [--baseline-repeat B]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
-//                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--progress MODE]
+//                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
+//                 [--roulette R] [--progress MODE]
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -203,6 +204,10 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)");
   sensor_cmd->add_option("--max-depth", sensor.max_depth, "Surface interactions per path (default 32)")
       ->check(CLI::Range(0, 1000));
+  sensor_cmd->add_option("--max-scatterings", sensor.max_scatterings,
+                         "Fog collisions per path before it is cut (default 100000; 1: single scattering)");
+  sensor_cmd->add_option("--roulette", sensor.roulette,
+                         "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
   sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
       ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
   sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");

@@ -213,6 +213,19 @@ void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
   for (const auto& x : j["angular_flux_w"]) angular += x.get<double>();
   expect(std::abs(angular - total) <= 1e-12 * total, "the angular bins do not hold the sensor's flux");
 
+  // --roulette and --max-scatterings act on fog paths: VolumeCliCheck. Here: they are reported,
+  // and a threshold outside [0, 1) is refused with a message naming the option.
+  expect(report["roulette_threshold"] == 0.05 && report["max_scatterings"] == 100000 && report["max_depth"] == 32,
+         "run.json lacks the default path limits: " + report.dump());
+  for (const char* bad_value : {"1", "-0.1", "nan"}) {
+    std::vector<std::string> args = sensorArgs(duplex, dir / "bands.json", "100", "1", dir / "bad_roulette");
+    args.push_back("--roulette");
+    args.push_back(bad_value);
+    const RunResult r = run(args, dir.string());
+    expect(r.exited && r.exit_code != 0 && r.err.find("--roulette") != std::string::npos,
+           std::string("--roulette ") + bad_value + ": expected an error naming the option, got " + describe(r));
+  }
+
   // A sphere sensor around a point light: all the power leaves through it, by direction.
   write(dir / "sphere.json", R"({"format": "scene-json-v1", "objects": [], "instances": [],
     "lights": [{"type": "point", "position": [0, 0, 0], "power": 3}],

@@ -234,9 +234,49 @@ int check(const std::string& duplex, const fs::path& dir) {
                "--transmittance", (dir / "no_such_dir" / "t.bin").string()},
               dir, "no_such_dir");
 
+  // duplex sensor's path limits act on fog (issue 5): light from the fog's far side is attenuated
+  // (transmittance down to exp(-sigma 2.4) ~ 0.04 across the box), crosses a sensor wall and is
+  // reflected by a white wall behind it, where roulette is decided on the power left.
+  // --roulette 0 plays no roulette (roulette_w exactly 0), --roulette 0.5 does; with a scattering
+  // fog, --max-scatterings 0 cuts every path at its first collision (depth_limited_w > 0), the
+  // default never.
+  auto sensorScene = [&](const fs::path& file, const char* material) {
+    std::ofstream(file) << R"({"format": "scene-json-v1",
+      "objects": [{"name": "fog", "volume": {"file": "vol.vdb", "grid": "density", "kind": "fog"})" << material << R"(},
+                  {"name": "back", "mesh": {"positions": [4,-10,-10, 4,12,-10, 4,12,12, 4,-10,12], "indices": [0,1,2, 0,2,3]},
+                   "material": {"type": "lambertian", "reflectance": 0.9}}],
+      "instances": [{"object": "fog", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]},
+                    {"object": "back", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]}],
+      "lights": [{"type": "point", "position": [-0.5, 1.15, 1.15], "power": 1}],
+      "sensors": [{"name": "wall", "shape": "rectangle", "size": [20, 20], "bins": [2, 2],
+                   "transform": [0,0,1,3, 0,1,0,1.15, -1,0,0,1.15]}]})";
+  };
+  auto sensorRun = [&](const fs::path& scene, const std::vector<std::string>& extra) {
+    std::vector<std::string> argv = {duplex, "sensor", "--scene", scene.string(), "--rays", "4000", "--threads", "1",
+                                     "--progress", "none", "--out", (dir / "sensor_out").string()};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return nlohmann::json::parse(runOk(argv, dir).out);
+  };
+  sensorScene(dir / "fog_sensor.json", "");
+  const nlohmann::json no_rr = sensorRun(dir / "fog_sensor.json", {"--roulette", "0"});
+  const nlohmann::json rr = sensorRun(dir / "fog_sensor.json", {"--roulette", "0.5"});
+  expect(no_rr["roulette_threshold"] == 0.0 && no_rr["energy"]["roulette_w"] == 0.0,
+         "--roulette 0 still played roulette: " + no_rr.dump());
+  expect(rr["roulette_threshold"] == 0.5 && rr["energy"]["roulette_w"].get<double>() != 0.0,
+         "--roulette 0.5 played no roulette in the fog: " + rr.dump());
+  sensorScene(dir / "fog_scatter.json", R"(, "material": {"type": "medium", "albedo": 0.9})");
+  const nlohmann::json cut = sensorRun(dir / "fog_scatter.json", {"--max-scatterings", "0"});
+  const nlohmann::json full = sensorRun(dir / "fog_scatter.json", {});
+  expect(cut["max_scatterings"] == 0 && cut["energy"]["depth_limited_w"].get<double>() > 0.1,
+         "--max-scatterings 0 did not cut the paths at their first collision: " + cut.dump());
+  expect(full["max_scatterings"] == 100000 && full["energy"]["depth_limited_w"] == 0.0 && full["scatterings"].get<double>() > 0,
+         "default max_scatterings: " + full.dump());
+  expectFails({duplex, "sensor", "--scene", (dir / "fog_sensor.json").string(), "--rays", "10", "--roulette", "1"}, dir,
+              "--roulette");
+
   std::cout << "volumes: " << rays.size() << " rays, " << checked << " checked against exp(-sigma L) (worst error "
             << worst << ", " << blocked << " blocked by the level set), 1 and 2 threads byte-identical; "
-            << sphere_hits << " level-set hit records at the analytic sphere\n";
+            << sphere_hits << " level-set hit records at the analytic sphere; sensor runs: --roulette and --max-scatterings act on fog\n";
   return 0;
 }
 
