@@ -7,13 +7,37 @@
 //            (file version >= 216), int64 grid, block and end positions; the grid's data spans
 //            [grid, end) and the next descriptor starts at end
 // where a string is a uint32 length followed by that many bytes.
+//
+// Inside a float grid (OpenVDB Archive.cc, Transform.cc, Maps.h, Tree.h, RootNode.h,
+// InternalNode.h, LeafNode.h, Compression.h):
+//   grid     uint32 compression flags (zip 1, active mask 2, blosc 4), metadata as above (the bool
+//            "is_saved_as_half_float" selects 2-byte values), string map type and the map's
+//            doubles, then at the topology: int32 buffer count (1), float background, uint32
+//            root tiles and children; 17 bytes per tile (coord, value, active flag); per child a
+//            coord and a 32^3 internal node
+//   internal child mask, value mask (N^3 bits each), the node's N^3 tile values (compressed
+//            values below), then its children in child-mask order (16^3 nodes, then 8^3 leaves,
+//            whose topology is their 64-byte value mask)
+//   buffers  at the block position, per leaf in the same order: its value mask again and its 512
+//            compressed values
+//   compressed values: int8 mask flag (0-6: which inactive values and whether a 512-bit selection
+//            mask follow), 0-2 floats, the selection mask, then the values, only the active ones
+//            when the active-mask flag is set (unless the mask flag is 6): zip or blosc chunks
+//            are an int64 byte count (negative: that many raw bytes) and the bytes; uncompressed
+//            values are raw; half floats store nothing at all when no value is stored.
+// OpenVDB 10 reads a raw chunk of whatever length it declares into a buffer sized for the values
+// (a heap overflow on a damaged file) and hands blosc a chunk whose header may claim more bytes
+// than were read; the walk below checks every chunk's lengths first.
 
 #include "VdbFileCheck.h"
 
 #include "duplex/accel/Error.h"
 
+#include <array>
+#include <bit>
 #include <cstring>
 #include <fstream>
+#include <map>
 
 namespace duplex {
 
@@ -77,6 +101,151 @@ class Reader {
   std::int64_t pos_ = 0;
 };
 
+// Bytes of the transform's map after its type name (the doubles each map type writes); maps not
+// listed (frustum) are not walked: VolumeObject refuses non-linear transforms anyway.
+std::int64_t mapBytes(const std::string& type) {
+  static const std::map<std::string, std::int64_t> bytes = {
+      {"UniformScaleMap", 5 * 24},       {"ScaleMap", 5 * 24},  {"UniformScaleTranslateMap", 6 * 24},
+      {"ScaleTranslateMap", 6 * 24},     {"TranslationMap", 24}, {"AffineMap", 128},
+      {"UnitaryMap", 128}};
+  const auto it = bytes.find(type);
+  return it == bytes.end() ? -1 : it->second;
+}
+
+constexpr std::uint32_t kZip = 0x1, kActiveMask = 0x2, kBlosc = 0x4;
+
+// Walks one float grid's tree (layout above), checking every length against the values it must
+// hold; throws through Reader::fail with the grid, the place and the problem.
+class FloatTreeWalk {
+ public:
+  FloatTreeWalk(Reader& r, const VdbGridExtent& e) : r_(r), e_(e), what_("grid \"" + e.unique_name + "\"") {}
+
+  void run() {
+    r_.seek(e_.grid_pos);
+    compression_ = r_.value<std::uint32_t>("grid compression flags");
+    const auto meta_count = r_.value<std::uint32_t>("grid metadata count");
+    half_ = e_.type.ends_with("_HalfFloat");
+    for (std::uint32_t k = 0; k < meta_count; ++k) {
+      const std::string name = r_.string("grid metadata name");
+      (void)r_.string("grid metadata type");
+      const auto size = r_.value<std::uint32_t>("grid metadata size");
+      if (name == "is_saved_as_half_float" && size == 1) {
+        half_ = r_.value<char>("grid metadata value") != 0;
+      } else {
+        r_.skip(size, "grid metadata value");
+      }
+    }
+    const std::int64_t map_bytes = mapBytes(r_.string("transform map type"));
+    if (map_bytes < 0) return;
+    r_.skip(map_bytes, "transform");
+
+    const auto buffers = r_.value<std::int32_t>("tree buffer count");
+    if (buffers != 1) fail("tree has " + std::to_string(buffers) + " buffers (OpenVDB reads 1)");
+    (void)r_.value<float>("background value");
+    const auto tiles = r_.value<std::uint32_t>("root tile count");
+    const auto children = r_.value<std::uint32_t>("root child count");
+    r_.skip(std::int64_t{tiles} * (12 + 4 + 1), "root tiles");
+    // The buffers follow the tree's order: root children by origin (later duplicates replace
+    // earlier ones, as in OpenVDB's root table), then child-mask order below.
+    std::map<std::array<std::int32_t, 3>, std::vector<std::uint16_t>> roots;
+    for (std::uint32_t c = 0; c < children; ++c) {
+      std::array<std::int32_t, 3> origin{};
+      for (std::int32_t& x : origin) x = r_.value<std::int32_t>("root child origin");
+      std::vector<std::uint16_t> leaf_counts;
+      internalNode(5, leaf_counts);
+      roots[origin] = std::move(leaf_counts);
+    }
+    if (r_.pos() != e_.block_pos)
+      fail("its tree topology ends at byte " + std::to_string(r_.pos()) + ", not at its block position " +
+           std::to_string(e_.block_pos));
+    std::size_t leaf = 0;
+    for (const auto& [origin, counts] : roots)
+      for (const std::uint16_t active : counts) {
+        r_.skip(64, "leaf value mask");
+        compressedValues(active, 512, "leaf buffer " + std::to_string(leaf++));
+      }
+    if (r_.pos() != e_.end_pos)
+      fail("its leaf buffers end at byte " + std::to_string(r_.pos()) + ", not at its end position " +
+           std::to_string(e_.end_pos));
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& problem) const { r_.fail(what_ + ": " + problem); }
+
+  // Returns the number of set bits of a mask of `bits` bits read from the file.
+  std::uint32_t mask(std::uint32_t bits, const char* what) {
+    std::vector<std::uint64_t> words(bits / 64);
+    r_.bytes(reinterpret_cast<char*>(words.data()), static_cast<std::int64_t>(bits / 8), what);
+    std::uint32_t on = 0;
+    for (const std::uint64_t w : words) on += static_cast<std::uint32_t>(std::popcount(w));
+    return on;
+  }
+
+  // A 2^(3 log2dim) internal node; appends the active-voxel count of each leaf below it.
+  void internalNode(int log2dim, std::vector<std::uint16_t>& leaf_counts) {
+    const std::uint32_t n = 1u << (3 * log2dim);
+    const std::int64_t at = r_.pos();
+    std::vector<std::uint64_t> child(n / 64);
+    r_.bytes(reinterpret_cast<char*>(child.data()), n / 8, "internal node child mask");
+    const std::uint32_t active = mask(n, "internal node value mask");
+    compressedValues(active, n, "internal node at byte " + std::to_string(at));
+    for (const std::uint64_t w : child)
+      for (int b = 0; b < std::popcount(w); ++b) {
+        if (log2dim == 5) {
+          internalNode(4, leaf_counts);
+        } else {
+          leaf_counts.push_back(static_cast<std::uint16_t>(mask(512, "leaf value mask")));
+        }
+      }
+  }
+
+  // io::readCompressedValues: `active` of the `count` values are active (the node's value mask).
+  void compressedValues(std::uint32_t active, std::uint32_t count, const std::string& where) {
+    const auto flag = r_.value<std::int8_t>("value compression flag");
+    if (flag == 2 || flag == 4 || flag == 5) r_.skip(4, "inactive value");
+    if (flag == 5) r_.skip(4, "second inactive value");
+    if (flag == 3 || flag == 4 || flag == 5) r_.skip(count / 8, "selection mask");
+    const std::uint32_t stored = (compression_ & kActiveMask) && flag != 6 ? active : count;
+    const std::int64_t bytes = std::int64_t{stored} * (half_ ? 2 : 4);
+    if (half_ && stored == 0) return;  // io::HalfReader reads nothing at all for no values
+    if (!(compression_ & (kZip | kBlosc))) {
+      r_.skip(bytes, "values");
+      return;
+    }
+    const std::int64_t at = r_.pos();
+    const auto chunk = r_.value<std::int64_t>("compressed chunk length");
+    auto bad = [&](const std::string& problem) {
+      fail(where + ": the chunk at byte " + std::to_string(at) + " " + problem + " (" + std::to_string(bytes) +
+           " bytes of values expected)");
+    };
+    if (chunk <= 0) {
+      if (chunk != -bytes) bad("declares " + std::to_string(-chunk) + " raw bytes");
+      r_.skip(bytes, "raw values");
+      return;
+    }
+    if (chunk > e_.end_pos - r_.pos()) bad("declares " + std::to_string(chunk) + " bytes, past the grid's end");
+    if (compression_ & kBlosc) {
+      // Blosc's header: version, version, flags, type size, then uint32 uncompressed, block and
+      // compressed sizes.
+      if (chunk < 16) bad("is too short for a blosc header");
+      std::uint32_t header[4];
+      r_.bytes(reinterpret_cast<char*>(header), 16, "blosc header");
+      if (header[1] != static_cast<std::uint64_t>(bytes) || header[3] != static_cast<std::uint64_t>(chunk))
+        bad("holds a blosc block of " + std::to_string(header[1]) + " bytes in " + std::to_string(header[3]) +
+            ", its length field says " + std::to_string(chunk));
+      r_.skip(chunk - 16, "blosc data");
+    } else {
+      r_.skip(chunk, "zip data");  // zlib's inflate is bounded by both lengths
+    }
+  }
+
+  Reader& r_;
+  const VdbGridExtent& e_;
+  std::string what_;
+  std::uint32_t compression_ = 0;
+  bool half_ = false;
+};
+
 }  // namespace
 
 std::vector<VdbGridExtent> checkVdbFileStructure(const std::filesystem::path& file) {
@@ -136,6 +305,10 @@ std::vector<VdbGridExtent> checkVdbFileStructure(const std::filesystem::path& fi
     r.seek(e.end_pos);
     grids.push_back(std::move(e));
   }
+  // The trees of the float grids (the grids Duplex reads; instances share their parent's tree).
+  for (const VdbGridExtent& e : grids)
+    if (e.instance_parent.empty() && (e.type == "Tree_float_5_4_3" || e.type == "Tree_float_5_4_3_HalfFloat"))
+      FloatTreeWalk(r, e).run();
   return grids;
 }
 

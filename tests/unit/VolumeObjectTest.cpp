@@ -18,6 +18,7 @@
 #include <openvdb/tools/LevelSetSphere.h>
 
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <optional>
@@ -424,6 +425,63 @@ TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
   writeGrids(dir / "frustum.vdb", {frustum});
   expectErrorNaming<InvalidArgument>([&] { (void)VolumeObject::load(dir / "frustum.vdb"); }, "frustum.vdb: grid \"frustum\"");
   expectErrorNaming<InvalidArgument>([&] { (void)makeVolumeObject(nullptr); }, "null grid");
+}
+
+// Damage inside the grid data (not a cut: lengths, masks and values overwritten at random) is
+// refused by the file walk or read as some other valid grid, never a crash or a memory error (in
+// the sanitizer build OpenVDB 10 itself would write past its buffers for a damaged raw-chunk
+// length). Each compression OpenVDB writes, and half floats; the walk must be what refuses some.
+TEST(VolumeObject, DamagedGridDataIsRefusedNeverACrash) {
+  TempDir dir;
+  openvdb::initialize();
+  struct Variant {
+    const char* name;
+    std::uint32_t compression;
+    bool half;
+  };
+  for (const Variant v : {Variant{"blosc", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK, false},
+                          Variant{"zip", openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK, false},
+                          Variant{"none", openvdb::io::COMPRESS_NONE, false},
+                          Variant{"blosc_half", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK, true}}) {
+    openvdb::FloatGrid::Ptr grid = sphereGrid(0.1);
+    grid->setSaveFloatAsHalf(v.half);
+    const auto clean = dir / (std::string(v.name) + ".vdb");
+    {
+      openvdb::io::File out(clean.string());
+      out.setCompression(v.compression);
+      out.write({grid});
+      out.close();
+    }
+    ASSERT_NO_THROW((void)VolumeObject::load(clean)) << v.name;
+    const std::vector<char> bytes = test::readBinaryFile(clean);
+    std::mt19937 rng(7);
+    int refused_by_walk = 0;
+    const auto damaged = dir / (std::string(v.name) + "_damaged.vdb");
+    for (int trial = 0; trial < 150; ++trial) {
+      std::vector<char> b = bytes;
+      // Past the header and descriptor (about the first 250 bytes): the grid's own data.
+      std::uniform_int_distribution<std::size_t> at(250, b.size() - 8);
+      for (int k = 0, n = 1 + trial % 4; k < n; ++k) {
+        const std::size_t o = at(rng);
+        if (trial % 2 == 0) {
+          b[o] = static_cast<char>(rng());
+        } else {  // a plausible length or count: small, negative, huge
+          const std::int64_t values[] = {-static_cast<std::int64_t>(rng() % 100000), static_cast<std::int64_t>(rng() % 100000),
+                                         std::int64_t{1} << 40, -1};
+          std::memcpy(b.data() + o, &values[rng() % 4], 8);
+        }
+      }
+      test::writeBinaryFile(damaged, b);
+      try {
+        (void)VolumeObject::load(damaged);
+      } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find(damaged.filename().string()), std::string::npos) << what;
+        if (what.find("not a readable .vdb file: grid") != std::string::npos) ++refused_by_walk;
+      }
+    }
+    EXPECT_GT(refused_by_walk, 0) << v.name << ": the file walk refused none of the damaged files";
+  }
 }
 
 TEST(VolumeObject, SceneFilesReadVolumes) {
