@@ -13,6 +13,7 @@
 #include <duplex/accel/Error.h>
 #include <duplex/scenegraph/SceneDocument.h>
 #include <duplex/scenegraph/SceneTracer.h>
+#include <duplex/sensors/SensorTypes.h>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -147,7 +148,11 @@ int main(int argc, char** argv) {
     std::optional<duplex::SceneTracer> tracer;
     double top_build_ms = 0.0;
     arena.execute([&] {
-      doc = duplex::loadSceneDocument(opt.scene);
+      // Sensor objects of duplex-scene-v1 files are read as by every `duplex` command (they never
+      // block a ray, so they do not show in the frames).
+      duplex::SceneDocumentOptions load_options;
+      load_options.registry = &duplex::sensorTypeRegistry();
+      doc = duplex::loadSceneDocument(opt.scene, load_options);
       const auto t0 = Clock::now();
       tracer.emplace(*doc.graph);
       top_build_ms = msSince(t0);
