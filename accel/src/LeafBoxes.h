@@ -9,6 +9,7 @@
 #include "duplex/accel/KdTraversal.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -28,6 +29,7 @@ struct LeafBoxes {
   // lo[k][i], hi[k][i]: axis k of the box of reference i (tree.prim_indices order), padded by
   // kPad entries so that a 16-wide load at the last reference stays inside.
   static constexpr std::size_t kPad = 15;
+  static constexpr std::uint32_t kMaxLanes = 16;
   std::vector<float> lo[3], hi[3];
   std::size_t count = 0;
   // Boxes per vector test: 16 (AVX-512F), 8 (AVX2), 4 (SSE2) or 1 (scalar); set by refresh().
@@ -62,7 +64,7 @@ struct LeafBoxes {
     if (lanes > 1 && !(ray.zero[0] | ray.zero[1] | ray.zero[2])) {
       // Up to 64 references per call: one call covers a leaf, and the ray's broadcasts stay in
       // registers across its vectors.
-      std::uint32_t met[64];
+      std::uint32_t met[64 + kMaxLanes];
       for (std::uint32_t j = 0; j < n; j += 64) {
         const std::uint32_t run[2] = {begin + j, begin + std::min<std::uint32_t>(n, j + 64)};
         const std::uint32_t count_met = metInRuns(ray, t_max, run, 1, met);
@@ -82,7 +84,7 @@ struct LeafBoxes {
   // The vector test over several runs of references at once (the grid walk: the runs of the cells
   // a ray passes, one call per ray): for each run [runs[2r], runs[2r + 1]) appends the references
   // whose box the ray meets within [ray.tnear, t_max] to `out` (room for every reference of the
-  // runs), in order; returns how many. Needs lanes > 1 and a ray without zero direction components.
+  // runs, plus kMaxLanes: the vector paths write whole vectors), in order; returns how many.
   std::uint32_t metInRuns(const KdRay& ray, float t_max, const std::uint32_t* runs, std::uint32_t run_count,
                           std::uint32_t* out) const {
 #if defined(DUPLEX_LEAF_BOXES_X86)
@@ -122,6 +124,26 @@ struct LeafBoxes {
   }
 
 #if defined(DUPLEX_LEAF_BOXES_X86)
+  // The lanes of a vector at reference i that lie in a run ending at `end`: `left` = end - i
+  // lanes (all of them when left >= 16). Without a branch: whether a vector is a run's last is a
+  // coin flip for runs of a dozen references.
+  static std::uint32_t inRun(std::uint32_t left) {
+    return static_cast<std::uint32_t>((std::uint64_t{1} << std::min<std::uint32_t>(left, 32u)) - 1u);
+  }
+  // The positions of the set bits of every 8-bit mask, packed: byte k of kPacked[m] is the lane of
+  // the k-th set bit of m. Met boxes are appended by storing a whole vector of i + those lanes and
+  // advancing by the bit count, with no branch per met box (a loop over the set bits mispredicts
+  // its exit about once per vector).
+  static constexpr std::array<std::uint64_t, 256> kPacked = [] {
+    std::array<std::uint64_t, 256> t{};
+    for (std::uint32_t m = 0; m < 256; ++m) {
+      int k = 0;
+      for (std::uint64_t lane = 0; lane < 8; ++lane)
+        if (m & (1u << lane)) t[m] |= lane << (8 * k++);
+    }
+    return t;
+  }();
+
   // The slab tests of the references of each run, `lanes` at a time; the indices of the boxes met
   // go to `out`. Per axis the entry is min(t0, t1) and the exit max(t0, t1); the largest entry
   // and the smallest exit are widened by their magnitude times kWiden (as clipIntervalToBox
@@ -136,6 +158,7 @@ struct LeafBoxes {
     const __m512 widen = _mm512_set1_ps(kWiden), t_near = _mm512_set1_ps(ray.tnear), t_far = _mm512_set1_ps(t_max);
     const __m512 minus_inf = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
     const __m512 plus_inf = _mm512_set1_ps(std::numeric_limits<float>::infinity());
+    const __m512i iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const float* lo_k[3] = {lo[0].data(), lo[1].data(), lo[2].data()};
     const float* hi_k[3] = {hi[0].data(), hi[1].data(), hi[2].data()};
     std::uint32_t n = 0;
@@ -151,9 +174,9 @@ struct LeafBoxes {
         }
         enter = _mm512_maskz_max_ps(kAll, _mm512_sub_ps(enter, _mm512_mul_ps(_mm512_abs_ps(enter), widen)), t_near);
         leave = _mm512_maskz_min_ps(kAll, _mm512_add_ps(leave, _mm512_mul_ps(_mm512_abs_ps(leave), widen)), t_far);
-        std::uint32_t met = _mm512_cmp_ps_mask(enter, leave, _CMP_LE_OQ);
-        if (end - i < 16) met &= (1u << (end - i)) - 1u;
-        for (; met != 0; met &= met - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(met));
+        const __mmask16 met = _mm512_cmp_ps_mask(enter, leave, _CMP_LE_OQ) & inRun(end - i);
+        _mm512_mask_compressstoreu_epi32(out + n, met, _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(i)), iota));
+        n += static_cast<std::uint32_t>(std::popcount(static_cast<unsigned>(met)));
       }
     }
     return n;
@@ -182,9 +205,10 @@ struct LeafBoxes {
         }
         enter = _mm256_max_ps(_mm256_sub_ps(enter, _mm256_mul_ps(_mm256_and_ps(enter, abs_mask), widen)), t_near);
         leave = _mm256_min_ps(_mm256_add_ps(leave, _mm256_mul_ps(_mm256_and_ps(leave, abs_mask), widen)), t_far);
-        std::uint32_t met = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ)));
-        if (end - i < 8) met &= (1u << (end - i)) - 1u;
-        for (; met != 0; met &= met - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(met));
+        const std::uint32_t met = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ))) & inRun(end - i);
+        const __m256i lanes_met = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&kPacked[met])));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n), _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(i)), lanes_met));
+        n += static_cast<std::uint32_t>(std::popcount(met));
       }
     }
     return n;
@@ -213,9 +237,9 @@ struct LeafBoxes {
         }
         enter = _mm_max_ps(_mm_sub_ps(enter, _mm_mul_ps(_mm_and_ps(enter, abs_mask), widen)), t_near);
         leave = _mm_min_ps(_mm_add_ps(leave, _mm_mul_ps(_mm_and_ps(leave, abs_mask), widen)), t_far);
-        std::uint32_t met = static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(enter, leave)));
-        if (end - i < 4) met &= (1u << (end - i)) - 1u;
-        for (; met != 0; met &= met - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(met));
+        // (SSE2 has no byte shuffle to pack the lanes with: a loop over the set bits.)
+        const std::uint32_t met = static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(enter, leave))) & inRun(end - i);
+        for (std::uint32_t m = met; m != 0; m &= m - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(m));
       }
     }
     return n;

@@ -4,8 +4,9 @@
 //
 // Why a grid beside the kd-tree: the sensors' walk asks for every sensor box a segment meets up
 // to a known t (no closest hit, no early exit), and benchmark-like scenes spread thousands of small
-// sensors through a room. A 3D-DDA (Amanatides and Woo 1987) steps from cell to cell with one
-// compare per step and tests each cell's few boxes in one vector test (LeafBoxes), where the
+// sensors through a room. A 3D-DDA (Amanatides and Woo 1987, written as a merge of the three
+// axes' plane crossings, without a branch per cell) lists the cells a segment passes, and one
+// vector test (LeafBoxes) covers their boxes, where the
 // kd-tree's walk pays unpredictable node steps and tests whole leaves. The grid is rebuilt from the
 // boxes after every commit of the level, in O(sensors + references) like the leaf-ordered boxes.
 //
@@ -22,6 +23,7 @@
 #include "LeafBoxes.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -71,18 +73,29 @@ struct SensorGrid {
     magnitude = std::max({std::abs(all.lo.x), std::abs(all.lo.y), std::abs(all.lo.z), std::abs(all.hi.x),
                           std::abs(all.hi.y), std::abs(all.hi.z)});
     if (!std::isfinite(magnitude)) return;
-    // Cubic cells over the axes of non-zero extent.
-    double volume = 1.0;
-    int axes = 0;
-    for (int k = 0; k < 3; ++k)
-      if (ext[k] > 0.0f) {
-        volume *= ext[k];
-        ++axes;
-      }
-    const double side = axes == 0 ? 1.0 : std::pow(volume / (kCellsPerBox * static_cast<double>(n)), 1.0 / axes);
+    // Cubic cells over the axes thicker than a cell; a thinner axis gets one cell and leaves the
+    // volume the cells share (else a thin, nearly flat layout, e.g. sensors on a slightly tilted
+    // floor, divides a tiny volume into cells far smaller than the layout's width: up to kMaxDim^2
+    // cells for a few boxes).
+    bool thin[3] = {!(ext[0] > 0.0f), !(ext[1] > 0.0f), !(ext[2] > 0.0f)};
+    double side = 1.0;
+    for (int pass = 0; pass < 3; ++pass) {
+      double volume = 1.0;
+      int axes = 0;
+      for (int k = 0; k < 3; ++k)
+        if (!thin[k]) {
+          volume *= ext[k];
+          ++axes;
+        }
+      side = axes == 0 ? 1.0 : std::pow(volume / (kCellsPerBox * static_cast<double>(n)), 1.0 / axes);
+      bool changed = false;
+      for (int k = 0; k < 3; ++k)
+        if (!thin[k] && ext[k] < side) thin[k] = changed = true;
+      if (!changed) break;
+    }
     std::uint64_t cells = 1;
     for (int k = 0; k < 3; ++k) {
-      dims[k] = ext[k] > 0.0f ? static_cast<std::uint32_t>(std::clamp(std::ceil(ext[k] / side), 1.0, double(kMaxDim))) : 1u;
+      dims[k] = thin[k] ? 1u : static_cast<std::uint32_t>(std::clamp(std::ceil(ext[k] / side), 1.0, double(kMaxDim)));
       cells *= dims[k];
       lo[k] = all.lo[k];
       cell[k] = ext[k] > 0.0f ? ext[k] / static_cast<float>(dims[k]) : 0.0f;
@@ -127,13 +140,17 @@ struct SensorGrid {
   }
 
   // Calls hit(slot) for the boxes of the cells the ray passes within [ray.tnear, t_max] that it
-  // meets within [ray.tnear, t_max] (a box spanning several cells may come more than once), in cell
-  // order along the ray. `dir` is the ray's direction; `runs` and `met` are scratch lists. Returns
+  // meets within [ray.tnear, t_max] (a box spanning several cells may come more than once), in no
+  // particular order. `dir` is the ray's direction; `runs` and `met` are scratch lists. Returns
   // false, having called nothing, when the ray's rounding could exceed the margin, or the ray has a
   // zero direction component (the caller walks the kd-tree instead).
   template <class F>
   bool forEachMet(const KdRay& ray, const glm::vec3& dir, float t_max, std::vector<std::uint32_t>& runs,
                   std::vector<std::uint32_t>& met, F&& hit) const {
+#if !defined(DUPLEX_LEAF_BOXES_X86)
+    (void)ray, (void)dir, (void)t_max, (void)runs, (void)met, (void)hit;
+    return false;  // no vector box test (LeafBoxes.h): the kd-tree
+#else
     if (boxes.lanes == 1 || ray.zero[0] || ray.zero[1] || ray.zero[2]) return false;
     float t0 = ray.tnear, t1 = t_max;
     if (!clipIntervalToBox(ray, bounds, t0, t1)) return true;  // misses every box
@@ -141,35 +158,76 @@ struct SensorGrid {
                         std::max(std::abs(t0), std::abs(t1)) * std::max({std::abs(dir.x), std::abs(dir.y), std::abs(dir.z)});
     // Entry point and plane crossings are each a few roundings of values up to `reach`.
     if (!(64.0f * std::numeric_limits<float>::epsilon() * reach <= margin)) return false;
-    const float d[3] = {dir.x, dir.y, dir.z};
-    std::int32_t c[3], step[3];
-    float next[3];
+    // Per axis: the cell where the ray enters, and the t of every cell plane it crosses up to t1
+    // before the grid's boundary (the planes are lo + p * cell).
+    // Each axis's t grow with p (every operation is monotonic), so the cells in order along the ray
+    // are a merge of the three lists: the walk of Amanatides and Woo without its branch per cell
+    // (which plane comes next is a coin flip for random rays: a mispredicted branch per cell cost
+    // more than the cell's box tests). Equal t step both axes at once, past the cell touched only
+    // at that edge, whose boxes near the ray are within the margin of the cells visited.
+    std::int32_t c[3], stride[3];
+    std::uint32_t count[3];
+    float plane_t[3][kMaxDim + 8];
+    const std::int32_t axis_stride[3] = {1, static_cast<std::int32_t>(dims[0]), static_cast<std::int32_t>(dims[0] * dims[1])};
     for (int k = 0; k < 3; ++k) {
-      c[k] = static_cast<std::int32_t>(cellOf(k, ray.origin[k] + t0 * d[k]));
-      step[k] = d[k] > 0.0f ? 1 : -1;
-      next[k] = planeT(ray, k, c[k], d[k]);
+      c[k] = static_cast<std::int32_t>(cellOf(k, ray.origin[k] + t0 * dir[k]));
+      const bool up = dir[k] > 0.0f;
+      const std::uint32_t left = up ? dims[k] - 1 - static_cast<std::uint32_t>(c[k]) : static_cast<std::uint32_t>(c[k]);
+      const std::int32_t step = up ? 1 : -1;
+      stride[k] = up ? axis_stride[k] : -axis_stride[k];
+      // Eight planes at a time (a loop over single planes mispredicts its exit twice per axis):
+      // those with t <= t1 are a prefix (t grows with the plane), and at most `left` count.
+      const __m128 lo4 = _mm_set1_ps(lo[k]), cell4 = _mm_set1_ps(cell[k]), o4 = _mm_set1_ps(ray.origin[k]);
+      const __m128 inv4 = _mm_set1_ps(ray.inv_dir[k]), end4 = _mm_set1_ps(t1);
+      const std::int32_t first = c[k] + (up ? 1 : 0);
+      __m128i plane = _mm_setr_epi32(first, first + step, first + 2 * step, first + 3 * step);
+      const __m128i step4 = _mm_set1_epi32(4 * step);
+      std::uint32_t n = 0;
+      while (true) {
+        const __m128 ta = _mm_mul_ps(_mm_sub_ps(_mm_add_ps(lo4, _mm_mul_ps(_mm_cvtepi32_ps(plane), cell4)), o4), inv4);
+        plane = _mm_add_epi32(plane, step4);
+        const __m128 tb = _mm_mul_ps(_mm_sub_ps(_mm_add_ps(lo4, _mm_mul_ps(_mm_cvtepi32_ps(plane), cell4)), o4), inv4);
+        plane = _mm_add_epi32(plane, step4);
+        _mm_storeu_ps(plane_t[k] + n, ta);
+        _mm_storeu_ps(plane_t[k] + n + 4, tb);
+        const auto before_end = static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(ta, end4)) |
+                                                           (_mm_movemask_ps(_mm_cmple_ps(tb, end4)) << 4));
+        const std::uint32_t got = std::min<std::uint32_t>(static_cast<std::uint32_t>(std::popcount(before_end)), left - n);
+        n += got;
+        if (got < 8) break;
+      }
+      plane_t[k][n] = std::numeric_limits<float>::infinity();
+      count[k] = n;
     }
     // The cells first (their runs of entries), then one vector test over all of them.
-    runs.clear();
-    std::uint32_t entries = 0;
-    while (true) {
-      const std::uint32_t cell_index = index(c[0], c[1], c[2]);
-      const std::uint32_t b = cell_begin[cell_index], e = cell_begin[cell_index + 1];
-      if (e > b) {
-        runs.push_back(b);
-        runs.push_back(e);
-        entries += e - b;
-      }
-      const int axis = next[0] < next[1] ? (next[0] < next[2] ? 0 : 2) : (next[1] < next[2] ? 1 : 2);
-      if (!(next[axis] <= t1)) break;
-      c[axis] += step[axis];
-      if (c[axis] < 0 || c[axis] >= static_cast<std::int32_t>(dims[axis])) break;
-      next[axis] = planeT(ray, axis, c[axis], d[axis]);
+    const std::uint32_t steps = count[0] + count[1] + count[2];
+    if (runs.size() < 2 * (steps + 1)) runs.resize(2 * (steps + 1));
+    std::uint32_t* run = runs.data();
+    std::uint32_t run_count = 0, entries = 0;
+    std::int32_t cell_index = static_cast<std::int32_t>(index(c[0], c[1], c[2]));
+    std::uint32_t i0 = 0, i1 = 0, i2 = 0;
+    for (std::uint32_t s = 0;; ++s) {
+      const std::uint32_t b = cell_begin[static_cast<std::uint32_t>(cell_index)];
+      const std::uint32_t e = cell_begin[static_cast<std::uint32_t>(cell_index) + 1];
+      run[2 * run_count] = b;
+      run[2 * run_count + 1] = e;
+      run_count += e > b ? 1u : 0u;
+      entries += e - b;
+      if (s == steps) break;
+      const float tx = plane_t[0][i0], ty = plane_t[1][i1], tz = plane_t[2][i2];
+      // Bitwise, not &&: each compare is a value, not a branch.
+      const bool sx = (tx <= ty) & (tx <= tz), sy = (ty <= tx) & (ty <= tz), sz = (tz <= tx) & (tz <= ty);
+      i0 += sx;
+      i1 += sy;
+      i2 += sz;
+      s += static_cast<std::uint32_t>(sx) + sy + sz - 1u;  // ties take several planes in one step
+      cell_index += (sx ? stride[0] : 0) + (sy ? stride[1] : 0) + (sz ? stride[2] : 0);
     }
-    if (met.size() < entries) met.resize(entries);
-    const std::uint32_t n = boxes.metInRuns(ray, t_max, runs.data(), static_cast<std::uint32_t>(runs.size() / 2), met.data());
+    if (met.size() < entries + LeafBoxes::kMaxLanes) met.resize(entries + LeafBoxes::kMaxLanes);
+    const std::uint32_t n = boxes.metInRuns(ray, t_max, run, run_count, met.data());
     for (std::uint32_t k = 0; k < n; ++k) hit(slots[met[k]]);
     return true;
+#endif
   }
 
  private:
@@ -181,12 +239,6 @@ struct SensorGrid {
   }
   [[nodiscard]] std::uint32_t index(std::uint32_t x, std::uint32_t y, std::uint32_t z) const {
     return (z * dims[1] + y) * dims[0] + x;
-  }
-  // The t at which the ray leaves cell c of axis k (its far plane along d); +inf when it never does.
-  [[nodiscard]] float planeT(const KdRay& ray, int k, std::int32_t c, float d) const {
-    if (ray.zero[k] || dims[k] == 1) return std::numeric_limits<float>::infinity();
-    const float plane = lo[k] + static_cast<float>(c + (d > 0.0f ? 1 : 0)) * cell[k];
-    return (plane - ray.origin[k]) * ray.inv_dir[k];
   }
 };
 

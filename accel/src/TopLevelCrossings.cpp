@@ -6,10 +6,10 @@
 // up to that hit (a sensor behind a wall costs nothing): through a uniform grid over the sensors'
 // boxes (SensorGrid.h, TopLevelConfig::sensor_grid) or else their shallow kd-tree, whose leaves'
 // boxes are tested 16, 8 or 4 at a time from a leaf-ordered copy (LeafBoxes.h,
-// TopLevelConfig::sensor_build). A flat sensor the ray clearly misses is dropped
-// (Object::flatCrossings, clearlyMisses); any other whose box the ray meets is asked for its
-// crossings up to the hit, once (mailbox, then a check of the crossings kept), and they are
-// inserted in order.
+// TopLevelConfig::sensor_build). A flat sensor whose plane the ray plainly misses is dropped by a
+// float test with rounding bounds (Object::flatCrossings, FlatPlane.h); any other whose box the ray
+// meets is asked for its crossings up to the hit, once (mailbox, then a check of the crossings
+// kept), and they are inserted in order.
 // Media met along the way are kept and their transmittance is applied segment by segment between
 // the sorted crossings, so each medium is integrated once over [tnear, t_hit].
 
@@ -120,14 +120,18 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     const Box* s_boxes = ss.boxes.data();
     const LeafBoxes* leaf_boxes = ss.leaf_boxes.count == s_tree.prim_indices.size() ? &ss.leaf_boxes : nullptr;
     Mailbox s_mailbox;
-    // Flat sensors' bounds, when they describe this level's slots (refreshed with the leaf boxes).
-    const FlatBound* flat = leaf_boxes && ss.flat.size() == ss.records.size() ? ss.flat.data() : nullptr;
-    const double t_keep_d = t_keep;
+    // Flat sensors' planes, when they describe this level's slots (refreshed with the leaf boxes).
+    const FlatPlane* flat = leaf_boxes && ss.flat.size() == ss.records.size() ? ss.flat.data() : nullptr;
+    const PlaneRay plane_ray(ray_ws);
     auto visit = [&](std::uint32_t slot) {
       const SlotFilter f = s_filters[slot];
-      if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
+      if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor) return;
+      if (flat && flat[slot].valid && plainlyMisses(flat[slot], plane_ray, t_keep)) {
+        ++ctx.stats.sensor_plane_misses;
+        return;
+      }
+      if (s_mailbox.seen(slot)) return;
       ++ctx.stats.instance_visits;
-      if (flat && flat[slot].valid && clearlyMisses(s_records[slot], flat[slot], w.d, t_keep_d)) return;
       addCrossings(s_records[slot], t_keep);
     };
     const bool by_grid = leaf_boxes && config_.sensor_grid && ss.grid.usable() &&

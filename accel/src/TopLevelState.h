@@ -7,6 +7,7 @@
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/TopLevel.h"
+#include "FlatPlane.h"
 #include "LeafBoxes.h"
 #include "SensorGrid.h"
 
@@ -86,32 +87,6 @@ struct WorldRay {
 
 inline WorldRay fromFloat(const Ray& r) {
   return {r, RayD{glm::dvec3(r.origin), glm::dvec3(r.dir), static_cast<double>(r.tnear), static_cast<double>(r.tfar)}};
-}
-
-// A flat instance's crossing bound (Object::flatCrossings), by slot of the sensors' level.
-struct FlatBound {
-  float half_width = 0.0f, half_height = 0.0f;
-  bool front_only = false;
-  bool valid = false;  // false: no bound (ask intersectAll)
-};
-
-// Whether the ray (world, double) clearly misses flat instance `rec`'s region within
-// [tnear, t_reach]: the same crossing as SensorObject::cross computes it (object-space ray, t =
-// -o.z / d.z, local x, y), but from the double transform before it is rounded to float, so each
-// comparison carries a relative slack of 1e-6 (float rounding is 6e-8) and only clear misses say
-// yes. A ray parallel to the plane is never a clear miss (intersectAll decides).
-inline bool clearlyMisses(const Record& rec, const FlatBound& f, const RayD& w, double t_reach) {
-  const glm::dvec3 o = rec.identity ? w.origin : rec.object_from_world.point(w.origin);
-  const glm::dvec3 d = rec.identity ? w.dir : rec.object_from_world.vector(w.dir);
-  if (f.front_only && d.z > 0.0) return true;  // cross() refuses dz >= 0 after rounding: the same sign
-  if (d.z == 0.0) return false;
-  constexpr double kSlack = 1e-6;
-  const double t = -o.z / d.z;
-  const double t_slack = kSlack * std::abs(t) + 1e-300;
-  if (t < w.tnear - t_slack || t > t_reach + t_slack) return true;
-  const double x = o.x + t * d.x, y = o.y + t * d.y;
-  if (std::abs(x) > f.half_width + kSlack * (f.half_width + std::abs(o.x) + std::abs(t * d.x))) return true;
-  return std::abs(y) > f.half_height + kSlack * (f.half_height + std::abs(o.y) + std::abs(t * d.y));
 }
 
 inline WorldRay fromDouble(const RayD& r) {
@@ -219,15 +194,16 @@ struct TopLevel::State {
   // With them, a uniform grid over the same boxes (SensorGrid.h), refreshed at the same times.
   toplevel_detail::LeafBoxes leaf_boxes;
   toplevel_detail::SensorGrid grid;
-  std::vector<toplevel_detail::FlatBound> flat;  // by slot: the flat instances' crossing bounds
+  std::vector<toplevel_detail::FlatPlane> flat;  // by slot: the flat instances' planes (FlatPlane.h)
   void refreshLeafBoxes(const KdTree& tree) {
     leaf_boxes.refresh(boxes, tree.prim_indices);
     grid.refresh(boxes);
     flat.assign(records.size(), {});
     for (std::size_t slot = 0; slot < records.size(); ++slot) {
-      if (!records[slot].object || boxes[slot].empty()) continue;
-      if (const std::optional<FlatCrossings> f = records[slot].object->flatCrossings())
-        flat[slot] = {f->half_width, f->half_height, f->front_only, true};
+      const Record& rec = records[slot];
+      if (!rec.object || boxes[slot].empty()) continue;
+      if (const std::optional<FlatCrossings> f = rec.object->flatCrossings())
+        flat[slot] = toplevel_detail::FlatPlane(rec.identity ? Affine::identity() : rec.object_from_world, *f);
     }
   }
 

@@ -31,8 +31,11 @@ namespace duplex {
 
 namespace {
 
+// A deposit: global bin, the sensor it belongs to (kInvalidId for an angular bin, which repeats
+// a spatial bin's power), and the power.
 struct BinEvent {
   std::uint32_t bin;
+  std::uint32_t sensor;
   double value;
 };
 struct SensorEvent {
@@ -74,6 +77,21 @@ bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_m
     t1 = std::min(t1, tb);
   }
   return t0 <= t1;
+}
+
+// Sorts a path's deposits by bin, keeping the path order within a bin. Most paths deposit in a
+// handful of bins: a stable insertion sort, where std::stable_sort would allocate a buffer per path.
+void sortByBin(std::vector<BinEvent>& events) {
+  if (events.size() > 32) {
+    std::stable_sort(events.begin(), events.end(), [](const BinEvent& a, const BinEvent& b) { return a.bin < b.bin; });
+    return;
+  }
+  for (std::size_t i = 1; i < events.size(); ++i) {
+    const BinEvent e = events[i];
+    std::size_t j = i;
+    for (; j > 0 && events[j - 1].bin > e.bin; --j) events[j] = events[j - 1];
+    events[j] = e;
+  }
 }
 
 }  // namespace
@@ -197,12 +215,12 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           if (s < 0) continue;
           const SensorInstance& si = sensors[static_cast<std::size_t>(s)];
           const double value = w * c.transmittance;
-          path_bins.push_back({si.first_bin + c.hit.prim_id, value});
+          path_bins.push_back({si.first_bin + c.hit.prim_id, static_cast<std::uint32_t>(s), value});
           if (si.object->spec().theta_bins != 0) {  // the incoming direction, in the sensor's world frame
             const glm::dvec3 in = -dir;
             const std::uint32_t ab = si.object->angleBinAt(glm::dot(in, si.normal),
                                                            std::atan2(glm::dot(in, si.frame_y), glm::dot(in, si.frame_x)));
-            path_bins.push_back({angle_base + si.first_angle_bin + ab, value});
+            path_bins.push_back({angle_base + si.first_angle_bin + ab, kInvalidId, value});
           }
           ++chunk.counters.crossings;
         }
@@ -289,7 +307,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     }
 
     // Merge this path's deposits per bin (in path order within a bin) and per sensor.
-    std::stable_sort(path_bins.begin(), path_bins.end(), [](const BinEvent& a, const BinEvent& b) { return a.bin < b.bin; });
+    sortByBin(path_bins);
     const std::size_t sensor_first = chunk.sensors.size();
     for (std::size_t i = 0; i < path_bins.size();) {
       BinEvent merged = path_bins[i];
@@ -300,10 +318,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     for (std::size_t i = chunk.bin_end.empty() ? 0 : chunk.bin_end.back(); i < chunk.bins.size(); ++i) {
       const BinEvent& b = chunk.bins[i];
       if (b.bin >= angle_base) break;  // angular bins (sorted after the spatial ones) repeat the same power
-      // The sensor of a global bin: the last sensor whose first_bin <= bin.
-      const auto it = std::upper_bound(sensors.begin(), sensors.end(), b.bin,
-                                       [](std::uint32_t bin, const SensorInstance& s) { return bin < s.first_bin; });
-      const auto s = static_cast<std::uint32_t>(it - sensors.begin() - 1);
+      const std::uint32_t s = b.sensor;
       if (chunk.sensors.size() > sensor_first && chunk.sensors.back().sensor == s) chunk.sensors.back().value += b.value;
       else chunk.sensors.push_back({s, b.value});
     }

@@ -16,6 +16,9 @@ namespace duplex {
 struct QueryStats {
   std::uint64_t rays = 0;
   std::uint64_t instance_visits = 0;  ///< top-level leaf tests that reached an object
+  /// Crossing queries: flat sensors whose box the ray met but whose plane it plainly misses (a
+  /// float test settled them without asking the object).
+  std::uint64_t sensor_plane_misses = 0;
 };
 
 /// One per thread; cheap to create (no allocation until an object caches something). Not
