@@ -302,6 +302,44 @@ TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
   EXPECT_EQ(spanning.stats().sensor_grid_cells, 0u);
 }
 
+// A thin, nearly flat layout (sensors on a floor tilted by 1e-6, 1,000 units wide): the grid must
+// not divide its tiny volume into cells far smaller than the layout's width (it gave 333 x 333
+// cells for 300 sensors); an axis thinner than a cell gets one cell. Crossings stay exact.
+TEST(SensorCrossingPaths, ThinLayoutsGetFewCells) {
+  Scene s;
+  const auto tile = sensor(SensorShape::Rectangle, 2.0, 4, true);
+  std::mt19937_64 r(3);
+  std::uniform_real_distribution<double> v(0.0, 1.0);
+  for (std::uint32_t id = 0; id < 300; ++id) {
+    InstanceDesc d;
+    d.id = id;
+    d.object = tile;
+    const double x = 1000.0 * v(r), y = 1000.0 * v(r);
+    d.world_from_object.translation = glm::dvec3(x, y, 1e-6 * x);
+    d.mask = 1u;
+    s.instances.push_back(d);
+    s.half.push_back(1.0);
+  }
+  const BothWalks walks(s.instances);
+  const std::uint64_t cells = walks.fast.stats().sensor_grid_cells;
+  ASSERT_GT(cells, 0u);
+  EXPECT_LE(cells, s.instances.size());
+  Counts counts;
+  for (int i = 0; i < 2000; ++i) {
+    const InstanceDesc& d = s.instances[r() % s.instances.size()];
+    // Down onto a sensor (or beside it), or skimming the floor from above.
+    const glm::dvec3 target = d.world_from_object.point(glm::dvec3(3.0 * v(r) - 1.5, 3.0 * v(r) - 1.5, 0.0));
+    const glm::dvec3 from = i % 2 ? target + glm::dvec3(50.0 * v(r) - 25.0, 50.0 * v(r) - 25.0, 5.0)
+                                  : target + glm::dvec3(400.0 * v(r) - 200.0, 400.0 * v(r) - 200.0, 0.5);
+    Ray ray;
+    ray.origin = glm::vec3(from);
+    ray.dir = glm::vec3(target - from);
+    ray.tfar = 1.5f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, ray, 1u, counts));
+  }
+  EXPECT_GT(counts.crossings, 500u);
+}
+
 // The float plane test (FlatPlane.h) may only drop sensors the exact path would not report: rays
 // that cross a sensor just inside or outside its border (1e-7 to 1e-4 relative), segments that
 // end or start within a few float steps of the crossing, and grazing rays (the direction 1e-6 to
