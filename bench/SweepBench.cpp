@@ -1,12 +1,18 @@
 // The heuristic/cost sweep: how much build time buys how much trace time. Every setting is built and
 // traced on one thread, settings interleaved within each repetition (so that machine drift spreads over
 // all of them), with Embree medium and high measured in the same repetitions as reference points.
+// Under callgrind (scripts/sweep_callgrind.sh) each setting's build and its four trace loops (random
+// and primary rays, closest and any hit) are instrumented sections of their own, dumped by name: their
+// instruction counts repeat exactly, where times on the shared machine do not.
 
 #include "BenchMeshes.h"
 #include "BenchModes.h"
 
 #if DUPLEX_BENCH_HAVE_EMBREE
 #include "EmbreeBaseline.h"
+#endif
+#if DUPLEX_BENCH_HAVE_CALLGRIND
+#include <valgrind/callgrind.h>
 #endif
 
 #include "duplex/accel/KdBuildConfig.h"
@@ -15,6 +21,7 @@
 
 #include <cmath>
 #include <iostream>
+#include <span>
 #include <sstream>
 
 namespace duplex::bench {
@@ -26,6 +33,40 @@ struct Setting {
   KdBuildConfig config;
   bool is_default = false;
 };
+
+bool onValgrind() {
+#if DUPLEX_BENCH_HAVE_CALLGRIND
+  return RUNNING_ON_VALGRIND != 0;
+#else
+  return false;
+#endif
+}
+
+// Runs `fn` as one instrumented callgrind section dumped as `name` (outside valgrind: just runs it).
+template <class Fn>
+[[gnu::noinline]] void callgrindSection(const std::string& name, const Fn& fn) {
+#if DUPLEX_BENCH_HAVE_CALLGRIND
+  CALLGRIND_ZERO_STATS;
+  CALLGRIND_START_INSTRUMENTATION;
+  fn();
+  CALLGRIND_STOP_INSTRUMENTATION;
+  CALLGRIND_DUMP_STATS_AT(name.c_str());
+#else
+  (void)name;
+  fn();
+#endif
+}
+
+// Closest or any hit of every ray, on the calling thread (the instrumented trace loops).
+template <class Accel>
+[[gnu::noinline]] std::uint64_t traceLoop(const Accel& accel, std::span<const Ray> rays, Query q) {
+  std::uint64_t hits = 0;
+  for (const Ray& r : rays) {
+    Hit hit;
+    hits += (q == Query::Closest ? accel.intersect(r, hit) : accel.occluded(r)) ? 1u : 0u;
+  }
+  return hits;
+}
 
 std::string costLabel(float value) {
   std::ostringstream os;
@@ -77,9 +118,13 @@ std::vector<Setting> settings(bool quick) {
     return list;
   }
   for (const float c : {0.1f, 0.2f, 0.35f, 0.5f, 1.0f, 1.5f, 3.0f}) add(sah(ct, c, eb, true));
+  // Cheaper builds than the defaults: a higher node cost (larger leaves, fewer nodes), no clipping,
+  // and both together.
+  add(sah(1.5f * ct, ci, eb, true));
   add(sah(2.0f * ct, ci, eb, true));
   for (const float b : {0.0f, 0.5f}) add(sah(ct, ci, b, true));
   add(sah(ct, ci, eb, false));
+  add(sah(1.5f * ct, ci, eb, false));
   add(sah(ct, 1.5f, eb, false));
   // Leaf size 2 is left out: Median L2 builds 20-30x slower than the SAH (koala: 18 s) and would
   // dominate the run time.
@@ -144,6 +189,34 @@ nlohmann::json runSweep(const Options& options) {
     std::vector<nlohmann::json> trees(all.size());
     Figures embree[2];
     const Stopwatch phase;
+    if (onValgrind()) {
+      // Instruction counts: one repetition, every section dumped by name; no timing, no Embree.
+      for (std::size_t i = 0; i < all.size(); ++i) {
+        // Only the SAH settings that could replace the defaults: the median / middle heuristics and
+        // intersection costs above twice the default trace 1.3-20x slower (docs/bench/sweep.txt) and
+        // would take most of the (50x slowed) run.
+        if (all[i].config.heuristic != KdHeuristic::Sah || all[i].config.intersection_cost > 2.0f * defaults.intersection_cost)
+          continue;
+        const std::string tag = "sweep|" + loaded.spec.label() + "|" + all[i].label + "|";
+        std::unique_ptr<MeshObject> object;
+        one.execute([&] {
+          callgrindSection(tag + "build", [&] { object = std::make_unique<MeshObject>(loaded.mesh, all[i].config); });
+        });
+        setFtzDaz();
+        // One uncounted query first, so that lazy symbol binding is not charged to a loop.
+        (void)traceLoop(*object, std::span<const Ray>(random).first(1), Query::Any);
+        for (const Query q : {Query::Closest, Query::Any}) {
+          callgrindSection(tag + "random-" + toString(q), [&] { (void)traceLoop(*object, random, q); });
+          callgrindSection(tag + "primary-" + toString(q), [&] { (void)traceLoop(*object, primary, q); });
+        }
+        const KdTreeStats own = object->tree().stats(all[i].config.traversal_cost, all[i].config.intersection_cost);
+        const KdTreeStats common = object->tree().stats(defaults.traversal_cost, defaults.intersection_cost);
+        std::cerr << "  " << pad(all[i].label, 24) << " nodes " << own.nodes << ", SAH " << fmt(common.sah_cost, 1)
+                  << ", references per triangle " << fmt(static_cast<double>(object->tree().prim_indices.size()) / triangles)
+                  << "\n";
+      }
+      continue;
+    }
     for (int rep = 0; rep < options.repeat; ++rep) {
       for (std::size_t i = 0; i < all.size(); ++i) {
         std::unique_ptr<MeshObject> object;

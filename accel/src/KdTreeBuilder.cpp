@@ -71,6 +71,9 @@ struct Split {
 
 constexpr int kMaxBins = 32;
 
+// Set bits of a 4-bit mask (SSE2 has no population count).
+constexpr std::uint8_t kBitCount4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+
 int binsFor(std::size_t n) { return n < 64 ? 8 : (n < 1024 ? 16 : kMaxBins); }
 
 // j / count for j = 0 .. count (count 8, 16 or 32) and a padding entry, as Bins::boundary computes
@@ -85,6 +88,25 @@ const float* binFractions(int count) {
   };
   static const Table table;
   return table.f[count == 8 ? 0 : count == 16 ? 1 : 2];
+}
+
+// Sorts a few events in place: an inline insertion sort, where std::sort's calls and checks cost
+// more than the sorting of 1-8 values (the top level sorts nine such lists per node).
+void sortFew(float* v, std::size_t n) {
+  for (std::size_t i = 1; i < n; ++i) {
+    const float x = v[i];
+    std::size_t j = i;
+    for (; j > 0 && x < v[j - 1]; --j) v[j] = v[j - 1];
+    v[j] = x;
+  }
+}
+
+// Sorts events: few inline, many with std::sort.
+void sortEvents(float* v, std::size_t n) {
+  if (n <= 16)
+    sortFew(v, n);
+  else
+    std::sort(v, v + n);
 }
 
 // Exact extent of a set of references.
@@ -507,9 +529,32 @@ class Builder {
     float* const planars = events + 2 * n;
     std::size_t n_starts = 0, n_ends = 0, n_planars = 0;
     // Without branches: whether a bound falls into the window is a coin flip per reference, and
-    // mispredicted branches here cost more than the stores (every slot written lies below n).
-    for (const PrimRef& r : refs) {
-      const float a = r.lo[axis], b = r.hi[axis];
+    // mispredicted branches here cost more than the stores (every slot written lies below n). Four
+    // references at a time: the six comparisons of each are SSE compares and bit masks; only the
+    // compaction stores stay scalar (the same events, in the same order, as one at a time).
+    const __m128 lo4 = _mm_set1_ps(win_lo), hi4 = _mm_set1_ps(win_hi);
+    const PrimRef* r = refs.data();
+    const PrimRef* const end4 = r + (n & ~std::size_t{3});
+    for (; r != end4; r += 4) {
+      const float a[4] = {r[0].lo[axis], r[1].lo[axis], r[2].lo[axis], r[3].lo[axis]};
+      const float b[4] = {r[0].hi[axis], r[1].hi[axis], r[2].hi[axis], r[3].hi[axis]};
+      const __m128 va = _mm_loadu_ps(a), vb = _mm_loadu_ps(b);
+      const auto a_in = static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(va, lo4), _mm_cmple_ps(va, hi4))));
+      const auto b_in = static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(vb, lo4), _mm_cmple_ps(vb, hi4))));
+      const unsigned planar = a_in & static_cast<unsigned>(_mm_movemask_ps(_mm_cmpeq_ps(va, vb)));
+      below_window += kBitCount4[_mm_movemask_ps(_mm_cmplt_ps(va, lo4))];
+      above_window += kBitCount4[_mm_movemask_ps(_mm_cmpgt_ps(vb, hi4))];
+      for (unsigned k = 0; k < 4; ++k) {
+        starts[n_starts] = a[k];
+        n_starts += (a_in >> k) & 1u;
+        ends[n_ends] = b[k];
+        n_ends += (b_in >> k) & 1u;
+        planars[n_planars] = a[k];
+        n_planars += (planar >> k) & 1u;
+      }
+    }
+    for (; r != refs.data() + n; ++r) {
+      const float a = r->lo[axis], b = r->hi[axis];
       const bool a_in = (a >= win_lo) & (a <= win_hi);
       below_window += a < win_lo;
       starts[n_starts] = a;
@@ -520,9 +565,9 @@ class Builder {
       planars[n_planars] = a;
       n_planars += a_in & (a == b);
     }
-    std::sort(starts, starts + n_starts);
-    std::sort(ends, ends + n_ends);
-    std::sort(planars, planars + n_planars);
+    sortEvents(starts, n_starts);
+    sortEvents(ends, n_ends);
+    sortEvents(planars, n_planars);
     return sweepSorted(g, axis, starts, n_starts, ends, n_ends, planars, n_planars, below_window, above_window);
   }
 
@@ -540,9 +585,9 @@ class Builder {
       }
       e.n_starts[axis] = e.n_ends[axis] = static_cast<std::uint8_t>(refs.size());
       e.n_planars[axis] = n_planars;
-      std::sort(e.starts[axis], e.starts[axis] + refs.size());
-      std::sort(e.ends[axis], e.ends[axis] + refs.size());
-      std::sort(e.planars[axis], e.planars[axis] + n_planars);
+      sortFew(e.starts[axis], refs.size());
+      sortFew(e.ends[axis], refs.size());
+      sortFew(e.planars[axis], n_planars);
     }
     e.valid = true;
   }
