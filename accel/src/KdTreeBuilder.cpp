@@ -373,6 +373,23 @@ class Builder {
     return std::countr_zero(mask);
   }
 
+  // splitCost of four planes `p` on `axis` with references `nl` below and `nu` above, on SSE lanes:
+  // splitCost's operations in the same order, so the same results bit for bit.
+  __m128 splitCost4(const NodeGeometry& g, int axis, __m128 p, __m128i nl, __m128i nu) const {
+    const __m128 lo = _mm_set1_ps(g.lo[axis]), hi = _mm_set1_ps(g.hi[axis]);
+    const __m128 ab = _mm_set1_ps(g.ab[axis]), a_plus_b = _mm_set1_ps(g.a_plus_b[axis]);
+    const __m128 inv_half_area = _mm_set1_ps(g.inv_half_area);
+    const __m128 ct = _mm_set1_ps(cfg_.traversal_cost), ci = _mm_set1_ps(cfg_.intersection_cost);
+    const __m128 p_lower = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(p, lo), a_plus_b)), inv_half_area);
+    const __m128 p_upper = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(hi, p), a_plus_b)), inv_half_area);
+    const __m128 c = _mm_add_ps(ct, _mm_mul_ps(ci, _mm_add_ps(_mm_mul_ps(p_lower, _mm_cvtepi32_ps(nl)),
+                                                               _mm_mul_ps(p_upper, _mm_cvtepi32_ps(nu)))));
+    const __m128i zero = _mm_setzero_si128();
+    const __m128 one_empty = _mm_castsi128_ps(_mm_or_si128(_mm_cmpeq_epi32(nl, zero), _mm_cmpeq_epi32(nu, zero)));
+    const __m128 bonus = _mm_set1_ps(1.0f - cfg_.empty_bonus);
+    return _mm_or_ps(_mm_and_ps(one_empty, _mm_mul_ps(c, bonus)), _mm_andnot_ps(one_empty, c));
+  }
+
   // Costs of the bin boundaries j = 1 .. count - 1 of `axis` into cost[j - 1], with their planes and
   // reference counts below / above: splitCost's operations in the same order on four lanes (the
   // same results, bit for bit), +inf for planes outside the node or straddled by all n references
@@ -393,24 +410,15 @@ class Builder {
     const __m128 frame_lo = _mm_set1_ps(b.frame_lo[axis]);
     const __m128 frame_w = _mm_set1_ps(b.frame_hi[axis] - b.frame_lo[axis]);
     const __m128 lo = _mm_set1_ps(g.lo[axis]), hi = _mm_set1_ps(g.hi[axis]);
-    const __m128 ab = _mm_set1_ps(g.ab[axis]), a_plus_b = _mm_set1_ps(g.a_plus_b[axis]);
-    const __m128 inv_half_area = _mm_set1_ps(g.inv_half_area);
-    const __m128 ct = _mm_set1_ps(cfg_.traversal_cost), ci = _mm_set1_ps(cfg_.intersection_cost);
-    const __m128 bonus = _mm_set1_ps(1.0f - cfg_.empty_bonus);
     const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
-    const __m128i all = _mm_set1_epi32(n), zero = _mm_setzero_si128();
+    const __m128i all = _mm_set1_epi32(n);
     for (int j = 0; j <= m; j += 4) {
       // boundary(axis, j + 1): frame_lo + (frame_hi - frame_lo) * ((j + 1) / count).
       const __m128 p = _mm_add_ps(frame_lo, _mm_mul_ps(frame_w, _mm_loadu_ps(frac + j + 1)));
       _mm_store_ps(pos + j, p);
       const __m128i nl = _mm_load_si128(reinterpret_cast<const __m128i*>(n_lower + j));
       const __m128i nu = _mm_load_si128(reinterpret_cast<const __m128i*>(n_upper + j));
-      const __m128 p_lower = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(p, lo), a_plus_b)), inv_half_area);
-      const __m128 p_upper = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(hi, p), a_plus_b)), inv_half_area);
-      __m128 c = _mm_add_ps(ct, _mm_mul_ps(ci, _mm_add_ps(_mm_mul_ps(p_lower, _mm_cvtepi32_ps(nl)),
-                                                           _mm_mul_ps(p_upper, _mm_cvtepi32_ps(nu)))));
-      const __m128 one_empty = _mm_castsi128_ps(_mm_or_si128(_mm_cmpeq_epi32(nl, zero), _mm_cmpeq_epi32(nu, zero)));
-      c = _mm_or_ps(_mm_and_ps(one_empty, _mm_mul_ps(c, bonus)), _mm_andnot_ps(one_empty, c));
+      const __m128 c = splitCost4(g, axis, p, nl, nu);
       const __m128 inside = _mm_and_ps(_mm_cmpgt_ps(p, lo), _mm_cmplt_ps(p, hi));
       const __m128 separates =
           _mm_castsi128_ps(_mm_andnot_si128(_mm_and_si128(_mm_cmpeq_epi32(nl, all), _mm_cmpeq_epi32(nu, all)),
@@ -446,7 +454,8 @@ class Builder {
       Split best;
       for (int axis = 0; axis < 3; ++axis) {
         if (!(g.hi[axis] > g.lo[axis])) continue;
-        const Split s = n <= SmallEvents::kMax
+        const Split s = n <= kSmallSweep && events.n_planars[axis] == 0 ? sweepSmall(g, axis, events, n)
+                        : n <= SmallEvents::kMax
                             ? sweepSorted(g, axis, events.starts[axis], events.n_starts[axis], events.ends[axis],
                                           events.n_ends[axis], events.planars[axis], events.n_planars[axis], 0, 0)
                             : sweepEvents(refs, g, axis, g.lo[axis], g.hi[axis]);
@@ -571,6 +580,52 @@ class Builder {
     return sweepSorted(g, axis, starts, n_starts, ends, n_ends, planars, n_planars, below_window, above_window);
   }
 
+  // The exact sweep of a node of at most kSmallSweep references with no planar one on `axis`,
+  // without the merge's branches: every start and end is a candidate plane, its counts below and
+  // above are compares against all events (SSE, four candidates at a time), its cost splitCost4's.
+  // The least cost wins, on ties the lowest plane: what the merge in order (sweepSorted) picks,
+  // since a plane listed twice has the same counts and cost both times.
+  static constexpr std::size_t kSmallSweep = 8;
+  Split sweepSmall(const NodeGeometry& g, int axis, const SmallEvents& e, std::size_t n) const {
+    const float* starts = e.starts[axis];  // padded to kSmallSweep with +inf
+    const float* ends = e.ends[axis];      // padded with -inf
+    const __m128 lo = _mm_set1_ps(g.lo[axis]), hi = _mm_set1_ps(g.hi[axis]);
+    const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+    __m128 best_cost = inf, best_pos = inf;
+    __m128i best_lower = _mm_setzero_si128(), best_upper = _mm_setzero_si128();
+    const std::size_t quads = (n + 3) / 4;
+    for (std::size_t q = 0; q < 2 * quads; ++q) {
+      const __m128 p = _mm_loadu_ps(q < quads ? starts + 4 * q : ends + 4 * (q - quads));
+      // lo < p below, hi > p above; compare masks are -1, so subtracting counts.
+      __m128i nl = _mm_setzero_si128(), nu = _mm_setzero_si128();
+      for (std::size_t j = 0; j < n; ++j) {
+        nl = _mm_sub_epi32(nl, _mm_castps_si128(_mm_cmplt_ps(_mm_set1_ps(starts[j]), p)));
+        nu = _mm_sub_epi32(nu, _mm_castps_si128(_mm_cmpgt_ps(_mm_set1_ps(ends[j]), p)));
+      }
+      const __m128 c = splitCost4(g, axis, p, nl, nu);
+      // Planes strictly inside the node (the padding is not); a NaN cost never wins.
+      const __m128 keep = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(p, lo), _mm_cmplt_ps(p, hi)), _mm_cmpord_ps(c, c));
+      const __m128 take = _mm_and_ps(keep, _mm_or_ps(_mm_cmplt_ps(c, best_cost),
+                                                     _mm_and_ps(_mm_cmpeq_ps(c, best_cost), _mm_cmplt_ps(p, best_pos))));
+      const __m128i take_i = _mm_castps_si128(take);
+      best_cost = _mm_or_ps(_mm_and_ps(take, c), _mm_andnot_ps(take, best_cost));
+      best_pos = _mm_or_ps(_mm_and_ps(take, p), _mm_andnot_ps(take, best_pos));
+      best_lower = _mm_or_si128(_mm_and_si128(take_i, nl), _mm_andnot_si128(take_i, best_lower));
+      best_upper = _mm_or_si128(_mm_and_si128(take_i, nu), _mm_andnot_si128(take_i, best_upper));
+    }
+    alignas(16) float cost[4], pos[4];
+    alignas(16) std::int32_t lower[4], upper[4];
+    _mm_store_ps(cost, best_cost);
+    _mm_store_ps(pos, best_pos);
+    _mm_store_si128(reinterpret_cast<__m128i*>(lower), best_lower);
+    _mm_store_si128(reinterpret_cast<__m128i*>(upper), best_upper);
+    Split best;
+    for (int k = 0; k < 4; ++k)
+      if (cost[k] < best.cost || (cost[k] == best.cost && cost[k] < std::numeric_limits<float>::infinity() && pos[k] < best.pos))
+        best = {axis, pos[k], cost[k], true, static_cast<std::size_t>(lower[k]), static_cast<std::size_t>(upper[k]), true};
+    return best;
+  }
+
   // The events of every axis of a small node (every event lies in the node: references are clipped
   // to it), sorted.
   static void collectSmallEvents(const RefVec& refs, SmallEvents& e) {
@@ -588,6 +643,11 @@ class Builder {
       sortFew(e.starts[axis], refs.size());
       sortFew(e.ends[axis], refs.size());
       sortFew(e.planars[axis], n_planars);
+      // Padding that no plane counts: sweepSmall reads kSmallSweep events.
+      for (std::size_t j = refs.size(); j < kSmallSweep; ++j) {
+        e.starts[axis][j] = std::numeric_limits<float>::infinity();
+        e.ends[axis][j] = -std::numeric_limits<float>::infinity();
+      }
     }
     e.valid = true;
   }
