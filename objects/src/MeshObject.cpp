@@ -5,6 +5,7 @@
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/accel/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
+#include "MeshRay.h"
 #include "TriangleBlock4.h"
 #include "WatertightTriangle4.h"
 
@@ -150,51 +151,49 @@ void MeshObject::buildLeafBlocks() {
 }
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
-  if (!isQueryable(ray_os)) return false;
-  const KdRay kray(ray_os);
-  const WatertightRay wray(ray_os);
-  const detail::WatertightRay4 wray4(wray);
+  detail::MeshRay ray;
+  float tmin, tmax;
+  if (!detail::setupMeshRay(ray_os, block_tree_.bounds, ray, tmin, tmax)) return false;
   float t_best = std::min(hit.t, ray_os.tfar);
   const detail::TriangleBlock4* best_block = nullptr;
   int best_lane = 0;
   float best_u = 0.0f, best_v = 0.0f;
   const detail::TriangleBlock4* blocks = blocks_.data();
-  // One dispatch per ray on the axis permutation; traversal and triangle tests below are
-  // instantiated for each of the six permutations.
-  dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-      bool found = false;
-      // Four triangles per block; lanes are resolved in order with the scalar interval test so
-      // that the result equals testing them one by one.
-      const detail::TriangleBlock4* block = blocks + begin;
-      for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
-        const detail::Watertight4 r =
-            detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, kLaneMask[std::min(left, 4)], t_max);
-        for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
-          const int k = std::countr_zero(static_cast<unsigned>(lanes));
-          float t, u, v;
-          if (r.exact >> k & 1) {
-            if (!intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
-                                                 t_max, t, u, v))
-              continue;
-          } else {
-            if (r.sT[k] > t_max * r.abs_det[k]) continue;
-            const float inv = 1.0f / r.det[k];  // the scalar test's final step
-            t = r.T[k] * inv;
-            u = r.V[k] * inv;
-            v = r.W[k] * inv;
+  // The axis permutation of the triangle test is a run-time value (no dispatch per ray: the six
+  // choices are a coin flip on random rays, and six copies of the traversal cost code size).
+  traverseKdTreeClipped<false>(
+      block_tree_, ray.kd, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+        bool found = false;
+        // Four triangles per block; lanes are resolved in order with the scalar interval test so
+        // that the result equals testing them one by one.
+        const detail::TriangleBlock4* block = blocks + begin;
+        for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
+          const detail::Watertight4 r =
+              detail::intersectWatertight4(ray.wray4, *block, kLaneMask[std::min(left, 4)], t_max);
+          for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
+            const int k = std::countr_zero(static_cast<unsigned>(lanes));
+            float t, u, v;
+            if (r.exact >> k & 1) {
+              if (!intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t,
+                                       u, v))
+                continue;
+            } else {
+              if (r.sT[k] > t_max * r.abs_det[k]) continue;
+              const float inv = 1.0f / r.det[k];  // the scalar test's final step
+              t = r.T[k] * inv;
+              u = r.V[k] * inv;
+              v = r.W[k] * inv;
+            }
+            t_max = t;
+            best_block = block;
+            best_lane = k;
+            best_u = u;
+            best_v = v;
+            found = true;
           }
-          t_max = t;
-          best_block = block;
-          best_lane = k;
-          best_u = u;
-          best_v = v;
-          found = true;
         }
-      }
-      return found;
-    });
-  });
+        return found;
+      });
   if (best_block == nullptr) return false;
   const glm::vec3 v0 = best_block->vertex(best_lane, 0);
   hit.t = t_best;
@@ -206,30 +205,28 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
 }
 
 bool MeshObject::occluded(const Ray& ray_os) const {
-  if (!isQueryable(ray_os)) return false;
-  const KdRay kray(ray_os);
-  const WatertightRay wray(ray_os);
-  const detail::WatertightRay4 wray4(wray);
+  detail::MeshRay ray;
+  float tmin, tmax;
+  if (!detail::setupMeshRay(ray_os, block_tree_.bounds, ray, tmin, tmax)) return false;
   float t_best = ray_os.tfar;
   const detail::TriangleBlock4* blocks = blocks_.data();
-  return dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    return traverseKdTree<true>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-      const detail::TriangleBlock4* block = blocks + begin;
-      for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
-        const detail::Watertight4 r =
-            detail::intersectWatertight4<KX, KY, KZ>(wray4, *block, kLaneMask[std::min(left, 4)], t_max);
-        if (r.fast) return true;
-        for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
-          const int k = std::countr_zero(static_cast<unsigned>(lanes));
-          float t, u, v;
-          if (intersectWatertight<KX, KY, KZ>(wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2),
-                                              t_max, t, u, v))
-            return true;
+  return traverseKdTreeClipped<true>(
+      block_tree_, ray.kd, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+        const detail::TriangleBlock4* block = blocks + begin;
+        for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
+          const detail::Watertight4 r =
+              detail::intersectWatertight4(ray.wray4, *block, kLaneMask[std::min(left, 4)], t_max);
+          if (r.fast) return true;
+          for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
+            const int k = std::countr_zero(static_cast<unsigned>(lanes));
+            float t, u, v;
+            if (intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t, u,
+                                    v))
+              return true;
+          }
         }
-      }
-      return false;
-    });
-  });
+        return false;
+      });
 }
 
 void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {

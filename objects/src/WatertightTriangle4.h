@@ -32,41 +32,44 @@ struct Watertight4 {
 };
 
 /// The per-ray constants of WatertightRay broadcast to four lanes, once per ray rather than once
-/// per block (the compiler does not hoist them out of the traversal's leaf calls).
+/// per block, in permuted order: o[0], o[1], o[2] are the origin's kx, ky, kz coordinates. The
+/// permutation is a run-time value: a block's coordinate rows are loaded at offsets kx, ky, kz,
+/// which costs the same as constant offsets and needs no dispatch per ray.
 struct WatertightRay4 {
   __m128 o[3];
   __m128 sx, sy, sz;
   __m128 tnear;
+  int kx = 0, ky = 1, kz = 2;
 
+  WatertightRay4() = default;
   explicit WatertightRay4(const WatertightRay& ray)
-      : o{_mm_set1_ps(ray.origin[0]), _mm_set1_ps(ray.origin[1]), _mm_set1_ps(ray.origin[2])},
+      : o{_mm_set1_ps(ray.origin[ray.kx]), _mm_set1_ps(ray.origin[ray.ky]), _mm_set1_ps(ray.origin[ray.kz])},
         sx(_mm_set1_ps(ray.sx)),
         sy(_mm_set1_ps(ray.sy)),
         sz(_mm_set1_ps(ray.sz)),
-        tnear(_mm_set1_ps(ray.tnear)) {}
+        tnear(_mm_set1_ps(ray.tnear)),
+        kx(ray.kx),
+        ky(ray.ky),
+        kz(ray.kz) {}
 };
 
 /// Tests the lanes in `lanes` (bit i: lane i holds one of the leaf's triangles) of `block`.
-template <int KX, int KY, int KZ>
 inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const TriangleBlock4& block, int lanes, float t_max) {
-  // v[k][c]: coordinate c of vertex k of the 4 triangles.
-  __m128 v[3][3];
-  for (int k = 0; k < 3; ++k)
-    for (int c = 0; c < 3; ++c) v[k][c] = _mm_load_ps(block.v[3 * k + c]);
-  const __m128* o = ray.o;
-  const __m128 sx = ray.sx, sy = ray.sy, sz = ray.sz;
+  // A/B/C[j]: coordinate (kx, ky, kz)[j] of vertex 0/1/2 of the 4 triangles, relative to the origin.
+  const int axes[3] = {ray.kx, ray.ky, ray.kz};
   __m128 A[3], B[3], C[3];
-  for (int k = 0; k < 3; ++k) {
-    A[k] = _mm_sub_ps(v[0][k], o[k]);
-    B[k] = _mm_sub_ps(v[1][k], o[k]);
-    C[k] = _mm_sub_ps(v[2][k], o[k]);
+  for (int j = 0; j < 3; ++j) {
+    A[j] = _mm_sub_ps(_mm_load_ps(block.v[0 + axes[j]]), ray.o[j]);
+    B[j] = _mm_sub_ps(_mm_load_ps(block.v[3 + axes[j]]), ray.o[j]);
+    C[j] = _mm_sub_ps(_mm_load_ps(block.v[6 + axes[j]]), ray.o[j]);
   }
-  const __m128 ax = _mm_sub_ps(A[KX], _mm_mul_ps(sx, A[KZ]));
-  const __m128 ay = _mm_sub_ps(A[KY], _mm_mul_ps(sy, A[KZ]));
-  const __m128 bx = _mm_sub_ps(B[KX], _mm_mul_ps(sx, B[KZ]));
-  const __m128 by = _mm_sub_ps(B[KY], _mm_mul_ps(sy, B[KZ]));
-  const __m128 cx = _mm_sub_ps(C[KX], _mm_mul_ps(sx, C[KZ]));
-  const __m128 cy = _mm_sub_ps(C[KY], _mm_mul_ps(sy, C[KZ]));
+  const __m128 sx = ray.sx, sy = ray.sy, sz = ray.sz;
+  const __m128 ax = _mm_sub_ps(A[0], _mm_mul_ps(sx, A[2]));
+  const __m128 ay = _mm_sub_ps(A[1], _mm_mul_ps(sy, A[2]));
+  const __m128 bx = _mm_sub_ps(B[0], _mm_mul_ps(sx, B[2]));
+  const __m128 by = _mm_sub_ps(B[1], _mm_mul_ps(sy, B[2]));
+  const __m128 cx = _mm_sub_ps(C[0], _mm_mul_ps(sx, C[2]));
+  const __m128 cy = _mm_sub_ps(C[1], _mm_mul_ps(sy, C[2]));
   const __m128 U = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
   const __m128 V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
   const __m128 W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
@@ -81,8 +84,8 @@ inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const Triangl
   const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
   int candidates = ~_mm_movemask_ps(_mm_or_ps(mixed, _mm_cmpeq_ps(det, zero))) & lanes & ~r.exact;
   if (candidates == 0) return r;
-  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, A[KZ])), _mm_mul_ps(V, _mm_mul_ps(sz, B[KZ]))),
-                              _mm_mul_ps(W, _mm_mul_ps(sz, C[KZ])));
+  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, A[2])), _mm_mul_ps(V, _mm_mul_ps(sz, B[2]))),
+                              _mm_mul_ps(W, _mm_mul_ps(sz, C[2])));
   const __m128 sign = _mm_and_ps(det, _mm_set1_ps(-0.0f));
   const __m128 abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), det);
   const __m128 sT = _mm_xor_ps(T, sign);

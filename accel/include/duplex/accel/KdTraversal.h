@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <utility>
 
 namespace duplex {
 
@@ -31,6 +32,9 @@ struct KdRay {
   float tnear;
   float tfar;
 
+  /// Uninitialised; for callers that compute the same values themselves (MeshObject's per-ray
+  /// setup does it with SSE, together with the triangle test's constants).
+  KdRay() = default;
   explicit KdRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear), tfar(r.tfar) {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     for (int k = 0; k < 3; ++k) {
@@ -93,10 +97,14 @@ inline constexpr int kKdStackSize = 64;
 /// ends when the next node starts behind t_best. That is what keeps hits on split planes and
 /// straddling primitives exact.
 template <bool AnyHit, class LeafFn>
-inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, LeafFn&& leaf) {
+inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, LeafFn&& leaf);
+
+/// traverseKdTree for a ray already clipped to tree.bounds: [tmin, tmax] is what clipRayToBox
+/// returned for it (tmin <= tmax).
+template <bool AnyHit, class LeafFn>
+inline bool traverseKdTreeClipped(const KdTree& tree, const KdRay& ray, float tmin, float tmax, float& t_best,
+                                  LeafFn&& leaf) {
   if (tree.nodes.empty()) return false;
-  float tmin, tmax;
-  if (!clipRayToBox(ray, tree.bounds, tmin, tmax)) return false;
 
   // The current cell's interval [lo, hi] is kept widened by the slack: closed intervals with a few
   // ulps of slack, because a ray through a vertex that lies on split planes touches the cells
@@ -174,6 +182,13 @@ inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, 
       hi = stack[top].hi;
     } while (lo > t_best);
   }
+}
+
+template <bool AnyHit, class LeafFn>
+inline bool traverseKdTree(const KdTree& tree, const KdRay& ray, float& t_best, LeafFn&& leaf) {
+  float tmin, tmax;
+  if (tree.nodes.empty() || !clipRayToBox(ray, tree.bounds, tmin, tmax)) return false;
+  return traverseKdTreeClipped<AnyHit>(tree, ray, tmin, tmax, t_best, std::forward<LeafFn>(leaf));
 }
 
 }  // namespace duplex

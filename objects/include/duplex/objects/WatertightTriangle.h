@@ -22,6 +22,8 @@ struct WatertightRay {
   float sx, sy, sz;     // shear constants
   float tnear;
 
+  /// Uninitialised; for code that computes the constants itself (MeshObject's per-ray setup).
+  WatertightRay() = default;
   explicit WatertightRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear) {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     const float a[3] = {std::abs(d[0]), std::abs(d[1]), std::abs(d[2])};
