@@ -16,8 +16,9 @@ namespace duplex {
 struct QueryStats {
   std::uint64_t rays = 0;
   std::uint64_t instance_visits = 0;  ///< top-level leaf tests that reached an object
-  /// Crossing queries: flat sensors whose box the ray met but whose plane it plainly misses (a
-  /// float test settled them without asking the object).
+  /// Crossing queries: plane tests that settled a flat sensor whose box the ray met as plainly
+  /// missed, without asking the object. A count of tests, not of sensors: the grid walk may list a
+  /// sensor spanning several cells more than once, and the plane test runs before the mailbox.
   std::uint64_t sensor_plane_misses = 0;
 };
 
