@@ -488,7 +488,7 @@ int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
                                               .out);
     expect(number(j, "moves") == 2.0 && number(j, "repeat") == 3.0, "moves/repeat not as given: " + j.dump());
     for (const char* key : {"update_ms_median", "full_rebuild_ms_median", "add_ms_median", "remove_ms_median",
-                            "build_ms", "mrays_per_s"})
+                            "build_ms", "mrays_per_s", "prepared_build_ms_median", "prepared_library_bytes"})
       expect(number(j, key) > 0.0, std::string("\"") + key + "\" is not positive: " + j.dump());
     if (j.contains("embree_update_ms_median")) {
       expect(number(j, "embree_update_ms_median") > 0.0, "\"embree_update_ms_median\" is not positive: " + j.dump());
