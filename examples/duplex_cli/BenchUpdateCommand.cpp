@@ -344,25 +344,30 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
       held.push_back(library.get(i));
       if (const auto* m = dynamic_cast<const MeshObject*>(held.back().get())) mesh_objects.push_back(m);
     }
-    std::vector<double> warm_ms, warm_bottom_ms;
-    for (int b = 0; b < options.build_repeat; ++b) {
-      std::vector<std::shared_ptr<const MeshObject>> rebuilt(mesh_objects.size());
-      std::unique_ptr<SceneTracer> fresh;
-      const Stopwatch watch;
-      arena.execute([&] {
-        tbb::parallel_for(std::size_t{0}, mesh_objects.size(), [&](std::size_t k) {
-          // A non-owning pointer: the library keeps the mesh alive.
-          const std::shared_ptr<const TriangleMesh> mesh(std::shared_ptr<const TriangleMesh>{}, &mesh_objects[k]->mesh());
-          rebuilt[k] = std::make_shared<const MeshObject>(mesh);
+    // Times options.build_repeat full builds: every mesh object made by make(k, mesh) in parallel,
+    // then a fresh top level; returns the medians of the whole and of the bottom-level part (ms).
+    const auto timeFullBuilds = [&](const auto& make) {
+      std::vector<double> whole_ms, bottom_ms;
+      for (int b = 0; b < options.build_repeat; ++b) {
+        std::vector<std::shared_ptr<const MeshObject>> made(mesh_objects.size());
+        std::unique_ptr<SceneTracer> fresh;
+        const Stopwatch watch;
+        arena.execute([&] {
+          tbb::parallel_for(std::size_t{0}, mesh_objects.size(), [&](std::size_t k) {
+            // A non-owning pointer: the library keeps the mesh alive.
+            made[k] = make(k, std::shared_ptr<const TriangleMesh>(std::shared_ptr<const TriangleMesh>{}, &mesh_objects[k]->mesh()));
+          });
         });
-      });
-      const double bottom_ms = watch.ms();
-      arena.execute([&] { fresh = ours->freshTracer(); });
-      warm_bottom_ms.push_back(bottom_ms);
-      warm_ms.push_back(watch.ms());
-    }
-    out["build_ms_warm_median"] = median(warm_ms);
-    out["bottom_build_ms_warm_median"] = median(warm_bottom_ms);
+        bottom_ms.push_back(watch.ms());
+        arena.execute([&] { fresh = ours->freshTracer(); });
+        whole_ms.push_back(watch.ms());
+      }
+      return std::pair{median(whole_ms), median(bottom_ms)};
+    };
+    const auto [warm_ms, warm_bottom_ms] =
+        timeFullBuilds([](std::size_t, std::shared_ptr<const TriangleMesh> mesh) { return std::make_shared<const MeshObject>(std::move(mesh)); });
+    out["build_ms_warm_median"] = warm_ms;
+    out["bottom_build_ms_warm_median"] = warm_bottom_ms;
 
     // The same full build from a prepared library (the paper's point: objects taken from a library
     // saved beforehand need no build): every mesh object's structure written once to a temporary
@@ -378,24 +383,10 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
         saveMeshObject(*mesh_objects[k], files[k]);
         bytes += std::filesystem::file_size(files[k]);
       }
-      std::vector<double> prepared_ms, prepared_bottom_ms;
-      for (int b = 0; b < options.build_repeat; ++b) {
-        std::vector<std::shared_ptr<const MeshObject>> loaded(mesh_objects.size());
-        std::unique_ptr<SceneTracer> fresh;
-        const Stopwatch watch;
-        arena.execute([&] {
-          tbb::parallel_for(std::size_t{0}, mesh_objects.size(), [&](std::size_t k) {
-            const std::shared_ptr<const TriangleMesh> mesh(std::shared_ptr<const TriangleMesh>{}, &mesh_objects[k]->mesh());
-            loaded[k] = loadMeshObject(files[k], mesh);
-          });
-        });
-        const double bottom_ms = watch.ms();
-        arena.execute([&] { fresh = ours->freshTracer(); });
-        prepared_bottom_ms.push_back(bottom_ms);
-        prepared_ms.push_back(watch.ms());
-      }
-      out["prepared_build_ms_median"] = median(prepared_ms);
-      out["prepared_bottom_load_ms_median"] = median(prepared_bottom_ms);
+      const auto [prepared_ms, prepared_bottom_ms] = timeFullBuilds(
+          [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) { return loadMeshObject(files[k], std::move(mesh)); });
+      out["prepared_build_ms_median"] = prepared_ms;
+      out["prepared_bottom_load_ms_median"] = prepared_bottom_ms;
       out["prepared_library_bytes"] = bytes;
     } catch (...) {
       std::error_code ignored;
