@@ -32,26 +32,55 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace duplex {
 
 namespace {
 
 // Bounds as plain arrays: the builder indexes by a run-time axis everywhere, and GLM's
-// operator[] is a switch. 28 bytes; the SSE loads of lo[0..3] and hi[0..3] read one float past
-// each triple (hi[0], id), which the code ignores.
-struct PrimRef {
-  float lo[3], hi[3];  // primitive bounds clipped to the current node
+// operator[] is a switch. Two aligned 16-byte halves, so a partition loads a reference in two SSE
+// loads (lo with the id in lane 3, hi with padding) and copies it with the same two registers;
+// the fourth lane is ignored wherever the halves are used as bounds.
+struct alignas(16) PrimRef {
+  float lo[3];  // primitive bounds clipped to the current node
   std::uint32_t id;
+  float hi[3];
+  float pad;
 
   PrimRef() = default;
-  PrimRef(const Box& b, std::uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z}, hi{b.hi.x, b.hi.y, b.hi.z}, id(i) {}
+  PrimRef(const Box& b, std::uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z}, id(i), hi{b.hi.x, b.hi.y, b.hi.z}, pad(0.0f) {}
   [[nodiscard]] Box box() const { return Box({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}); }
+  [[nodiscard]] __m128 loadLo() const { return _mm_load_ps(lo); }  // lane 3: the id's bits
+  [[nodiscard]] __m128 loadHi() const { return _mm_load_ps(hi); }  // lane 3: padding
 };
-static_assert(sizeof(PrimRef) == 28);
+static_assert(sizeof(PrimRef) == 32);
 
-using RefVec = std::vector<PrimRef>;
+// Leaves new elements uninitialised, so that a partition can size its output to the most
+// references it can receive and write them through a pointer (no capacity check per reference).
+template <class T>
+struct UninitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitAllocator<U>;
+  };
+  UninitAllocator() = default;
+  template <class U>
+  UninitAllocator(const UninitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
+using RefVec = std::vector<PrimRef, UninitAllocator<PrimRef>>;
 
 struct Subtree {
   std::vector<KdNode> nodes;
@@ -471,7 +500,7 @@ class Builder {
         hi[k] = std::min(g.hi[k], extent.hi[k]);
       }
       own.init(lo, hi, binsFor(n));
-      for (const PrimRef& r : refs) own.add(_mm_loadu_ps(r.lo), _mm_loadu_ps(r.hi));
+      for (const PrimRef& r : refs) own.add(r.loadLo(), r.loadHi());
       bins = &own;
     }
     const Bins& b = *bins;
@@ -716,14 +745,17 @@ class Builder {
     return {};
   }
 
-  // One child's side of a partition pass: its references, extent and bins.
+  // One child's side of a partition pass: its references (written at `next`, into storage sized
+  // for every reference the pass can send there), extent and bins.
   struct Sink {
-    RefVec* refs;
+    PrimRef* next;
     ExtentAcc extent;
     Bins* bins;  // null: not binned
     void put(const PrimRef& r) {
-      refs->push_back(r);
-      const __m128 lo = _mm_loadu_ps(r.lo), hi = _mm_loadu_ps(r.hi);
+      const __m128 lo = r.loadLo(), hi = r.loadHi();
+      _mm_store_ps(next->lo, lo);
+      _mm_store_ps(next->hi, hi);
+      ++next;
       extent.add(lo, hi);
       if (bins) bins->add(lo, hi);
     }
@@ -782,11 +814,14 @@ class Builder {
     const std::size_t n = refs.size();
     const std::size_t chunks = cfg_.parallel_threshold > 0 && n >= 4 * kPartitionChunk ? (n + kPartitionChunk - 1) / kPartitionChunk : 1;
     if (chunks == 1) {
-      lower.refs.reserve(s.n_lower + (s.exact ? 0 : s.n_lower / 8 + 8));
-      upper.refs.reserve(s.n_upper + (s.exact ? 0 : s.n_upper / 8 + 8));
-      Sink lo{&lower.refs, {}, lower.binned ? &lower.bins : nullptr};
-      Sink hi{&upper.refs, {}, upper.binned ? &upper.bins : nullptr};
+      // A child receives each reference of the node at most once.
+      lower.refs.resize(n);
+      upper.refs.resize(n);
+      Sink lo{lower.refs.data(), {}, lower.binned ? &lower.bins : nullptr};
+      Sink hi{upper.refs.data(), {}, upper.binned ? &upper.bins : nullptr};
       partitionRange(refs, 0, n, s, lower.box, upper.box, lo, hi);
+      lower.refs.resize(static_cast<std::size_t>(lo.next - lower.refs.data()));
+      upper.refs.resize(static_cast<std::size_t>(hi.next - upper.refs.data()));
       lower.extent = lo.extent.extent();
       upper.extent = hi.extent.extent();
       return;
@@ -801,17 +836,18 @@ class Builder {
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
       ChunkOut& p = parts[c];
       const std::size_t begin = c * kPartitionChunk, end = std::min(n, begin + kPartitionChunk);
-      p.refs[0].reserve(end - begin);
-      p.refs[1].reserve(end - begin);
       Sink sinks[2];
       for (int side = 0; side < 2; ++side) {
         const Child& child = side == 0 ? lower : upper;
         if (child.binned) p.bins[side] = child.bins;  // zeroed counts, same frame
-        sinks[side] = {&p.refs[side], {}, child.binned ? &p.bins[side] : nullptr};
+        p.refs[side].resize(end - begin);
+        sinks[side] = {p.refs[side].data(), {}, child.binned ? &p.bins[side] : nullptr};
       }
       partitionRange(refs, begin, end, s, lower.box, upper.box, sinks[0], sinks[1]);
-      p.extent[0] = sinks[0].extent;
-      p.extent[1] = sinks[1].extent;
+      for (int side = 0; side < 2; ++side) {
+        p.refs[side].resize(static_cast<std::size_t>(sinks[side].next - p.refs[side].data()));
+        p.extent[side] = sinks[side].extent;
+      }
     });
     for (int side = 0; side < 2; ++side) {
       Child& child = side == 0 ? lower : upper;

@@ -2,6 +2,8 @@
 
 #include <glm/vec3.hpp>
 
+#include <emmintrin.h>
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -129,61 +131,81 @@ struct DBox {
 // corners are floats and enter the bounds as they are; only the edge crossings are computed in
 // double and rounded outward, once for both sides. Rounding outward is monotonic, so this gives
 // the bounds of the polygon loop below (same points, same order) rounded at the end.
-void splitInsideTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& lower_box,
-                         const Box& upper_box, int axis, float pos, Box& lower, Box& upper) {
-  const float v[3][3] = {{a.x, a.y, a.z}, {b.x, b.y, b.z}, {c.x, c.y, c.z}};
+//
+// On SSE lanes (x, y, z, unused): the corners as one vector each, a crossing's three coordinates
+// as two double pairs, its outward rounding by integer steps on the float bits of all lanes at
+// once. The operations are the scalar ones lane by lane (same products, sums and comparisons, and
+// min(p, lo) / max(p, hi) keep the earlier value on ties as std::min(lo, p) / std::max(hi, p)
+// do), so the bounds are the same bit for bit, zeros' signs included.
+void splitInsideTriangle(const __m128 (&v)[3], const Box& lower_box, const Box& upper_box, int axis, float pos,
+                         Box& lower, Box& upper) {
+  alignas(16) float coord[3][4];
+  for (int i = 0; i < 3; ++i) _mm_store_ps(coord[i], v[i]);
   const double plane = pos;
-  const double d[3] = {static_cast<double>(v[0][axis]) - plane, static_cast<double>(v[1][axis]) - plane,
-                       static_cast<double>(v[2][axis]) - plane};
-  constexpr float inf = std::numeric_limits<float>::infinity();
-  float lo[2][3] = {{inf, inf, inf}, {inf, inf, inf}};
-  float hi[2][3] = {{-inf, -inf, -inf}, {-inf, -inf, -inf}};
+  const double d[3] = {static_cast<double>(coord[0][axis]) - plane, static_cast<double>(coord[1][axis]) - plane,
+                       static_cast<double>(coord[2][axis]) - plane};
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 ninf = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+  alignas(16) std::int32_t axis_bits[4] = {0, 0, 0, 0};
+  axis_bits[axis] = -1;
+  const __m128 on_axis = _mm_castsi128_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(axis_bits)));
+  const __m128 pos4 = _mm_set1_ps(pos);
+  const __m128i one = _mm_set1_epi32(1);
+  __m128 lo[2] = {inf, inf}, hi[2] = {ninf, ninf};
   bool any[2] = {false, false};
-  auto extend = [&](int side, const float* p) {
-    any[side] = true;
-    for (int k = 0; k < 3; ++k) {
-      lo[side][k] = std::min(lo[side][k], p[k]);
-      hi[side][k] = std::max(hi[side][k], p[k]);
-    }
-  };
   int prev = 2;
   for (int i = 0; i < 3; ++i) {
     const double d_prev = d[prev], d_cur = d[i];
     if ((d_prev < 0.0 && d_cur > 0.0) || (d_prev > 0.0 && d_cur < 0.0)) {
-      // The crossing, exactly on the plane along `axis`, rounded outward on the other axes.
-      const double t = d_prev / (d_prev - d_cur);
-      float x_lo[3], x_hi[3];
-      for (int k = 0; k < 3; ++k) {
-        if (k == axis) {
-          x_lo[k] = x_hi[k] = pos;
-          continue;
-        }
-        const double p = static_cast<double>(v[prev][k]);
-        const double x = p + t * (static_cast<double>(v[i][k]) - p);
-        x_lo[k] = floatBelow(x);
-        x_hi[k] = floatAbove(x);
-      }
+      // The crossing p + t (q - p) in double on every lane, exactly on the plane along `axis`.
+      const __m128d t = _mm_set1_pd(d_prev / (d_prev - d_cur));
+      const __m128d p01 = _mm_cvtps_pd(v[prev]), p23 = _mm_cvtps_pd(_mm_movehl_ps(v[prev], v[prev]));
+      const __m128d q01 = _mm_cvtps_pd(v[i]), q23 = _mm_cvtps_pd(_mm_movehl_ps(v[i], v[i]));
+      const __m128d x01 = _mm_add_pd(p01, _mm_mul_pd(t, _mm_sub_pd(q01, p01)));
+      const __m128d x23 = _mm_add_pd(p23, _mm_mul_pd(t, _mm_sub_pd(q23, p23)));
+      // Nearest floats, and whether each lies above (below) the double it rounds.
+      const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(x01), _mm_cvtpd_ps(x23));
+      const __m128d f01 = _mm_cvtps_pd(f), f23 = _mm_cvtps_pd(_mm_movehl_ps(f, f));
+      const __m128i above = _mm_castps_si128(_mm_shuffle_ps(_mm_castpd_ps(_mm_cmpgt_pd(f01, x01)),
+                                                            _mm_castpd_ps(_mm_cmpgt_pd(f23, x23)), _MM_SHUFFLE(2, 0, 2, 0)));
+      const __m128i below = _mm_castps_si128(_mm_shuffle_ps(_mm_castpd_ps(_mm_cmplt_pd(f01, x01)),
+                                                            _mm_castpd_ps(_mm_cmplt_pd(f23, x23)), _MM_SHUFFLE(2, 0, 2, 0)));
+      // floatBelow / floatAbove on the bits: one step away from zero for a negative float going
+      // down or a positive one going up, towards zero otherwise.
+      const __m128i u = _mm_castps_si128(f);
+      const __m128i sign = _mm_srli_epi32(u, 31);
+      const __m128i step_down = _mm_sub_epi32(_mm_add_epi32(sign, sign), one);  // 2 s - 1
+      const __m128i step_up = _mm_sub_epi32(one, _mm_add_epi32(sign, sign));    // 1 - 2 s
+      __m128 x_lo = _mm_castsi128_ps(_mm_add_epi32(u, _mm_and_si128(step_down, above)));
+      __m128 x_hi = _mm_castsi128_ps(_mm_add_epi32(u, _mm_and_si128(step_up, below)));
+      x_lo = _mm_or_ps(_mm_and_ps(on_axis, pos4), _mm_andnot_ps(on_axis, x_lo));
+      x_hi = _mm_or_ps(_mm_and_ps(on_axis, pos4), _mm_andnot_ps(on_axis, x_hi));
       for (int side = 0; side < 2; ++side) {
         any[side] = true;
-        for (int k = 0; k < 3; ++k) {
-          lo[side][k] = std::min(lo[side][k], x_lo[k]);
-          hi[side][k] = std::max(hi[side][k], x_hi[k]);
-        }
+        lo[side] = _mm_min_ps(x_lo, lo[side]);
+        hi[side] = _mm_max_ps(x_hi, hi[side]);
       }
     }
-    if (d_cur <= 0.0) extend(0, v[i]);
-    if (d_cur >= 0.0) extend(1, v[i]);
+    if (d_cur <= 0.0) {
+      any[0] = true;
+      lo[0] = _mm_min_ps(v[i], lo[0]);
+      hi[0] = _mm_max_ps(v[i], hi[0]);
+    }
+    if (d_cur >= 0.0) {
+      any[1] = true;
+      lo[1] = _mm_min_ps(v[i], lo[1]);
+      hi[1] = _mm_max_ps(v[i], hi[1]);
+    }
     prev = i;
   }
-  // Limited to each half box, as DBox::rounded does.
+  // Limited to each half box, as DBox::rounded does (max(box, lo) keeps lo on ties like
+  // std::max(lo, box)).
   auto limited = [&](int side, const Box& box) {
     if (!any[side]) return Box();
-    Box out;
-    for (int k = 0; k < 3; ++k) {
-      out.lo[k] = std::max(lo[side][k], box.lo[k]);
-      out.hi[k] = std::min(hi[side][k], box.hi[k]);
-    }
-    return out;
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, _mm_max_ps(_mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f), lo[side]));
+    _mm_store_ps(h, _mm_min_ps(_mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f), hi[side]));
+    return Box({l[0], l[1], l[2]}, {h[0], h[1], h[2]});
   };
   lower = limited(0, lower_box);
   upper = limited(1, upper_box);
@@ -214,24 +236,35 @@ Box clipTriangleToBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c
 
 void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, int axis,
                         float pos, Box& lower, Box& upper) {
-  lower = upper = Box();
-  if (box.empty()) return;
+  if (box.empty()) {
+    lower = upper = Box();
+    return;
+  }
   Box lower_box = box, upper_box = box;
   lower_box.hi[axis] = std::min(lower_box.hi[axis], pos);
   upper_box.lo[axis] = std::max(upper_box.lo[axis], pos);
+  // The triangle's bounds (as Box::extend forms them: min(b, a) keeps a on ties like glm::min(a, b))
+  // and whether they lie inside the box, on SSE lanes.
+  const __m128 v[3] = {_mm_setr_ps(a.x, a.y, a.z, 0.0f), _mm_setr_ps(b.x, b.y, b.z, 0.0f),
+                       _mm_setr_ps(c.x, c.y, c.z, 0.0f)};
+  const __m128 own_lo = _mm_min_ps(v[2], _mm_min_ps(v[1], v[0]));
+  const __m128 own_hi = _mm_max_ps(v[2], _mm_max_ps(v[1], v[0]));
+  const __m128 box_lo = _mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f);
+  const __m128 box_hi = _mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f);
+  if ((_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(own_lo, box_lo), _mm_cmple_ps(own_hi, box_hi))) & 7) == 7) {
+    splitInsideTriangle(v, lower_box, upper_box, axis, pos, lower, upper);
+    return;
+  }
+  lower = upper = Box();
   const Box own = ownBounds(a, b, c);
   P buffers[2][kMaxCorners];
   P* poly = buffers[0];
-  int n = clipPolygon(a, b, c, box, own, buffers[0], buffers[1], poly);
+  const int n = clipPolygon(a, b, c, box, own, buffers[0], buffers[1], poly);
   if (n == 0) return;
   if (n < 0) {
-    // Inside the box (or too complex): split the triangle itself (the fallback clips each side).
-    if (intersection(own, box) != own) {
-      lower = clipTriangleToBox(a, b, c, lower_box);
-      upper = clipTriangleToBox(a, b, c, upper_box);
-      return;
-    }
-    splitInsideTriangle(a, b, c, lower_box, upper_box, axis, pos, lower, upper);
+    // Too complex after rounding (not inside: that case returned above): clip each side.
+    lower = clipTriangleToBox(a, b, c, lower_box);
+    upper = clipTriangleToBox(a, b, c, upper_box);
     return;
   }
   // Each side gets the corners on its closed side of the plane and the crossings of the edges
