@@ -63,6 +63,12 @@ Prepared prepare(const InstanceDesc& d) {
   p.record.identity = l == glm::dmat3(1.0) && d.world_from_object.translation == glm::dvec3(0.0);
   p.owner = d.object;
   p.box = d.world_from_object.apply(d.object->bounds());
+  // A finite double transform can still carry the box beyond float range (a scale of 1e30 on an
+  // object of size 1e10): the builder would drop such a box and an incremental commit would grow the
+  // root to infinity, so the instance is refused here, on both paths alike.
+  const auto finite = [](const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  if (!p.box.empty() && (!finite(p.box.lo) || !finite(p.box.hi)))
+    throw InvalidArgument(describe(d) + ": world box exceeds float range (transform too large for the object)");
   return p;
 }
 
@@ -680,6 +686,11 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
 }
 
 std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {
+  // A NaN plane is never "outside", so it would select everything: refuse it.
+  for (const glm::dvec4& p : planes)
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(p.w) ||
+        !(p.x != 0.0 || p.y != 0.0 || p.z != 0.0))
+      throw InvalidArgument("TopLevel::instancesInRegion: a plane has a non-finite or zero normal, or a non-finite offset");
   std::vector<std::uint32_t> out = sensors_ ? sensors_->instancesInRegion(planes, mask) : std::vector<std::uint32_t>{};
   if (tree_.empty()) return out;
   // A box is outside when its corner furthest along a plane's normal is still outside it.

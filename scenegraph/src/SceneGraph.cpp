@@ -653,6 +653,29 @@ std::vector<NodeId> SceneGraph::pathIds(NodeId id) const {
   return ids;
 }
 
+std::vector<NodeId> SceneGraph::committedPathIds(NodeId id) const {
+  const Impl& m = *impl_;
+  if (id == kRootNode) return {};
+  // The batch's undo log names every node added, removed or re-parented since the last commit (a
+  // removed node keeps its record until the commit); a node's first Removed or Reparented record
+  // holds its parent as of the last commit. Linear in the batch per level: picks are rare, batches
+  // short, and the common case (no pending edits) is the plain walk.
+  const auto addedSince = [&m](NodeId n) {
+    return std::any_of(m.undo.begin(), m.undo.end(), [n](const Undo& u) { return u.kind == UndoKind::Added && u.node == n; });
+  };
+  if (!m.nodes.has(id) || addedSince(id))
+    throw InvalidArgument("SceneGraph::committedPathIds: node id " + std::to_string(id) + " did not exist at the last commit");
+  const auto committedParent = [&m](NodeId n) {
+    for (const Undo& u : m.undo)
+      if (u.node == n && (u.kind == UndoKind::Removed || u.kind == UndoKind::Reparented)) return u.parent;
+    return m.nodes[n].parent;
+  };
+  std::vector<NodeId> ids;
+  for (NodeId n = id; n != kRootNode; n = committedParent(n)) ids.push_back(n);
+  std::reverse(ids.begin(), ids.end());
+  return ids;
+}
+
 std::optional<NodeId> SceneGraph::find(std::string_view path) const {
   // One hash look-up per path component.
   if (path.empty() || path.front() != '/') return std::nullopt;

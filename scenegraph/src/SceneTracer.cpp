@@ -6,9 +6,11 @@
 #include <glm/geometric.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <mutex>
 #include <shared_mutex>
 #include <string>
@@ -125,7 +127,8 @@ SceneHit detail(const SceneGraph& graph, const TopLevel& top, const RayD& ray_ws
   const glm::dvec3 n(hit.ng);
   const double len = glm::length(n);
   out.normal_ws = len > 0.0 ? n / len : n;
-  out.path = graph.pathIds(hit.instance_id);
+  // The path as of the commit the hit comes from: pending edits of this thread are not seen.
+  out.path = graph.committedPathIds(hit.instance_id);
   return out;
 }
 
@@ -144,9 +147,15 @@ void forEachRay(const char* what, std::span<const Ray> rays, std::span<Out> out,
   if (out.size() != rays.size())
     throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) + " rays but room for " +
                           std::to_string(out.size()) + " results");
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
-    QueryContext ctx;
-    for (std::size_t i = range.begin(); i != range.end(); ++i) out[i] = query(rays[i], ctx);
+  // Isolated: the caller holds the shared lock while it waits here, and a thread that waits in a
+  // TBB loop may otherwise pick up an unrelated outer task, which could be another batch query
+  // taking the same lock again on this thread (undefined for std::shared_mutex; a deadlock when a
+  // commit waits between the two).
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
+      QueryContext ctx;
+      for (std::size_t i = range.begin(); i != range.end(); ++i) out[i] = query(rays[i], ctx);
+    });
   });
 }
 
@@ -180,11 +189,27 @@ void requireImage(const char* what, std::uint32_t width, std::uint32_t height) {
                           std::to_string(height) + " (both must be positive)");
 }
 
+/// A camera that makes finite, distinct corner rays: finite vectors, non-zero axes, a field of
+/// view strictly between 0 and 180 degrees. Anything else would give NaN planes (select everything)
+/// or coincident rays (select everything in front).
+void requireCamera(const char* what, const PinholeCamera& c) {
+  const auto finite = [](const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  if (!finite(c.eye) || !finite(c.forward) || !finite(c.right) || !finite(c.up))
+    throw InvalidArgument(std::string(what) + ": camera has non-finite eye or axes");
+  if (!(glm::length(c.forward) > 0.0) || !(glm::length(c.right) > 0.0) || !(glm::length(c.up) > 0.0) ||
+      !(glm::length(glm::cross(c.right, c.up)) > 0.0))
+    throw InvalidArgument(std::string(what) + ": camera axes are zero or right and up are parallel");
+  if (!(c.vertical_fov_deg > 0.0 && c.vertical_fov_deg < 180.0))
+    throw InvalidArgument(std::string(what) + ": camera vertical_fov_deg " + std::to_string(c.vertical_fov_deg) +
+                          " (must lie strictly between 0 and 180)");
+}
+
 }  // namespace
 
 std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, double py, std::uint32_t width,
                                         std::uint32_t height, PickMode mode, std::uint32_t mask) const {
   requireImage("SceneTracer::pick", width, height);
+  requireCamera("SceneTracer::pick", camera);
   if (!std::isfinite(px) || !std::isfinite(py))
     throw InvalidArgument("SceneTracer::pick: pixel coordinates must be finite");
   RayD ray;
@@ -215,6 +240,7 @@ std::vector<NodeId> SceneTracer::selectRectangle(const PinholeCamera& camera, do
                                                  double y1, std::uint32_t width, std::uint32_t height,
                                                  std::uint32_t mask) const {
   requireImage("SceneTracer::selectRectangle", width, height);
+  requireCamera("SceneTracer::selectRectangle", camera);
   if (!std::isfinite(x0) || !std::isfinite(y0) || !std::isfinite(x1) || !std::isfinite(y1))
     throw InvalidArgument("SceneTracer::selectRectangle: rectangle coordinates must be finite");
   if (x0 > x1) std::swap(x0, x1);

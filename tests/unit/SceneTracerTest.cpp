@@ -18,6 +18,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 #include <string>
 #include <vector>
@@ -246,6 +247,72 @@ TEST(SceneTracer, PickingModesAndPaths) {
   // Off to the side: nothing.
   EXPECT_TRUE(tracer.pick(cam, 0.5, 0.5, 100, 100).empty());
   expectErrorNaming<InvalidArgument>([&] { (void)tracer.pick(cam, 1.0, 1.0, 0, 100); }, "image size");
+}
+
+TEST(SceneTracer, PicksReportCommittedPathsWhileEditsArePending) {
+  // The tracer answers from the last commit; the path of a hit must come from the same state, not
+  // from the graph's pending edits (a removed node is not "unknown" yet, a re-parented one is
+  // still at its old place).
+  Fixture f;
+  SceneGraph& g = f.graph;
+  const NodeId left = g.addGroup(kRootNode, "left");
+  const NodeId right = g.addGroup(kRootNode, "right");
+  const NodeId box = g.addInstance(left, f.objects[1], Affine::identity(), "box");
+  g.commit();
+  SceneTracer tracer(g);
+  PinholeCamera cam;
+  cam.eye = glm::dvec3(0.0, 0.0, 10.0);
+  RayD ray;
+  ray.origin = cam.eye;
+  ray.dir = glm::dvec3(0.0, 0.0, -1.0);
+  QueryContext ctx;
+  const std::vector<NodeId> committed{left, box};
+
+  g.reparent(box, right);
+  EXPECT_EQ(g.pathIds(box), (std::vector<NodeId>{right, box})) << "the graph shows the pending edit";
+  EXPECT_EQ(g.committedPathIds(box), committed);
+  ASSERT_EQ(tracer.pick(cam, 50.0, 50.0, 100, 100).size(), 1u);
+  EXPECT_EQ(tracer.pick(cam, 50.0, 50.0, 100, 100)[0].path, committed);
+  EXPECT_EQ(tracer.intersectDetailed(ray, ctx).path, committed);
+  g.remove(right);  // the box goes with it, still uncommitted
+  EXPECT_FALSE(g.contains(box));
+  EXPECT_EQ(g.committedPathIds(box), committed);
+  EXPECT_EQ(tracer.intersectDetailed(ray, ctx).path, committed);
+  const NodeId added = g.addInstance(kRootNode, f.objects[0], Affine::identity(), "added");
+  expectErrorNaming<InvalidArgument>([&] { (void)g.committedPathIds(added); }, "last commit");
+  g.rollback();
+  g.reparent(box, right);
+  g.commit();
+  EXPECT_EQ(tracer.intersectDetailed(ray, ctx).path, (std::vector<NodeId>{right, box}));
+  g.remove(box);
+  g.commit();
+  EXPECT_FALSE(tracer.intersectDetailed(ray, ctx).valid());
+  expectErrorNaming<InvalidArgument>([&] { (void)g.committedPathIds(box); }, "last commit");
+}
+
+TEST(SceneTracer, PickingAndSelectionRefuseCamerasThatSelectEverything) {
+  // A NaN or degenerate camera gave NaN or coincident frustum planes, which select every instance.
+  Fixture f;
+  (void)f.graph.addInstance(kRootNode, f.objects[1], Affine::identity(), "box");
+  f.graph.commit();
+  SceneTracer tracer(f.graph);
+  PinholeCamera good;
+  good.eye = glm::dvec3(0.0, 0.0, 10.0);
+  ASSERT_EQ(tracer.selectRectangle(good, 40, 40, 60, 60, 100, 100).size(), 1u);
+  ASSERT_TRUE(tracer.selectRectangle(good, 0, 0, 2, 2, 100, 100).empty());
+  const auto bad = [&](auto&& change, const char* needle) {
+    PinholeCamera c = good;
+    change(c);
+    expectErrorNaming<InvalidArgument>([&] { (void)tracer.selectRectangle(c, 0, 0, 2, 2, 100, 100); }, needle);
+    expectErrorNaming<InvalidArgument>([&] { (void)tracer.pick(c, 50.0, 50.0, 100, 100); }, needle);
+  };
+  bad([](PinholeCamera& c) { c.eye.x = std::nan(""); }, "non-finite");
+  bad([](PinholeCamera& c) { c.forward.z = INFINITY; }, "non-finite");
+  bad([](PinholeCamera& c) { c.vertical_fov_deg = 0.0; }, "vertical_fov_deg");
+  bad([](PinholeCamera& c) { c.vertical_fov_deg = std::nan(""); }, "vertical_fov_deg");
+  bad([](PinholeCamera& c) { c.vertical_fov_deg = 180.0; }, "vertical_fov_deg");
+  bad([](PinholeCamera& c) { c.up = c.right; }, "parallel");
+  bad([](PinholeCamera& c) { c.forward = glm::dvec3(0.0); }, "zero");
 }
 
 TEST(SceneTracer, PickingFarFromTheOriginIsAsAccurateAsNearIt) {

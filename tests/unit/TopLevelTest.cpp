@@ -382,6 +382,17 @@ TEST(TopLevel, InvalidInstancesThrowNamingTheInstance) {
   expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 5}), 45}, "45");      // flat
   expect_throw({lib.box, Affine::fromRowMajor3x4({1, 2, 3, 0, 2, 4, 6, 0, 1, 0, 1, 0}), 46}, "46");      // rank 2
   expect_throw({nullptr, Affine::identity(), 47}, "47");
+  // Finite in double, but the world box leaves float range: refused by the full build and by set(),
+  // which leaves the top level as it was.
+  const Affine huge = Affine::fromRowMajor3x4({1e39, 0, 0, 0, 0, 1e39, 0, 0, 0, 0, 1e39, 0});
+  expect_throw({lib.box, huge, 48}, "float range");
+  TopLevel top;
+  top.build(std::vector<InstanceDesc>{{lib.sphere, Affine::identity(), 0}});
+  EXPECT_THROW(top.set({lib.box, huge, 49}), InvalidArgument);
+  top.commit();
+  EXPECT_FALSE(top.contains(49));
+  EXPECT_EQ(top.size(), 1u);
+  EXPECT_TRUE(std::isfinite(top.bounds().hi.x)) << "the root grew to infinity";
 }
 
 }  // namespace

@@ -117,6 +117,11 @@ class SceneGraph {
   [[nodiscard]] std::string path(NodeId id) const;
   /// Node ids from the root's child down to `id` (the root excluded).
   [[nodiscard]] std::vector<NodeId> pathIds(NodeId id) const;
+  /// pathIds as of the last commit, ignoring the pending batch (nodes removed or re-parented since
+  /// keep their committed place): what observers and the tracer's hits refer to. Throws
+  /// InvalidArgument for a node that did not exist at the last commit (unknown, or added since).
+  /// Cost: depth x (1 + pending edits).
+  [[nodiscard]] std::vector<NodeId> committedPathIds(NodeId id) const;
   /// The node at `path` ("/" is the root), or nullopt (also for a malformed path: no leading '/', an
   /// empty component, a trailing '/'). One hash look-up per component.
   [[nodiscard]] std::optional<NodeId> find(std::string_view path) const;

@@ -31,7 +31,7 @@ struct SceneHit {
   NodeId instance = kInvalidNode;
   glm::dvec3 position_ws{0.0};  ///< recomputed in double from the object-space hit
   glm::dvec3 normal_ws{0.0};    ///< unit geometric normal, world space
-  std::vector<NodeId> path;     ///< node ids from below the root down to the instance
+  std::vector<NodeId> path;     ///< node ids from below the root down to the instance, as of the last commit
 
   [[nodiscard]] bool valid() const { return hit.valid(); }
 };
@@ -73,12 +73,15 @@ class SceneTracer {
   void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Picking through pixel (px, py) (continuous pixel coordinates, (0, 0) the top-left corner,
-  /// (w, h) the bottom-right) of a width x height image seen by `camera`.
+  /// (w, h) the bottom-right) of a width x height image seen by `camera` (world space). Throws
+  /// InvalidArgument for a zero image size, non-finite pixel coordinates, or a camera with
+  /// non-finite vectors, zero or parallel axes, or a field of view outside (0, 180) degrees.
   [[nodiscard]] std::vector<SceneHit> pick(const PinholeCamera& camera, double px, double py, std::uint32_t width,
                                            std::uint32_t height, PickMode mode = PickMode::Nearest,
                                            std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Rectangle selection: every visible instance whose world box meets the frustum through the pixel
-  /// rectangle [x0, x1] x [y0, y1] (continuous pixel coordinates), sorted by node id.
+  /// rectangle [x0, x1] x [y0, y1] (continuous pixel coordinates), sorted by node id. Throws as
+  /// pick() does, and for non-finite rectangle coordinates.
   [[nodiscard]] std::vector<NodeId> selectRectangle(const PinholeCamera& camera, double x0, double y0, double x1,
                                                     double y1, std::uint32_t width, std::uint32_t height,
                                                     std::uint32_t mask = 0xFFFFFFFFu) const;
