@@ -587,8 +587,14 @@ class Builder {
         n_starts += (a_in >> k) & 1u;
         ends[n_ends] = b[k];
         n_ends += (b_in >> k) & 1u;
-        planars[n_planars] = a[k];
-        n_planars += (planar >> k) & 1u;
+      }
+      // References lying in a plane of the axis are rare in most meshes, so this branch is
+      // predictable where the stores it skips would be wasted.
+      if (planar != 0) {
+        for (unsigned k = 0; k < 4; ++k) {
+          planars[n_planars] = a[k];
+          n_planars += (planar >> k) & 1u;
+        }
       }
     }
     for (; r != refs.data() + n; ++r) {
@@ -751,18 +757,32 @@ class Builder {
     PrimRef* next;
     ExtentAcc extent;
     Bins* bins;  // null: not binned
+    // kBinned: bins != null, decided once per pass rather than per reference.
+    template <bool kBinned>
     void put(const PrimRef& r) {
       const __m128 lo = r.loadLo(), hi = r.loadHi();
       _mm_store_ps(next->lo, lo);
       _mm_store_ps(next->hi, hi);
       ++next;
       extent.add(lo, hi);
-      if (bins) bins->add(lo, hi);
+      if constexpr (kBinned) bins->add(lo, hi);
     }
   };
 
   // Sends refs[begin, end) to the children's sinks; straddling primitives are re-clipped to each
   // child ("perfect splits").
+  void partitionRange(const RefVec& refs, std::size_t begin, std::size_t end, const Split& s, const Box& lower_box,
+                      const Box& upper_box, Sink& lower, Sink& upper) const {
+    const int binned = (lower.bins ? 1 : 0) | (upper.bins ? 2 : 0);
+    switch (binned) {
+      case 0: return partitionRange<false, false>(refs, begin, end, s, lower_box, upper_box, lower, upper);
+      case 1: return partitionRange<true, false>(refs, begin, end, s, lower_box, upper_box, lower, upper);
+      case 2: return partitionRange<false, true>(refs, begin, end, s, lower_box, upper_box, lower, upper);
+      default: return partitionRange<true, true>(refs, begin, end, s, lower_box, upper_box, lower, upper);
+    }
+  }
+
+  template <bool kLowerBinned, bool kUpperBinned>
   void partitionRange(const RefVec& refs, std::size_t begin, std::size_t end, const Split& s, const Box& lower_box,
                       const Box& upper_box, Sink& lower, Sink& upper) const {
     const int axis = s.axis;
@@ -772,9 +792,12 @@ class Builder {
       const float a = r.lo[axis], b = r.hi[axis];
       if (b <= pos) {
         // Below the plane, or lying in it.
-        (a == pos && !s.planar_left ? upper : lower).put(r);
+        if (a == pos && !s.planar_left)
+          upper.put<kUpperBinned>(r);
+        else
+          lower.put<kLowerBinned>(r);
       } else if (a >= pos) {
-        upper.put(r);
+        upper.put<kUpperBinned>(r);
       } else {
         // Straddles the plane. If the clipped part turns out empty on one side the primitive only
         // touched the plane there and is dropped there; the plain box intersection is the
@@ -789,8 +812,8 @@ class Builder {
             parts[side] = cfg_.clip_primitives ? (*clip_)(r.id, bounded) : bounded;
           }
         }
-        if (!parts[0].empty()) lower.put(PrimRef(parts[0], r.id));
-        if (!parts[1].empty()) upper.put(PrimRef(parts[1], r.id));
+        if (!parts[0].empty()) lower.put<kLowerBinned>(PrimRef(parts[0], r.id));
+        if (!parts[1].empty()) upper.put<kUpperBinned>(PrimRef(parts[1], r.id));
       }
     }
   }
@@ -873,9 +896,11 @@ class Builder {
 };
 
 bool finiteBox(const Box& b) {
-  for (int k = 0; k < 3; ++k)
-    if (!std::isfinite(b.lo[k]) || !std::isfinite(b.hi[k])) return false;
-  return !b.empty();
+  // x - x is 0 for a finite x and NaN for an infinite or NaN one; the sum of six such is 0 only
+  // when all six are finite (one test instead of six branches per primitive).
+  const float zero = (b.lo.x - b.lo.x) + (b.lo.y - b.lo.y) + (b.lo.z - b.lo.z) + (b.hi.x - b.hi.x) +
+                     (b.hi.y - b.hi.y) + (b.hi.z - b.hi.z);
+  return zero == 0.0f && !b.empty();
 }
 
 }  // namespace
