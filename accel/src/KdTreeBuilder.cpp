@@ -42,22 +42,19 @@ namespace duplex {
 namespace {
 
 // Bounds as plain arrays: the builder indexes by a run-time axis everywhere, and GLM's
-// operator[] is a switch. Two aligned 16-byte halves, so a partition loads a reference in two SSE
-// loads (lo with the id in lane 3, hi with padding) and copies it with the same two registers;
-// the fourth lane is ignored wherever the halves are used as bounds.
-struct alignas(16) PrimRef {
-  float lo[3];  // primitive bounds clipped to the current node
+// operator[] is a switch. 28 bytes; the SSE loads of lo[0..3] and hi[0..3] read one float past
+// each triple (hi[0], id), which the code ignores.
+struct PrimRef {
+  float lo[3], hi[3];  // primitive bounds clipped to the current node
   std::uint32_t id;
-  float hi[3];
-  float pad;
 
   PrimRef() = default;
-  PrimRef(const Box& b, std::uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z}, id(i), hi{b.hi.x, b.hi.y, b.hi.z}, pad(0.0f) {}
+  PrimRef(const Box& b, std::uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z}, hi{b.hi.x, b.hi.y, b.hi.z}, id(i) {}
   [[nodiscard]] Box box() const { return Box({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}); }
-  [[nodiscard]] __m128 loadLo() const { return _mm_load_ps(lo); }  // lane 3: the id's bits
-  [[nodiscard]] __m128 loadHi() const { return _mm_load_ps(hi); }  // lane 3: padding
+  [[nodiscard]] __m128 loadLo() const { return _mm_loadu_ps(lo); }  // lane 3: hi[0]
+  [[nodiscard]] __m128 loadHi() const { return _mm_loadu_ps(hi); }  // lane 3: the id's bits
 };
-static_assert(sizeof(PrimRef) == 32);
+static_assert(sizeof(PrimRef) == 28);
 
 // Leaves new elements uninitialised, so that a partition can size its output to the most
 // references it can receive and write them through a pointer (no capacity check per reference).
@@ -761,8 +758,9 @@ class Builder {
     template <bool kBinned>
     void put(const PrimRef& r) {
       const __m128 lo = r.loadLo(), hi = r.loadHi();
-      _mm_store_ps(next->lo, lo);
-      _mm_store_ps(next->hi, hi);
+      // 28 bytes in two overlapping 16-byte stores: lo (and hi[0]) at 0, hi and the id at 12.
+      _mm_storeu_ps(next->lo, lo);
+      _mm_storeu_ps(next->hi, hi);
       ++next;
       extent.add(lo, hi);
       if constexpr (kBinned) bins->add(lo, hi);
