@@ -29,6 +29,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdint>
 #include <exception>
 #include <iostream>
@@ -40,9 +41,16 @@ namespace {
 constexpr int kExitBadInput = 1;     // duplex::Error: a file or argument the library refused
 constexpr int kExitInternal = 3;     // anything else: a bug, reported rather than crashing
 
-// CLI11 would wrap "-1" around for an unsigned 64-bit option.
-const CLI::Validator kNotNegative(
-    [](std::string& value) { return value.starts_with('-') ? std::string("must not be negative") : std::string(); },
+// Integers in plain decimal only: CLI11 parses them with base 0 (strtoull), so "010" would be 8 and
+// "0x10" 16, and it would wrap "-1" around for an unsigned 64-bit option.
+const CLI::Validator kDecimal(
+    [](std::string& value) {
+      if (value.empty() || !std::all_of(value.begin(), value.end(), [](char c) { return c >= '0' && c <= '9'; }))
+        return std::string("must be a non-negative decimal integer, got '" + value + "'");
+      if (value.size() > 1 && value.front() == '0')
+        return std::string("must be written without leading zeros (decimal), got '" + value + "'");
+      return std::string();
+    },
     "UINT");
 
 }  // namespace
@@ -71,11 +79,11 @@ int main(int argc, char** argv) {
       "(0 where a surface blocks the ray)");
   hits_opt->excludes(transmittance_opt);
   trace_cmd->add_option("--threads", trace.threads, "Worker threads (default: all hardware threads)")
-      ->check(CLI::Range(1, 4096));
+      ->check(kDecimal)->check(CLI::Range(1, 4096));
   trace_cmd->add_flag("--any-hit", trace.any_hit,
                       "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
-      ->check(CLI::Range(1, 1000000));
+      ->check(kDecimal)->check(CLI::Range(1, 1000000));
   trace_cmd->footer(
       "A hit's instance_id is the instance's position in the scene: in \"instances\" for scene-json-v1; in\n"
       "depth-first file order of the node tree for duplex-scene-v1 (hidden instances keep their place).\n"
@@ -91,11 +99,11 @@ int main(int argc, char** argv) {
   CLI::Option* primary_opt =
       rays_cmd->add_option("--primary", primary, "W H: primary rays of a W x H image, row-major from the top left")
           ->expected(2)
-          ->check(CLI::Range(1u, 65536u));
+          ->check(kDecimal)->check(CLI::Range(1u, 65536u));
   CLI::Option* random_opt = rays_cmd->add_option("--random", random_count, "N random rays (origins in the world box)")
-                                ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
+                                ->check(kDecimal)->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
   CLI::Option* seed_opt =
-      rays_cmd->add_option("--seed", seed, "Seed of the random rays (0 to 2^64-1)")->check(kNotNegative);
+      rays_cmd->add_option("--seed", seed, "Seed of the random rays (0 to 2^64-1)")->check(kDecimal);
   primary_opt->excludes(random_opt);
   primary_opt->excludes(seed_opt);
   random_opt->needs(seed_opt);
@@ -118,9 +126,9 @@ int main(int argc, char** argv) {
   split_cmd->add_option("--mesh", split.mesh, "Mesh file (OBJ, PLY, OFF, STL, OM)")->required();
   split_cmd->add_option("--objects", split.objects, "K: number of objects (1 to the triangle count)")
       ->required()
-      ->check(CLI::Range(1u, 0xFFFFFFFFu));
+      ->check(kDecimal)->check(CLI::Range(1u, 0xFFFFFFFFu));
   split_cmd->add_option("--loop", split.loop, "Loop-subdivide the mesh N times before splitting (default 0)")
-      ->check(CLI::Range(0, 6));
+      ->check(kDecimal)->check(CLI::Range(0, 6));
   split_cmd->add_option("--out", split.out, "scene-json-v1 file to write")->required();
 
   duplex::cli::SceneInstancesOptions scatter;
@@ -130,10 +138,10 @@ int main(int argc, char** argv) {
       ->required();
   instances_cmd->add_option("--count", scatter.count, "N: number of instances")
       ->required()
-      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
+      ->check(kDecimal)->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
   instances_cmd->add_option("--seed", scatter.seed, "Seed of the rotations (std::mt19937_64, 0 to 2^64-1)")
       ->required()
-      ->check(kNotNegative);
+      ->check(kDecimal);
   instances_cmd->add_option("--out", scatter.out, "scene-json-v1 file to write")->required();
 
   duplex::cli::SceneRobotOptions robot;
@@ -141,7 +149,7 @@ int main(int argc, char** argv) {
   CLI::App* robot_cmd = scene_cmd->add_subcommand(
       "robot", "A URDF robot's link meshes placed by forward kinematics, in copies side by side along +y");
   robot_cmd->add_option("--urdf", robot.urdf, "URDF file (package:// mesh paths resolved near it)")->required();
-  robot_cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")->check(CLI::Range(1, 1000000));
+  robot_cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")->check(kDecimal)->check(CLI::Range(1, 1000000));
   robot_cmd->add_option("--joints", robot.joints,
                         "Joint values a1,a2,... in radians (metres for prismatic), one per movable joint in file "
                         "order (default: all zero)")
@@ -158,7 +166,7 @@ int main(int argc, char** argv) {
   prepare_cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dkdt structure files")
       ->required();
   prepare_cmd->add_option("--threads", prepare.threads, "Worker threads (default: all hardware threads)")
-      ->check(CLI::Range(1, 4096));
+      ->check(kDecimal)->check(CLI::Range(1, 4096));
 
   // duplex bench update
   CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update)");
@@ -171,17 +179,17 @@ int main(int argc, char** argv) {
   update_cmd->add_option("--moves", bench_update.moves,
                          "Instances moved per commit: a count or a percentage such as 1% (default 1)");
   update_cmd->add_option("--repeat", bench_update.repeat, "Commits per measurement, medians reported (default 50)")
-      ->check(CLI::Range(1, 1000000));
-  update_cmd->add_option("--seed", bench_update.seed, "Seed of the edit plan (default 1)")->check(kNotNegative);
+      ->check(kDecimal)->check(CLI::Range(1, 1000000));
+  update_cmd->add_option("--seed", bench_update.seed, "Seed of the edit plan (default 1)")->check(kDecimal);
   update_cmd->add_option("--threads", bench_update.threads, "Worker threads (default: all hardware threads)")
-      ->check(CLI::Range(1, 4096));
+      ->check(kDecimal)->check(CLI::Range(1, 4096));
   update_cmd->add_option("--primary", bench_update.primary, "Primary rays of a W x W image (default 512)")
-      ->check(CLI::Range(1u, 8192u));
+      ->check(kDecimal)->check(CLI::Range(1u, 8192u));
   update_cmd->add_option("--baseline-repeat", bench_update.baseline_repeat,
                          "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
-      ->check(CLI::Range(0, 1000000));
+      ->check(kDecimal)->check(CLI::Range(0, 1000000));
   update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Full Embree builds timed per mode (default 3)")
-      ->check(CLI::Range(1, 100));
+      ->check(kDecimal)->check(CLI::Range(1, 100));
 
   // duplex sensor (issue 5)
   duplex::cli::SensorOptions sensor;
@@ -191,21 +199,24 @@ int main(int argc, char** argv) {
       ->required();
   sensor_cmd->add_option("--rays", sensor.rays, "Total emitted rays (with --resume: including the saved ones)")
       ->required()
-      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
+      ->check(kDecimal)->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
   sensor_cmd->add_option("--threads", sensor.threads, "Worker threads (default: all hardware threads)")
-      ->check(CLI::Range(1, 4096));
-  sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")->check(kNotNegative);
+      ->check(kDecimal)->check(CLI::Range(1, 4096));
+  sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")->check(kDecimal);
   sensor_cmd->add_option("--out", sensor.out, "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
   sensor_cmd->add_flag("--resume", sensor.resume,
                        "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
-  sensor_cmd->add_option("--target-error", sensor.target_error,
-                         "Stop once the target sensor's total flux has this relative standard error (e.g. 0.01)")
-      ->check(CLI::Range(0.0, 1.0));
-  sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)");
+  CLI::Option* target_error_opt =
+      sensor_cmd->add_option("--target-error", sensor.target_error,
+                             "Stop once the target sensor's total flux has this relative standard error (e.g. 0.01)")
+          ->check(CLI::Range(0.0, 1.0));
+  sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)")
+      ->needs(target_error_opt);
   sensor_cmd->add_option("--max-depth", sensor.max_depth, "Surface interactions per path (default 32)")
-      ->check(CLI::Range(0, 1000));
+      ->check(kDecimal)->check(CLI::Range(0, 1000));
   sensor_cmd->add_option("--max-scatterings", sensor.max_scatterings,
-                         "Fog collisions per path before it is cut (default 100000; 1: single scattering)");
+                         "Fog collisions per path before it is cut (default 100000; 1: single scattering)")
+      ->check(kDecimal);
   sensor_cmd->add_option("--roulette", sensor.roulette,
                          "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
   sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")

@@ -203,11 +203,17 @@ TriangleMesh loopSubdivide(const TriangleMesh& input, int steps) {
   {
     std::lock_guard<std::mutex> lock(openMeshMutex());
     OpenMeshCapture capture;
+    std::size_t refused = 0;
     for (std::size_t i = 0; i < input.triangleCount(); ++i) {
       if (!input.isValid(i)) continue;
       const auto& t = input.triangles()[i];
-      mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]);
+      if (!mesh.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) ++refused;
     }
+    // OpenMesh's half-edge mesh cannot hold a non-manifold face; subdividing without it would
+    // silently drop geometry, so refuse the input instead.
+    if (refused > 0)
+      throw InvalidArgument("loopSubdivide: " + std::to_string(refused) + " of " + std::to_string(input.triangleCount()) +
+                            " triangles are non-manifold (complex edge or vertex) and cannot be subdivided");
     OpenMesh::Subdivider::Uniform::LoopT<TriMesh> loop;
     loop.attach(mesh);
     loop(static_cast<std::size_t>(steps));

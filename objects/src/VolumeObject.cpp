@@ -242,6 +242,21 @@ std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, 
     throw InvalidArgument(what + ": non-linear (" + grid->transform().mapType() +
                           ") transform; only linear (affine) grid transforms are supported");
   if (grid->activeVoxelCount() == 0) throw InvalidArgument(what + ": empty grid (no active voxels)");
+  // A damaged file (or a careless caller) can give a linear map with NaN, infinite or zero scale:
+  // the volume's bounds would be NaN or empty and it would silently never be hit.
+  // (The map's matrix is taken from images of the origin and the unit vectors: getAffineMap()
+  // would invert it and throw OpenVDB's own error first.)
+  {
+    const vdb::math::MapBase& map = *grid->transform().baseMap();
+    const vdb::Vec3d o = map.applyMap(vdb::Vec3d(0.0));
+    const vdb::Vec3d x = map.applyMap(vdb::Vec3d(1, 0, 0)) - o, y = map.applyMap(vdb::Vec3d(0, 1, 0)) - o,
+                     z = map.applyMap(vdb::Vec3d(0, 0, 1)) - o;
+    bool finite = true;
+    for (const vdb::Vec3d& v : {o, x, y, z}) finite = finite && std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
+    const double det = x.dot(y.cross(z));
+    if (!finite || !std::isfinite(det) || det == 0.0)
+      throw InvalidArgument(what + ": grid transform is not finite and invertible (voxel size or matrix is NaN, infinite or zero)");
+  }
 
   auto g = std::make_shared<VolumeObject::Grid>();
   g->grid = grid;
@@ -262,6 +277,9 @@ std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, 
     const vdb::Vec3d p_os = grid->transform().indexToWorld(p_is);
     b.extend(glm::vec3(static_cast<float>(p_os.x()), static_cast<float>(p_os.y()), static_cast<float>(p_os.z())));
   }
+  const auto finite3 = [](const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  if (b.empty() || !finite3(b.lo) || !finite3(b.hi))
+    throw InvalidArgument(what + ": object-space bounds are not finite (the grid transform takes the active voxels beyond float range)");
   g->bounds_os = b;
   if (g->kind == VolumeKind::Fog) buildRanges(*g);
   if (name.empty()) name = g->grid_name;

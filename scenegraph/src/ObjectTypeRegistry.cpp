@@ -192,8 +192,14 @@ ObjectSpecResult readMesh(const json& spec, const ObjectSpecContext& ctx) {
   if (!idx.is_array()) ctx.fail(p + "/indices", "expected an array");
   std::vector<float> positions;
   positions.reserve(pos.size());
-  for (std::size_t k = 0; k < pos.size(); ++k)
-    positions.push_back(static_cast<float>(ctx.number(pos[k], p + "/positions/" + std::to_string(k))));
+  for (std::size_t k = 0; k < pos.size(); ++k) {
+    const std::string pp = p + "/positions/" + std::to_string(k);
+    const float v = static_cast<float>(ctx.number(pos[k], pp));
+    // Positions are stored as float: a finite double beyond float range would become an infinite
+    // vertex and silently a degenerate triangle.
+    if (!std::isfinite(v)) ctx.fail(pp, "outside float range");
+    positions.push_back(v);
+  }
   std::vector<std::uint32_t> indices;
   indices.reserve(idx.size());
   for (std::size_t k = 0; k < idx.size(); ++k) {

@@ -393,5 +393,23 @@ TEST(LoopSubdivide, MultipliesTrianglesByFourAndStaysClosed) {
   EXPECT_THROW((void)loopSubdivide(ico, -1), InvalidArgument);
 }
 
+TEST(LoopSubdivide, RefusesNonManifoldTrianglesInsteadOfDroppingThem) {
+  // Three triangles on one edge (a fin): OpenMesh's half-edge mesh refuses the third, which the
+  // subdivision would otherwise lose without a word.
+  const std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1};
+  const std::vector<std::uint32_t> fin = {0, 1, 2, 1, 0, 3, 0, 1, 4};
+  const TriangleMesh m = TriangleMesh::fromArrays(p, fin, "fin");
+  ASSERT_EQ(m.triangleCount(), 3u);
+  try {
+    (void)loopSubdivide(m, 1);
+    ADD_FAILURE() << "a non-manifold triangle was dropped silently";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("1 of 3 triangles are non-manifold"), std::string::npos) << e.what();
+  }
+  // The two-triangle part alone subdivides.
+  const std::vector<std::uint32_t> two = {0, 1, 2, 1, 0, 3};
+  EXPECT_EQ(loopSubdivide(TriangleMesh::fromArrays(p, two, "two"), 1).triangleCount(), 8u);
+}
+
 }  // namespace
 }  // namespace duplex::test

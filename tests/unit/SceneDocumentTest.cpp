@@ -343,6 +343,9 @@ TEST(SceneDocumentV1Errors, InlineMeshes) {
   };
   const std::string good_positions = "[0, 0, 0, 1, 0, 0, 0, 1, 0]";
   expectDocError(d, v1(inline_object(R"([0, 0, 0, 1, "x", 0, 0, 1, 0])", "[0, 1, 2]"), ""), "/objects/0/mesh/positions/4");
+  // Finite as a double, infinite as the float it is stored in.
+  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0, 0, 0, 1e39, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh/positions/7",
+                 "float range");
   expectDocError(d, v1(inline_object(good_positions, "[0, -1, 2]"), ""), "/objects/0/mesh/indices/1");
   expectDocError(d, v1(inline_object(good_positions, "[0, 1.5, 2]"), ""), "/objects/0/mesh/indices/1");
   expectDocError(d, v1(inline_object(good_positions, "[0, 1, null]"), ""), "/objects/0/mesh/indices/2");

@@ -294,6 +294,46 @@ double lengthInBox(const openvdb::math::Transform& xf, const Ray& r, int lo, int
   return t1 > t0 ? (t1 - t0) * glm::length(glm::dvec3(r.dir)) : 0.0;
 }
 
+TEST(VolumeObject, GridTransformsThatGiveNoFiniteBoundsAreRefused) {
+  // Without the check a NaN or huge voxel size gave NaN or infinite bounds: a volume never hit.
+  // OpenVDB's own constructors refuse a NaN map, but its reader takes one from a damaged file: the
+  // voxel size 0.15625 (exact in binary, so its 8 bytes are found as written) patched to NaN / inf.
+  TempDir dir;
+  openvdb::initialize();
+  auto grid = fogBox(1.0f, 0, 3);
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(0.15625));
+  const auto clean = dir / "scaled.vdb";
+  {
+    openvdb::io::File out(clean.string());
+    out.write({grid});
+    out.close();
+  }
+  ASSERT_NO_THROW((void)VolumeObject::load(clean));
+  const std::vector<char> bytes = test::readBinaryFile(clean);
+  const auto patched = [&](double value) {
+    std::vector<char> b = bytes;
+    const double size = 0.15625;
+    int found = 0;
+    for (std::size_t o = 0; o + 8 <= b.size(); ++o)
+      if (std::memcmp(b.data() + o, &size, 8) == 0) {
+        std::memcpy(b.data() + o, &value, 8);
+        ++found;
+      }
+    EXPECT_GT(found, 0) << "voxel size not found in the file";
+    const auto path = dir / "patched.vdb";
+    test::writeBinaryFile(path, b);
+    return path;
+  };
+  for (const double bad : {std::nan(""), double(INFINITY), 0.0}) {
+    SCOPED_TRACE(bad);
+    const auto path = patched(bad);
+    expectErrorNaming<Error>([&] { (void)VolumeObject::load(path); }, "patched.vdb: grid \"density\": grid transform is not finite and invertible");
+  }
+  // In memory: a voxel size that takes the active voxels beyond float range.
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(1e38));
+  expectErrorNaming<InvalidArgument>([&] { (void)makeVolumeObject(grid, VolumeKind::Fog, "v"); }, "float range");
+}
+
 TEST(VolumeObject, FogTransmittanceThroughABoxIsExact) {
   const float sigma = 2.0f;
   const int lo = -3, hi = 16;  // 20 voxels: full 8^3 tiles and partial leaves

@@ -22,7 +22,11 @@ struct MeshLoadReport {
 [[nodiscard]] TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report = nullptr);
 
 /// Uniform Loop subdivision, `steps` times (each step multiplies the triangle count by 4), with
-/// OpenMesh's subdivider; used to make large inputs from real meshes for benchmarks.
+/// OpenMesh's subdivider; used to make large inputs from real meshes for benchmarks. Degenerate
+/// triangles (TriangleMesh::isValid false: never hit anyway) are left out; the result's triangles
+/// are OpenMesh's, numbered anew. Throws InvalidArgument for negative `steps` and for a mesh with
+/// non-manifold triangles (OpenMesh's half-edge structure cannot hold them), naming their count.
+/// Positions stay in the input's units.
 [[nodiscard]] TriangleMesh loopSubdivide(const TriangleMesh& mesh, int steps);
 
 }  // namespace duplex

@@ -15,8 +15,9 @@ namespace duplex {
 
 /// A volume object over `grid` (shared, not copied: the caller must not modify the grid
 /// afterwards). `kind` Auto: from the grid class. `name` empty: the grid's name. Throws
-/// InvalidArgument naming the grid for a null or empty grid or a non-linear (frustum) transform,
-/// and for an invalid `config` (see VolumeObject::withConfig).
+/// InvalidArgument naming the grid for a null or empty grid, a non-linear (frustum) transform, a
+/// transform that is not finite and invertible, or one that takes the active voxels beyond float
+/// range, and for an invalid `config` (see VolumeObject::withConfig).
 [[nodiscard]] std::shared_ptr<const VolumeObject> makeVolumeObject(openvdb::FloatGrid::ConstPtr grid,
                                                                    VolumeKind kind = VolumeKind::Auto,
                                                                    std::string name = {},
