@@ -22,7 +22,8 @@ struct Affine {
 
   static Affine identity() { return {}; }
   /// From 12 numbers, row-major 3x4 [r00 r01 r02 t0  r10 r11 r12 t1  r20 r21 r22 t2] (the
-  /// scene-json-v1 layout).
+  /// scene-json-v1 layout). Takes the numbers as they are: callers that need a valid transform
+  /// check isFinite() and !isSingular() (the scene graph and the top level do).
   static Affine fromRowMajor3x4(const std::array<double, 12>& m);
   [[nodiscard]] std::array<double, 12> toRowMajor3x4() const;
 
@@ -32,7 +33,8 @@ struct Affine {
   [[nodiscard]] bool isFinite() const;
   /// |det(linear)| relative to the scale of the matrix is tiny: not invertible in practice.
   [[nodiscard]] bool isSingular() const;
-  /// Inverse; precondition: !isSingular().
+  /// Inverse; precondition: !isSingular() (a singular matrix gives infinite or NaN entries, no
+  /// exception).
   [[nodiscard]] Affine inverse() const;
   /// Bounds of the transformed box (exact for affine maps: the box of the 8 mapped corners, computed
   /// with the centre/half-extent form and rounded outward to float).

@@ -17,6 +17,8 @@ inline constexpr std::uint32_t kInvalidId = 0xFFFFFFFFu;
 /// barycentric coordinates of the hit point: p = (1 - u - v) * v0 + u * v1 + v * v2 for triangle
 /// (v0, v1, v2). `ng` is the unnormalised geometric normal cross(v1 - v0, v2 - v0) in the space of
 /// the query (object space from an object's intersector, world space from a scene query).
+/// Other object types fill u, v (and prim_id) with their own coordinates: sensors the hit's local
+/// position (SensorObject.h), volumes 0 (VolumeObject.h).
 struct Hit {
   float t = std::numeric_limits<float>::infinity();
   float u = 0.0f;

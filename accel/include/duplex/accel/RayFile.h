@@ -28,8 +28,13 @@ static_assert(sizeof(HitRecord) == 20, "HitRecord must match the 20-byte hit-fil
 /// Reads a ray file; throws FileError naming the file when it cannot be read or its size is not
 /// a multiple of 32 bytes.
 [[nodiscard]] std::vector<Ray> readRayFile(const std::filesystem::path& path);
+/// Writes `rays` (world space, as traced) as 32-byte records; throws FileError naming the file when
+/// it cannot be written.
 void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays);
+/// Reads a hit file; throws FileError naming the file when it cannot be read or its size is not a
+/// multiple of 20 bytes.
 [[nodiscard]] std::vector<HitRecord> readHitFile(const std::filesystem::path& path);
+/// Writes 20-byte hit records; throws FileError naming the file when it cannot be written.
 void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits);
 /// Transmittance file (`duplex trace --transmittance`): one little-endian float32 per ray, in ray
 /// order, nothing else. Throws FileError naming the file.

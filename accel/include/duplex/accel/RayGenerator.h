@@ -24,7 +24,9 @@ struct PinholeCamera {
   /// Throws InvalidArgument for empty or non-finite bounds.
   static PinholeCamera looking_at_box(const Box& world_bounds);
   /// Unit direction through the centre of pixel (px, py) of a width x height image, pixel (0, 0)
-  /// at the top left, square pixels.
+  /// at the top left, square pixels. Preconditions (not checked here: the hot loop of primary rays):
+  /// width and height > 0, unit and orthogonal forward/right/up, 0 < vertical_fov_deg < 180;
+  /// SceneTracer::pick checks them.
   [[nodiscard]] glm::vec3 direction(std::uint32_t px, std::uint32_t py, std::uint32_t width,
                                     std::uint32_t height) const;
   /// Unit direction (double) through continuous image coordinates (x, y): (0, 0) is the top-left
@@ -34,6 +36,7 @@ struct PinholeCamera {
 };
 
 /// width * height primary rays, row-major from the top-left pixel; unit directions, t in [0, inf).
+/// Throws InvalidArgument for empty or non-finite bounds.
 [[nodiscard]] std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height);
 /// `count` rays with origins uniform in `world_bounds` and directions uniform on the unit sphere,
 /// t in [0, inf). Deterministic for a seed (std::mt19937_64, independent of the thread count).

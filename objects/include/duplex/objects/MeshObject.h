@@ -22,7 +22,8 @@ class MeshObject final : public Object {
  public:
   static constexpr std::string_view kTypeName = "mesh";
 
-  /// Builds the kd-tree over the mesh's valid triangles (object space).
+  /// Builds the kd-tree over the mesh's valid triangles (object space). Throws InvalidArgument for a
+  /// null mesh or an invalid `config` (see buildKdTree).
   explicit MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config = {});
   ~MeshObject() override;
 

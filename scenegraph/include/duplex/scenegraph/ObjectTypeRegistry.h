@@ -8,7 +8,7 @@
 /// Built in: "mesh" (`{"file": PATH}` or `{"positions": [...], "indices": [...]}`), and procedural
 /// meshes "sphere" (`{"radius": r, "subdivisions": s}`), "box" (`{"size": [x, y, z] | s}`) and
 /// "plane" (`{"size": [w, h] | s}`), and "volume" (`{"file": PATH.vdb, "grid": G, "kind": "fog" |
-/// "levelset"}`, VolumeObject). Sensors will register the same way.
+/// "levelset"}`, VolumeObject). Sensors register the same way (duplex::registerSensorTypes).
 
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/Object.h"

@@ -106,6 +106,7 @@ std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit);
 /// `dir` (created if needed) as "<object id>_<name>.dkdt" (characters other than [A-Za-z0-9._-]
 /// replaced by '_'), for use as "structure" in a scene file. Returns the path per library object id
 /// (empty for objects of other types). An object shared by several entries is written once per entry.
+/// Throws FileError naming the folder or file that cannot be created or written.
 std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, const std::filesystem::path& dir);
 
 }  // namespace duplex
