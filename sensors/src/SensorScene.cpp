@@ -61,6 +61,12 @@ void SensorScene::prepare(std::vector<Material> materials) {
                             std::to_string(nb) + " band(s)");
     for (const double r : m.band_reflectance)
       if (!(r >= 0.0 && r <= 1.0)) throw InvalidArgument(what + ": per-band values must be in [0, 1]");
+    // The file reader checks these too; a programmatic scene must not reach the run with a
+    // reflectance above 1 (acts as 1), a NaN one (never absorbs: a perfect mirror) or a NaN index.
+    if (!(m.reflectance >= 0.0 && m.reflectance <= 1.0))
+      throw InvalidArgument(what + ": reflectance (albedo) " + std::to_string(m.reflectance) + " must be in [0, 1]");
+    if (m.type == MaterialType::Dielectric && !(std::isfinite(m.ior) && m.ior > 0.0))
+      throw InvalidArgument(what + ": index of refraction " + std::to_string(m.ior) + " must be finite and positive");
     if (m.type == MaterialType::Medium && !(m.g > -1.0 && m.g < 1.0)) throw InvalidArgument(what + ": g must be in (-1, 1)");
   }
   bool scatters = false;

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <unistd.h>
@@ -223,6 +224,33 @@ TEST(SensorSpectral, BandCountsMustAgree) {
     // Finite entries whose sum overflows would give a spectrum of NaN shares.
     EXPECT_THROW((void)f.scene({spectralPoint({0, 0, 0}, 1.0, {1e308, 1e308})}, {"a", "b"}), InvalidArgument);
   }
+}
+
+TEST(SensorSpectral, MaterialsMadeInCodeAreCheckedAsFilesAre) {
+  // The file reader refuses these; a scene made in code must too (a reflectance of 1.5 acted as 1,
+  // a NaN one never absorbed, a NaN index of refraction fed NaN into Fresnel).
+  const auto refused = [](Material m, const std::string& needle) {
+    Fixture f;
+    f.add(quad(1.0, "wall"), Affine::identity(), "wall", m);
+    try {
+      (void)f.scene({pointLight({0, 0, 1}, 1.0)});
+      ADD_FAILURE() << "accepted: " << needle;
+    } catch (const InvalidArgument& e) {
+      EXPECT_NE(std::string(e.what()).find("'wall'"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  refused(Material{MaterialType::Lambertian, 1.5}, "reflectance");
+  refused(Material{MaterialType::Mirror, std::nan("")}, "reflectance");
+  refused(Material{MaterialType::Lambertian, -0.1}, "reflectance");
+  Material glass{MaterialType::Dielectric, 0.0};
+  glass.ior = std::nan("");
+  refused(glass, "index of refraction");
+  glass.ior = -1.5;
+  refused(glass, "index of refraction");
+  Fixture ok;
+  ok.add(quad(1.0, "wall"), Affine::identity(), "wall", Material{MaterialType::Lambertian, 1.0});
+  EXPECT_NO_THROW((void)ok.scene({pointLight({0, 0, 1}, 1.0)}));
 }
 
 TEST(SensorSpectral, SceneFilesDeclareBandsSpectraAndPerBandReflectance) {

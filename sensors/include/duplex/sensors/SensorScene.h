@@ -71,11 +71,13 @@ class SensorScene {
   /// A scene over a committed `graph` (kept by reference: it must outlive this scene and must not
   /// be edited while a run traces it). `materials` is indexed by ObjectId; objects beyond its end
   /// are absorbers. `bands` names the spectral bands (empty: one radiometric band, no per-band
-  /// output). Validates the lights (InvalidArgument naming the light). A scene without lights is
-  /// valid (a run then emits nothing). Throws InvalidArgument naming the object or light for a
-  /// "medium" material on an object that is not a fog, a surface material on a fog, a fog that
-  /// cannot be sampled (a medium of another type) in a scene whose media scatter, per-band values
-  /// whose count is not the band count, or empty or repeated band names.
+  /// output). Validates the lights (InvalidArgument naming the light). A scene without lights can
+  /// be made (for picking or inspection), but SensorRun::run refuses it. Throws InvalidArgument
+  /// naming the object or light for a reflectance or albedo outside [0, 1] or NaN, an index of
+  /// refraction that is not finite and positive, a "medium" material on an object that is not a
+  /// fog, a surface material on a fog, a fog that cannot be sampled (a medium of another type) in
+  /// a scene whose media scatter, per-band values whose count is not the band count, or empty or
+  /// repeated band names.
   SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
               std::vector<std::string> bands = {});
   SensorScene(SensorScene&&) noexcept;
@@ -105,13 +107,14 @@ class SensorScene {
   [[nodiscard]] const std::vector<std::string>& bands() const { return bands_; }
   /// Number of bands transported (1 when the scene has no "bands").
   [[nodiscard]] std::uint32_t bandCount() const { return bands_.empty() ? 1u : static_cast<std::uint32_t>(bands_.size()); }
-  /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1).
+  /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1); `light`
+  /// must be < lights().size() (not checked: the run's hot loop).
   [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return band_cdf_[light]; }
-  /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
-  /// scatteringMedia() and transported by free flights, else fogs only attenuate.
   /// Whether `linear` is a rotation (or reflection) times a uniform scale, to relative 1e-9: the
   /// transforms a sphere sensor accepts (its bins keep equal areas only under these).
   [[nodiscard]] static bool isSimilarity(const glm::dmat3& linear);
+  /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
+  /// scatteringMedia() and transported by free flights, else fogs only attenuate.
   [[nodiscard]] bool scatters() const { return !media_.empty(); }
   [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return media_; }
   [[nodiscard]] const SceneTracer& tracer() const { return *tracer_; }
