@@ -74,14 +74,17 @@ inline bool setupMeshRay(const Ray& ray, const Box& box, MeshRay& r, float& tmin
   WatertightRay& w = r.wray;
   const float dx = ray.dir.x, dy = ray.dir.y, dz = ray.dir.z;
   const float a0 = std::abs(dx), a1 = std::abs(dy), a2 = std::abs(dz);
-  const int x_dominant = static_cast<int>(a0 >= a1) & static_cast<int>(a0 >= a2);
-  const int kz = (1 - x_dominant) * (2 - static_cast<int>(a1 >= a2));
-  int kx = kz == 2 ? 0 : kz + 1;
-  int ky = kx == 2 ? 0 : kx + 1;
+  // Table lookups rather than WatertightRay's arithmetic, which the compiler turned into a branch
+  // on |dy| >= |dz| (a coin flip on random rays, half a misprediction per ray). kDominant by the
+  // three comparisons: x when it is >= both others, else y when |dy| >= |dz|, else z.
+  static constexpr std::int8_t kDominant[8] = {2, 2, 2, 0, 1, 1, 1, 0};
+  // (kx, ky) by kz and the sign of d[kz]: the next two axes, swapped when d[kz] < 0 (winding).
+  static constexpr std::int8_t kCross[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
+  const int kz = kDominant[static_cast<int>(a0 >= a1) | static_cast<int>(a0 >= a2) << 1 | static_cast<int>(a1 >= a2) << 2];
   const float dkz = (&ray.dir.x)[kz];
-  const int flip = (kx ^ ky) & -static_cast<int>(dkz < 0.0f);
-  kx ^= flip;
-  ky ^= flip;
+  const int negative = static_cast<int>(dkz < 0.0f);
+  const int kx = kCross[kz][negative][0];
+  const int ky = kCross[kz][negative][1];
   alignas(16) float q[4];
   // {dx, dy, dz, 1} / dkz: lane k = d[k] / d[kz] (the shear of axis k), lane 3 = 1 / d[kz].
   const __m128 num = _mm_or_ps(_mm_and_ps(d, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0))),

@@ -55,21 +55,23 @@ struct WatertightRay4 {
 
 /// Tests the lanes in `lanes` (bit i: lane i holds one of the leaf's triangles) of `block`.
 inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const TriangleBlock4& block, int lanes, float t_max) {
-  // A/B/C[j]: coordinate (kx, ky, kz)[j] of vertex 0/1/2 of the 4 triangles, relative to the origin.
-  const int axes[3] = {ray.kx, ray.ky, ray.kz};
-  __m128 A[3], B[3], C[3];
-  for (int j = 0; j < 3; ++j) {
-    A[j] = _mm_sub_ps(_mm_load_ps(block.v[0 + axes[j]]), ray.o[j]);
-    B[j] = _mm_sub_ps(_mm_load_ps(block.v[3 + axes[j]]), ray.o[j]);
-    C[j] = _mm_sub_ps(_mm_load_ps(block.v[6 + axes[j]]), ray.o[j]);
-  }
+  // Rows of coordinate kx / ky / kz of vertex 0; vertex k's rows follow 12 k floats further
+  // (block.v[3 k + axis]), so each row is one pointer plus a constant offset: three live pointers
+  // instead of nine row addresses, which the compiler kept on the stack.
+  const float* rx = block.v[ray.kx];
+  const float* ry = block.v[ray.ky];
+  const float* rz = block.v[ray.kz];
   const __m128 sx = ray.sx, sy = ray.sy, sz = ray.sz;
-  const __m128 ax = _mm_sub_ps(A[0], _mm_mul_ps(sx, A[2]));
-  const __m128 ay = _mm_sub_ps(A[1], _mm_mul_ps(sy, A[2]));
-  const __m128 bx = _mm_sub_ps(B[0], _mm_mul_ps(sx, B[2]));
-  const __m128 by = _mm_sub_ps(B[1], _mm_mul_ps(sy, B[2]));
-  const __m128 cx = _mm_sub_ps(C[0], _mm_mul_ps(sx, C[2]));
-  const __m128 cy = _mm_sub_ps(C[1], _mm_mul_ps(sy, C[2]));
+  // Relative to the origin and sheared vertex by vertex (the scalar test's operations, same order).
+  const __m128 Az = _mm_sub_ps(_mm_load_ps(rz), ray.o[2]);
+  const __m128 ax = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(rx), ray.o[0]), _mm_mul_ps(sx, Az));
+  const __m128 ay = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(ry), ray.o[1]), _mm_mul_ps(sy, Az));
+  const __m128 Bz = _mm_sub_ps(_mm_load_ps(rz + 12), ray.o[2]);
+  const __m128 bx = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(rx + 12), ray.o[0]), _mm_mul_ps(sx, Bz));
+  const __m128 by = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(ry + 12), ray.o[1]), _mm_mul_ps(sy, Bz));
+  const __m128 Cz = _mm_sub_ps(_mm_load_ps(rz + 24), ray.o[2]);
+  const __m128 cx = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(rx + 24), ray.o[0]), _mm_mul_ps(sx, Cz));
+  const __m128 cy = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(ry + 24), ray.o[1]), _mm_mul_ps(sy, Cz));
   const __m128 U = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
   const __m128 V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
   const __m128 W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
@@ -84,8 +86,8 @@ inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const Triangl
   const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
   int candidates = ~_mm_movemask_ps(_mm_or_ps(mixed, _mm_cmpeq_ps(det, zero))) & lanes & ~r.exact;
   if (candidates == 0) return r;
-  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, A[2])), _mm_mul_ps(V, _mm_mul_ps(sz, B[2]))),
-                              _mm_mul_ps(W, _mm_mul_ps(sz, C[2])));
+  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, Az)), _mm_mul_ps(V, _mm_mul_ps(sz, Bz))),
+                              _mm_mul_ps(W, _mm_mul_ps(sz, Cz)));
   const __m128 sign = _mm_and_ps(det, _mm_set1_ps(-0.0f));
   const __m128 abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), det);
   const __m128 sT = _mm_xor_ps(T, sign);
