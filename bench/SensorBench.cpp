@@ -181,7 +181,7 @@ double median(std::vector<double> v) {
 nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned threads, int repeat, const std::string& data_dir) {
   std::string meshes;
   const auto setup = roomScene(sensors, data_dir, meshes);
-  std::vector<double> with, without;
+  std::vector<double> with, without, with_cpu, without_cpu;
   SensorRunCounters counters;
   SensorRunResults results;
   for (int r = 0; r < repeat; ++r) {
@@ -192,8 +192,10 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
       cfg.closest_hit_only = plain;
       SensorRun run(*setup->scene, cfg);
       const auto t0 = std::chrono::steady_clock::now();
+      const std::clock_t c0 = std::clock();
       (void)run.runUntil(rays);
       (plain ? without : with).push_back(seconds(t0));
+      (plain ? without_cpu : with_cpu).push_back(static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
       if (!plain) {
         counters = run.counters();
         results = run.results();
@@ -202,6 +204,20 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
   }
   double recorded = 0.0;
   for (const SensorResult& s : results.sensors) recorded += s.total_flux_w;
+  // FNV-1a over every bin's flux, standard error and ray count and every sensor's total: equal
+  // hashes across revisions mean bit-identical results (the sensors' fast paths must not change a
+  // bit).
+  std::uint64_t hash = 1469598103934665603ull;
+  auto add = [&hash](const void* p, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) hash = (hash ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
+  };
+  for (const SensorResult& s : results.sensors) {
+    add(s.flux_w.data(), s.flux_w.size() * sizeof(double));
+    add(s.flux_stderr_w.data(), s.flux_stderr_w.size() * sizeof(double));
+    add(s.ray_count.data(), s.ray_count.size() * sizeof(s.ray_count[0]));
+    add(&s.total_flux_w, sizeof(double));
+    add(&s.total_flux_stderr_w, sizeof(double));
+  }
   const double t_with = median(with), t_without = median(without);
   const TopLevelStats top = setup->scene->tracer().topLevel().stats();
   return {{"sensors", sensors},
@@ -223,7 +239,13 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
           {"sensor_rays_per_s", static_cast<double>(rays) / t_with},
           {"closest_hit_rays_per_s", static_cast<double>(rays) / t_without},
           {"overhead_ratio", t_with / t_without},
-          {"recorded_flux_w", recorded}};
+          // Process CPU time (all threads): on a shared machine a one-thread run's CPU time leaves
+          // out the time it waited for a core, so its ratio is steadier than the wall-clock one.
+          {"sensor_run_cpu_s", median(with_cpu)},
+          {"closest_hit_cpu_s", median(without_cpu)},
+          {"overhead_ratio_cpu", median(with_cpu) / median(without_cpu)},
+          {"recorded_flux_w", recorded},
+          {"results_hash", std::to_string(hash)}};
 }
 
 /// "sensor_level": the crossing query alone on the overhead scene's 10,000 small sensors (no

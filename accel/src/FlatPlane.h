@@ -30,19 +30,30 @@ struct alignas(64) FlatPlane {
   // rounded to float).
   float row[3][4] = {};
   float half_width = 0.0f, half_height = 0.0f;  // Object::flatCrossings, rounded outwards
-  bool front_only = false;
-  bool valid = false;  // false: not flat (or a free slot): always ask the object
+  // The slot's query mask, 0 when the slot is not a sensor (no crossing query asks it), so that a
+  // met grid entry is filtered without reading the slot's filter: one cache line per entry met.
+  std::uint32_t mask = 0;
+  // slot | front_only << 30 | valid << 31. Not valid: not flat, a free slot, or a slot number too
+  // large to pack: always take the general path (filter, object).
+  std::uint32_t bits = 0;
+
+  static constexpr std::uint32_t kFrontOnly = 1u << 30, kValid = 1u << 31, kSlotMask = kFrontOnly - 1u;
 
   FlatPlane() = default;
-  FlatPlane(const Affine& object_from_world, const FlatCrossings& f)
-      : half_width(f.half_width), half_height(f.half_height), front_only(f.front_only), valid(true) {
+  FlatPlane(const Affine& object_from_world, const FlatCrossings& f, std::uint32_t slot = 0, std::uint32_t query_mask = 0)
+      : half_width(f.half_width), half_height(f.half_height), mask(query_mask),
+        bits(slot <= kSlotMask ? slot | (f.front_only ? kFrontOnly : 0u) | kValid : 0u) {
     for (int k = 0; k < 3; ++k) {
       // glm matrices are column-major: linear[column][row].
       for (int j = 0; j < 3; ++j) row[k][j] = static_cast<float>(object_from_world.linear[j][k]);
       row[k][3] = static_cast<float>(object_from_world.translation[k]);
     }
   }
+  [[nodiscard]] bool valid() const { return (bits & kValid) != 0; }
+  [[nodiscard]] bool frontOnly() const { return (bits & kFrontOnly) != 0; }
+  [[nodiscard]] std::uint32_t slot() const { return bits & kSlotMask; }
 };
+static_assert(sizeof(FlatPlane) == 64, "one cache line per plane record");
 
 // The world ray as the plane test reads it: float origin and direction and the largest magnitude
 // of each (once per ray).
@@ -76,7 +87,7 @@ inline bool plainlyMisses(const FlatPlane& f, const PlaneRay& r, float t_reach) 
   auto norm1 = [&](int k) { return std::fabs(f.row[k][0]) + std::fabs(f.row[k][1]) + std::fabs(f.row[k][2]); };
   const float n2 = norm1(2);
   const float dz = at(2, r.d), e_dz = kErr * n2 * r.d_max;
-  const bool back = f.front_only & (dz > e_dz);  // the exact d.z > 0: it arrives at the back
+  const bool back = f.frontOnly() & (dz > e_dz);  // the exact d.z > 0: it arrives at the back
   const float adz = std::fabs(dz);
   const bool steep = adz > 2.0f * e_dz;  // else (nearly) parallel: only the exact path decides
   const float oz = at(2, r.o) + f.row[2][3], e_oz = kErr * (n2 * r.o_max + std::fabs(f.row[2][3]));

@@ -85,11 +85,19 @@ struct LeafBoxes {
   // a ray passes, one call per ray): for each run [runs[2r], runs[2r + 1]) appends the references
   // whose box the ray meets within [ray.tnear, t_max] to `out` (room for every reference of the
   // runs, plus kMaxLanes: the vector paths write whole vectors), in order; returns how many.
+  // `records`, when given, holds a 64-byte record per reference that the caller reads for every
+  // reference met: the 16- and 8-wide tests ask for the record of the first box each vector meets
+  // as soon as it is known, so that its load overlaps the remaining tests (without a branch: when
+  // a vector meets nothing, the prefetched line is that of a stale index, which costs nothing).
   std::uint32_t metInRuns(const KdRay& ray, float t_max, const std::uint32_t* runs, std::uint32_t run_count,
-                          std::uint32_t* out) const {
+                          std::uint32_t* out, const void* records = nullptr) const {
 #if defined(DUPLEX_LEAF_BOXES_X86)
-    if (lanes == 16) return runs16(ray, t_max, runs, run_count, out);
-    if (lanes == 8) return runs8(ray, t_max, runs, run_count, out);
+    // Prefetch addresses are computed as integers (a stale index may lie past the records; a
+    // prefetch never faults). Without records, the prefetches go to `out` itself.
+    const std::uintptr_t base = reinterpret_cast<std::uintptr_t>(records ? records : out);
+    const unsigned shift = records ? 6u : 0u;
+    if (lanes == 16) return runs16(ray, t_max, runs, run_count, out, base, shift);
+    if (lanes == 8) return runs8(ray, t_max, runs, run_count, out, base, shift);
     if (lanes == 4) return runs4(ray, t_max, runs, run_count, out);
 #endif
     std::uint32_t n = 0;
@@ -150,8 +158,9 @@ struct LeafBoxes {
   // widens each axis's) and clipped to [tnear, t_max]. The running bound is the second operand of
   // max / min: a NaN slab bound (0 * inf) leaves it. Loads past a run's end read the next run or
   // the padding; their bits are cleared. The three differ only in vector width.
-  __attribute__((target("avx512f"))) std::uint32_t runs16(const KdRay& ray, float t_max, const std::uint32_t* runs,
-                                                          std::uint32_t run_count, std::uint32_t* out) const {
+  __attribute__((target("avx512f,popcnt"))) std::uint32_t runs16(const KdRay& ray, float t_max, const std::uint32_t* runs,
+                                                                 std::uint32_t run_count, std::uint32_t* out, std::uintptr_t records,
+                                                                 unsigned shift) const {
     constexpr __mmask16 kAll = 0xFFFF;
     const __m512 o[3] = {_mm512_set1_ps(ray.origin[0]), _mm512_set1_ps(ray.origin[1]), _mm512_set1_ps(ray.origin[2])};
     const __m512 inv[3] = {_mm512_set1_ps(ray.inv_dir[0]), _mm512_set1_ps(ray.inv_dir[1]), _mm512_set1_ps(ray.inv_dir[2])};
@@ -176,14 +185,16 @@ struct LeafBoxes {
         leave = _mm512_maskz_min_ps(kAll, _mm512_add_ps(leave, _mm512_mul_ps(_mm512_abs_ps(leave), widen)), t_far);
         const __mmask16 met = _mm512_cmp_ps_mask(enter, leave, _CMP_LE_OQ) & inRun(end - i);
         _mm512_mask_compressstoreu_epi32(out + n, met, _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(i)), iota));
+        __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{out[n]} << shift)));
         n += static_cast<std::uint32_t>(std::popcount(static_cast<unsigned>(met)));
       }
     }
     return n;
   }
 
-  __attribute__((target("avx2"))) std::uint32_t runs8(const KdRay& ray, float t_max, const std::uint32_t* runs,
-                                                       std::uint32_t run_count, std::uint32_t* out) const {
+  __attribute__((target("avx2,popcnt"))) std::uint32_t runs8(const KdRay& ray, float t_max, const std::uint32_t* runs,
+                                                              std::uint32_t run_count, std::uint32_t* out, std::uintptr_t records,
+                                                              unsigned shift) const {
     const __m256 o[3] = {_mm256_set1_ps(ray.origin[0]), _mm256_set1_ps(ray.origin[1]), _mm256_set1_ps(ray.origin[2])};
     const __m256 inv[3] = {_mm256_set1_ps(ray.inv_dir[0]), _mm256_set1_ps(ray.inv_dir[1]), _mm256_set1_ps(ray.inv_dir[2])};
     const __m256 widen = _mm256_set1_ps(kWiden), t_near = _mm256_set1_ps(ray.tnear), t_far = _mm256_set1_ps(t_max);
@@ -208,6 +219,7 @@ struct LeafBoxes {
         const std::uint32_t met = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ))) & inRun(end - i);
         const __m256i lanes_met = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&kPacked[met])));
         _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n), _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(i)), lanes_met));
+        __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{out[n]} << shift)));
         n += static_cast<std::uint32_t>(std::popcount(met));
       }
     }

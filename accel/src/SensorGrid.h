@@ -139,16 +139,18 @@ struct SensorGrid {
     cell_begin = std::move(count);
   }
 
-  // Calls hit(slot) for the boxes of the cells the ray passes within [ray.tnear, t_max] that it
-  // meets within [ray.tnear, t_max] (a box spanning several cells may come more than once), in no
-  // particular order. `dir` is the ray's direction; `runs` and `met` are scratch lists. Returns
+  // Calls hit(entry) for the entries (boxes of the cells the ray passes within [ray.tnear, t_max])
+  // whose box it meets within [ray.tnear, t_max]; slots[entry] is the box's slot (a box spanning
+  // several cells comes once per cell), in no particular order. `dir` is the ray's direction; `runs` and `met` are scratch lists. Returns
   // false, having called nothing, when the ray's rounding could exceed the margin, or the ray has a
   // zero direction component (the caller walks the kd-tree instead).
+  // `records` (optional): a 64-byte record per entry that hit() reads (LeafBoxes::metInRuns
+  // prefetches it).
   template <class F>
   bool forEachMet(const KdRay& ray, const glm::vec3& dir, float t_max, std::vector<std::uint32_t>& runs,
-                  std::vector<std::uint32_t>& met, F&& hit) const {
+                  std::vector<std::uint32_t>& met, F&& hit, const void* records = nullptr) const {
 #if !defined(DUPLEX_LEAF_BOXES_X86)
-    (void)ray, (void)dir, (void)t_max, (void)runs, (void)met, (void)hit;
+    (void)ray, (void)dir, (void)t_max, (void)runs, (void)met, (void)hit, (void)records;
     return false;  // no vector box test (LeafBoxes.h): the kd-tree
 #else
     if (boxes.lanes == 1 || ray.zero[0] || ray.zero[1] || ray.zero[2]) return false;
@@ -192,7 +194,9 @@ struct SensorGrid {
         _mm_storeu_ps(plane_t[k] + n + 4, tb);
         const auto before_end = static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(ta, end4)) |
                                                            (_mm_movemask_ps(_mm_cmple_ps(tb, end4)) << 4));
-        const std::uint32_t got = std::min<std::uint32_t>(static_cast<std::uint32_t>(std::popcount(before_end)), left - n);
+        // A prefix: its length is the count of trailing ones (std::popcount would be a library
+        // call without -mpopcnt).
+        const std::uint32_t got = std::min<std::uint32_t>(static_cast<std::uint32_t>(std::countr_one(before_end)), left - n);
         n += got;
         if (got < 8) break;
       }
@@ -224,8 +228,8 @@ struct SensorGrid {
       cell_index += (sx ? stride[0] : 0) + (sy ? stride[1] : 0) + (sz ? stride[2] : 0);
     }
     if (met.size() < entries + LeafBoxes::kMaxLanes) met.resize(entries + LeafBoxes::kMaxLanes);
-    const std::uint32_t n = boxes.metInRuns(ray, t_max, run, run_count, met.data());
-    for (std::uint32_t k = 0; k < n; ++k) hit(slots[met[k]]);
+    const std::uint32_t n = boxes.metInRuns(ray, t_max, run, run_count, met.data(), records);
+    for (std::uint32_t k = 0; k < n; ++k) hit(met[k]);
     return true;
 #endif
   }

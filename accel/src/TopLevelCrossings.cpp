@@ -123,19 +123,34 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     // Flat sensors' planes, when they describe this level's slots (refreshed with the leaf boxes).
     const FlatPlane* flat = leaf_boxes && ss.flat.size() == ss.records.size() ? ss.flat.data() : nullptr;
     const PlaneRay plane_ray(ray_ws);
+    // A met reference: its filter, the mailbox (a sensor listed in several cells or leaves is
+    // plane-tested and asked once), the plane test, then the object.
     auto visit = [&](std::uint32_t slot) {
       const SlotFilter f = s_filters[slot];
-      if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor) return;
-      if (flat && flat[slot].valid && plainlyMisses(flat[slot], plane_ray, t_keep)) {
+      if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
+      if (flat && flat[slot].valid() && plainlyMisses(flat[slot], plane_ray, t_keep)) {
         ++ctx.stats.sensor_plane_misses;
         return;
       }
-      if (s_mailbox.seen(slot)) return;
       ++ctx.stats.instance_visits;
       addCrossings(s_records[slot], t_keep);
     };
+    // The grid's entries carry their plane record, slot and mask in one cache line (grid_planes):
+    // the same steps as visit() from one read; entries without a record take visit().
+    const FlatPlane* grid_planes = flat && ss.grid_planes.size() == ss.grid.slots.size() ? ss.grid_planes.data() : nullptr;
+    auto visitEntry = [&](std::uint32_t entry) {
+      if (!grid_planes || !grid_planes[entry].valid()) return visit(ss.grid.slots[entry]);
+      const FlatPlane& p = grid_planes[entry];
+      if ((p.mask & query.sensor_mask) == 0 || s_mailbox.seen(p.slot())) return;
+      if (plainlyMisses(p, plane_ray, t_keep)) {
+        ++ctx.stats.sensor_plane_misses;
+        return;
+      }
+      ++ctx.stats.instance_visits;
+      addCrossings(s_records[p.slot()], t_keep);
+    };
     const bool by_grid = leaf_boxes && config_.sensor_grid && ss.grid.usable() &&
-                         ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met, [&](std::uint32_t slot) { visit(slot); });
+                         ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met, visitEntry, grid_planes);
     float t_limit = t_keep;
     if (!by_grid) (void)traverseKdTree<false>(s_tree, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
       if (leaf_boxes) {

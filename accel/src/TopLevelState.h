@@ -195,6 +195,10 @@ struct TopLevel::State {
   toplevel_detail::LeafBoxes leaf_boxes;
   toplevel_detail::SensorGrid grid;
   std::vector<toplevel_detail::FlatPlane> flat;  // by slot: the flat instances' planes (FlatPlane.h)
+  // By grid entry (grid.slots order): the same records, so that an entry whose box a ray meets is
+  // filtered, mailboxed and plane-tested from one cache line (slot and mask packed in the record)
+  // instead of three random reads (entry slot, filter, plane).
+  std::vector<toplevel_detail::FlatPlane> grid_planes;
   void refreshLeafBoxes(const KdTree& tree) {
     leaf_boxes.refresh(boxes, tree.prim_indices);
     grid.refresh(boxes);
@@ -203,7 +207,13 @@ struct TopLevel::State {
       const Record& rec = records[slot];
       if (!rec.object || boxes[slot].empty()) continue;
       if (const std::optional<FlatCrossings> f = rec.object->flatCrossings())
-        flat[slot] = toplevel_detail::FlatPlane(rec.identity ? Affine::identity() : rec.object_from_world, *f);
+        flat[slot] = toplevel_detail::FlatPlane(rec.identity ? Affine::identity() : rec.object_from_world, *f,
+                                                static_cast<std::uint32_t>(slot), rec.role == ObjectRole::Sensor ? rec.mask : 0u);
+    }
+    grid_planes.clear();
+    if (grid.usable()) {
+      grid_planes.resize(grid.slots.size());
+      for (std::size_t e = 0; e < grid.slots.size(); ++e) grid_planes[e] = flat[grid.slots[e]];
     }
   }
 

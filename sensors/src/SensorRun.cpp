@@ -26,6 +26,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <type_traits>
 
 namespace duplex {
 
@@ -129,17 +130,19 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
                             std::to_string(bytes >> 20) + " MiB of accumulators, more than max_accumulator_bytes (" +
                             std::to_string(config_.max_accumulator_bytes >> 20) + " MiB)");
   }
-  bin_sum_.assign(all_bins, 0.0);
-  bin_sum2_.assign(all_bins, 0.0);
-  bin_count_.assign(all_bins, 0);
-  sensor_sum_.assign(scene_.sensors().size(), 0.0);
-  sensor_sum2_.assign(scene_.sensors().size(), 0.0);
+  bins_.assign(all_bins, BinSums{});
+  for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
+    const SensorInstance& si = scene_.sensors()[k];
+    if (si.node >= deposit_targets_.size()) deposit_targets_.resize(std::size_t{si.node} + 1);
+    deposit_targets_[si.node] = {si.first_bin, static_cast<std::int32_t>(k), si.object->spec().theta_bins != 0};
+  }
+  sensor_sums_.assign(scene_.sensors().size(), SensorSums{});
   if (!scene_.bands().empty()) {
     const std::size_t nb = scene_.bandCount();
-    band_bin_sum_.assign(bin_sum_.size() * nb, 0.0);
-    band_bin_sum2_.assign(bin_sum_.size() * nb, 0.0);
-    band_sensor_sum_.assign(sensor_sum_.size() * nb, 0.0);
-    band_sensor_sum2_.assign(sensor_sum_.size() * nb, 0.0);
+    band_bin_sum_.assign(bins_.size() * nb, 0.0);
+    band_bin_sum2_.assign(bins_.size() * nb, 0.0);
+    band_sensor_sum_.assign(sensor_sums_.size() * nb, 0.0);
+    band_sensor_sum2_.assign(sensor_sums_.size() * nb, 0.0);
   }
 }
 
@@ -211,12 +214,14 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       if (!config_.closest_hit_only) {
         for (const SensorCrossing& c : crossings) {
           if (c.hit.t > t_collision) break;  // sorted by t
-          const int s = scene_.sensorOf(c.hit.instance_id);
+          if (c.hit.instance_id >= deposit_targets_.size()) continue;
+          const DepositTarget target = deposit_targets_[c.hit.instance_id];
+          const int s = target.sensor;
           if (s < 0) continue;
-          const SensorInstance& si = sensors[static_cast<std::size_t>(s)];
           const double value = w * c.transmittance;
-          path_bins.push_back({si.first_bin + c.hit.prim_id, static_cast<std::uint32_t>(s), value});
-          if (si.object->spec().theta_bins != 0) {  // the incoming direction, in the sensor's world frame
+          path_bins.push_back({target.first_bin + c.hit.prim_id, static_cast<std::uint32_t>(s), value});
+          if (target.angular) {  // the incoming direction, in the sensor's world frame
+            const SensorInstance& si = sensors[static_cast<std::size_t>(s)];
             const glm::dvec3 in = -dir;
             const std::uint32_t ab = si.object->angleBinAt(glm::dot(in, si.normal),
                                                            std::atan2(glm::dot(in, si.frame_y), glm::dot(in, si.frame_x)));
@@ -352,6 +357,9 @@ const MediumInstance* SensorRun::sampleCollision(const glm::dvec3& origin, const
   return found;
 }
 
+// How many deposits ahead the reduction prefetches their accumulators.
+constexpr std::size_t kReduceAhead = 16;
+
 void SensorRun::reduce(const Chunk& chunk) {
   std::size_t b = 0, s = 0;
   const bool spectral = !band_bin_sum_.empty();
@@ -360,19 +368,25 @@ void SensorRun::reduce(const Chunk& chunk) {
     // A ray carries one band: its deposits are also that band's samples (zeros in the others).
     const std::size_t band = chunk.band.empty() ? 0 : chunk.band[k];
     for (; b < chunk.bin_end[k]; ++b) {
+      // The bins a chunk deposits in are scattered over the accumulators (far more than the
+      // caches hold with 10,000 sensors): ask for a later deposit's line now.
+      if (b + kReduceAhead < chunk.bins.size()) __builtin_prefetch(&bins_[chunk.bins[b + kReduceAhead].bin], 1);
       const BinEvent& ev = chunk.bins[b];
-      bin_sum_[ev.bin] += ev.value;
-      bin_sum2_[ev.bin] += ev.value * ev.value;
-      ++bin_count_[ev.bin];
+      BinSums& acc = bins_[ev.bin];
+      acc.sum += ev.value;
+      acc.sum2 += ev.value * ev.value;
+      ++acc.count;
       if (spectral) {
         band_bin_sum_[ev.bin * nb + band] += ev.value;
         band_bin_sum2_[ev.bin * nb + band] += ev.value * ev.value;
       }
     }
     for (; s < chunk.sensor_end[k]; ++s) {
+      if (s + kReduceAhead < chunk.sensors.size()) __builtin_prefetch(&sensor_sums_[chunk.sensors[s + kReduceAhead].sensor], 1);
       const SensorEvent& ev = chunk.sensors[s];
-      sensor_sum_[ev.sensor] += ev.value;
-      sensor_sum2_[ev.sensor] += ev.value * ev.value;
+      SensorSums& acc = sensor_sums_[ev.sensor];
+      acc.sum += ev.value;
+      acc.sum2 += ev.value * ev.value;
       if (spectral) {
         band_sensor_sum_[ev.sensor * nb + band] += ev.value;
         band_sensor_sum2_[ev.sensor * nb + band] += ev.value * ev.value;
@@ -455,7 +469,8 @@ void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, doubl
 
 double SensorRun::relativeStderr(int sensor) const {
   double mean, se;
-  meanAndStderr(sensor_sum_[static_cast<std::size_t>(sensor)], sensor_sum2_[static_cast<std::size_t>(sensor)], rays_done_, mean, se);
+  const SensorSums& acc = sensor_sums_[static_cast<std::size_t>(sensor)];
+  meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
   return mean > 0.0 ? se / mean : std::numeric_limits<double>::infinity();
 }
 
@@ -493,26 +508,28 @@ SensorRunResults SensorRun::results() const {
     const std::uint32_t bins = s.object->binCount();
     for (std::uint32_t b = 0; b < bins; ++b) {
       double mean, se;
-      meanAndStderr(bin_sum_[s.first_bin + b], bin_sum2_[s.first_bin + b], rays_done_, mean, se);
+      const BinSums& acc = bins_[s.first_bin + b];
+      meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
       const double area = s.binAreaWorld(b);
       out.flux_w.push_back(mean);
       out.flux_stderr_w.push_back(se);
       out.bin_area_m2.push_back(area);
       out.irradiance_w_m2.push_back(area > 0.0 ? mean / area : 0.0);
       out.stderr_w_m2.push_back(area > 0.0 ? se / area : 0.0);
-      out.ray_count.push_back(bin_count_[s.first_bin + b]);
+      out.ray_count.push_back(acc.count);
     }
-    meanAndStderr(sensor_sum_[k], sensor_sum2_[k], rays_done_, out.total_flux_w, out.total_flux_stderr_w);
+    meanAndStderr(sensor_sums_[k].sum, sensor_sums_[k].sum2, rays_done_, out.total_flux_w, out.total_flux_stderr_w);
     out.theta_bins = spec.theta_bins;
     out.phi_bins = spec.theta_bins ? spec.phi_bins : 0;
     const std::size_t angle_first = static_cast<std::size_t>(scene_.binCount()) + s.first_angle_bin;
     for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a) {
       double mean, se;
-      meanAndStderr(bin_sum_[angle_first + a], bin_sum2_[angle_first + a], rays_done_, mean, se);
+      const BinSums& acc = bins_[angle_first + a];
+      meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
       out.angular_flux_w.push_back(mean);
       out.angular_stderr_w.push_back(se);
       out.angular_solid_angle_sr.push_back(s.object->angleBinSolidAngle(a));
-      out.angular_ray_count.push_back(bin_count_[angle_first + a]);
+      out.angular_ray_count.push_back(acc.count);
     }
     if (spectral) {
       out.band_flux_w.assign(nb, {});
@@ -623,15 +640,22 @@ constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
 void SensorRun::saveState(const std::filesystem::path& file) const {
   std::ofstream out(file, std::ios::binary | std::ios::trunc);
   if (!out) throw FileError(file.string() + ": cannot write the run state");
-  const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bin_sum_.size(), sensor_sum_.size()};
+  const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bins_.size(), sensor_sums_.size()};
   out.write(kStateMagic, sizeof kStateMagic);
   out.write(reinterpret_cast<const char*>(header), sizeof header);
   auto put = [&out](const auto& v) { out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(v[0]))); };
-  put(bin_sum_);
-  put(bin_sum2_);
-  put(bin_count_);
-  put(sensor_sum_);
-  put(sensor_sum2_);
+  // The file keeps one array per quantity (the layout of states saved before the accumulators
+  // became structures).
+  auto column = [](const auto& v, auto field) {
+    std::vector<std::remove_cvref_t<decltype(v[0].*field)>> out(v.size());
+    for (std::size_t i = 0; i < v.size(); ++i) out[i] = v[i].*field;
+    return out;
+  };
+  put(column(bins_, &BinSums::sum));
+  put(column(bins_, &BinSums::sum2));
+  put(column(bins_, &BinSums::count));
+  put(column(sensor_sums_, &SensorSums::sum));
+  put(column(sensor_sums_, &SensorSums::sum2));
   const double energy[5] = {energy_sum_.escaped_w, energy_sum_.absorbed_w, energy_sum_.medium_absorbed_w,
                             energy_sum_.depth_limited_w, energy_sum_.roulette_w};
   out.write(reinterpret_cast<const char*>(energy), sizeof energy);
@@ -650,12 +674,12 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   in.read(magic, sizeof magic);
   in.read(reinterpret_cast<char*>(header), sizeof header);
   if (!in || std::memcmp(magic, kStateMagic, sizeof magic) != 0) throw FileError(file.string() + ": not a sensor run state");
-  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bin_sum_.size() || header[4] != sensor_sum_.size())
+  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() || header[4] != sensor_sums_.size())
     throw FileError(file.string() + ": the saved run is of another scene, seed or configuration (seed " +
                     std::to_string(header[1]) + ", " + std::to_string(header[3]) + " bins)");
   // Read into copies: a truncated file leaves this run as it was.
-  auto b1 = bin_sum_, b2 = bin_sum2_, s1 = sensor_sum_, s2 = sensor_sum2_;
-  auto bc = bin_count_;
+  std::vector<double> b1(bins_.size()), b2(bins_.size()), s1(sensor_sums_.size()), s2(sensor_sums_.size());
+  std::vector<std::uint64_t> bc(bins_.size());
   auto get = [&in](auto& v) { in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(v[0]))); };
   get(b1);
   get(b2);
@@ -674,11 +698,8 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   band_bin_sum2_ = std::move(bb2);
   band_sensor_sum_ = std::move(bs1);
   band_sensor_sum2_ = std::move(bs2);
-  bin_sum_ = std::move(b1);
-  bin_sum2_ = std::move(b2);
-  bin_count_ = std::move(bc);
-  sensor_sum_ = std::move(s1);
-  sensor_sum2_ = std::move(s2);
+  for (std::size_t i = 0; i < bins_.size(); ++i) bins_[i] = {b1[i], b2[i], bc[i]};
+  for (std::size_t i = 0; i < sensor_sums_.size(); ++i) sensor_sums_[i] = {s1[i], s2[i]};
   energy_sum_ = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
   rays_done_ = header[2];
 }

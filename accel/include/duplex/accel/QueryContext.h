@@ -17,8 +17,8 @@ struct QueryStats {
   std::uint64_t rays = 0;
   std::uint64_t instance_visits = 0;  ///< top-level leaf tests that reached an object
   /// Crossing queries: plane tests that settled a flat sensor whose box the ray met as plainly
-  /// missed, without asking the object. A count of tests, not of sensors: the grid walk may list a
-  /// sensor spanning several cells more than once, and the plane test runs before the mailbox.
+  /// missed, without asking the object. The mailbox runs first, so a sensor the walk lists in
+  /// several cells or leaves is tested once per query (while the 8-entry mailbox holds it).
   std::uint64_t sensor_plane_misses = 0;
 };
 

@@ -126,9 +126,25 @@ class SensorRun {
   std::uint64_t rays_done_ = 0;
   SensorRunCounters counters_;
   // Accumulators, added to in ray order: per bin and per sensor sums of X and X^2, crossing counts.
-  std::vector<double> bin_sum_, bin_sum2_;
-  std::vector<std::uint64_t> bin_count_;
-  std::vector<double> sensor_sum_, sensor_sum2_;
+  // One structure per bin (one cache line per deposit in the reduction, where three arrays took
+  // three misses; 32 bytes so that none straddles two lines).
+  struct alignas(32) BinSums {
+    double sum = 0.0, sum2 = 0.0;
+    std::uint64_t count = 0;
+  };
+  struct SensorSums {
+    double sum = 0.0, sum2 = 0.0;
+  };
+  std::vector<BinSums> bins_;
+  // By instance node (a crossing's instance_id): what its deposit needs, in one small record
+  // (SensorScene's node-to-sensor table and the SensorInstance would be two cache misses).
+  struct DepositTarget {
+    std::uint32_t first_bin = 0;
+    std::int32_t sensor = -1;  // index in SensorScene::sensors(), -1: not a sensor
+    bool angular = false;      // has angular bins
+  };
+  std::vector<DepositTarget> deposit_targets_;
+  std::vector<SensorSums> sensor_sums_;
   // Spectral scenes only: the same per (bin, band) and (sensor, band), index * bands + band.
   std::vector<double> band_bin_sum_, band_bin_sum2_, band_sensor_sum_, band_sensor_sum2_;
   EnergyBalance energy_sum_;  // sums over rays (divide by rays_done_)
