@@ -38,10 +38,11 @@ struct SensorOptions {
 };
 
 /// Runs the command; returns the report (keys: rays, seed, threads, max_depth, max_scatterings,
-/// roulette_threshold, status ("completed",
-/// "target_reached"), seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w,
-/// medium_absorbed_w, depth_limited_w, roulette_w}, sensors [{name, file, total_flux_w,
-/// relative_stderr, efficiency}]). Throws duplex::Error for bad input.
+/// roulette_threshold, status ("completed", "target_reached"), resumed_from (rays already done when
+/// the run started: 0, or the saved count with --resume), seconds, rays_per_s, emitted_power_w,
+/// energy {escaped_w, absorbed_w, medium_absorbed_w, depth_limited_w, roulette_w}, bands and
+/// band_emitted_w (spectral scenes only), scatterings (scenes whose fog scatters only), sensors
+/// [{name, file, total_flux_w, relative_stderr, efficiency}]). Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
 
 }  // namespace duplex::cli

@@ -35,7 +35,8 @@ class TriangleMesh {
   [[nodiscard]] const std::vector<glm::vec3>& positions() const { return positions_; }
   [[nodiscard]] const std::vector<Triangle>& triangles() const { return triangles_; }
   [[nodiscard]] std::size_t triangleCount() const { return triangles_.size(); }
-  /// Whether triangle `i` can be hit (not degenerate).
+  /// Whether triangle `i` can be hit (not degenerate). Precondition here and in vertices():
+  /// i < triangleCount() (not checked: per-triangle loops).
   [[nodiscard]] bool isValid(std::size_t i) const { return valid_[i] != 0; }
   [[nodiscard]] std::size_t degenerateCount() const { return degenerate_count_; }
   /// Object-space bounds of the valid triangles.

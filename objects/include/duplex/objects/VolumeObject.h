@@ -122,7 +122,7 @@ class VolumeObject final : public Object {
   [[nodiscard]] const VolumeQueryConfig& config() const { return config_; }
   /// The same volume (the grid is shared, not copied) answering queries with `config`, under the
   /// same name. Throws InvalidArgument for samples 0, a non-positive or non-finite march_step, a
-  /// majorant_level outside [0, 2], levelset_step outside (0, 1] or negative refine_steps.
+  /// majorant_level outside [0, 2], levelset_step outside (0, 1] or refine_steps outside [0, 60].
   [[nodiscard]] std::shared_ptr<const VolumeObject> withConfig(const VolumeQueryConfig& config) const;
 
   /// The OpenVDB side (defined in VolumeObject.cpp; VolumeObjectVdb.h builds one).

@@ -58,7 +58,7 @@ struct VolumeQueryConfig {
   /// Level sets: sampling step of the zero-crossing search, in voxels (> 0, <= 1). A crossing pair
   /// closer than the step can be missed (thin features).
   double levelset_step = 0.5;
-  /// Level sets: bisection steps after a sign change is bracketed, then one secant step (>= 0).
+  /// Level sets: bisection steps after a sign change is bracketed, then one secant step (0 to 60).
   int refine_steps = 14;
 };
 

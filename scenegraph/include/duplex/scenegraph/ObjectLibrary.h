@@ -37,7 +37,7 @@ class ObjectLibrary {
 
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
   [[nodiscard]] std::optional<ObjectId> find(std::string_view name) const;
-  /// Throws InvalidArgument for an unknown id.
+  /// name, typeName, isBuilt: throw InvalidArgument for an unknown id.
   [[nodiscard]] const std::string& name(ObjectId id) const;
   [[nodiscard]] const std::string& typeName(ObjectId id) const;
   [[nodiscard]] bool isBuilt(ObjectId id) const;

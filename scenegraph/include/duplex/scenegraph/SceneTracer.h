@@ -67,7 +67,8 @@ class SceneTracer {
   [[nodiscard]] SceneHit intersectDetailed(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Batch versions, in parallel over the rays with TBB (one QueryContext per task). `hits` /
-  /// `occluded` must have the size of `rays`.
+  /// `occluded` / `transmittance` must have the size of `rays` (else InvalidArgument, nothing
+  /// written).
   void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu) const;
   void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu) const;
   void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu) const;

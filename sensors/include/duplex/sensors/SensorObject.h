@@ -79,7 +79,8 @@ class SensorObject final : public Object {
   [[nodiscard]] const SensorSpec& spec() const { return spec_; }
   [[nodiscard]] std::uint32_t binCount() const { return spec_.nx * spec_.ny; }
   /// Object-space area of bin `bin` that belongs to the sensor (for a disk, the exact area of the
-  /// bin's square inside the circle; zero for bins outside it).
+  /// bin's square inside the circle; zero for bins outside it). Precondition: bin < binCount()
+  /// (not checked: used per deposit).
   [[nodiscard]] double binArea(std::uint32_t bin) const { return bin_area_[bin]; }
   /// Angular bin of an incoming direction given by the cosine of its angle to the crossed face's
   /// normal (sign ignored) and its azimuth phi (radians, any real number); kInvalidId without
