@@ -22,10 +22,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <span>
 #include <type_traits>
 
 namespace duplex {
@@ -113,6 +115,8 @@ struct SensorRun::Chunk {
 SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : scene_(scene), config_(config) {
   if (config_.chunk_rays == 0 || config_.batch_rays == 0) throw InvalidArgument("SensorRun: chunk_rays and batch_rays must be > 0");
   if (config_.max_depth > 1000) throw InvalidArgument("SensorRun: max_depth above 1000");
+  // TBB's arena takes an int; more workers than that are a mistake, not a wish.
+  if (config_.threads > 4096) throw InvalidArgument("SensorRun: threads above 4096 (" + std::to_string(config_.threads) + ")");
   if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
   double acc = 0.0;
@@ -468,6 +472,9 @@ void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, doubl
 }  // namespace
 
 double SensorRun::relativeStderr(int sensor) const {
+  if (sensor < 0 || static_cast<std::size_t>(sensor) >= sensor_sums_.size())
+    throw InvalidArgument("SensorRun::relativeStderr: sensor " + std::to_string(sensor) + " (the scene has " +
+                          std::to_string(sensor_sums_.size()) + ")");
   double mean, se;
   const SensorSums& acc = sensor_sums_[static_cast<std::size_t>(sensor)];
   meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
@@ -634,18 +641,42 @@ std::uint64_t SensorRun::fingerprint() const {
 }
 
 namespace {
-constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
+
+// Version 2 ends with a checksum of every byte before it; version 1 ("DXSENSR1") had none.
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'};
+constexpr char kStateMagicV1[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
+
+// FNV-1a 64 over the bytes, eight at a time folded in as one word (the state is a few MB and saved
+// once per run or batch: this is not on the hot path, only a damage check).
+std::uint64_t stateChecksum(std::span<const char> bytes) {
+  std::uint64_t h = 1469598103934665603ull;
+  std::size_t i = 0;
+  for (; i + 8 <= bytes.size(); i += 8) {
+    std::uint64_t w;
+    std::memcpy(&w, bytes.data() + i, 8);
+    h = (h ^ w) * 1099511628211ull;
+    h ^= h >> 29;
+  }
+  for (; i < bytes.size(); ++i) h = (h ^ static_cast<unsigned char>(bytes[i])) * 1099511628211ull;
+  return h;
 }
 
+template <class T>
+void append(std::vector<char>& out, const T* data, std::size_t count) {
+  const auto* p = reinterpret_cast<const char*>(data);
+  out.insert(out.end(), p, p + count * sizeof(T));
+}
+
+}  // namespace
+
 void SensorRun::saveState(const std::filesystem::path& file) const {
-  std::ofstream out(file, std::ios::binary | std::ios::trunc);
-  if (!out) throw FileError(file.string() + ": cannot write the run state");
+  std::vector<char> bytes;
   const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bins_.size(), sensor_sums_.size()};
-  out.write(kStateMagic, sizeof kStateMagic);
-  out.write(reinterpret_cast<const char*>(header), sizeof header);
-  auto put = [&out](const auto& v) { out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(v[0]))); };
+  append(bytes, kStateMagic, sizeof kStateMagic);
+  append(bytes, header, 5);
   // The file keeps one array per quantity (the layout of states saved before the accumulators
   // became structures).
+  auto put = [&bytes](const auto& v) { append(bytes, v.data(), v.size()); };
   auto column = [](const auto& v, auto field) {
     std::vector<std::remove_cvref_t<decltype(v[0].*field)>> out(v.size());
     for (std::size_t i = 0; i < v.size(); ++i) out[i] = v[i].*field;
@@ -658,48 +689,103 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
   put(column(sensor_sums_, &SensorSums::sum2));
   const double energy[5] = {energy_sum_.escaped_w, energy_sum_.absorbed_w, energy_sum_.medium_absorbed_w,
                             energy_sum_.depth_limited_w, energy_sum_.roulette_w};
-  out.write(reinterpret_cast<const char*>(energy), sizeof energy);
+  append(bytes, energy, 5);
   put(band_bin_sum_);  // empty unless the scene has bands
   put(band_bin_sum2_);
   put(band_sensor_sum_);
   put(band_sensor_sum2_);
-  if (!out) throw FileError(file.string() + ": write failed");
+  const std::uint64_t checksum = stateChecksum(bytes);
+  append(bytes, &checksum, 1);
+  // Written beside the file and renamed over it: a process killed while saving leaves the previous
+  // state intact, never a half-written one.
+  std::filesystem::path tmp = file;
+  tmp += ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw FileError(file.string() + ": cannot write the run state (" + tmp.string() + ")");
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    out.close();
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(tmp, ignored);
+      throw FileError(file.string() + ": write failed");
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, file, ec);
+  if (ec) {
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    throw FileError(file.string() + ": cannot replace the run state: " + ec.message());
+  }
 }
 
 void SensorRun::loadState(const std::filesystem::path& file) {
-  std::ifstream in(file, std::ios::binary);
+  std::ifstream in(file, std::ios::binary | std::ios::ate);
   if (!in) throw FileError(file.string() + ": cannot open the run state");
-  char magic[8];
+  const std::streamoff size = in.tellg();
+  in.seekg(0);
+  std::vector<char> bytes(static_cast<std::size_t>(std::max<std::streamoff>(size, 0)));
+  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!in) throw FileError(file.string() + ": cannot read the run state");
+  constexpr std::size_t kHead = sizeof kStateMagic + 5 * sizeof(std::uint64_t);
+  if (bytes.size() >= sizeof kStateMagicV1 && std::memcmp(bytes.data(), kStateMagicV1, sizeof kStateMagicV1) == 0)
+    throw FileError(file.string() + ": a run state of an older version (no checksum): run again without resuming");
+  if (bytes.size() < kHead || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
+    throw FileError(file.string() + ": not a sensor run state");
   std::uint64_t header[5];
-  in.read(magic, sizeof magic);
-  in.read(reinterpret_cast<char*>(header), sizeof header);
-  if (!in || std::memcmp(magic, kStateMagic, sizeof magic) != 0) throw FileError(file.string() + ": not a sensor run state");
+  std::memcpy(header, bytes.data() + sizeof kStateMagic, sizeof header);
   if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() || header[4] != sensor_sums_.size())
     throw FileError(file.string() + ": the saved run is of another scene, seed or configuration (seed " +
                     std::to_string(header[1]) + ", " + std::to_string(header[3]) + " bins)");
-  // Read into copies: a truncated file leaves this run as it was.
-  std::vector<double> b1(bins_.size()), b2(bins_.size()), s1(sensor_sums_.size()), s2(sensor_sums_.size());
-  std::vector<std::uint64_t> bc(bins_.size());
-  auto get = [&in](auto& v) { in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(v[0]))); };
+  const std::size_t nb = bins_.size(), ns = sensor_sums_.size();
+  const std::size_t expected = kHead + nb * (2 * sizeof(double) + sizeof(std::uint64_t)) + ns * 2 * sizeof(double) +
+                               5 * sizeof(double) +
+                               (band_bin_sum_.size() + band_bin_sum2_.size() + band_sensor_sum_.size() + band_sensor_sum2_.size()) *
+                                   sizeof(double) +
+                               sizeof(std::uint64_t);
+  if (bytes.size() != expected)
+    throw FileError(file.string() + ": run state of " + std::to_string(bytes.size()) + " bytes, expected " +
+                    std::to_string(expected) + " (truncated or extended)");
+  std::uint64_t stored;
+  std::memcpy(&stored, bytes.data() + expected - sizeof stored, sizeof stored);
+  if (stateChecksum(std::span<const char>(bytes).first(expected - sizeof stored)) != stored)
+    throw FileError(file.string() + ": run state checksum mismatch (damaged file)");
+  // Read into copies and check them: a refused file leaves this run as it was.
+  std::size_t at = kHead;
+  auto get = [&bytes, &at](auto& v) {
+    std::memcpy(v.data(), bytes.data() + at, v.size() * sizeof(v[0]));
+    at += v.size() * sizeof(v[0]);
+  };
+  std::vector<double> b1(nb), b2(nb), s1(ns), s2(ns);
+  std::vector<std::uint64_t> bc(nb);
   get(b1);
   get(b2);
   get(bc);
   get(s1);
   get(s2);
-  double energy[5];
-  in.read(reinterpret_cast<char*>(energy), sizeof energy);
+  std::array<double, 5> energy;
+  get(energy);
   auto bb1 = band_bin_sum_, bb2 = band_bin_sum2_, bs1 = band_sensor_sum_, bs2 = band_sensor_sum2_;
   get(bb1);
   get(bb2);
   get(bs1);
   get(bs2);
-  if (!in) throw FileError(file.string() + ": truncated run state");
+  // Powers are finite and non-negative, counts at most the rays done: anything else is not a
+  // state this code wrote (a checksum is no proof against a forged file).
+  const auto valid = [](const std::vector<double>& v) {
+    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
+  };
+  const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= header[2]; });
+  if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(bb1) || !valid(bb2) || !valid(bs1) || !valid(bs2) ||
+      !valid(std::vector<double>(energy.begin(), energy.end())) || !counts_ok)
+    throw FileError(file.string() + ": run state holds negative, non-finite or impossible values");
   band_bin_sum_ = std::move(bb1);
   band_bin_sum2_ = std::move(bb2);
   band_sensor_sum_ = std::move(bs1);
   band_sensor_sum2_ = std::move(bs2);
-  for (std::size_t i = 0; i < bins_.size(); ++i) bins_[i] = {b1[i], b2[i], bc[i]};
-  for (std::size_t i = 0; i < sensor_sums_.size(); ++i) sensor_sums_[i] = {s1[i], s2[i]};
+  for (std::size_t i = 0; i < nb; ++i) bins_[i] = {b1[i], b2[i], bc[i]};
+  for (std::size_t i = 0; i < ns; ++i) sensor_sums_[i] = {s1[i], s2[i]};
   energy_sum_ = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
   rays_done_ = header[2];
 }

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <unistd.h>
 
 namespace duplex {
@@ -194,6 +195,67 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
   EXPECT_FALSE(moved(-0.5, {0.3, 0.1, 0.4}));  // the same scene again: accepted
   EXPECT_TRUE(moved(-0.4, {0.3, 0.1, 0.4}));   // the floor moved
   EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.3}));   // a light moved
+  std::filesystem::remove(state);
+}
+
+// A damaged, truncated, extended or forged state is refused naming the file, the run keeps its
+// accumulators, and saving over a state never leaves a half-written file behind.
+TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
+  const Material white{MaterialType::Lambertian, 0.8};
+  const std::filesystem::path state =
+      std::filesystem::temp_directory_path() / ("duplex_spectral_damaged_" + std::to_string(::getpid()) + ".bin");
+  SensorRunConfig cfg;
+  cfg.seed = 5;
+  Fixture f;
+  const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, white);
+  SensorRun first(scene, cfg);
+  (void)first.runUntil(3000);
+  first.saveState(state);
+  first.saveState(state);  // over an existing state
+  EXPECT_FALSE(std::filesystem::exists(std::filesystem::path(state) += ".tmp"));
+  std::vector<char> clean;
+  {
+    std::ifstream in(state, std::ios::binary);
+    clean.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  ASSERT_GT(clean.size(), 100u);
+  const auto refusedWith = [&](const std::vector<char>& bytes, const std::string& needle) {
+    {
+      std::ofstream out(state, std::ios::binary | std::ios::trunc);
+      out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    }
+    SensorRun other(scene, cfg);
+    (void)other.runUntil(1000);
+    const double before = other.results().sensors[0].total_flux_w;
+    try {
+      other.loadState(state);
+      ADD_FAILURE() << "accepted: " << needle;
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(state.filename().string()), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(other.raysDone(), 1000u);
+    EXPECT_EQ(other.results().sensors[0].total_flux_w, before);
+  };
+  std::vector<char> b = clean;
+  b[b.size() / 2] ^= 0x10;  // one flipped bit in the sums
+  refusedWith(b, "checksum");
+  refusedWith(std::vector<char>(clean.begin(), clean.end() - 9), "truncated");
+  b = clean;
+  b.push_back(0);
+  refusedWith(b, "truncated or extended");
+  b = clean;
+  b[7] = '1';  // the version without checksum
+  refusedWith(b, "older version");
+  // The clean file still resumes to the same accumulators.
+  {
+    std::ofstream out(state, std::ios::binary | std::ios::trunc);
+    out.write(clean.data(), static_cast<std::streamsize>(clean.size()));
+  }
+  SensorRun resumed(scene, cfg);
+  resumed.loadState(state);
+  EXPECT_EQ(resumed.raysDone(), 3000u);
+  EXPECT_EQ(resumed.results().sensors[0].total_flux_w, first.results().sensors[0].total_flux_w);
   std::filesystem::remove(state);
 }
 

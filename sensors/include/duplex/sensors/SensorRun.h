@@ -99,14 +99,20 @@ class SensorRun {
   [[nodiscard]] const SensorRunConfig& config() const { return config_; }
   [[nodiscard]] SensorRunResults results() const;
   /// Relative standard error of sensor `sensor`'s total flux now (infinity before any power arrived).
+  /// Throws InvalidArgument for a sensor index outside [0, sensor count).
   [[nodiscard]] double relativeStderr(int sensor) const;
   [[nodiscard]] SensorRunCounters counters() const { return counters_; }
 
-  /// Saves the accumulators (exact binary doubles) so that a later process can resume. Throws
-  /// FileError naming the file.
+  /// Saves the accumulators (exact binary doubles, then a checksum) so that a later process can
+  /// resume; written to "<file>.tmp" and renamed over `file`, so a process killed while saving
+  /// leaves the previous state intact. Throws FileError naming the file.
   void saveState(const std::filesystem::path& file) const;
   /// Loads a saved state into this run (whose scene and seed must match the saved ones: checked by
-  /// a fingerprint of the sensors, bins and lights). Throws FileError naming the file.
+  /// a fingerprint of the sensors, bins, lights, instances and materials; mesh and grid contents
+  /// are not hashed). Throws FileError naming the file for another scene or configuration, a
+  /// size that disagrees with the scene (truncated, extended), a checksum mismatch (damaged), a
+  /// state of the older format without checksum, or negative / non-finite sums; the run is then
+  /// unchanged.
   void loadState(const std::filesystem::path& file);
 
  private:
