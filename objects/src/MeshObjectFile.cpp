@@ -1,15 +1,15 @@
 #include "duplex/objects/MeshObjectFile.h"
 
+#include "duplex/accel/AtomicFile.h"
 #include "duplex/accel/Error.h"
 #include "duplex/accel/KdTree.h"
+#include "duplex/accel/Xxh64.h"
 
 #include <array>
-#include <bit>
 #include <cstring>
 #include <fstream>
 #include <span>
 #include <string>
-#include <system_error>
 #include <type_traits>
 #include <vector>
 
@@ -24,52 +24,6 @@ namespace {
 constexpr std::array<char, 8> kMagic = {'D', 'P', 'L', 'X', 'K', 'D', 'T', '\0'};
 constexpr std::size_t kHeaderBytes = 64;
 constexpr std::size_t kChecksumBytes = 8;
-
-// XXH64 (Yann Collet, xxHash specification v0.1.1): fast, well mixed, and a published algorithm, so
-// that a tool outside the project can recompute the checksums.
-constexpr std::uint64_t kP1 = 11400714785074694791ull, kP2 = 14029467366897019727ull, kP3 = 1609587929392839161ull,
-                        kP4 = 9650029242287828579ull, kP5 = 2870177450012600261ull;
-
-std::uint64_t load64(const unsigned char* p) {
-  std::uint64_t v;
-  std::memcpy(&v, p, 8);
-  return v;
-}
-std::uint32_t load32(const unsigned char* p) {
-  std::uint32_t v;
-  std::memcpy(&v, p, 4);
-  return v;
-}
-std::uint64_t xxRound(std::uint64_t acc, std::uint64_t input) { return std::rotl(acc + input * kP2, 31) * kP1; }
-std::uint64_t xxMerge(std::uint64_t acc, std::uint64_t v) { return (acc ^ xxRound(0, v)) * kP1 + kP4; }
-
-std::uint64_t xxh64(std::span<const unsigned char> data, std::uint64_t seed) {
-  const unsigned char* p = data.data();
-  const unsigned char* const end = p + data.size();
-  std::uint64_t h;
-  if (data.size() >= 32) {
-    std::uint64_t v[4] = {seed + kP1 + kP2, seed + kP2, seed, seed - kP1};
-    for (; end - p >= 32; p += 32)
-      for (int k = 0; k < 4; ++k) v[k] = xxRound(v[k], load64(p + 8 * k));
-    h = std::rotl(v[0], 1) + std::rotl(v[1], 7) + std::rotl(v[2], 12) + std::rotl(v[3], 18);
-    for (const std::uint64_t lane : v) h = xxMerge(h, lane);
-  } else {
-    h = seed + kP5;
-  }
-  h += data.size();
-  for (; end - p >= 8; p += 8) h = std::rotl(h ^ xxRound(0, load64(p)), 27) * kP1 + kP4;
-  if (end - p >= 4) {
-    h = std::rotl(h ^ (std::uint64_t{load32(p)} * kP1), 23) * kP2 + kP3;
-    p += 4;
-  }
-  for (; p < end; ++p) h = std::rotl(h ^ (*p * kP5), 11) * kP1;
-  h ^= h >> 33;
-  h *= kP2;
-  h ^= h >> 29;
-  h *= kP3;
-  h ^= h >> 32;
-  return h;
-}
 
 template <class T>
 std::span<const unsigned char> bytesOf(const std::vector<T>& v) {
@@ -146,26 +100,7 @@ void saveMeshObject(const MeshObject& object, const std::filesystem::path& path)
   const std::uint64_t checksum = xxh64(std::span(bytes).first(bytes.size() - kChecksumBytes), 0);
   std::memcpy(bytes.data() + bytes.size() - kChecksumBytes, &checksum, kChecksumBytes);
 
-  std::filesystem::path tmp = path;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw FileError(path.string() + ": cannot write bottom-level structure file");
-    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    out.close();
-    if (!out) {
-      std::error_code ignored;
-      std::filesystem::remove(tmp, ignored);
-      throw FileError(path.string() + ": write failed (disk full?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::error_code ignored;
-    std::filesystem::remove(tmp, ignored);
-    throw FileError(path.string() + ": cannot replace the file (" + ec.message() + ")");
-  }
+  writeFileAtomically(path, bytes, "bottom-level structure file");
 }
 
 std::shared_ptr<const MeshObject> loadMeshObject(const std::filesystem::path& path,

@@ -7,7 +7,9 @@
 
 #include "duplex/sensors/SensorRun.h"
 
+#include "duplex/accel/AtomicFile.h"
 #include "duplex/accel/Error.h"
+#include "duplex/accel/Xxh64.h"
 #include "duplex/sensors/CounterRng.h"
 #include "duplex/sensors/HenyeyGreenstein.h"
 
@@ -568,7 +570,7 @@ SensorRunResults SensorRun::results() const {
   return r;
 }
 
-// ---- saved state: "DXSENSR1", fingerprint, seed, rays, sizes, then the raw accumulators ----
+// ---- saved state: "DXSENSR2", fingerprint, seed, rays, sizes, the raw accumulators, XXH64 checksum ----
 
 std::uint64_t SensorRun::fingerprint() const {
   // FNV-1a over what the accumulators' meaning depends on.
@@ -646,19 +648,9 @@ namespace {
 constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'};
 constexpr char kStateMagicV1[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
 
-// FNV-1a 64 over the bytes, eight at a time folded in as one word (the state is a few MB and saved
-// once per run or batch: this is not on the hot path, only a damage check).
+// The checksum of the state: XXH64 of every byte before it.
 std::uint64_t stateChecksum(std::span<const char> bytes) {
-  std::uint64_t h = 1469598103934665603ull;
-  std::size_t i = 0;
-  for (; i + 8 <= bytes.size(); i += 8) {
-    std::uint64_t w;
-    std::memcpy(&w, bytes.data() + i, 8);
-    h = (h ^ w) * 1099511628211ull;
-    h ^= h >> 29;
-  }
-  for (; i < bytes.size(); ++i) h = (h ^ static_cast<unsigned char>(bytes[i])) * 1099511628211ull;
-  return h;
+  return xxh64({reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()});
 }
 
 template <class T>
@@ -698,26 +690,7 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
   append(bytes, &checksum, 1);
   // Written beside the file and renamed over it: a process killed while saving leaves the previous
   // state intact, never a half-written one.
-  std::filesystem::path tmp = file;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw FileError(file.string() + ": cannot write the run state (" + tmp.string() + ")");
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    out.close();
-    if (!out) {
-      std::error_code ignored;
-      std::filesystem::remove(tmp, ignored);
-      throw FileError(file.string() + ": write failed");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, file, ec);
-  if (ec) {
-    std::error_code ignored;
-    std::filesystem::remove(tmp, ignored);
-    throw FileError(file.string() + ": cannot replace the run state: " + ec.message());
-  }
+  writeFileAtomically(file, {reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()}, "run state");
 }
 
 void SensorRun::loadState(const std::filesystem::path& file) {
