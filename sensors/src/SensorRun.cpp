@@ -727,6 +727,7 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   // Read into copies and check them: a refused file leaves this run as it was.
   std::size_t at = kHead;
   auto get = [&bytes, &at](auto& v) {
+    if (v.empty()) return;  // an empty vector's data() may be null, which memcpy must not get
     std::memcpy(v.data(), bytes.data() + at, v.size() * sizeof(v[0]));
     at += v.size() * sizeof(v[0]);
   };
