@@ -35,6 +35,20 @@ SensorScene diffuseBox(Fixture& f, std::vector<std::string> bands, Material whit
   return f.scene({first, second}, std::move(bands));
 }
 
+// A run state file in the temporary folder, named for the test and the process.
+std::filesystem::path tempState(const std::string& tag) {
+  return std::filesystem::temp_directory_path() / ("duplex_spectral_" + tag + "_" + std::to_string(::getpid()) + ".bin");
+}
+
+// Runs `rays` rays of `scene` and saves the state to `state`; returns the run's results.
+SensorRunResults savedRun(const SensorScene& scene, const SensorRunConfig& cfg, std::uint64_t rays,
+                          const std::filesystem::path& state) {
+  SensorRun r(scene, cfg);
+  (void)r.runUntil(rays);
+  r.saveState(state);
+  return r.results();
+}
+
 SensorRunResults run(const SensorScene& scene, std::uint64_t rays, unsigned threads = 0) {
   SensorRunConfig cfg;
   cfg.seed = 21;
@@ -118,15 +132,10 @@ TEST(SensorSpectral, BitIdenticalForAnyThreadCountAndResumable) {
   const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, white);
   const SensorRunResults one = run(scene, 70000, 1);
   expectIdentical(one, run(scene, 70000, 2));
-  const std::filesystem::path state =
-      std::filesystem::temp_directory_path() / ("duplex_spectral_" + std::to_string(::getpid()) + ".bin");
+  const std::filesystem::path state = tempState("threads");
   SensorRunConfig cfg;
   cfg.seed = 21;
-  {
-    SensorRun first(scene, cfg);
-    (void)first.runUntil(30000);
-    first.saveState(state);
-  }
+  savedRun(scene, cfg, 30000, state);
   SensorRun resumed(scene, cfg);
   resumed.loadState(state);
   (void)resumed.runUntil(70000);
@@ -147,16 +156,13 @@ TEST(SensorSpectral, BitIdenticalForAnyThreadCountAndResumable) {
 // would otherwise be silently mixed into the continued run).
 TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
   const Material white{MaterialType::Lambertian, 0.8};
-  const std::filesystem::path state =
-      std::filesystem::temp_directory_path() / ("duplex_spectral_changed_" + std::to_string(::getpid()) + ".bin");
+  const std::filesystem::path state = tempState("changed");
   SensorRunConfig cfg;
   cfg.seed = 21;
   {
     Fixture f;
     const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, white);
-    SensorRun first(scene, cfg);
-    (void)first.runUntil(5000);
-    first.saveState(state);
+    savedRun(scene, cfg, 5000, state);
     SensorRun same(scene, cfg);
     EXPECT_NO_THROW(same.loadState(state));
   }
@@ -201,17 +207,13 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
 // A damaged, truncated, extended or forged state is refused naming the file, the run keeps its
 // accumulators, and saving over a state never leaves a half-written file behind.
 TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
-  const Material white{MaterialType::Lambertian, 0.8};
-  const std::filesystem::path state =
-      std::filesystem::temp_directory_path() / ("duplex_spectral_damaged_" + std::to_string(::getpid()) + ".bin");
+  const std::filesystem::path state = tempState("damaged");
   SensorRunConfig cfg;
   cfg.seed = 5;
   Fixture f;
-  const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, white);
-  SensorRun first(scene, cfg);
-  (void)first.runUntil(3000);
-  first.saveState(state);
-  first.saveState(state);  // over an existing state
+  const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Lambertian, 0.8});
+  const SensorRunResults saved = savedRun(scene, cfg, 3000, state);
+  savedRun(scene, cfg, 3000, state);  // again, over an existing state
   EXPECT_FALSE(std::filesystem::exists(std::filesystem::path(state) += ".tmp"));
   std::vector<char> clean;
   {
@@ -255,7 +257,7 @@ TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   SensorRun resumed(scene, cfg);
   resumed.loadState(state);
   EXPECT_EQ(resumed.raysDone(), 3000u);
-  EXPECT_EQ(resumed.results().sensors[0].total_flux_w, first.results().sensors[0].total_flux_w);
+  EXPECT_EQ(resumed.results().sensors[0].total_flux_w, saved.sensors[0].total_flux_w);
   std::filesystem::remove(state);
 }
 
