@@ -66,8 +66,7 @@ Prepared prepare(const InstanceDesc& d) {
   // A finite double transform can still carry the box beyond float range (a scale of 1e30 on an
   // object of size 1e10): the builder would drop such a box and an incremental commit would grow the
   // root to infinity, so the instance is refused here, on both paths alike.
-  const auto finite = [](const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
-  if (!p.box.empty() && (!finite(p.box.lo) || !finite(p.box.hi)))
+  if (!p.box.empty() && !p.box.finite())
     throw InvalidArgument(describe(d) + ": world box exceeds float range (transform too large for the object)");
   return p;
 }

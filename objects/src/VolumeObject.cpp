@@ -277,8 +277,7 @@ std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, 
     const vdb::Vec3d p_os = grid->transform().indexToWorld(p_is);
     b.extend(glm::vec3(static_cast<float>(p_os.x()), static_cast<float>(p_os.y()), static_cast<float>(p_os.z())));
   }
-  const auto finite3 = [](const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
-  if (b.empty() || !finite3(b.lo) || !finite3(b.hi))
+  if (b.empty() || !b.finite())
     throw InvalidArgument(what + ": object-space bounds are not finite (the grid transform takes the active voxels beyond float range)");
   g->bounds_os = b;
   if (g->kind == VolumeKind::Fog) buildRanges(*g);

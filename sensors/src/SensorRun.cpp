@@ -747,12 +747,12 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   get(bs2);
   // Powers are finite and non-negative, counts at most the rays done: anything else is not a
   // state this code wrote (a checksum is no proof against a forged file).
-  const auto valid = [](const std::vector<double>& v) {
+  const auto valid = [](std::span<const double> v) {
     return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
   };
   const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= header[2]; });
   if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(bb1) || !valid(bb2) || !valid(bs1) || !valid(bs2) ||
-      !valid(std::vector<double>(energy.begin(), energy.end())) || !counts_ok)
+      !valid(energy) || !counts_ok)
     throw FileError(file.string() + ": run state holds negative, non-finite or impossible values");
   band_bin_sum_ = std::move(bb1);
   band_bin_sum2_ = std::move(bb2);

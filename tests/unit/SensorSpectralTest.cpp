@@ -204,8 +204,8 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
   std::filesystem::remove(state);
 }
 
-// A damaged, truncated, extended or forged state is refused naming the file, the run keeps its
-// accumulators, and saving over a state never leaves a half-written file behind.
+// A damaged, truncated, extended or old-version state is refused naming the file, the run keeps
+// its accumulators, and saving over a state never leaves a half-written file behind.
 TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   const std::filesystem::path state = tempState("damaged");
   SensorRunConfig cfg;

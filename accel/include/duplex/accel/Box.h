@@ -5,6 +5,7 @@
 #include <glm/common.hpp>
 #include <glm/vec3.hpp>
 
+#include <cmath>
 #include <limits>
 #include <ostream>
 
@@ -20,6 +21,11 @@ struct Box {
   Box(const glm::vec3& lo_, const glm::vec3& hi_) : lo(lo_), hi(hi_) {}
 
   [[nodiscard]] bool empty() const { return !(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z); }
+  /// Whether all six bounds are finite (false for the default empty box, whose bounds are +-inf).
+  [[nodiscard]] bool finite() const {
+    return std::isfinite(lo.x) && std::isfinite(lo.y) && std::isfinite(lo.z) && std::isfinite(hi.x) &&
+           std::isfinite(hi.y) && std::isfinite(hi.z);
+  }
   void extend(const glm::vec3& p) {
     lo = glm::min(lo, p);
     hi = glm::max(hi, p);
