@@ -12,7 +12,8 @@
 #   MAIN_ARGS   extra arguments for the main bench   (e.g. "--repeat 5" or "--meshes koala.obj:2")
 #   SWEEP_ARGS  extra arguments for the sweep        (e.g. "--sweep-meshes koala.obj")
 #   SKIP_MAIN=1 / SKIP_SWEEP=1   run only the other part (the charts are drawn from whatever JSON exists)
-#   CALLGRIND=1 also run scripts/bench_callgrind.sh (instructions per ray; a few more minutes)
+#   CALLGRIND=1 also run scripts/bench_callgrind.sh (instructions per ray; a few more minutes), in its
+#               own -g build dir CALLGRIND_BUILD_DIR (default build-callgrind)
 #   JOBS        make -j (default 2: the machine is shared)
 #   PYTHON      interpreter with matplotlib (default: /usr/bin/python3, Debian's python3-matplotlib)
 set -euo pipefail
@@ -53,6 +54,7 @@ if [ "${SKIP_SWEEP:-0}" != 1 ]; then
 fi
 "$PYTHON" "$ROOT/scripts/plot_bench.py" --main "$OUTDIR/mesh_bench.json" --sweep "$OUTDIR/sweep.json" --outdir "$OUTDIR"
 if [ "${CALLGRIND:-0}" = 1 ]; then
-  OUT="$OUTDIR/callgrind.json" "$ROOT/scripts/bench_callgrind.sh" | tee "$OUTDIR/callgrind.txt"
+  # bench_callgrind.sh needs its own -g build, not the BUILD_DIR of this script.
+  BUILD_DIR="${CALLGRIND_BUILD_DIR:-$ROOT/build-callgrind}" OUT="$OUTDIR/callgrind.json" "$ROOT/scripts/bench_callgrind.sh" | tee "$OUTDIR/callgrind.txt"
 fi
 echo "bench_run.sh: done in $(( $(date +%s) - start )) s; results in $OUTDIR" >&2

@@ -61,13 +61,27 @@ struct EditPlan {
 
 // A fresh folder for the prepared library's files: the system's temporary folder, named by process
 // id and a counter so that concurrent runs do not share one.
-std::filesystem::path preparedLibraryDir() {
-  const std::filesystem::path base = std::filesystem::temp_directory_path();
-  for (int k = 0;; ++k) {
-    std::filesystem::path dir = base / ("duplex-bench-library-" + std::to_string(::getpid()) + "-" + std::to_string(k));
-    if (std::filesystem::create_directory(dir)) return dir;
+// Removed with everything in it when the guard goes out of scope, also when a save or load throws.
+class PreparedLibraryDir {
+ public:
+  PreparedLibraryDir() {
+    const std::filesystem::path base = std::filesystem::temp_directory_path();
+    for (int k = 0;; ++k) {
+      path_ = base / ("duplex-bench-library-" + std::to_string(::getpid()) + "-" + std::to_string(k));
+      if (std::filesystem::create_directory(path_)) return;
+    }
   }
-}
+  PreparedLibraryDir(const PreparedLibraryDir&) = delete;
+  PreparedLibraryDir& operator=(const PreparedLibraryDir&) = delete;
+  ~PreparedLibraryDir() {
+    std::error_code ignored;  // a leftover temporary folder is not worth failing the benchmark for
+    std::filesystem::remove_all(path_, ignored);
+  }
+  [[nodiscard]] const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
 
 double unitInterval(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
@@ -374,27 +388,20 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     // folder, then each repeat reads them back in parallel (loadMeshObject: checks, checksums, leaf
     // blocks derived from the tree) and builds a fresh top level. The files were just written, so
     // they are read from the page cache, as in an application that opens the same library again.
-    const std::filesystem::path dir = preparedLibraryDir();
-    try {
-      std::vector<std::filesystem::path> files(mesh_objects.size());
-      std::uintmax_t bytes = 0;
-      for (std::size_t k = 0; k < mesh_objects.size(); ++k) {
-        files[k] = dir / (std::to_string(k) + ".dkdt");
-        saveMeshObject(*mesh_objects[k], files[k]);
-        bytes += std::filesystem::file_size(files[k]);
-      }
-      const auto [prepared_ms, prepared_bottom_ms] = timeFullBuilds(
-          [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) { return loadMeshObject(files[k], std::move(mesh)); });
-      out["prepared_build_ms_median"] = prepared_ms;
-      out["prepared_bottom_load_ms_median"] = prepared_bottom_ms;
-      out["prepared_library_bytes"] = bytes;
-    } catch (...) {
-      std::error_code ignored;
-      std::filesystem::remove_all(dir, ignored);
-      throw;
+    const PreparedLibraryDir library_dir;
+    const std::filesystem::path& dir = library_dir.path();
+    std::vector<std::filesystem::path> files(mesh_objects.size());
+    std::uintmax_t bytes = 0;
+    for (std::size_t k = 0; k < mesh_objects.size(); ++k) {
+      files[k] = dir / (std::to_string(k) + ".dkdt");
+      saveMeshObject(*mesh_objects[k], files[k]);
+      bytes += std::filesystem::file_size(files[k]);
     }
-    std::error_code ignored;
-    std::filesystem::remove_all(dir, ignored);
+    const auto [prepared_ms, prepared_bottom_ms] = timeFullBuilds(
+        [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) { return loadMeshObject(files[k], std::move(mesh)); });
+    out["prepared_build_ms_median"] = prepared_ms;
+    out["prepared_bottom_load_ms_median"] = prepared_bottom_ms;
+    out["prepared_library_bytes"] = bytes;
   }
   const Figures incremental = replay(*ours, plan, initial, arena, rays);
   // The baselines replay a prefix of the same plan.
