@@ -129,6 +129,18 @@ std::size_t countOccurrences(const std::string& text, const std::string& what) {
   return n;
 }
 
+// The mesh's vertex positions, indexed as OpenMesh numbers its vertices (face indices refer to them).
+// For the polygon mesh of a file and the triangle mesh of a subdivision alike.
+template <class OpenMeshMesh>
+std::vector<glm::vec3> vertexPositions(const OpenMeshMesh& mesh) {
+  std::vector<glm::vec3> positions(mesh.n_vertices());
+  for (const auto vh : mesh.vertices()) {
+    const auto& p = mesh.point(vh);
+    positions[vh.idx()] = {p[0], p[1], p[2]};
+  }
+  return positions;
+}
+
 }  // namespace
 
 TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report) {
@@ -167,11 +179,7 @@ TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report)
   const std::size_t lines = static_cast<std::size_t>(std::count(messages.begin(), messages.end(), '\n'));
   rep.other_warnings = lines > rep.complex_edge_warnings ? lines - rep.complex_edge_warnings : 0;
 
-  std::vector<glm::vec3> positions(mesh.n_vertices());
-  for (const auto vh : mesh.vertices()) {
-    const auto& p = mesh.point(vh);
-    positions[vh.idx()] = {p[0], p[1], p[2]};
-  }
+  std::vector<glm::vec3> positions = vertexPositions(mesh);
   std::vector<TriangleMesh::Triangle> triangles;
   triangles.reserve(mesh.n_faces());
   std::vector<std::uint32_t> corners;
@@ -220,11 +228,7 @@ TriangleMesh loopSubdivide(const TriangleMesh& input, int steps) {
     loop.detach();
   }
   mesh.garbage_collection();
-  std::vector<glm::vec3> positions(mesh.n_vertices());
-  for (const auto vh : mesh.vertices()) {
-    const auto& p = mesh.point(vh);
-    positions[vh.idx()] = {p[0], p[1], p[2]};
-  }
+  std::vector<glm::vec3> positions = vertexPositions(mesh);
   std::vector<TriangleMesh::Triangle> triangles;
   triangles.reserve(mesh.n_faces());
   for (const auto fh : mesh.faces()) {

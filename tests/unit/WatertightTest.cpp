@@ -103,8 +103,41 @@ bool chooseDirection(const Target& target, const std::vector<glm::dvec3>& normal
   return false;
 }
 
+/// Draws targets in a shuffled cycle, each time with a fresh direction that faces all the target's
+/// triangles; a target with no such direction (a saddle vertex) is skipped from then on and counted.
+class TargetCycle {
+ public:
+  TargetCycle(std::vector<Target> targets, const std::vector<glm::dvec3>& normals, std::mt19937_64& rng)
+      : targets_(std::move(targets)), normals_(normals), rng_(rng), unusable_(targets_.size(), 0) {
+    std::shuffle(targets_.begin(), targets_.end(), rng_);
+  }
+  /// One draw: false when the drawn target has no facing direction (the caller draws again).
+  bool next(const Target*& target, glm::dvec3& dir) {
+    const std::size_t k = draws_++ % targets_.size();
+    if (unusable_[k]) return false;
+    if (!chooseDirection(targets_[k], normals_, rng_, dir)) {
+      unusable_[k] = 1;
+      ++skipped_;
+      return false;
+    }
+    target = &targets_[k];
+    return true;
+  }
+  /// Draws so far, the current one included.
+  [[nodiscard]] std::size_t draws() const { return draws_; }
+  [[nodiscard]] std::size_t skipped() const { return skipped_; }
+  [[nodiscard]] std::size_t size() const { return targets_.size(); }
+
+ private:
+  std::vector<Target> targets_;
+  const std::vector<glm::dvec3>& normals_;
+  std::mt19937_64& rng_;
+  std::vector<char> unusable_;
+  std::size_t draws_ = 0, skipped_ = 0;
+};
+
 struct Tally {
-  std::size_t rays = 0, misses = 0, beyond = 0, occlusion_failures = 0, skipped_targets = 0;
+  std::size_t rays = 0, misses = 0, beyond = 0, occlusion_failures = 0;
   double worst_excess = 0.0;  // largest (t - allowed) seen, for the failure message
 };
 
@@ -158,22 +191,17 @@ void shootNearOrigin(std::shared_ptr<const TriangleMesh> mesh, std::size_t budge
   ASSERT_FALSE(targets.empty());
   EXPECT_LT(non_manifold, mesh->triangleCount() / 100 + 1) << label << " should be a closed 2-manifold";
   std::mt19937_64 rng(seed);
-  std::shuffle(targets.begin(), targets.end(), rng);
   std::uniform_real_distribution<double> u01(0.0, 1.0);
   const double diag = glm::length(glm::dvec3(mesh->bounds().extent()));
+  TargetCycle cycle(std::move(targets), normals, rng);
   Tally s;
-  std::vector<char> unusable(targets.size(), 0);
-  std::size_t attempts = 0;
-  for (std::size_t i = 0; s.rays < budget; ++i) {
-    ASSERT_LT(attempts++, budget * 4) << label << ": too few usable targets";
-    const Target& target = targets[i % targets.size()];
-    if (unusable[i % targets.size()]) continue;
+  while (s.rays < budget) {
+    ASSERT_LT(cycle.draws(), budget * 4) << label << ": too few usable targets";
+    const Target* drawn = nullptr;
     glm::dvec3 dir0;
-    if (!chooseDirection(target, normals, rng, dir0)) {
-      unusable[i % targets.size()] = 1;
-      ++s.skipped_targets;
-      continue;
-    }
+    if (!cycle.next(drawn, dir0)) continue;
+    const Target& target = *drawn;
+    const bool test_occlusion = (cycle.draws() - 1) % 3 == 0;
     const double dist = diag * (0.05 + 0.45 * u01(rng));
     Ray ray;
     ray.origin = roundToFloat(target.point - dir0 * dist);
@@ -184,9 +212,9 @@ void shootNearOrigin(std::shared_ptr<const TriangleMesh> mesh, std::size_t budge
     const double t_star = glm::dot(target.point - o, d) / glm::dot(d, d);
     const double delta = glm::length(o + t_star * d - target.point);
     const double t_allowed = t_star * (1.0 + 1e-5) + 4.0 * delta / (glm::length(d) * facing);
-    traceOne(*object, ray, t_allowed, i % 3 == 0, target, s, label);
+    traceOne(*object, ray, t_allowed, test_occlusion, target, s, label);
   }
-  EXPECT_LT(s.skipped_targets, targets.size() / 50 + 1) << label << ": targets without a facing direction";
+  EXPECT_LT(cycle.skipped(), cycle.size() / 50 + 1) << label << ": targets without a facing direction";
   report(s, budget, label);
 }
 
@@ -220,21 +248,16 @@ void shootFarExact(const TriangleMesh& original, std::size_t budget, std::uint64
   for (const Target& t : targets)
     ASSERT_EQ(glm::dvec3(glm::vec3(t.point)), t.point) << "edge point not exactly a float";
   std::mt19937_64 rng(seed);
-  std::shuffle(targets.begin(), targets.end(), rng);
   std::uniform_real_distribution<double> u01(0.0, 1.0);
+  TargetCycle cycle(std::move(targets), normals, rng);
   Tally s;
-  std::vector<char> unusable(targets.size(), 0);
-  std::size_t attempts = 0;
-  for (std::size_t i = 0; s.rays < budget; ++i) {
-    ASSERT_LT(attempts++, budget * 4) << label << ": too few usable targets";
-    const Target& target = targets[i % targets.size()];
-    if (unusable[i % targets.size()]) continue;
+  while (s.rays < budget) {
+    ASSERT_LT(cycle.draws(), budget * 4) << label << ": too few usable targets";
+    const Target* drawn = nullptr;
     glm::dvec3 dir0;
-    if (!chooseDirection(target, normals, rng, dir0)) {
-      unusable[i % targets.size()] = 1;
-      ++s.skipped_targets;
-      continue;
-    }
+    if (!cycle.next(drawn, dir0)) continue;
+    const Target& target = *drawn;
+    const bool test_occlusion = (cycle.draws() - 1) % 3 == 0;
     const double dist = 300.0 + 14000.0 * u01(rng);
     Ray ray;
     ray.origin = roundToFloat(target.point - dir0 * dist);
@@ -245,9 +268,9 @@ void shootFarExact(const TriangleMesh& original, std::size_t budget, std::uint64
     ASSERT_EQ(glm::dvec3(ray.origin) + glm::dvec3(ray.dir), target.point) << "ray construction not exact: " << ray;
     const double facing = minFacing(glm::dvec3(ray.dir), target, normals);
     if (!(facing > 0.0)) continue;
-    traceOne(*object, ray, 1.0 + 1e-5, i % 3 == 0, target, s, label);
+    traceOne(*object, ray, 1.0 + 1e-5, test_occlusion, target, s, label);
   }
-  EXPECT_LT(s.skipped_targets, targets.size() / 50 + 1) << label << ": targets without a facing direction";
+  EXPECT_LT(cycle.skipped(), cycle.size() / 50 + 1) << label << ": targets without a facing direction";
   report(s, budget, label);
 }
 
