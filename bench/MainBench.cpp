@@ -5,12 +5,15 @@
 #include "BenchChecks.h"
 #include "BenchMeshes.h"
 #include "BenchModes.h"
+// The objects library's private per-ray setup, for the time split only (as its unit test does).
+#include "../objects/src/MeshRay.h"
 
 #if DUPLEX_BENCH_HAVE_EMBREE
 #include "EmbreeBaseline.h"
 #endif
 
 #include "duplex/accel/KdBuildConfig.h"
+#include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/objects/MeshObject.h"
 
@@ -39,6 +42,49 @@ struct RaySet {
   std::string name;
   std::vector<Ray> rays;
 };
+
+
+// The cumulative parts of a closest-hit query that MeshBench::timeSplit times, each called out of
+// line as MeshObject::intersect is: the harness alone (read the ray, write the hit), + the per-ray
+// setup, + the traversal visiting every leaf the full query visits (t_best starts at the ray's final
+// hit distance) with leaves counted but no triangle test.
+[[gnu::noinline]] bool splitHarness(const Ray& ray, Hit& hit) {
+  hit.t = ray.tfar;
+  return !(ray.tnear <= ray.tfar);
+}
+[[gnu::noinline]] bool splitSetup(const MeshObject& object, const Ray& ray, Hit& hit) {
+  detail::MeshRay r;
+  float tmin, tmax;
+  if (!detail::setupMeshRay(ray, object.tree().bounds, r, tmin, tmax)) return false;
+  hit.t = tmin;
+  hit.u = tmax;
+  return false;
+}
+// The tree's nodes are those of the query's tree (only leaf offsets differ, which are not read here).
+[[gnu::noinline]] bool splitTraversal(const MeshObject& object, const Ray& ray, float t_final, Hit& hit) {
+  detail::MeshRay r;
+  float tmin, tmax;
+  if (!detail::setupMeshRay(ray, object.tree().bounds, r, tmin, tmax)) return false;
+  float t_best = std::min(t_final, ray.tfar);
+  std::uint32_t leaves = 0;
+  traverseKdTreeClipped<false>(object.tree(), r.kd, tmin, tmax, t_best, [&](std::uint32_t, std::uint32_t, float&) {
+    ++leaves;
+    return false;
+  });
+  hit.t = t_best;
+  hit.prim_id = leaves;
+  return false;
+}
+#if DUPLEX_BENCH_HAVE_EMBREE
+[[gnu::noinline]] bool splitEmbreeHarness(const Ray& ray, Hit& hit) {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh = toRayHit(ray, std::min(ray.tfar, hit.t));
+  asm volatile("" : : "r"(&rh), "r"(&context) : "memory");  // built as for rtcIntersect1, not traced
+  hit.t = rh.ray.tfar;
+  return rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+}
+#endif
 
 nlohmann::json configJson(const KdBuildConfig& c) {
   return {{"heuristic", std::string(toString(c.heuristic))},
@@ -97,6 +143,7 @@ class MeshBench {
   void build(const LoadedMesh& loaded, nlohmann::json& out);
   void checkAgreement(const TriangleMesh& mesh, const std::vector<RaySet>& sets, nlohmann::json& out);
   void trace(const std::vector<RaySet>& sets, nlohmann::json& out);
+  void timeSplit(const RaySet& random, nlohmann::json& out);
 
   const Options& options_;
   const std::vector<int>& threads_;
@@ -150,6 +197,7 @@ nlohmann::json MeshBench::run(const LoadedMesh& loaded) {
   out["ours"]["traversal"] = counters;
 
   trace(sets, out);
+  timeSplit(sets[0], out);
   ours_.reset();
 #if DUPLEX_BENCH_HAVE_EMBREE
   embree_.release();
@@ -461,6 +509,82 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
     }
   }
   out["trace"] = records;
+}
+
+// Where the time of a random closest-hit ray goes, one thread, CPU time, medians of the repetitions
+// with the order alternating: the cumulative parts above, our full query and Embree's (medium).
+// Differences of the medians give harness, setup, traversal and triangle tests (docs/kdtree.md,
+// "Where the time goes").
+void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
+  const std::span<const Ray> rays = random.rays;
+  if (rays.empty()) return;
+  tbb::task_arena& arena = arenas_.get(1);
+  const MeshObject& object = *ours_;
+  std::vector<float> t_final(rays.size());
+  parallelFor(arenas_.get(threads_.back()), rays.size(), [&](std::size_t i) {
+    Hit hit;
+    (void)object.intersect(rays[i], hit);
+    t_final[i] = hit.t;
+  });
+  auto at = [&](const Ray& r) { return t_final[static_cast<std::size_t>(&r - rays.data())]; };
+  enum Part { kHarness, kSetup, kTraversal, kFull, kEmbreeHarness, kEmbreeFull, kParts };
+  constexpr const char* kKey[kParts] = {"harness", "setup", "traversal", "ours", "embree_harness", "embree_medium"};
+  const int parts = haveEmbree() ? kParts : kEmbreeHarness;
+  // Each part gets a fresh Hit per ray, as timeQuery gives the full query.
+  auto timePart = [&](const auto& part) {
+    return timeTrace(arena, rays, [&](const Ray& r) {
+      Hit hit;
+      return part(r, hit);
+    });
+  };
+  std::vector<double> cpu_ms[kParts];
+  for (int rep = 0; rep < options_.repeat; ++rep) {
+    for (int k = 0; k < parts; ++k) {
+      const int part = rep % 2 == 0 ? k : parts - 1 - k;
+      TraceTiming timing;
+      switch (part) {
+        case kHarness:
+          timing = timePart([](const Ray& r, Hit& hit) { return splitHarness(r, hit); });
+          break;
+        case kSetup:
+          timing = timePart([&](const Ray& r, Hit& hit) { return splitSetup(object, r, hit); });
+          break;
+        case kTraversal:
+          timing = timePart([&](const Ray& r, Hit& hit) { return splitTraversal(object, r, at(r), hit); });
+          break;
+        case kFull:
+          timing = timeQuery(arena, rays, object, Query::Closest);
+          break;
+#if DUPLEX_BENCH_HAVE_EMBREE
+        case kEmbreeHarness:
+          timing = timePart([](const Ray& r, Hit& hit) { return splitEmbreeHarness(r, hit); });
+          break;
+        case kEmbreeFull:
+          timing = timeQuery(arena, rays, *embree_.scenes[kEmbreeMedium], Query::Closest);
+          break;
+#endif
+        default:
+          break;
+      }
+      cpu_ms[part].push_back(timing.time.cpu_ms);
+    }
+  }
+  double ns[kParts];
+  nlohmann::json split{{"rays", random.name}, {"ray_count", rays.size()}, {"threads", 1}};
+  for (int k = 0; k < kParts; ++k) {
+    ns[k] = k < parts ? median(cpu_ms[k]) * 1e6 / static_cast<double>(rays.size()) : kNaN;
+    split[std::string(kKey[k]) + "_ns"] = num(ns[k]);
+    if (k < parts) split[std::string(kKey[k]) + "_cpu_ms_samples"] = cpu_ms[k];
+  }
+  split["setup_only_ns"] = num(ns[kSetup] - ns[kHarness]);
+  split["traversal_only_ns"] = num(ns[kTraversal] - ns[kSetup]);
+  split["triangles_only_ns"] = num(ns[kFull] - ns[kTraversal]);
+  split["traversal_share"] = num((ns[kTraversal] - ns[kSetup]) / ns[kFull]);
+  out["time_split"] = split;
+  std::cerr << "  time split  ns per random closest-hit ray, 1T, CPU: harness " << fmt(ns[kHarness], 1) << ", setup "
+            << fmt(ns[kSetup] - ns[kHarness], 1) << ", traversal " << fmt(ns[kTraversal] - ns[kSetup], 1)
+            << ", triangles " << fmt(ns[kFull] - ns[kTraversal], 1) << ", ours " << fmt(ns[kFull], 1)
+            << "; embree harness " << fmt(ns[kEmbreeHarness], 1) << ", embree " << fmt(ns[kEmbreeFull], 1) << "\n";
 }
 
 // The goals, evaluated on this run's ratios.
