@@ -122,9 +122,12 @@ std::vector<Setting> settings(bool quick) {
   // and both together.
   add(sah(1.5f * ct, ci, eb, true));
   add(sah(2.0f * ct, ci, eb, true));
+  // Beyond node cost 2 (issue 3's full-build goal): where do build and trace stop improving together?
+  for (const float k : {3.0f, 4.0f, 6.0f, 8.0f}) add(sah(k * ct, ci, eb, true));
   for (const float b : {0.0f, 0.5f}) add(sah(ct, ci, b, true));
   add(sah(ct, ci, eb, false));
   add(sah(1.5f * ct, ci, eb, false));
+  for (const float k : {3.0f, 4.0f}) add(sah(k * ct, ci, eb, false));
   add(sah(ct, 1.5f, eb, false));
   // Leaf size 2 is left out: Median L2 builds 20-30x slower than the SAH (koala: 18 s) and would
   // dominate the run time.

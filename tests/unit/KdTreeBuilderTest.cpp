@@ -153,7 +153,9 @@ TEST(KdTreeBuilder, GivenRootBoundsFrameTheTree) {
   // than the tree over the boxes' own bounds, scaled by the area ratio.
   const KdTree tight = buildKdTreeOverBoxes(boxes);
   const double area_ratio = static_cast<double>(all.area()) / static_cast<double>(root.area());
-  EXPECT_LT(tree.stats(1.0f, 0.1f).sah_cost, tight.stats(1.0f, 0.1f).sah_cost * area_ratio + 6.0);
+  const KdBuildConfig costs{};  // weigh both trees by the costs they were built for
+  EXPECT_LT(tree.stats(costs.traversal_cost, costs.intersection_cost).sah_cost,
+            tight.stats(costs.traversal_cost, costs.intersection_cost).sah_cost * area_ratio + 6.0);
   const Box too_small(all.lo, all.hi - 0.5f * margin);
   expectErrorNaming<InvalidArgument>([&] { (void)buildKdTreeOverBoxes(boxes, KdBuildConfig{}, too_small); }, "root bounds");
   EXPECT_TRUE(buildKdTreeOverBoxes(std::vector<Box>{Box()}, KdBuildConfig{}, root).empty());

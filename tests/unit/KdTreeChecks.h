@@ -476,7 +476,8 @@ inline std::vector<ConfigCase> allConfigCases() {
   small_leaves.parallel_threshold = 64;
   cases.push_back({"middle_leaf2_parallel64", small_leaves});
   KdBuildConfig deep;
-  deep.traversal_cost = 0.1f;
+  deep.traversal_cost = 0.1f;  // node cost 1 triangle test: small leaves, whatever the default
+  deep.intersection_cost = 0.1f;
   deep.empty_bonus = 0.9f;
   cases.push_back({"sah_deep", deep});
   return cases;

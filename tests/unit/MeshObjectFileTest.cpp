@@ -55,9 +55,9 @@ std::vector<Ray> testRays(const Box& bounds, std::size_t count) {
   return rays;
 }
 
-void roundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays) {
+void roundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays, const KdBuildConfig& config = {}) {
   const TempDir dir;
-  const auto built = buildChecked(mesh);
+  const auto built = buildChecked(mesh, config);
   saveMeshObject(*built, dir / "object.dkdt");
   const auto loaded = loadMeshObject(dir / "object.dkdt", mesh);
   ASSERT_TRUE(loaded);
@@ -73,6 +73,18 @@ void roundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays) {
 }
 
 TEST(MeshObjectFile, RoundTripIcosphere) { roundTrip(std::make_shared<const TriangleMesh>(icosphere(4)), 4000); }
+
+// A file holds the tree, not the costs it was built with: a structure saved under another build
+// configuration (the former mesh default, intersection cost 0.1, or the top level's 1) still loads and
+// answers like the object it was saved from.
+TEST(MeshObjectFile, RoundTripTreesBuiltWithOtherCosts) {
+  for (const float ci : {0.1f, 1.0f}) {
+    KdBuildConfig config;
+    config.intersection_cost = ci;
+    SCOPED_TRACE(ci);
+    roundTrip(std::make_shared<const TriangleMesh>(icosphere(4)), 2000, config);
+  }
+}
 
 TEST(MeshObjectFile, RoundTripTriangleSoupWithDegenerates) {
   roundTrip(std::make_shared<const TriangleMesh>(triangleSoup(3000, 7)), 4000);

@@ -30,13 +30,18 @@ struct KdBuildConfig {
   KdHeuristic heuristic = KdHeuristic::Sah;
   /// Cost of one inner-node step. 1 by convention; only the ratio to intersection_cost matters.
   float traversal_cost = 1.0f;
-  /// Cost of one primitive test relative to a node step. By instruction count a watertight
-  /// triangle test costs about 4 node steps (1 in a 4-wide leaf packet), but the SAH model ignores
-  /// what a node step really costs on random rays (a dependent load and an unpredictable branch
-  /// per node), so small, shallow trees with larger leaves win: on koala (100k triangles)
-  /// random-ray throughput is flat between 0.1 and 0.3 and a third lower at 1.5, while the build
-  /// at 0.1 is 1.7x faster than at 0.2 and 8x faster than at 1.5 (bench/ sweep, docs/bench).
-  float intersection_cost = 0.1f;
+  /// Cost of one primitive test relative to a node step: 0.05, a node cost of 20 triangle tests.
+  /// By instruction count a watertight triangle test costs about 4 node steps (1 in a 4-wide leaf
+  /// packet), but the SAH model ignores what a node step really costs on incoherent rays (a
+  /// dependent load and an unpredictable branch per node), so smaller, shallower trees with larger
+  /// leaves win, up to a point. Timed sweep (bench/SweepBench.cpp, docs/bench/sweep_node_cost.txt;
+  /// CPU time, one thread) on koala, hammer, plane, spot and the robot's link_1 and base_link,
+  /// against the former 0.1: the tree builds in 0.65-0.71x the time, traces random and primary rays
+  /// in 0.90-1.06x (within the run's noise) and takes 23-27% fewer bytes; a node cost of 3 (0.033)
+  /// builds in 0.55-0.63x but traces primary rays 1.3-1.4x slower on spot and link_1; 0.1 -> 0.2
+  /// builds 1.7x slower and traces no faster. The top level and the sensors' level set their own
+  /// intersection costs (TopLevel.h) and keep traversal_cost 1, so change this one, not that.
+  float intersection_cost = 0.05f;
   /// Relative cost reduction for a split that cuts off empty space (Wald & Havran 2006: 0.2),
   /// which isolates geometry from empty space and pays off for rays that miss.
   float empty_bonus = 0.2f;
