@@ -10,6 +10,8 @@
 #include "WatertightTriangle4.h"
 
 #include <glm/geometric.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <bit>
@@ -21,6 +23,22 @@
 namespace duplex {
 
 namespace {
+
+// Work per task of the parallel passes around the build (triangle bounds, leaf blocks).
+constexpr std::size_t kTrianglesPerTask = 8192;
+constexpr std::size_t kNodesPerTask = 2048;
+
+// body(begin, end) over [0, n) in tasks of `grain`; a range of one task runs inline (the many tiny
+// objects of a split scene pay no task overhead).
+template <class Body>
+void forChunks(std::size_t n, std::size_t grain, const Body& body) {
+  if (n <= grain) {
+    body(std::size_t{0}, n);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
+                    [&](const tbb::blocked_range<std::size_t>& range) { body(range.begin(), range.end()); });
+}
 
 // Lane masks of a block holding n (1..4) of the leaf's triangles.
 constexpr int kLaneMask[5] = {0x0, 0x1, 0x3, 0x7, 0xF};
@@ -90,15 +108,18 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
     : Object(mesh ? mesh->name() : std::string()), mesh_(std::move(mesh)) {
   if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
   const TriangleMesh& m = *mesh_;
-  // Degenerate triangles get an empty box, which the builder leaves out.
+  // Degenerate triangles get an empty box, which the builder leaves out. In parallel: on its own
+  // this pass would hold the other threads idle before the build (as the leaf blocks after it).
   std::vector<Box> bounds(m.triangleCount());
-  for (std::size_t i = 0; i < m.triangleCount(); ++i) {
-    if (!m.isValid(i)) continue;
-    const auto v = m.vertices(i);
-    Box b;
-    for (const auto& p : v) b.extend(p);
-    bounds[i] = b;
-  }
+  forChunks(m.triangleCount(), kTrianglesPerTask, [&](std::size_t first, std::size_t last) {
+    for (std::size_t i = first; i < last; ++i) {
+      if (!m.isValid(i)) continue;
+      const auto v = m.vertices(i);
+      Box b;
+      for (const auto& p : v) b.extend(p);
+      bounds[i] = b;
+    }
+  });
   tree_ = buildKdTree(
       bounds,
       // A straddling triangle is clipped once per split, not once per child.
@@ -129,25 +150,31 @@ void MeshObject::buildLeafBlocks() {
   const std::vector<std::uint32_t>& refs = tree_.prim_indices;
   block_tree_.bounds = tree_.bounds;
   block_tree_.nodes = tree_.nodes;
+  // Each non-empty leaf's first block, in node order (a serial pass over the nodes only); then the
+  // blocks are filled leaf by leaf in parallel, each leaf writing only its own range.
   std::size_t block_count = 0;
-  for (const KdNode& node : tree_.nodes)
-    if (node.isLeaf() && !node.isJump()) block_count += (node.primCount() + 3) / 4;
-  blocks_.clear();
-  blocks_.reserve(block_count);
   for (KdNode& node : block_tree_.nodes) {
     if (!node.isLeaf() || node.isJump() || node.primCount() == 0) continue;
-    const std::uint32_t begin = node.primOffset(), end = begin + node.primCount();
-    node.setPrimOffset(static_cast<std::uint32_t>(blocks_.size()));
-    for (std::uint32_t i = begin; i < end; i += 4) {
-      detail::TriangleBlock4& block = blocks_.emplace_back();
-      for (std::uint32_t k = 0; k < 4; ++k) {
-        // Padding lanes repeat the leaf's last triangle (masked off by the leaf's count).
-        const std::uint32_t prim = refs[std::min(i + k, end - 1)];
-        const TriangleMesh::Triangle& t = m.triangles()[prim];
-        block.set(static_cast<int>(k), positions[t[0]], positions[t[1]], positions[t[2]], prim);
+    node.setPrimOffset(static_cast<std::uint32_t>(block_count));
+    block_count += (node.primCount() + 3) / 4;
+  }
+  blocks_.resize(block_count);
+  forChunks(tree_.nodes.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
+    for (std::size_t n = first; n < last; ++n) {
+      const KdNode& node = tree_.nodes[n];
+      if (!node.isLeaf() || node.isJump() || node.primCount() == 0) continue;
+      const std::uint32_t begin = node.primOffset(), end = begin + node.primCount();
+      detail::TriangleBlock4* block = blocks_.data() + block_tree_.nodes[n].primOffset();
+      for (std::uint32_t i = begin; i < end; i += 4, ++block) {
+        for (std::uint32_t k = 0; k < 4; ++k) {
+          // Padding lanes repeat the leaf's last triangle (masked off by the leaf's count).
+          const std::uint32_t prim = refs[std::min(i + k, end - 1)];
+          const TriangleMesh::Triangle& t = m.triangles()[prim];
+          block->set(static_cast<int>(k), positions[t[0]], positions[t[1]], positions[t[2]], prim);
+        }
       }
     }
-  }
+  });
 }
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
