@@ -146,11 +146,14 @@ struct SensorGrid {
   // zero direction component (the caller walks the kd-tree instead).
   // `records` (optional): a 64-byte record per entry that hit() reads (LeafBoxes::metInRuns
   // prefetches it).
-  template <class F>
+  // `before(met, n)` (optional) sees the n entries met before hit() is called for any of them
+  // (the crossing query prefetches what the hits will read).
+  template <class F, class B = void (*)(const std::uint32_t*, std::uint32_t)>
   bool forEachMet(const KdRay& ray, const glm::vec3& dir, float t_max, std::vector<std::uint32_t>& runs,
-                  std::vector<std::uint32_t>& met, F&& hit, const void* records = nullptr) const {
+                  std::vector<std::uint32_t>& met, F&& hit, const void* records = nullptr,
+                  B&& before = [](const std::uint32_t*, std::uint32_t) {}) const {
 #if !defined(DUPLEX_LEAF_BOXES_X86)
-    (void)ray, (void)dir, (void)t_max, (void)runs, (void)met, (void)hit, (void)records;
+    (void)ray, (void)dir, (void)t_max, (void)runs, (void)met, (void)hit, (void)records, (void)before;
     return false;  // no vector box test (LeafBoxes.h): the kd-tree
 #else
     if (boxes.lanes == 1 || ray.zero[0] || ray.zero[1] || ray.zero[2]) return false;
@@ -229,6 +232,7 @@ struct SensorGrid {
     }
     if (met.size() < entries + LeafBoxes::kMaxLanes) met.resize(entries + LeafBoxes::kMaxLanes);
     const std::uint32_t n = boxes.metInRuns(ray, t_max, run, run_count, met.data(), records);
+    before(met.data(), n);
     for (std::uint32_t k = 0; k < n; ++k) hit(met[k]);
     return true;
 #endif
