@@ -270,7 +270,8 @@ TEST(SensorCrossingPaths, AgreeFarFromTheOrigin) {
 
 // 10^5 from the origin a float coordinate steps by 1/128 and the plane test's bounds (relative to
 // the magnitudes) are wider than these sensors, so nearly everything goes to the exact test. The
-// grid is not built for this scene there (the level takes its tree; why was not examined): the
+// grid is not built there: its margin (128 float epsilons of the magnitude, 1.5 units) exceeds
+// its cells (about 1.1 units), so boxes would span 4 cells each, and the level takes its tree. The
 // tree with the plane test must still agree with the brute force bit for bit.
 TEST(SensorCrossingPaths, AgreeAHundredThousandUnitsFromTheOrigin) {
   ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(1e5, -5e4, 2e4), false));
