@@ -33,6 +33,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -933,9 +934,19 @@ KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const
              const KdBuildConfig& config, const Box* root = nullptr) {
   if (prim_bounds.size() > KdNode::kMaxIndex)
     throw InvalidArgument("kd-tree build: " + std::to_string(prim_bounds.size()) + " primitives exceed the limit of 2^30");
-  if (!(config.traversal_cost > 0.0f) || !(config.intersection_cost > 0.0f) || !(config.empty_bonus >= 0.0f) ||
-      !(config.empty_bonus < 1.0f) || config.max_depth < 0)
-    throw InvalidArgument("kd-tree build: invalid configuration");
+  // Name the field and the value: a bad cost usually comes from a command-line flag or a caller's
+  // arithmetic, and "invalid configuration" alone does not say which.
+  auto refuse = [&config](const char* field, const char* rule, double value) {
+    std::ostringstream os;
+    os << "kd-tree build: " << field << " must be " << rule << " (got " << value << "; configuration " << config << ")";
+    throw InvalidArgument(os.str());
+  };
+  if (!(config.traversal_cost > 0.0f && std::isfinite(config.traversal_cost)))
+    refuse("traversal_cost", "finite and > 0", config.traversal_cost);
+  if (!(config.intersection_cost > 0.0f && std::isfinite(config.intersection_cost)))
+    refuse("intersection_cost", "finite and > 0", config.intersection_cost);
+  if (!(config.empty_bonus >= 0.0f && config.empty_bonus < 1.0f)) refuse("empty_bonus", "in [0, 1)", config.empty_bonus);
+  if (config.max_depth < 0) refuse("max_depth", ">= 0 (0: automatic)", config.max_depth);
 
   KdTree tree;
   RefVec refs;

@@ -24,6 +24,7 @@
 #include <limits>
 #include <random>
 #include <set>
+#include <string>
 #include <vector>
 
 namespace duplex::test {
@@ -314,17 +315,24 @@ TEST(KdTreeBuilder, BinningKnobsKeepInvariants) {
 
 TEST(KdTreeBuilder, InvalidConfigurationThrows) {
   const std::vector<Box> boxes = {Box(glm::vec3(0.0f), glm::vec3(1.0f))};
-  auto expect_throw = [&](auto mutate) {
+  // Refused with a message that names the field at fault.
+  auto expect_throw = [&](const std::string& field, auto mutate) {
     KdBuildConfig c;
     mutate(c);
-    EXPECT_THROW((void)buildKdTreeOverBoxes(boxes, c), InvalidArgument) << c;
+    try {
+      (void)buildKdTreeOverBoxes(boxes, c);
+      ADD_FAILURE() << "no exception for " << c;
+    } catch (const InvalidArgument& e) {
+      EXPECT_NE(std::string(e.what()).find(field + " must be"), std::string::npos) << e.what();
+    }
   };
-  expect_throw([](KdBuildConfig& c) { c.traversal_cost = 0.0f; });
-  expect_throw([](KdBuildConfig& c) { c.intersection_cost = -1.0f; });
-  expect_throw([](KdBuildConfig& c) { c.intersection_cost = kNaN; });
-  expect_throw([](KdBuildConfig& c) { c.empty_bonus = 1.0f; });
-  expect_throw([](KdBuildConfig& c) { c.empty_bonus = -0.1f; });
-  expect_throw([](KdBuildConfig& c) { c.max_depth = -1; });
+  expect_throw("traversal_cost", [](KdBuildConfig& c) { c.traversal_cost = 0.0f; });
+  expect_throw("traversal_cost", [](KdBuildConfig& c) { c.traversal_cost = kInf; });
+  expect_throw("intersection_cost", [](KdBuildConfig& c) { c.intersection_cost = -1.0f; });
+  expect_throw("intersection_cost", [](KdBuildConfig& c) { c.intersection_cost = kNaN; });
+  expect_throw("empty_bonus", [](KdBuildConfig& c) { c.empty_bonus = 1.0f; });
+  expect_throw("empty_bonus", [](KdBuildConfig& c) { c.empty_bonus = -0.1f; });
+  expect_throw("max_depth", [](KdBuildConfig& c) { c.max_depth = -1; });
 }
 
 TEST(KdBuildConfig, HeuristicNamesRoundTrip) {

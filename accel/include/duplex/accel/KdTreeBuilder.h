@@ -27,7 +27,10 @@ using KdSplitFunction = std::function<void(std::uint32_t prim, const Box& box, i
 
 /// Builds a kd-tree over `prim_bounds.size()` primitives. Primitives with empty or non-finite
 /// bounds are left out (the caller filters degenerate geometry before). With no usable primitive
-/// the tree is empty (no nodes). Throws InvalidArgument for more than 2^30 primitives.
+/// the tree is empty (no nodes). Throws InvalidArgument for more than 2^30 primitives, a tree of
+/// more than 2^30 nodes, or a configuration outside its ranges (traversal_cost and
+/// intersection_cost finite and > 0, empty_bonus in [0, 1), max_depth >= 0); the message names the
+/// field and its value.
 ///
 /// Algorithm: top-down SAH. Nodes are binned (8 to 32 bins per axis, counted while the parent is
 /// partitioned), with exact empty-space cuts at the references' extent (a chain of them moves no
