@@ -120,14 +120,19 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
       bounds[i] = b;
     }
   });
-  tree_ = buildKdTree(
-      bounds,
-      // A straddling triangle is clipped once per split, not once per child.
-      [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
-        const auto v = m.vertices(prim);
-        splitTriangleInBox(v[0], v[1], v[2], box, axis, pos, lower, upper);
-      },
-      config);
+  try {
+    tree_ = buildKdTree(
+        bounds,
+        // A straddling triangle is clipped once per split, not once per child.
+        [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
+          const auto v = m.vertices(prim);
+          splitTriangleInBox(v[0], v[1], v[2], box, axis, pos, lower, upper);
+        },
+        config);
+  } catch (const InvalidArgument& e) {
+    // The builder knows bounds, not meshes: say which mesh the refused build was for.
+    throw InvalidArgument("mesh '" + m.name() + "': " + e.what());
+  }
   buildLeafBlocks();
 }
 

@@ -283,12 +283,23 @@ TEST(MeshObjectEdgeCases, OneTriangleMeshes) {
 // ---------------------------------------------------------------------------------------------
 // Construction errors and degenerate input.
 
-
 TEST(TriangleMeshErrors, EmptyMeshThrowsNamingTheMesh) {
   expectErrorNaming<InvalidArgument>([] { (void)TriangleMesh::fromArrays({}, {}, "empty-mesh-7"); }, "empty-mesh-7");
   const std::vector<float> positions = {0, 0, 0, 1, 0, 0, 0, 1, 0};
   expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, {}, "no-triangles-8"); }, "no-triangles-8");
   expectErrorNaming<InvalidArgument>([] { (void)TriangleMesh::fromTriangles({}, {}, "empty-vectors-9"); }, "empty-vectors-9");
+}
+
+TEST(MeshObjectErrors, RefusedBuildConfigurationNamesTheMeshAndTheField) {
+  auto mesh = std::make_shared<const TriangleMesh>(
+      TriangleMesh::fromTriangles({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}, "config-mesh-3"));
+  KdBuildConfig bad;
+  bad.intersection_cost = -1.0f;
+  expectErrorNaming<InvalidArgument>([&] { (void)MeshObject(mesh, bad); }, "config-mesh-3");
+  expectErrorNaming<InvalidArgument>([&] { (void)MeshObject(mesh, bad); }, "intersection_cost");
+  // The same mesh with the default configuration builds: the refusal was the configuration's.
+  const MeshObject good(mesh);
+  EXPECT_FALSE(good.tree().empty());
 }
 
 TEST(TriangleMeshErrors, OutOfRangeIndexAndBadSizesThrow) {
