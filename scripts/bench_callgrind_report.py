@@ -45,7 +45,8 @@ def parse_part(path):
     trigger, totals, events, event_totals = None, None, ["Ir"], {}
     fl = cur_file = cur_fn = "???"
     skip_next_cost = False
-    n_positions = 1
+    positions = ["line"]  # "instr line" with --dump-instr=yes
+    last = [0]
     line_no = 0
     with open(path, errors="replace") as f:
         for raw in f:
@@ -56,7 +57,8 @@ def parse_part(path):
                 trigger = line.split("Client Request:", 1)[-1].strip() if "Client Request:" in line else line
                 continue
             if line.startswith("positions:"):
-                n_positions = len(line.split(":", 1)[1].split())
+                positions = line.split(":", 1)[1].split()
+                last = [0] * len(positions)
                 continue
             if line.startswith("events:"):
                 events = line.split(":", 1)[1].split()
@@ -84,12 +86,16 @@ def parse_part(path):
                 continue
             if line[0].isdigit() or line[0] in "+-*":
                 parts = line.split()
-                # Position compression: "+n"/"-n" relative to the previous position, "*" the same.
-                pos = parts[0]
-                if pos.startswith("+") or pos.startswith("-"):
-                    line_no += int(pos)
-                elif pos != "*":
-                    line_no = int(pos)
+                n_positions = len(positions)
+                # Position compression per column: "+n"/"-n" relative to the previous value, "*" the
+                # same; instruction addresses may be hexadecimal ("0x...").
+                for k, pos in enumerate(parts[:n_positions]):
+                    if pos.startswith("+") or pos.startswith("-"):
+                        last[k] += int(pos, 0)
+                    elif pos != "*":
+                        last[k] = int(pos, 0)
+                if "line" in positions:
+                    line_no = last[positions.index("line")]
                 if skip_next_cost:
                     skip_next_cost = False
                     continue
