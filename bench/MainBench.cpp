@@ -43,7 +43,6 @@ struct RaySet {
   std::vector<Ray> rays;
 };
 
-
 // The cumulative parts of a closest-hit query that MeshBench::timeSplit times, each called out of
 // line as MeshObject::intersect is: the harness alone (read the ray, write the hit), + the per-ray
 // setup, + the traversal visiting every leaf the full query visits (t_best starts at the ray's final
