@@ -73,35 +73,31 @@ TEST(MeshObjectDifferential, BoxFarFromOrigin) {
   runDifferential(mesh, 2000, 32);
 }
 
-TEST(MeshObjectDifferential, Spot) {
-  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "spot.obj");
-  runDifferential(mesh, 3000, 48);
+// The real meshes of the shared data folder (skipped, each with its own message, when it is absent).
+struct SharedMeshCase {
+  const char* name;  ///< gtest name
+  const char* file;  ///< relative to the shared meshes folder
+  int rays;
+  int grid;
+};
+
+class MeshObjectDifferentialShared : public ::testing::TestWithParam<SharedMeshCase> {};
+
+TEST_P(MeshObjectDifferentialShared, AgreesWithTheReference) {
+  const SharedMeshCase& c = GetParam();
+  DUPLEX_SHARED_MESH_OR_SKIP(mesh, c.file);
+  runDifferential(mesh, c.rays, c.grid);
 }
 
-TEST(MeshObjectDifferential, Koala) {
-  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "koala.obj");
-  runDifferential(mesh, 1000, 32);
-}
-
-TEST(MeshObjectDifferential, Hammer) {
-  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "hammer.obj");
-  runDifferential(mesh, 1000, 32);
-}
-
-TEST(MeshObjectDifferential, Plane) {
-  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "plane.obj");
-  runDifferential(mesh, 1500, 32);
-}
-
-TEST(MeshObjectDifferential, CornellBoxQuads) {
-  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "cornell_box.obj");
-  runDifferential(mesh, 2000, 40);
-}
-
-TEST(MeshObjectDifferential, RobotPartNonManifold) {
-  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "abb_irb6640/link_4.stl");
-  runDifferential(mesh, 1500, 32);
-}
+INSTANTIATE_TEST_SUITE_P(SharedMeshes, MeshObjectDifferentialShared,
+                         ::testing::Values(SharedMeshCase{"Spot", "spot.obj", 3000, 48},
+                                           SharedMeshCase{"Koala", "koala.obj", 1000, 32},
+                                           SharedMeshCase{"Hammer", "hammer.obj", 1000, 32},
+                                           SharedMeshCase{"Plane", "plane.obj", 1500, 32},
+                                           SharedMeshCase{"CornellBoxQuads", "cornell_box.obj", 2000, 40},
+                                           // non-manifold CAD part
+                                           SharedMeshCase{"RobotPartNonManifold", "abb_irb6640/link_4.stl", 1500, 32}),
+                         [](const auto& info) { return std::string(info.param.name); });
 
 // ---------------------------------------------------------------------------------------------
 // Every heuristic, with and without clipping, plus the knobs that change the tree's shape.
