@@ -8,14 +8,18 @@
 #include <duplex/sensors/SensorRun.h>
 #include <duplex/sensors/SensorScene.h>
 
+#include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <limits>
+#include <map>
 
 namespace duplex::cli {
 
@@ -26,6 +30,60 @@ std::string fileName(const std::string& name) {
   for (char& c : s)
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) c = '_';
   return s.empty() ? "_" : s;
+}
+
+// The run a SIGINT / SIGTERM stops. Lock-free atomics only: the handler may run on any thread.
+std::atomic<SensorRun*> g_running{nullptr};
+std::atomic<int> g_stop_signal{0};
+static_assert(std::atomic<SensorRun*>::is_always_lock_free && std::atomic<int>::is_always_lock_free);
+
+extern "C" void onStopSignal(int sig) {
+  g_stop_signal.store(sig, std::memory_order_relaxed);
+  if (SensorRun* run = g_running.load(std::memory_order_relaxed)) run->cancel();
+}
+
+// While alive, SIGINT and SIGTERM stop `run` after the chunks in flight (so that the rays traced so
+// far are saved and can be resumed) instead of killing the process; a second signal kills it as
+// usual (SA_RESETHAND). The previous handlers come back at the end of the scope.
+class StopSignals {
+ public:
+  explicit StopSignals(SensorRun& run) {
+    g_stop_signal.store(0);
+    g_running.store(&run);
+    struct sigaction sa {};
+    sa.sa_handler = onStopSignal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESETHAND;
+    ::sigaction(SIGINT, &sa, &old_int_);
+    ::sigaction(SIGTERM, &sa, &old_term_);
+  }
+  ~StopSignals() {
+    ::sigaction(SIGINT, &old_int_, nullptr);
+    ::sigaction(SIGTERM, &old_term_, nullptr);
+    g_running.store(nullptr);
+  }
+  StopSignals(const StopSignals&) = delete;
+  StopSignals& operator=(const StopSignals&) = delete;
+
+ private:
+  struct sigaction old_int_ {};
+  struct sigaction old_term_ {};
+};
+
+// Every sensor writes DIR/<file name>.{json,csv,png,exr} and the run writes DIR/run.json: two
+// sensors whose names map to one file name (or a sensor called "run") would overwrite each other.
+void checkOutputNames(const SensorScene& scene, const std::filesystem::path& scene_file) {
+  std::map<std::string, std::string> owner;
+  for (const SensorInstance& s : scene.sensors()) {
+    const std::string base = fileName(s.name);
+    if (base == "run")
+      throw InvalidArgument(scene_file.string() + ": sensor '" + s.name +
+                            "' would write run.json, the run's report; rename the sensor");
+    const auto [it, fresh] = owner.emplace(base, s.name);
+    if (!fresh)
+      throw InvalidArgument(scene_file.string() + ": sensors '" + it->second + "' and '" + s.name + "' would both write " +
+                            base + ".json (characters other than [A-Za-z0-9._-] become '_'); rename one");
+  }
 }
 
 // JSON has no infinity: a relative error with nothing measured is written as null.
@@ -158,6 +216,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   const SensorScene scene = workers.arena.execute([&] { return SensorScene::load(o.scene); });
   if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
   if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
+  checkOutputNames(scene, o.scene);
 
   SensorRunConfig cfg;
   cfg.seed = o.seed;
@@ -186,11 +245,15 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
   SensorRunStatus status;
   {
+    const StopSignals signals(run);
     ProgressPrinter printer(o.progress, start);
     status = run.runUntil(o.rays, [&](const SensorProgress& p) { printer(p); }, stop);
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   run.saveState(state);
+  if (status == SensorRunStatus::Cancelled)
+    std::cerr << "duplex sensor: stopped by signal " << g_stop_signal.load() << " after " << run.raysDone()
+              << " rays; saved to " << state.string() << " (continue with --resume)\n";
 
   const SensorRunResults r = run.results();
   nlohmann::ordered_json report;
@@ -200,7 +263,10 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   report["max_depth"] = o.max_depth;
   report["max_scatterings"] = o.max_scatterings;
   report["roulette_threshold"] = o.roulette;
-  report["status"] = status == SensorRunStatus::TargetReached ? "target_reached" : "completed";
+  report["status"] = status == SensorRunStatus::TargetReached ? "target_reached"
+                     : status == SensorRunStatus::Cancelled   ? "interrupted"
+                                                              : "completed";
+  if (status == SensorRunStatus::Cancelled) report["signal"] = g_stop_signal.load();
   report["resumed_from"] = start;
   report["seconds"] = seconds;
   report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;

@@ -4,10 +4,15 @@
 /// a light-tracing run over the scene's lights and sensors (SensorRun). Writes for each sensor
 /// DIR/<name>.json (keys: name, rays, seed, shape, size, bins, two_sided, emitted_power_w,
 /// total_flux_w, total_flux_stderr_w, relative_stderr, efficiency, and row-major nx * ny arrays
-/// irradiance_w_m2, stderr_w_m2, flux_w, ray_count), DIR/<name>.csv (one row per bin) and
+/// irradiance_w_m2, stderr_w_m2, flux_w, ray_count, bin_area_m2; band_* and angular_* arrays
+/// when the scene asks for them), DIR/<name>.csv (one row per bin) and
 /// DIR/<name>.png (false-colour irradiance with a scale bar), plus DIR/run_state.bin (the exact
 /// accumulators, for --resume) and DIR/run.json (the report printed on stdout). Characters of a
-/// sensor name other than [A-Za-z0-9._-] become '_' in file names.
+/// sensor name other than [A-Za-z0-9._-] become '_' in file names; sensors whose file names would
+/// collide (with each other, or "run" with run.json) are refused before the run.
+/// SIGINT / SIGTERM stop the run after the chunks in flight: the rays traced so far are saved to
+/// run_state.bin and written out as usual, the report's status is "interrupted", and the process
+/// exits with 128 + the signal (a second signal kills it at once).
 
 #include "duplex/sensors/SensorRun.h"
 
@@ -38,7 +43,8 @@ struct SensorOptions {
 };
 
 /// Runs the command; returns the report (keys: rays, seed, threads, max_depth, max_scatterings,
-/// roulette_threshold, status ("completed", "target_reached"), resumed_from (rays already done when
+/// roulette_threshold, status ("completed", "target_reached", "interrupted" with the signal's
+/// number in `signal`), resumed_from (rays already done when
 /// the run started: 0, or the saved count with --resume), seconds, rays_per_s, emitted_power_w,
 /// energy {escaped_w, absorbed_w, medium_absorbed_w, depth_limited_w, roulette_w}, bands and
 /// band_emitted_w (spectral scenes only), scatterings (scenes whose fog scatters only), sensors

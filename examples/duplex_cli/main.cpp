@@ -267,6 +267,9 @@ int main(int argc, char** argv) {
       result = duplex::cli::runRays(rays);
     }
     std::cout << result.dump() << std::endl;
+    // A run stopped by SIGINT / SIGTERM saved its state and wrote its files; the exit status still
+    // says it was stopped, as a shell expects (128 + the signal).
+    if (*sensor_cmd && result.contains("signal")) return 128 + result["signal"].get<int>();
     return 0;
   } catch (const duplex::Error& e) {
     std::cerr << command << ": error: " << e.what() << '\n';

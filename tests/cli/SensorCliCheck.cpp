@@ -18,6 +18,7 @@
 #endif
 
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -111,8 +112,11 @@ int check(const std::string& duplex, const fs::path& dir) {
   const fs::path scene = dir / "box.json";
   write(scene, boxScene("7"));
 
-  // Output keys and files.
-  const nlohmann::json report = runJson(sensorArgs(duplex, scene, "20000", "1", dir / "one"), dir);
+  // Output keys and files; plain progress lines on a stderr that is not a terminal.
+  const RunResult first = runOk(sensorArgs(duplex, scene, "20000", "1", dir / "one"), dir);
+  expect(first.err.find("progress: 20000 / 20000 rays (100.0%)") != std::string::npos,
+         "--progress lines printed no final progress line:\n" + first.err);
+  const nlohmann::json report = nlohmann::json::parse(first.out);
   expect(report["rays"] == 20000 && report["status"] == "completed", "report: " + report.dump());
   expect(report["sensors"].size() == 6, "six sensors expected: " + report.dump());
   double total = 0.0;
@@ -124,6 +128,8 @@ int check(const std::string& duplex, const fs::path& dir) {
     expect(j["rays"] == 20000, name + ".json: rays is not the emitted count");
     expect(j["irradiance_w_m2"].size() == 12 && j["stderr_w_m2"].size() == 12, name + ".json: arrays are not nx * ny = 12");
     total += j["total_flux_w"].get<double>();
+    expect(std::abs(j["efficiency"].get<double>() - j["total_flux_w"].get<double>() / 7.0) <= 1e-12,
+           name + ".json: efficiency is not total_flux_w / emitted power (7 W)");
     std::ifstream csv(dir / "one" / (name + ".csv"));
     std::string line;
     int lines = 0;
@@ -148,6 +154,26 @@ int check(const std::string& duplex, const fs::path& dir) {
   expect(resumed["resumed_from"] == 8000, "resume did not start from the saved rays: " + resumed.dump());
   expectSameMaps(dir / "one", dir / "resumed", "resumed run");
 
+  // SIGINT stops a run after the chunks in flight: its rays are saved and written, the exit status
+  // is 128 + 2, and resuming to N rays gives the files of one run of N rays.
+  {
+    const RunResult stopped = runAndSignal(sensorArgs(duplex, scene, "2000000000", "2", dir / "stopped"), dir.string(),
+                                           SIGINT, "progress: ", 120.0);
+    expect(stopped.exited && stopped.exit_code == 130, "SIGINT: expected exit 130, got " + describe(stopped) + "\n" + stopped.err);
+    const nlohmann::json j = nlohmann::json::parse(stopped.out);
+    const std::uint64_t done = j["rays"].get<std::uint64_t>();
+    expect(j["status"] == "interrupted" && j["signal"] == SIGINT && done > 0 && done < 2000000000,
+           "SIGINT: report " + stopped.out);
+    expect(readJson(dir / "stopped" / "face0.json")["rays"] == done, "SIGINT: face0.json does not hold the rays done");
+    const std::string total_rays = std::to_string(done + 3000);
+    std::vector<std::string> resume_stopped = sensorArgs(duplex, scene, total_rays, "2", dir / "stopped");
+    resume_stopped.push_back("--resume");
+    const nlohmann::json continued = runJson(resume_stopped, dir);
+    expect(continued["resumed_from"] == done && continued["status"] == "completed", "resume after SIGINT: " + continued.dump());
+    (void)runJson(sensorArgs(duplex, scene, total_rays, "1", dir / "straight"), dir);
+    expectSameMaps(dir / "straight", dir / "stopped", "run stopped by SIGINT and resumed");
+  }
+
   // Stop on a target relative error.
   std::vector<std::string> target = sensorArgs(duplex, scene, "50000000", "2", dir / "target");
   for (const char* a : {"--target-error", "0.05", "--target-sensor", "face4"}) target.push_back(a);
@@ -167,6 +193,32 @@ int check(const std::string& duplex, const fs::path& dir) {
       {"bad_bins.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
         "sensors": [{"name": "s", "shape": "rectangle", "size": [1, 1], "bins": [0, 3]}]})", "/sensors/0/bins/0"},
       {"no_lights.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "sensors": [{"name": "s", "size": 1}]})", "no lights"}};
+  auto twoSensors = [](const char* a, const char* b) {
+    return std::string(R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
+        "sensors": [{"name": ")") + a + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]},
+                    {"name": ")" + b + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]}]})";
+  };
+  const std::vector<Bad> bad_names = {{"same_file.json", twoSensors("a b", "a_b"), "would both write a_b.json"},
+                                      {"run_name.json", twoSensors("x", "run"), "would write run.json"}};
+  for (const Bad& b : bad_names) {
+    write(dir / b.file, b.text);
+    const RunResult r = run(sensorArgs(duplex, dir / b.file, "100", "1", dir / "bad"), dir.string());
+    expect(r.exited && r.exit_code != 0, std::string(b.file) + ": expected a non-zero exit, got " + describe(r));
+    expect(r.err.find((dir / b.file).string()) != std::string::npos && r.err.find(b.needle) != std::string::npos,
+           std::string(b.file) + ": message does not name the file and '" + b.needle + "':\n" + r.err);
+  }
+  {
+    std::vector<std::string> args = sensorArgs(duplex, scene, "100", "1", dir / "bad");
+    for (const char* a : {"--target-error", "0.1", "--target-sensor", "no-such-face"}) args.push_back(a);
+    const RunResult r = run(args, dir.string());
+    expect(r.exited && r.exit_code != 0 && r.err.find("no-such-face") != std::string::npos,
+           "unknown --target-sensor: " + describe(r) + "\n" + r.err);
+    args = sensorArgs(duplex, scene, "100", "1", dir / "fresh");
+    args.push_back("--resume");
+    const RunResult rr = run(args, dir.string());
+    expect(rr.exited && rr.exit_code != 0 && rr.err.find("run_state.bin") != std::string::npos,
+           "--resume without a saved state: " + describe(rr) + "\n" + rr.err);
+  }
   for (const Bad& b : bad) {
     write(dir / b.file, b.text);
     const RunResult r = run(sensorArgs(duplex, dir / b.file, "100", "1", dir / "bad"), dir.string());
@@ -174,7 +226,8 @@ int check(const std::string& duplex, const fs::path& dir) {
     expect(r.err.find((dir / b.file).string()) != std::string::npos && r.err.find(b.needle) != std::string::npos,
            std::string(b.file) + ": message does not name the file and '" + b.needle + "':\n" + r.err);
   }
-  std::cout << "duplex sensor: files, keys, closed box " << total << " W of 7 W, 1 = 2 threads, resume, target, errors: ok\n";
+  std::cout << "duplex sensor: files, keys, progress lines, efficiency, closed box " << total
+            << " W of 7 W, 1 = 2 threads, resume, SIGINT and resume, target, errors, colliding names: ok\n";
   return 0;
 }
 

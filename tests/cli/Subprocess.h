@@ -19,6 +19,13 @@ struct RunResult {
 /// captured through files in `scratch_dir`. Throws std::runtime_error when it cannot start.
 [[nodiscard]] RunResult run(const std::vector<std::string>& argv, const std::string& scratch_dir);
 
+/// As run(), but sends `signal` to the program once `after_stderr` appears in what it has written
+/// to stderr (polled every 10 ms). If the text does not appear within `timeout_s` seconds the
+/// program is killed (SIGKILL) and the result says so in `err`; if it ends first, the result is
+/// how it ended.
+[[nodiscard]] RunResult runAndSignal(const std::vector<std::string>& argv, const std::string& scratch_dir, int signal,
+                                     const std::string& after_stderr, double timeout_s);
+
 /// "exit 3" / "killed by signal 11", for messages.
 [[nodiscard]] std::string describe(const RunResult& r);
 
