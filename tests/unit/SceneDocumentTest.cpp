@@ -715,10 +715,12 @@ TEST(SceneDocumentScale, ThousandsOfInlineObjects) {
   const int n = 3000;
   for (int i = 0; i < n; ++i) {
     const float o = static_cast<float>(i);
-    scene["objects"].push_back({{"name", "o" + std::to_string(i)},
+    // Not "o" + std::to_string(i): GCC 12 warns about that expression (-Wrestrict, a false positive).
+    const std::string name = std::string("o").append(std::to_string(i));
+    scene["objects"].push_back({{"name", name},
                                 {"mesh", {{"positions", {o, 0, 0, o + 1, 0, 0, o, 1, 0, o, 0, 1}},
                                           {"indices", {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3}}}}});
-    scene["instances"].push_back({{"object", "o" + std::to_string(i)}, {"transform", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, i}}});
+    scene["instances"].push_back({{"object", name}, {"transform", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, i}}});
   }
   const auto path = d.write(scene.dump());
   const SceneDocument doc = loadSceneDocument(path);
