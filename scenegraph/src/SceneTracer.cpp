@@ -219,7 +219,17 @@ std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, 
   std::shared_lock lock(impl_->mutex);
   std::vector<SceneHit> out;
   if (mode == PickMode::Nearest) {
-    SceneHit h = detail(graph_, impl_->top, ray, impl_->top.intersect(ray, ctx, mask));
+    Hit nearest = impl_->top.intersect(ray, ctx, mask);
+    // Sensors never block, so intersect() looks through them; a pick whose mask selects sensors
+    // wants the nearest thing under the cursor, sensor or surface (a tie goes to the surface).
+    if (const TopLevel* sensors = impl_->top.sensorLevel()) {
+      RayD up_to = ray;
+      if (nearest.valid()) up_to.tfar = nearest.t;
+      std::vector<Hit> crossings;
+      sensors->intersectAll(up_to, crossings, ctx, mask);
+      if (!crossings.empty() && (!nearest.valid() || crossings.front().t < nearest.t)) nearest = crossings.front();
+    }
+    SceneHit h = detail(graph_, impl_->top, ray, nearest);
     if (h.valid()) out.push_back(std::move(h));
     return out;
   }

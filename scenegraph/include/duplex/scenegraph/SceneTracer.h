@@ -37,7 +37,7 @@ struct SceneHit {
 };
 
 enum class PickMode : std::uint8_t {
-  Nearest,      ///< the closest hit
+  Nearest,      ///< the closest hit: a surface, or a sensor when the mask selects sensors
   AllSorted,    ///< every hit along the ray, sorted by t
   PerInstance,  ///< the closest hit of each instance, sorted by t
 };
