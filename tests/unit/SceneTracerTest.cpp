@@ -2,8 +2,7 @@
 // hide, mask) in random batches, each commit checked against a brute force over the visible
 // instances and the top-level invariants; picking (nearest, all, per instance) with node paths,
 // sensors in picks, precision 10^6 units from the origin, rectangle selection, batch queries on 1
-// and 2 threads,
-// lazy builds, and what queries see before a commit.
+// and 2 threads, lazy builds, and what queries see before a commit.
 
 #include "MeshChecks.h"
 #include "TestSupport.h"
