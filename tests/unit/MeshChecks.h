@@ -16,6 +16,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace duplex::test {
 
@@ -30,6 +31,11 @@ inline std::shared_ptr<const MeshObject> buildChecked(std::shared_ptr<const Tria
 
 inline std::shared_ptr<const MeshObject> buildChecked(TriangleMesh mesh, const KdBuildConfig& config = {}) {
   return buildChecked(std::make_shared<const TriangleMesh>(std::move(mesh)), config);
+}
+
+/// A one-triangle mesh object named `name` (cheap to build), its tree checked.
+inline std::shared_ptr<const MeshObject> tinyMeshObject(const std::string& name) {
+  return buildChecked(TriangleMesh::fromArrays(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}, std::vector<std::uint32_t>{0, 1, 2}, name));
 }
 
 /// The reported hit is self-consistent: t within [tnear, tfar], barycentrics inside the triangle,

@@ -15,7 +15,6 @@
 #include <gtest/gtest.h>
 
 #include <bit>
-#include <chrono>
 #include <cstring>
 #include <random>
 #include <string>
@@ -23,10 +22,6 @@
 
 namespace duplex::test {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 bool sameBits(float a, float b) { return std::bit_cast<std::uint32_t>(a) == std::bit_cast<std::uint32_t>(b); }
 
@@ -90,30 +85,17 @@ TEST(MeshObjectFile, RoundTripTriangleSoupWithDegenerates) {
   roundTrip(std::make_shared<const TriangleMesh>(triangleSoup(3000, 7)), 4000);
 }
 
-TEST(MeshObjectFile, RoundTripKoalaAndLoadIsMuchFasterThanBuild) {
+// A real mesh round-trips exactly. How much faster loading is than building is a benchmark figure
+// (`duplex bench update`, the prepared-library column), not a test: timings do not belong here.
+TEST(MeshObjectFile, RoundTripKoala) {
   DUPLEX_SHARED_MESH_OR_SKIP(mesh, "koala.obj");
   const TempDir dir;
-  // Best of 3 for both, so that a busy machine disturbs the ratio less.
-  double build_ms = 1e30, load_ms = 1e30, save_ms = 1e30;
-  std::shared_ptr<const MeshObject> built, loaded;
-  for (int run = 0; run < 3; ++run) {
-    auto t0 = Clock::now();
-    built = std::make_shared<const MeshObject>(mesh);
-    build_ms = std::min(build_ms, msSince(t0));
-    t0 = Clock::now();
-    saveMeshObject(*built, dir / "koala.dkdt");
-    save_ms = std::min(save_ms, msSince(t0));
-    t0 = Clock::now();
-    loaded = loadMeshObject(dir / "koala.dkdt", mesh);
-    load_ms = std::min(load_ms, msSince(t0));
-  }
-  const auto file_bytes = std::filesystem::file_size(dir / "koala.dkdt");
-  std::printf("koala (%zu triangles): build %.1f ms, save %.1f ms, load %.2f ms (%.0fx faster than build), file %.2f MB\n",
-              mesh->triangleCount(), build_ms, save_ms, load_ms, build_ms / load_ms, double(file_bytes) / 1e6);
-  RecordProperty("build_ms", std::to_string(build_ms));
-  RecordProperty("load_ms", std::to_string(load_ms));
-  EXPECT_LT(load_ms * 5.0, build_ms) << "loading a prepared structure should be far cheaper than building it";
+  const auto built = buildChecked(mesh);
+  saveMeshObject(*built, dir / "koala.dkdt");
+  const auto loaded = loadMeshObject(dir / "koala.dkdt", mesh);
   EXPECT_TRUE(checkMeshTree(*loaded, 0));
+  ASSERT_EQ(loaded->tree().nodes.size(), built->tree().nodes.size());
+  EXPECT_EQ(loaded->tree().prim_indices, built->tree().prim_indices);
   expectIdenticalQueries(*built, *loaded, testRays(mesh->bounds(), 1500));
 }
 
@@ -123,7 +105,7 @@ class MeshObjectFileTamper : public ::testing::Test {
  protected:
   void SetUp() override {
     mesh_ = std::make_shared<const TriangleMesh>(icosphere(3));
-    object_ = std::make_shared<const MeshObject>(mesh_);
+    object_ = buildChecked(mesh_);
     saveMeshObject(*object_, good_);
     bytes_ = readBinaryFile(good_);
     nodes_ = object_->tree().nodes.size();

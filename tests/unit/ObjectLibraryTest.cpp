@@ -6,6 +6,7 @@
 #include "duplex/objects/MeshObject.h"
 #include "duplex/scenegraph/ObjectLibrary.h"
 
+#include "MeshChecks.h"
 #include "TestSupport.h"
 
 #include <gtest/gtest.h>
@@ -21,19 +22,13 @@ namespace duplex {
 namespace {
 
 using test::expectErrorNaming;
+using test::tinyMeshObject;
 using namespace std::chrono_literals;
-
-/// A one-triangle mesh object (cheap to build).
-std::shared_ptr<const Object> tinyObject(const std::string& name) {
-  const std::vector<float> positions{0, 0, 0, 1, 0, 0, 0, 1, 0};
-  const std::vector<std::uint32_t> indices{0, 1, 2};
-  return std::make_shared<MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, name)));
-}
 
 TEST(ObjectLibrary, AddFindAndNames) {
   ObjectLibrary lib;
-  const ObjectId a = lib.add("a", tinyObject("a"));
-  const ObjectId b = lib.addDeferred("b", "mesh", [] { return tinyObject("b"); });
+  const ObjectId a = lib.add("a", tinyMeshObject("a"));
+  const ObjectId b = lib.addDeferred("b", "mesh", [] { return tinyMeshObject("b"); });
   EXPECT_EQ(a, 0u);
   EXPECT_EQ(b, 1u);
   EXPECT_EQ(lib.size(), 2u);
@@ -51,17 +46,17 @@ TEST(ObjectLibrary, AddFindAndNames) {
 
 TEST(ObjectLibrary, BadAddsAreRejectedAndChangeNothing) {
   ObjectLibrary lib;
-  (void)lib.add("a", tinyObject("a"));
-  expectErrorNaming<InvalidArgument>([&] { (void)lib.add("a", tinyObject("a")); }, "'a'");
-  expectErrorNaming<InvalidArgument>([&] { (void)lib.addDeferred("a", "mesh", [] { return tinyObject("a"); }); }, "'a'");
-  EXPECT_THROW((void)lib.add("", tinyObject("x")), InvalidArgument);
+  (void)lib.add("a", tinyMeshObject("a"));
+  expectErrorNaming<InvalidArgument>([&] { (void)lib.add("a", tinyMeshObject("a")); }, "'a'");
+  expectErrorNaming<InvalidArgument>([&] { (void)lib.addDeferred("a", "mesh", [] { return tinyMeshObject("a"); }); }, "'a'");
+  EXPECT_THROW((void)lib.add("", tinyMeshObject("x")), InvalidArgument);
   EXPECT_THROW((void)lib.add("n", nullptr), InvalidArgument);
   EXPECT_THROW((void)lib.addDeferred("f", "mesh", nullptr), InvalidArgument);
   EXPECT_EQ(lib.size(), 1u);
   EXPECT_EQ(lib.find("n"), std::nullopt);
   EXPECT_EQ(lib.find("f"), std::nullopt);
   // The rejected names are still free.
-  EXPECT_EQ(lib.add("n", tinyObject("n")), 1u);
+  EXPECT_EQ(lib.add("n", tinyMeshObject("n")), 1u);
 }
 
 TEST(ObjectLibrary, DeferredObjectIsBuiltOnceUnderConcurrentGet) {
@@ -70,7 +65,7 @@ TEST(ObjectLibrary, DeferredObjectIsBuiltOnceUnderConcurrentGet) {
   const ObjectId id = lib.addDeferred("slow", "mesh", [&calls] {
     calls.fetch_add(1);
     std::this_thread::sleep_for(30ms);  // long enough for every thread to arrive during the build
-    return tinyObject("slow");
+    return tinyMeshObject("slow");
   });
   constexpr int kThreads = 12;
   std::latch start(kThreads);
@@ -98,7 +93,7 @@ TEST(ObjectLibrary, FailedBuildIsRethrownNamingTheObjectAndRetried) {
   std::atomic<int> calls{0};
   const ObjectId id = lib.addDeferred("flaky", "mesh", [&calls]() -> std::shared_ptr<const Object> {
     if (calls.fetch_add(1) == 0) throw std::runtime_error("disk on fire");
-    return tinyObject("flaky");
+    return tinyMeshObject("flaky");
   });
   expectErrorNaming<InvalidArgument>([&] { (void)lib.get(id); }, "flaky");
   expectErrorNaming<InvalidArgument>([&] { (void)lib.get(kInvalidObject); }, "unknown");
@@ -140,7 +135,7 @@ TEST(ObjectLibrary, BuildAllRunsFactoriesInParallel) {
       const auto deadline = std::chrono::steady_clock::now() + 3s;
       while (max_in_flight.load() < 2 && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(1ms);
       in_flight.fetch_sub(1);
-      return tinyObject(name);
+      return tinyMeshObject(name);
     }));
   }
   lib.buildAll();
@@ -157,9 +152,9 @@ TEST(ObjectLibrary, BuildAllReportsTheFirstFailureAfterBuildingTheRest) {
   const auto failing = [](const char* why) {
     return [why]() -> std::shared_ptr<const Object> { throw std::runtime_error(why); };
   };
-  const ObjectId ok1 = lib.addDeferred("ok1", "mesh", [] { return tinyObject("ok1"); });
+  const ObjectId ok1 = lib.addDeferred("ok1", "mesh", [] { return tinyMeshObject("ok1"); });
   const ObjectId bad1 = lib.addDeferred("bad1", "mesh", failing("first reason"));
-  const ObjectId ok2 = lib.addDeferred("ok2", "mesh", [] { return tinyObject("ok2"); });
+  const ObjectId ok2 = lib.addDeferred("ok2", "mesh", [] { return tinyMeshObject("ok2"); });
   const ObjectId bad2 = lib.addDeferred("bad2", "mesh", failing("second reason"));
   const std::vector<ObjectId> ids{ok1, bad1, ok2, bad2};
   expectErrorNaming<InvalidArgument>([&] { lib.buildAll(ids); }, "bad1");
@@ -173,7 +168,7 @@ TEST(ObjectLibrary, BuildAllReportsTheFirstFailureAfterBuildingTheRest) {
   expectErrorNaming<InvalidArgument>([&] { lib.buildAll(only_bad2); }, "second reason");
 
   // An unknown id is refused before anything is built.
-  const ObjectId later = lib.addDeferred("later", "mesh", [] { return tinyObject("later"); });
+  const ObjectId later = lib.addDeferred("later", "mesh", [] { return tinyMeshObject("later"); });
   const std::vector<ObjectId> with_unknown{later, 99};
   EXPECT_THROW(lib.buildAll(with_unknown), InvalidArgument);
   EXPECT_FALSE(lib.isBuilt(later));

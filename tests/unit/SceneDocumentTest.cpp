@@ -5,6 +5,7 @@
 // edits, custom object types; every malformed input names the file and the JSON pointer.
 
 #include "KdTreeChecks.h"
+#include "MeshChecks.h"
 #include "TestSupport.h"
 
 #include "duplex/accel/Error.h"
@@ -672,8 +673,8 @@ TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
   int built_now = 0;
   auto tetra = [](double edge, const std::string& name) {
     const float e = static_cast<float>(edge);
-    return std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(
-        {{0, 0, 0}, {e, 0, 0}, {0, e, 0}, {0, 0, e}}, {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}, name)));
+    return test::buildChecked(TriangleMesh::fromTriangles({{0, 0, 0}, {e, 0, 0}, {0, e, 0}, {0, 0, e}},
+                                                          {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}, name));
   };
   registry.add({"tetra", [&](const nlohmann::json& spec, const ObjectSpecContext& ctx) -> ObjectSpecResult {
                   ctx.onlyKeys(spec, ctx.pointer, {"edge"});

@@ -29,12 +29,7 @@ namespace duplex {
 namespace {
 
 using test::expectErrorNaming;
-
-std::shared_ptr<const Object> tinyObject(const std::string& name) {
-  const std::vector<float> positions{0, 0, 0, 1, 0, 0, 0, 1, 0};
-  const std::vector<std::uint32_t> indices{0, 1, 2};
-  return std::make_shared<MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, name)));
-}
+using test::tinyMeshObject;
 
 bool sameAffine(const Affine& a, const Affine& b) { return a.linear == b.linear && a.translation == b.translation; }
 
@@ -43,10 +38,10 @@ struct Library {
   std::shared_ptr<ObjectLibrary> lib = std::make_shared<ObjectLibrary>();
   ObjectId failing = kInvalidObject;
   Library() {
-    (void)lib->add("o0", tinyObject("o0"));
-    (void)lib->add("o1", tinyObject("o1"));
-    (void)lib->add("o2", tinyObject("o2"));
-    (void)lib->addDeferred("lazy", "mesh", [] { return tinyObject("lazy"); });
+    (void)lib->add("o0", tinyMeshObject("o0"));
+    (void)lib->add("o1", tinyMeshObject("o1"));
+    (void)lib->add("o2", tinyMeshObject("o2"));
+    (void)lib->addDeferred("lazy", "mesh", [] { return tinyMeshObject("lazy"); });
     failing = lib->addDeferred("broken", "mesh", []() -> std::shared_ptr<const Object> { throw std::runtime_error("no"); });
   }
 };

@@ -2,6 +2,7 @@
 // watertight mesh, whatever its material, near the origin or far from it, and the energy balance
 // closes exactly. Also the depth limit: in a closed mirror every path ends by it.
 
+#include "MeshChecks.h"
 #include "SensorFixture.h"
 #include "TestSupport.h"
 
@@ -16,7 +17,7 @@ using test::Fixture;
 // [-1, 1]^3 outside it, a two-sided 0.5 x 0.5 sensor inside it; everything moved by `offset`.
 SensorScene sphereAroundTheLight(Fixture& f, const Material& m, const glm::dvec3& offset) {
   const auto mesh = std::make_shared<const TriangleMesh>(test::icosphere(3, 0.8));
-  f.add(std::make_shared<const MeshObject>(mesh), test::translate(offset.x, offset.y, offset.z), "shell", m);
+  f.add(test::buildChecked(mesh), test::translate(offset.x, offset.y, offset.z), "shell", m);
   const glm::dvec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
   for (int k = 0; k < 6; ++k) {
     const std::string name = "outside" + std::to_string(k);
