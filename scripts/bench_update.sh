@@ -16,7 +16,12 @@
 #   SCENE_DIR   generated scenes (default: out/paper)
 #   REPEAT      commits per measurement of ours (default 1000: the trace after 1,000 commits)
 #   BASELINE_REPEAT  commits per measurement of the full-rebuild and Embree baselines (default 30)
+#   BUILD_REPEAT  rounds of full builds (ours warm, ours from the prepared library, Embree's;
+#               interleaved) per run (default 7)
 #   SCENES      subset, e.g. "paper-1 robot5"
+#
+# Unattended: configures BUILD_DIR (Release, examples and benchmarks on, so that `duplex` has the
+# Embree baseline when Embree is installed), builds duplex_cli, generates the scenes and runs.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
@@ -24,11 +29,12 @@ OUTDIR=${OUTDIR:-$ROOT/docs/bench/update}
 SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
 REPEAT=${REPEAT:-1000}
 BASELINE_REPEAT=${BASELINE_REPEAT:-30}
+BUILD_REPEAT=${BUILD_REPEAT:-7}
 SCENES=${SCENES:-"paper-1 paper-2 paper-3 robot5 hammer1k"}
 DATA=$ROOT/../shared/data/meshes
 DUPLEX=$BUILD_DIR/bin/duplex
 if [ ! -d "$DATA" ]; then echo "bench_update.sh: $DATA is absent; the paper's scenes need it" >&2; exit 1; fi
-cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DDUPLEX_BUILD_EXAMPLES=ON -DDUPLEX_BUILD_BENCH=ON >/dev/null
 cmake --build "$BUILD_DIR" -j2 --target duplex_cli >/dev/null
 mkdir -p "$OUTDIR" "$SCENE_DIR"
 
@@ -51,7 +57,7 @@ for scene in $SCENES; do
     tag=${moves%\%}; [ "$moves" = "1%" ] && tag=1pct
     echo "== $scene, $moves moved per commit" >&2
     "$DUPLEX" bench update --scene "$SCENE_DIR/$scene.json" --moves "$moves" --repeat "$REPEAT" \
-      --baseline-repeat "$BASELINE_REPEAT" --seed 1 > "$OUTDIR/${scene}_${tag}.json"
+      --baseline-repeat "$BASELINE_REPEAT" --build-repeat "$BUILD_REPEAT" --seed 1 > "$OUTDIR/${scene}_${tag}.json"
   done
 done
 python3 "$ROOT/scripts/update_table.py" "$OUTDIR" > "$OUTDIR/table.md"

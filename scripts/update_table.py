@@ -29,6 +29,15 @@ def ratio(a, b):
     return "-" if a is None or b is None or b == 0 else f"{a / b:.2f}"
 
 
+def round_ratio(j, key, ours_key):
+    """Median of the per-round ratios ours / Embree (builds interleaved in one process) with the
+    rounds' range; runs older than those keys: the ratio of the two medians, marked '*'."""
+    if f"{key}_median" in j:
+        return f"{j[key + '_median']:.2f}, {j[key + '_min']:.2f}-{j[key + '_max']:.2f}"
+    r = ratio(j.get(ours_key), j.get("embree_build_ms"))
+    return r if r == "-" else r + "*"
+
+
 def main():
     d = sys.argv[1]
     rows = []
@@ -41,11 +50,10 @@ def main():
         ep = pct.get("embree_update_ms_median") if pct else None
         rows.append([
             NAMES[scene], f"{one['instances']:,} / {one['triangles']:,}", paper[0], paper[1],
-            (f"{ms(one['build_ms'])} / {ms(one['build_ms_warm_median'])} "
-             f"({ratio(one['build_ms_warm_median'], one.get('embree_build_ms'))})"
+            (f"{ms(one['build_ms'])} / {ms(one['build_ms_warm_median'])} ({round_ratio(one, 'full_build_ratio', 'build_ms_warm_median')})"
              if "build_ms_warm_median" in one else
              f"{ms(one['build_ms'])} ({ratio(one['build_ms'], one.get('embree_build_ms'))})"),
-            (f"{ms(one['prepared_build_ms_median'])} ({ratio(one['prepared_build_ms_median'], one.get('embree_build_ms'))})"
+            (f"{ms(one['prepared_build_ms_median'])} ({round_ratio(one, 'prepared_build_ratio', 'prepared_build_ms_median')})"
              if "prepared_build_ms_median" in one else "-"),
             f"{ms(one['update_ms_median'])} ({ratio(e1, one['update_ms_median'])}x)",
             f"{ms(pct['update_ms_median'])} ({ratio(ep, pct['update_ms_median'])}x)" if pct else "-",
@@ -55,8 +63,8 @@ def main():
             f"{one.get('trace_slowdown_paired_pct', one['trace_slowdown_pct']):+.1f}% after {one['repeat']:,}",
         ])
     head = ["scene", "instances / triangles", "paper: full build", "paper: update",
-            "ours: full build ms, cold / warm median (warm / Embree's median)",
-            "ours: full build from a prepared library, ms (/ Embree's full build)", "1 moved: ms (Embree / ours)", "1% moved: ms (Embree / ours)",
+            "ours: full build ms, cold / warm median (warm / Embree's: median of the per-round ratios, rounds' range)",
+            "ours: full build from a prepared library, ms (/ Embree's full build: per-round median, range)", "1 moved: ms (Embree / ours)", "1% moved: ms (Embree / ours)",
             "add / remove ms", "full top-level rebuild ms", "primary Mrays/s (/ Embree)",
             "trace time vs a fresh build (paired)"]
     print("| " + " | ".join(head) + " |")
@@ -69,6 +77,10 @@ def main():
         print(f"\n{any_run.get('threads')} threads; {m.get('cpu_model', '?')}; Embree {m.get('embree_version', '-')}; "
               f"load average at start {m.get('loadavg_at_start', '?')}; revision {m.get('duplex_git_revision', '?')}; "
               f"{m.get('date_utc', '')}.")
+        print(f"\nFull builds: {any_run.get('full_build_rounds', '?')} rounds per run, each one warm build of ours, one "
+              "from the prepared library and one of Embree's two-level build (default flags), alternating which side "
+              "goes first; the ratios are medians of the per-round ratios (a '*' marks a run without rounds: the "
+              "ratio of the two medians).")
 
 
 if __name__ == "__main__":

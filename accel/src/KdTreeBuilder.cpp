@@ -14,8 +14,9 @@
 //    collects the few events there; KdBuildConfig::refine_max bounds the node size), so the plane
 //    sits on a primitive bound as in Wald & Havran's event sweep. Only nodes of at most
 //    exact_sweep_max references sweep every event, and a single reference has only its faces.
-//  - Partitions of large nodes run in parallel chunks (concatenated in order: the tree does not
-//    depend on the thread count); subtrees are TBB tasks.
+//  - Subtrees are TBB tasks. The passes over a large node's references (preparation, binning, the
+//    refinement's event collection, the partition) run in parallel chunks whose results are
+//    combined in order, so the tree depends neither on the thread count nor on the chunking.
 
 #include "duplex/accel/KdTreeBuilder.h"
 
@@ -23,6 +24,7 @@
 #include "duplex/accel/Log.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_group.h>
 
 #include <emmintrin.h>
@@ -142,12 +144,6 @@ struct Extent {
                  std::numeric_limits<float>::infinity()};
   float hi[3] = {-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
                  -std::numeric_limits<float>::infinity()};
-  void merge(const Extent& o) {
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], o.lo[k]);
-      hi[k] = std::max(hi[k], o.hi[k]);
-    }
-  }
 };
 
 // SSE accumulator of an Extent.
@@ -158,6 +154,8 @@ struct ExtentAcc {
     lo = _mm_min_ps(lo, rlo);
     hi = _mm_max_ps(hi, rhi);
   }
+  /// Folds in the accumulator of the references that follow this one's, as add() would have.
+  void merge(const ExtentAcc& later) { add(later.lo, later.hi); }
   [[nodiscard]] Extent extent() const {
     alignas(16) float l[4], h[4];
     _mm_store_ps(l, lo);
@@ -257,8 +255,15 @@ struct SmallEvents {
   float starts[3][kMax], ends[3][kMax], planars[3][kMax];
 };
 
-// References per chunk of a parallel partition, and the node size from which it is used.
-constexpr std::size_t kPartitionChunk = 16384;
+// Passes over a node's references (the root's preparation and binning, the refinement's event
+// collection, the partition) run in parallel chunks of kPassChunk references in nodes of at least
+// kParallelPassMin, so that the top levels, which subtree tasks cannot split, keep both threads busy
+// (the hammer's 60k references used to be prepared, binned, refined and partitioned on one thread
+// while the other waited). Every chunked pass gives the serial pass's result bit for bit: outputs
+// are concatenated in chunk order, bin counts added, and extents merged as the serial pass folds
+// them (on equal values, -0 and +0, the later one wins, as _mm_min_ps / _mm_max_ps keep it).
+constexpr std::size_t kPassChunk = 8192;
+constexpr std::size_t kParallelPassMin = 2 * kPassChunk;
 
 class Builder {
  public:
@@ -344,6 +349,27 @@ class Builder {
   }
 
  private:
+  // Chunks of a pass over n references: 1 (serial) below kParallelPassMin or in a serial build.
+  [[nodiscard]] std::size_t passChunks(std::size_t n) const {
+    return cfg_.parallel_threshold > 0 && n >= kParallelPassMin ? (n + kPassChunk - 1) / kPassChunk : 1;
+  }
+
+  // Bins every reference into `bins` (initialised, counts zero): chunks bin into copies whose
+  // counts are added.
+  void binRefs(const RefVec& refs, Bins& bins) const {
+    const std::size_t n = refs.size(), chunks = passChunks(n);
+    if (chunks == 1) {
+      for (const PrimRef& r : refs) bins.add(r.loadLo(), r.loadHi());
+      return;
+    }
+    std::vector<Bins> parts(chunks, bins);
+    tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+      const std::size_t end = std::min(n, (c + 1) * kPassChunk);
+      for (std::size_t i = c * kPassChunk; i < end; ++i) parts[c].add(refs[i].loadLo(), refs[i].loadHi());
+    });
+    for (const Bins& part : parts) bins.merge(part);
+  }
+
   void buildChild(Child& c, int depth, int bad_refines, Subtree& out) const {
     build(std::move(c.refs), c.box, c.binned ? &c.bins : nullptr, c.extent, depth, bad_refines, out);
   }
@@ -498,7 +524,7 @@ class Builder {
         hi[k] = std::min(g.hi[k], extent.hi[k]);
       }
       own.init(lo, hi, binsFor(n));
-      for (const PrimRef& r : refs) own.add(r.loadLo(), r.loadHi());
+      binRefs(refs, own);
       bins = &own;
     }
     const Bins& b = *bins;
@@ -548,10 +574,11 @@ class Builder {
   // Wald & Havran: a primitive counts below a plane p if its lower bound is < p, above if its
   // upper bound is > p; a primitive lying in p goes to the cheaper side.
   Split sweepEvents(const RefVec& refs, const NodeGeometry& g, int axis, float win_lo, float win_hi) const {
-    std::size_t below_window = 0, above_window = 0;  // lo < win_lo, hi > win_hi
-    // Scratch for the three event lists: on the stack for small nodes (the many tiny nodes of a
-    // top level), per thread otherwise (allocation dominated).
     const std::size_t n = refs.size();
+    if (passChunks(n) > 1) return sweepEventsChunked(refs, g, axis, win_lo, win_hi);
+    // Scratch for the three event lists: on the stack for small nodes (the many tiny nodes of a
+    // top level), per thread otherwise (allocation dominated). Nothing here waits for other tasks,
+    // so no other build can run on this thread and reuse the scratch meanwhile.
     constexpr std::size_t kStack = 32;
     float stack_events[3 * kStack];
     float* events = stack_events;
@@ -563,14 +590,67 @@ class Builder {
     float* const starts = events;
     float* const ends = events + n;
     float* const planars = events + 2 * n;
+    const WindowEvents w = collectWindow(refs.data(), refs.data() + n, axis, win_lo, win_hi, starts, ends, planars);
+    sortEvents(starts, w.n_starts);
+    sortEvents(ends, w.n_ends);
+    sortEvents(planars, w.n_planars);
+    return sweepSorted(g, axis, starts, w.n_starts, ends, w.n_ends, planars, w.n_planars, w.below, w.above);
+  }
+
+  // sweepEvents of a large node: the events collected in parallel chunks, concatenated in chunk
+  // order (the serial pass's lists exactly), the start and end lists sorted side by side.
+  Split sweepEventsChunked(const RefVec& refs, const NodeGeometry& g, int axis, float win_lo, float win_hi) const {
+    const std::size_t n = refs.size(), chunks = passChunks(n);
+    // Not the thread-local scratch: while this thread waits for the chunks it may run another
+    // subtree's build, which would use (and could reallocate) that scratch.
+    std::vector<float, UninitAllocator<float>> events(3 * n);
+    float* const starts = events.data();
+    float* const ends = starts + n;
+    float* const planars = starts + 2 * n;
+    std::vector<WindowEvents> parts(chunks);
+    tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+      const std::size_t begin = c * kPassChunk, end = std::min(n, begin + kPassChunk);
+      parts[c] = collectWindow(refs.data() + begin, refs.data() + end, axis, win_lo, win_hi, starts + begin,
+                               ends + begin, planars + begin);
+    });
+    WindowEvents w;
+    for (std::size_t c = 0; c < chunks; ++c) {
+      // Each chunk's events start at its first reference's slot, at or after where they go.
+      const std::size_t begin = c * kPassChunk;
+      std::copy_n(starts + begin, parts[c].n_starts, starts + w.n_starts);
+      std::copy_n(ends + begin, parts[c].n_ends, ends + w.n_ends);
+      std::copy_n(planars + begin, parts[c].n_planars, planars + w.n_planars);
+      w.n_starts += parts[c].n_starts;
+      w.n_ends += parts[c].n_ends;
+      w.n_planars += parts[c].n_planars;
+      w.below += parts[c].below;
+      w.above += parts[c].above;
+    }
+    tbb::parallel_invoke([&] { sortEvents(starts, w.n_starts); }, [&] { sortEvents(ends, w.n_ends); });
+    sortEvents(planars, w.n_planars);
+    return sweepSorted(g, axis, starts, w.n_starts, ends, w.n_ends, planars, w.n_planars, w.below, w.above);
+  }
+
+  // What collectWindow found: events stored, and references starting below (lo < win_lo) and
+  // ending above (hi > win_hi) the window.
+  struct WindowEvents {
+    std::size_t n_starts = 0, n_ends = 0, n_planars = 0, below = 0, above = 0;
+  };
+
+  // The events of references [first, last) on `axis` inside [win_lo, win_hi]: lower bounds to
+  // `starts`, upper bounds to `ends`, bounds of references lying in a plane to `planars`, each in
+  // reference order (each array has room for last - first values).
+  static WindowEvents collectWindow(const PrimRef* first, const PrimRef* last, int axis, float win_lo, float win_hi,
+                                    float* starts, float* ends, float* planars) {
     std::size_t n_starts = 0, n_ends = 0, n_planars = 0;
+    std::size_t below_window = 0, above_window = 0;
     // Without branches: whether a bound falls into the window is a coin flip per reference, and
     // mispredicted branches here cost more than the stores (every slot written lies below n). Four
     // references at a time: the six comparisons of each are SSE compares and bit masks; only the
     // compaction stores stay scalar (the same events, in the same order, as one at a time).
     const __m128 lo4 = _mm_set1_ps(win_lo), hi4 = _mm_set1_ps(win_hi);
-    const PrimRef* r = refs.data();
-    const PrimRef* const end4 = r + (n & ~std::size_t{3});
+    const PrimRef* r = first;
+    const PrimRef* const end4 = r + (static_cast<std::size_t>(last - first) & ~std::size_t{3});
     for (; r != end4; r += 4) {
       const float a[4] = {r[0].lo[axis], r[1].lo[axis], r[2].lo[axis], r[3].lo[axis]};
       const float b[4] = {r[0].hi[axis], r[1].hi[axis], r[2].hi[axis], r[3].hi[axis]};
@@ -595,7 +675,7 @@ class Builder {
         }
       }
     }
-    for (; r != refs.data() + n; ++r) {
+    for (; r != last; ++r) {
       const float a = r->lo[axis], b = r->hi[axis];
       const bool a_in = (a >= win_lo) & (a <= win_hi);
       below_window += a < win_lo;
@@ -607,10 +687,7 @@ class Builder {
       planars[n_planars] = a;
       n_planars += a_in & (a == b);
     }
-    sortEvents(starts, n_starts);
-    sortEvents(ends, n_ends);
-    sortEvents(planars, n_planars);
-    return sweepSorted(g, axis, starts, n_starts, ends, n_ends, planars, n_planars, below_window, above_window);
+    return {n_starts, n_ends, n_planars, below_window, above_window};
   }
 
   // The exact sweep of a node of at most kSmallSweep references with no planar one on `axis`,
@@ -834,7 +911,7 @@ class Builder {
       }
     }
     const std::size_t n = refs.size();
-    const std::size_t chunks = cfg_.parallel_threshold > 0 && n >= 4 * kPartitionChunk ? (n + kPartitionChunk - 1) / kPartitionChunk : 1;
+    const std::size_t chunks = passChunks(n);
     if (chunks == 1) {
       // A child receives each reference of the node at most once.
       lower.refs.resize(n);
@@ -857,7 +934,7 @@ class Builder {
     std::vector<ChunkOut> parts(chunks);
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
       ChunkOut& p = parts[c];
-      const std::size_t begin = c * kPartitionChunk, end = std::min(n, begin + kPartitionChunk);
+      const std::size_t begin = c * kPassChunk, end = std::min(n, begin + kPassChunk);
       Sink sinks[2];
       for (int side = 0; side < 2; ++side) {
         const Child& child = side == 0 ? lower : upper;
@@ -879,12 +956,12 @@ class Builder {
       tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
         std::copy(parts[c].refs[side].begin(), parts[c].refs[side].end(), child.refs.begin() + static_cast<std::ptrdiff_t>(offset[c]));
       });
-      Extent e;
+      ExtentAcc e;
       for (std::size_t c = 0; c < chunks; ++c) {
-        e.merge(parts[c].extent[side].extent());
+        e.merge(parts[c].extent[side]);
         if (child.binned) child.bins.merge(parts[c].bins[side]);
       }
-      child.extent = e;
+      child.extent = e.extent();
     }
   }
 
@@ -900,6 +977,43 @@ bool finiteBox(const Box& b) {
   const float zero = (b.lo.x - b.lo.x) + (b.lo.y - b.lo.y) + (b.lo.z - b.lo.z) + (b.hi.x - b.hi.x) +
                      (b.hi.y - b.hi.y) + (b.hi.z - b.hi.z);
   return zero == 0.0f && !b.empty();
+}
+
+// The references of the primitives with finite, non-empty bounds, in primitive order, and the
+// union of those bounds (`bounds` starts empty). A parallel build of many primitives fills chunks
+// side by side, then closes the gaps left by skipped primitives and extends the bounds chunk by
+// chunk in order, which gives the serial loop's result (Box::extend keeps the earlier of equal values).
+void prepareRefs(std::span<const Box> prim_bounds, bool parallel, RefVec& refs, Box& bounds) {
+  const std::size_t n = prim_bounds.size();
+  const std::size_t chunks = parallel && n >= kParallelPassMin ? (n + kPassChunk - 1) / kPassChunk : 1;
+  refs.resize(n);
+  std::vector<std::size_t> kept(chunks);
+  std::vector<Box> chunk_bounds(chunks);
+  const auto fill = [&](std::size_t c) {
+    const std::size_t begin = c * kPassChunk, end = chunks == 1 ? n : std::min(n, begin + kPassChunk);
+    PrimRef* const first = refs.data() + begin;
+    PrimRef* out = first;
+    Box b;
+    for (std::size_t i = begin; i < end; ++i) {
+      if (!finiteBox(prim_bounds[i])) continue;
+      *out++ = PrimRef(prim_bounds[i], static_cast<std::uint32_t>(i));
+      b.extend(prim_bounds[i]);
+    }
+    kept[c] = static_cast<std::size_t>(out - first);
+    chunk_bounds[c] = b;
+  };
+  if (chunks == 1)
+    fill(0);
+  else
+    tbb::parallel_for(std::size_t{0}, chunks, fill);
+  std::size_t total = 0;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const std::size_t begin = c * kPassChunk;
+    if (begin != total) std::copy_n(refs.data() + begin, kept[c], refs.data() + total);
+    total += kept[c];
+    bounds.extend(chunk_bounds[c]);
+  }
+  refs.resize(total);
 }
 
 }  // namespace
@@ -950,12 +1064,7 @@ KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const
 
   KdTree tree;
   RefVec refs;
-  refs.reserve(prim_bounds.size());
-  for (std::size_t i = 0; i < prim_bounds.size(); ++i) {
-    if (!finiteBox(prim_bounds[i])) continue;
-    refs.emplace_back(prim_bounds[i], static_cast<std::uint32_t>(i));
-    tree.bounds.extend(prim_bounds[i]);
-  }
+  prepareRefs(prim_bounds, config.parallel_threshold > 0, refs, tree.bounds);
   if (refs.empty()) return tree;
 
   int max_depth = config.max_depth;

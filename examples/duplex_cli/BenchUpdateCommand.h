@@ -41,7 +41,10 @@ struct BenchUpdateOptions {
   std::uint64_t seed = 1;   ///< seed of the edit plan
   int threads = 0;          ///< builds, commits and tracing; 0 means all hardware threads
   std::uint32_t primary = 512;  ///< primary rays of a W x W image (the camera of `duplex rays`)
-  int build_repeat = 3;     ///< full Embree builds timed per mode
+  /// Rounds of full builds: each round one of ours (warm), one from the prepared library and one
+  /// of Embree's (default flags), in alternating order; the dynamic / low quality Embree top level
+  /// is built this many times after them.
+  int build_repeat = 7;
   /// Commits per measurement of the baselines (full top-level rebuild, Embree): the first ones of
   /// the same plan. 0 means `repeat`. Lets ours run 1,000 commits (the trace after 1,000 commits)
   /// without 1,000 full rebuilds of each baseline.
@@ -63,7 +66,12 @@ struct BenchUpdateOptions {
 /// with Embree the same figures prefixed "embree_" and "embree_dynamic_low_" plus
 /// embree_*build*_ms, agreement_with_embree (fraction of primary rays with the same instance and
 /// triangle as ours with full rebuilds, which replayed the same baseline plan) and
-/// embree_update_over_ours; machine. Times are wall-clock milliseconds. Progress goes to stderr.
+/// embree_update_over_ours; full builds: build_ms_warm_median, bottom_build_ms_warm_median,
+/// prepared_build_ms_median, prepared_bottom_load_ms_median, prepared_library_bytes,
+/// full_build_rounds, and with Embree full_build_ratio_median / _min / _max and
+/// prepared_build_ratio_median / _min / _max (over the rounds, each round's ours / Embree's full
+/// two-level build, timed side by side); machine. Times are wall-clock milliseconds. Progress goes
+/// to stderr.
 /// Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options);
 

@@ -188,7 +188,7 @@ int main(int argc, char** argv) {
   update_cmd->add_option("--baseline-repeat", bench_update.baseline_repeat,
                          "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
       ->check(kDecimal)->check(CLI::Range(0, 1000000));
-  update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Full Embree builds timed per mode (default 3)")
+  update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Rounds of full builds, ours and Embree's interleaved (default 7)")
       ->check(kDecimal)->check(CLI::Range(1, 100));
 
   // duplex sensor (issue 5)

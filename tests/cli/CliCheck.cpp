@@ -494,7 +494,14 @@ int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
       expect(number(j, "embree_update_ms_median") > 0.0, "\"embree_update_ms_median\" is not positive: " + j.dump());
       expect(number(j, "agreement_with_embree") >= 0.99, "ours and Embree disagree after the same edits: " + j.dump());
       expect(number(j, "hits") == number(j, "embree_hits"), "ours and Embree hit different ray counts: " + j.dump());
+      // The full builds' interleaved rounds (7 by default): per-round ratios ours / Embree.
+      for (const std::string key : {"full_build_ratio", "prepared_build_ratio"})
+        expect(number(j, (key + "_min").c_str()) > 0.0 &&
+                   number(j, (key + "_min").c_str()) <= number(j, (key + "_median").c_str()) &&
+                   number(j, (key + "_median").c_str()) <= number(j, (key + "_max").c_str()),
+               "\"" + key + "\" min / median / max out of order: " + j.dump());
     }
+    expect(number(j, "full_build_rounds") == 7.0, "\"full_build_rounds\" is not the default 7: " + j.dump());
     std::cout << "bench update " << scene.filename().string() << ": " << j.dump() << "\n";
   }
   return 0;

@@ -298,6 +298,51 @@ TEST(KdTreeBuilder, ParallelBuildEqualsSerialBuild) {
   EXPECT_GT(a.nodes.size(), 10000u);
 }
 
+TEST(KdTreeBuilder, ChunkedPassesEqualSerialPassesWithSignedZerosAndSkippedBoxes) {
+  // 40,000 boxes: the root's preparation, binning, event collection and partition run in parallel
+  // chunks (from 16,384 references) and must give the serial passes' tree bit for bit. Traps for a
+  // chunked pass: unusable (NaN, empty) boxes inside chunks, which the preparation skips and whose
+  // gaps it must close in order; and the lower bound x = 0 of every second box, stored as -0 in the
+  // first half of the input and +0 in the second, so that the exact extent of the lower child (which
+  // the serial pass folds with _mm_min_ps, the later of two equal values winning) decides the sign
+  // of the empty-space cut at x = 0; a merge of chunk extents that kept the earlier value would
+  // give -0 there.
+  constexpr std::size_t kCount = 40000;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f), s(0.001f, 0.02f);
+  std::vector<Box> boxes;
+  for (std::size_t i = 0; i < kCount; ++i) {
+    if (i % 997 == 13) {
+      boxes.push_back(i % 2 ? Box({kNaN, 0.0f, 0.0f}, {1.0f, 1.0f, 1.0f}) : Box());
+      continue;
+    }
+    const float zero = i < kCount / 2 ? -0.0f : 0.0f;
+    const glm::vec3 lo = i % 2 == 0 ? glm::vec3(zero, u(rng), u(rng))               // x from 0, y in [0, 1]
+                                    : glm::vec3(2.0f * u(rng) - 1.0f, 2.0f + u(rng), u(rng));  // x from -1, y in [2, 3]
+    boxes.emplace_back(lo, lo + glm::vec3(s(rng), s(rng), s(rng)));
+  }
+  KdBuildConfig serial;
+  serial.intersection_cost = 1.0f;  // as the top level: small leaves, many cuts
+  serial.parallel_threshold = 0;
+  const KdTree a = buildKdTreeOverBoxes(boxes, serial);
+  // The serial tree has the +0 cut (else the trap is not armed) and no -0 split.
+  std::size_t plus_zero = 0, minus_zero = 0;
+  for (const KdNode& n : a.nodes)
+    if (!n.isLeaf() && n.axis() == 0 && n.split() == 0.0f) (std::signbit(n.split()) ? minus_zero : plus_zero) += 1;
+  EXPECT_GT(plus_zero, 0u);
+  EXPECT_EQ(minus_zero, 0u);
+  for (const int threads : {1, 2, 4}) {
+    KdBuildConfig parallel = serial;
+    parallel.parallel_threshold = KdBuildConfig{}.parallel_threshold;
+    KdTree b;
+    tbb::task_arena arena(threads);
+    arena.execute([&] { b = buildKdTreeOverBoxes(boxes, parallel); });
+    EXPECT_EQ(nodeFields(a), nodeFields(b)) << threads << " threads";
+    EXPECT_EQ(a.prim_indices, b.prim_indices) << threads << " threads";
+    EXPECT_EQ(a.bounds, b.bounds);
+  }
+}
+
 TEST(KdTreeBuilder, BinningKnobsKeepInvariants) {
   // Exact sweeps everywhere / nowhere, refinement never / only in small nodes.
   const auto tris = randomTriangles(2500, 41);

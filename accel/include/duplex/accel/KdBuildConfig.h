@@ -49,8 +49,12 @@ struct KdBuildConfig {
   int max_depth = 0;
   /// Leaf size at which the Median / SpatialMiddle heuristics stop splitting.
   std::uint32_t max_leaf_size = 4;
-  /// Build subtrees on TBB's threads when they hold at least this many references (0: serial).
-  std::uint32_t parallel_threshold = 4096;
+  /// Build subtrees on TBB's threads when they hold at least this many references (0: serial, and
+  /// no pass runs in parallel chunks either). The tree does not depend on it. 1024 rather than the
+  /// former 4096: the nodes of 1-4k references above the serial subtrees were most of what kept a
+  /// second thread idle (critical path of paper-2's top level 23 -> 6 ms of a 69 ms one-thread
+  /// build, of the hammer's 3.4 -> 2.2 of 36 ms; KdTreeBuilder.cpp's chunked passes do the rest).
+  std::uint32_t parallel_threshold = 1024;
   /// Clip primitives to node boxes ("perfect splits"). Off: keep unclipped bounds (faster build,
   /// worse tree), so the benchmark can chart the difference.
   bool clip_primitives = true;
