@@ -3,6 +3,8 @@
 /// Scene building blocks of the sensor-run tests: quads, sensors, placements, a point light, a graph
 /// with per-object materials, a closed box of sensors, and comparisons of run results.
 
+#include "MeshChecks.h"
+
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/TriangleMesh.h"
 #include "duplex/scenegraph/SceneGraph.h"
@@ -22,11 +24,12 @@ namespace duplex::test {
 
 inline constexpr double kPi = std::numbers::pi;
 
-inline std::shared_ptr<const Object> quad(double half, const std::string& name) {
-  const float h = static_cast<float>(half);
-  const std::vector<float> p = {-h, -h, 0, h, -h, 0, h, h, 0, -h, h, 0};
+// A square of half size `half` in the plane z (object space), normal +z, its tree checked.
+inline std::shared_ptr<const Object> quad(double half, const std::string& name, double z = 0.0) {
+  const float h = static_cast<float>(half), zf = static_cast<float>(z);
+  const std::vector<float> p = {-h, -h, zf, h, -h, zf, h, h, zf, -h, h, zf};
   const std::vector<std::uint32_t> i = {0, 1, 2, 0, 2, 3};
-  return std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(p, i, name)));
+  return buildChecked(TriangleMesh::fromArrays(p, i, name));
 }
 
 inline std::shared_ptr<const SensorObject> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true,

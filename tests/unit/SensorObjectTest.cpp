@@ -31,7 +31,9 @@ Ray downRay(double x, double y, double z = 1.0) {
   return r;
 }
 
+using test::quad;
 using test::sensor;
+using test::translate;
 
 SensorObject rectangle(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true) {
   return *sensor(w, h, nx, ny, two_sided);
@@ -153,25 +155,12 @@ TEST(SensorObject, RejectsBadSpecs) {
 
 // ---- the crossing query ----
 
-std::shared_ptr<const Object> quad(double half, double z, const std::string& name) {
-  const float h = static_cast<float>(half), zf = static_cast<float>(z);
-  const std::vector<float> p = {-h, -h, zf, h, -h, zf, h, h, zf, -h, h, zf};
-  const std::vector<std::uint32_t> i = {0, 1, 2, 0, 2, 3};
-  return std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(p, i, name)));
-}
-
-Affine translate(double x, double y, double z) {
-  Affine a;
-  a.translation = glm::dvec3(x, y, z);
-  return a;
-}
-
 TEST(CrossingQuery, CrossingsBeforeTheHitInOrderEachOnce) {
   // Sensors at z = 1, 2, 3 (the one at 2 is large: it spans many leaves), a wall at z = 2.5, and a
   // sensor lying on the wall.
   std::vector<InstanceDesc> inst = {
       {sensor(4, 4, 4, 4), translate(0, 0, 1), 10},  {sensor(40, 40, 8, 8), translate(0, 0, 2), 11},
-      {sensor(4, 4, 1, 1), translate(0, 0, 3), 12},  {quad(5, 2.5, "wall"), Affine::identity(), 20},
+      {sensor(4, 4, 1, 1), translate(0, 0, 3), 12},  {quad(5, "wall", 2.5), Affine::identity(), 20},
       {sensor(2, 2, 2, 2), translate(0, 0, 2.5), 13}};
   // Many small sensors elsewhere so that the tree has several leaves.
   for (std::uint32_t k = 0; k < 40; ++k) inst.push_back({sensor(0.5, 0.5, 1, 1), translate(10.0 + k, 7.0, -3.0 + 0.1 * k), 100 + k});
@@ -234,7 +223,7 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
       sensor_world.push_back(w);
     }
     for (std::uint32_t k = 0; k < 10; ++k)
-      inst.push_back({quad(0.5 + std::abs(u(rng)), 0.0, "q"), translate(5 * u(rng), 5 * u(rng), 5 * u(rng)), 1000 + k});
+      inst.push_back({quad(0.5 + std::abs(u(rng)), "q"), translate(5 * u(rng), 5 * u(rng), 5 * u(rng)), 1000 + k});
     TopLevel top;
     top.build(inst);
     QueryContext ctx;
@@ -282,7 +271,7 @@ TEST(CrossingQuery, MediaAttenuateEachSegment) {
   std::vector<InstanceDesc> inst = {{sensor(4, 4, 1, 1), translate(0, 0, 1), 1},
                                     {sensor(4, 4, 1, 1), translate(0, 0, 2), 2},
                                     {std::make_shared<const test::SlabMedium>(0.7, slab), Affine::identity(), 3},
-                                    {quad(5, 3, "wall"), Affine::identity(), 4}};
+                                    {quad(5, "wall", 3), Affine::identity(), 4}};
   TopLevel top;
   top.build(inst);
   QueryContext ctx;

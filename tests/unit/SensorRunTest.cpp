@@ -516,6 +516,29 @@ TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
   EXPECT_EQ(scene.materialOf(scene.document()->instances[0]).type, MaterialType::Absorber);
 }
 
+// scene-json-v1 ignores unknown keys (tools outside the project may add their own), also inside
+// lights and sensors; the project's own format refuses them, naming the key's JSON pointer.
+TEST(SensorSceneFile, UnknownKeysAreIgnoredInSceneJsonV1AndRefusedInTheOwnFormat) {
+  const std::string lights = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2, "colour": "red"}])";
+  const std::string sensors = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2], "vendor": "acme"}])";
+  const SensorScene v1 = SensorScene::load(writeScene(
+      "v1_unknown.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "note": "x", )" + lights + ", " + sensors + "}"));
+  EXPECT_EQ(v1.totalPower(), 2.0);
+  ASSERT_EQ(v1.sensors().size(), 1u);
+  EXPECT_EQ(v1.sensors()[0].object->binCount(), 4u);
+
+  const std::string light_only = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2}])";
+  const std::string sensor_only = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2]}])";
+  const auto own = [](const std::string& name, const std::string& body) {
+    return writeScene(name, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], )" + body + "}");
+  };
+  (void)SensorScene::load(own("own_known.json", light_only + ", " + sensor_only));  // the keys alone are fine
+  expectErrorNaming<FileError>([&] { (void)SensorScene::load(own("own_light.json", lights + ", " + sensor_only)); },
+                               "/lights/0/colour");
+  expectErrorNaming<FileError>([&] { (void)SensorScene::load(own("own_sensor.json", light_only + ", " + sensors)); },
+                               "/sensors/0/vendor");
+}
+
 TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
   const std::string text = R"({"format": "duplex-scene-v1",
     "objects": [{"name": "floor", "plane": {"size": 10}, "material": {"type": "lambertian", "reflectance": 0.5}},
