@@ -792,8 +792,10 @@ Box TopLevel::bounds() const {
 }
 
 std::size_t TopLevel::bytesPerInstance() {
-  // Record, owner pointer, world box, and the id map's node (key, value, next pointer, hash).
-  return sizeof(Record) + sizeof(std::shared_ptr<const Object>) + sizeof(Box) + 4 * sizeof(void*);
+  // Record, query filter, owner pointer, world box, and the id map's node (key, value, next
+  // pointer, hash).
+  return sizeof(Record) + sizeof(toplevel_detail::SlotFilter) + sizeof(std::shared_ptr<const Object>) + sizeof(Box) +
+         4 * sizeof(void*);
 }
 
 }  // namespace duplex

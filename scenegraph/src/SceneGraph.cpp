@@ -726,8 +726,9 @@ std::size_t SceneGraph::bytesPerInstance() {
   // id) and its share of the bucket array at load factor 1. Not counted: names longer than the
   // std::string small-buffer (15 chars; default names like "instance20967" fit) and the batch's
   // transient lists (undo log, touched records), which are empty between commits.
+  // The slot table's two id maps (id -> slot, slot -> id) add 4 bytes each.
   constexpr std::size_t index_entry = sizeof(void*) + sizeof(std::pair<const std::uint64_t, NodeId>) + sizeof(void*);
-  return sizeof(Node) + index_entry;
+  return sizeof(Node) + index_entry + 2 * sizeof(std::uint32_t);
 }
 
 }  // namespace duplex

@@ -15,7 +15,10 @@
 
 #include <gtest/gtest.h>
 
+#include <malloc.h>
+
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -830,6 +833,41 @@ TEST(SceneGraph, MovingOneInstanceOfManyTouchesOnlyIt) {
   EXPECT_EQ(moved.moved, g.children(grp));
   EXPECT_EQ(moved.moved.size(), 210u);
   EXPECT_GT(SceneGraph::bytesPerInstance(), 2 * sizeof(Affine));
+}
+
+// The documented bytes per instance (SceneGraph + TopLevel records) against what adding 20,000
+// instances to a scene with a tracer really allocates (glibc's count of bytes in use): at least
+// the figure (it is not overstated) and at most twice it plus the top-level tree's references and
+// nodes (vectors grow by doubling, so up to half of a vector's capacity may be unused).
+TEST(SceneGraph, BytesPerInstanceAccountsForWhatAnInstanceAllocates) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer's allocator is not glibc's: mallinfo2() does not count it (the Release build runs this test)";
+#endif
+  Library lib;
+  SceneGraph g(lib.lib);
+  SceneTracer tracer(g);
+  const auto add = [&](int first, int count) {
+    for (int i = first; i < first + count; ++i) {
+      char name[16];
+      std::snprintf(name, sizeof name, "i%06d", i);  // fits std::string's small buffer, as counted
+      (void)g.addInstance(kRootNode, static_cast<ObjectId>(i % 3), translation(i % 100, i / 100 % 100, i / 10000), name);
+    }
+    (void)g.commit();
+  };
+  add(0, 1000);
+  const std::size_t before = ::mallinfo2().uordblks;
+  const int n = 20000;
+  add(1000, n);
+  const double measured = double(::mallinfo2().uordblks - before) / n;
+  const double documented = double(SceneGraph::bytesPerInstance() + TopLevel::bytesPerInstance());
+  const TopLevelStats st = tracer.stats();
+  const double tree = (4.0 * double(st.tree.references) + 8.0 * double(st.tree.nodes)) / double(st.instances);
+  EXPECT_GE(measured, 0.95 * documented) << "graph " << SceneGraph::bytesPerInstance() << " + top level "
+                                          << TopLevel::bytesPerInstance() << " bytes documented";
+  EXPECT_LE(measured, 2.0 * (documented + tree)) << "graph " << SceneGraph::bytesPerInstance() << " + top level "
+                                                 << TopLevel::bytesPerInstance() << " + tree " << tree;
+  std::printf("bytes per instance: %.0f allocated, %.0f documented (graph %zu, top level %zu) + tree %.1f\n", measured,
+              documented, SceneGraph::bytesPerInstance(), TopLevel::bytesPerInstance(), tree);
 }
 
 TEST(SceneGraph, ALongSessionOfAddsAndRemovesReusesNodeRecords) {
