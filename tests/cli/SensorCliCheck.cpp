@@ -9,6 +9,10 @@
 
 #include <nlohmann/json.hpp>
 
+#define STB_IMAGE_IMPLEMENTATION
+#define STBI_ONLY_PNG
+#include <stb_image.h>
+
 #ifdef DUPLEX_CHECK_EXR
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
@@ -17,6 +21,7 @@
 #include <OpenEXR/ImfStringAttribute.h>
 #endif
 
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <filesystem>
@@ -97,6 +102,36 @@ void expectExrMatches(const fs::path& exr, const nlohmann::json& j) {
 #endif
 }
 
+// The false-colour PNG of a map: decodes, holds the map on the left and a colour scale bar on the
+// right (a column whose colours form a gradient of at least 32 steps), and the bar's top colour is
+// the colour of the map's brightest bin (both the map's maximum).
+void expectPngWithScaleBar(const fs::path& png) {
+  int w = 0, h = 0, channels = 0;
+  unsigned char* data = stbi_load(png.c_str(), &w, &h, &channels, 3);
+  expect(data != nullptr, png.string() + " does not decode as a PNG");
+  const auto pixel = [&](int x, int y) {
+    const unsigned char* p = data + (static_cast<std::size_t>(y) * w + x) * 3;
+    return (p[0] << 16) | (p[1] << 8) | p[2];
+  };
+  int bar_x = -1;
+  for (int x = w / 2; x < w && bar_x < 0; ++x) {
+    std::vector<int> column;
+    for (int y = 0; y < h; ++y) column.push_back(pixel(x, y));
+    std::sort(column.begin(), column.end());
+    if (std::unique(column.begin(), column.end()) - column.begin() >= 32) bar_x = x;
+  }
+  bool top_in_map = false;
+  if (bar_x >= 0) {
+    int top = 0;
+    while (top < h && pixel(bar_x, top) == pixel(0, 0)) ++top;  // past the background margin
+    for (int y = 0; y < h && !top_in_map; ++y)
+      for (int x = 0; x < bar_x - 1 && !top_in_map; ++x) top_in_map = pixel(x, y) == pixel(bar_x, top);
+  }
+  stbi_image_free(data);
+  expect(bar_x >= 0, png.string() + ": no colour scale bar on the right half of the image");
+  expect(top_in_map, png.string() + ": the scale bar's top colour (the maximum) is not the colour of any bin");
+}
+
 void expectSameMaps(const fs::path& a, const fs::path& b, const std::string& what) {
   for (int k = 0; k < 6; ++k) {
     const std::string name = "face" + std::to_string(k) + ".json";
@@ -139,6 +174,7 @@ int check(const std::string& duplex, const fs::path& dir) {
     char sig[8] = {};
     png.read(sig, 8);
     expect(std::string(sig + 1, 3) == "PNG", name + ".png is not a PNG file");
+    expectPngWithScaleBar(dir / "one" / (name + ".png"));
     expectExrMatches(dir / "one" / (name + ".exr"), j);
   }
   // Sensors never block: the closed box registers all the emitted power.
