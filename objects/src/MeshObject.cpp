@@ -1,4 +1,5 @@
 #include "duplex/objects/MeshObject.h"
+#include "duplex/objects/MeshObjectFile.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
@@ -309,6 +310,8 @@ std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
          blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode);
 }
+
+std::uint64_t MeshObject::contentHash() const { return meshChecksum(*mesh_); }
 
 std::size_t MeshObject::memoryBytes() const {
   return accelBytes() + mesh_->positions().size() * sizeof(glm::vec3) +

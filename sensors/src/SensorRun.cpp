@@ -602,9 +602,10 @@ std::uint64_t SensorRun::fingerprint() const {
     }
   }
   if (scene_.scatters()) add(&config_.max_scatterings, sizeof config_.max_scatterings);
-  // What the paths depend on: every visible instance's object name, placement, mask and material,
-  // the sensors' shapes and the lights' geometry (a state of a scene where any of these changed
-  // would be mixed silently into the continued run). Mesh and grid contents are not hashed.
+  // What the paths depend on: every visible instance's object name and content (a mesh's positions
+  // and triangles; hashed once per object), placement, mask and material, the sensors' shapes and
+  // the lights' geometry (a state of a scene where any of these changed would be mixed silently
+  // into the continued run). Volume grids are not hashed (their type computes no content hash).
   auto addAffine = [&add](const Affine& a) {
     const std::array<double, 12> m = a.toRowMajor3x4();
     add(m.data(), sizeof m);
@@ -612,10 +613,14 @@ std::uint64_t SensorRun::fingerprint() const {
   auto addDouble = [&add](double x) { add(&x, sizeof x); };
   std::vector<NodeId> instances = scene_.graph().visibleInstances();
   std::sort(instances.begin(), instances.end());
+  std::unordered_map<ObjectId, std::uint64_t> content;  // per object: copies share it
   for (const NodeId node : instances) {
     const NodeInfo info = scene_.graph().node(node);
     const std::string_view object = scene_.graph().library().name(info.object);
     add(object.data(), object.size() + 1);
+    auto [it, fresh] = content.try_emplace(info.object, 0);
+    if (fresh) it->second = scene_.graph().library().get(info.object)->contentHash();
+    add(&it->second, sizeof it->second);
     addAffine(scene_.graph().worldTransform(node));
     add(&info.mask, sizeof info.mask);
     const Material& m = scene_.materialOf(node);
@@ -644,9 +649,11 @@ std::uint64_t SensorRun::fingerprint() const {
 
 namespace {
 
-// Version 2 ends with a checksum of every byte before it; version 1 ("DXSENSR1") had none.
-constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'};
+// Version 3's fingerprint hashes mesh contents; version 2 ended with the same checksum of every
+// byte before it; version 1 ("DXSENSR1") had none. Older versions are refused by name.
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '3'};
 constexpr char kStateMagicV1[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
+constexpr char kStateMagicV2[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'};
 
 // The checksum of the state: XXH64 of every byte before it.
 std::uint64_t stateChecksum(std::span<const char> bytes) {
@@ -704,6 +711,9 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   constexpr std::size_t kHead = sizeof kStateMagic + 5 * sizeof(std::uint64_t);
   if (bytes.size() >= sizeof kStateMagicV1 && std::memcmp(bytes.data(), kStateMagicV1, sizeof kStateMagicV1) == 0)
     throw FileError(file.string() + ": a run state of an older version (no checksum): run again without resuming");
+  if (bytes.size() >= sizeof kStateMagicV2 && std::memcmp(bytes.data(), kStateMagicV2, sizeof kStateMagicV2) == 0)
+    throw FileError(file.string() + ": a run state of an older version (mesh contents not fingerprinted): run again "
+                    "without resuming");
   if (bytes.size() < kHead || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
     throw FileError(file.string() + ": not a sensor run state");
   std::uint64_t header[5];

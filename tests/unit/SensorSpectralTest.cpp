@@ -189,11 +189,12 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
     Fixture f;  // a mirror instead of the Lambertian floor
     EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Mirror, 0.8})));
   }
-  // diffuseBox with the floor at height z and the blue light at p.
-  auto moved = [&](double z, glm::dvec3 p) {
+  // diffuseBox with the floor at height z and the blue light at p (and the floor mesh of half size
+  // `half`, under the same object name).
+  auto moved = [&](double z, glm::dvec3 p, double half = 0.6) {
     Fixture f;
     closeBox(f);
-    f.add(quad(0.6, "white"), translate(0, 0, z), "white", white);
+    f.add(quad(half, "white"), translate(0, 0, z), "white", white);
     Light second = spectralPoint(p, 1.0, {0, 0, 1});
     second.name = "blue";
     return refused(f.scene({spectralPoint({0, 0, 0.2}, 3.0, {1, 2, 1}), second}, {"b", "g", "r"}));
@@ -201,6 +202,7 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
   EXPECT_FALSE(moved(-0.5, {0.3, 0.1, 0.4}));  // the same scene again: accepted
   EXPECT_TRUE(moved(-0.4, {0.3, 0.1, 0.4}));   // the floor moved
   EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.3}));   // a light moved
+  EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.4}, 0.55));  // the floor's mesh changed, not its name
   std::filesystem::remove(state);
 }
 
@@ -249,6 +251,8 @@ TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   b = clean;
   b[7] = '1';  // the version without checksum
   refusedWith(b, "older version");
+  b[7] = '2';  // the version whose fingerprint lacked mesh contents
+  refusedWith(b, "mesh contents not fingerprinted");
   // The clean file still resumes to the same accumulators.
   {
     std::ofstream out(state, std::ios::binary | std::ios::trunc);

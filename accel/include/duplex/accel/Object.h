@@ -55,6 +55,10 @@ class Object {
   [[nodiscard]] bool blocks() const { return role_ == ObjectRole::Surface; }
   /// Bounds in object space. Empty for an object that cannot be hit.
   [[nodiscard]] virtual Box bounds() const = 0;
+  /// A 64-bit hash of what the object's queries answer from (a mesh: its positions and triangles),
+  /// so that saved results can be checked against the objects they were computed with; 0 when the
+  /// type computes none (the default). May take time linear in the object's size.
+  [[nodiscard]] virtual std::uint64_t contentHash() const { return 0; }
 
   /// Closest hit of `ray_os` (object space, direction not normalised) with t in
   /// [ray_os.tnear, hit.t]. On a closer hit, overwrites hit.t, u, v, prim_id and hit.ng (object

@@ -42,6 +42,9 @@ class MeshObject final : public Object {
   [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
   void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
+  /// meshChecksum() of the mesh (XXH64 of positions and triangle indices, as prepared structure
+  /// files check it).
+  [[nodiscard]] std::uint64_t contentHash() const override;
 
   /// The same queries without the virtual call and context (for benchmarks and the bottom level).
   bool intersect(const Ray& ray_os, Hit& hit) const;
