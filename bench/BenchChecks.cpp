@@ -78,8 +78,9 @@ TraversalCounts countTraversal(tbb::task_arena& arena, const MeshObject& object,
     const bool library_hit = object.intersect(ray, hit);
     // Ties between triangles sharing an edge may go either way: a different triangle at the same t
     // is not a mismatch.
-    const bool same = library_hit == (best != kInvalidId) &&
-                      (!library_hit || hit.prim_id == best || std::abs(hit.t - best_t) <= 1e-5f * std::max(1.0f, hit.t));
+    const bool same =
+        library_hit == (best != kInvalidId) &&
+        (!library_hit || hit.prim_id == best || std::abs(hit.t - best_t) <= 1e-5f * std::max(1.0f, hit.t));
     if (!same) mismatches.fetch_add(1, std::memory_order_relaxed);
     leaves.fetch_add(my_leaves, std::memory_order_relaxed);
     tests.fetch_add(my_tests, std::memory_order_relaxed);

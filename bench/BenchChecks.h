@@ -28,7 +28,8 @@ struct TraversalCounts {
 };
 
 /// Counts over `rays` (parallel on `arena`). Assumes tree().prim_indices holds mesh triangle ids.
-[[nodiscard]] TraversalCounts countTraversal(tbb::task_arena& arena, const MeshObject& object, std::span<const Ray> rays);
+[[nodiscard]] TraversalCounts countTraversal(tbb::task_arena& arena, const MeshObject& object,
+                                             std::span<const Ray> rays);
 
 /// Whether any valid triangle of `mesh` meets `ray` within [tnear, tfar], in double precision over
 /// all triangles (edges and vertices count as inside). Slow: for a few disputed rays only.

@@ -35,9 +35,7 @@ tbb::task_arena& Arenas::get(int threads) {
   if (!slot) {
     slot = std::make_unique<tbb::task_arena>(threads);
     // Start the workers now, so that no measurement pays for thread creation.
-    slot->execute([] {
-      tbb::parallel_for(0, 1 << 16, [](int) { setFtzDaz(); });
-    });
+    slot->execute([] { tbb::parallel_for(0, 1 << 16, [](int) { setFtzDaz(); }); });
   }
   return *slot;
 }
@@ -107,7 +105,8 @@ nlohmann::json machineInfo() {
   // `make` (DUPLEX_BENCH_BUILD_INFO: revision, "+dirty:<hash of the diff>" for uncommitted changes in
   // accel/ or objects/), which is the one to trust while someone edits the library.
   m["duplex_git_revision"] = commandLine("git -C '" + src + "' rev-parse --short HEAD 2>/dev/null");
-  m["duplex_library_dirty"] = !commandLine("git -C '" + src + "' status --porcelain -- accel objects 2>/dev/null").empty();
+  m["duplex_library_dirty"] =
+      !commandLine("git -C '" + src + "' status --porcelain -- accel objects 2>/dev/null").empty();
   const char* built = std::getenv("DUPLEX_BENCH_BUILD_INFO");
   m["duplex_library_at_build"] = built ? nlohmann::json(built) : nlohmann::json(nullptr);
 #if DUPLEX_BENCH_HAVE_EMBREE

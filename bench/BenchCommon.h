@@ -177,10 +177,11 @@ TraceTiming timeQuery(tbb::task_arena& arena, std::span<const Ray> rays, const A
 template <class Fn>
 void parallelFor(tbb::task_arena& arena, std::size_t n, const Fn& fn) {
   arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kTraceChunk), [&](const tbb::blocked_range<std::size_t>& r) {
-      setFtzDaz();
-      for (std::size_t i = r.begin(); i != r.end(); ++i) fn(i);
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kTraceChunk),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        setFtzDaz();
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) fn(i);
+                      });
   });
 }
 

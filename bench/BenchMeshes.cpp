@@ -11,9 +11,7 @@
 
 namespace duplex::bench {
 
-std::string MeshSpec::label() const {
-  return loop_steps == 0 ? file : file + " Loop x" + std::to_string(loop_steps);
-}
+std::string MeshSpec::label() const { return loop_steps == 0 ? file : file + " Loop x" + std::to_string(loop_steps); }
 
 MeshSpec MeshSpec::parse(const std::string& spec) {
   MeshSpec s;

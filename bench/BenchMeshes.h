@@ -14,8 +14,8 @@ namespace duplex::bench {
 
 /// A parsed mesh spec.
 struct MeshSpec {
-  std::string file;   ///< as given (relative to the data folder's meshes/ unless it exists as is)
-  int loop_steps = 0; ///< uniform Loop subdivision steps applied after loading
+  std::string file;    ///< as given (relative to the data folder's meshes/ unless it exists as is)
+  int loop_steps = 0;  ///< uniform Loop subdivision steps applied after loading
   /// "koala.obj" or "koala.obj Loop x2".
   [[nodiscard]] std::string label() const;
   /// Parses "file" or "file:steps"; throws std::invalid_argument for a bad step count.

@@ -26,7 +26,8 @@ namespace {
 
 // One instrumented section: zero the counters, count the loop, dump under `name`.
 template <class Accel>
-[[gnu::noinline]] std::uint64_t callgrindLoop(const char* name, const Accel& accel, std::span<const Ray> rays, Query q) {
+[[gnu::noinline]] std::uint64_t callgrindLoop(const char* name, const Accel& accel, std::span<const Ray> rays,
+                                              Query q) {
   // One uncounted query first, so that lazy symbol binding (PLT) is not charged to the loop.
   if (!rays.empty()) {
     Hit warm;
@@ -60,7 +61,8 @@ template <class Accel>
 nlohmann::json runCallgrind(const Options& options) {
   setFtzDaz();
   const auto wants = [&](const char* what) {
-    return std::find(options.callgrind_what.begin(), options.callgrind_what.end(), what) != options.callgrind_what.end();
+    return std::find(options.callgrind_what.begin(), options.callgrind_what.end(), what) !=
+           options.callgrind_what.end();
   };
   MeshCache cache(options.data_dir);
   const LoadedMesh& loaded = cache.get(MeshSpec::parse(options.callgrind_mesh));

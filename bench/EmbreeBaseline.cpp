@@ -14,7 +14,8 @@ std::string g_error;
 
 void onError(void*, RTCError code, const char* message) {
   std::lock_guard<std::mutex> lock(g_error_mutex);
-  if (g_error.empty()) g_error = "Embree error " + std::to_string(static_cast<int>(code)) + ": " + (message ? message : "");
+  if (g_error.empty())
+    g_error = "Embree error " + std::to_string(static_cast<int>(code)) + ": " + (message ? message : "");
 }
 
 }  // namespace
@@ -52,8 +53,8 @@ void attachTriangleMesh(EmbreeDevice& device, RTCScene scene, const TriangleMesh
   const auto& triangles = mesh.triangles();
   // rtcSetNewGeometryBuffer pads vertex buffers for Embree's 16-byte loads; we copy, as our
   // MeshObject copies the vertices into its own triangle array.
-  void* vertices = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                           3 * sizeof(float), positions.size());
+  void* vertices = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                           positions.size());
   void* indices = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                           3 * sizeof(std::uint32_t), triangles.size());
   if (!vertices || !indices) {

@@ -310,7 +310,8 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
         // A one-thread build whose process used clearly more CPU than the calling thread ran elsewhere too.
         const double process = median(process_cpu_ms[k][t]);
         if (process > 1.2 * cpu[k] + 5.0)
-          std::cerr << "  WARNING: the 1-thread build of " << name << " used " << fmt(process / cpu[k]) << "x the CPU of the calling thread\n";
+          std::cerr << "  WARNING: the 1-thread build of " << name << " used " << fmt(process / cpu[k])
+                    << "x the CPU of the calling thread\n";
       }
     }
     rec["ratio_vs_embree_medium"] = num(ratio(med[kOurs], med[kEmbreeMedium]));
@@ -331,8 +332,10 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
   std::cerr << "  tree        nodes " << thousands(stats.nodes) << "  leaves " << thousands(stats.leaves) << " ("
             << thousands(stats.empty_leaves) << " empty)  avg leaf " << fmt(stats.avg_leaf_size) << "  SAH "
             << fmt(stats.sah_cost, 1) << "  depth " << stats.max_depth << "\n";
-  out["ratios"]["vs_embree_medium"]["bytes_per_triangle"] = num(ratio(bytes_per_triangle[kOurs], bytes_per_triangle[kEmbreeMedium]));
-  out["ratios"]["vs_embree_high"]["bytes_per_triangle"] = num(ratio(bytes_per_triangle[kOurs], bytes_per_triangle[kEmbreeHigh]));
+  out["ratios"]["vs_embree_medium"]["bytes_per_triangle"] =
+      num(ratio(bytes_per_triangle[kOurs], bytes_per_triangle[kEmbreeMedium]));
+  out["ratios"]["vs_embree_high"]["bytes_per_triangle"] =
+      num(ratio(bytes_per_triangle[kOurs], bytes_per_triangle[kEmbreeHigh]));
   for (const auto& rec : builds) {
     const std::string key = std::to_string(rec["threads"].get<int>()) + "T";
     out["ratios"]["vs_embree_medium"]["build"][key] = rec["ratio_vs_embree_medium"];
@@ -466,8 +469,9 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
     }
   }
   std::cerr << "  traces: " << fmt(phase.ms() / 1e3, 1) << " s\n";
-  std::cerr << "  Mrays/s     " << pad("rays", 9) << pad("query", 8) << pad("T", 3) << lpad("ours", 8) << lpad("emb-med", 9)
-            << lpad("emb-high", 9) << lpad("/med", 8) << lpad("/high", 8) << lpad("/med cpu", 10) << "\n";
+  std::cerr << "  Mrays/s     " << pad("rays", 9) << pad("query", 8) << pad("T", 3) << lpad("ours", 8)
+            << lpad("emb-med", 9) << lpad("emb-high", 9) << lpad("/med", 8) << lpad("/high", 8) << lpad("/med cpu", 10)
+            << "\n";
   nlohmann::json records = nlohmann::json::array();
   for (const int t : threads_) {
     for (std::size_t s = 0; s < sets.size(); ++s) {
@@ -500,8 +504,8 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
         }
         records.push_back(rec);
         std::cerr << "              " << pad(sets[s].name, 9) << pad(toString(q), 8) << pad(std::to_string(t), 3)
-                  << lpad(fmt(mrays[kOurs]), 8) << lpad(fmt(mrays[kEmbreeMedium]), 9) << lpad(fmt(mrays[kEmbreeHigh]), 9)
-                  << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeMedium])) + "x", 8)
+                  << lpad(fmt(mrays[kOurs]), 8) << lpad(fmt(mrays[kEmbreeMedium]), 9)
+                  << lpad(fmt(mrays[kEmbreeHigh]), 9) << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeMedium])) + "x", 8)
                   << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeHigh])) + "x", 8)
                   << lpad(fmt(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeMedium])) + "x", 10) << "\n";
       }
@@ -542,28 +546,19 @@ void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
       const int part = rep % 2 == 0 ? k : parts - 1 - k;
       TraceTiming timing;
       switch (part) {
-        case kHarness:
-          timing = timePart([](const Ray& r, Hit& hit) { return splitHarness(r, hit); });
-          break;
-        case kSetup:
-          timing = timePart([&](const Ray& r, Hit& hit) { return splitSetup(object, r, hit); });
-          break;
+        case kHarness: timing = timePart([](const Ray& r, Hit& hit) { return splitHarness(r, hit); }); break;
+        case kSetup: timing = timePart([&](const Ray& r, Hit& hit) { return splitSetup(object, r, hit); }); break;
         case kTraversal:
           timing = timePart([&](const Ray& r, Hit& hit) { return splitTraversal(object, r, at(r), hit); });
           break;
-        case kFull:
-          timing = timeQuery(arena, rays, object, Query::Closest);
-          break;
+        case kFull: timing = timeQuery(arena, rays, object, Query::Closest); break;
 #if DUPLEX_BENCH_HAVE_EMBREE
         case kEmbreeHarness:
           timing = timePart([](const Ray& r, Hit& hit) { return splitEmbreeHarness(r, hit); });
           break;
-        case kEmbreeFull:
-          timing = timeQuery(arena, rays, *embree_.scenes[kEmbreeMedium], Query::Closest);
-          break;
+        case kEmbreeFull: timing = timeQuery(arena, rays, *embree_.scenes[kEmbreeMedium], Query::Closest); break;
 #endif
-        default:
-          break;
+        default: break;
       }
       cpu_ms[part].push_back(timing.time.cpu_ms);
     }
@@ -614,12 +609,13 @@ nlohmann::json evaluateGoals(const nlohmann::json& meshes) {
                        {"met", r <= 3.0}});
     }
   }
-  return {{"random_closest_throughput_vs_embree_medium", trace},
-          {"build_time_vs_embree_medium_1M_triangles", build},
-          {"note",
-           "throughput ratio = our Mrays/s / Embree's (goal >= 1.0, issue unresolved below 0.7); build ratio = our ms / "
-           "Embree's (goal <= 3.0, meshes of >= 10^6 triangles); 'ratio' from wall-clock medians, 'ratio_cpu' from CPU "
-           "time (see config.clocks); 'met' judges the wall-clock ratio"}};
+  return {
+      {"random_closest_throughput_vs_embree_medium", trace},
+      {"build_time_vs_embree_medium_1M_triangles", build},
+      {"note",
+       "throughput ratio = our Mrays/s / Embree's (goal >= 1.0, issue unresolved below 0.7); build ratio = our ms / "
+       "Embree's (goal <= 3.0, meshes of >= 10^6 triangles); 'ratio' from wall-clock medians, 'ratio_cpu' from CPU "
+       "time (see config.clocks); 'met' judges the wall-clock ratio"}};
 }
 
 void printSummary(const nlohmann::json& meshes, const std::vector<int>& threads) {
@@ -630,7 +626,8 @@ void printSummary(const nlohmann::json& meshes, const std::vector<int>& threads)
     for (const char* q : {"closest", "any"})
       for (const int t : threads) {
         keys.push_back(std::string(rays) + " " + q + " " + std::to_string(t) + "T");
-        head << lpad(std::string(rays).substr(0, 3) + "-" + std::string(q).substr(0, 3) + "-" + std::to_string(t) + "T", 11);
+        head << lpad(std::string(rays).substr(0, 3) + "-" + std::string(q).substr(0, 3) + "-" + std::to_string(t) + "T",
+                     11);
       }
   for (const int t : threads) head << lpad("build-" + std::to_string(t) + "T", 10);
   head << lpad("B/tri", 8);
@@ -677,29 +674,31 @@ nlohmann::json runMainBench(const Options& options) {
   nlohmann::json doc;
   doc["kind"] = "duplex_bench_mesh";
   doc["machine"] = machineInfo();
-  doc["config"] = {{"data", options.data_dir},
-                   {"meshes", options.meshes},
-                   {"random_rays", options.random_rays},
-                   {"primary", {options.primary_width, options.primary_height}},
-                   {"threads", threads},
-                   {"repeat", options.repeat},
-                   {"seed", options.seed},
-                   {"trace_chunk", kTraceChunk},
-                   {"quick", options.quick},
-                   {"embree", embree.enabled()},
-                   {"embree_config", options.embree_config},
-                   {"clocks",
-                    "every figure has a wall-clock median (fields *_ms, *_mrays, ratio_*) and a CPU-time median "
-                    "(*_cpu_ms, *_mrays_cpu, ratio_cpu_*): CPU time of the calling thread for 1 thread, process CPU "
-                    "time / N for N-thread traces; N-thread builds have wall clock only. The machine is shared: "
-                    "compare machine.loadavg_*; CPU-time ratios repeat better under load"},
-                   {"method",
-                    "builds: MeshObject constructor inside a tbb::task_arena of N threads vs Embree geometry setup + "
-                    "rtcCommitScene on a device made with threads=N for that measurement (the only Embree device alive: "
-                    "with a second device of more threads alive, a threads=1 device builds on two); traces: the same tbb::parallel_for over chunks of "
-                    "4096 rays in a task_arena of N threads, one call per ray (MeshObject::intersect with a fresh Hit / "
-                    "occluded vs rtcIntersect1 / rtcOccluded1), FTZ+DAZ set per chunk; ours and Embree interleaved per "
-                    "repetition, figures are medians of the repetitions"}};
+  doc["config"] = {
+      {"data", options.data_dir},
+      {"meshes", options.meshes},
+      {"random_rays", options.random_rays},
+      {"primary", {options.primary_width, options.primary_height}},
+      {"threads", threads},
+      {"repeat", options.repeat},
+      {"seed", options.seed},
+      {"trace_chunk", kTraceChunk},
+      {"quick", options.quick},
+      {"embree", embree.enabled()},
+      {"embree_config", options.embree_config},
+      {"clocks",
+       "every figure has a wall-clock median (fields *_ms, *_mrays, ratio_*) and a CPU-time median "
+       "(*_cpu_ms, *_mrays_cpu, ratio_cpu_*): CPU time of the calling thread for 1 thread, process CPU "
+       "time / N for N-thread traces; N-thread builds have wall clock only. The machine is shared: "
+       "compare machine.loadavg_*; CPU-time ratios repeat better under load"},
+      {"method",
+       "builds: MeshObject constructor inside a tbb::task_arena of N threads vs Embree geometry setup + "
+       "rtcCommitScene on a device made with threads=N for that measurement (the only Embree device alive: "
+       "with a second device of more threads alive, a threads=1 device builds on two); traces: the same "
+       "tbb::parallel_for over chunks of "
+       "4096 rays in a task_arena of N threads, one call per ray (MeshObject::intersect with a fresh Hit / "
+       "occluded vs rtcIntersect1 / rtcOccluded1), FTZ+DAZ set per chunk; ours and Embree interleaved per "
+       "repetition, figures are medians of the repetitions"}};
   MeshBench bench(options, threads, arenas, embree);
   MeshCache cache(options.data_dir);
   nlohmann::json meshes = nlohmann::json::array();

@@ -66,7 +66,9 @@ struct Setup {
     materials[id] = m;
     return id;
   }
-  void place(ObjectId id, const Affine& world, const std::string& name) { (void)graph.addInstance(kRootNode, id, world, name); }
+  void place(ObjectId id, const Affine& world, const std::string& name) {
+    (void)graph.addInstance(kRootNode, id, world, name);
+  }
   void finish(std::vector<Light> lights) {
     (void)graph.commit();
     scene = std::make_unique<SensorScene>(graph, std::move(lights), materials);
@@ -79,7 +81,8 @@ std::shared_ptr<const Object> meshObject(TriangleMesh mesh) {
 
 std::shared_ptr<const Object> sensorObject(double w, double h, std::uint32_t nx, std::uint32_t ny, SensorShape shape,
                                            const std::string& name) {
-  return std::make_shared<const SensorObject>(name, SensorSpec{.shape = shape, .width = w, .height = h, .nx = nx, .ny = ny});
+  return std::make_shared<const SensorObject>(name,
+                                              SensorSpec{.shape = shape, .width = w, .height = h, .nx = nx, .ny = ny});
 }
 
 Affine translate(const glm::dvec3& t) {
@@ -158,8 +161,8 @@ std::unique_ptr<Setup> roomScene(std::size_t sensors, const std::string& data_di
     s->place(shapes[k % shapes.size()].first, a, "body" + std::to_string(k));
   }
   if (sensors == 1) {
-    s->place(s->object(sensorObject(1.0, 1.0, 32, 32, SensorShape::Rectangle, "big"), "big"), translate({1.5, 1.5, 0.5}),
-             "sensor0");
+    s->place(s->object(sensorObject(1.0, 1.0, 32, 32, SensorShape::Rectangle, "big"), "big"),
+             translate({1.5, 1.5, 0.5}), "sensor0");
   } else if (sensors > 1) {
     const ObjectId small = s->object(sensorObject(0.1, 0.1, 4, 4, SensorShape::Rectangle, "small"), "small");
     const std::vector<Affine> at = smallSensorPlacements(sensors);
@@ -178,7 +181,8 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned threads, int repeat, const std::string& data_dir) {
+nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned threads, int repeat,
+                        const std::string& data_dir) {
   std::string meshes;
   const auto setup = roomScene(sensors, data_dir, meshes);
   std::vector<double> with, without, with_cpu, without_cpu;
@@ -221,13 +225,22 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
   const double t_with = median(with), t_without = median(without);
   const TopLevelStats top = setup->scene->tracer().topLevel().stats();
   return {{"sensors", sensors},
-          {"top_level", {{"nodes", top.tree.nodes}, {"leaves", top.tree.leaves}, {"empty_leaves", top.tree.empty_leaves},
-                         {"references", top.tree.references}, {"max_depth", top.tree.max_depth},
-                         {"sah_cost", top.tree.sah_cost}}},
-          {"sensor_level", {{"nodes", top.sensor_tree.nodes}, {"leaves", top.sensor_tree.leaves},
-                            {"empty_leaves", top.sensor_tree.empty_leaves}, {"references", top.sensor_tree.references},
-                            {"max_depth", top.sensor_tree.max_depth}, {"sah_cost", top.sensor_tree.sah_cost},
-                            {"grid_cells", top.sensor_grid_cells}, {"grid_entries", top.sensor_grid_entries}}},
+          {"top_level",
+           {{"nodes", top.tree.nodes},
+            {"leaves", top.tree.leaves},
+            {"empty_leaves", top.tree.empty_leaves},
+            {"references", top.tree.references},
+            {"max_depth", top.tree.max_depth},
+            {"sah_cost", top.tree.sah_cost}}},
+          {"sensor_level",
+           {{"nodes", top.sensor_tree.nodes},
+            {"leaves", top.sensor_tree.leaves},
+            {"empty_leaves", top.sensor_tree.empty_leaves},
+            {"references", top.sensor_tree.references},
+            {"max_depth", top.sensor_tree.max_depth},
+            {"sah_cost", top.sensor_tree.sah_cost},
+            {"grid_cells", top.sensor_grid_cells},
+            {"grid_entries", top.sensor_grid_entries}}},
           {"bins", setup->scene->binCount()},
           {"instances", setup->graph.instances().size()},
           {"meshes", meshes},
@@ -250,9 +263,9 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
 
 /// "sensor_level": the crossing query alone on the overhead scene's 10,000 small sensors (no
 /// meshes), with the sensors' tree built with several intersection costs and empty bonuses
-/// (TopLevelConfig::sensor_build, walked without the grid), and as shipped (the grid): process CPU time per query (best of `repeat` interleaved
-/// rounds; CPU time, because the machine may be shared) on wall-to-wall segments of the room, each
-/// from a random wall point (by area) in a cosine-distributed direction, as diffuse bounces leave.
+/// (TopLevelConfig::sensor_build, walked without the grid), and as shipped (the grid): process CPU time per query (best
+/// of `repeat` interleaved rounds; CPU time, because the machine may be shared) on wall-to-wall segments of the room,
+/// each from a random wall point (by area) in a cosine-distributed direction, as diffuse bounces leave.
 nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int repeat) {
   SensorSpec spec;
   spec.width = 0.1;
@@ -295,8 +308,12 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   };
   const KdBuildConfig shipped = sensorLevelBuildDefaults(), main_level = topLevelBuildDefaults();
   const std::vector<Variant> variants{{main_level.intersection_cost, main_level.empty_bonus, false},
-                                      {0.3f, 0.0f, false}, {0.1f, 0.0f, false}, {0.1f, 0.2f, false},
-                                      {0.05f, 0.0f, false}, {0.02f, 0.0f, false}, {0.01f, 0.0f, false},
+                                      {0.3f, 0.0f, false},
+                                      {0.1f, 0.0f, false},
+                                      {0.1f, 0.2f, false},
+                                      {0.05f, 0.0f, false},
+                                      {0.02f, 0.0f, false},
+                                      {0.01f, 0.0f, false},
                                       {shipped.intersection_cost, shipped.empty_bonus, true}};
   std::vector<std::unique_ptr<TopLevel>> tops;
   for (const Variant& v : variants) {
@@ -462,7 +479,8 @@ nlohmann::json convergence(const Exact& e, std::uint64_t max_rays, int seeds, un
 
 int main(int argc, char** argv) {
   using namespace duplex;
-  CLI::App app{"duplex_bench_sensor: sensor overhead against closest-hit tracing, and convergence against exact answers"};
+  CLI::App app{
+      "duplex_bench_sensor: sensor overhead against closest-hit tracing, and convergence against exact answers"};
   std::uint64_t rays = 200000, max_rays = 1024000;
   unsigned threads = 1;
   int repeat = 3, seeds = 16;
@@ -474,12 +492,14 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "worker threads (0: all)");
   app.add_option("--repeat", repeat, "runs per configuration (median)")->check(CLI::PositiveNumber);
   app.add_option("--sensors", counts, "sensor counts of the overhead runs");
-  app.add_option("--max-rays", max_rays, "largest run of the convergence series (1000 * 4^k)")->check(CLI::PositiveNumber);
+  app.add_option("--max-rays", max_rays, "largest run of the convergence series (1000 * 4^k)")
+      ->check(CLI::PositiveNumber);
   app.add_option("--seeds", seeds, "runs per convergence point")->check(CLI::PositiveNumber);
   app.add_option("--data", data_dir, "shared data folder (meshes/spot.obj, meshes/koala.obj)");
   app.add_option("--sweep-segments", sweep_segments,
                  "segments of the sensors' tree sweep (crossing query alone, 10,000 sensors; 0: skip)");
-  app.add_flag("--quick", quick, "small run for tests: 20,000 rays, one repeat, convergence up to 64,000 rays, 4 seeds");
+  app.add_flag("--quick", quick,
+               "small run for tests: 20,000 rays, one repeat, convergence up to 64,000 rays, 4 seeds");
   CLI11_PARSE(app, argc, argv);
   if (quick) {
     rays = 20000;

@@ -172,10 +172,12 @@ nlohmann::json runSweep(const Options& options) {
                    {"repeat", options.repeat},
                    {"seed", options.seed},
                    {"query", "closest"},
-                   {"clock", "build_ms, random_ms, primary_ms: medians of the calling thread's CPU time (one thread: "
-                             "robust to other processes on the shared machine); *_wall_ms: wall-clock medians"},
-                   {"sah_cost_note", "sah_cost weighs every tree with the default costs (1, 1.5) so that settings compare; "
-                                     "sah_cost_own with the setting's own costs"}};
+                   {"clock",
+                    "build_ms, random_ms, primary_ms: medians of the calling thread's CPU time (one thread: "
+                    "robust to other processes on the shared machine); *_wall_ms: wall-clock medians"},
+                   {"sah_cost_note",
+                    "sah_cost weighs every tree with the default costs (1, 1.5) so that settings compare; "
+                    "sah_cost_own with the setting's own costs"}};
   MeshCache cache(options.data_dir);
   nlohmann::json meshes = nlohmann::json::array();
   for (const std::string& spec_text : options.sweep_meshes) {
@@ -185,8 +187,8 @@ nlohmann::json runSweep(const Options& options) {
     const std::vector<Ray> random = randomRays(mesh.bounds(), options.sweep_random_rays, options.seed);
     const std::vector<Ray> primary =
         primaryRays(mesh.bounds(), options.sweep_primary_width, options.sweep_primary_height);
-    std::cerr << "\n== sweep " << loaded.spec.label() << ": " << mesh.triangleCount() << " triangles, "
-              << all.size() << " settings x " << options.repeat << " repetitions\n";
+    std::cerr << "\n== sweep " << loaded.spec.label() << ": " << mesh.triangleCount() << " triangles, " << all.size()
+              << " settings x " << options.repeat << " repetitions\n";
 
     std::vector<Figures> figures(all.size());
     std::vector<nlohmann::json> trees(all.size());
@@ -198,7 +200,8 @@ nlohmann::json runSweep(const Options& options) {
         // Only the SAH settings that could replace the defaults: the median / middle heuristics and
         // intersection costs above twice the default trace 1.3-20x slower (docs/bench/sweep.txt) and
         // would take most of the (50x slowed) run.
-        if (all[i].config.heuristic != KdHeuristic::Sah || all[i].config.intersection_cost > 2.0f * defaults.intersection_cost)
+        if (all[i].config.heuristic != KdHeuristic::Sah ||
+            all[i].config.intersection_cost > 2.0f * defaults.intersection_cost)
           continue;
         const std::string tag = "sweep|" + loaded.spec.label() + "|" + all[i].label + "|";
         std::unique_ptr<MeshObject> object;
@@ -215,8 +218,8 @@ nlohmann::json runSweep(const Options& options) {
         const KdTreeStats own = object->tree().stats(all[i].config.traversal_cost, all[i].config.intersection_cost);
         const KdTreeStats common = object->tree().stats(defaults.traversal_cost, defaults.intersection_cost);
         std::cerr << "  " << pad(all[i].label, 24) << " nodes " << own.nodes << ", SAH " << fmt(common.sah_cost, 1)
-                  << ", references per triangle " << fmt(static_cast<double>(object->tree().prim_indices.size()) / triangles)
-                  << "\n";
+                  << ", references per triangle "
+                  << fmt(static_cast<double>(object->tree().prim_indices.size()) / triangles) << "\n";
       }
       continue;
     }
@@ -246,7 +249,8 @@ nlohmann::json runSweep(const Options& options) {
         for (int q = 0; q < 2; ++q) {
           std::unique_ptr<EmbreeMesh> scene;
           const Timing build = timeIt(1, [&] {
-            scene = std::make_unique<EmbreeMesh>(*device, mesh, q == 0 ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
+            scene =
+                std::make_unique<EmbreeMesh>(*device, mesh, q == 0 ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
           });
           const Timing random_time = timeQuery(one, random, *scene, Query::Closest).time;
           const Timing primary_time = timeQuery(one, primary, *scene, Query::Closest).time;
@@ -319,9 +323,9 @@ nlohmann::json runSweep(const Options& options) {
                                                  {"build_wall_ms", median(embree[q].build_wall_ms)},
                                                  {"random_wall_ms", median(embree[q].random_wall_ms)},
                                                  {"primary_wall_ms", median(embree[q].primary_wall_ms)}};
-      std::cerr << "  " << pad(q == 0 ? "Embree medium" : "Embree high", 24) << lpad(fmt(b, 1), 10) << lpad(fmt(r, 1), 11)
-                << lpad(fmt(p, 1), 11) << lpad(fmt(b / def_build), 10) << lpad(fmt(r / def_random), 10)
-                << lpad(fmt(p / def_primary), 10) << "\n";
+      std::cerr << "  " << pad(q == 0 ? "Embree medium" : "Embree high", 24) << lpad(fmt(b, 1), 10)
+                << lpad(fmt(r, 1), 11) << lpad(fmt(p, 1), 11) << lpad(fmt(b / def_build), 10)
+                << lpad(fmt(r / def_random), 10) << lpad(fmt(p / def_primary), 10) << "\n";
     }
     meshes.push_back(m);
   }

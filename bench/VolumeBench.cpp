@@ -122,7 +122,8 @@ json levelSetSphere(std::size_t ray_count) {
     entry.push_back((-b - std::sqrt(disc)) / a);
   }
   for (const double voxel : {0.1, 0.05, 0.02, 0.01}) {
-    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(radius), openvdb::Vec3f(0.0f), float(voxel));
+    auto grid =
+        openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(radius), openvdb::Vec3f(0.0f), float(voxel));
     const auto base = makeVolumeObject(grid, VolumeKind::LevelSet, "sphere");
     for (const int refine : {0, 1, 2, 4, 6, 8, 10, 13, 16, 20}) {
       VolumeQueryConfig c;
@@ -295,7 +296,8 @@ std::vector<FogProfile> fogProfiles() {
                      const double disc = b * b - a * cc;
                      if (disc <= 0.0) return 1.0;
                      const double s = std::sqrt(disc);
-                     const double t0 = std::max<double>(r.tnear, (-b - s) / a), t1 = std::min<double>(r.tfar, (-b + s) / a);
+                     const double t0 = std::max<double>(r.tnear, (-b - s) / a),
+                                  t1 = std::min<double>(r.tfar, (-b + s) / a);
                      return t1 > t0 ? std::exp(-sigma * (t1 - t0) * std::sqrt(a)) : 1.0;
                    }});
   }

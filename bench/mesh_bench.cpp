@@ -28,14 +28,19 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--random", options.random_rays, "random rays per mesh (duplex::randomRays)")->capture_default_str();
-  app.add_option("--primary", [&options](const CLI::results_t& r) {
-       options.primary_width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
-       options.primary_height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
-       return true;
-     }, "primary rays: W H (duplex::primaryRays, default 1024 1024)")
+  app.add_option(
+         "--primary",
+         [&options](const CLI::results_t& r) {
+           options.primary_width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
+           options.primary_height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
+           return true;
+         },
+         "primary rays: W H (duplex::primaryRays, default 1024 1024)")
       ->expected(2);
   app.add_option("--threads", options.threads, "thread counts, comma separated")->delimiter(',')->capture_default_str();
-  app.add_option("--repeat", options.repeat, "repetitions; figures are medians")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--repeat", options.repeat, "repetitions; figures are medians")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--seed", options.seed, "seed of the random rays")->capture_default_str();
   app.add_flag("--quick", options.quick, "smoke run: small meshes, few rays, one repetition");
   app.add_option("--out", options.out, "JSON output file (default: none, table only)");
@@ -47,20 +52,27 @@ int main(int argc, char** argv) {
   app.add_flag("--sweep", sweep, "heuristic/cost sweep: build ms vs trace ms (1 thread) over KdBuildConfig settings");
   app.add_option("--sweep-meshes", options.sweep_meshes, "meshes of the sweep")->delimiter(',')->capture_default_str();
   app.add_option("--sweep-random", options.sweep_random_rays, "random rays per sweep setting")->capture_default_str();
-  app.add_option("--sweep-primary", [&options](const CLI::results_t& r) {
-       options.sweep_primary_width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
-       options.sweep_primary_height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
-       return true;
-     }, "primary rays of the sweep: W H (default 512 512)")
+  app.add_option(
+         "--sweep-primary",
+         [&options](const CLI::results_t& r) {
+           options.sweep_primary_width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
+           options.sweep_primary_height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
+           return true;
+         },
+         "primary rays of the sweep: W H (default 512 512)")
       ->expected(2);
 
   bool callgrind = false;
-  app.add_flag("--callgrind", callgrind,
-               "fixed workload for valgrind --tool=callgrind --instr-atstart=no: only the trace loops are instrumented, "
-               "one dump per tracer and query");
+  app.add_flag(
+      "--callgrind", callgrind,
+      "fixed workload for valgrind --tool=callgrind --instr-atstart=no: only the trace loops are instrumented, "
+      "one dump per tracer and query");
   app.add_option("--callgrind-mesh", options.callgrind_mesh, "mesh of the callgrind workload")->capture_default_str();
-  app.add_option("--callgrind-rays", options.callgrind_rays, "random rays of the callgrind workload")->capture_default_str();
-  app.add_option("--callgrind-what", options.callgrind_what, "tracers: ours, embree")->delimiter(',')->capture_default_str();
+  app.add_option("--callgrind-rays", options.callgrind_rays, "random rays of the callgrind workload")
+      ->capture_default_str();
+  app.add_option("--callgrind-what", options.callgrind_what, "tracers: ours, embree")
+      ->delimiter(',')
+      ->capture_default_str();
 
   CLI11_PARSE(app, argc, argv);
   options.with_embree = !no_embree;

@@ -8,7 +8,8 @@
 
 namespace duplex {
 
-void writeFileAtomically(const std::filesystem::path& path, std::span<const unsigned char> bytes, std::string_view what) {
+void writeFileAtomically(const std::filesystem::path& path, std::span<const unsigned char> bytes,
+                         std::string_view what) {
   std::filesystem::path tmp = path;
   tmp += ".tmp";
   const auto dropTmp = [&tmp] {

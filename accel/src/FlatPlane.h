@@ -40,8 +40,11 @@ struct alignas(64) FlatPlane {
   static constexpr std::uint32_t kFrontOnly = 1u << 30, kValid = 1u << 31, kSlotMask = kFrontOnly - 1u;
 
   FlatPlane() = default;
-  FlatPlane(const Affine& object_from_world, const FlatCrossings& f, std::uint32_t slot = 0, std::uint32_t query_mask = 0)
-      : half_width(f.half_width), half_height(f.half_height), mask(query_mask),
+  FlatPlane(const Affine& object_from_world, const FlatCrossings& f, std::uint32_t slot = 0,
+            std::uint32_t query_mask = 0)
+      : half_width(f.half_width),
+        half_height(f.half_height),
+        mask(query_mask),
         bits(slot <= kSlotMask ? slot | (f.front_only ? kFrontOnly : 0u) | kValid : 0u) {
     for (int k = 0; k < 3; ++k) {
       // glm matrices are column-major: linear[column][row].

@@ -132,10 +132,8 @@ void sortFew(float* v, std::size_t n) {
 
 // Sorts events: few inline, many with std::sort.
 void sortEvents(float* v, std::size_t n) {
-  if (n <= 16)
-    sortFew(v, n);
-  else
-    std::sort(v, v + n);
+  if (n <= 16) sortFew(v, n);
+  else std::sort(v, v + n);
 }
 
 // Exact extent of a set of references.
@@ -194,8 +192,10 @@ struct Bins {
     alignas(16) std::int32_t b0[4], b1[4];
     const __m128 f0 = _mm_mul_ps(_mm_sub_ps(rlo, sse_lo), sse_scale);
     const __m128 f1 = _mm_mul_ps(_mm_sub_ps(rhi, sse_lo), sse_scale);
-    _mm_store_si128(reinterpret_cast<__m128i*>(b0), _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), sse_max)));
-    _mm_store_si128(reinterpret_cast<__m128i*>(b1), _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), sse_max)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(b0),
+                    _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), sse_max)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(b1),
+                    _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), sse_max)));
     for (int k = 0; k < 3; ++k) {
       ++start[k][b0[k]];
       ++end[k][b1[k]];
@@ -278,7 +278,7 @@ class Builder {
     // Nodes whose upper child is an empty leaf still to be written after their lower subtree.
     std::array<std::uint32_t, 64> pending;  // depth <= 60
     int n_pending = 0;
-    Bins own;  // bins made here when the parent did not bin this node (or they are too coarse)
+    Bins own;            // bins made here when the parent did not bin this node (or they are too coarse)
     SmallEvents events;  // valid while `refs` stay (empty-space cuts)
     for (;;) {
       const std::size_t n = refs.size();
@@ -375,7 +375,8 @@ class Builder {
   }
 
   static void makeLeaf(const RefVec& refs, Subtree& out) {
-    out.nodes.push_back(KdNode::leaf(static_cast<std::uint32_t>(out.prims.size()), static_cast<std::uint32_t>(refs.size())));
+    out.nodes.push_back(
+        KdNode::leaf(static_cast<std::uint32_t>(out.prims.size()), static_cast<std::uint32_t>(refs.size())));
     for (const PrimRef& r : refs) out.prims.push_back(r.id);
   }
 
@@ -397,8 +398,8 @@ class Builder {
   float splitCost(const NodeGeometry& g, int axis, float pos, std::size_t n_lower, std::size_t n_upper) const {
     const float p_lower = (g.ab[axis] + (pos - g.lo[axis]) * g.a_plus_b[axis]) * g.inv_half_area;
     const float p_upper = (g.ab[axis] + (g.hi[axis] - pos) * g.a_plus_b[axis]) * g.inv_half_area;
-    float cost = cfg_.traversal_cost +
-                 cfg_.intersection_cost * (p_lower * static_cast<float>(n_lower) + p_upper * static_cast<float>(n_upper));
+    float cost = cfg_.traversal_cost + cfg_.intersection_cost * (p_lower * static_cast<float>(n_lower) +
+                                                                 p_upper * static_cast<float>(n_upper));
     if (n_lower == 0 || n_upper == 0) cost *= 1.0f - cfg_.empty_bonus;
     return cost;
   }
@@ -436,7 +437,7 @@ class Builder {
     const __m128 p_lower = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(p, lo), a_plus_b)), inv_half_area);
     const __m128 p_upper = _mm_mul_ps(_mm_add_ps(ab, _mm_mul_ps(_mm_sub_ps(hi, p), a_plus_b)), inv_half_area);
     const __m128 c = _mm_add_ps(ct, _mm_mul_ps(ci, _mm_add_ps(_mm_mul_ps(p_lower, _mm_cvtepi32_ps(nl)),
-                                                               _mm_mul_ps(p_upper, _mm_cvtepi32_ps(nu)))));
+                                                              _mm_mul_ps(p_upper, _mm_cvtepi32_ps(nu)))));
     const __m128i zero = _mm_setzero_si128();
     const __m128 one_empty = _mm_castsi128_ps(_mm_or_si128(_mm_cmpeq_epi32(nl, zero), _mm_cmpeq_epi32(nu, zero)));
     const __m128 bonus = _mm_set1_ps(1.0f - cfg_.empty_bonus);
@@ -473,9 +474,8 @@ class Builder {
       const __m128i nu = _mm_load_si128(reinterpret_cast<const __m128i*>(n_upper + j));
       const __m128 c = splitCost4(g, axis, p, nl, nu);
       const __m128 inside = _mm_and_ps(_mm_cmpgt_ps(p, lo), _mm_cmplt_ps(p, hi));
-      const __m128 separates =
-          _mm_castsi128_ps(_mm_andnot_si128(_mm_and_si128(_mm_cmpeq_epi32(nl, all), _mm_cmpeq_epi32(nu, all)),
-                                            _mm_set1_epi32(-1)));
+      const __m128 separates = _mm_castsi128_ps(
+          _mm_andnot_si128(_mm_and_si128(_mm_cmpeq_epi32(nl, all), _mm_cmpeq_epi32(nu, all)), _mm_set1_epi32(-1)));
       const __m128 keep = _mm_and_ps(inside, separates);
       _mm_store_ps(cost + j, _mm_or_ps(_mm_and_ps(keep, c), _mm_andnot_ps(keep, inf)));
     }
@@ -655,8 +655,10 @@ class Builder {
       const float a[4] = {r[0].lo[axis], r[1].lo[axis], r[2].lo[axis], r[3].lo[axis]};
       const float b[4] = {r[0].hi[axis], r[1].hi[axis], r[2].hi[axis], r[3].hi[axis]};
       const __m128 va = _mm_loadu_ps(a), vb = _mm_loadu_ps(b);
-      const auto a_in = static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(va, lo4), _mm_cmple_ps(va, hi4))));
-      const auto b_in = static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(vb, lo4), _mm_cmple_ps(vb, hi4))));
+      const auto a_in =
+          static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(va, lo4), _mm_cmple_ps(va, hi4))));
+      const auto b_in =
+          static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(_mm_cmpge_ps(vb, lo4), _mm_cmple_ps(vb, hi4))));
       const unsigned planar = a_in & static_cast<unsigned>(_mm_movemask_ps(_mm_cmpeq_ps(va, vb)));
       below_window += kBitCount4[_mm_movemask_ps(_mm_cmplt_ps(va, lo4))];
       above_window += kBitCount4[_mm_movemask_ps(_mm_cmpgt_ps(vb, hi4))];
@@ -715,8 +717,9 @@ class Builder {
       const __m128 c = splitCost4(g, axis, p, nl, nu);
       // Planes strictly inside the node (the padding is not); a NaN cost never wins.
       const __m128 keep = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(p, lo), _mm_cmplt_ps(p, hi)), _mm_cmpord_ps(c, c));
-      const __m128 take = _mm_and_ps(keep, _mm_or_ps(_mm_cmplt_ps(c, best_cost),
-                                                     _mm_and_ps(_mm_cmpeq_ps(c, best_cost), _mm_cmplt_ps(p, best_pos))));
+      const __m128 take = _mm_and_ps(
+          keep,
+          _mm_or_ps(_mm_cmplt_ps(c, best_cost), _mm_and_ps(_mm_cmpeq_ps(c, best_cost), _mm_cmplt_ps(p, best_pos))));
       const __m128i take_i = _mm_castps_si128(take);
       best_cost = _mm_or_ps(_mm_and_ps(take, c), _mm_andnot_ps(take, best_cost));
       best_pos = _mm_or_ps(_mm_and_ps(take, p), _mm_andnot_ps(take, best_pos));
@@ -731,8 +734,10 @@ class Builder {
     _mm_store_si128(reinterpret_cast<__m128i*>(upper), best_upper);
     Split best;
     for (int k = 0; k < 4; ++k)
-      if (cost[k] < best.cost || (cost[k] == best.cost && cost[k] < std::numeric_limits<float>::infinity() && pos[k] < best.pos))
-        best = {axis, pos[k], cost[k], true, static_cast<std::size_t>(lower[k]), static_cast<std::size_t>(upper[k]), true};
+      if (cost[k] < best.cost ||
+          (cost[k] == best.cost && cost[k] < std::numeric_limits<float>::infinity() && pos[k] < best.pos))
+        best = {axis, pos[k], cost[k], true, static_cast<std::size_t>(lower[k]), static_cast<std::size_t>(upper[k]),
+                true};
     return best;
   }
 
@@ -773,13 +778,13 @@ class Builder {
     std::size_t i_start = 0, i_end = 0, i_planar = 0;
     // Merge the two sorted lists; each distinct value is one candidate plane.
     while (i_start < n_starts || i_end < n_ends) {
-      const float p = i_end >= n_ends ? starts[i_start]
+      const float p = i_end >= n_ends       ? starts[i_start]
                       : i_start >= n_starts ? ends[i_end]
                                             : std::min(starts[i_start], ends[i_end]);
       while (i_planar < n_planars && planars[i_planar] < p) ++i_planar;
       std::size_t n_planar = 0;
       while (i_planar + n_planar < n_planars && planars[i_planar + n_planar] == p) ++n_planar;
-      const std::size_t n_lower = below_window + i_start;          // lo < p
+      const std::size_t n_lower = below_window + i_start;  // lo < p
       while (i_end < n_ends && ends[i_end] <= p) ++i_end;
       const std::size_t n_upper = above_window + (n_ends - i_end);  // hi > p
       if (p > lo && p < hi) {
@@ -868,10 +873,8 @@ class Builder {
       const float a = r.lo[axis], b = r.hi[axis];
       if (b <= pos) {
         // Below the plane, or lying in it.
-        if (a == pos && !s.planar_left)
-          upper.put<kUpperBinned>(r);
-        else
-          lower.put<kLowerBinned>(r);
+        if (a == pos && !s.planar_left) upper.put<kUpperBinned>(r);
+        else lower.put<kLowerBinned>(r);
       } else if (a >= pos) {
         upper.put<kUpperBinned>(r);
       } else {
@@ -954,7 +957,8 @@ class Builder {
       for (std::size_t c = 0; c < chunks; ++c) offset[c + 1] = offset[c] + parts[c].refs[side].size();
       child.refs.resize(offset[chunks]);
       tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-        std::copy(parts[c].refs[side].begin(), parts[c].refs[side].end(), child.refs.begin() + static_cast<std::ptrdiff_t>(offset[c]));
+        std::copy(parts[c].refs[side].begin(), parts[c].refs[side].end(),
+                  child.refs.begin() + static_cast<std::ptrdiff_t>(offset[c]));
       });
       ExtentAcc e;
       for (std::size_t c = 0; c < chunks; ++c) {
@@ -974,8 +978,8 @@ class Builder {
 bool finiteBox(const Box& b) {
   // x - x is 0 for a finite x and NaN for an infinite or NaN one; the sum of six such is 0 only
   // when all six are finite (one test instead of six branches per primitive).
-  const float zero = (b.lo.x - b.lo.x) + (b.lo.y - b.lo.y) + (b.lo.z - b.lo.z) + (b.hi.x - b.hi.x) +
-                     (b.hi.y - b.hi.y) + (b.hi.z - b.hi.z);
+  const float zero = (b.lo.x - b.lo.x) + (b.lo.y - b.lo.y) + (b.lo.z - b.lo.z) + (b.hi.x - b.hi.x) + (b.hi.y - b.hi.y) +
+                     (b.hi.z - b.hi.z);
   return zero == 0.0f && !b.empty();
 }
 
@@ -1002,10 +1006,8 @@ void prepareRefs(std::span<const Box> prim_bounds, bool parallel, RefVec& refs, 
     kept[c] = static_cast<std::size_t>(out - first);
     chunk_bounds[c] = b;
   };
-  if (chunks == 1)
-    fill(0);
-  else
-    tbb::parallel_for(std::size_t{0}, chunks, fill);
+  if (chunks == 1) fill(0);
+  else tbb::parallel_for(std::size_t{0}, chunks, fill);
   std::size_t total = 0;
   for (std::size_t c = 0; c < chunks; ++c) {
     const std::size_t begin = c * kPassChunk;
@@ -1035,10 +1037,10 @@ KdHeuristic parseKdHeuristic(std::string_view name) {
 }
 
 std::ostream& operator<<(std::ostream& os, const KdBuildConfig& c) {
-  return os << "KdBuildConfig{" << toString(c.heuristic) << ", Ct=" << c.traversal_cost << ", Ci=" << c.intersection_cost
-            << ", empty_bonus=" << c.empty_bonus << ", max_depth=" << c.max_depth << ", leaf=" << c.max_leaf_size
-            << ", clip=" << c.clip_primitives << ", exact_sweep_max=" << c.exact_sweep_max
-            << ", refine_max=" << c.refine_max << "}";
+  return os << "KdBuildConfig{" << toString(c.heuristic) << ", Ct=" << c.traversal_cost
+            << ", Ci=" << c.intersection_cost << ", empty_bonus=" << c.empty_bonus << ", max_depth=" << c.max_depth
+            << ", leaf=" << c.max_leaf_size << ", clip=" << c.clip_primitives
+            << ", exact_sweep_max=" << c.exact_sweep_max << ", refine_max=" << c.refine_max << "}";
 }
 
 namespace {
@@ -1047,7 +1049,8 @@ namespace {
 KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const KdSplitFunction* split,
              const KdBuildConfig& config, const Box* root = nullptr) {
   if (prim_bounds.size() > KdNode::kMaxIndex)
-    throw InvalidArgument("kd-tree build: " + std::to_string(prim_bounds.size()) + " primitives exceed the limit of 2^30");
+    throw InvalidArgument("kd-tree build: " + std::to_string(prim_bounds.size()) +
+                          " primitives exceed the limit of 2^30");
   // Name the field and the value: a bad cost usually comes from a command-line flag or a caller's
   // arithmetic, and "invalid configuration" alone does not say which.
   auto refuse = [&config](const char* field, const char* rule, double value) {
@@ -1059,7 +1062,8 @@ KdTree build(std::span<const Box> prim_bounds, const KdClipFunction* clip, const
     refuse("traversal_cost", "finite and > 0", config.traversal_cost);
   if (!(config.intersection_cost > 0.0f && std::isfinite(config.intersection_cost)))
     refuse("intersection_cost", "finite and > 0", config.intersection_cost);
-  if (!(config.empty_bonus >= 0.0f && config.empty_bonus < 1.0f)) refuse("empty_bonus", "in [0, 1)", config.empty_bonus);
+  if (!(config.empty_bonus >= 0.0f && config.empty_bonus < 1.0f))
+    refuse("empty_bonus", "in [0, 1)", config.empty_bonus);
   if (config.max_depth < 0) refuse("max_depth", ">= 0 (0: automatic)", config.max_depth);
 
   KdTree tree;
@@ -1101,7 +1105,8 @@ KdTree buildKdTree(std::span<const Box> prim_bounds, const KdSplitFunction& spli
 
 KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config) {
   // Clipping a box primitive to a node is plain intersection; `box` is already that.
-  return buildKdTree(boxes, [](std::uint32_t, const Box& box) { return box; }, config);
+  return buildKdTree(
+      boxes, [](std::uint32_t, const Box& box) { return box; }, config);
 }
 
 KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config, const Box& root_bounds) {
@@ -1109,8 +1114,9 @@ KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& con
   for (const Box& b : boxes)
     if (finiteBox(b)) all.extend(b);
   if (all.empty()) return {};
-  if (!finiteBox(root_bounds) || !(root_bounds.lo.x <= all.lo.x && root_bounds.lo.y <= all.lo.y && root_bounds.lo.z <= all.lo.z &&
-                                   root_bounds.hi.x >= all.hi.x && root_bounds.hi.y >= all.hi.y && root_bounds.hi.z >= all.hi.z))
+  if (!finiteBox(root_bounds) ||
+      !(root_bounds.lo.x <= all.lo.x && root_bounds.lo.y <= all.lo.y && root_bounds.lo.z <= all.lo.z &&
+        root_bounds.hi.x >= all.hi.x && root_bounds.hi.y >= all.hi.y && root_bounds.hi.z >= all.hi.z))
     throw InvalidArgument("kd-tree build: the given root bounds do not contain every box");
   const KdClipFunction clip = [](std::uint32_t, const Box& box) { return box; };
   return build(boxes, &clip, nullptr, config, &root_bounds);

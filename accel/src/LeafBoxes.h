@@ -158,12 +158,14 @@ struct LeafBoxes {
   // widens each axis's) and clipped to [tnear, t_max]. The running bound is the second operand of
   // max / min: a NaN slab bound (0 * inf) leaves it. Loads past a run's end read the next run or
   // the padding; their bits are cleared. The three differ only in vector width.
-  __attribute__((target("avx512f,popcnt"))) std::uint32_t runs16(const KdRay& ray, float t_max, const std::uint32_t* runs,
-                                                                 std::uint32_t run_count, std::uint32_t* out, std::uintptr_t records,
+  __attribute__((target("avx512f,popcnt"))) std::uint32_t runs16(const KdRay& ray, float t_max,
+                                                                 const std::uint32_t* runs, std::uint32_t run_count,
+                                                                 std::uint32_t* out, std::uintptr_t records,
                                                                  unsigned shift) const {
     constexpr __mmask16 kAll = 0xFFFF;
     const __m512 o[3] = {_mm512_set1_ps(ray.origin[0]), _mm512_set1_ps(ray.origin[1]), _mm512_set1_ps(ray.origin[2])};
-    const __m512 inv[3] = {_mm512_set1_ps(ray.inv_dir[0]), _mm512_set1_ps(ray.inv_dir[1]), _mm512_set1_ps(ray.inv_dir[2])};
+    const __m512 inv[3] = {_mm512_set1_ps(ray.inv_dir[0]), _mm512_set1_ps(ray.inv_dir[1]),
+                           _mm512_set1_ps(ray.inv_dir[2])};
     const __m512 widen = _mm512_set1_ps(kWiden), t_near = _mm512_set1_ps(ray.tnear), t_far = _mm512_set1_ps(t_max);
     const __m512 minus_inf = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
     const __m512 plus_inf = _mm512_set1_ps(std::numeric_limits<float>::infinity());
@@ -193,10 +195,11 @@ struct LeafBoxes {
   }
 
   __attribute__((target("avx2,popcnt"))) std::uint32_t runs8(const KdRay& ray, float t_max, const std::uint32_t* runs,
-                                                              std::uint32_t run_count, std::uint32_t* out, std::uintptr_t records,
-                                                              unsigned shift) const {
+                                                             std::uint32_t run_count, std::uint32_t* out,
+                                                             std::uintptr_t records, unsigned shift) const {
     const __m256 o[3] = {_mm256_set1_ps(ray.origin[0]), _mm256_set1_ps(ray.origin[1]), _mm256_set1_ps(ray.origin[2])};
-    const __m256 inv[3] = {_mm256_set1_ps(ray.inv_dir[0]), _mm256_set1_ps(ray.inv_dir[1]), _mm256_set1_ps(ray.inv_dir[2])};
+    const __m256 inv[3] = {_mm256_set1_ps(ray.inv_dir[0]), _mm256_set1_ps(ray.inv_dir[1]),
+                           _mm256_set1_ps(ray.inv_dir[2])};
     const __m256 widen = _mm256_set1_ps(kWiden), t_near = _mm256_set1_ps(ray.tnear), t_far = _mm256_set1_ps(t_max);
     const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
     const __m256 minus_inf = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
@@ -216,9 +219,12 @@ struct LeafBoxes {
         }
         enter = _mm256_max_ps(_mm256_sub_ps(enter, _mm256_mul_ps(_mm256_and_ps(enter, abs_mask), widen)), t_near);
         leave = _mm256_min_ps(_mm256_add_ps(leave, _mm256_mul_ps(_mm256_and_ps(leave, abs_mask), widen)), t_far);
-        const std::uint32_t met = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ))) & inRun(end - i);
-        const __m256i lanes_met = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&kPacked[met])));
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n), _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(i)), lanes_met));
+        const std::uint32_t met =
+            static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ))) & inRun(end - i);
+        const __m256i lanes_met =
+            _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&kPacked[met])));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n),
+                            _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(i)), lanes_met));
         __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{out[n]} << shift)));
         n += static_cast<std::uint32_t>(std::popcount(met));
       }
@@ -250,7 +256,8 @@ struct LeafBoxes {
         enter = _mm_max_ps(_mm_sub_ps(enter, _mm_mul_ps(_mm_and_ps(enter, abs_mask), widen)), t_near);
         leave = _mm_min_ps(_mm_add_ps(leave, _mm_mul_ps(_mm_and_ps(leave, abs_mask), widen)), t_far);
         // (SSE2 has no byte shuffle to pack the lanes with: a loop over the set bits.)
-        const std::uint32_t met = static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(enter, leave))) & inRun(end - i);
+        const std::uint32_t met =
+            static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(enter, leave))) & inRun(end - i);
         for (std::uint32_t m = met; m != 0; m &= m - 1u) out[n++] = i + static_cast<std::uint32_t>(std::countr_zero(m));
       }
     }

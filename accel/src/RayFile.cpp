@@ -49,7 +49,9 @@ void writeRecords(const std::filesystem::path& path, std::span<const Record> rec
 std::vector<Ray> readRayFile(const std::filesystem::path& path) { return readRecords<Ray>(path, "ray"); }
 void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays) { writeRecords(path, rays, "ray"); }
 std::vector<HitRecord> readHitFile(const std::filesystem::path& path) { return readRecords<HitRecord>(path, "hit"); }
-void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits) { writeRecords(path, hits, "hit"); }
+void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits) {
+  writeRecords(path, hits, "hit");
+}
 std::vector<float> readTransmittanceFile(const std::filesystem::path& path) {
   return readRecords<float>(path, "transmittance");
 }

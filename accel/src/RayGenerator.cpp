@@ -15,7 +15,8 @@ namespace {
 void requireBounds(const Box& b, const char* what) {
   for (int k = 0; k < 3; ++k)
     if (!std::isfinite(b.lo[k]) || !std::isfinite(b.hi[k]))
-      throw InvalidArgument(std::string(what) + ": the world bounds are empty or not finite (a scene without instances?)");
+      throw InvalidArgument(std::string(what) +
+                            ": the world bounds are empty or not finite (a scene without instances?)");
   if (b.empty()) throw InvalidArgument(std::string(what) + ": the world bounds are empty (a scene without instances?)");
 }
 }  // namespace
@@ -33,7 +34,8 @@ PinholeCamera PinholeCamera::looking_at_box(const Box& b) {
   return cam;
 }
 
-glm::vec3 PinholeCamera::direction(std::uint32_t px, std::uint32_t py, std::uint32_t width, std::uint32_t height) const {
+glm::vec3 PinholeCamera::direction(std::uint32_t px, std::uint32_t py, std::uint32_t width,
+                                   std::uint32_t height) const {
   return glm::vec3(directionAt(px + 0.5, py + 0.5, width, height));
 }
 
@@ -70,7 +72,8 @@ std::vector<Ray> randomRays(const Box& b, std::size_t count, std::uint64_t seed)
     const double z = 2.0 * unit(rng) - 1.0;
     const double phi = 2.0 * std::numbers::pi * unit(rng);
     const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
-    r.dir = glm::vec3(static_cast<float>(s * std::cos(phi)), static_cast<float>(s * std::sin(phi)), static_cast<float>(z));
+    r.dir =
+        glm::vec3(static_cast<float>(s * std::cos(phi)), static_cast<float>(s * std::sin(phi)), static_cast<float>(z));
     r.tnear = 0.0f;
     r.tfar = std::numeric_limits<float>::infinity();
   }

@@ -43,8 +43,8 @@ struct SensorGrid {
   static constexpr double kMaxRefsPerBox = 4.0;
   static constexpr std::uint32_t kMaxDim = 512;
 
-  LeafBoxes boxes;                       // entry boxes in cell order (vector tests)
-  std::vector<std::uint32_t> slots;      // slot of each entry, cell order
+  LeafBoxes boxes;                        // entry boxes in cell order (vector tests)
+  std::vector<std::uint32_t> slots;       // slot of each entry, cell order
   std::vector<std::uint32_t> cell_begin;  // entries of cell c: [cell_begin[c], cell_begin[c + 1])
   std::uint32_t dims[3] = {1, 1, 1};
   float lo[3] = {0, 0, 0};
@@ -141,17 +141,16 @@ struct SensorGrid {
 
   // Calls hit(entry) for the entries (boxes of the cells the ray passes within [ray.tnear, t_max])
   // whose box it meets within [ray.tnear, t_max]; slots[entry] is the box's slot (a box spanning
-  // several cells comes once per cell), in no particular order. `dir` is the ray's direction; `runs` and `met` are scratch lists. Returns
-  // false, having called nothing, when the ray's rounding could exceed the margin, or the ray has a
-  // zero direction component (the caller walks the kd-tree instead).
-  // `records` (optional): a 64-byte record per entry that hit() reads (LeafBoxes::metInRuns
-  // prefetches it).
-  // `before(met, n)` (optional) sees the n entries met before hit() is called for any of them
-  // (the crossing query prefetches what the hits will read).
+  // several cells comes once per cell), in no particular order. `dir` is the ray's direction; `runs` and `met` are
+  // scratch lists. Returns false, having called nothing, when the ray's rounding could exceed the margin, or the ray
+  // has a zero direction component (the caller walks the kd-tree instead). `records` (optional): a 64-byte record per
+  // entry that hit() reads (LeafBoxes::metInRuns prefetches it). `before(met, n)` (optional) sees the n entries met
+  // before hit() is called for any of them (the crossing query prefetches what the hits will read).
   template <class F, class B = void (*)(const std::uint32_t*, std::uint32_t)>
-  bool forEachMet(const KdRay& ray, const glm::vec3& dir, float t_max, std::vector<std::uint32_t>& runs,
-                  std::vector<std::uint32_t>& met, F&& hit, const void* records = nullptr,
-                  B&& before = [](const std::uint32_t*, std::uint32_t) {}) const {
+  bool forEachMet(
+      const KdRay& ray, const glm::vec3& dir, float t_max, std::vector<std::uint32_t>& runs,
+      std::vector<std::uint32_t>& met, F&& hit, const void* records = nullptr,
+      B&& before = [](const std::uint32_t*, std::uint32_t) {}) const {
 #if !defined(DUPLEX_LEAF_BOXES_X86)
     (void)ray, (void)dir, (void)t_max, (void)runs, (void)met, (void)hit, (void)records, (void)before;
     return false;  // no vector box test (LeafBoxes.h): the kd-tree
@@ -159,8 +158,9 @@ struct SensorGrid {
     if (boxes.lanes == 1 || ray.zero[0] || ray.zero[1] || ray.zero[2]) return false;
     float t0 = ray.tnear, t1 = t_max;
     if (!clipIntervalToBox(ray, bounds, t0, t1)) return true;  // misses every box
-    const float reach = std::max({std::abs(ray.origin[0]), std::abs(ray.origin[1]), std::abs(ray.origin[2]), magnitude}) +
-                        std::max(std::abs(t0), std::abs(t1)) * std::max({std::abs(dir.x), std::abs(dir.y), std::abs(dir.z)});
+    const float reach =
+        std::max({std::abs(ray.origin[0]), std::abs(ray.origin[1]), std::abs(ray.origin[2]), magnitude}) +
+        std::max(std::abs(t0), std::abs(t1)) * std::max({std::abs(dir.x), std::abs(dir.y), std::abs(dir.z)});
     // Entry point and plane crossings are each a few roundings of values up to `reach`.
     if (!(64.0f * std::numeric_limits<float>::epsilon() * reach <= margin)) return false;
     // Per axis: the cell where the ray enters, and the t of every cell plane it crosses up to t1
@@ -173,7 +173,8 @@ struct SensorGrid {
     std::int32_t c[3], stride[3];
     std::uint32_t count[3];
     float plane_t[3][kMaxDim + 8];
-    const std::int32_t axis_stride[3] = {1, static_cast<std::int32_t>(dims[0]), static_cast<std::int32_t>(dims[0] * dims[1])};
+    const std::int32_t axis_stride[3] = {1, static_cast<std::int32_t>(dims[0]),
+                                         static_cast<std::int32_t>(dims[0] * dims[1])};
     for (int k = 0; k < 3; ++k) {
       c[k] = static_cast<std::int32_t>(cellOf(k, ray.origin[k] + t0 * dir[k]));
       const bool up = dir[k] > 0.0f;
@@ -199,7 +200,8 @@ struct SensorGrid {
                                                            (_mm_movemask_ps(_mm_cmple_ps(tb, end4)) << 4));
         // A prefix: its length is the count of trailing ones (std::popcount would be a library
         // call without -mpopcnt).
-        const std::uint32_t got = std::min<std::uint32_t>(static_cast<std::uint32_t>(std::countr_one(before_end)), left - n);
+        const std::uint32_t got =
+            std::min<std::uint32_t>(static_cast<std::uint32_t>(std::countr_one(before_end)), left - n);
         n += got;
         if (got < 8) break;
       }

@@ -13,9 +13,9 @@
 // and per refinement, and made exact (with the root shrunk to its boxes) every 32 commits or
 // before a rebuild decision; when it exceeds the cost of the last full build by
 // TopLevelConfig::rebuild_ratio, the instance count drifted far from that build's, or the tree
-// grew to 4 times its nodes or references, the whole tree is rebuilt. A leaf that grows is moved to the end of the index list (its old range becomes
-// garbage, compacted when garbage outweighs live references), so an edit costs O(leaves touched),
-// independent of the scene size, apart from the amortised exact recomputations.
+// grew to 4 times its nodes or references, the whole tree is rebuilt. A leaf that grows is moved to the end of the
+// index list (its old range becomes garbage, compacted when garbage outweighs live references), so an edit costs
+// O(leaves touched), independent of the scene size, apart from the amortised exact recomputations.
 
 #include "duplex/accel/TopLevel.h"
 
@@ -131,7 +131,8 @@ namespace {
 void validateBuild(const KdBuildConfig& b, const std::string& which) {
   auto bad = [&](const std::string& what) { throw InvalidArgument("top level configuration: " + which + what); };
   if (!(std::isfinite(b.traversal_cost) && b.traversal_cost > 0.0f)) bad("traversal_cost must be finite and positive");
-  if (!(std::isfinite(b.intersection_cost) && b.intersection_cost > 0.0f)) bad("intersection_cost must be finite and positive");
+  if (!(std::isfinite(b.intersection_cost) && b.intersection_cost > 0.0f))
+    bad("intersection_cost must be finite and positive");
   if (!(b.empty_bonus >= 0.0f && b.empty_bonus < 1.0f)) bad("empty_bonus must be in [0, 1)");
   if (b.max_depth < 0) bad("max_depth must not be negative (0 = automatic)");
 }
@@ -455,7 +456,8 @@ void TopLevel::commitEdits() {
       if (it == s.slot_of_id.end()) continue;  // added and removed within this batch
       const std::uint32_t slot = it->second;
       boundary_left |= on_boundary(s.boxes[slot]);
-      if (incremental) forEachLeaf(tree_, s.frontier_of, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
+      if (incremental)
+        forEachLeaf(tree_, s.frontier_of, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
       s.boxes[slot] = Box();
       s.records[slot] = Record{};
       s.filters[slot] = SlotFilter{};
@@ -493,9 +495,11 @@ void TopLevel::commitEdits() {
     // Leave the leaves only the old box touches, join those only the new box touches.
     s.scratch_old.clear();
     s.scratch_new.clear();
-    if (!old_box.empty()) forEachLeaf(tree_, s.frontier_of, old_box, [&](const LeafVisit& v) { s.scratch_old.push_back(v); });
+    if (!old_box.empty())
+      forEachLeaf(tree_, s.frontier_of, old_box, [&](const LeafVisit& v) { s.scratch_old.push_back(v); });
     grow_root(edit->box);
-    if (!edit->box.empty()) forEachLeaf(tree_, s.frontier_of, edit->box, [&](const LeafVisit& v) { s.scratch_new.push_back(v); });
+    if (!edit->box.empty())
+      forEachLeaf(tree_, s.frontier_of, edit->box, [&](const LeafVisit& v) { s.scratch_new.push_back(v); });
     auto in = [](const std::vector<LeafVisit>& list, std::uint32_t node) {
       return std::any_of(list.begin(), list.end(), [&](const LeafVisit& v) { return v.node == node; });
     };
@@ -518,7 +522,8 @@ void TopLevel::commitEdits() {
   }
   // Too few instances to bother, or the count drifted far from the last full build's: rebuild.
   const double drift = std::abs(static_cast<double>(live_count_) - static_cast<double>(s.fresh_count));
-  if (live_count_ < config_.min_incremental_instances || drift > 0.25 * static_cast<double>(std::max<std::size_t>(s.fresh_count, 1))) {
+  if (live_count_ < config_.min_incremental_instances ||
+      drift > 0.25 * static_cast<double>(std::max<std::size_t>(s.fresh_count, 1))) {
     fullRebuild();
     return;
   }
@@ -584,7 +589,8 @@ Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& c
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
       const SlotFilter f = filters[slot];
-      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) || mailbox.seen(slot))
+      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) ||
+          mailbox.seen(slot))
         continue;
       const Record& rec = records[slot];
       ++ctx.stats.instance_visits;
@@ -653,7 +659,8 @@ void TopLevel::collectAllHere(const toplevel_detail::WorldRay& w, std::vector<Hi
   traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
-      if ((filters[slot].mask & mask) == 0 || std::find(visited.begin(), visited.end(), slot) != visited.end()) continue;
+      if ((filters[slot].mask & mask) == 0 || std::find(visited.begin(), visited.end(), slot) != visited.end())
+        continue;
       const Record& rec = records[slot];
       visited.push_back(slot);
       ++ctx.stats.instance_visits;
@@ -689,7 +696,8 @@ std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec
   for (const glm::dvec4& p : planes)
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(p.w) ||
         !(p.x != 0.0 || p.y != 0.0 || p.z != 0.0))
-      throw InvalidArgument("TopLevel::instancesInRegion: a plane has a non-finite or zero normal, or a non-finite offset");
+      throw InvalidArgument(
+          "TopLevel::instancesInRegion: a plane has a non-finite or zero normal, or a non-finite offset");
   std::vector<std::uint32_t> out = sensors_ ? sensors_->instancesInRegion(planes, mask) : std::vector<std::uint32_t>{};
   if (tree_.empty()) return out;
   // A box is outside when its corner furthest along a plane's normal is still outside it.

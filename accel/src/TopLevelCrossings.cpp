@@ -44,8 +44,8 @@ inline void prefetchLine(const char* p) {
 
 }  // namespace
 
-SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<SensorCrossing>& crossings, QueryContext& ctx,
-                                            const CrossingQuery& query) const {
+SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<SensorCrossing>& crossings,
+                                            QueryContext& ctx, const CrossingQuery& query) const {
   ++ctx.stats.rays;
   crossings.clear();
   SegmentEnd end;
@@ -66,7 +66,8 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   // id): a ray meets few sensors, so keeping the list sorted costs less than sorting it. An
   // instance in many leaves may come back after the mailbox forgot it; it is asked once.
   auto addCrossings = [&](const Record& rec, float t_reach) {
-    if (std::any_of(crossings.begin(), crossings.end(), [&](const SensorCrossing& c) { return c.hit.instance_id == rec.id; }))
+    if (std::any_of(crossings.begin(), crossings.end(),
+                    [&](const SensorCrossing& c) { return c.hit.instance_id == rec.id; }))
       return;
     Ray ray_os = toObject(rec, w);
     ray_os.tfar = t_reach;
@@ -76,39 +77,41 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
       if (!(h.t <= t_reach)) continue;
       h.instance_id = rec.id;
       h.ng = normalToWorld(rec, h.ng);
-      const auto at = std::upper_bound(crossings.begin(), crossings.end(), h, [](const Hit& a, const SensorCrossing& b) {
-        return a.t < b.hit.t || (a.t == b.hit.t && a.instance_id < b.hit.instance_id);
-      });
+      const auto at =
+          std::upper_bound(crossings.begin(), crossings.end(), h, [](const Hit& a, const SensorCrossing& b) {
+            return a.t < b.hit.t || (a.t == b.hit.t && a.instance_id < b.hit.instance_id);
+          });
       crossings.insert(at, {h, 1.0f});
     }
   };
   Mailbox mailbox;
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
-  if (!tree_.empty()) traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
-    bool found = false;
-    for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t slot = tree_.prim_indices[i];
-      // Surfaces and media only: sensors live in the sensors' level, walked below.
-      const SlotFilter f = filters[slot];
-      const std::uint32_t role_mask = f.role == ObjectRole::Surface  ? query.surface_mask
-                                      : f.role == ObjectRole::Medium ? query.medium_mask
-                                                                     : 0u;
-      const float t_reach = f.role == ObjectRole::Surface ? t : t * (1.0f + kCrossingSlack);
-      if ((f.mask & role_mask) == 0 || !meetsBox(kray, boxes[slot], t_reach) || mailbox.seen(slot)) continue;
-      const Record& rec = records[slot];
-      ++ctx.stats.instance_visits;
-      if (rec.role == ObjectRole::Surface) {
-        if (closerHit(rec, w, best, t, ctx)) {
-          winner = &rec;
-          found = true;
+  if (!tree_.empty())
+    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
+      bool found = false;
+      for (std::uint32_t i = begin; i < begin + count; ++i) {
+        const std::uint32_t slot = tree_.prim_indices[i];
+        // Surfaces and media only: sensors live in the sensors' level, walked below.
+        const SlotFilter f = filters[slot];
+        const std::uint32_t role_mask = f.role == ObjectRole::Surface  ? query.surface_mask
+                                        : f.role == ObjectRole::Medium ? query.medium_mask
+                                                                       : 0u;
+        const float t_reach = f.role == ObjectRole::Surface ? t : t * (1.0f + kCrossingSlack);
+        if ((f.mask & role_mask) == 0 || !meetsBox(kray, boxes[slot], t_reach) || mailbox.seen(slot)) continue;
+        const Record& rec = records[slot];
+        ++ctx.stats.instance_visits;
+        if (rec.role == ObjectRole::Surface) {
+          if (closerHit(rec, w, best, t, ctx)) {
+            winner = &rec;
+            found = true;
+          }
+        } else if (std::find(media.begin(), media.end(), &rec) == media.end()) {
+          media.push_back(&rec);
         }
-      } else if (std::find(media.begin(), media.end(), &rec) == media.end()) {
-        media.push_back(&rec);
       }
-    }
-    return found;
-  });
+      return found;
+    });
 
   if (winner) {
     best.instance_id = winner->id;
@@ -147,7 +150,8 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     };
     // The grid's entries carry their plane record, slot and mask in one cache line (grid_planes):
     // the same steps as visit() from one read; entries without a record take visit().
-    const FlatPlane* grid_planes = flat && ss.grid_planes.size() == ss.grid.slots.size() ? ss.grid_planes.data() : nullptr;
+    const FlatPlane* grid_planes =
+        flat && ss.grid_planes.size() == ss.grid.slots.size() ? ss.grid_planes.data() : nullptr;
     auto visitEntry = [&](std::uint32_t entry) {
       if (!grid_planes || !grid_planes[entry].valid()) return visit(ss.grid.slots[entry]);
       const FlatPlane& p = grid_planes[entry];
@@ -173,18 +177,19 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
       }
     };
     const bool by_grid = leaf_boxes && config_.sensor_grid && ss.grid.usable() &&
-                         ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met, visitEntry, grid_planes,
-                                            prefetchRecords);
+                         ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met,
+                                            visitEntry, grid_planes, prefetchRecords);
     float t_limit = t_keep;
-    if (!by_grid) (void)traverseKdTree<false>(s_tree, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
-      if (leaf_boxes) {
-        leaf_boxes->forEachMet(kray, begin, count, t_keep, [&](std::uint32_t i) { visit(s_prims[i]); });
-      } else {
-        for (std::uint32_t i = begin; i < begin + count; ++i)
-          if (meetsBox(kray, s_boxes[s_prims[i]], t_keep)) visit(s_prims[i]);
-      }
-      return false;
-    });
+    if (!by_grid)
+      (void)traverseKdTree<false>(s_tree, kray, t_limit, [&](std::uint32_t begin, std::uint32_t count, float&) {
+        if (leaf_boxes) {
+          leaf_boxes->forEachMet(kray, begin, count, t_keep, [&](std::uint32_t i) { visit(s_prims[i]); });
+        } else {
+          for (std::uint32_t i = begin; i < begin + count; ++i)
+            if (meetsBox(kray, s_boxes[s_prims[i]], t_keep)) visit(s_prims[i]);
+        }
+        return false;
+      });
   }
 
   // Media: the product of each medium's transmittance over consecutive segments

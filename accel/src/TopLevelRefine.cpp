@@ -126,10 +126,8 @@ std::uint32_t appendSubtree(KdTree& tree, const KdTree& sub, const std::vector<s
   const auto node_base = static_cast<std::uint32_t>(tree.nodes.size());
   const auto prim_base = static_cast<std::uint32_t>(tree.prim_indices.size());
   for (KdNode m : sub.nodes) {
-    if (m.isLeaf())
-      m = KdNode::leaf(m.primCount() ? m.primOffset() + prim_base : 0, m.primCount());
-    else
-      m.setUpperChild(m.upperChild() + node_base);
+    if (m.isLeaf()) m = KdNode::leaf(m.primCount() ? m.primOffset() + prim_base : 0, m.primCount());
+    else m.setUpperChild(m.upperChild() + node_base);
     tree.nodes.push_back(m);
   }
   for (const std::uint32_t p : sub.prim_indices) tree.prim_indices.push_back(slots[p]);
@@ -182,7 +180,8 @@ void uniqueBy(std::vector<LeafVisit>& visits, std::uint32_t LeafVisit::*key) {
 
 // Whether the visit's leaf lies in a frontier subtree that was rebuilt (and is garbage now).
 bool inRebuilt(const LeafVisit& v, const std::vector<std::uint32_t>& rebuilt_frontiers) {
-  return v.frontier != kNoJump && std::find(rebuilt_frontiers.begin(), rebuilt_frontiers.end(), v.frontier) != rebuilt_frontiers.end();
+  return v.frontier != kNoJump &&
+         std::find(rebuilt_frontiers.begin(), rebuilt_frontiers.end(), v.frontier) != rebuilt_frontiers.end();
 }
 
 }  // namespace
@@ -244,12 +243,15 @@ std::vector<std::uint32_t> TopLevel::State::rebuildEditedFrontiers(TopLevel& top
   }
   std::size_t max_refs = 0;
   for (const std::uint32_t fi : touched_frontiers) max_refs = std::max<std::size_t>(max_refs, frontiers[fi].refs);
-  frontier_credit = std::min(frontier_credit, 2.0 * static_cast<double>(std::max<std::size_t>(max_refs, kMinFrontierRefs)));
+  frontier_credit =
+      std::min(frontier_credit, 2.0 * static_cast<double>(std::max<std::size_t>(max_refs, kMinFrontierRefs)));
   touched_frontiers.clear();
-  if (pick != kNoJump && frontier_credit >= static_cast<double>(frontiers[pick].refs)) touched_frontiers.push_back(pick);
+  if (pick != kNoJump && frontier_credit >= static_cast<double>(frontiers[pick].refs))
+    touched_frontiers.push_back(pick);
   // Large batches drift the tree faster than one frontier per commit repairs; their quality is left
   // to the SAH check and full rebuilds (TopLevel.cpp), and their commits stay as cheap as before.
-  if (static_cast<double>(last_edits) > std::max(1.0, kFrontierBatchShare * static_cast<double>(boxes.size() - free_slots.size())))
+  if (static_cast<double>(last_edits) >
+      std::max(1.0, kFrontierBatchShare * static_cast<double>(boxes.size() - free_slots.size())))
     touched_frontiers.clear();
   for (const std::uint32_t fi : touched_frontiers) {
     Frontier& f = frontiers[fi];
@@ -319,7 +321,8 @@ bool TopLevel::State::refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_
   std::vector<std::uint32_t> slots;
   for (LeafVisit& v : grown_leaves) {
     // A leaf of a rebuilt jump subtree is garbage now (the rebuild took its references).
-    if ((v.jump != kNoJump && std::find(gone.begin(), gone.end(), v.jump) != gone.end()) || inRebuilt(v, rebuilt)) continue;
+    if ((v.jump != kNoJump && std::find(gone.begin(), gone.end(), v.jump) != gone.end()) || inRebuilt(v, rebuilt))
+      continue;
     const KdNode n = tree.nodes[v.node];
     const std::uint32_t cnt = n.primCount();
     if (cnt < 2) continue;
@@ -382,7 +385,8 @@ void TopLevel::compact() {
   tree_ = std::move(out);
   s.jump_losses.clear();  // no jumps left
   s.frontier_of.assign(tree_.nodes.size(), kNoJump);
-  for (std::size_t f = 0; f < s.frontiers.size(); ++f) s.frontier_of[s.frontiers[f].node] = static_cast<std::uint32_t>(f);
+  for (std::size_t f = 0; f < s.frontiers.size(); ++f)
+    s.frontier_of[s.frontiers[f].node] = static_cast<std::uint32_t>(f);
   s.garbage = 0;
   s.garbage_nodes = 0;
 }

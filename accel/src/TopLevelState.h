@@ -70,8 +70,8 @@ struct LeafVisit {
 // its references: the nodes where a walk from the root first meets a subtree of at most
 // max(256, references / 64) references (leaves included).
 struct Frontier {
-  std::uint32_t node;   // stays valid: frontier nodes are never garbage (a rebuild makes them jumps)
-  Box cell;             // derived from `root`
+  std::uint32_t node;  // stays valid: frontier nodes are never garbage (a rebuild makes them jumps)
+  Box cell;            // derived from `root`
   Box root;
   std::uint32_t depth;  // inner nodes above it
   std::uint32_t refs;   // references after its last build
@@ -162,7 +162,7 @@ struct TopLevel::State {
   using Record = toplevel_detail::Record;
   using LeafVisit = toplevel_detail::LeafVisit;
   using Prepared = toplevel_detail::Prepared;
-  std::vector<Record> records;  // by slot; tree indices are slots
+  std::vector<Record> records;                       // by slot; tree indices are slots
   std::vector<toplevel_detail::SlotFilter> filters;  // by slot: filterOf(records[slot])
   std::vector<std::shared_ptr<const Object>> owners;
   std::vector<Box> boxes;  // world box by slot; empty for a free slot
@@ -208,7 +208,8 @@ struct TopLevel::State {
       if (!rec.object || boxes[slot].empty()) continue;
       if (const std::optional<FlatCrossings> f = rec.object->flatCrossings())
         flat[slot] = toplevel_detail::FlatPlane(rec.identity ? Affine::identity() : rec.object_from_world, *f,
-                                                static_cast<std::uint32_t>(slot), rec.role == ObjectRole::Sensor ? rec.mask : 0u);
+                                                static_cast<std::uint32_t>(slot),
+                                                rec.role == ObjectRole::Sensor ? rec.mask : 0u);
     }
     grid_planes.clear();
     if (grid.usable()) {
@@ -219,9 +220,9 @@ struct TopLevel::State {
 
   std::size_t garbage_nodes = 0;  // nodes no longer reachable (replaced local subtrees)
   std::vector<toplevel_detail::Frontier> frontiers;
-  std::vector<std::uint32_t> frontier_of;  // by node index (nodes of the last full build): frontier or kNoJump
+  std::vector<std::uint32_t> frontier_of;        // by node index (nodes of the last full build): frontier or kNoJump
   std::vector<std::uint32_t> touched_frontiers;  // frontiers edited in this commit (repeats)
-  double frontier_credit = 0.0;  // references of frontier rebuild work the edits have paid for
+  double frontier_credit = 0.0;                  // references of frontier rebuild work the edits have paid for
   void countEdit(const LeafVisit& v) {
     if (v.frontier == toplevel_detail::kNoJump) return;
     ++frontiers[v.frontier].edits;

@@ -166,10 +166,10 @@ void splitInsideTriangle(const __m128 (&v)[3], const Box& lower_box, const Box& 
       // Nearest floats, and whether each lies above (below) the double it rounds.
       const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(x01), _mm_cvtpd_ps(x23));
       const __m128d f01 = _mm_cvtps_pd(f), f23 = _mm_cvtps_pd(_mm_movehl_ps(f, f));
-      const __m128i above = _mm_castps_si128(_mm_shuffle_ps(_mm_castpd_ps(_mm_cmpgt_pd(f01, x01)),
-                                                            _mm_castpd_ps(_mm_cmpgt_pd(f23, x23)), _MM_SHUFFLE(2, 0, 2, 0)));
-      const __m128i below = _mm_castps_si128(_mm_shuffle_ps(_mm_castpd_ps(_mm_cmplt_pd(f01, x01)),
-                                                            _mm_castpd_ps(_mm_cmplt_pd(f23, x23)), _MM_SHUFFLE(2, 0, 2, 0)));
+      const __m128i above = _mm_castps_si128(_mm_shuffle_ps(
+          _mm_castpd_ps(_mm_cmpgt_pd(f01, x01)), _mm_castpd_ps(_mm_cmpgt_pd(f23, x23)), _MM_SHUFFLE(2, 0, 2, 0)));
+      const __m128i below = _mm_castps_si128(_mm_shuffle_ps(
+          _mm_castpd_ps(_mm_cmplt_pd(f01, x01)), _mm_castpd_ps(_mm_cmplt_pd(f23, x23)), _MM_SHUFFLE(2, 0, 2, 0)));
       // floatBelow / floatAbove on the bits: one step away from zero for a negative float going
       // down or a positive one going up, towards zero otherwise.
       const __m128i u = _mm_castps_si128(f);
@@ -234,8 +234,8 @@ Box clipTriangleToBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c
   return bounds.rounded(box);
 }
 
-void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, int axis,
-                        float pos, Box& lower, Box& upper) {
+void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, int axis, float pos,
+                        Box& lower, Box& upper) {
   if (box.empty()) {
     lower = upper = Box();
     return;

@@ -31,7 +31,7 @@ namespace duplex::demo {
 /// Continuous image coordinates ((0, 0) the top-left corner, (width, height) the bottom-right, the
 /// convention of PinholeCamera::directionAt) of the world point `p_ws`; nullopt when the point is
 /// not in front of the camera.
-[[nodiscard]] std::optional<glm::dvec2> project(const PinholeCamera& camera, const glm::dvec3& p_ws, std::uint32_t width,
-                                                std::uint32_t height);
+[[nodiscard]] std::optional<glm::dvec2> project(const PinholeCamera& camera, const glm::dvec3& p_ws,
+                                                std::uint32_t width, std::uint32_t height);
 
 }  // namespace duplex::demo

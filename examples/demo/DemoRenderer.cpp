@@ -58,8 +58,8 @@ DemoRenderer::DemoRenderer(const SceneTracer& tracer, const PinholeCamera& camer
   const glm::vec3 eye(camera.eye);
   for (std::uint32_t y = 0; y < settings.height; ++y)
     for (std::uint32_t x = 0; x < settings.width; ++x)
-      primary_[static_cast<std::size_t>(y) * settings.width + x] =
-          Ray{eye, 0.0f, camera.direction(x, y, settings.width, settings.height), std::numeric_limits<float>::infinity()};
+      primary_[static_cast<std::size_t>(y) * settings.width + x] = Ray{
+          eye, 0.0f, camera.direction(x, y, settings.width, settings.height), std::numeric_limits<float>::infinity()};
   hits_.resize(n);
 }
 
@@ -122,7 +122,8 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
       ++primary_hits;
       const glm::vec3 nrm = facingNormal(h, primary_[i]);
       const float ambient = 0.12f + 0.14f * (0.5f + 0.5f * nrm.y);
-      const glm::vec3 base = h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
+      const glm::vec3 base =
+          h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
       colour = base * (ambient + 0.85f * direct[i]);
     }
     for (int c = 0; c < 3; ++c) image.pixels[i * 3 + c] = toSrgb8(colour[c]);

@@ -56,7 +56,7 @@ class DemoRenderer {
   RenderSettings settings_;
   std::vector<Ray> primary_;  ///< one per pixel, row-major from the top-left pixel
   std::vector<Hit> hits_;
-  std::vector<Ray> shadow_;   ///< towards the light, for the lit pixels listed in shadow_pixel_
+  std::vector<Ray> shadow_;  ///< towards the light, for the lit pixels listed in shadow_pixel_
   std::vector<std::size_t> shadow_pixel_;
   std::vector<std::uint8_t> blocked_;
   std::vector<glm::vec3> colour_of_node_;  ///< base colour per node id (instances of the last commit)

@@ -122,16 +122,24 @@ fs::path framePath(const fs::path& dir, std::size_t frame) {
 
 int main(int argc, char** argv) {
   Options opt;
-  CLI::App app{"Plays a scene's timed edits through a SceneTracer: renders PNGs before and after them (Lambert "
-               "shading, shadow rays) and prints build, update and trace figures, then one JSON line.",
-               "duplex_demo"};
+  CLI::App app{
+      "Plays a scene's timed edits through a SceneTracer: renders PNGs before and after them (Lambert "
+      "shading, shadow rays) and prints build, update and trace figures, then one JSON line.",
+      "duplex_demo"};
   app.add_option("--scene", opt.scene, "Scene file (duplex-scene-v1 or scene-json-v1)")->capture_default_str();
-  app.add_option("--out", opt.out, "PNG of the final frame (default out/<scene>_after.png; out/<scene>.png without edits)");
-  app.add_option("--before", opt.before, "PNG of the first frame, before the edits (default: <scene>_before.png beside --out)");
+  app.add_option("--out", opt.out,
+                 "PNG of the final frame (default out/<scene>_after.png; out/<scene>.png without edits)");
+  app.add_option("--before", opt.before,
+                 "PNG of the first frame, before the edits (default: <scene>_before.png beside --out)");
   app.add_option("--frames", opt.frames, "Also write every frame to DIR/frame_NNN.png");
-  app.add_option("--width", opt.render.width, "Image width in pixels")->check(CLI::Range(1u, 16384u))->capture_default_str();
-  app.add_option("--height", opt.render.height, "Image height in pixels")->check(CLI::Range(1u, 16384u))->capture_default_str();
-  app.add_option("--threads", opt.threads, "Worker threads (default: all hardware threads)")->check(CLI::Range(1, 4096));
+  app.add_option("--width", opt.render.width, "Image width in pixels")
+      ->check(CLI::Range(1u, 16384u))
+      ->capture_default_str();
+  app.add_option("--height", opt.render.height, "Image height in pixels")
+      ->check(CLI::Range(1u, 16384u))
+      ->capture_default_str();
+  app.add_option("--threads", opt.threads, "Worker threads (default: all hardware threads)")
+      ->check(CLI::Range(1, 4096));
   app.add_option("--distance", opt.distance, "Camera distance in diagonals of the (non-flat) scene as loaded")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -141,7 +149,8 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    tbb::global_control thread_limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(opt.threads));
+    tbb::global_control thread_limit(tbb::global_control::max_allowed_parallelism,
+                                     static_cast<std::size_t>(opt.threads));
     tbb::task_arena arena(opt.threads);
 
     duplex::SceneDocument doc;
@@ -263,13 +272,15 @@ int main(int argc, char** argv) {
     const double update_max = update_ms.empty() ? 0.0 : *std::max_element(update_ms.begin(), update_ms.end());
     const double mrays = mraysPerSecond(rays, all_trace_ms);
     if (!commits.empty())
-      std::printf("  update   median %.3f ms, max %.3f ms per commit (first edit call until queries see it); "
-                  "top level median %.3f ms\n",
-                  median(update_ms), update_max, median(tracer_ms));
+      std::printf(
+          "  update   median %.3f ms, max %.3f ms per commit (first edit call until queries see it); "
+          "top level median %.3f ms\n",
+          median(update_ms), update_max, median(tracer_ms));
     std::printf("  trace    median %.2f ms per frame over %zu frames, %.2f Mrays/s (primary + shadow rays)\n",
                 median(trace_ms), frames.size(), mrays);
     for (const Probe& p : probes)
-      std::printf("  probe    %s: before %s, after %s\n", p.path.c_str(), p.hit_before.empty() ? "(miss)" : p.hit_before.c_str(),
+      std::printf("  probe    %s: before %s, after %s\n", p.path.c_str(),
+                  p.hit_before.empty() ? "(miss)" : p.hit_before.c_str(),
                   p.hit_after.empty() ? "(miss)" : p.hit_after.c_str());
     if (animated) std::printf("  image    %s (before), ", opt.before.string().c_str());
     else std::printf("  image    ");

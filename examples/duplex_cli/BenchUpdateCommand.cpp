@@ -192,7 +192,8 @@ class Ours {
   void setTransform(std::uint32_t instance, const Affine& world_from_object) {
     // Children of the root (every instance of scene-json-v1) take the world transform as it is.
     const std::optional<Affine>& parent_from_world = parent_from_world_[instance];
-    graph_.setTransform(nodes_[instance], parent_from_world ? *parent_from_world * world_from_object : world_from_object);
+    graph_.setTransform(nodes_[instance],
+                        parent_from_world ? *parent_from_world * world_from_object : world_from_object);
   }
   std::uint32_t add(std::uint32_t object, const Affine& world_from_object) {
     nodes_.push_back(graph_.addInstance(kRootNode, object, world_from_object));
@@ -228,7 +229,9 @@ class Ours {
       switch (info.kind) {
         case NodeKind::Group: copy = graph_.addGroup(copy_parent, name); break;
         case NodeKind::Transform: copy = graph_.addTransform(copy_parent, info.local, name); break;
-        case NodeKind::Instance: copy = graph_.addInstance(copy_parent, info.object, info.local, name, info.mask); break;
+        case NodeKind::Instance:
+          copy = graph_.addInstance(copy_parent, info.object, info.local, name, info.mask);
+          break;
       }
       if (!info.visible) graph_.setVisible(copy, false);
       if (copy_.size() <= child) copy_.resize(std::size_t{child} + 1, kInvalidNode);
@@ -293,7 +296,8 @@ std::size_t parseMoves(const std::string& text, std::size_t instances) {
   const double count = percent ? std::round(value * static_cast<double>(instances) / 100.0) : value;
   const std::size_t m = std::max<std::size_t>(1, static_cast<std::size_t>(count));
   if (m > instances)
-    throw InvalidArgument("--moves " + text + " exceeds the scene's " + std::to_string(instances) + " visible instances");
+    throw InvalidArgument("--moves " + text + " exceeds the scene's " + std::to_string(instances) +
+                          " visible instances");
   return m;
 }
 
@@ -356,7 +360,8 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     embree_held.push_back(library.get(i));
     const auto* mesh_object = dynamic_cast<const MeshObject*>(embree_held.back().get());
     if (!mesh_object)
-      throw InvalidArgument(options.scene.string() + ": object " + library.name(i) + " is not a mesh (Embree baseline)");
+      throw InvalidArgument(options.scene.string() + ": object " + library.name(i) +
+                            " is not a mesh (Embree baseline)");
     meshes.push_back(&mesh_object->mesh());
   }
   std::vector<bench::EmbreeInstanceDesc> embree_instances;
@@ -402,7 +407,8 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
       arena.execute([&] {
         tbb::parallel_for(std::size_t{0}, mesh_objects.size(), [&](std::size_t k) {
           // A non-owning pointer: the library keeps the mesh alive.
-          made[k] = make(k, std::shared_ptr<const TriangleMesh>(std::shared_ptr<const TriangleMesh>{}, &mesh_objects[k]->mesh()));
+          made[k] = make(
+              k, std::shared_ptr<const TriangleMesh>(std::shared_ptr<const TriangleMesh>{}, &mesh_objects[k]->mesh()));
         });
       });
       const double bottom_ms = watch.ms();
@@ -428,7 +434,9 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
 #if DUPLEX_BENCH_HAVE_EMBREE
       const auto embreeRound = [&] {
         std::unique_ptr<Embree> embree;
-        arena.execute([&] { embree = std::make_unique<Embree>(device, meshes, embree_instances, bench::EmbreeTopLevelMode::Default); });
+        arena.execute([&] {
+          embree = std::make_unique<Embree>(device, meshes, embree_instances, bench::EmbreeTopLevelMode::Default);
+        });
         const bench::EmbreeTwoLevelBuildTimes& t = embree->scene().buildTimes();
         embree_objects_ms.push_back(t.objects_ms);
         embree_top_ms.push_back(t.top_ms);
@@ -464,7 +472,8 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   const Figures incremental = replay(*ours, plan, initial, arena, rays);
   // The baselines replay a prefix of the same plan.
   EditPlan baseline_plan = plan;
-  const int baseline_repeat = options.baseline_repeat > 0 ? std::min(options.baseline_repeat, options.repeat) : options.repeat;
+  const int baseline_repeat =
+      options.baseline_repeat > 0 ? std::min(options.baseline_repeat, options.repeat) : options.repeat;
   baseline_plan.moves.resize(static_cast<std::size_t>(baseline_repeat));
   baseline_plan.adds.resize(static_cast<std::size_t>(baseline_repeat));
   out["baseline_repeat"] = baseline_repeat;
@@ -473,9 +482,9 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   out["top_level_full_rebuilds"] = stats.full_rebuilds;
   out["top_level_subtree_rebuilds"] = stats.subtree_rebuilds;
   // What the incremental commits cost the tracing: the incremental tree against a tree built from
-  // scratch over the same instances, traced alternately on one thread (8 pairs, each tree first in half of them; the median of the
-  // per-pair thread CPU time ratios), and the instance visits per ray of both
-  // (deterministic, single-threaded over the same rays).
+  // scratch over the same instances, traced alternately on one thread (8 pairs, each tree first in half of them; the
+  // median of the per-pair thread CPU time ratios), and the instance visits per ray of both (deterministic,
+  // single-threaded over the same rays).
   {
     std::unique_ptr<SceneTracer> fresh;
     arena.execute([&] { fresh = ours->freshTracer(); });
@@ -511,7 +520,8 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     out["top_level_sah_cost_fresh"] = fresh->stats().tree.sah_cost;
     // Shape of both trees: the SAH cost is normalised by the root box's area, so a looser root can
     // hide a costlier tree; nodes and the root's extent say what the cost does not.
-    for (const auto& [suffix, t] : {std::pair<std::string, const SceneTracer*>{"", &ours->tracer()}, {"_fresh", fresh.get()}}) {
+    for (const auto& [suffix, t] :
+         {std::pair<std::string, const SceneTracer*>{"", &ours->tracer()}, {"_fresh", fresh.get()}}) {
       const KdTreeStats ts = t->stats().tree;
       const Box root = t->bounds();
       out["top_level_nodes" + suffix] = ts.nodes;
@@ -528,7 +538,8 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     });
     std::size_t same = 0;
     for (std::size_t i = 0; i < rays.size(); ++i)
-      same += a[i].instance_id == b[i].instance_id && a[i].prim_id == b[i].prim_id && (a[i].t == b[i].t || !a[i].valid());
+      same +=
+          a[i].instance_id == b[i].instance_id && a[i].prim_id == b[i].prim_id && (a[i].t == b[i].t || !a[i].valid());
     out["agreement_incremental_vs_fresh"] = static_cast<double>(same) / static_cast<double>(rays.size());
   }
   // The same tree rebuilt from scratch: what the incremental commits cost the tracing.

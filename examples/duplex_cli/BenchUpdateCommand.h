@@ -37,9 +37,9 @@ struct BenchUpdateOptions {
   std::filesystem::path scene;
   /// Instances moved per commit: a count ("1") or a percentage of the instances ("1%", at least 1).
   std::string moves = "1";
-  int repeat = 50;          ///< commits per measurement (medians reported)
-  std::uint64_t seed = 1;   ///< seed of the edit plan
-  int threads = 0;          ///< builds, commits and tracing; 0 means all hardware threads
+  int repeat = 50;              ///< commits per measurement (medians reported)
+  std::uint64_t seed = 1;       ///< seed of the edit plan
+  int threads = 0;              ///< builds, commits and tracing; 0 means all hardware threads
   std::uint32_t primary = 512;  ///< primary rays of a W x W image (the camera of `duplex rays`)
   /// Rounds of full builds: each round one of ours (warm), one from the prepared library and one
   /// of Embree's (default flags), in alternating order; the dynamic / low quality Embree top level

@@ -126,8 +126,9 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
     json out_entry = v1 ? json{{"name", entry["name"]}} : entry;
     if (entry.contains("mesh")) {
       out_entry["mesh"] = meshSpec(entry["mesh"], v1, source_dir, options.out);
-      if (structure.empty()) throw InvalidArgument(options.scene.string() + ": /objects/" + std::to_string(k) +
-                                                   ": mesh object without a saved structure");
+      if (structure.empty())
+        throw InvalidArgument(options.scene.string() + ": /objects/" + std::to_string(k) +
+                              ": mesh object without a saved structure");
       out_entry["structure"] = structure.filename().string();
       ++mesh_objects;
     } else if (!structure.empty()) {

@@ -18,7 +18,8 @@ nlohmann::ordered_json runRays(const RaysOptions& options) {
   const SceneDocument doc = loadDocumentNamed(options.scene);
   const Box world_bounds = visibleWorldBounds(doc);
   if (world_bounds.empty())
-    throw InvalidArgument(options.scene.string() + ": scene has no visible instances, so no bounds to generate rays in");
+    throw InvalidArgument(options.scene.string() +
+                          ": scene has no visible instances, so no bounds to generate rays in");
 
   const std::vector<Ray> rays = primary ? primaryRays(world_bounds, *options.width, *options.height)
                                         : randomRays(world_bounds, *options.random_count, options.seed.value());

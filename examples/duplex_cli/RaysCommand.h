@@ -14,7 +14,7 @@ struct RaysOptions {
   /// scene-json-v1 or duplex-scene-v1 file; only its world bounds (the union of its visible
   /// instances' world boxes) are used
   std::filesystem::path scene;
-  std::filesystem::path out;    ///< ray file to write
+  std::filesystem::path out;  ///< ray file to write
   /// Exactly one of the two sets: primary rays of a width x height image (duplex::primaryRays) or
   /// `random_count` random rays from `seed` (duplex::randomRays).
   std::optional<std::uint32_t> width, height;

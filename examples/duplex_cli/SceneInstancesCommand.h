@@ -14,7 +14,7 @@ struct SceneInstancesOptions {
   std::filesystem::path mesh;  ///< any format duplex::loadMesh reads (loaded for its bounds)
   std::uint64_t count = 1;     ///< N >= 1 instances
   std::uint64_t seed = 0;
-  std::filesystem::path out;   ///< scene-json-v1 file to write
+  std::filesystem::path out;  ///< scene-json-v1 file to write
 };
 
 /// Writes one object (the mesh by path: relative to the output's folder when possible) and N

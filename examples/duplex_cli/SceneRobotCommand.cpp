@@ -68,7 +68,8 @@ class XmlReader {
         skipSpace();
         expectChar('>');
         if (stack.empty() || stack.back().name != name)
-          fail("closing tag </" + name + "> does not match " + (stack.empty() ? "any open element" : "<" + stack.back().name + ">"));
+          fail("closing tag </" + name + "> does not match " +
+               (stack.empty() ? "any open element" : "<" + stack.back().name + ">"));
         XmlElement done = std::move(stack.back());
         stack.pop_back();
         finish(std::move(done), stack, root);
@@ -95,13 +96,12 @@ class XmlReader {
           skipSpace();
           element.attributes.emplace_back(std::move(key), readQuoted());
         }
-        if (self_closing)
-          finish(std::move(element), stack, root);
-        else
-          stack.push_back(std::move(element));
+        if (self_closing) finish(std::move(element), stack, root);
+        else stack.push_back(std::move(element));
       }
     }
-    if (!stack.empty()) fail("<" + stack.back().name + "> (line " + std::to_string(stack.back().line) + ") is never closed");
+    if (!stack.empty())
+      fail("<" + stack.back().name + "> (line " + std::to_string(stack.back().line) + ") is never closed");
     if (!root) fail("no XML element");
     return std::move(*root);
   }
@@ -136,12 +136,14 @@ class XmlReader {
   }
   void expectChar(char c) {
     if (pos_ >= text_.size() || text_[pos_] != c)
-      fail(std::string("expected '") + c + "'" + (pos_ < text_.size() ? std::string(" before '") + text_[pos_] + "'" : " before the end"));
+      fail(std::string("expected '") + c + "'" +
+           (pos_ < text_.size() ? std::string(" before '") + text_[pos_] + "'" : " before the end"));
     advanceTo(pos_ + 1);
   }
   std::string readName() {
     std::size_t p = pos_;
-    while (p < text_.size() && (std::isalnum(static_cast<unsigned char>(text_[p])) || std::string_view("_-.:").find(text_[p]) != std::string_view::npos))
+    while (p < text_.size() && (std::isalnum(static_cast<unsigned char>(text_[p])) ||
+                                std::string_view("_-.:").find(text_[p]) != std::string_view::npos))
       ++p;
     if (p == pos_) fail("expected a name");
     std::string name = text_.substr(pos_, p - pos_);
@@ -187,9 +189,9 @@ class XmlReader {
 
 struct UrdfLink {
   std::string name;
-  std::string mesh_uri;           ///< empty: nothing to place
+  std::string mesh_uri;  ///< empty: nothing to place
   glm::dvec3 mesh_scale{1.0};
-  Affine link_from_visual;        ///< the visual's <origin>
+  Affine link_from_visual;  ///< the visual's <origin>
 };
 
 enum class JointKind { Fixed, Revolute, Prismatic };
@@ -197,8 +199,8 @@ enum class JointKind { Fixed, Revolute, Prismatic };
 struct UrdfJoint {
   std::string name;
   JointKind kind = JointKind::Fixed;
-  Affine parent_from_joint;       ///< <origin xyz rpy>
-  glm::dvec3 axis{1.0, 0.0, 0.0}; ///< unit, joint frame
+  Affine parent_from_joint;        ///< <origin xyz rpy>
+  glm::dvec3 axis{1.0, 0.0, 0.0};  ///< unit, joint frame
   std::string parent, child;
   std::optional<std::pair<double, double>> limits;  ///< lower, upper (revolute, prismatic)
 };
@@ -267,7 +269,8 @@ Urdf readUrdf(const std::filesystem::path& path) {
   Urdf urdf;
   for (const XmlElement& e : root.children) {
     const std::string* name = e.attribute("name");
-    const std::string where = file + ": line " + std::to_string(e.line) + ": <" + e.name + (name ? " name=\"" + *name + "\"" : "") + ">";
+    const std::string where =
+        file + ": line " + std::to_string(e.line) + ": <" + e.name + (name ? " name=\"" + *name + "\"" : "") + ">";
     if (e.name == "link") {
       if (!name) throw FileError(where + " has no name");
       UrdfLink link;
@@ -295,7 +298,9 @@ Urdf readUrdf(const std::filesystem::path& path) {
       if (*type == "fixed") joint.kind = JointKind::Fixed;
       else if (*type == "revolute" || *type == "continuous") joint.kind = JointKind::Revolute;
       else if (*type == "prismatic") joint.kind = JointKind::Prismatic;
-      else throw FileError(where + ": joint type '" + *type + "' is not supported (fixed, revolute, continuous, prismatic)");
+      else
+        throw FileError(where + ": joint type '" + *type +
+                        "' is not supported (fixed, revolute, continuous, prismatic)");
       joint.parent_from_joint = originTransform(e.child("origin"), where);
       const glm::dvec3 axis = vec3Attribute(e.child("axis"), "xyz", {1.0, 0.0, 0.0}, where + " <axis>");
       if (!(glm::length(axis) > 0.0)) throw FileError(where + ": <axis xyz> is the zero vector");
@@ -307,7 +312,8 @@ Urdf readUrdf(const std::filesystem::path& path) {
       joint.parent = *parent->attribute("link");
       joint.child = *child->attribute("link");
       if (*type == "revolute" || *type == "prismatic") {
-        if (const XmlElement* limit = e.child("limit"); limit && limit->attribute("lower") && limit->attribute("upper")) {
+        if (const XmlElement* limit = e.child("limit");
+            limit && limit->attribute("lower") && limit->attribute("upper")) {
           const double lower = parseNumbers(*limit->attribute("lower"), 1, where + " <limit lower>")[0];
           const double upper = parseNumbers(*limit->attribute("upper"), 1, where + " <limit upper>")[0];
           joint.limits = std::make_pair(lower, upper);
@@ -369,9 +375,12 @@ nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
   for (std::size_t j = 0; j < urdf.joints.size(); ++j) {
     const UrdfJoint& joint = urdf.joints[j];
     for (const std::string* l : {&joint.parent, &joint.child})
-      if (!link_index.contains(*l)) throw FileError(file + ": joint '" + joint.name + "' names unknown link '" + *l + "'");
+      if (!link_index.contains(*l))
+        throw FileError(file + ": joint '" + joint.name + "' names unknown link '" + *l + "'");
     int& pj = parent_joint[link_index[joint.child]];
-    if (pj >= 0) throw FileError(file + ": link '" + joint.child + "' is the child of two joints ('" + urdf.joints[static_cast<std::size_t>(pj)].name + "' and '" + joint.name + "')");
+    if (pj >= 0)
+      throw FileError(file + ": link '" + joint.child + "' is the child of two joints ('" +
+                      urdf.joints[static_cast<std::size_t>(pj)].name + "' and '" + joint.name + "')");
     pj = static_cast<int>(j);
     if (joint.kind != JointKind::Fixed) movable.push_back(j);
   }
@@ -379,7 +388,8 @@ nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
   for (std::size_t i = 0; i < urdf.links.size(); ++i)
     if (parent_joint[i] < 0) roots.push_back(i);
   if (roots.size() != 1)
-    throw FileError(file + ": expected one root link (a link no joint has as child), found " + std::to_string(roots.size()));
+    throw FileError(file + ": expected one root link (a link no joint has as child), found " +
+                    std::to_string(roots.size()));
 
   // Joint values.
   std::vector<double> q(urdf.joints.size(), 0.0);
@@ -387,16 +397,17 @@ nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
     if (options.joints.size() != movable.size()) {
       std::string names;
       for (const std::size_t j : movable) names += (names.empty() ? "" : ", ") + urdf.joints[j].name;
-      throw InvalidArgument("--joints gives " + std::to_string(options.joints.size()) + " values but " + file + " has " +
-                            std::to_string(movable.size()) + " movable joints (" + names + ")");
+      throw InvalidArgument("--joints gives " + std::to_string(options.joints.size()) + " values but " + file +
+                            " has " + std::to_string(movable.size()) + " movable joints (" + names + ")");
     }
     for (std::size_t m = 0; m < movable.size(); ++m) {
       const UrdfJoint& joint = urdf.joints[movable[m]];
       const double v = options.joints[m];
       if (!std::isfinite(v)) throw InvalidArgument("--joints: value for '" + joint.name + "' is not finite");
       if (joint.limits && (v < joint.limits->first || v > joint.limits->second))
-        throw InvalidArgument("--joints: " + std::to_string(v) + " for joint '" + joint.name + "' is outside its limits [" +
-                              std::to_string(joint.limits->first) + ", " + std::to_string(joint.limits->second) + "] in " + file);
+        throw InvalidArgument("--joints: " + std::to_string(v) + " for joint '" + joint.name +
+                              "' is outside its limits [" + std::to_string(joint.limits->first) + ", " +
+                              std::to_string(joint.limits->second) + "] in " + file);
       q[movable[m]] = v;
     }
   }
@@ -418,7 +429,8 @@ nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
     }
   }
   for (std::size_t i = 0; i < urdf.links.size(); ++i)
-    if (!world_from_link[i]) throw FileError(file + ": link '" + urdf.links[i].name + "' is not connected to the root (a joint cycle?)");
+    if (!world_from_link[i])
+      throw FileError(file + ": link '" + urdf.links[i].name + "' is not connected to the root (a joint cycle?)");
 
   // Objects: one per distinct mesh file; the posed robot's bounds for the spacing.
   std::vector<SceneObjectEntry> objects;
@@ -441,13 +453,14 @@ nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
     scale.linear = glm::dmat3(glm::dvec3(link.mesh_scale.x, 0, 0), glm::dvec3(0, link.mesh_scale.y, 0),
                               glm::dvec3(0, 0, link.mesh_scale.z));
     const Affine robot_from_object = *world_from_link[i] * link.link_from_visual * scale;
-    if (robot_from_object.isSingular()) throw FileError(file + ": link '" + link.name + "': singular mesh transform (zero scale?)");
+    if (robot_from_object.isSingular())
+      throw FileError(file + ": link '" + link.name + "': singular mesh transform (zero scale?)");
     placed.push_back({link.name, it->second, robot_from_object});
     if (!options.spacing) robot_bounds.extend(robot_from_object.apply(loadMesh(mesh_path).bounds()));
   }
   if (placed.empty()) throw FileError(file + ": no link has a mesh");
-  const double spacing = options.spacing ? *options.spacing
-                                         : 1.25 * std::max(robot_bounds.extent().x, robot_bounds.extent().y);
+  const double spacing =
+      options.spacing ? *options.spacing : 1.25 * std::max(robot_bounds.extent().x, robot_bounds.extent().y);
 
   std::vector<SceneInstanceEntry> instances;
   for (int c = 0; c < options.copies; ++c)

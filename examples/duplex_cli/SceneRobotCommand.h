@@ -13,11 +13,11 @@ namespace duplex::cli {
 
 struct SceneRobotOptions {
   std::filesystem::path urdf;
-  int copies = 1;                        ///< >= 1 robots, side by side along +y
-  std::vector<double> joints;            ///< radians (metres for prismatic joints), one per movable
-                                         ///< joint in file order; empty: all zero
-  std::optional<double> spacing;         ///< distance between copies; default 1.25 x the larger
-                                         ///< horizontal (x, y) extent of one posed robot
+  int copies = 1;                 ///< >= 1 robots, side by side along +y
+  std::vector<double> joints;     ///< radians (metres for prismatic joints), one per movable
+                                  ///< joint in file order; empty: all zero
+  std::optional<double> spacing;  ///< distance between copies; default 1.25 x the larger
+                                  ///< horizontal (x, y) extent of one posed robot
   std::filesystem::path out;
 };
 

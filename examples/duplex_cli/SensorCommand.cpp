@@ -81,13 +81,16 @@ void checkOutputNames(const SensorScene& scene, const std::filesystem::path& sce
                             "' would write run.json, the run's report; rename the sensor");
     const auto [it, fresh] = owner.emplace(base, s.name);
     if (!fresh)
-      throw InvalidArgument(scene_file.string() + ": sensors '" + it->second + "' and '" + s.name + "' would both write " +
-                            base + ".json (characters other than [A-Za-z0-9._-] become '_'); rename one");
+      throw InvalidArgument(scene_file.string() + ": sensors '" + it->second + "' and '" + s.name +
+                            "' would both write " + base +
+                            ".json (characters other than [A-Za-z0-9._-] become '_'); rename one");
   }
 }
 
 // JSON has no infinity: a relative error with nothing measured is written as null.
-nlohmann::ordered_json finiteOrNull(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }
+nlohmann::ordered_json finiteOrNull(double v) {
+  return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr);
+}
 
 void writeText(const std::filesystem::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
@@ -121,16 +124,16 @@ class ProgressPrinter {
       const int width = 30, filled = static_cast<int>(frac * width);
       std::string bar(static_cast<std::size_t>(filled), '#');
       bar.resize(width, '.');
-      std::snprintf(line, sizeof line, "\r[%s] %5.1f%%  %llu / %llu rays  %.3g rays/s  ETA %s   ", bar.c_str(), 100 * frac,
-                    static_cast<unsigned long long>(p.rays_done), static_cast<unsigned long long>(p.rays_target), rate,
-                    duration(left).c_str());
+      std::snprintf(line, sizeof line, "\r[%s] %5.1f%%  %llu / %llu rays  %.3g rays/s  ETA %s   ", bar.c_str(),
+                    100 * frac, static_cast<unsigned long long>(p.rays_done),
+                    static_cast<unsigned long long>(p.rays_target), rate, duration(left).c_str());
       std::cerr << line << std::flush;
       drawn_ = true;
     } else if (lines_ && (p.seconds - last_ >= 2.0 || p.rays_done == p.rays_target)) {
       last_ = p.seconds;
       std::snprintf(line, sizeof line, "progress: %llu / %llu rays (%.1f%%), %.3g rays/s, ETA %s\n",
-                    static_cast<unsigned long long>(p.rays_done), static_cast<unsigned long long>(p.rays_target), 100 * frac,
-                    rate, duration(left).c_str());
+                    static_cast<unsigned long long>(p.rays_done), static_cast<unsigned long long>(p.rays_target),
+                    100 * frac, rate, duration(left).c_str());
       std::cerr << line << std::flush;
     }
   }
@@ -209,7 +212,8 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
 
 nlohmann::ordered_json runSensor(const SensorOptions& o) {
   if (o.rays == 0) throw InvalidArgument("--rays must be at least 1");
-  if (o.target_error < 0.0 || !std::isfinite(o.target_error)) throw InvalidArgument("--target-error must be a finite number >= 0");
+  if (o.target_error < 0.0 || !std::isfinite(o.target_error))
+    throw InvalidArgument("--target-error must be a finite number >= 0");
   if (!(o.roulette >= 0.0 && o.roulette < 1.0))
     throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
   WorkerThreads workers(o.threads);
@@ -237,7 +241,8 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   SensorStopRule stop;
   if (o.target_error > 0.0) {
     stop.sensor = o.target_sensor.empty() ? 0 : scene.findSensor(o.target_sensor);
-    if (stop.sensor < 0) throw InvalidArgument("--target-sensor: the scene has no sensor named '" + o.target_sensor + "'");
+    if (stop.sensor < 0)
+      throw InvalidArgument("--target-sensor: the scene has no sensor named '" + o.target_sensor + "'");
     stop.target = o.target_error;
     stop.min_rays = std::min<std::uint64_t>(10000, o.rays);
   }
@@ -247,7 +252,8 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   {
     const StopSignals signals(run);
     ProgressPrinter printer(o.progress, start);
-    status = run.runUntil(o.rays, [&](const SensorProgress& p) { printer(p); }, stop);
+    status = run.runUntil(
+        o.rays, [&](const SensorProgress& p) { printer(p); }, stop);
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   run.saveState(state);

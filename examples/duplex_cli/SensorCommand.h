@@ -30,9 +30,9 @@ struct SensorOptions {
   int threads = 0;         ///< 0: all hardware threads
   std::uint64_t seed = 1;
   std::filesystem::path out = ".";
-  bool resume = false;            ///< continue from DIR/run_state.bin (same scene and seed) up to `rays`
-  double target_error = 0.0;      ///< > 0: stop once the target sensor's relative standard error is at most this
-  std::string target_sensor;      ///< the sensor of target_error (default: the first)
+  bool resume = false;        ///< continue from DIR/run_state.bin (same scene and seed) up to `rays`
+  double target_error = 0.0;  ///< > 0: stop once the target sensor's relative standard error is at most this
+  std::string target_sensor;  ///< the sensor of target_error (default: the first)
   // Path limits: SensorRunConfig's fields and defaults (surface interactions; fog collisions; the
   // Russian-roulette threshold, a fraction of a ray's emitted power in [0, 1)).
   std::uint32_t max_depth = SensorRunConfig{}.max_depth;

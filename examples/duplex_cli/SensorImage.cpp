@@ -12,13 +12,14 @@ namespace {
 
 // Viridis at 9 stops (matplotlib's table, sampled), interpolated linearly.
 std::array<std::uint8_t, 3> viridis(double x) {
-  static constexpr double stops[9][3] = {{68, 1, 84},    {71, 44, 122},  {59, 81, 139},  {44, 113, 142}, {33, 144, 141},
-                                         {39, 173, 129}, {92, 200, 99},  {170, 220, 50}, {253, 231, 37}};
+  static constexpr double stops[9][3] = {{68, 1, 84},    {71, 44, 122}, {59, 81, 139},  {44, 113, 142}, {33, 144, 141},
+                                         {39, 173, 129}, {92, 200, 99}, {170, 220, 50}, {253, 231, 37}};
   x = std::clamp(x, 0.0, 1.0) * 8.0;
   const int i = std::min(7, static_cast<int>(x));
   const double f = x - i;
   std::array<std::uint8_t, 3> c{};
-  for (int k = 0; k < 3; ++k) c[k] = static_cast<std::uint8_t>(std::lround(stops[i][k] + f * (stops[i + 1][k] - stops[i][k])));
+  for (int k = 0; k < 3; ++k)
+    c[k] = static_cast<std::uint8_t>(std::lround(stops[i][k] + f * (stops[i + 1][k] - stops[i][k])));
   return c;
 }
 
@@ -59,7 +60,8 @@ void text(demo::RgbImage& img, std::uint32_t x, std::uint32_t y, const std::stri
       for (std::uint32_t c = 0; c < 3; ++c)
         if (g[r] & (4u >> c))
           for (std::uint32_t dy = 0; dy < scale; ++dy)
-            for (std::uint32_t dx = 0; dx < scale; ++dx) put(img, x + c * scale + dx, y + r * scale + dy, {255, 255, 255});
+            for (std::uint32_t dx = 0; dx < scale; ++dx)
+              put(img, x + c * scale + dx, y + r * scale + dy, {255, 255, 255});
     x += 4 * scale;
   }
 }
@@ -81,7 +83,8 @@ demo::RgbImage falseColourImage(const std::vector<double>& values, std::uint32_t
   for (std::uint32_t iy = 0; iy < ny; ++iy) {
     for (std::uint32_t ix = 0; ix < nx; ++ix) {
       const double v = values[static_cast<std::size_t>(iy) * nx + ix];
-      const auto c = std::isfinite(v) ? viridis(vmax > 0.0 ? v / vmax : 0.0) : std::array<std::uint8_t, 3>{128, 128, 128};
+      const auto c =
+          std::isfinite(v) ? viridis(vmax > 0.0 ? v / vmax : 0.0) : std::array<std::uint8_t, 3>{128, 128, 128};
       const std::uint32_t top = margin + (ny - 1 - iy) * cell;
       for (std::uint32_t y = 0; y < cell; ++y)
         for (std::uint32_t x = 0; x < cell; ++x) put(img, margin + ix * cell + x, top + y, c);

@@ -69,12 +69,9 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   for (int run = 0; run < options.repeat; ++run) {
     const auto t0 = Clock::now();
     arena.execute([&] {
-      if (want_transmittance)
-        tracer->transmittance(rays, transmittance);
-      else if (options.any_hit)
-        tracer->occluded(rays, blocked);
-      else
-        tracer->intersect(rays, hits);
+      if (want_transmittance) tracer->transmittance(rays, transmittance);
+      else if (options.any_hit) tracer->occluded(rays, blocked);
+      else tracer->intersect(rays, hits);
     });
     trace_ms.push_back(msSince(t0));
   }
@@ -101,8 +98,8 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
       }
     }
     writeHitFile(options.hits, records);
-    hit_count = static_cast<std::size_t>(std::count_if(
-        records.begin(), records.end(), [](const HitRecord& r) { return r.instance_id != kInvalidId; }));
+    hit_count = static_cast<std::size_t>(
+        std::count_if(records.begin(), records.end(), [](const HitRecord& r) { return r.instance_id != kInvalidId; }));
   }
   const double trace_median = median(trace_ms);
   const double mrays_per_s = trace_median > 0.0 ? static_cast<double>(rays.size()) / (trace_median * 1e3) : 0.0;

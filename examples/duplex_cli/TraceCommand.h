@@ -15,8 +15,8 @@ struct TraceOptions {
   /// scene-json-v1 or duplex-scene-v1 file (read by loadSceneDocument; the latter's timed edits
   /// are not applied: the scene is traced as loaded).
   std::filesystem::path scene;
-  std::filesystem::path rays;   ///< ray file (32-byte records)
-  std::filesystem::path hits;   ///< hit file to write (20-byte records, one per ray, same order)
+  std::filesystem::path rays;  ///< ray file (32-byte records)
+  std::filesystem::path hits;  ///< hit file to write (20-byte records, one per ray, same order)
   /// Worker threads for loading, building and tracing; 0 means all hardware threads.
   int threads = 0;
   /// Occlusion instead of closest hit. A record is then {t=0, u=0, v=0, instance 0,

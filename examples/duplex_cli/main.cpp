@@ -38,8 +38,8 @@
 namespace {
 
 // Exit statuses besides CLI11's own (which are non-zero for every parse error).
-constexpr int kExitBadInput = 1;     // duplex::Error: a file or argument the library refused
-constexpr int kExitInternal = 3;     // anything else: a bug, reported rather than crashing
+constexpr int kExitBadInput = 1;  // duplex::Error: a file or argument the library refused
+constexpr int kExitInternal = 3;  // anything else: a bug, reported rather than crashing
 
 // Integers in plain decimal only: CLI11 parses them with base 0 (strtoull), so "010" would be 8 and
 // "0x10" 16, and it would wrap "-1" around for an unsigned 64-bit option.
@@ -59,9 +59,10 @@ int main(int argc, char** argv) {
   using duplex::cli::RaysOptions;
   using duplex::cli::TraceOptions;
 
-  CLI::App app{"Two-level kd-tree ray tracing of scene-json-v1 and duplex-scene-v1 scenes (ray and hit files in, "
-               "JSON figures out).",
-               "duplex"};
+  CLI::App app{
+      "Two-level kd-tree ray tracing of scene-json-v1 and duplex-scene-v1 scenes (ray and hit files in, "
+      "JSON figures out).",
+      "duplex"};
   app.require_subcommand(1);
   bool verbose = false;
   app.add_flag("-v,--verbose", verbose, "Log the library's info messages to stderr");
@@ -79,11 +80,13 @@ int main(int argc, char** argv) {
       "(0 where a surface blocks the ray)");
   hits_opt->excludes(transmittance_opt);
   trace_cmd->add_option("--threads", trace.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)->check(CLI::Range(1, 4096));
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 4096));
   trace_cmd->add_flag("--any-hit", trace.any_hit,
                       "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
-      ->check(kDecimal)->check(CLI::Range(1, 1000000));
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 1000000));
   trace_cmd->footer(
       "A hit's instance_id is the instance's position in the scene: in \"instances\" for scene-json-v1; in\n"
       "depth-first file order of the node tree for duplex-scene-v1 (hidden instances keep their place).\n"
@@ -94,14 +97,19 @@ int main(int argc, char** argv) {
   std::vector<std::uint32_t> primary;
   std::uint64_t random_count = 0, seed = 0;
   CLI::App* rays_cmd = app.add_subcommand("rays", "Write primary or random rays for a scene");
-  rays_cmd->add_option("--scene", rays.scene, "scene-json-v1 or duplex-scene-v1 file (the world bounds of its visible instances place the rays)")->required();
+  rays_cmd
+      ->add_option("--scene", rays.scene,
+                   "scene-json-v1 or duplex-scene-v1 file (the world bounds of its visible instances place the rays)")
+      ->required();
   rays_cmd->add_option("--out", rays.out, "Ray file to write")->required();
   CLI::Option* primary_opt =
       rays_cmd->add_option("--primary", primary, "W H: primary rays of a W x H image, row-major from the top left")
           ->expected(2)
-          ->check(kDecimal)->check(CLI::Range(1u, 65536u));
+          ->check(kDecimal)
+          ->check(CLI::Range(1u, 65536u));
   CLI::Option* random_opt = rays_cmd->add_option("--random", random_count, "N random rays (origins in the world box)")
-                                ->check(kDecimal)->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
+                                ->check(kDecimal)
+                                ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
   CLI::Option* seed_opt =
       rays_cmd->add_option("--seed", seed, "Seed of the random rays (0 to 2^64-1)")->check(kDecimal);
   primary_opt->excludes(random_opt);
@@ -110,12 +118,13 @@ int main(int argc, char** argv) {
   seed_opt->needs(random_opt);
 
   // duplex scene split|instances|robot
-  CLI::App* scene_cmd = app.add_subcommand("scene", "Write benchmark scenes as scene-json-v1 (split, instances, robot)");
+  CLI::App* scene_cmd =
+      app.add_subcommand("scene", "Write benchmark scenes as scene-json-v1 (split, instances, robot)");
   scene_cmd->require_subcommand(1);
 
   duplex::cli::SceneSplitOptions split;
-  CLI::App* split_cmd =
-      scene_cmd->add_subcommand("split", "Split a mesh into K objects (the paper's scenes), one identity instance each");
+  CLI::App* split_cmd = scene_cmd->add_subcommand(
+      "split", "Split a mesh into K objects (the paper's scenes), one identity instance each");
   split_cmd->footer(
       "Rule (issue 3, section 6): split(tris, k): k == 1 gives one object; else kl = k div 2, order the\n"
       "triangles by (centroid on the longest axis of their centroid box, ties x, y, z; triangle index),\n"
@@ -126,9 +135,11 @@ int main(int argc, char** argv) {
   split_cmd->add_option("--mesh", split.mesh, "Mesh file (OBJ, PLY, OFF, STL, OM)")->required();
   split_cmd->add_option("--objects", split.objects, "K: number of objects (1 to the triangle count)")
       ->required()
-      ->check(kDecimal)->check(CLI::Range(1u, 0xFFFFFFFFu));
+      ->check(kDecimal)
+      ->check(CLI::Range(1u, 0xFFFFFFFFu));
   split_cmd->add_option("--loop", split.loop, "Loop-subdivide the mesh N times before splitting (default 0)")
-      ->check(kDecimal)->check(CLI::Range(0, 6));
+      ->check(kDecimal)
+      ->check(CLI::Range(0, 6));
   split_cmd->add_option("--out", split.out, "scene-json-v1 file to write")->required();
 
   duplex::cli::SceneInstancesOptions scatter;
@@ -138,7 +149,8 @@ int main(int argc, char** argv) {
       ->required();
   instances_cmd->add_option("--count", scatter.count, "N: number of instances")
       ->required()
-      ->check(kDecimal)->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
+      ->check(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
   instances_cmd->add_option("--seed", scatter.seed, "Seed of the rotations (std::mt19937_64, 0 to 2^64-1)")
       ->required()
       ->check(kDecimal);
@@ -149,10 +161,13 @@ int main(int argc, char** argv) {
   CLI::App* robot_cmd = scene_cmd->add_subcommand(
       "robot", "A URDF robot's link meshes placed by forward kinematics, in copies side by side along +y");
   robot_cmd->add_option("--urdf", robot.urdf, "URDF file (package:// mesh paths resolved near it)")->required();
-  robot_cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")->check(kDecimal)->check(CLI::Range(1, 1000000));
-  robot_cmd->add_option("--joints", robot.joints,
-                        "Joint values a1,a2,... in radians (metres for prismatic), one per movable joint in file "
-                        "order (default: all zero)")
+  robot_cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 1000000));
+  robot_cmd
+      ->add_option("--joints", robot.joints,
+                   "Joint values a1,a2,... in radians (metres for prismatic), one per movable joint in file "
+                   "order (default: all zero)")
       ->delimiter(',');
   CLI::Option* spacing_opt = robot_cmd->add_option(
       "--spacing", spacing, "Distance between copies (default 1.25 x the larger horizontal extent of one robot)");
@@ -166,7 +181,8 @@ int main(int argc, char** argv) {
   prepare_cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dkdt structure files")
       ->required();
   prepare_cmd->add_option("--threads", prepare.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)->check(CLI::Range(1, 4096));
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 4096));
 
   // duplex bench update
   CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update)");
@@ -179,46 +195,64 @@ int main(int argc, char** argv) {
   update_cmd->add_option("--moves", bench_update.moves,
                          "Instances moved per commit: a count or a percentage such as 1% (default 1)");
   update_cmd->add_option("--repeat", bench_update.repeat, "Commits per measurement, medians reported (default 50)")
-      ->check(kDecimal)->check(CLI::Range(1, 1000000));
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 1000000));
   update_cmd->add_option("--seed", bench_update.seed, "Seed of the edit plan (default 1)")->check(kDecimal);
   update_cmd->add_option("--threads", bench_update.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)->check(CLI::Range(1, 4096));
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 4096));
   update_cmd->add_option("--primary", bench_update.primary, "Primary rays of a W x W image (default 512)")
-      ->check(kDecimal)->check(CLI::Range(1u, 8192u));
-  update_cmd->add_option("--baseline-repeat", bench_update.baseline_repeat,
-                         "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
-      ->check(kDecimal)->check(CLI::Range(0, 1000000));
-  update_cmd->add_option("--build-repeat", bench_update.build_repeat, "Rounds of full builds, ours and Embree's interleaved (default 7)")
-      ->check(kDecimal)->check(CLI::Range(1, 100));
+      ->check(kDecimal)
+      ->check(CLI::Range(1u, 8192u));
+  update_cmd
+      ->add_option("--baseline-repeat", bench_update.baseline_repeat,
+                   "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
+      ->check(kDecimal)
+      ->check(CLI::Range(0, 1000000));
+  update_cmd
+      ->add_option("--build-repeat", bench_update.build_repeat,
+                   "Rounds of full builds, ours and Embree's interleaved (default 7)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 100));
 
   // duplex sensor (issue 5)
   duplex::cli::SensorOptions sensor;
   CLI::App* sensor_cmd = app.add_subcommand(
       "sensor", "Light-tracing run: power from the scene's lights arriving at its sensors (irradiance maps)");
-  sensor_cmd->add_option("--scene", sensor.scene, "scene-json-v1 or duplex-scene-v1 file with \"lights\" and \"sensors\"")
+  sensor_cmd
+      ->add_option("--scene", sensor.scene, "scene-json-v1 or duplex-scene-v1 file with \"lights\" and \"sensors\"")
       ->required();
   sensor_cmd->add_option("--rays", sensor.rays, "Total emitted rays (with --resume: including the saved ones)")
       ->required()
-      ->check(kDecimal)->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
+      ->check(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
   sensor_cmd->add_option("--threads", sensor.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)->check(CLI::Range(1, 4096));
-  sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")->check(kDecimal);
-  sensor_cmd->add_option("--out", sensor.out, "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 4096));
+  sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")
+      ->check(kDecimal);
+  sensor_cmd->add_option(
+      "--out", sensor.out,
+      "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
   sensor_cmd->add_flag("--resume", sensor.resume,
                        "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
   CLI::Option* target_error_opt =
-      sensor_cmd->add_option("--target-error", sensor.target_error,
-                             "Stop once the target sensor's total flux has this relative standard error (e.g. 0.01)")
+      sensor_cmd
+          ->add_option("--target-error", sensor.target_error,
+                       "Stop once the target sensor's total flux has this relative standard error (e.g. 0.01)")
           ->check(CLI::Range(0.0, 1.0));
   sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)")
       ->needs(target_error_opt);
   sensor_cmd->add_option("--max-depth", sensor.max_depth, "Surface interactions per path (default 32)")
-      ->check(kDecimal)->check(CLI::Range(0, 1000));
-  sensor_cmd->add_option("--max-scatterings", sensor.max_scatterings,
-                         "Fog collisions per path before it is cut (default 100000; 1: single scattering)")
+      ->check(kDecimal)
+      ->check(CLI::Range(0, 1000));
+  sensor_cmd
+      ->add_option("--max-scatterings", sensor.max_scatterings,
+                   "Fog collisions per path before it is cut (default 100000; 1: single scattering)")
       ->check(kDecimal);
-  sensor_cmd->add_option("--roulette", sensor.roulette,
-                         "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
+  sensor_cmd->add_option(
+      "--roulette", sensor.roulette,
+      "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
   sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
       ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
   sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");

@@ -150,8 +150,7 @@ std::vector<glm::vec3> vertexPositions(const OpenMeshMesh& mesh) {
 
 TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw FileError("mesh file '" + path.string() + "': no such file");
+  if (!std::filesystem::is_regular_file(path, ec)) throw FileError("mesh file '" + path.string() + "': no such file");
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
   if (ext != ".obj" && ext != ".ply" && ext != ".off" && ext != ".stl" && ext != ".stla" && ext != ".stlb" &&
@@ -225,7 +224,8 @@ TriangleMesh loopSubdivide(const TriangleMesh& input, int steps) {
     // OpenMesh's half-edge mesh cannot hold a non-manifold face; subdividing without it would
     // silently drop geometry, so refuse the input instead.
     if (refused > 0)
-      throw InvalidArgument("loopSubdivide: " + std::to_string(refused) + " of " + std::to_string(input.triangleCount()) +
+      throw InvalidArgument("loopSubdivide: " + std::to_string(refused) + " of " +
+                            std::to_string(input.triangleCount()) +
                             " triangles are non-manifold (complex edge or vertex) and cannot be subdivided");
     OpenMesh::Subdivider::Uniform::LoopT<TriMesh> loop;
     loop.attach(mesh);

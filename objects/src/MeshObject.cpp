@@ -73,7 +73,8 @@ void checkTreeAgainstMesh(const KdTree& tree, const TriangleMesh& mesh) {
     auto at = [index] { return "node " + std::to_string(index) + ": "; };  // only built on failure
     if (!node.isLeaf()) {
       if (!std::isfinite(node.split())) fail(at() + "split plane not finite");
-      if (depth + 1 >= kKdStackSize) fail(at() + "deeper than the traversal stack (" + std::to_string(kKdStackSize) + ")");
+      if (depth + 1 >= kKdStackSize)
+        fail(at() + "deeper than the traversal stack (" + std::to_string(kKdStackSize) + ")");
       const std::uint32_t upper = node.upperChild();
       if (upper <= index + 1 || upper >= n)
         fail(at() + "upper child " + std::to_string(upper) + " out of range (" + std::to_string(n) + " nodes)");
@@ -207,8 +208,8 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
             const int k = std::countr_zero(static_cast<unsigned>(lanes));
             float t, u, v;
             if (r.exact >> k & 1) {
-              if (!intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t,
-                                       u, v))
+              if (!intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max,
+                                       t, u, v))
                 continue;
             } else {
               if (r.sT[k] > t_max * r.abs_det[k]) continue;
@@ -253,8 +254,8 @@ bool MeshObject::occluded(const Ray& ray_os) const {
           for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
             const int k = std::countr_zero(static_cast<unsigned>(lanes));
             float t, u, v;
-            if (intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t, u,
-                                    v))
+            if (intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t,
+                                    u, v))
               return true;
           }
         }
@@ -293,7 +294,8 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
   // surface once (a sensor must not count it twice): hits within kSameCrossing of each other in
   // t merge into the one with the lowest primitive id.
   const auto begin = hits.begin() + static_cast<std::ptrdiff_t>(first);
-  std::sort(begin, hits.end(), [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.prim_id < b.prim_id; });
+  std::sort(begin, hits.end(),
+            [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.prim_id < b.prim_id; });
   constexpr float kSameCrossing = 4.0f * std::numeric_limits<float>::epsilon();
   auto out = begin;
   for (auto it = begin; it != hits.end(); ++it) {

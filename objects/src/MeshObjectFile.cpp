@@ -15,7 +15,8 @@
 
 namespace duplex {
 
-static_assert(std::endian::native == std::endian::little, "the structure file is written in native (little endian) order");
+static_assert(std::endian::native == std::endian::little,
+              "the structure file is written in native (little endian) order");
 static_assert(std::is_trivially_copyable_v<KdNode> && sizeof(KdNode) == 8);
 static_assert(sizeof(glm::vec3) == 12 && sizeof(TriangleMesh::Triangle) == 12);
 
@@ -106,9 +107,7 @@ void saveMeshObject(const MeshObject& object, const std::filesystem::path& path)
 std::shared_ptr<const MeshObject> loadMeshObject(const std::filesystem::path& path,
                                                  std::shared_ptr<const TriangleMesh> mesh) {
   if (!mesh) throw InvalidArgument("loadMeshObject: null mesh");
-  auto fail = [&path](const std::string& problem) -> void {
-    throw FileError(path.string() + ": " + problem);
-  };
+  auto fail = [&path](const std::string& problem) -> void { throw FileError(path.string() + ": " + problem); };
 
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) fail("cannot open bottom-level structure file");

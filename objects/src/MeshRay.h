@@ -44,8 +44,8 @@ inline bool setupMeshRay(const Ray& ray, const Box& box, MeshRay& r, float& tmin
   const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
   // isQueryable (Ray.h) with one branch: origin and direction finite (|x| < inf is false for NaN
   // and inf), some direction component non-zero, tnear <= tfar.
-  const int finite = _mm_movemask_ps(_mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf),
-                                                _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
+  const int finite = _mm_movemask_ps(
+      _mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf), _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
   const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
   if (((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar)) return false;
   // 1/d is already +-inf with the sign of d for a zero (or denormal) component, which is what
@@ -80,15 +80,16 @@ inline bool setupMeshRay(const Ray& ray, const Box& box, MeshRay& r, float& tmin
   static constexpr std::int8_t kDominant[8] = {2, 2, 2, 0, 1, 1, 1, 0};
   // (kx, ky) by kz and the sign of d[kz]: the next two axes, swapped when d[kz] < 0 (winding).
   static constexpr std::int8_t kCross[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
-  const int kz = kDominant[static_cast<int>(a0 >= a1) | static_cast<int>(a0 >= a2) << 1 | static_cast<int>(a1 >= a2) << 2];
+  const int kz =
+      kDominant[static_cast<int>(a0 >= a1) | static_cast<int>(a0 >= a2) << 1 | static_cast<int>(a1 >= a2) << 2];
   const float dkz = (&ray.dir.x)[kz];
   const int negative = static_cast<int>(dkz < 0.0f);
   const int kx = kCross[kz][negative][0];
   const int ky = kCross[kz][negative][1];
   alignas(16) float q[4];
   // {dx, dy, dz, 1} / dkz: lane k = d[k] / d[kz] (the shear of axis k), lane 3 = 1 / d[kz].
-  const __m128 num = _mm_or_ps(_mm_and_ps(d, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0))),
-                               _mm_setr_ps(0.0f, 0.0f, 0.0f, 1.0f));
+  const __m128 num =
+      _mm_or_ps(_mm_and_ps(d, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0))), _mm_setr_ps(0.0f, 0.0f, 0.0f, 1.0f));
   _mm_store_ps(q, _mm_div_ps(num, _mm_set1_ps(dkz)));
   w.origin[0] = ray.origin.x;
   w.origin[1] = ray.origin.y;

@@ -104,10 +104,13 @@ class Reader {
 // Bytes of the transform's map after its type name (the doubles each map type writes); maps not
 // listed (frustum) are not walked: VolumeObject refuses non-linear transforms anyway.
 std::int64_t mapBytes(const std::string& type) {
-  static const std::map<std::string, std::int64_t> bytes = {
-      {"UniformScaleMap", 5 * 24},       {"ScaleMap", 5 * 24},  {"UniformScaleTranslateMap", 6 * 24},
-      {"ScaleTranslateMap", 6 * 24},     {"TranslationMap", 24}, {"AffineMap", 128},
-      {"UnitaryMap", 128}};
+  static const std::map<std::string, std::int64_t> bytes = {{"UniformScaleMap", 5 * 24},
+                                                            {"ScaleMap", 5 * 24},
+                                                            {"UniformScaleTranslateMap", 6 * 24},
+                                                            {"ScaleTranslateMap", 6 * 24},
+                                                            {"TranslationMap", 24},
+                                                            {"AffineMap", 128},
+                                                            {"UnitaryMap", 128}};
   const auto it = bytes.find(type);
   return it == bytes.end() ? -1 : it->second;
 }

@@ -25,10 +25,10 @@ namespace vdb = openvdb;
 
 using TreeT = vdb::FloatTree;
 using RootT = TreeT::RootNodeType;
-using Upper = RootT::ChildNodeType;    // 4096^3 voxels (level 2)
-using Lower = Upper::ChildNodeType;    // 128^3 voxels (level 1)
-using LeafT = Lower::ChildNodeType;    // 8^3 voxels (level 0)
-using RayI = vdb::math::Ray<double>;   // index space, direction not normalised
+using Upper = RootT::ChildNodeType;   // 4096^3 voxels (level 2)
+using Lower = Upper::ChildNodeType;   // 128^3 voxels (level 1)
+using LeafT = Lower::ChildNodeType;   // 8^3 voxels (level 0)
+using RayI = vdb::math::Ray<double>;  // index space, direction not normalised
 using TimeSpan = RayI::TimeSpan;
 using AccessorT = vdb::tree::ValueAccessor<const TreeT, /*IsSafe=*/false>;
 // (min, max) of the effective density of each node, keyed by the node origin >> log2(node size).

@@ -252,16 +252,18 @@ std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, 
     const vdb::Vec3d x = map.applyMap(vdb::Vec3d(1, 0, 0)) - o, y = map.applyMap(vdb::Vec3d(0, 1, 0)) - o,
                      z = map.applyMap(vdb::Vec3d(0, 0, 1)) - o;
     bool finite = true;
-    for (const vdb::Vec3d& v : {o, x, y, z}) finite = finite && std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
+    for (const vdb::Vec3d& v : {o, x, y, z})
+      finite = finite && std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
     const double det = x.dot(y.cross(z));
     if (!finite || !std::isfinite(det) || det == 0.0)
-      throw InvalidArgument(what + ": grid transform is not finite and invertible (voxel size or matrix is NaN, infinite or zero)");
+      throw InvalidArgument(
+          what + ": grid transform is not finite and invertible (voxel size or matrix is NaN, infinite or zero)");
   }
 
   auto g = std::make_shared<VolumeObject::Grid>();
   g->grid = grid;
   g->grid_name = grid->getName();
-  g->kind = kind != VolumeKind::Auto ? kind
+  g->kind = kind != VolumeKind::Auto                      ? kind
             : grid->getGridClass() == vdb::GRID_LEVEL_SET ? VolumeKind::LevelSet
                                                           : VolumeKind::Fog;
   const vdb::CoordBBox bbox = grid->evalActiveVoxelBoundingBox();
@@ -278,12 +280,14 @@ std::shared_ptr<const VolumeObject> makeFromGrid(vdb::FloatGrid::ConstPtr grid, 
     b.extend(glm::vec3(static_cast<float>(p_os.x()), static_cast<float>(p_os.y()), static_cast<float>(p_os.z())));
   }
   if (b.empty() || !b.finite())
-    throw InvalidArgument(what + ": object-space bounds are not finite (the grid transform takes the active voxels beyond float range)");
+    throw InvalidArgument(
+        what + ": object-space bounds are not finite (the grid transform takes the active voxels beyond float range)");
   g->bounds_os = b;
   if (g->kind == VolumeKind::Fog) buildRanges(*g);
   if (name.empty()) name = g->grid_name;
   const ObjectRole role = g->kind == VolumeKind::LevelSet ? ObjectRole::Surface : ObjectRole::Medium;
-  return std::make_shared<const VolumeObject>(std::move(name), role, std::move(g), config, VolumeObject::ConstructTag{});
+  return std::make_shared<const VolumeObject>(std::move(name), role, std::move(g), config,
+                                              VolumeObject::ConstructTag{});
 }
 
 }  // namespace
@@ -376,7 +380,7 @@ std::shared_ptr<const VolumeObject> VolumeObject::load(const std::filesystem::pa
     vdb::io::File in(f);
     in.open(/*delayLoad=*/false);  // read everything now: a truncated file must fail here
     std::string chosen;
-    std::ostringstream listing;  // "name (type), ..." for messages
+    std::ostringstream listing;                                 // "name (type), ..." for messages
     const vdb::GridPtrVecPtr metas = in.readAllGridMetadata();  // OpenVDB lists grids by name
     for (const vdb::GridBase::Ptr& meta : *metas) {
       const std::string gname = meta->getName();

@@ -210,8 +210,8 @@ ObjectSpecResult readMesh(const json& spec, const ObjectSpecContext& ctx) {
   }
   // The mesh is validated in the factory, in parallel with the other objects' builds.
   return ObjectLibrary::Factory([ctx, positions = std::move(positions), indices = std::move(indices)] {
-    return meshObjectFor(std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, ctx.object_name)),
-                         ctx);
+    return meshObjectFor(
+        std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, ctx.object_name)), ctx);
   });
 }
 
@@ -236,7 +236,8 @@ ObjectSpecResult readSphere(const json& spec, const ObjectSpecContext& ctx) {
       ctx.fail(p + "/subdivisions", "expected an integer in [0, " + std::to_string(kMaxSphereSubdivisions) + "]");
     subdivisions = static_cast<int>(s);
   }
-  return deferredShape(ctx, [radius, subdivisions](const std::string& name) { return makeSphere(radius, subdivisions, name); });
+  return deferredShape(
+      ctx, [radius, subdivisions](const std::string& name) { return makeSphere(radius, subdivisions, name); });
 }
 
 ObjectSpecResult readBox(const json& spec, const ObjectSpecContext& ctx) {
@@ -256,7 +257,6 @@ ObjectSpecResult readPlane(const json& spec, const ObjectSpecContext& ctx) {
   const glm::dvec2 size(s[0], s[1]);
   return deferredShape(ctx, [size](const std::string& name) { return makePlane(size, name); });
 }
-
 
 // An OpenVDB volume: {"file": PATH.vdb, "grid": G?, "kind": "fog" | "levelset"?} (scene-json-v1,
 // issue 4 section 2). Read by the factory; entries with the same file, grid and kind share one object.
@@ -280,9 +280,11 @@ ObjectSpecResult readVolume(const json& spec, const ObjectSpecContext& ctx) {
   std::error_code ec;
   auto key = std::filesystem::weakly_canonical(file, ec);
   if (ec) key = file;
-  const std::string share_key = "volume:" + key.string() + "|grid:" + options.grid + "|kind:" + std::string(toString(options.kind));
+  const std::string share_key =
+      "volume:" + key.string() + "|grid:" + options.grid + "|kind:" + std::string(toString(options.kind));
   return ObjectLibrary::Factory([ctx, file, options, share_key] {
-    return ctx.cache->shared(share_key, [&] { return std::shared_ptr<const Object>(VolumeObject::load(file, options)); });
+    return ctx.cache->shared(share_key,
+                             [&] { return std::shared_ptr<const Object>(VolumeObject::load(file, options)); });
   });
 }
 }  // namespace
@@ -305,7 +307,8 @@ const ObjectTypeRegistry& ObjectTypeRegistry::builtin() {
 void ObjectTypeRegistry::add(ObjectTypeInfo info) {
   if (info.name.empty()) throw InvalidArgument("ObjectTypeRegistry::add: empty type name");
   if (info.name == "name" || info.name == "structure")
-    throw InvalidArgument("ObjectTypeRegistry::add: '" + info.name + "' is a key of every object entry, not a type name");
+    throw InvalidArgument("ObjectTypeRegistry::add: '" + info.name +
+                          "' is a key of every object entry, not a type name");
   if (!info.reader) throw InvalidArgument("ObjectTypeRegistry::add: type '" + info.name + "' has no reader");
   if (find(info.name)) throw InvalidArgument("ObjectTypeRegistry::add: type '" + info.name + "' is already registered");
   types_.push_back(std::move(info));

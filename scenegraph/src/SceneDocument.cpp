@@ -64,7 +64,8 @@ class DocumentReader {
     ctx_.onlyKeys(v, p, {"axis", "degrees", "euler_xyz"});
     const double to_rad = std::numbers::pi / 180.0;
     if (v.contains("euler_xyz")) {
-      if (v.contains("axis") || v.contains("degrees")) ctx_.fail(p, "\"euler_xyz\" cannot be combined with \"axis\"/\"degrees\"");
+      if (v.contains("axis") || v.contains("degrees"))
+        ctx_.fail(p, "\"euler_xyz\" cannot be combined with \"axis\"/\"degrees\"");
       const glm::dvec3 e = vec3(v["euler_xyz"], at(p, "euler_xyz")) * to_rad;
       // About x first, then y, then z (fixed axes): R = Rz * Ry * Rx.
       return rotation({0, 0, 1}, e.z) * rotation({0, 1, 0}, e.y) * rotation({1, 0, 0}, e.x);
@@ -109,7 +110,8 @@ class DocumentReader {
       return a;
     }
     if (!v.is_object())
-      ctx_.fail(p, "expected 12 numbers (row-major 3x4) or an object with \"matrix\" or \"translate\"/\"rotate\"/\"scale\"");
+      ctx_.fail(
+          p, "expected 12 numbers (row-major 3x4) or an object with \"matrix\" or \"translate\"/\"rotate\"/\"scale\"");
     ctx_.onlyKeys(v, p, {"matrix", "translate", "rotate", "scale"});
     return transformFields(v, p);
   }
@@ -186,8 +188,7 @@ class DocumentReader {
       key = k;
       e.kind = kind;
     }
-    if (!key)
-      ctx_.fail(p, "expected one of \"set_transform\", \"add\", \"remove\", \"visible\", \"object\", \"mask\"");
+    if (!key) ctx_.fail(p, "expected one of \"set_transform\", \"add\", \"remove\", \"visible\", \"object\", \"mask\"");
     const std::string kp = at(p, key);
     auto target = [&] { return ctx_.string(ctx_.member(v, p, "node"), at(p, "node")); };
     switch (e.kind) {
@@ -288,7 +289,8 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
   if (!root.is_object()) ctx.fail("", "expected a JSON object at the top level");
   doc.format = ctx.string(ctx.member(root, "", "format"), "/format");
   if (doc.format != kV1 && doc.format != kOwn)
-    ctx.fail("/format", "unknown format \"" + doc.format + "\" (this version reads \"" + kV1 + "\" and \"" + kOwn + "\")");
+    ctx.fail("/format",
+             "unknown format \"" + doc.format + "\" (this version reads \"" + kV1 + "\" and \"" + kOwn + "\")");
   const bool v1 = doc.format == kV1;
   ctx.strict = !v1;  // v1: unknown keys are ignored; own format: they are errors (typos)
   // "lights", "sensors", "bands" (and an object's "material") belong to duplex::sensors, which reads them
@@ -387,7 +389,8 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
       if (!instances[i].is_object()) ctx.fail(p, "expected an object");
       const ObjectId object = reader.object(ctx.member(instances[i], p, "object"), at(p, "object"));
       const std::string tp = at(p, "transform");
-      const Affine transform = Affine::fromRowMajor3x4(reader.twelveNumbers(ctx.member(instances[i], p, "transform"), tp));
+      const Affine transform =
+          Affine::fromRowMajor3x4(reader.twelveNumbers(ctx.member(instances[i], p, "transform"), tp));
       try {
         doc.instances.push_back(graph.addInstance(kRootNode, object, transform, "instance" + std::to_string(i)));
       } catch (const InvalidArgument& e) {

@@ -1,8 +1,8 @@
 /// \file SceneGraph.cpp
 /// Layout: a flat node table addressed by NodeId (ids are sequential and never reused; the record
 /// of a node removed by a commit, or added by a rolled-back batch, is released and its slot taken
-/// by a later node: a dead id costs 4 bytes, `SlotTable`), children as intrusive doubly linked sibling lists (O(1) add, remove and
-/// re-parent), and one hash index (parent, name) -> node for path lookup and name collisions.
+/// by a later node: a dead id costs 4 bytes, `SlotTable`), children as intrusive doubly linked sibling lists (O(1) add,
+/// remove and re-parent), and one hash index (parent, name) -> node for path lookup and name collisions.
 ///
 /// A batch keeps three lists, so that no edit and no commit scans the whole graph:
 /// - the undo log (one record per edit, replayed backwards by rollback());
@@ -48,8 +48,8 @@ struct Node {
   NodeId last_child = kInvalidNode;
   NodeId prev_sibling = kInvalidNode;
   NodeId next_sibling = kInvalidNode;
-  ObjectId object = kInvalidObject;  ///< instances (pending state)
-  std::uint32_t mask = 0xFFFFFFFFu;  ///< instances (pending state)
+  ObjectId object = kInvalidObject;     ///< instances (pending state)
+  std::uint32_t mask = 0xFFFFFFFFu;     ///< instances (pending state)
   std::uint32_t touched = kNotTouched;  ///< index in Impl::touched while the instance is in the batch
   NodeKind kind = NodeKind::Group;
   std::uint8_t flags = 0;
@@ -155,7 +155,8 @@ struct SceneGraph::Impl {
 
   /// The alive node, or InvalidArgument naming the call and the id.
   const Node& live(NodeId id, const char* call) const {
-    if (!contains(id)) throw InvalidArgument(std::string("SceneGraph::") + call + ": unknown node id " + std::to_string(id));
+    if (!contains(id))
+      throw InvalidArgument(std::string("SceneGraph::") + call + ": unknown node id " + std::to_string(id));
     return nodes[id];
   }
 
@@ -191,14 +192,18 @@ struct SceneGraph::Impl {
     n.parent = parent;
     n.prev_sibling = prev;
     n.next_sibling = prev == kInvalidNode ? p.first_child : nodes[prev].next_sibling;
-    if (prev == kInvalidNode) p.first_child = id; else nodes[prev].next_sibling = id;
-    if (n.next_sibling == kInvalidNode) p.last_child = id; else nodes[n.next_sibling].prev_sibling = id;
+    if (prev == kInvalidNode) p.first_child = id;
+    else nodes[prev].next_sibling = id;
+    if (n.next_sibling == kInvalidNode) p.last_child = id;
+    else nodes[n.next_sibling].prev_sibling = id;
   }
   void unlink(NodeId id) {
     Node& n = nodes[id];
     Node& p = nodes[n.parent];
-    if (n.prev_sibling == kInvalidNode) p.first_child = n.next_sibling; else nodes[n.prev_sibling].next_sibling = n.next_sibling;
-    if (n.next_sibling == kInvalidNode) p.last_child = n.prev_sibling; else nodes[n.next_sibling].prev_sibling = n.prev_sibling;
+    if (n.prev_sibling == kInvalidNode) p.first_child = n.next_sibling;
+    else nodes[n.prev_sibling].next_sibling = n.next_sibling;
+    if (n.next_sibling == kInvalidNode) p.last_child = n.prev_sibling;
+    else nodes[n.next_sibling].prev_sibling = n.prev_sibling;
     n.prev_sibling = n.next_sibling = kInvalidNode;
   }
 
@@ -244,8 +249,8 @@ struct SceneGraph::Impl {
   std::string checkName(const char* call, NodeId parent, NodeId self, NodeKind kind, std::string name) const {
     if (name.empty()) name = kindName(kind) + std::to_string(self);
     if (name.find('/') != std::string::npos)
-      throw InvalidArgument(std::string("SceneGraph::") + call + ": name '" + name + "' of node " + std::to_string(self) +
-                            " contains '/'");
+      throw InvalidArgument(std::string("SceneGraph::") + call + ": name '" + name + "' of node " +
+                            std::to_string(self) + " contains '/'");
     const NodeId other = child(parent, name);
     if (other != kInvalidNode && other != self)
       throw InvalidArgument(std::string("SceneGraph::") + call + ": name '" + name + "' is already used under '" +
@@ -261,7 +266,8 @@ struct SceneGraph::Impl {
   static void checkTransform(const char* call, const Who& who, const Affine& local) {
     if (!local.isFinite())
       throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who() + ": transform is not finite");
-    if (local.isSingular()) throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who() + ": transform is singular");
+    if (local.isSingular())
+      throw InvalidArgument(std::string("SceneGraph::") + call + ": " + who() + ": transform is singular");
   }
 
   // ---- edits and commit (defined below) ----
@@ -273,7 +279,6 @@ struct SceneGraph::Impl {
   ChangeSet collectChanges();
 };
 
-
 SceneGraph::SceneGraph(std::shared_ptr<ObjectLibrary> library)
     : library_(library ? std::move(library) : std::make_shared<ObjectLibrary>()), impl_(std::make_unique<Impl>()) {
   Node root;
@@ -284,15 +289,17 @@ SceneGraph::SceneGraph(std::shared_ptr<ObjectLibrary> library)
 
 SceneGraph::~SceneGraph() = default;
 
-
 // ---- edits ----
 
 NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, NodeId parent, NewNode nn) {
   checkParent(call, parent);
-  if (nodes.idCount() >= kInvalidNode) throw InvalidArgument(std::string("SceneGraph::") + call + ": node ids exhausted");
+  if (nodes.idCount() >= kInvalidNode)
+    throw InvalidArgument(std::string("SceneGraph::") + call + ": node ids exhausted");
   const auto id = static_cast<NodeId>(nodes.idCount());
   std::string name = checkName(call, parent, id, nn.kind, std::move(nn.name));
-  const auto who = [&] { return "new " + std::string(kindName(nn.kind)) + " '" + name + "' under '" + path(parent) + "'"; };
+  const auto who = [&] {
+    return "new " + std::string(kindName(nn.kind)) + " '" + name + "' under '" + path(parent) + "'";
+  };
   if (nn.kind != NodeKind::Group) checkTransform(call, who, nn.local);
   if (nn.kind == NodeKind::Instance) requireObject(library, call, who, nn.object);
   // Valid. Reserve first (geometrically) so that the bookkeeping below cannot fail half-way.
@@ -306,8 +313,8 @@ NodeId SceneGraph::Impl::add(const ObjectLibrary& library, const char* call, Nod
   n.kind = nn.kind;
   n.object = nn.object;
   n.mask = nn.mask;
-  n.parent = parent;  // the name index key; link() below sets it again
-  n.flags = kAlive | kVisible;  // not kEffVisible: it was not visible at the last commit
+  n.parent = parent;               // the name index key; link() below sets it again
+  n.flags = kAlive | kVisible;     // not kEffVisible: it was not visible at the last commit
   (void)nodes.push(std::move(n));  // == id
   try {
     indexInsert(id);
@@ -331,7 +338,8 @@ NodeId SceneGraph::addTransform(NodeId parent, const Affine& local, std::string 
   return impl_->add(*library_, "addTransform", parent, {NodeKind::Transform, local, std::move(name)});
 }
 
-NodeId SceneGraph::addInstance(NodeId parent, ObjectId object, const Affine& local, std::string name, std::uint32_t mask) {
+NodeId SceneGraph::addInstance(NodeId parent, ObjectId object, const Affine& local, std::string name,
+                               std::uint32_t mask) {
   return impl_->add(*library_, "addInstance", parent, {NodeKind::Instance, local, std::move(name), object, mask});
 }
 
@@ -363,8 +371,9 @@ void SceneGraph::reparent(NodeId node, NodeId new_parent) {
                             " would make a cycle");
   Node& n = m.nodes[node];
   if (const NodeId other = m.child(new_parent, n.name); other != kInvalidNode && other != node)
-    throw InvalidArgument("SceneGraph::reparent: " + m.describe(node) + ": name '" + n.name + "' is already used under '" +
-                          m.path(new_parent) + "' (by node " + std::to_string(other) + ")");
+    throw InvalidArgument("SceneGraph::reparent: " + m.describe(node) + ": name '" + n.name +
+                          "' is already used under '" + m.path(new_parent) + "' (by node " + std::to_string(other) +
+                          ")");
   m.undo.push_back({UndoKind::Reparented, node, n.parent, n.prev_sibling});
   m.indexErase(node);
   m.unlink(node);
@@ -389,8 +398,10 @@ void SceneGraph::setTransform(NodeId node, const Affine& local) {
   Impl& m = *impl_;
   const Node& n = m.live(node, "setTransform");
   if (n.kind == NodeKind::Group)
-    throw InvalidArgument("SceneGraph::setTransform: " + m.describe(node) + " is a group; only transform and instance nodes have one");
-  Impl::checkTransform("setTransform", [&] { return m.describe(node); }, local);
+    throw InvalidArgument("SceneGraph::setTransform: " + m.describe(node) +
+                          " is a group; only transform and instance nodes have one");
+  Impl::checkTransform(
+      "setTransform", [&] { return m.describe(node); }, local);
   m.undo_locals.push_back(n.local);
   m.undo.push_back({UndoKind::Transform, node});
   m.nodes[node].local = local;
@@ -400,8 +411,10 @@ void SceneGraph::setTransform(NodeId node, const Affine& local) {
 void SceneGraph::setObject(NodeId instance, ObjectId object) {
   Impl& m = *impl_;
   const Node& n = m.live(instance, "setObject");
-  if (n.kind != NodeKind::Instance) throw InvalidArgument("SceneGraph::setObject: " + m.describe(instance) + " is not an instance");
-  requireObject(*library_, "setObject", [&] { return m.describe(instance); }, object);
+  if (n.kind != NodeKind::Instance)
+    throw InvalidArgument("SceneGraph::setObject: " + m.describe(instance) + " is not an instance");
+  requireObject(
+      *library_, "setObject", [&] { return m.describe(instance); }, object);
   m.undo.push_back({UndoKind::Object, instance, kInvalidNode, kInvalidNode, n.object});
   m.touch(instance);
   m.nodes[instance].object = object;
@@ -419,7 +432,8 @@ void SceneGraph::setVisible(NodeId node, bool visible) {
 void SceneGraph::setMask(NodeId instance, std::uint32_t mask) {
   Impl& m = *impl_;
   const Node& n = m.live(instance, "setMask");
-  if (n.kind != NodeKind::Instance) throw InvalidArgument("SceneGraph::setMask: " + m.describe(instance) + " is not an instance");
+  if (n.kind != NodeKind::Instance)
+    throw InvalidArgument("SceneGraph::setMask: " + m.describe(instance) + " is not an instance");
   m.undo.push_back({UndoKind::Mask, instance, kInvalidNode, kInvalidNode, n.mask});
   m.touch(instance);
   m.nodes[instance].mask = mask;
@@ -481,7 +495,8 @@ ChangeSet SceneGraph::Impl::collectChanges() {
   for (const NodeId r : dirty_roots) {
     if (!(nodes[r].flags & kAlive)) continue;
     bool covered = false;
-    for (NodeId a = nodes[r].parent; a != kInvalidNode && !covered; a = nodes[a].parent) covered = (nodes[a].flags & kDirty) != 0;
+    for (NodeId a = nodes[r].parent; a != kInvalidNode && !covered; a = nodes[a].parent)
+      covered = (nodes[a].flags & kDirty) != 0;
     if (!covered) roots.push_back(r);
   }
   // Validate every new world transform first, so that a commit that throws changes nothing.
@@ -661,10 +676,12 @@ std::vector<NodeId> SceneGraph::committedPathIds(NodeId id) const {
   // holds its parent as of the last commit. Linear in the batch per level: picks are rare, batches
   // short, and the common case (no pending edits) is the plain walk.
   const auto addedSince = [&m](NodeId n) {
-    return std::any_of(m.undo.begin(), m.undo.end(), [n](const Undo& u) { return u.kind == UndoKind::Added && u.node == n; });
+    return std::any_of(m.undo.begin(), m.undo.end(),
+                       [n](const Undo& u) { return u.kind == UndoKind::Added && u.node == n; });
   };
   if (!m.nodes.has(id) || addedSince(id))
-    throw InvalidArgument("SceneGraph::committedPathIds: node id " + std::to_string(id) + " did not exist at the last commit");
+    throw InvalidArgument("SceneGraph::committedPathIds: node id " + std::to_string(id) +
+                          " did not exist at the last commit");
   const auto committedParent = [&m](NodeId n) {
     for (const Undo& u : m.undo)
       if (u.node == n && (u.kind == UndoKind::Removed || u.kind == UndoKind::Reparented)) return u.parent;

@@ -79,8 +79,7 @@ SceneTracer::SceneTracer(SceneGraph& graph, const TopLevelConfig& config)
     for (const NodeId id : changed) set(id);
     impl->top.commit();
     impl->last_update_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    if (!failures.empty())
-      throw InvalidArgument("scene tracer: instances left out of the top level: " + failures);
+    if (!failures.empty()) throw InvalidArgument("scene tracer: instances left out of the top level: " + failures);
   });
 }
 
@@ -164,14 +163,16 @@ void forEachRay(const char* what, std::span<const Ray> rays, std::span<Out> out,
 void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::intersect", rays, hits, [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
+  forEachRay("SceneTracer::intersect", rays, hits,
+             [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
 }
 
 void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::occluded", rays, occluded,
-             [&](const Ray& r, QueryContext& ctx) { return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0); });
+  forEachRay("SceneTracer::occluded", rays, occluded, [&](const Ray& r, QueryContext& ctx) {
+    return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0);
+  });
 }
 
 void SceneTracer::transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask) const {
@@ -185,15 +186,17 @@ namespace {
 
 void requireImage(const char* what, std::uint32_t width, std::uint32_t height) {
   if (width == 0 || height == 0)
-    throw InvalidArgument(std::string(what) + ": image size " + std::to_string(width) + " x " +
-                          std::to_string(height) + " (both must be positive)");
+    throw InvalidArgument(std::string(what) + ": image size " + std::to_string(width) + " x " + std::to_string(height) +
+                          " (both must be positive)");
 }
 
 /// A camera that makes finite, distinct corner rays: finite vectors, non-zero axes, a field of
 /// view strictly between 0 and 180 degrees. Anything else would give NaN planes (select everything)
 /// or coincident rays (select everything in front).
 void requireCamera(const char* what, const PinholeCamera& c) {
-  const auto finite = [](const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  const auto finite = [](const glm::dvec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
   if (!finite(c.eye) || !finite(c.forward) || !finite(c.right) || !finite(c.up))
     throw InvalidArgument(std::string(what) + ": camera has non-finite eye or axes");
   if (!(glm::length(c.forward) > 0.0) || !(glm::length(c.right) > 0.0) || !(glm::length(c.up) > 0.0) ||

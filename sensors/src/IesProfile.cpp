@@ -136,8 +136,9 @@ std::vector<std::pair<double, std::size_t>> unfold(const std::vector<double>& h,
   }
   std::sort(planes.begin(), planes.end());
   // Mirrored planes on a symmetry axis coincide: keep one.
-  planes.erase(std::unique(planes.begin(), planes.end(), [](const auto& a, const auto& b) { return a.first == b.first; }),
-               planes.end());
+  planes.erase(
+      std::unique(planes.begin(), planes.end(), [](const auto& a, const auto& b) { return a.first == b.first; }),
+      planes.end());
   return planes;
 }
 
@@ -235,8 +236,9 @@ IesProfile IesProfile::parse(std::string_view text, const std::string& source) {
     if (c < 0.0) r.fail("candela value " + NumberReader::format(c) + " is negative");
     c *= multiplier * ballast;
   }
-  if (!r.atEnd()) r.fail("unexpected data after the candela table (counts say " + std::to_string(nv) + " x " +
-                         std::to_string(nh) + " values)");
+  if (!r.atEnd())
+    r.fail("unexpected data after the candela table (counts say " + std::to_string(nv) + " x " + std::to_string(nh) +
+           " values)");
   if (const std::string problem = checkAngles(vertical, 0.0, 180.0, "vertical"); !problem.empty())
     throw FileError(source + ": " + problem);
   p.vertical_deg_ = std::move(vertical);
@@ -253,7 +255,8 @@ IesProfile IesProfile::fromTable(std::vector<double> vertical_deg, std::vector<d
       throw FileError(source + ": " + std::to_string(candela.size()) + " candela values for " +
                       std::to_string(vertical_deg.size()) + " x " + std::to_string(horizontal_deg.size()) + " angles");
     for (const double c : candela)
-      if (!std::isfinite(c) || c < 0.0) throw FileError(source + ": candela value " + NumberReader::format(c) + " is negative or not finite");
+      if (!std::isfinite(c) || c < 0.0)
+        throw FileError(source + ": candela value " + NumberReader::format(c) + " is negative or not finite");
     if (const std::string problem = checkAngles(vertical_deg, 0.0, 180.0, "vertical"); !problem.empty())
       throw FileError(source + ": " + problem);
     IesProfile p;
@@ -270,7 +273,8 @@ void IesProfile::finish(const std::vector<double>& horizontal_in, const std::vec
                         const std::string& where) {
   if (const std::string problem = checkAngles(horizontal_in, 0.0, 360.0, "horizontal"); !problem.empty())
     throw FileError(where + ": " + problem);
-  const auto planes = unfold(horizontal_in, [&](const std::string& problem) { throw FileError(where + ": " + problem); });
+  const auto planes =
+      unfold(horizontal_in, [&](const std::string& problem) { throw FileError(where + ": " + problem); });
   const std::size_t nv = vertical_deg_.size();
   horizontal_deg_.clear();
   candela_.clear();
@@ -312,9 +316,11 @@ std::size_t IesProfile::cellOf(double gamma, double phi, double& s, double& t) c
   phi = std::fmod(phi, kTwoPi);
   if (phi < 0.0) phi += kTwoPi;
   const std::size_t nv = vertical_rad_.size(), nh = horizontal_rad_.size();
-  auto v = static_cast<std::size_t>(std::upper_bound(vertical_rad_.begin(), vertical_rad_.end(), gamma) - vertical_rad_.begin());
+  auto v = static_cast<std::size_t>(std::upper_bound(vertical_rad_.begin(), vertical_rad_.end(), gamma) -
+                                    vertical_rad_.begin());
   v = std::clamp<std::size_t>(v, 1, nv - 1) - 1;
-  auto h = static_cast<std::size_t>(std::upper_bound(horizontal_rad_.begin(), horizontal_rad_.end(), phi) - horizontal_rad_.begin());
+  auto h = static_cast<std::size_t>(std::upper_bound(horizontal_rad_.begin(), horizontal_rad_.end(), phi) -
+                                    horizontal_rad_.begin());
   h = std::clamp<std::size_t>(h, 1, nh - 1) - 1;
   s = std::clamp((gamma - vertical_rad_[v]) / (vertical_rad_[v + 1] - vertical_rad_[v]), 0.0, 1.0);
   t = std::clamp((phi - horizontal_rad_[h]) / (horizontal_rad_[h + 1] - horizontal_rad_[h]), 0.0, 1.0);

@@ -37,7 +37,8 @@ void Light::validate() const {
       [[fallthrough]];
     case LightType::Point:
       if (!finite(position)) bad("position is not finite");
-      if (type == LightType::Spot && !(finite(direction) && glm::length(direction) > 0.0)) bad("direction must be a finite non-zero vector");
+      if (type == LightType::Spot && !(finite(direction) && glm::length(direction) > 0.0))
+        bad("direction must be a finite non-zero vector");
       break;
     case LightType::Directional:
       if (!finite(position)) bad("position is not finite");
@@ -58,7 +59,8 @@ void Light::validate() const {
       break;
     }
     case LightType::Area:
-      if (!(std::isfinite(width) && width > 0.0 && std::isfinite(height) && height > 0.0)) bad("size must be finite and > 0");
+      if (!(std::isfinite(width) && width > 0.0 && std::isfinite(height) && height > 0.0))
+        bad("size must be finite and > 0");
       if (!world_from_light.isFinite() || world_from_light.isSingular()) bad("transform is not finite or singular");
       break;
   }

@@ -43,14 +43,17 @@ double diskRectangleArea(double r, double x0, double x1, double y0, double y1) {
   return std::max(0.0, area);
 }
 
-SensorObject::SensorObject(std::string name, const SensorSpec& spec) : Object(std::move(name), ObjectRole::Sensor), spec_(spec) {
+SensorObject::SensorObject(std::string name, const SensorSpec& spec)
+    : Object(std::move(name), ObjectRole::Sensor), spec_(spec) {
   auto bad = [this](const std::string& what) { throw InvalidArgument("sensor '" + this->name() + "': " + what); };
   if (!(std::isfinite(spec.width) && spec.width > 0.0) || !(std::isfinite(spec.height) && spec.height > 0.0))
     bad("size must be finite and > 0");
   if (spec.nx == 0 || spec.ny == 0) bad("bins must be at least 1 x 1");
   if (static_cast<std::uint64_t>(spec.nx) * spec.ny > (1u << 26)) bad("more than 2^26 bins");
-  if (spec.shape != SensorShape::Rectangle && spec.width != spec.height) bad("a disk or sphere has one diameter (width == height)");
-  if (spec.shape == SensorShape::Sphere && spec.theta_bins != 0) bad("a sphere takes no angular bins (its bins are directions)");
+  if (spec.shape != SensorShape::Rectangle && spec.width != spec.height)
+    bad("a disk or sphere has one diameter (width == height)");
+  if (spec.shape == SensorShape::Sphere && spec.theta_bins != 0)
+    bad("a sphere takes no angular bins (its bins are directions)");
   if (spec.theta_bins > 0 && spec.phi_bins == 0) bad("angular bins need at least one phi bin");
   if (static_cast<std::uint64_t>(spec.theta_bins) * spec.phi_bins > (1u << 20)) bad("more than 2^20 angular bins");
   // Bin areas once: a rectangle's bins are equal; a disk's are its squares cut by the circle; a
@@ -122,8 +125,10 @@ std::uint32_t SensorObject::binAt(double x, double y) const {
     return kInvalidId;
   }
   // floor puts an inner edge into the bin above it; the upper border belongs to the last bin.
-  const auto ix = std::min<std::uint32_t>(spec_.nx - 1, static_cast<std::uint32_t>(std::floor((x + hw) * spec_.nx / spec_.width)));
-  const auto iy = std::min<std::uint32_t>(spec_.ny - 1, static_cast<std::uint32_t>(std::floor((y + hh) * spec_.ny / spec_.height)));
+  const auto ix =
+      std::min<std::uint32_t>(spec_.nx - 1, static_cast<std::uint32_t>(std::floor((x + hw) * spec_.nx / spec_.width)));
+  const auto iy =
+      std::min<std::uint32_t>(spec_.ny - 1, static_cast<std::uint32_t>(std::floor((y + hh) * spec_.ny / spec_.height)));
   return iy * spec_.nx + ix;
 }
 
@@ -165,8 +170,8 @@ bool SensorObject::cross(const Ray& ray_os, float& t_out, SensorCell& cell) cons
     return true;
   }
   const double dz = ray_os.dir.z;
-  if (dz == 0.0) return false;                      // parallel (or in the plane): no crossing
-  if (!spec_.two_sided && dz > 0.0) return false;   // one-sided: only rays arriving at the front (+z) face
+  if (dz == 0.0) return false;                     // parallel (or in the plane): no crossing
+  if (!spec_.two_sided && dz > 0.0) return false;  // one-sided: only rays arriving at the front (+z) face
   // In double: the crossing point decides the bin, and a float product would move it by an ulp.
   const double t = -static_cast<double>(ray_os.origin.z) / dz;
   if (!(t >= ray_os.tnear && t <= ray_os.tfar)) return false;
@@ -184,10 +189,10 @@ std::uint32_t SensorObject::sphereBinAt(const glm::dvec3& n) const {
   double phi = std::atan2(n.y, n.x);
   if (phi < 0.0) phi += kTwoPi;
   const auto ix = std::min<std::uint32_t>(spec_.nx - 1, static_cast<std::uint32_t>(phi / kTwoPi * spec_.nx));
-  const auto iy = std::min<std::uint32_t>(spec_.ny - 1, static_cast<std::uint32_t>(std::max(0.0, (n.z + 1.0) * 0.5 * spec_.ny)));
+  const auto iy =
+      std::min<std::uint32_t>(spec_.ny - 1, static_cast<std::uint32_t>(std::max(0.0, (n.z + 1.0) * 0.5 * spec_.ny)));
   return iy * spec_.nx + ix;
 }
-
 
 void SensorObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
   if (spec_.shape == SensorShape::Sphere) {

@@ -68,7 +68,8 @@ glm::dvec3 phaseDirection(const glm::dvec3& d, const HenyeyGreenstein& hg, doubl
 
 // Whether the segment origin + t dir, t in [0, t_max], meets the box [lo, hi] (slab test; an
 // infinite t_max is a ray).
-bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_max, const glm::dvec3& lo, const glm::dvec3& hi) {
+bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_max, const glm::dvec3& lo,
+                     const glm::dvec3& hi) {
   double t0 = 0.0, t1 = t_max;
   for (int a = 0; a < 3; ++a) {
     const double inv = 1.0 / dir[a];
@@ -115,10 +116,12 @@ struct SensorRun::Chunk {
 };
 
 SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : scene_(scene), config_(config) {
-  if (config_.chunk_rays == 0 || config_.batch_rays == 0) throw InvalidArgument("SensorRun: chunk_rays and batch_rays must be > 0");
+  if (config_.chunk_rays == 0 || config_.batch_rays == 0)
+    throw InvalidArgument("SensorRun: chunk_rays and batch_rays must be > 0");
   if (config_.max_depth > 1000) throw InvalidArgument("SensorRun: max_depth above 1000");
   // TBB's arena takes an int; more workers than that are a mistake, not a wish.
-  if (config_.threads > 4096) throw InvalidArgument("SensorRun: threads above 4096 (" + std::to_string(config_.threads) + ")");
+  if (config_.threads > 4096)
+    throw InvalidArgument("SensorRun: threads above 4096 (" + std::to_string(config_.threads) + ")");
   if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
   double acc = 0.0;
@@ -183,7 +186,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     // Light by power, then a ray of it.
     const double pick = rng.uniform() * power;
     const std::size_t li = std::min<std::size_t>(
-        lights.size() - 1, static_cast<std::size_t>(std::upper_bound(light_cdf_.begin(), light_cdf_.end(), pick) - light_cdf_.begin()));
+        lights.size() - 1,
+        static_cast<std::size_t>(std::upper_bound(light_cdf_.begin(), light_cdf_.end(), pick) - light_cdf_.begin()));
     // The band by the light's spectrum, from where `pick` fell inside the light's share: the path's
     // other random numbers stay those of a single-band run (equal reflectances: equal paths).
     std::uint32_t band = 0;
@@ -191,7 +195,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       const double lo = li ? light_cdf_[li - 1] : 0.0;
       const double ub = std::clamp((pick - lo) / lights[li].power_w, 0.0, 1.0);
       const std::vector<double>& cdf = scene_.bandCdf(li);
-      band = std::min(bands - 1, static_cast<std::uint32_t>(std::upper_bound(cdf.begin(), cdf.end(), ub) - cdf.begin()));
+      band =
+          std::min(bands - 1, static_cast<std::uint32_t>(std::upper_bound(cdf.begin(), cdf.end(), ub) - cdf.begin()));
       // ub rounded up to 1 lands past the end: never in a band of zero share.
       while (band > 0 && cdf[band] == cdf[band - 1]) --band;
       chunk.band[k] = static_cast<std::uint16_t>(band);
@@ -215,7 +220,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       const MediumInstance* collided = nullptr;
       double t_collision = std::numeric_limits<double>::infinity();
       if (scatter) {
-        collided = sampleCollision(origin, dir, end.hit.valid() ? end.hit.t : std::numeric_limits<float>::infinity(), rng, ctx, t_collision);
+        collided = sampleCollision(origin, dir, end.hit.valid() ? end.hit.t : std::numeric_limits<float>::infinity(),
+                                   rng, ctx, t_collision);
       }
       if (!config_.closest_hit_only) {
         for (const SensorCrossing& c : crossings) {
@@ -229,8 +235,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           if (target.angular) {  // the incoming direction, in the sensor's world frame
             const SensorInstance& si = sensors[static_cast<std::size_t>(s)];
             const glm::dvec3 in = -dir;
-            const std::uint32_t ab = si.object->angleBinAt(glm::dot(in, si.normal),
-                                                           std::atan2(glm::dot(in, si.frame_y), glm::dot(in, si.frame_x)));
+            const std::uint32_t ab = si.object->angleBinAt(
+                glm::dot(in, si.normal), std::atan2(glm::dot(in, si.frame_y), glm::dot(in, si.frame_x)));
             path_bins.push_back({angle_base + si.first_angle_bin + ab, kInvalidId, value});
           }
           ++chunk.counters.crossings;
@@ -243,7 +249,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           break;
         }
         ++scatterings;
-        const double albedo = collided->material.type == MaterialType::Medium ? collided->material.reflectanceIn(band) : 0.0;
+        const double albedo =
+            collided->material.type == MaterialType::Medium ? collided->material.reflectanceIn(band) : 0.0;
         if (!(rng.uniform() < albedo)) {
           e.medium_absorbed_w += w;
           break;
@@ -330,7 +337,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       const BinEvent& b = chunk.bins[i];
       if (b.bin >= angle_base) break;  // angular bins (sorted after the spatial ones) repeat the same power
       const std::uint32_t s = b.sensor;
-      if (chunk.sensors.size() > sensor_first && chunk.sensors.back().sensor == s) chunk.sensors.back().value += b.value;
+      if (chunk.sensors.size() > sensor_first && chunk.sensors.back().sensor == s)
+        chunk.sensors.back().value += b.value;
       else chunk.sensors.push_back({s, b.value});
     }
     chunk.bin_end.push_back(static_cast<std::uint32_t>(chunk.bins.size()));
@@ -339,8 +347,8 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   chunk.done = true;
 }
 
-const MediumInstance* SensorRun::sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max, CounterRng& rng,
-                                                 QueryContext& ctx, double& t_collision) const {
+const MediumInstance* SensorRun::sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max,
+                                                 CounterRng& rng, QueryContext& ctx, double& t_collision) const {
   // The first collision among independent free flights is a free flight through the summed
   // density; each later medium only needs to be sampled up to the best collision so far.
   const MediumInstance* found = nullptr;
@@ -388,7 +396,8 @@ void SensorRun::reduce(const Chunk& chunk) {
       }
     }
     for (; s < chunk.sensor_end[k]; ++s) {
-      if (s + kReduceAhead < chunk.sensors.size()) __builtin_prefetch(&sensor_sums_[chunk.sensors[s + kReduceAhead].sensor], 1);
+      if (s + kReduceAhead < chunk.sensors.size())
+        __builtin_prefetch(&sensor_sums_[chunk.sensors[s + kReduceAhead].sensor], 1);
       const SensorEvent& ev = chunk.sensors[s];
       SensorSums& acc = sensor_sums_[ev.sensor];
       acc.sum += ev.value;
@@ -411,7 +420,8 @@ void SensorRun::reduce(const Chunk& chunk) {
   counters_.scatterings += chunk.counters.scatterings;
 }
 
-SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays, const std::function<void(const SensorProgress&)>& progress,
+SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays,
+                                    const std::function<void(const SensorProgress&)>& progress,
                                     const SensorStopRule& stop) {
   if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
   if (stop.sensor >= static_cast<int>(scene_.sensors().size()))
@@ -420,7 +430,8 @@ SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays, const std::functio
   cancel_.store(false, std::memory_order_relaxed);
   const auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t start = rays_done_;
-  const unsigned threads = config_.threads ? config_.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
+  const unsigned threads =
+      config_.threads ? config_.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
   tbb::task_arena arena(static_cast<int>(threads));
   std::vector<Chunk> chunks;
   while (rays_done_ < total_rays) {
@@ -435,9 +446,8 @@ SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays, const std::functio
       chunks[c].count = std::min<std::uint64_t>(config_.chunk_rays, batch_end - chunks[c].first);
       chunks[c].done = false;
     }
-    arena.execute([&] {
-      tbb::parallel_for(std::size_t{0}, chunks.size(), [&](std::size_t c) { traceChunk(chunks[c]); });
-    });
+    arena.execute(
+        [&] { tbb::parallel_for(std::size_t{0}, chunks.size(), [&](std::size_t c) { traceChunk(chunks[c]); }); });
     // Reduce the finished prefix in ray order (after a cancel, later finished chunks are dropped).
     for (const Chunk& c : chunks) {
       if (!c.done) break;
@@ -501,7 +511,8 @@ SensorRunResults SensorRun::results() const {
     r.band_emitted_w.assign(nb, 0.0);
     for (std::size_t l = 0; l < scene_.lights().size(); ++l) {
       const std::vector<double>& cdf = scene_.bandCdf(l);
-      for (std::size_t k = 0; k < nb; ++k) r.band_emitted_w[k] += scene_.lights()[l].power_w * (cdf[k] - (k ? cdf[k - 1] : 0.0));
+      for (std::size_t k = 0; k < nb; ++k)
+        r.band_emitted_w[k] += scene_.lights()[l].power_w * (cdf[k] - (k ? cdf[k - 1] : 0.0));
     }
   }
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
@@ -559,11 +570,12 @@ SensorRunResults SensorRun::results() const {
         if (spec.angleBinCount() != 0) out.band_angular_flux_w.resize(nb);
         for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a)
           out.band_angular_flux_w[band].push_back(band_bin_sum_[(angle_first + a) * nb + band] / n);
-        meanAndStderr(band_sensor_sum_[k * nb + band], band_sensor_sum2_[k * nb + band], rays_done_, out.band_total_flux_w[band],
-                      out.band_total_flux_stderr_w[band]);
+        meanAndStderr(band_sensor_sum_[k * nb + band], band_sensor_sum2_[k * nb + band], rays_done_,
+                      out.band_total_flux_w[band], out.band_total_flux_stderr_w[band]);
       }
     }
-    out.relative_stderr = out.total_flux_w > 0.0 ? out.total_flux_stderr_w / out.total_flux_w : std::numeric_limits<double>::infinity();
+    out.relative_stderr =
+        out.total_flux_w > 0.0 ? out.total_flux_stderr_w / out.total_flux_w : std::numeric_limits<double>::infinity();
     out.efficiency = scene_.totalPower() > 0.0 ? out.total_flux_w / scene_.totalPower() : 0.0;
     r.sensors.push_back(std::move(out));
   }
@@ -712,21 +724,23 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   if (bytes.size() >= sizeof kStateMagicV1 && std::memcmp(bytes.data(), kStateMagicV1, sizeof kStateMagicV1) == 0)
     throw FileError(file.string() + ": a run state of an older version (no checksum): run again without resuming");
   if (bytes.size() >= sizeof kStateMagicV2 && std::memcmp(bytes.data(), kStateMagicV2, sizeof kStateMagicV2) == 0)
-    throw FileError(file.string() + ": a run state of an older version (mesh contents not fingerprinted): run again "
+    throw FileError(file.string() +
+                    ": a run state of an older version (mesh contents not fingerprinted): run again "
                     "without resuming");
   if (bytes.size() < kHead || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
     throw FileError(file.string() + ": not a sensor run state");
   std::uint64_t header[5];
   std::memcpy(header, bytes.data() + sizeof kStateMagic, sizeof header);
-  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() || header[4] != sensor_sums_.size())
+  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() ||
+      header[4] != sensor_sums_.size())
     throw FileError(file.string() + ": the saved run is of another scene, seed or configuration (seed " +
                     std::to_string(header[1]) + ", " + std::to_string(header[3]) + " bins)");
   const std::size_t nb = bins_.size(), ns = sensor_sums_.size();
-  const std::size_t expected = kHead + nb * (2 * sizeof(double) + sizeof(std::uint64_t)) + ns * 2 * sizeof(double) +
-                               5 * sizeof(double) +
-                               (band_bin_sum_.size() + band_bin_sum2_.size() + band_sensor_sum_.size() + band_sensor_sum2_.size()) *
-                                   sizeof(double) +
-                               sizeof(std::uint64_t);
+  const std::size_t expected =
+      kHead + nb * (2 * sizeof(double) + sizeof(std::uint64_t)) + ns * 2 * sizeof(double) + 5 * sizeof(double) +
+      (band_bin_sum_.size() + band_bin_sum2_.size() + band_sensor_sum_.size() + band_sensor_sum2_.size()) *
+          sizeof(double) +
+      sizeof(std::uint64_t);
   if (bytes.size() != expected)
     throw FileError(file.string() + ": run state of " + std::to_string(bytes.size()) + " bytes, expected " +
                     std::to_string(expected) + " (truncated or extended)");
@@ -761,8 +775,8 @@ void SensorRun::loadState(const std::filesystem::path& file) {
     return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
   };
   const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= header[2]; });
-  if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(bb1) || !valid(bb2) || !valid(bs1) || !valid(bs2) ||
-      !valid(energy) || !counts_ok)
+  if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(bb1) || !valid(bb2) || !valid(bs1) ||
+      !valid(bs2) || !valid(energy) || !counts_ok)
     throw FileError(file.string() + ": run state holds negative, non-finite or impossible values");
   band_bin_sum_ = std::move(bb1);
   band_bin_sum2_ = std::move(bb2);

@@ -54,11 +54,12 @@ void SensorScene::prepare(std::vector<Material> materials) {
   std::unordered_set<std::string> names;
   for (std::size_t id = 0; id < materials.size(); ++id) {
     const Material& m = materials[id];
-    const std::string what = "material of object " + (id < library.size() ? "'" + library.name(static_cast<ObjectId>(id)) + "'"
-                                                                           : std::to_string(id));
+    const std::string what =
+        "material of object " +
+        (id < library.size() ? "'" + library.name(static_cast<ObjectId>(id)) + "'" : std::to_string(id));
     if (!m.band_reflectance.empty() && m.band_reflectance.size() != nb)
-      throw InvalidArgument(what + ": " + std::to_string(m.band_reflectance.size()) + " per-band values, the scene has " +
-                            std::to_string(nb) + " band(s)");
+      throw InvalidArgument(what + ": " + std::to_string(m.band_reflectance.size()) +
+                            " per-band values, the scene has " + std::to_string(nb) + " band(s)");
     for (const double r : m.band_reflectance)
       if (!(r >= 0.0 && r <= 1.0)) throw InvalidArgument(what + ": per-band values must be in [0, 1]");
     // The file reader checks these too; a programmatic scene must not reach the run with a
@@ -67,7 +68,8 @@ void SensorScene::prepare(std::vector<Material> materials) {
       throw InvalidArgument(what + ": reflectance (albedo) " + std::to_string(m.reflectance) + " must be in [0, 1]");
     if (m.type == MaterialType::Dielectric && !(std::isfinite(m.ior) && m.ior > 0.0))
       throw InvalidArgument(what + ": index of refraction " + std::to_string(m.ior) + " must be finite and positive");
-    if (m.type == MaterialType::Medium && !(m.g > -1.0 && m.g < 1.0)) throw InvalidArgument(what + ": g must be in (-1, 1)");
+    if (m.type == MaterialType::Medium && !(m.g > -1.0 && m.g < 1.0))
+      throw InvalidArgument(what + ": g must be in (-1, 1)");
   }
   bool scatters = false;
   std::vector<NodeId> media;
@@ -93,13 +95,15 @@ void SensorScene::prepare(std::vector<Material> materials) {
     s.node = node;
     s.object = std::move(object);
     s.world_from_object = graph_->worldTransform(node);
-    const glm::dvec3 ex = s.world_from_object.vector(glm::dvec3(1, 0, 0)), ey = s.world_from_object.vector(glm::dvec3(0, 1, 0));
+    const glm::dvec3 ex = s.world_from_object.vector(glm::dvec3(1, 0, 0)),
+                     ey = s.world_from_object.vector(glm::dvec3(0, 1, 0));
     s.area_scale = glm::length(glm::cross(ex, ey));
     s.normal = glm::normalize(glm::cross(ex, ey));
     s.frame_x = glm::normalize(ex);
     s.frame_y = glm::cross(s.normal, s.frame_x);
     if (s.object->spec().shape == SensorShape::Sphere && !isSimilarity(s.world_from_object.linear))
-      throw InvalidArgument("sensor '" + s.name + "': a sphere sensor's transform must be a rotation with uniform scale");
+      throw InvalidArgument("sensor '" + s.name +
+                            "': a sphere sensor's transform must be a rotation with uniform scale");
     if (!names.insert(s.name).second) throw InvalidArgument("SensorScene: two sensors named '" + s.name + "'");
     s.first_bin = bin_count_;
     if (static_cast<std::uint64_t>(bin_count_) + s.object->binCount() > 0xFFFFFFF0ull)
@@ -123,9 +127,10 @@ void SensorScene::prepare(std::vector<Material> materials) {
     mi.node = node;
     mi.volume = std::dynamic_pointer_cast<const VolumeObject>(library.get(info.object));
     if (!mi.volume)
-      throw InvalidArgument("object '" + std::string(library.name(info.object)) + "' (type " +
-                            std::string(library.get(info.object)->typeName()) +
-                            ") is a medium that cannot sample free flights: a scene whose fogs scatter takes volume fogs only");
+      throw InvalidArgument(
+          "object '" + std::string(library.name(info.object)) + "' (type " +
+          std::string(library.get(info.object)->typeName()) +
+          ") is a medium that cannot sample free flights: a scene whose fogs scatter takes volume fogs only");
     const Affine& world = graph_->worldTransform(node);
     mi.object_from_world = world.inverse();
     const Box box = world.apply(mi.volume->bounds());

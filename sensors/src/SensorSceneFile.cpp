@@ -103,7 +103,8 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       ctx.fail(at(p, "file"), e.what());
     }
   } else {
-    ctx.fail(at(p, "type"), "unknown light type \"" + type + "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
+    ctx.fail(at(p, "type"), "unknown light type \"" + type +
+                                "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
   }
   if (v.contains("spectrum")) l.spectrum = numbers(v["spectrum"], at(p, "spectrum"), ctx);
   try {
@@ -121,11 +122,13 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
   // A number in [0, 1], or one per band (then `reflectance` keeps their mean, for messages).
   auto fraction = [&](const char* key) {
     const json& x = ctx.member(v, p, key);
-    const std::vector<double> values = x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
+    const std::vector<double> values =
+        x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
     double sum = 0.0;
     for (std::size_t k = 0; k < values.size(); ++k) {
       if (!(values[k] >= 0.0 && values[k] <= 1.0))
-        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key), std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key + " in [0, 1]");
+        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key),
+                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key + " in [0, 1]");
       sum += values[k];
     }
     if (x.is_array()) m.band_reflectance = values;
@@ -189,7 +192,8 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     for (std::size_t i = 0; i < list.size(); ++i) {
       bands.push_back(ctx.string(list[i], at("/bands", i)));
       for (std::size_t j = 0; j < i; ++j)
-        if (bands[j] == bands[i] || bands[i].empty()) ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
+        if (bands[j] == bands[i] || bands[i].empty())
+          ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
     }
   }
   auto bandCount = [&](const std::vector<double>& values, const std::string& p) {
@@ -199,7 +203,8 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   };
   for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
     const Material& m = materials[doc->objects[i]];
-    bandCount(m.band_reflectance, at(at(at("/objects", i), "material"), m.type == MaterialType::Medium ? "albedo" : "reflectance"));
+    bandCount(m.band_reflectance,
+              at(at(at("/objects", i), "material"), m.type == MaterialType::Medium ? "albedo" : "reflectance"));
   }
 
   std::vector<Light> lights;
@@ -223,7 +228,8 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const SensorSpec spec = readSensorSpec(e, sctx, {"name", "transform"});
       const std::string name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
       if (name.empty()) ctx.fail(at(p, "name"), "expected a non-empty sensor name");
-      const Affine world = e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();
+      const Affine world =
+          e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();
       if (spec.shape == SensorShape::Sphere && !SensorScene::isSimilarity(world.linear))
         ctx.fail(at(p, "transform"), "a sphere sensor's transform must be a rotation with uniform scale");
       try {

@@ -21,7 +21,8 @@ std::uint32_t binCount(const json& v, const std::string& p, const ObjectSpecCont
 
 }  // namespace
 
-SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::initializer_list<std::string_view> extra_keys) {
+SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx,
+                          std::initializer_list<std::string_view> extra_keys) {
   const std::string& p = ctx.pointer;
   if (!spec.is_object()) ctx.fail(p, "expected an object");
   if (ctx.strict) {
@@ -43,7 +44,8 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::i
   s.width = size[0];
   s.height = size[1];
   if (s.shape != SensorShape::Rectangle && s.width != s.height)
-    ctx.fail(p + "/size", std::string("a ") + (s.shape == SensorShape::Disk ? "disk" : "sphere") + " has one diameter: a number or [d, d]");
+    ctx.fail(p + "/size", std::string("a ") + (s.shape == SensorShape::Disk ? "disk" : "sphere") +
+                              " has one diameter: a number or [d, d]");
   if (spec.contains("bins")) {
     const json& b = spec["bins"];
     if (b.is_number()) {
@@ -64,12 +66,15 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx, std::i
     if (a.is_number()) {
       s.theta_bins = binCount(a, p + "/angular_bins", ctx);
     } else {
-      if (!a.is_array() || a.size() != 2) ctx.fail(p + "/angular_bins", "expected n_theta or [n_theta, n_phi] (integers >= 1)");
+      if (!a.is_array() || a.size() != 2)
+        ctx.fail(p + "/angular_bins", "expected n_theta or [n_theta, n_phi] (integers >= 1)");
       s.theta_bins = binCount(a[0], p + "/angular_bins/0", ctx);
       s.phi_bins = binCount(a[1], p + "/angular_bins/1", ctx);
     }
-    if (static_cast<std::uint64_t>(s.theta_bins) * s.phi_bins > (1u << 20)) ctx.fail(p + "/angular_bins", "more than 2^20 angular bins");
-    if (s.shape == SensorShape::Sphere) ctx.fail(p + "/angular_bins", "a sphere takes no angular bins (its bins are directions)");
+    if (static_cast<std::uint64_t>(s.theta_bins) * s.phi_bins > (1u << 20))
+      ctx.fail(p + "/angular_bins", "more than 2^20 angular bins");
+    if (s.shape == SensorShape::Sphere)
+      ctx.fail(p + "/angular_bins", "a sphere takes no angular bins (its bins are directions)");
   }
   return s;
 }

@@ -44,7 +44,8 @@ constexpr int kSkip = 77;
 
 std::string show(const HitRecord& h) {
   std::ostringstream s;
-  s << "{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", instance=" << h.instance_id << ", prim=" << h.prim_id << "}";
+  s << "{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", instance=" << h.instance_id << ", prim=" << h.prim_id
+    << "}";
   return s.str();
 }
 
@@ -70,7 +71,8 @@ nlohmann::json parseOneLine(const std::string& out) {
 }
 
 double number(const nlohmann::json& j, const char* key) {
-  expect(j.contains(key) && j[key].is_number(), std::string("JSON key \"") + key + "\" missing or not a number: " + j.dump());
+  expect(j.contains(key) && j[key].is_number(),
+         std::string("JSON key \"") + key + "\" missing or not a number: " + j.dump());
   return j[key].get<double>();
 }
 
@@ -88,8 +90,8 @@ void compareRecords(const fs::path& actual_path, const fs::path& expected_path, 
 }
 
 std::vector<std::string> traceArgs(const std::string& duplex, const fs::path& dir, const fs::path& hits) {
-  return {duplex, "trace", "--scene", (dir / "quad.json").string(), "--rays", (dir / "rays.bin").string(), "--hits",
-          hits.string()};
+  return {duplex,   "trace",      "--scene", (dir / "quad.json").string(), "--rays", (dir / "rays.bin").string(),
+          "--hits", hits.string()};
 }
 
 // Closest hit or --any-hit over the quad scene: exact records, the JSON line, and the same
@@ -109,13 +111,16 @@ int checkTrace(const std::string& duplex, const fs::path& dir, bool any_hit) {
   fs::remove(hits);
   const RunResult r = runOk(args, dir);
   const nlohmann::json j = parseOneLine(r.out);
-  expect(number(j, "rays") == static_cast<double>(c.rays.size()), "\"rays\" is not " + std::to_string(c.rays.size()) + ": " + j.dump());
-  expect(number(j, "hits") == static_cast<double>(expected_hits), "\"hits\" is not " + std::to_string(expected_hits) + ": " + j.dump());
+  expect(number(j, "rays") == static_cast<double>(c.rays.size()),
+         "\"rays\" is not " + std::to_string(c.rays.size()) + ": " + j.dump());
+  expect(number(j, "hits") == static_cast<double>(expected_hits),
+         "\"hits\" is not " + std::to_string(expected_hits) + ": " + j.dump());
   expect(number(j, "threads") == 2.0, "\"threads\" is not 2: " + j.dump());
   for (const char* key : {"load_ms", "build_ms", "trace_ms", "mrays_per_s"})
     expect(number(j, key) >= 0.0, std::string("\"") + key + "\" is negative: " + j.dump());
   if (j.contains("trace_ms_all")) {
-    expect(j["trace_ms_all"].is_array() && j["trace_ms_all"].size() == 3, "\"trace_ms_all\" does not hold 3 runs: " + j.dump());
+    expect(j["trace_ms_all"].is_array() && j["trace_ms_all"].size() == 3,
+           "\"trace_ms_all\" does not hold 3 runs: " + j.dump());
     std::vector<double> runs = j["trace_ms_all"].get<std::vector<double>>();
     std::sort(runs.begin(), runs.end());
     expect(number(j, "trace_ms") == runs[1], "\"trace_ms\" is not the median of \"trace_ms_all\": " + j.dump());
@@ -123,7 +128,8 @@ int checkTrace(const std::string& duplex, const fs::path& dir, bool any_hit) {
   compareRecords(hits, expected, c.rays);
 
   // One thread, and the default thread count: the same records.
-  for (const std::vector<std::string>& extra : {std::vector<std::string>{"--threads", "1"}, std::vector<std::string>{}}) {
+  for (const std::vector<std::string>& extra :
+       {std::vector<std::string>{"--threads", "1"}, std::vector<std::string>{}}) {
     const fs::path again = dir / ("hits_" + tag + "_again.bin");
     auto a = traceArgs(duplex, dir, again);
     a.insert(a.end(), extra.begin(), extra.end());
@@ -160,7 +166,8 @@ int checkRays(const std::string& duplex, const fs::path& dir) {
     a.insert(a.end(), mode.begin(), mode.end());
     a.insert(a.end(), {"--out", out.string()});
     const nlohmann::json j = parseOneLine(runOk(a, dir).out);
-    expect(j.contains("out") && j["out"] == out.string(), "summary does not name the output " + out.string() + ": " + j.dump());
+    expect(j.contains("out") && j["out"] == out.string(),
+           "summary does not name the output " + out.string() + ": " + j.dump());
     return number(j, "rays");
   };
   auto bytes = [](const fs::path& p) {
@@ -171,7 +178,8 @@ int checkRays(const std::string& duplex, const fs::path& dir) {
   // Primary rays: 4 x 3, row-major from the top-left pixel, against an independent camera.
   const fs::path primary = dir / "primary.bin";
   expect(raysCmd(primary, {"--primary", "4", "3"}) == 12.0, "--primary 4 3 does not report 12 rays");
-  expect(fs::file_size(primary) == 12 * 32, "--primary 4 3 wrote " + std::to_string(fs::file_size(primary)) + " bytes, not 384");
+  expect(fs::file_size(primary) == 12 * 32,
+         "--primary 4 3 wrote " + std::to_string(fs::file_size(primary)) + " bytes, not 384");
   const Vec lo{kBoxLo[0], kBoxLo[1], kBoxLo[2]}, hi{kBoxHi[0], kBoxHi[1], kBoxHi[2]};
   const Vec centre = (lo + hi) * 0.5;
   const Vec eye = centre + normalize({1.0, 0.6, 0.8}) * std::sqrt(dot(hi - lo, hi - lo));
@@ -218,8 +226,7 @@ int checkFails(const fs::path& dir, const std::string& needle, const std::vector
   for (const std::string& a : argv) cmd += a + " ";
   expect(r.exited, "`" + cmd + "` crashed (" + describe(r) + "); stderr:\n" + r.err);
   expect(r.exit_code != 0, "`" + cmd + "` succeeded on bad input; stdout:\n" + r.out);
-  expect(r.err.find(needle) != std::string::npos,
-         "`" + cmd + "`: stderr does not name '" + needle + "':\n" + r.err);
+  expect(r.err.find(needle) != std::string::npos, "`" + cmd + "`: stderr does not name '" + needle + "':\n" + r.err);
   expect(r.out.empty(), "`" + cmd + "` printed on stdout:\n" + r.out);
   std::cout << describe(r) << ", stderr: " << r.err;
   return 0;
@@ -259,7 +266,8 @@ int checkSharedData(const std::string& duplex, const fs::path& dir, const fs::pa
   const fs::path rays = dir / "spot_rays.bin";
   runOk({duplex, "rays", "--scene", scene.string(), "--primary", "64", "48", "--out", rays.string()}, dir);
   auto trace = [&](const fs::path& hits, std::vector<std::string> extra) {
-    std::vector<std::string> a = {duplex, "trace", "--scene", scene.string(), "--rays", rays.string(), "--hits", hits.string()};
+    std::vector<std::string> a = {duplex,   "trace",       "--scene", scene.string(),
+                                  "--rays", rays.string(), "--hits",  hits.string()};
     a.insert(a.end(), extra.begin(), extra.end());
     return parseOneLine(runOk(a, dir).out);
   };
@@ -344,7 +352,8 @@ std::string fileBytes(const fs::path& p) {
 
 nlohmann::json traceJson(const std::string& duplex, const fs::path& dir, const fs::path& scene, const fs::path& rays,
                          const fs::path& hits, std::vector<std::string> extra) {
-  std::vector<std::string> a = {duplex, "trace", "--scene", scene.string(), "--rays", rays.string(), "--hits", hits.string()};
+  std::vector<std::string> a = {duplex,   "trace",       "--scene", scene.string(),
+                                "--rays", rays.string(), "--hits",  hits.string()};
   a.insert(a.end(), extra.begin(), extra.end());
   return parseOneLine(runOk(a, dir).out);
 }
@@ -386,7 +395,8 @@ int checkDocument(const std::string& duplex, const fs::path& fixtures) {
              "\"format\" does not name the scene formats: " + jt.dump() + " / " + jf.dump());
       expect(number(jt, "instances") == 6.0 && number(jf, "instances") == 5.0,
              "\"instances\" is not 6 (tree, hidden one included) and 5 (flat): " + jt.dump() + " / " + jf.dump());
-      expect(number(jt, "hits") == number(jf, "hits") && number(jt, "hits") > 0.0, "hit counts differ or are 0: " + jt.dump());
+      expect(number(jt, "hits") == number(jf, "hits") && number(jt, "hits") > 0.0,
+             "hit counts differ or are 0: " + jt.dump());
       if (!any_hit) {
         std::vector<int> per_instance(5, 0);
         for (const HitRecord& h : readRecords<HitRecord>(dir / ("doc_hits_" + tag + "_tree.bin"))) {
@@ -396,7 +406,8 @@ int checkDocument(const std::string& duplex, const fs::path& fixtures) {
         }
         if (name == "random")
           for (std::size_t i = 0; i < 5; ++i)
-            expect(per_instance[i] > 0, "no random ray hits instance " + std::to_string(i) + " (the fixture misses its point)");
+            expect(per_instance[i] > 0,
+                   "no random ray hits instance " + std::to_string(i) + " (the fixture misses its point)");
       }
       std::cout << "document " << tag << ": identical hit files; " << jt.dump() << "\n";
     }
@@ -419,8 +430,9 @@ int checkPrepare(const std::string& duplex, const fs::path& fixtures) {
     const nlohmann::json p =
         parseOneLine(runOk({duplex, "prepare", "--scene", source.string(), "--out", out.string()}, dir).out);
     const fs::path prepared = out / (name + ".json");
-    expect(p.value("scene", "") == prepared.string() && number(p, "structures") == 3.0 && number(p, "mesh_objects") == 3.0,
-           "prepare report: " + p.dump());
+    expect(
+        p.value("scene", "") == prepared.string() && number(p, "structures") == 3.0 && number(p, "mesh_objects") == 3.0,
+        "prepare report: " + p.dump());
     const nlohmann::json copy = nlohmann::json::parse(fileBytes(prepared));
     expect(copy.value("format", "") == "duplex-scene-v1", prepared.string() + " is not duplex-scene-v1");
     for (const nlohmann::json& object : copy["objects"])
@@ -428,7 +440,8 @@ int checkPrepare(const std::string& duplex, const fs::path& fixtures) {
              prepared.string() + ": object without an existing structure file: " + object.dump());
 
     const nlohmann::json built = traceJson(duplex, dir, source, rays, dir / ("prep_hits_" + name + ".bin"), {});
-    const nlohmann::json loaded = traceJson(duplex, dir, prepared, rays, dir / ("prep_hits_" + name + "_prepared.bin"), {});
+    const nlohmann::json loaded =
+        traceJson(duplex, dir, prepared, rays, dir / ("prep_hits_" + name + "_prepared.bin"), {});
     expect(number(built, "structures_loaded") == 0.0 && number(loaded, "structures_loaded") == 3.0,
            "structures_loaded is not 0 (source) and 3 (prepared): " + built.dump() + " / " + loaded.dump());
     expectSameFile(dir / ("prep_hits_" + name + ".bin"), dir / ("prep_hits_" + name + "_prepared.bin"));
@@ -446,8 +459,8 @@ int checkPrepare(const std::string& duplex, const fs::path& fixtures) {
                             dir.string());
     expect(r.exited && r.exit_code == 1 && r.err.find(damaged.filename().string()) != std::string::npos,
            "a damaged structure was not refused with its file named (" + describe(r) + "): " + r.err);
-    std::cout << "prepare " << name << ": " << p.dump() << "\n  built " << built.dump() << "\n  loaded " << loaded.dump()
-              << "\n";
+    std::cout << "prepare " << name << ": " << p.dump() << "\n  built " << built.dump() << "\n  loaded "
+              << loaded.dump() << "\n";
   }
   return 0;
 }
@@ -466,7 +479,8 @@ int checkPrepareKoala(const std::string& duplex, const fs::path& dir, const fs::
   runOk({duplex, "prepare", "--scene", scene.string(), "--out", out.string()}, dir);
   runOk({duplex, "rays", "--scene", scene.string(), "--primary", "128", "128", "--out", rays.string()}, dir);
   const nlohmann::json built = traceJson(duplex, dir, scene, rays, dir / "koala19_hits.bin", {});
-  const nlohmann::json loaded = traceJson(duplex, dir, out / "koala19.json", rays, dir / "koala19_hits_prepared.bin", {});
+  const nlohmann::json loaded =
+      traceJson(duplex, dir, out / "koala19.json", rays, dir / "koala19_hits_prepared.bin", {});
   expect(number(loaded, "structures_loaded") == 19.0, "prepared koala did not load 19 structures: " + loaded.dump());
   expectSameFile(dir / "koala19_hits.bin", dir / "koala19_hits_prepared.bin");
   for (const auto& [what, j] : {std::pair{"original", built}, std::pair{"prepared", loaded}})

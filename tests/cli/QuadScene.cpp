@@ -81,7 +81,8 @@ QuadCase quadCase() {
 template <class Record>
 void writeRecords(const std::filesystem::path& path, const std::vector<Record>& records) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(records.data()), static_cast<std::streamsize>(records.size() * sizeof(Record)));
+  out.write(reinterpret_cast<const char*>(records.data()),
+            static_cast<std::streamsize>(records.size() * sizeof(Record)));
   if (!out) throw std::runtime_error("cannot write " + path.string());
 }
 
@@ -117,8 +118,9 @@ void writeFixtures(const std::filesystem::path& dir) {
   writeText(dir / "bad_mesh_missing.json",
             scene("scene-json-v1", R"({"name": "quad", "mesh": {"file": "no_such_mesh.obj"}})", one_instance));
   // JSON has no NaN; 1e999 is the closest a file gets (it overflows to infinity).
-  writeText(dir / "bad_transform_overflow.json",
-            scene("scene-json-v1", kQuadObject, R"([{"object": "quad", "transform": [1e999,0,0,0, 0,1,0,0, 0,0,1,0]}])"));
+  writeText(
+      dir / "bad_transform_overflow.json",
+      scene("scene-json-v1", kQuadObject, R"([{"object": "quad", "transform": [1e999,0,0,0, 0,1,0,0, 0,0,1,0]}])"));
   writeText(dir / "bad_transform_singular.json",
             scene("scene-json-v1", kQuadObject, R"([{"object": "quad", "transform": [1,0,0,0, 0,1,0,0, 0,0,0,0]}])"));
   writeText(dir / "bad_truncated.json", scene("scene-json-v1", kQuadObject, one_instance).substr(0, 40));

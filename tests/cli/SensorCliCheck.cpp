@@ -53,10 +53,12 @@ std::string boxScene(const std::string& power) {
   const char* faces[6] = {"0,0,1,1, 0,1,0,0, -1,0,0,0",  "0,0,-1,-1, 0,1,0,0, 1,0,0,0", "1,0,0,0, 0,0,1,1, 0,-1,0,0",
                           "1,0,0,0, 0,0,-1,-1, 0,1,0,0", "1,0,0,0, 0,1,0,0, 0,0,1,1",   "1,0,0,0, 0,-1,0,0, 0,0,-1,-1"};
   std::string s = R"({"format": "scene-json-v1", "objects": [], "instances": [],
-  "lights": [{"type": "point", "position": [0.1, 0.2, -0.3], "power": )" + power + R"(}], "sensors": [)";
+  "lights": [{"type": "point", "position": [0.1, 0.2, -0.3], "power": )" +
+                  power + R"(}], "sensors": [)";
   for (int k = 0; k < 6; ++k)
     s += std::string(k ? ", " : "") + R"({"name": "face)" + std::to_string(k) +
-         R"(", "shape": "rectangle", "size": [2, 2], "bins": [4, 3], "two_sided": true, "transform": [)" + faces[k] + "]}";
+         R"(", "shape": "rectangle", "size": [2, 2], "bins": [4, 3], "two_sided": true, "transform": [)" + faces[k] +
+         "]}";
   return s + "]}";
 }
 
@@ -68,8 +70,8 @@ void write(const fs::path& p, const std::string& text) {
 
 std::vector<std::string> sensorArgs(const std::string& duplex, const fs::path& scene, const std::string& rays,
                                     const std::string& threads, const fs::path& out) {
-  return {duplex, "sensor", "--scene", scene.string(), "--rays", rays, "--threads", threads, "--seed", "3",
-          "--out", out.string(), "--progress", "lines"};
+  return {duplex,  "sensor", "--scene", scene.string(), "--rays",     rays,         "--threads",
+          threads, "--seed", "3",       "--out",        out.string(), "--progress", "lines"};
 }
 
 // The EXR copy of a map (built with OpenEXR): Y and stderr equal the JSON arrays as floats, with the
@@ -161,7 +163,8 @@ int check(const std::string& duplex, const fs::path& dir) {
     for (const char* key : {"rays", "total_flux_w", "irradiance_w_m2", "stderr_w_m2", "efficiency"})
       expect(j.contains(key), name + ".json lacks \"" + std::string(key) + "\"");
     expect(j["rays"] == 20000, name + ".json: rays is not the emitted count");
-    expect(j["irradiance_w_m2"].size() == 12 && j["stderr_w_m2"].size() == 12, name + ".json: arrays are not nx * ny = 12");
+    expect(j["irradiance_w_m2"].size() == 12 && j["stderr_w_m2"].size() == 12,
+           name + ".json: arrays are not nx * ny = 12");
     total += j["total_flux_w"].get<double>();
     expect(std::abs(j["efficiency"].get<double>() - j["total_flux_w"].get<double>() / 7.0) <= 1e-12,
            name + ".json: efficiency is not total_flux_w / emitted power (7 W)");
@@ -195,7 +198,8 @@ int check(const std::string& duplex, const fs::path& dir) {
   {
     const RunResult stopped = runAndSignal(sensorArgs(duplex, scene, "2000000000", "2", dir / "stopped"), dir.string(),
                                            SIGINT, "progress: ", 120.0);
-    expect(stopped.exited && stopped.exit_code == 130, "SIGINT: expected exit 130, got " + describe(stopped) + "\n" + stopped.err);
+    expect(stopped.exited && stopped.exit_code == 130,
+           "SIGINT: expected exit 130, got " + describe(stopped) + "\n" + stopped.err);
     const nlohmann::json j = nlohmann::json::parse(stopped.out);
     const std::uint64_t done = j["rays"].get<std::uint64_t>();
     expect(j["status"] == "interrupted" && j["signal"] == SIGINT && done > 0 && done < 2000000000,
@@ -205,7 +209,8 @@ int check(const std::string& duplex, const fs::path& dir) {
     std::vector<std::string> resume_stopped = sensorArgs(duplex, scene, total_rays, "2", dir / "stopped");
     resume_stopped.push_back("--resume");
     const nlohmann::json continued = runJson(resume_stopped, dir);
-    expect(continued["resumed_from"] == done && continued["status"] == "completed", "resume after SIGINT: " + continued.dump());
+    expect(continued["resumed_from"] == done && continued["status"] == "completed",
+           "resume after SIGINT: " + continued.dump());
     (void)runJson(sensorArgs(duplex, scene, total_rays, "1", dir / "straight"), dir);
     expectSameMaps(dir / "straight", dir / "stopped", "run stopped by SIGINT and resumed");
   }
@@ -214,8 +219,10 @@ int check(const std::string& duplex, const fs::path& dir) {
   std::vector<std::string> target = sensorArgs(duplex, scene, "50000000", "2", dir / "target");
   for (const char* a : {"--target-error", "0.05", "--target-sensor", "face4"}) target.push_back(a);
   const nlohmann::json stopped = runJson(target, dir);
-  expect(stopped["status"] == "target_reached" && stopped["rays"].get<double>() < 5e7, "target not reached: " + stopped.dump());
-  expect(stopped["sensors"][4]["relative_stderr"].get<double>() <= 0.05, "relative error above target: " + stopped.dump());
+  expect(stopped["status"] == "target_reached" && stopped["rays"].get<double>() < 5e7,
+         "target not reached: " + stopped.dump());
+  expect(stopped["sensors"][4]["relative_stderr"].get<double>() <= 0.05,
+         "relative error above target: " + stopped.dump());
 
   // Bad input: a clear message naming the file and the JSON pointer, a non-zero exit.
   struct Bad {
@@ -226,13 +233,20 @@ int check(const std::string& duplex, const fs::path& dir) {
   const std::vector<Bad> bad = {
       {"zero_power.json", boxScene("0"), "/lights/0/power"},
       {"negative_power.json", boxScene("-3"), "power must be > 0"},
-      {"bad_bins.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
-        "sensors": [{"name": "s", "shape": "rectangle", "size": [1, 1], "bins": [0, 3]}]})", "/sensors/0/bins/0"},
-      {"no_lights.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "sensors": [{"name": "s", "size": 1}]})", "no lights"}};
+      {"bad_bins.json",
+       R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
+        "sensors": [{"name": "s", "shape": "rectangle", "size": [1, 1], "bins": [0, 3]}]})",
+       "/sensors/0/bins/0"},
+      {"no_lights.json",
+       R"({"format": "scene-json-v1", "objects": [], "instances": [], "sensors": [{"name": "s", "size": 1}]})",
+       "no lights"}};
   auto twoSensors = [](const char* a, const char* b) {
-    return std::string(R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
-        "sensors": [{"name": ")") + a + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]},
-                    {"name": ")" + b + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]}]})";
+    return std::string(
+               R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
+        "sensors": [{"name": ")") +
+           a + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]},
+                    {"name": ")" +
+           b + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]}]})";
   };
   const std::vector<Bad> bad_names = {{"same_file.json", twoSensors("a b", "a_b"), "would both write a_b.json"},
                                       {"run_name.json", twoSensors("x", "run"), "would write run.json"}};
@@ -291,12 +305,16 @@ void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
   const double total = j["total_flux_w"];
   expect(total > 0.0, "the sensor under the light saw nothing of the floor");
   expect(j["band_total_flux_w"][1].get<double>() == 0.0, "red arrived from a floor that reflects no red");
-  expect(std::abs(j["band_total_flux_w"][0].get<double>() - total) <= 1e-12 * total, "the bands do not sum to total_flux_w");
+  expect(std::abs(j["band_total_flux_w"][0].get<double>() - total) <= 1e-12 * total,
+         "the bands do not sum to total_flux_w");
   for (std::size_t b = 0; b < 4; ++b) {
-    const double e = j["irradiance_w_m2"][b], blue = j["band_irradiance_w_m2"][0][b], red = j["band_irradiance_w_m2"][1][b];
-    expect(red == 0.0 && std::abs(blue - e) <= 1e-12 * e, "bin " + std::to_string(b) + ": bands do not sum to the irradiance");
+    const double e = j["irradiance_w_m2"][b], blue = j["band_irradiance_w_m2"][0][b],
+                 red = j["band_irradiance_w_m2"][1][b];
+    expect(red == 0.0 && std::abs(blue - e) <= 1e-12 * e,
+           "bin " + std::to_string(b) + ": bands do not sum to the irradiance");
   }
-  expect(j["angular_bins"] == nlohmann::json({3, 4}) && j["angular_flux_w"].size() == 12 && j["angular_solid_angle_sr"].size() == 12,
+  expect(j["angular_bins"] == nlohmann::json({3, 4}) && j["angular_flux_w"].size() == 12 &&
+             j["angular_solid_angle_sr"].size() == 12,
          "looks_down.json lacks its 3 x 4 angular bins");
   double angular = 0.0;
   for (const auto& x : j["angular_flux_w"]) angular += x.get<double>();

@@ -8,11 +8,11 @@
 namespace duplex::clitest {
 
 struct RunResult {
-  bool exited = false;   ///< ended through exit() (false: killed by a signal, e.g. a crash)
-  int exit_code = -1;    ///< valid when `exited`
-  int signal = 0;        ///< valid when !exited
-  std::string out;       ///< everything written to stdout
-  std::string err;       ///< everything written to stderr
+  bool exited = false;  ///< ended through exit() (false: killed by a signal, e.g. a crash)
+  int exit_code = -1;   ///< valid when `exited`
+  int signal = 0;       ///< valid when !exited
+  std::string out;      ///< everything written to stdout
+  std::string err;      ///< everything written to stderr
 };
 
 /// Runs argv[0] (a path, no PATH lookup) with argv, stdin from /dev/null, stdout and stderr

@@ -35,7 +35,7 @@ namespace {
 
 constexpr float kSigma = 1.3f;
 constexpr double kVoxel = 0.1;
-constexpr int kLo = 0, kHi = 23;                 // fog voxels [0, 23]^3: object box [-0.05, 2.35]^3
+constexpr int kLo = 0, kHi = 23;  // fog voxels [0, 23]^3: object box [-0.05, 2.35]^3
 constexpr double kBoxLo = (kLo - 0.5) * kVoxel;
 constexpr double kBoxHi = (kHi + 0.5) * kVoxel;
 constexpr double kRadius = 0.5;
@@ -136,10 +136,10 @@ int check(const std::string& duplex, const fs::path& dir) {
 
   // Rays: fixed cases, then random rays through the fog towards (or past) the sphere.
   std::vector<RayRec> rays = {
-      {{-1.0f, 1.15f, 1.15f}, 0.0f, {1, 0, 0}, 3.5f},  // through the fog, stops before the sphere
-      {{-1.0f, 1.15f, 1.15f}, 0.0f, {1, 0, 0}, kInf},  // then blocked by the sphere
-      {{0.0f, 10.0f, 0.0f}, 0.0f, {1, 0, 0}, kInf},    // misses everything
-      {{-1.0f, 1.0f, 1.0f}, 1.0f, {1, 0, 0}, 2.0f},    // starts inside the fog
+      {{-1.0f, 1.15f, 1.15f}, 0.0f, {1, 0, 0}, 3.5f},    // through the fog, stops before the sphere
+      {{-1.0f, 1.15f, 1.15f}, 0.0f, {1, 0, 0}, kInf},    // then blocked by the sphere
+      {{0.0f, 10.0f, 0.0f}, 0.0f, {1, 0, 0}, kInf},      // misses everything
+      {{-1.0f, 1.0f, 1.0f}, 1.0f, {1, 0, 0}, 2.0f},      // starts inside the fog
       {{-1.0f, -1.0f, 0.5f}, 0.0f, {2, 2, 0.2f}, 1.5f},  // diagonal, direction not unit
   };
   std::mt19937 rng(5);
@@ -186,9 +186,9 @@ int check(const std::string& duplex, const fs::path& dir) {
     const double expected = hits_sphere ? 0.0 : std::exp(-double(kSigma) * lengthInBox(r));
     blocked += hits_sphere;
     worst = std::max(worst, std::abs(t[k] - expected));
-    expect(std::abs(t[k] - expected) < 2e-5 + 1e-5 * expected,
-           "ray " + std::to_string(k) + " " + show(r) + ": transmittance " + std::to_string(t[k]) + ", expected " +
-               std::to_string(expected));
+    expect(std::abs(t[k] - expected) < 2e-5 + 1e-5 * expected, "ray " + std::to_string(k) + " " + show(r) +
+                                                                   ": transmittance " + std::to_string(t[k]) +
+                                                                   ", expected " + std::to_string(expected));
   }
   expect(t[0] > 0.0f && t[0] < 1.0f && t[1] == 0.0f && t[2] == 1.0f, "fixed cases wrong");
   expect(blocked > 20 && checked - blocked > 20, "too few blocked or free rays: " + std::to_string(blocked));
@@ -211,7 +211,8 @@ int check(const std::string& duplex, const fs::path& dir) {
     if (std::abs(impact - kRadius) < 0.04 || std::abs(entry - double(r.tfar)) * length(r) < 0.04) continue;
     const bool hits_sphere = std::isfinite(entry) && entry >= r.tnear && entry <= r.tfar;
     if (!hits_sphere) {
-      expect(h[k].instance_id == 0xFFFFFFFFu && h[k].prim_id == 0xFFFFFFFFu, "ray " + std::to_string(k) + " should miss");
+      expect(h[k].instance_id == 0xFFFFFFFFu && h[k].prim_id == 0xFFFFFFFFu,
+             "ray " + std::to_string(k) + " should miss");
       continue;
     }
     ++sphere_hits;
@@ -242,7 +243,8 @@ int check(const std::string& duplex, const fs::path& dir) {
   // default never.
   auto sensorScene = [&](const fs::path& file, const char* material) {
     std::ofstream(file) << R"({"format": "scene-json-v1",
-      "objects": [{"name": "fog", "volume": {"file": "vol.vdb", "grid": "density", "kind": "fog"})" << material << R"(},
+      "objects": [{"name": "fog", "volume": {"file": "vol.vdb", "grid": "density", "kind": "fog"})"
+                        << material << R"(},
                   {"name": "back", "mesh": {"positions": [4,-10,-10, 4,12,-10, 4,12,12, 4,-10,12], "indices": [0,1,2, 0,2,3]},
                    "material": {"type": "lambertian", "reflectance": 0.9}}],
       "instances": [{"object": "fog", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]},
@@ -252,8 +254,9 @@ int check(const std::string& duplex, const fs::path& dir) {
                    "transform": [0,0,1,3, 0,1,0,1.15, -1,0,0,1.15]}]})";
   };
   auto sensorRun = [&](const fs::path& scene, const std::vector<std::string>& extra) {
-    std::vector<std::string> argv = {duplex, "sensor", "--scene", scene.string(), "--rays", "4000", "--threads", "1",
-                                     "--progress", "none", "--out", (dir / "sensor_out").string()};
+    std::vector<std::string> argv = {duplex,       "sensor", "--scene",   scene.string(),
+                                     "--rays",     "4000",   "--threads", "1",
+                                     "--progress", "none",   "--out",     (dir / "sensor_out").string()};
     argv.insert(argv.end(), extra.begin(), extra.end());
     return nlohmann::json::parse(runOk(argv, dir).out);
   };
@@ -269,14 +272,16 @@ int check(const std::string& duplex, const fs::path& dir) {
   const nlohmann::json full = sensorRun(dir / "fog_scatter.json", {});
   expect(cut["max_scatterings"] == 0 && cut["energy"]["depth_limited_w"].get<double>() > 0.1,
          "--max-scatterings 0 did not cut the paths at their first collision: " + cut.dump());
-  expect(full["max_scatterings"] == 100000 && full["energy"]["depth_limited_w"] == 0.0 && full["scatterings"].get<double>() > 0,
+  expect(full["max_scatterings"] == 100000 && full["energy"]["depth_limited_w"] == 0.0 &&
+             full["scatterings"].get<double>() > 0,
          "default max_scatterings: " + full.dump());
   expectFails({duplex, "sensor", "--scene", (dir / "fog_sensor.json").string(), "--rays", "10", "--roulette", "1"}, dir,
               "--roulette");
 
-  std::cout << "volumes: " << rays.size() << " rays, " << checked << " checked against exp(-sigma L) (worst error "
-            << worst << ", " << blocked << " blocked by the level set), 1 and 2 threads byte-identical; "
-            << sphere_hits << " level-set hit records at the analytic sphere; sensor runs: --roulette and --max-scatterings act on fog\n";
+  std::cout
+      << "volumes: " << rays.size() << " rays, " << checked << " checked against exp(-sigma L) (worst error " << worst
+      << ", " << blocked << " blocked by the level set), 1 and 2 threads byte-identical; " << sphere_hits
+      << " level-set hit records at the analytic sphere; sensor runs: --roulette and --max-scatterings act on fog\n";
   return 0;
 }
 

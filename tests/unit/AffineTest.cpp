@@ -31,8 +31,8 @@ std::vector<Affine> randomTransforms(int count, std::uint64_t seed) {
   for (int i = 0; i < count; ++i) {
     glm::dvec3 scale(s(rng), s(rng), s(rng));
     if (i % 3 == 1) scale.z = -scale.z;
-    out.push_back(Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(u(rng), u(rng), u(rng)) + 1e-3, 4.0 * u(rng),
-                                                                   scale, glm::dvec3(u(rng), u(rng), u(rng)) * 100.0)));
+    out.push_back(Affine::fromRowMajor3x4(rotationScaleTranslation(
+        glm::dvec3(u(rng), u(rng), u(rng)) + 1e-3, 4.0 * u(rng), scale, glm::dvec3(u(rng), u(rng), u(rng)) * 100.0)));
   }
   return out;
 }

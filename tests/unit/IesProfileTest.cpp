@@ -73,7 +73,8 @@ IesProfile asymmetricProfile() {
 }
 
 TEST(IesProfile, IsotropicFileHasTheIntegralOfASphereAndUnitWeights) {
-  const IesProfile p = IesProfile::parse(iesText({0, 90, 180}, {0}, {100, 100, 100}, "TILT=NONE", "1", "2.5"), "iso.ies");
+  const IesProfile p =
+      IesProfile::parse(iesText({0, 90, 180}, {0}, {100, 100, 100}, "TILT=NONE", "1", "2.5"), "iso.ies");
   EXPECT_NEAR(p.integral(), 4.0 * kPi * 250.0, 1e-9 * p.integral());
   EXPECT_DOUBLE_EQ(p.intensity({0.3, -0.2, 0.9}), 250.0);
   EXPECT_EQ(p.keywords().at("TEST"), "unit test");
@@ -134,7 +135,7 @@ TEST(IesProfile, TableValuesAndSymmetriesAreHonoured) {
     EXPECT_NEAR(c.intensityAt(g, kPi - phi), c.intensityAt(g, phi), 1e-9) << deg;
   }
   EXPECT_DOUBLE_EQ(c.intensityAt(kPi / 4, 1.5 * kPi), 7.0 * 2 + 3);  // the 270 plane as given
-  EXPECT_DOUBLE_EQ(c.intensityAt(kPi / 4, 0.0), 7.0 + 3);           // 0 mirrors the 180 plane
+  EXPECT_DOUBLE_EQ(c.intensityAt(kPi / 4, 0.0), 7.0 + 3);            // 0 mirrors the 180 plane
   EXPECT_EQ(b.horizontalAngles().front(), 0.0);
   EXPECT_EQ(b.horizontalAngles().back(), 360.0);
 }
@@ -145,7 +146,8 @@ TEST(IesProfile, SamplingIsUnbiasedAgainstQuadrature) {
   const glm::dvec3 axis = glm::normalize(glm::dvec3(0.4, -0.3, -0.8));
   const auto in_cone = [&](const glm::dvec3& d) { return glm::dot(glm::normalize(d), axis) > 0.8 ? 1.0 : 0.0; };
   const auto upper = [](const glm::dvec3& d) { return d.z > 0.0 ? 1.0 : 0.0; };
-  for (const auto& f : {std::function<double(const glm::dvec3&)>(in_cone), std::function<double(const glm::dvec3&)>(upper)}) {
+  for (const auto& f :
+       {std::function<double(const glm::dvec3&)>(in_cone), std::function<double(const glm::dvec3&)>(upper)}) {
     const double exact = quadrature(p, f) / p.integral();
     std::mt19937_64 rng(42);
     std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -154,7 +156,8 @@ TEST(IesProfile, SamplingIsUnbiasedAgainstQuadrature) {
     for (int i = 0; i < n; ++i) {
       const auto s = p.sample(u(rng), u(rng));
       // The weight is the ratio the class promises, for every sample.
-      ASSERT_NEAR(s.weight, p.intensity(s.direction_lf) / (p.pdf(s.direction_lf) * p.integral()), 1e-9 * (1 + s.weight));
+      ASSERT_NEAR(s.weight, p.intensity(s.direction_lf) / (p.pdf(s.direction_lf) * p.integral()),
+                  1e-9 * (1 + s.weight));
       const double x = s.weight * f(s.direction_lf);
       sum += x;
       sum2 += x * x;
@@ -214,7 +217,8 @@ TEST(IesProfile, MalformedFilesGiveErrorsNamingFileAndProblem) {
   }
   // Line numbers point at the bad value.
   try {
-    (void)IesProfile::parse("IESNA:LM-63-2002\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n0 90 180\n0\n1 oops 3\n", "l.ies");
+    (void)IesProfile::parse("IESNA:LM-63-2002\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n0 90 180\n0\n1 oops 3\n",
+                            "l.ies");
     ADD_FAILURE() << "accepted a non-number";
   } catch (const FileError& e) {
     EXPECT_NE(std::string(e.what()).find("line 7"), std::string::npos) << e.what();

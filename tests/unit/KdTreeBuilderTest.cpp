@@ -45,7 +45,10 @@ KdTree buildOverTriangles(const std::vector<std::array<glm::vec3, 3>>& tris, con
   for (std::size_t i = 0; i < tris.size(); ++i)
     for (const auto& v : tris[i]) bounds[i].extend(v);
   return buildKdTree(
-      bounds, [&](std::uint32_t prim, const Box& box) { return clipTriangleToBox(tris[prim][0], tris[prim][1], tris[prim][2], box); },
+      bounds,
+      [&](std::uint32_t prim, const Box& box) {
+        return clipTriangleToBox(tris[prim][0], tris[prim][1], tris[prim][2], box);
+      },
       config);
 }
 
@@ -96,11 +99,11 @@ TEST(KdTreeBuilder, EmptyInputGivesEmptyTree) {
 
 TEST(KdTreeBuilder, OnlyUnusableBoxesGiveEmptyTree) {
   const std::vector<Box> boxes = {
-      Box(),                                                      // default: empty
-      Box(glm::vec3(1.0f), glm::vec3(0.0f)),                      // inverted
-      Box(glm::vec3(0.0f, kNaN, 0.0f), glm::vec3(1.0f)),          // NaN
-      Box(glm::vec3(0.0f), glm::vec3(1.0f, 1.0f, kInf)),          // infinite
-      Box(glm::vec3(-kInf), glm::vec3(kInf)),                     // infinite
+      Box(),                                              // default: empty
+      Box(glm::vec3(1.0f), glm::vec3(0.0f)),              // inverted
+      Box(glm::vec3(0.0f, kNaN, 0.0f), glm::vec3(1.0f)),  // NaN
+      Box(glm::vec3(0.0f), glm::vec3(1.0f, 1.0f, kInf)),  // infinite
+      Box(glm::vec3(-kInf), glm::vec3(kInf)),             // infinite
   };
   const KdTree tree = buildKdTreeOverBoxes(boxes);
   EXPECT_TRUE(tree.empty());
@@ -120,7 +123,8 @@ TEST(KdTreeBuilder, NaNAndEmptyBoxesAreLeftOut) {
     SCOPED_TRACE(c.name);
     const KdTree tree = buildKdTreeOverBoxes(boxes, c.config);
     EXPECT_TRUE(checkBoxKdTree(tree, boxes, c.config.max_depth));  // also: no reference to a left-out box
-    for (const std::uint32_t id : tree.prim_indices) EXPECT_EQ(bad.count(id), 0u) << "left-out box " << id << " referenced";
+    for (const std::uint32_t id : tree.prim_indices)
+      EXPECT_EQ(bad.count(id), 0u) << "left-out box " << id << " referenced";
     for (int k = 0; k < 3; ++k) EXPECT_TRUE(std::isfinite(tree.bounds.lo[k]) && std::isfinite(tree.bounds.hi[k]));
   }
 }
@@ -145,9 +149,11 @@ TEST(KdTreeBuilder, GivenRootBoundsFrameTheTree) {
   // Points of the margin, near the root's corners, lie in leaves without references.
   for (int corner = 0; corner < 8; ++corner) {
     glm::vec3 p;
-    for (int k = 0; k < 3; ++k) p[k] = (corner >> k) & 1 ? root.hi[k] - 0.01f * margin[k] : root.lo[k] + 0.01f * margin[k];
+    for (int k = 0; k < 3; ++k)
+      p[k] = (corner >> k) & 1 ? root.hi[k] - 0.01f * margin[k] : root.lo[k] + 0.01f * margin[k];
     std::uint32_t i = 0;
-    while (!tree.nodes[i].isLeaf()) i = p[tree.nodes[i].axis()] < tree.nodes[i].split() ? i + 1 : tree.nodes[i].upperChild();
+    while (!tree.nodes[i].isLeaf())
+      i = p[tree.nodes[i].axis()] < tree.nodes[i].split() ? i + 1 : tree.nodes[i].upperChild();
     EXPECT_EQ(tree.nodes[i].primCount(), 0u) << "corner " << corner;
   }
   // The cost is that of a ray through the root: cutting off the margin costs a few node steps more
@@ -158,7 +164,8 @@ TEST(KdTreeBuilder, GivenRootBoundsFrameTheTree) {
   EXPECT_LT(tree.stats(costs.traversal_cost, costs.intersection_cost).sah_cost,
             tight.stats(costs.traversal_cost, costs.intersection_cost).sah_cost * area_ratio + 6.0);
   const Box too_small(all.lo, all.hi - 0.5f * margin);
-  expectErrorNaming<InvalidArgument>([&] { (void)buildKdTreeOverBoxes(boxes, KdBuildConfig{}, too_small); }, "root bounds");
+  expectErrorNaming<InvalidArgument>([&] { (void)buildKdTreeOverBoxes(boxes, KdBuildConfig{}, too_small); },
+                                     "root bounds");
   EXPECT_TRUE(buildKdTreeOverBoxes(std::vector<Box>{Box()}, KdBuildConfig{}, root).empty());
 }
 
@@ -197,7 +204,8 @@ TEST_P(KdTreeBuilderConfigs, RandomBoxes) {
 
 TEST_P(KdTreeBuilderConfigs, IdenticalBoxes) {
   // Copies of one box and a few others: no split can separate the copies.
-  std::vector<Box> boxes(GetParam().config.heuristic == KdHeuristic::Sah ? 300 : 12, Box(glm::vec3(1.0f), glm::vec3(2.0f)));
+  std::vector<Box> boxes(GetParam().config.heuristic == KdHeuristic::Sah ? 300 : 12,
+                         Box(glm::vec3(1.0f), glm::vec3(2.0f)));
   boxes.emplace_back(glm::vec3(5.0f), glm::vec3(6.0f));
   boxes.emplace_back(glm::vec3(-3.0f), glm::vec3(-2.5f));
   const KdTree tree = buildKdTreeOverBoxes(boxes, GetParam().config);
@@ -240,7 +248,8 @@ TEST(KdTreeBuilder, SimpleHeuristicsStopWhenASplitSeparatesNothing) {
     for (std::size_t i = tree.nodes.size(); i-- > 0;) {
       const KdNode& n = tree.nodes[i];
       if (n.isLeaf()) {
-        prims[i].insert(tree.prim_indices.begin() + n.primOffset(), tree.prim_indices.begin() + n.primOffset() + n.primCount());
+        prims[i].insert(tree.prim_indices.begin() + n.primOffset(),
+                        tree.prim_indices.begin() + n.primOffset() + n.primCount());
         continue;
       }
       prims[i] = prims[i + 1];
@@ -317,7 +326,7 @@ TEST(KdTreeBuilder, ChunkedPassesEqualSerialPassesWithSignedZerosAndSkippedBoxes
       continue;
     }
     const float zero = i < kCount / 2 ? -0.0f : 0.0f;
-    const glm::vec3 lo = i % 2 == 0 ? glm::vec3(zero, u(rng), u(rng))               // x from 0, y in [0, 1]
+    const glm::vec3 lo = i % 2 == 0 ? glm::vec3(zero, u(rng), u(rng))                          // x from 0, y in [0, 1]
                                     : glm::vec3(2.0f * u(rng) - 1.0f, 2.0f + u(rng), u(rng));  // x from -1, y in [2, 3]
     boxes.emplace_back(lo, lo + glm::vec3(s(rng), s(rng), s(rng)));
   }
@@ -471,26 +480,28 @@ TEST(KdTraversal, NearestBoxAgreesWithBruteForce) {
       const KdRay kray(ray);
       float t_best = ray.tfar;
       double best_kd = std::numeric_limits<double>::infinity();
-      const bool found = traverseKdTree<false>(tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-        bool any = false;
-        for (std::uint32_t k = begin; k < begin + count; ++k) {
-          const double t = boxEntry(ray, boxes[tree.prim_indices[k]]);
-          if (!std::isnan(t) && t <= t_max) {
-            best_kd = std::min(best_kd, t);
-            float f = static_cast<float>(best_kd);  // rounded up, so no closer box is culled
-            if (static_cast<double>(f) < best_kd) f = std::nextafter(f, kInf);
-            t_max = f;
-            any = true;
-          }
-        }
-        return any;
-      });
+      const bool found =
+          traverseKdTree<false>(tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+            bool any = false;
+            for (std::uint32_t k = begin; k < begin + count; ++k) {
+              const double t = boxEntry(ray, boxes[tree.prim_indices[k]]);
+              if (!std::isnan(t) && t <= t_max) {
+                best_kd = std::min(best_kd, t);
+                float f = static_cast<float>(best_kd);  // rounded up, so no closer box is culled
+                if (static_cast<double>(f) < best_kd) f = std::nextafter(f, kInf);
+                t_max = f;
+                any = true;
+              }
+            }
+            return any;
+          });
       float t_any = ray.tfar;
-      const bool any_hit = traverseKdTree<true>(tree, kray, t_any, [&](std::uint32_t begin, std::uint32_t count, float&) {
-        for (std::uint32_t k = begin; k < begin + count; ++k)
-          if (!std::isnan(boxEntry(ray, boxes[tree.prim_indices[k]]))) return true;
-        return false;
-      });
+      const bool any_hit =
+          traverseKdTree<true>(tree, kray, t_any, [&](std::uint32_t begin, std::uint32_t count, float&) {
+            for (std::uint32_t k = begin; k < begin + count; ++k)
+              if (!std::isnan(boxEntry(ray, boxes[tree.prim_indices[k]]))) return true;
+            return false;
+          });
       const bool must_hit = std::isfinite(best_pierced), may_hit = std::isfinite(best_any);
       hits += must_hit;
       const double tol = 1e-6 * (1.0 + std::abs(best_any));
@@ -561,28 +572,36 @@ TEST(KdTreeChecks, CheckerCatchesCorruptedTrees) {
     corrupt(bad);
     EXPECT_FALSE(checkTriangleKdTree(bad, tris, use)) << "checker missed: " << what;
   };
-  expect_caught("a reference replaced by a duplicate", [&](KdTree& t) {
-    t.prim_indices[lf.primOffset()] = t.prim_indices[lf.primOffset() + 1];
-  }, usable);
-  expect_caught("split moved outside the node", [&](KdTree& t) {
-    t.nodes[inner] = KdNode::inner(in.axis(), t.bounds.hi[in.axis()] + 1.0f, in.upperChild());
-  }, usable);
-  expect_caught("split moved inside the node", [&](KdTree& t) {
-    const Box b = good.nodeBox(inner);
-    t.nodes[inner] = KdNode::inner(in.axis(), 0.5f * (in.split() + b.lo[in.axis()]), in.upperChild());
-  }, usable);
-  expect_caught("upper child pointing back", [&](KdTree& t) { t.nodes[inner].setUpperChild(inner); }, usable);
-  expect_caught("upper child out of range", [&](KdTree& t) {
-    t.nodes[inner].setUpperChild(static_cast<std::uint32_t>(t.nodes.size()));
-  }, usable);
-  expect_caught("leaf range past the index list", [&](KdTree& t) {
-    t.nodes[leaf].setPrimOffset(static_cast<std::uint32_t>(t.prim_indices.size()));
-  }, usable);
-  expect_caught("reference to an unknown primitive", [&](KdTree& t) { t.prim_indices[0] = 100000; }, usable);
-  expect_caught("bounds shrunk", [&](KdTree& t) { t.bounds.hi.x -= 0.01f; }, usable);
+  expect_caught(
+      "a reference replaced by a duplicate",
+      [&](KdTree& t) { t.prim_indices[lf.primOffset()] = t.prim_indices[lf.primOffset() + 1]; }, usable);
+  expect_caught(
+      "split moved outside the node",
+      [&](KdTree& t) { t.nodes[inner] = KdNode::inner(in.axis(), t.bounds.hi[in.axis()] + 1.0f, in.upperChild()); },
+      usable);
+  expect_caught(
+      "split moved inside the node",
+      [&](KdTree& t) {
+        const Box b = good.nodeBox(inner);
+        t.nodes[inner] = KdNode::inner(in.axis(), 0.5f * (in.split() + b.lo[in.axis()]), in.upperChild());
+      },
+      usable);
+  expect_caught(
+      "upper child pointing back", [&](KdTree& t) { t.nodes[inner].setUpperChild(inner); }, usable);
+  expect_caught(
+      "upper child out of range",
+      [&](KdTree& t) { t.nodes[inner].setUpperChild(static_cast<std::uint32_t>(t.nodes.size())); }, usable);
+  expect_caught(
+      "leaf range past the index list",
+      [&](KdTree& t) { t.nodes[leaf].setPrimOffset(static_cast<std::uint32_t>(t.prim_indices.size())); }, usable);
+  expect_caught(
+      "reference to an unknown primitive", [&](KdTree& t) { t.prim_indices[0] = 100000; }, usable);
+  expect_caught(
+      "bounds shrunk", [&](KdTree& t) { t.bounds.hi.x -= 0.01f; }, usable);
   std::vector<char> one_unusable = usable;
   one_unusable[good.prim_indices[0]] = 0;
-  expect_caught("reference to an unusable primitive", [](KdTree&) {}, one_unusable);
+  expect_caught(
+      "reference to an unusable primitive", [](KdTree&) {}, one_unusable);
   EXPECT_FALSE(checkTriangleKdTree(good, tris, usable, 3)) << "checker missed a tree deeper than max_depth";
 
   // Box trees: drop a box from one leaf.
@@ -715,7 +734,8 @@ TEST(TriangleClip, SplitEqualsClippingEachHalf) {
     const Box box = boxNearTriangle(t, i, rng);
     const int axis = static_cast<int>(i % 3);
     // Planes through the box, on a vertex now and then.
-    const float pos = i % 5 == 0 ? t[0][axis] : box.lo[axis] + static_cast<float>(u(rng)) * (box.hi[axis] - box.lo[axis]);
+    const float pos =
+        i % 5 == 0 ? t[0][axis] : box.lo[axis] + static_cast<float>(u(rng)) * (box.hi[axis] - box.lo[axis]);
     Box parts[2];
     splitTriangleInBox(t[0], t[1], t[2], box, axis, pos, parts[0], parts[1]);
     Box halves[2] = {box, box};
@@ -726,7 +746,8 @@ TEST(TriangleClip, SplitEqualsClippingEachHalf) {
       const Box& part = parts[side];
       const Box reference = clipTriangleToBox(t[0], t[1], t[2], halves[side]);
       if (!part.empty()) {
-        EXPECT_TRUE(halves[side].contains(part.lo) && halves[side].contains(part.hi)) << part << " not inside " << halves[side];
+        EXPECT_TRUE(halves[side].contains(part.lo) && halves[side].contains(part.hi))
+            << part << " not inside " << halves[side];
       }
       EXPECT_EQ(part.empty(), reference.empty()) << "triangle " << i << " side " << side;
       if (!part.empty() && !reference.empty())

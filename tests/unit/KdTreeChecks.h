@@ -230,7 +230,8 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
       for (const std::uint32_t id : ids) {
         if (id >= prim_count || !usable[id]) {
           f.add([&](auto& os) {
-            os << "leaf " << it.node << " references primitive " << id << (id >= prim_count ? " (out of range)" : " (not usable)");
+            os << "leaf " << it.node << " references primitive " << id
+               << (id >= prim_count ? " (out of range)" : " (not usable)");
           });
           continue;
         }
@@ -249,7 +250,9 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
       });
     const std::uint32_t upper = n.upperChild();
     if (!(upper > it.node + 1 && upper < tree.nodes.size() && it.node + 1 < tree.nodes.size())) {
-      f.add([&](auto& os) { os << "node " << it.node << " has upper child " << upper << " (size " << tree.nodes.size() << ")"; });
+      f.add([&](auto& os) {
+        os << "node " << it.node << " has upper child " << upper << " (size " << tree.nodes.size() << ")";
+      });
       continue;
     }
     Box lower_box = it.box, upper_box = it.box;
@@ -260,7 +263,8 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
   }
   const auto reached = static_cast<std::size_t>(std::count(visited.begin(), visited.end(), 1));
   if (reached != tree.nodes.size())
-    f.add([&](auto& os) { os << "only " << reached << " of " << tree.nodes.size() << " nodes reachable from the root"; });
+    f.add(
+        [&](auto& os) { os << "only " << reached << " of " << tree.nodes.size() << " nodes reachable from the root"; });
   std::sort(ranges.begin(), ranges.end());
   std::uint64_t total = 0;
   for (std::size_t i = 0; i < ranges.size(); ++i) {
@@ -269,7 +273,9 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
       f.add([&](auto& os) { os << "leaf ranges overlap at prim offset " << ranges[i + 1].first; });
   }
   if (total != tree.prim_indices.size())
-    f.add([&](auto& os) { os << "leaves hold " << total << " references but prim_indices has " << tree.prim_indices.size(); });
+    f.add([&](auto& os) {
+      os << "leaves hold " << total << " references but prim_indices has " << tree.prim_indices.size();
+    });
   for (std::size_t i = 0; i < prim_count; ++i)
     if (usable[i] && !referenced[i]) f.add([&](auto& os) { os << "usable primitive " << i << " is in no leaf"; });
   // KdTree::nodeBox and KdTree::stats assume a well-formed node array: only ask them now.
@@ -277,7 +283,8 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
   for (std::uint32_t i = 0; i < tree.nodes.size(); ++i) {
     if (i % 8 != 0 && tree.nodes.size() >= 4096) continue;  // nodeBox walks from the root: sample big trees
     const Box nb = tree.nodeBox(i);
-    if (!(nb == walk_boxes[i])) f.add([&](auto& os) { os << "nodeBox(" << i << ") = " << nb << " but walk gives " << walk_boxes[i]; });
+    if (!(nb == walk_boxes[i]))
+      f.add([&](auto& os) { os << "nodeBox(" << i << ") = " << nb << " but walk gives " << walk_boxes[i]; });
   }
   const KdTreeStats st = tree.stats(1.0f, 1.5f);
   if (st.nodes != tree.nodes.size() || int(st.max_depth) != max_seen || st.references != tree.prim_indices.size())
@@ -289,7 +296,8 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
 }
 
 /// Full check of a tree over triangles `tris[i]`; `usable[i]` false for degenerate triangles.
-inline ::testing::AssertionResult checkTriangleKdTree(const KdTree& tree, std::span<const std::array<glm::vec3, 3>> tris,
+inline ::testing::AssertionResult checkTriangleKdTree(const KdTree& tree,
+                                                      std::span<const std::array<glm::vec3, 3>> tris,
                                                       const std::vector<char>& usable, int max_depth = 0) {
   using namespace kdcheck_detail;
   std::vector<Box> bounds(tris.size());
@@ -405,7 +413,8 @@ inline ::testing::AssertionResult checkBoxKdTree(const KdTree& tree, std::span<c
           overlap = overlap && std::max(lo[k], double(boxes[i].lo[k])) <= std::min(hi[k], double(boxes[i].hi[k]));
         if (overlap && !leafReferences(tree, n, prim))
           f.add([&](auto& os) {
-            os << "box " << prim << " " << boxes[i] << " overlaps leaf " << node << " " << box << " but is not referenced";
+            os << "box " << prim << " " << boxes[i] << " overlaps leaf " << node << " " << box
+               << " but is not referenced";
           });
         return;
       }
@@ -418,10 +427,13 @@ inline ::testing::AssertionResult checkBoxKdTree(const KdTree& tree, std::span<c
     visit(0, tree.bounds);
     const glm::dvec3 lo(boxes[i].lo), hi(boxes[i].hi);
     for (int corner = 0; corner < 9; ++corner) {
-      const glm::dvec3 p = corner == 8 ? 0.5 * (lo + hi)
-                                       : glm::dvec3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z);
+      const glm::dvec3 p =
+          corner == 8 ? 0.5 * (lo + hi)
+                      : glm::dvec3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z);
       if (!pointCovered(tree, p, prim)) {
-        f.add([&](auto& os) { os << "point of box " << prim << " " << boxes[i] << " lies in no leaf that references it"; });
+        f.add([&](auto& os) {
+          os << "point of box " << prim << " " << boxes[i] << " lies in no leaf that references it";
+        });
         break;
       }
     }

@@ -35,7 +35,8 @@ inline std::shared_ptr<const MeshObject> buildChecked(TriangleMesh mesh, const K
 
 /// A one-triangle mesh object named `name` (cheap to build), its tree checked.
 inline std::shared_ptr<const MeshObject> tinyMeshObject(const std::string& name) {
-  return buildChecked(TriangleMesh::fromArrays(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}, std::vector<std::uint32_t>{0, 1, 2}, name));
+  return buildChecked(TriangleMesh::fromArrays(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0},
+                                               std::vector<std::uint32_t>{0, 1, 2}, name));
 }
 
 /// The reported hit is self-consistent: t within [tnear, tfar], barycentrics inside the triangle,
@@ -71,8 +72,8 @@ struct DiffStats {
 /// Every ray: MeshObject::intersect against the brute force (same primitive, or same t within
 /// 1e-5 relative; misses agree), the hit's geometry, and MeshObject::occluded (both overloads)
 /// against "the reference has a hit in [tnear, tfar]". Reports the first failures in full.
-inline DiffStats expectAgreesWithReference(const MeshObject& object, const RefScene& ref,
-                                           std::span<const Ray> rays, const std::string& label) {
+inline DiffStats expectAgreesWithReference(const MeshObject& object, const RefScene& ref, std::span<const Ray> rays,
+                                           const std::string& label) {
   DiffStats s;
   const double scale = coordinateScale(object.bounds());
   HitTolerance tol;
@@ -91,7 +92,8 @@ inline DiffStats expectAgreesWithReference(const MeshObject& object, const RefSc
       if (s.failures++ < 8) ADD_FAILURE() << label << ", ray " << i << ": " << what;
     };
     if (reported != hit.valid()) fail("intersect's return value disagrees with hit.valid()");
-    if (reported_ctx != reported || hit_ctx.prim_id != hit.prim_id || !(hit_ctx.t == hit.t || (!reported && !reported_ctx)))
+    if (reported_ctx != reported || hit_ctx.prim_id != hit.prim_id ||
+        !(hit_ctx.t == hit.t || (!reported && !reported_ctx)))
       fail("the QueryContext overload of intersect gives another answer");
     const auto match = agreesWithReference(hit, ray, ref, tol, false);
     if (!match) fail(match.message());

@@ -33,7 +33,6 @@ namespace {
 
 using Corners = std::vector<std::uint32_t>;
 
-
 /// Triangles [first, first + n - 2) are a fan over `corners` (a polygon of n corners) that keeps
 /// the polygon's cyclic order and winding: (c[r], c[r+1], c[r+2]), (c[r], c[r+2], c[r+3]), ... for
 /// one rotation r.
@@ -77,7 +76,8 @@ std::vector<std::array<std::array<float, 3>, 3>> canonicalTriangles(const Triang
 
 const std::vector<glm::vec3> kCubePositions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
                                                {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
-const std::vector<Corners> kCubeFaces = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
+const std::vector<Corners> kCubeFaces = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
+                                         {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
 const std::vector<glm::vec3> kTetraPositions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
 const std::vector<TriangleMesh::Triangle> kTetraFaces = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
 
@@ -250,9 +250,9 @@ TEST(MeshLoader, SameGeometryFromEveryFormat) {
     std::string name;
     OpenMesh::IO::Options options;
   };
-  const std::vector<Out> outs = {{"cube.obj", {}}, {"cube.off", {}}, {"cube_ascii.ply", {}},
-                                 {"cube_binary.ply", OpenMesh::IO::Options::Binary}, {"cube.om", {}},
-                                 {"cube_binary.off", OpenMesh::IO::Options::Binary}};
+  const std::vector<Out> outs = {{"cube.obj", {}},       {"cube.off", {}},
+                                 {"cube_ascii.ply", {}}, {"cube_binary.ply", OpenMesh::IO::Options::Binary},
+                                 {"cube.om", {}},        {"cube_binary.off", OpenMesh::IO::Options::Binary}};
   for (const Out& o : outs) {
     SCOPED_TRACE(o.name);
     ASSERT_TRUE(writeWithOpenMesh(cube, dir / o.name, o.options));
@@ -318,7 +318,8 @@ TEST(MeshLoaderErrors, EmptyAndTruncatedBinaryFiles) {
   // Binary PLY cut inside the vertex list and inside the face list.
   auto ply = binaryPly(4);
   const std::size_t header_end = std::string(ply.begin(), ply.end()).find("end_header\n") + 11;
-  writeBinaryFile(dir / "cut_vertices.ply", std::vector<char>(ply.begin(), ply.begin() + static_cast<long>(header_end) + 20));
+  writeBinaryFile(dir / "cut_vertices.ply",
+                  std::vector<char>(ply.begin(), ply.begin() + static_cast<long>(header_end) + 20));
   expectErrorNaming<FileError>([&] { (void)loadMesh(dir / "cut_vertices.ply"); }, "cut_vertices.ply");
   writeBinaryFile(dir / "cut_faces.ply", std::vector<char>(ply.begin(), ply.end() - 20));
   expectErrorNaming<FileError>([&] { (void)loadMesh(dir / "cut_faces.ply"); }, "cut_faces.ply");

@@ -22,7 +22,8 @@ namespace {
 
 /// Random rays from inside the bounds, random rays from a box three times as large (many start
 /// outside and miss), and primary rays.
-std::vector<Ray> mixedRays(const Box& bounds, std::size_t random_count, std::uint32_t primary_side, std::uint64_t seed) {
+std::vector<Ray> mixedRays(const Box& bounds, std::size_t random_count, std::uint32_t primary_side,
+                           std::uint64_t seed) {
   std::vector<Ray> rays = randomRays(bounds, random_count, seed);
   const std::vector<Ray> outer = randomRays(enlarged(bounds, 1.0f), random_count / 2, seed + 1);
   rays.insert(rays.end(), outer.begin(), outer.end());
@@ -42,9 +43,13 @@ void runDifferential(std::shared_ptr<const TriangleMesh> mesh, std::size_t rando
   EXPECT_LT(s.hits, s.rays) << mesh->name();
 }
 
-TEST(MeshObjectDifferential, Icosphere) { runDifferential(std::make_shared<const TriangleMesh>(icosphere(4)), 3000, 48); }
+TEST(MeshObjectDifferential, Icosphere) {
+  runDifferential(std::make_shared<const TriangleMesh>(icosphere(4)), 3000, 48);
+}
 
-TEST(MeshObjectDifferential, UvSphere) { runDifferential(std::make_shared<const TriangleMesh>(uvSphere(48, 24)), 2000, 40); }
+TEST(MeshObjectDifferential, UvSphere) {
+  runDifferential(std::make_shared<const TriangleMesh>(uvSphere(48, 24)), 2000, 40);
+}
 
 TEST(MeshObjectDifferential, FlatAxisAlignedGrid) {
   for (int axis = 0; axis < 3; ++axis) {

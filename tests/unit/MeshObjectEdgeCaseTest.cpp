@@ -103,7 +103,8 @@ TEST(MeshObjectEdgeCases, RaysInSplitPlanes) {
       std::uniform_real_distribution<float> u01(0.0f, 1.0f);
       std::vector<Ray> rays;
       const auto& nodes = object->tree().nodes;
-      for (std::uint32_t i = 0; i < nodes.size() && rays.size() < 1500; i += 1 + static_cast<std::uint32_t>(nodes.size() / 300)) {
+      for (std::uint32_t i = 0; i < nodes.size() && rays.size() < 1500;
+           i += 1 + static_cast<std::uint32_t>(nodes.size() / 300)) {
         if (nodes[i].isLeaf()) continue;
         const int axis = nodes[i].axis();
         for (int rep = 0; rep < 4; ++rep) {
@@ -112,7 +113,7 @@ TEST(MeshObjectEdgeCases, RaysInSplitPlanes) {
           r.origin[axis] = nodes[i].split();
           r.dir = glm::normalize(glm::vec3(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f));
           if (rep < 3) r.dir[axis] = rep == 1 ? -0.0f : 0.0f;  // inside the plane; rep 3 starts on it
-          if (rep == 2) r.dir[(axis + 1) % 3] = 0.0f;        // along the plane and axis-parallel
+          if (rep == 2) r.dir[(axis + 1) % 3] = 0.0f;          // along the plane and axis-parallel
           if (r.dir == glm::vec3(0.0f)) r.dir[(axis + 2) % 3] = 1.0f;
           rays.push_back(r);
         }
@@ -286,8 +287,10 @@ TEST(MeshObjectEdgeCases, OneTriangleMeshes) {
 TEST(TriangleMeshErrors, EmptyMeshThrowsNamingTheMesh) {
   expectErrorNaming<InvalidArgument>([] { (void)TriangleMesh::fromArrays({}, {}, "empty-mesh-7"); }, "empty-mesh-7");
   const std::vector<float> positions = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, {}, "no-triangles-8"); }, "no-triangles-8");
-  expectErrorNaming<InvalidArgument>([] { (void)TriangleMesh::fromTriangles({}, {}, "empty-vectors-9"); }, "empty-vectors-9");
+  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, {}, "no-triangles-8"); },
+                                     "no-triangles-8");
+  expectErrorNaming<InvalidArgument>([] { (void)TriangleMesh::fromTriangles({}, {}, "empty-vectors-9"); },
+                                     "empty-vectors-9");
 }
 
 TEST(MeshObjectErrors, RefusedBuildConfigurationNamesTheMeshAndTheField) {
@@ -304,14 +307,21 @@ TEST(MeshObjectErrors, RefusedBuildConfigurationNamesTheMeshAndTheField) {
 TEST(TriangleMeshErrors, OutOfRangeIndexAndBadSizesThrow) {
   const std::vector<float> positions = {0, 0, 0, 1, 0, 0, 0, 1, 0};
   const std::vector<std::uint32_t> bad_index = {0, 1, 2, 0, 2, 3};
-  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, bad_index, "oob-mesh"); }, "oob-mesh");
+  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, bad_index, "oob-mesh"); },
+                                     "oob-mesh");
   const std::vector<std::uint32_t> huge_index = {0, 1, 0xFFFFFFFFu};
-  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, huge_index, "huge-index"); }, "huge-index");
+  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(positions, huge_index, "huge-index"); },
+                                     "huge-index");
   const std::vector<float> ragged = {0, 0, 0, 1, 0, 0, 0, 1};
-  expectErrorNaming<InvalidArgument>([&] { (void)TriangleMesh::fromArrays(ragged, std::vector<std::uint32_t>{0, 1, 2}, "ragged"); },
-                              "ragged");
   expectErrorNaming<InvalidArgument>(
-      [&] { (void)TriangleMesh::fromArrays(positions, std::vector<std::uint32_t>{0, 1, 2, 0}, "four-indices"); },
+      [&] {
+        (void)TriangleMesh::fromArrays(ragged, std::vector<std::uint32_t>{0, 1, 2}, "ragged");
+      },
+      "ragged");
+  expectErrorNaming<InvalidArgument>(
+      [&] {
+        (void)TriangleMesh::fromArrays(positions, std::vector<std::uint32_t>{0, 1, 2, 0}, "four-indices");
+      },
       "four-indices");
 }
 
@@ -332,12 +342,13 @@ TEST(TriangleMeshDegenerate, CountedNeverHitAndLeftOutOfTheTree) {
   // 0: valid; 1: zero area (collinear, distinct vertices); 2: repeated index; 3: NaN vertex;
   // 4: infinite vertex; 5: valid; 6: all three the same point.
   std::vector<glm::vec3> p = {
-      {0, 0, 0}, {1, 0, 0}, {0, 1, 0},               // 0..2 triangle 0
-      {2, 0, 0}, {3, 0, 0}, {4, 0, 0},               // 3..5 collinear
-      {kNaN, 0.5f, 0.5f}, {kInf, 0, 0},              // 6, 7
-      {0, 0, 1}, {1, 0, 1}, {0, 1, 1},               // 8..10 triangle 5
+      {0, 0, 0},          {1, 0, 0},    {0, 1, 0},  // 0..2 triangle 0
+      {2, 0, 0},          {3, 0, 0},    {4, 0, 0},  // 3..5 collinear
+      {kNaN, 0.5f, 0.5f}, {kInf, 0, 0},             // 6, 7
+      {0, 0, 1},          {1, 0, 1},    {0, 1, 1},  // 8..10 triangle 5
   };
-  const std::vector<TriangleMesh::Triangle> t = {{0, 1, 2}, {3, 4, 5}, {0, 0, 1}, {0, 6, 1}, {7, 1, 2}, {8, 9, 10}, {3, 3, 3}};
+  const std::vector<TriangleMesh::Triangle> t = {{0, 1, 2}, {3, 4, 5},  {0, 0, 1}, {0, 6, 1},
+                                                 {7, 1, 2}, {8, 9, 10}, {3, 3, 3}};
   auto mesh = std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(p, t, "degenerate"));
   EXPECT_EQ(mesh->degenerateCount(), 5u);
   for (std::size_t i = 0; i < t.size(); ++i) EXPECT_EQ(mesh->isValid(i), i == 0 || i == 5) << "triangle " << i;
@@ -358,7 +369,8 @@ TEST(TriangleMeshDegenerate, CountedNeverHitAndLeftOutOfTheTree) {
     along.dir = glm::vec3(1.0f, 0.0f, 0.0f);
     rays.push_back(along);
   }
-  for (const glm::vec3& o : {glm::vec3(0.25f, 0.25f, 3.0f), glm::vec3(0.1f, 0.0f, -2.0f), glm::vec3(0.5f, 0.0f, 0.5f)}) {
+  for (const glm::vec3& o :
+       {glm::vec3(0.25f, 0.25f, 3.0f), glm::vec3(0.1f, 0.0f, -2.0f), glm::vec3(0.5f, 0.0f, 0.5f)}) {
     Ray r;
     r.origin = o;
     r.dir = glm::vec3(0.0f, 0.0f, o.z > 0.5f ? -1.0f : 1.0f);
@@ -379,7 +391,9 @@ TEST(TriangleMeshDegenerate, CountedNeverHitAndLeftOutOfTheTree) {
 TEST(TriangleMeshDegenerate, OnlyDegenerateTrianglesThrows) {
   const std::vector<glm::vec3> p = {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {kNaN, 0, 0}};
   expectErrorNaming<InvalidArgument>(
-      [&] { (void)TriangleMesh::fromTriangles(p, {{0, 1, 2}, {0, 0, 1}, {3, 1, 0}}, "all-degenerate"); },
+      [&] {
+        (void)TriangleMesh::fromTriangles(p, {{0, 1, 2}, {0, 0, 1}, {3, 1, 0}}, "all-degenerate");
+      },
       "all-degenerate");
 }
 

@@ -60,8 +60,9 @@ void roundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays, const
   EXPECT_EQ(loaded->name(), built->name());
   EXPECT_EQ(loaded->tree().bounds, built->tree().bounds);
   ASSERT_EQ(loaded->tree().nodes.size(), built->tree().nodes.size());
-  EXPECT_EQ(std::memcmp(loaded->tree().nodes.data(), built->tree().nodes.data(),
-                        built->tree().nodes.size() * sizeof(KdNode)), 0);
+  EXPECT_EQ(
+      std::memcmp(loaded->tree().nodes.data(), built->tree().nodes.data(), built->tree().nodes.size() * sizeof(KdNode)),
+      0);
   EXPECT_EQ(loaded->tree().prim_indices, built->tree().prim_indices);
   EXPECT_EQ(loaded->accelBytes(), built->accelBytes());
   expectIdenticalQueries(*built, *loaded, testRays(mesh->bounds(), rays));
@@ -140,17 +141,23 @@ TEST_F(MeshObjectFileTamper, EveryFlippedByteIsRefused) {
   std::vector<std::size_t> offsets;
   for (std::size_t i = 0; i < 64; ++i) offsets.push_back(i);
   for (std::size_t i = 64; i < bytes_.size(); i += 37) offsets.push_back(i);
-  offsets.push_back(64 + 8 * nodes_);          // first index
-  offsets.push_back(bytes_.size() - 9);        // last index byte
-  offsets.push_back(bytes_.size() - 1);        // checksum
+  offsets.push_back(64 + 8 * nodes_);    // first index
+  offsets.push_back(bytes_.size() - 9);  // last index byte
+  offsets.push_back(bytes_.size() - 1);  // checksum
   for (const std::size_t at : offsets) {
     for (const unsigned char mask : {0x01, 0x80}) {
       std::vector<char> bad = bytes_;
       bad[at] = static_cast<char>(bad[at] ^ mask);
-      const std::string region = at < 64 ? "header" : at < 64 + 8 * nodes_ ? "nodes" : at < bytes_.size() - 8 ? "indices" : "checksum";
+      const std::string region = at < 64                  ? "header"
+                                 : at < 64 + 8 * nodes_   ? "nodes"
+                                 : at < bytes_.size() - 8 ? "indices"
+                                                          : "checksum";
       // Magic, version and sizes have their own messages; anything else is caught by the checksum.
-      std::string problem = at < 8 ? "bad magic" : at < 12 ? "version" : at < 16 ? "header size" :
-                            at >= 32 && at < 40 ? "truncated or damaged" : "checksum mismatch";
+      std::string problem = at < 8                ? "bad magic"
+                            : at < 12             ? "version"
+                            : at < 16             ? "header size"
+                            : at >= 32 && at < 40 ? "truncated or damaged"
+                                                  : "checksum mismatch";
       expectRefused(bad, problem, region + " byte " + std::to_string(at) + " ^ " + std::to_string(mask));
     }
   }
@@ -171,8 +178,8 @@ TEST_F(MeshObjectFileTamper, WrongMeshIsRefused) {
   // Same counts, one vertex moved: only the checksum tells.
   std::vector<glm::vec3> positions = mesh_->positions();
   positions[5].x += 1e-3f;
-  auto moved = std::make_shared<const TriangleMesh>(
-      TriangleMesh::fromTriangles(positions, mesh_->triangles(), "moved"));
+  auto moved =
+      std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(positions, mesh_->triangles(), "moved"));
   try {
     auto loaded = loadMeshObject(good_, moved);
     ADD_FAILURE() << "accepted a structure saved for another mesh";

@@ -48,7 +48,8 @@ TEST(ObjectLibrary, BadAddsAreRejectedAndChangeNothing) {
   ObjectLibrary lib;
   (void)lib.add("a", tinyMeshObject("a"));
   expectErrorNaming<InvalidArgument>([&] { (void)lib.add("a", tinyMeshObject("a")); }, "'a'");
-  expectErrorNaming<InvalidArgument>([&] { (void)lib.addDeferred("a", "mesh", [] { return tinyMeshObject("a"); }); }, "'a'");
+  expectErrorNaming<InvalidArgument>([&] { (void)lib.addDeferred("a", "mesh", [] { return tinyMeshObject("a"); }); },
+                                     "'a'");
   EXPECT_THROW((void)lib.add("", tinyMeshObject("x")), InvalidArgument);
   EXPECT_THROW((void)lib.add("n", nullptr), InvalidArgument);
   EXPECT_THROW((void)lib.addDeferred("f", "mesh", nullptr), InvalidArgument);
@@ -107,9 +108,8 @@ TEST(ObjectLibrary, FailedBuildIsRethrownNamingTheObjectAndRetried) {
   EXPECT_EQ(lib.buildCount(), 1u);
 
   // The cause is in the message too, and a null result is a failure.
-  const ObjectId bad = lib.addDeferred("broken", "mesh", []() -> std::shared_ptr<const Object> {
-    throw std::runtime_error("disk on fire");
-  });
+  const ObjectId bad = lib.addDeferred(
+      "broken", "mesh", []() -> std::shared_ptr<const Object> { throw std::runtime_error("disk on fire"); });
   expectErrorNaming<InvalidArgument>([&] { (void)lib.get(bad); }, "disk on fire");
   const ObjectId null = lib.addDeferred("nothing", "mesh", [] { return std::shared_ptr<const Object>(); });
   expectErrorNaming<InvalidArgument>([&] { (void)lib.get(null); }, "nothing");

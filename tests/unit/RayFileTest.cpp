@@ -21,7 +21,6 @@
 namespace duplex::test {
 namespace {
 
-
 TEST(RayFile, RaysRoundTripBitExactly) {
   TempDir dir;
   std::vector<Ray> rays = randomRays(Box(glm::vec3(-5.0f), glm::vec3(5.0f)), 1000, 1);
@@ -109,7 +108,8 @@ TEST(RayFile, WrongSizesAndMissingFilesThrowNamingTheFile) {
   expectErrorNaming<FileError>([&] { (void)readRayFile(dir / "no_such_rays.bin"); }, "no_such_rays.bin");
   expectErrorNaming<FileError>([&] { (void)readHitFile(dir / "no_such_hits.bin"); }, "no_such_hits.bin");
   expectErrorNaming<FileError>([&] { writeRayFile(dir / "missing_dir" / "r.bin", std::vector<Ray>(1)); }, "r.bin");
-  expectErrorNaming<FileError>([&] { writeHitFile(dir / "missing_dir" / "h.bin", std::vector<HitRecord>(1)); }, "h.bin");
+  expectErrorNaming<FileError>([&] { writeHitFile(dir / "missing_dir" / "h.bin", std::vector<HitRecord>(1)); },
+                               "h.bin");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -170,10 +170,11 @@ TEST(RayGenerator, PrimaryRaysLookAtTheBox) {
   const glm::dvec3 to_centre = glm::normalize(centre - glm::dvec3(rays[0].origin));
   const Ray& mid = rays[std::size_t(h / 2) * w + w / 2];
   EXPECT_GT(glm::dot(glm::dvec3(mid.dir), to_centre), 0.999);
-  EXPECT_GT(rays[0].dir.y, rays[std::size_t(h - 1) * w].dir.y);         // top row above bottom row
+  EXPECT_GT(rays[0].dir.y, rays[std::size_t(h - 1) * w].dir.y);                    // top row above bottom row
   EXPECT_GT(glm::dot(glm::dvec3(rays[w - 1].dir - rays[0].dir), cam.right), 0.0);  // left to right
   // 45 degrees vertical field of view: top and bottom centre rays are 45 * (h-1)/h degrees apart.
-  const double angle = std::acos(glm::dot(glm::dvec3(rays[w / 2].dir), glm::dvec3(rays[std::size_t(h - 1) * w + w / 2].dir)));
+  const double angle =
+      std::acos(glm::dot(glm::dvec3(rays[w / 2].dir), glm::dvec3(rays[std::size_t(h - 1) * w + w / 2].dir)));
   const double half = std::atan(std::tan(22.5 * 3.14159265358979 / 180.0) * (h - 1.0) / h);
   EXPECT_NEAR(angle, 2.0 * half, 2e-3);
 }

@@ -106,8 +106,8 @@ class RefScene {
     spheres_.reserve(tris_.size());
     for (const RefTriangle& t : tris_) {
       const glm::dvec3 c = (t.a + t.b + t.c) / 3.0;
-      const double r = std::sqrt(std::max({glm::dot(t.a - c, t.a - c), glm::dot(t.b - c, t.b - c),
-                                           glm::dot(t.c - c, t.c - c)}));
+      const double r =
+          std::sqrt(std::max({glm::dot(t.a - c, t.a - c), glm::dot(t.b - c, t.b - c), glm::dot(t.c - c, t.c - c)}));
       spheres_.push_back({c.x, c.y, c.z, r * (1.0 + 1e-9)});
       magnitude_ = std::max({magnitude_, std::abs(c.x), std::abs(c.y), std::abs(c.z), r});
     }
@@ -175,8 +175,8 @@ struct HitTolerance {
 
 /// Compares a library hit with the reference hit of the same ray. `check_instance` also compares
 /// instance ids (two-level queries).
-inline ::testing::AssertionResult hitMatches(const Hit& hit, const RefHit& ref, const Ray& ray,
-                                             const HitTolerance& tol, bool check_instance) {
+inline ::testing::AssertionResult hitMatches(const Hit& hit, const RefHit& ref, const Ray& ray, const HitTolerance& tol,
+                                             bool check_instance) {
   const double dir_len = glm::length(glm::dvec3(ray.dir));
   const double floor = dir_len > 0.0 ? tol.abs_scale / dir_len : 0.0;
   if (!hit.valid() && !ref.valid()) return ::testing::AssertionSuccess();
@@ -189,8 +189,8 @@ inline ::testing::AssertionResult hitMatches(const Hit& hit, const RefHit& ref, 
   const double allowed = (same ? tol.same_rel : tol.tie_rel) * std::abs(ref.t) + floor;
   if (err <= allowed) return ::testing::AssertionSuccess();
   return ::testing::AssertionFailure() << ray << ": library " << hit << " vs reference t=" << ref.t
-                                       << " prim=" << ref.prim << " inst=" << ref.instance << " (|dt|=" << err
-                                       << " > " << allowed << (same ? ", same primitive)" : ", different primitive)");
+                                       << " prim=" << ref.prim << " inst=" << ref.instance << " (|dt|=" << err << " > "
+                                       << allowed << (same ? ", same primitive)" : ", different primitive)");
 }
 
 /// Absolute t tolerance of a reference hit at `t` (see HitTolerance).

@@ -59,7 +59,8 @@ std::string own(const std::string& objects, const std::string& nodes, const std:
 
 /// `load` must throw FileError naming the file and `pointer` (and `also` when given).
 template <class Load>
-void expectError(Load&& load, const std::filesystem::path& file, const std::string& pointer, const std::string& also = "") {
+void expectError(Load&& load, const std::filesystem::path& file, const std::string& pointer,
+                 const std::string& also = "") {
   try {
     load();
     ADD_FAILURE() << "no FileError (expected " << pointer << ")";
@@ -75,8 +76,8 @@ void expectError(Load&& load, const std::filesystem::path& file, const std::stri
   }
 }
 
-void expectDocError(const SceneDir& d, const std::string& json, const std::string& pointer, const std::string& also = "",
-                    const SceneDocumentOptions& options = {}) {
+void expectDocError(const SceneDir& d, const std::string& json, const std::string& pointer,
+                    const std::string& also = "", const SceneDocumentOptions& options = {}) {
   SCOPED_TRACE(json);
   const auto path = d.write(json, "bad_scene.json");
   expectError([&] { (void)loadSceneDocument(path, options); }, path, pointer, also);
@@ -85,7 +86,8 @@ void expectDocError(const SceneDir& d, const std::string& json, const std::strin
 ::testing::AssertionResult sameAffine(const Affine& a, const Affine& b, double tol = 0.0) {
   const auto x = a.toRowMajor3x4(), y = b.toRowMajor3x4();
   for (std::size_t k = 0; k < 12; ++k)
-    if (!(std::abs(x[k] - y[k]) <= tol)) return ::testing::AssertionFailure() << a << " != " << b << " (entry " << k << ")";
+    if (!(std::abs(x[k] - y[k]) <= tol))
+      return ::testing::AssertionFailure() << a << " != " << b << " (entry " << k << ")";
   return ::testing::AssertionSuccess();
 }
 
@@ -123,8 +125,10 @@ TEST(SceneDocumentV1, InlineAndFileObjectsInstancesAndUnknownKeys) {
     "comment": "unknown keys are ignored at every level",
     "objects": [
       {"name": "cube", "mesh": {"file": "meshes/quad_cube.obj", "units": "m"}, "material": "steel"},
-      {"name": "tetra", "mesh": )" + std::string(kTetraInline) + R"(},
-      {"name": "cube-again", "mesh": {"file": ")" + absolute + R"("}},
+      {"name": "tetra", "mesh": )" +
+                           std::string(kTetraInline) + R"(},
+      {"name": "cube-again", "mesh": {"file": ")" +
+                           absolute + R"("}},
       {"name": "cube-detour", "mesh": {"file": "meshes/../meshes/quad_cube.obj"}}
     ],
     "instances": [
@@ -221,13 +225,15 @@ TEST(SceneDocumentV1, InstancesAndTransformsAreExactlyTheFilesValues) {
                                                        {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}};
   const std::vector<std::string> names{"cube", "tetra", "cube2", "cube"};
   nlohmann::json instances = nlohmann::json::array();
-  for (std::size_t k = 0; k < names.size(); ++k) instances.push_back({{"object", names[k]}, {"transform", transforms[k]}});
+  for (std::size_t k = 0; k < names.size(); ++k)
+    instances.push_back({{"object", names[k]}, {"transform", transforms[k]}});
   instances.back()["comment"] = "ignored";  // an unknown key
   // cube2 names the same file as cube: read and built once. Unknown keys and a non-v1 type key
   // ("sphere", not part of scene-json-v1) are ignored, as v1 requires.
-  const auto path = d.write(R"({"format": "scene-json-v1", "extra": {"x": 1}, "objects": [)" + kCube + "," + kTetra +
-                            R"(, {"name": "cube2", "mesh": {"file": "./meshes/quad_cube.obj"}, "sphere": 3}], "instances": )" +
-                            instances.dump() + "}");
+  const auto path =
+      d.write(R"({"format": "scene-json-v1", "extra": {"x": 1}, "objects": [)" + kCube + "," + kTetra +
+              R"(, {"name": "cube2", "mesh": {"file": "./meshes/quad_cube.obj"}, "sphere": 3}], "instances": )" +
+              instances.dump() + "}");
   const SceneDocument doc = loadSceneDocument(path);
   EXPECT_EQ(doc.format, "scene-json-v1");
   ASSERT_EQ(doc.instances.size(), 4u);
@@ -325,8 +331,8 @@ TEST(SceneDocumentV1Errors, Objects) {
   expectDocError(d, v1(R"({"name": "x", "mesh": "meshes/quad_cube.obj"})", ""), "/objects/0/mesh");
   expectDocError(d, v1(R"({"name": "x", "mesh": {"vertices": []}})", ""), "/objects/0/mesh");
   expectDocError(d, v1(R"({"name": "x", "mesh": {"file": 3}})", ""), "/objects/0/mesh/file");
-  expectDocError(d, v1(kCube + R"(, {"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}})", ""), "/objects/1/name",
-                 "cube");
+  expectDocError(d, v1(kCube + R"(, {"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}})", ""),
+                 "/objects/1/name", "cube");
   expectDocError(d, v1(R"({"name": "", "mesh": {"file": "meshes/quad_cube.obj"}})", ""), "/objects/0/name");
   // Missing and unreadable mesh files: the JSON pointer and the mesh file are both named.
   expectDocError(d, v1(kCube + R"(, {"name": "gone", "mesh": {"file": "meshes/gone.obj"}})", ""), "/objects/1/mesh",
@@ -343,7 +349,8 @@ TEST(SceneDocumentV1Errors, InlineMeshes) {
     return R"({"name": "m", "mesh": {"positions": )" + positions + R"(, "indices": )" + indices + "}}";
   };
   const std::string good_positions = "[0, 0, 0, 1, 0, 0, 0, 1, 0]";
-  expectDocError(d, v1(inline_object(R"([0, 0, 0, 1, "x", 0, 0, 1, 0])", "[0, 1, 2]"), ""), "/objects/0/mesh/positions/4");
+  expectDocError(d, v1(inline_object(R"([0, 0, 0, 1, "x", 0, 0, 1, 0])", "[0, 1, 2]"), ""),
+                 "/objects/0/mesh/positions/4");
   // Finite as a double, infinite as the float it is stored in.
   expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0, 0, 0, 1e39, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh/positions/7",
                  "float range");
@@ -352,10 +359,11 @@ TEST(SceneDocumentV1Errors, InlineMeshes) {
   expectDocError(d, v1(inline_object(good_positions, "[0, 1, null]"), ""), "/objects/0/mesh/indices/2");
   expectDocError(d, v1(inline_object(good_positions, "{}"), ""), "/objects/0/mesh/indices");
   expectDocError(d, v1(R"({"name": "m", "mesh": {"positions": [0, 0, 0]}})", ""), "/objects/0/mesh", "indices");
-  expectDocError(d, v1(inline_object(good_positions, "[0, 1, 7]"), ""), "/objects/0/mesh");        // out of range
-  expectDocError(d, v1(inline_object(good_positions, "[]"), ""), "/objects/0/mesh");               // no triangle
-  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh");      // ragged
-  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0, 0, 2, 0, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh");  // degenerate
+  expectDocError(d, v1(inline_object(good_positions, "[0, 1, 7]"), ""), "/objects/0/mesh");     // out of range
+  expectDocError(d, v1(inline_object(good_positions, "[]"), ""), "/objects/0/mesh");            // no triangle
+  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh");  // ragged
+  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0, 0, 2, 0, 0]", "[0, 1, 2]"), ""),
+                 "/objects/0/mesh");  // degenerate
 }
 
 TEST(SceneDocumentV1Errors, Instances) {
@@ -367,15 +375,18 @@ TEST(SceneDocumentV1Errors, Instances) {
   expectDocError(d, v1(kCube, R"({"transform": )" + kIdentity + "}"), "/instances/0", "object");
   expectDocError(d, v1(kCube, R"({"object": "cube"})"), "/instances/0", "transform");
   expectDocError(d, v1(kCube, R"({"object": 0, "transform": )" + kIdentity + "}"), "/instances/0/object");
-  expectDocError(d, v1(kCube, instance("cube", kIdentity) + ", " + instance("sphere", kIdentity)), "/instances/1/object",
-                 "sphere");
+  expectDocError(d, v1(kCube, instance("cube", kIdentity) + ", " + instance("sphere", kIdentity)),
+                 "/instances/1/object", "sphere");
   expectDocError(d, v1(kCube, instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]")), "/instances/0/transform", "11");
   expectDocError(d, v1(kCube, instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0]")), "/instances/0/transform");
   expectDocError(d, v1(kCube, instance("cube", R"("identity")")), "/instances/0/transform");
-  expectDocError(d, v1(kCube, instance("cube", R"([1, 0, 0, 0, 0, "one", 0, 0, 0, 0, 1, 0])")), "/instances/0/transform/5");
-  expectDocError(d, v1(kCube, instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, null]")), "/instances/0/transform/11");
-  expectDocError(d, v1(kCube, instance("cube", kIdentity) + ", " + instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, null]")),
-                 "/instances/1/transform/11");
+  expectDocError(d, v1(kCube, instance("cube", R"([1, 0, 0, 0, 0, "one", 0, 0, 0, 0, 1, 0])")),
+                 "/instances/0/transform/5");
+  expectDocError(d, v1(kCube, instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, null]")),
+                 "/instances/0/transform/11");
+  expectDocError(
+      d, v1(kCube, instance("cube", kIdentity) + ", " + instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, null]")),
+      "/instances/1/transform/11");
   expectDocError(d, v1(kCube, instance("cube", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]")), "/instances/0/transform",
                  "singular");
   expectDocError(d, v1(kCube, instance("cube", "[1, 2, 3, 0, 2, 4, 6, 0, 0, 0, 1, 0]")), "/instances/0/transform");
@@ -459,10 +470,10 @@ TEST(SceneDocumentOwn, TimedEditsAreReadSortedAndApplied) {
     {"time": 1.5, "node": "/arm/tip", "object": "cube"},
     {"time": 1.5, "node": "/arm/tip", "mask": 3},
     {"time": 3.0, "node": "/gone", "visible": true})";
-  const auto path = d.write(own(kCube + "," + kTetra,
-                                R"({"group": "arm", "matrix": )" + kIdentity +
-                                    R"(, "children": [{"instance": "tip", "object": "tetra"}]})",
-                                edits));
+  const auto path = d.write(
+      own(kCube + "," + kTetra,
+          R"({"group": "arm", "matrix": )" + kIdentity + R"(, "children": [{"instance": "tip", "object": "tetra"}]})",
+          edits));
   SceneDocument doc = loadSceneDocument(path);
   ASSERT_EQ(doc.edits.size(), 7u);
   std::vector<std::string> order;
@@ -528,9 +539,11 @@ TEST(SceneDocumentOwn, MalformedInputNamesFileAndPointer) {
   SceneDir d;
   const std::string objs = kCube + "," + kTetra;
   const std::string inst = R"({"instance": "i", "object": "cube"})";
-  expectDocError(d, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], "extra": 1})", "/extra", "unknown key");
+  expectDocError(d, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], "extra": 1})", "/extra",
+                 "unknown key");
   expectDocError(d, R"({"format": "duplex-scene-v1", "objects": [], "nodes": {}})", "/nodes");
-  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "colour": 1})", ""), "/objects/0/colour");
+  expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "colour": 1})", ""),
+                 "/objects/0/colour");
   expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "box": {}})", ""), "/objects/0",
                  "two object types");
   expectDocError(d, own(R"({"name": "c"})", ""), "/objects/0", "no object type");
@@ -564,9 +577,11 @@ TEST(SceneDocumentOwn, MalformedInputNamesFileAndPointer) {
   expectDocError(d, own(objs, R"({"group": "g", "matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]})"), "/nodes/0/matrix",
                  "singular");
   expectDocError(d, own(objs, R"({"group": "g", "scale": [1, 0, 1]})"), "/nodes/0/scale/1");
-  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"axis": [0, 0, 0], "degrees": 5}})"), "/nodes/0/rotate/axis");
+  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"axis": [0, 0, 0], "degrees": 5}})"),
+                 "/nodes/0/rotate/axis");
   expectDocError(d, own(objs, R"({"group": "g", "rotate": {"axis": [0, 0, 1]}})"), "/nodes/0/rotate", "degrees");
-  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"euler_xyz": [0, 0, 1], "degrees": 3}})"), "/nodes/0/rotate");
+  expectDocError(d, own(objs, R"({"group": "g", "rotate": {"euler_xyz": [0, 0, 1], "degrees": 3}})"),
+                 "/nodes/0/rotate");
   expectDocError(d, own(objs, R"({"group": "g", "rotate": {"euler": [0, 0, 1]}})"), "/nodes/0/rotate/euler");
   expectDocError(d, own(objs, R"({"group": "g", "tranlsate": [0, 0, 1]})"), "/nodes/0/tranlsate", "unknown key");
   expectDocError(d, own(objs, R"({"group": "a/b"})"), "/nodes/0", "/");
@@ -628,13 +643,15 @@ TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
   ASSERT_EQ(files.size(), 3u);
   EXPECT_EQ(files[0].filename(), "0_cube.dkdt");
   EXPECT_EQ(files[1].filename(), "1_tetra.dkdt");
-  const std::string prepared = R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/0_cube.dkdt"},)"
-                               R"({"name": "tetra", "mesh": )" + nlohmann::json::parse(kTetra)["mesh"].dump() +
-                               R"(, "structure": "prepared/1_tetra.dkdt"})";
+  const std::string prepared =
+      R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/0_cube.dkdt"},)"
+      R"({"name": "tetra", "mesh": )" +
+      nlohmann::json::parse(kTetra)["mesh"].dump() + R"(, "structure": "prepared/1_tetra.dkdt"})";
   for (const std::string format : {"duplex-scene-v1", "scene-json-v1"}) {
     SCOPED_TRACE(format);
-    const auto p2 = d.write(R"({"format": ")" + format + R"(", "objects": [)" + prepared + R"(], "instances": [], "nodes": []})",
-                            format + ".json");
+    const auto p2 =
+        d.write(R"({"format": ")" + format + R"(", "objects": [)" + prepared + R"(], "instances": [], "nodes": []})",
+                format + ".json");
     if (format == std::string("duplex-scene-v1")) {
       // "instances" is not a key of the own format.
       expectError([&] { (void)loadSceneDocument(p2); }, p2, "/instances", "unknown key");
@@ -653,8 +670,9 @@ TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
     EXPECT_EQ(loadSceneDocument(p2, no_structures).figures.structures_loaded, 0u);
   }
   // A structure saved for another mesh is refused: the scene file, the entry and the structure file.
-  const auto wrong = d.write(own(R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/1_tetra.dkdt"})", ""),
-                             "wrong.json");
+  const auto wrong = d.write(
+      own(R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/1_tetra.dkdt"})", ""),
+      "wrong.json");
   expectError([&] { (void)loadSceneDocument(wrong); }, wrong, "/objects/0/structure", "1_tetra.dkdt");
 }
 
@@ -664,10 +682,16 @@ TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
   const auto names = ObjectTypeRegistry::builtin().names();
   EXPECT_EQ(names, (std::vector<std::string>{"mesh", "sphere", "box", "plane", "volume"}));
   ObjectTypeRegistry registry = ObjectTypeRegistry::builtin();
-  expectErrorNaming<InvalidArgument>([&] { registry.add({"mesh", ObjectTypeRegistry::builtin().find("mesh")->reader}); },
-                                     "already registered");
-  expectErrorNaming<InvalidArgument>([&] { registry.add({"name", ObjectTypeRegistry::builtin().find("mesh")->reader}); },
-                                     "name");
+  expectErrorNaming<InvalidArgument>(
+      [&] {
+        registry.add({"mesh", ObjectTypeRegistry::builtin().find("mesh")->reader});
+      },
+      "already registered");
+  expectErrorNaming<InvalidArgument>(
+      [&] {
+        registry.add({"name", ObjectTypeRegistry::builtin().find("mesh")->reader});
+      },
+      "name");
   expectErrorNaming<InvalidArgument>([&] { registry.add({"x", nullptr}); }, "no reader");
   // A custom type: a tetrahedron of a given edge, built now ("tetra") or deferred ("lazy_tetra").
   int built_now = 0;
@@ -712,15 +736,17 @@ TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
 // Many small objects: each deferred build runs once, in parallel, before the instances are added.
 TEST(SceneDocumentScale, ThousandsOfInlineObjects) {
   SceneDir d;
-  nlohmann::json scene = {{"format", "scene-json-v1"}, {"objects", nlohmann::json::array()}, {"instances", nlohmann::json::array()}};
+  nlohmann::json scene = {
+      {"format", "scene-json-v1"}, {"objects", nlohmann::json::array()}, {"instances", nlohmann::json::array()}};
   const int n = 3000;
   for (int i = 0; i < n; ++i) {
     const float o = static_cast<float>(i);
     // Not "o" + std::to_string(i): GCC 12 warns about that expression (-Wrestrict, a false positive).
     const std::string name = std::string("o").append(std::to_string(i));
     scene["objects"].push_back({{"name", name},
-                                {"mesh", {{"positions", {o, 0, 0, o + 1, 0, 0, o, 1, 0, o, 0, 1}},
-                                          {"indices", {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3}}}}});
+                                {"mesh",
+                                 {{"positions", {o, 0, 0, o + 1, 0, 0, o, 1, 0, o, 0, 1}},
+                                  {"indices", {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3}}}}});
     scene["instances"].push_back({{"object", name}, {"transform", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, i}}});
   }
   const auto path = d.write(scene.dump());

@@ -45,7 +45,8 @@ struct Library {
     (void)lib->add("o1", tinyMeshObject("o1"));
     (void)lib->add("o2", tinyMeshObject("o2"));
     (void)lib->addDeferred("lazy", "mesh", [] { return tinyMeshObject("lazy"); });
-    failing = lib->addDeferred("broken", "mesh", []() -> std::shared_ptr<const Object> { throw std::runtime_error("no"); });
+    failing =
+        lib->addDeferred("broken", "mesh", []() -> std::shared_ptr<const Object> { throw std::runtime_error("no"); });
   }
 };
 
@@ -92,7 +93,8 @@ struct Model {
     return true;
   }
   /// The name a node gets, or nullopt when it is invalid there.
-  [[nodiscard]] std::optional<std::string> finalName(NodeId parent, NodeId self, NodeKind kind, std::string name) const {
+  [[nodiscard]] std::optional<std::string> finalName(NodeId parent, NodeId self, NodeKind kind,
+                                                     std::string name) const {
     if (name.empty()) name = kindName(kind) + std::to_string(self);
     if (name.find('/') != std::string::npos || !nameFree(parent, name, self)) return std::nullopt;
     return name;
@@ -199,7 +201,8 @@ void expectPendingEquals(const SceneGraph& g, const Model& m, const std::string&
 void expectCommittedEquals(const SceneGraph& g, const std::map<NodeId, Committed>& eval) {
   std::vector<NodeId> visible;
   for (const auto& [id, c] : eval) {
-    EXPECT_TRUE(sameAffine(g.worldTransform(id), c.world)) << "instance " << id << ": " << g.worldTransform(id) << " vs " << c.world;
+    EXPECT_TRUE(sameAffine(g.worldTransform(id), c.world))
+        << "instance " << id << ": " << g.worldTransform(id) << " vs " << c.world;
     EXPECT_EQ(g.isVisibleInstance(id), c.visible) << "instance " << id;
     if (c.visible) visible.push_back(id);
   }
@@ -237,7 +240,8 @@ class RandomEdits {
 
   /// Mostly an existing node; sometimes an id that does not exist (removed, rolled back, never made).
   NodeId anyNode() {
-    if (uniform(0, 29) == 0) return uniform(0, 1) ? m_.next_id + 5 : static_cast<NodeId>(uniform(0, static_cast<int>(m_.next_id)));
+    if (uniform(0, 29) == 0)
+      return uniform(0, 1) ? m_.next_id + 5 : static_cast<NodeId>(uniform(0, static_cast<int>(m_.next_id)));
     auto it = m_.nodes.begin();
     std::advance(it, uniform(0, static_cast<int>(m_.nodes.size()) - 1));
     return it->first;
@@ -263,8 +267,8 @@ class RandomEdits {
     a.linear = rx * ry * glm::dmat3(real(0.5, 2.0));
     a.translation = {real(-10, 10), real(-10, 10), real(-10, 10)};
     switch (uniform(0, 19)) {
-      case 0: a.linear[uniform(0, 2)] = glm::dvec3(0.0); return {a, false};              // singular
-      case 1: a.linear[2] = a.linear[0] * 2.0; return {a, false};                           // singular, non-zero
+      case 0: a.linear[uniform(0, 2)] = glm::dvec3(0.0); return {a, false};  // singular
+      case 1: a.linear[2] = a.linear[0] * 2.0; return {a, false};            // singular, non-zero
       case 2: a.translation[uniform(0, 2)] = std::numeric_limits<double>::quiet_NaN(); return {a, false};
       case 3: a.linear[1][1] = std::numeric_limits<double>::infinity(); return {a, false};
       default: return {a, true};
@@ -301,11 +305,14 @@ class RandomEdits {
     const bool object_ok = kind != NodeKind::Instance || object < lib_.failing;
     const bool valid = final_name && local_ok && object_ok;
     NodeId got = kInvalidNode;
-    expectOutcome(valid, [&] {
-      got = kind == NodeKind::Group       ? g_.addGroup(parent, name)
-            : kind == NodeKind::Transform ? g_.addTransform(parent, local, name)
-                                          : g_.addInstance(parent, object, local, name, mask);
-    }, "add");
+    expectOutcome(
+        valid,
+        [&] {
+          got = kind == NodeKind::Group       ? g_.addGroup(parent, name)
+                : kind == NodeKind::Transform ? g_.addTransform(parent, local, name)
+                                              : g_.addInstance(parent, object, local, name, mask);
+        },
+        "add");
     if (!valid) return;
     ASSERT_EQ(got, m_.next_id);
     MNode n;
@@ -328,7 +335,8 @@ class RandomEdits {
   void remove() {
     const NodeId id = uniform(0, 30) == 0 ? kRootNode : anyNode();
     const bool valid = m_.has(id) && id != kRootNode;
-    expectOutcome(valid, [&] { g_.remove(id); }, "remove");
+    expectOutcome(
+        valid, [&] { g_.remove(id); }, "remove");
     if (!valid) return;
     m_.detach(id);
     m_.eraseSubtree(id);
@@ -345,7 +353,8 @@ class RandomEdits {
     }
     const bool valid = m_.has(id) && id != kRootNode && m_.isParent(parent) && !m_.isAncestorOrSelf(id, parent) &&
                        m_.nameFree(parent, m_.nodes.at(id).name, id);
-    expectOutcome(valid, [&] { g_.reparent(id, parent); }, "reparent");
+    expectOutcome(
+        valid, [&] { g_.reparent(id, parent); }, "reparent");
     if (!valid) return;
     m_.detach(id);
     m_.nodes.at(id).parent = parent;
@@ -356,8 +365,10 @@ class RandomEdits {
     const NodeId id = uniform(0, 30) == 0 ? kRootNode : anyNode();
     const std::string name = anyName();
     std::optional<std::string> final_name;
-    if (m_.has(id) && id != kRootNode) final_name = m_.finalName(m_.nodes.at(id).parent, id, m_.nodes.at(id).kind, name);
-    expectOutcome(final_name.has_value(), [&] { g_.rename(id, name); }, "rename");
+    if (m_.has(id) && id != kRootNode)
+      final_name = m_.finalName(m_.nodes.at(id).parent, id, m_.nodes.at(id).kind, name);
+    expectOutcome(
+        final_name.has_value(), [&] { g_.rename(id, name); }, "rename");
     if (final_name) m_.nodes.at(id).name = *final_name;
   }
 
@@ -365,7 +376,8 @@ class RandomEdits {
     const NodeId id = pick(uniform(0, 1) == 0);
     auto [local, local_ok] = anyTransform();
     const bool valid = m_.has(id) && m_.nodes.at(id).kind != NodeKind::Group && local_ok;
-    expectOutcome(valid, [&] { g_.setTransform(id, local); }, "setTransform");
+    expectOutcome(
+        valid, [&] { g_.setTransform(id, local); }, "setTransform");
     if (valid) m_.nodes.at(id).local = local;
   }
 
@@ -373,14 +385,16 @@ class RandomEdits {
     const NodeId id = pick(true);
     const ObjectId object = anyObject();
     const bool valid = m_.has(id) && m_.nodes.at(id).kind == NodeKind::Instance && object < lib_.failing;
-    expectOutcome(valid, [&] { g_.setObject(id, object); }, "setObject");
+    expectOutcome(
+        valid, [&] { g_.setObject(id, object); }, "setObject");
     if (valid) m_.nodes.at(id).object = object;
   }
 
   void setVisible() {
     const NodeId id = anyNode();
     const bool visible = uniform(0, 2) != 0;
-    expectOutcome(m_.has(id), [&] { g_.setVisible(id, visible); }, "setVisible");
+    expectOutcome(
+        m_.has(id), [&] { g_.setVisible(id, visible); }, "setVisible");
     if (m_.has(id)) m_.nodes.at(id).visible = visible;
   }
 
@@ -388,7 +402,8 @@ class RandomEdits {
     const NodeId id = pick(true);
     const auto mask = static_cast<std::uint32_t>(uniform(0, 3));
     const bool valid = m_.has(id) && m_.nodes.at(id).kind == NodeKind::Instance;
-    expectOutcome(valid, [&] { g_.setMask(id, mask); }, "setMask");
+    expectOutcome(
+        valid, [&] { g_.setMask(id, mask); }, "setMask");
     if (valid) m_.nodes.at(id).mask = mask;
   }
 
@@ -493,8 +508,8 @@ Snapshot snapshot(const SceneGraph& g, NodeId max_id) {
     }
     const NodeInfo n = g.node(id);
     std::ostringstream os;
-    os << id << ' ' << static_cast<int>(n.kind) << ' ' << n.parent << ' ' << n.name << ' ' << n.local << ' ' << n.visible
-       << ' ' << n.object << ' ' << n.mask << ' ' << g.path(id) << " world " << g.worldTransform(id) << ' '
+    os << id << ' ' << static_cast<int>(n.kind) << ' ' << n.parent << ' ' << n.name << ' ' << n.local << ' '
+       << n.visible << ' ' << n.object << ' ' << n.mask << ' ' << g.path(id) << " world " << g.worldTransform(id) << ' '
        << g.isVisibleInstance(id) << " children";
     for (const NodeId c : g.children(id)) os << ' ' << c;
     s.lines.push_back(os.str());
@@ -542,7 +557,11 @@ TEST(SceneGraph, RejectedEditsLeaveEverythingUnchanged) {
       {"cycle below", [&] { g.reparent(s.car, g.node(s.wheel0).parent); }},
       {"reparent root", [&] { g.reparent(kRootNode, s.hidden); }},
       {"parent is instance", [&] { g.reparent(s.lamp, s.body); }},
-      {"name taken under new parent", [&] { (void)g.addInstance(s.hidden, 0, Affine::identity(), "lamp"); g.reparent(s.lamp, s.hidden); }},
+      {"name taken under new parent",
+       [&] {
+         (void)g.addInstance(s.hidden, 0, Affine::identity(), "lamp");
+         g.reparent(s.lamp, s.hidden);
+       }},
       {"unknown node", [&] { g.setTransform(999, translation(1, 1, 1)); }},
       {"unknown parent", [&] { (void)g.addGroup(999, "g"); }},
       {"NaN transform", [&] { g.setTransform(s.car, nan_local); }},
@@ -809,7 +828,8 @@ TEST(SceneGraph, ChangeSetPrintsEveryList) {
   cs.mask_changed = {7};
   std::ostringstream os;
   os << cs;
-  EXPECT_EQ(os.str(), "ChangeSet{commit=4, appeared=[1,2], disappeared=[], moved=[], object_changed=[], mask_changed=[7]}");
+  EXPECT_EQ(os.str(),
+            "ChangeSet{commit=4, appeared=[1,2], disappeared=[], moved=[], object_changed=[], mask_changed=[7]}");
 }
 
 TEST(SceneGraph, MovingOneInstanceOfManyTouchesOnlyIt) {
@@ -841,7 +861,8 @@ TEST(SceneGraph, MovingOneInstanceOfManyTouchesOnlyIt) {
 // nodes (vectors grow by doubling, so up to half of a vector's capacity may be unused).
 TEST(SceneGraph, BytesPerInstanceAccountsForWhatAnInstanceAllocates) {
 #if defined(__SANITIZE_ADDRESS__)
-  GTEST_SKIP() << "AddressSanitizer's allocator is not glibc's: mallinfo2() does not count it (the Release build runs this test)";
+  GTEST_SKIP() << "AddressSanitizer's allocator is not glibc's: mallinfo2() does not count it (the Release build runs "
+                  "this test)";
 #endif
   Library lib;
   SceneGraph g(lib.lib);
@@ -850,7 +871,8 @@ TEST(SceneGraph, BytesPerInstanceAccountsForWhatAnInstanceAllocates) {
     for (int i = first; i < first + count; ++i) {
       char name[16];
       std::snprintf(name, sizeof name, "i%06d", i);  // fits std::string's small buffer, as counted
-      (void)g.addInstance(kRootNode, static_cast<ObjectId>(i % 3), translation(i % 100, i / 100 % 100, i / 10000), name);
+      (void)g.addInstance(kRootNode, static_cast<ObjectId>(i % 3), translation(i % 100, i / 100 % 100, i / 10000),
+                          name);
     }
     (void)g.commit();
   };
@@ -863,7 +885,7 @@ TEST(SceneGraph, BytesPerInstanceAccountsForWhatAnInstanceAllocates) {
   const TopLevelStats st = tracer.stats();
   const double tree = (4.0 * double(st.tree.references) + 8.0 * double(st.tree.nodes)) / double(st.instances);
   EXPECT_GE(measured, 0.95 * documented) << "graph " << SceneGraph::bytesPerInstance() << " + top level "
-                                          << TopLevel::bytesPerInstance() << " bytes documented";
+                                         << TopLevel::bytesPerInstance() << " bytes documented";
   EXPECT_LE(measured, 2.0 * (documented + tree)) << "graph " << SceneGraph::bytesPerInstance() << " + top level "
                                                  << TopLevel::bytesPerInstance() << " + tree " << tree;
   std::printf("bytes per instance: %.0f allocated, %.0f documented (graph %zu, top level %zu) + tree %.1f\n", measured,
@@ -930,7 +952,8 @@ TEST(SceneGraph, ALongSessionOfAddsAndRemovesReusesNodeRecords) {
   EXPECT_EQ(g.visibleInstances(), parts);
   // Dead ids stay dead: not contained, rejected by name, never reused by a new node.
   for (const NodeId id : gone) ASSERT_FALSE(g.contains(id));
-  expectErrorNaming<InvalidArgument>([&] { (void)g.node(gone.front()); }, "unknown node id " + std::to_string(gone.front()));
+  expectErrorNaming<InvalidArgument>([&] { (void)g.node(gone.front()); },
+                                     "unknown node id " + std::to_string(gone.front()));
   expectErrorNaming<InvalidArgument>([&] { g.setTransform(gone.back(), translation(0, 0, 0)); },
                                      "unknown node id " + std::to_string(gone.back()));
   EXPECT_GT(g.addGroup(kRootNode), last_id);

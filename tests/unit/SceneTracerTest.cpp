@@ -56,7 +56,8 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   std::mt19937_64 rng(2024);
   // Start: a few groups and transform nodes with instances below them.
   std::vector<NodeId> parents{kRootNode};
-  for (int i = 0; i < 6; ++i) parents.push_back(g.addTransform(parents[rng() % parents.size()], randomPlacement(rng, 6.0)));
+  for (int i = 0; i < 6; ++i)
+    parents.push_back(g.addTransform(parents[rng() % parents.size()], randomPlacement(rng, 6.0)));
   for (int i = 0; i < 30; ++i)
     g.addInstance(parents[rng() % parents.size()], f.objects[rng() % 4], randomPlacement(rng, 8.0));
   g.commit();
@@ -138,11 +139,11 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   }
   EXPECT_GE(commits, 800u);
   EXPECT_GT(rejected, 20u);  // NaN transforms and cycles were tried, and refused
-  EXPECT_GT(hits, 7500u);  // enough rays met geometry for the comparison to mean something
+  EXPECT_GT(hits, 7500u);    // enough rays met geometry for the comparison to mean something
   const TopLevelStats st = tracer.stats();
   EXPECT_GT(st.commits, 800u);
-  EXPECT_GT(st.subtree_rebuilds, 100u);                // the incremental path ran ...
-  EXPECT_LT(st.full_rebuilds, st.commits * 3 / 4);     // ... for a good part of the commits
+  EXPECT_GT(st.subtree_rebuilds, 100u);             // the incremental path ran ...
+  EXPECT_LT(st.full_rebuilds, st.commits * 3 / 4);  // ... for a good part of the commits
   EXPECT_LE(st.sah_cost, tracer.topLevel().config().rebuild_ratio * st.fresh_sah_cost * (1.0 + 1e-9));
 }
 
@@ -218,7 +219,8 @@ TEST(SceneTracer, PickingModesAndPaths) {
   const NodeId body = g.addTransform(car, Affine::identity(), "body");
   std::vector<NodeId> boxes;
   for (int i = 0; i < 3; ++i)
-    boxes.push_back(g.addInstance(body, f.objects[1], Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -4.0 * i}),
+    boxes.push_back(g.addInstance(body, f.objects[1],
+                                  Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -4.0 * i}),
                                   "box" + std::to_string(i), i == 1 ? 4u : 1u));
   g.commit();
   SceneTracer tracer(g);
@@ -256,10 +258,14 @@ TEST(SceneTracer, PickingModesAndPaths) {
 TEST(SceneTracer, PickingSeesSensorsWhenTheMaskSelectsThem) {
   Fixture f;
   SceneGraph& g = f.graph;
-  const ObjectId sensor = f.library->add("sensor", std::make_shared<const SensorObject>("sensor", SensorSpec{.width = 1.0, .height = 1.0, .nx = 2, .ny = 2}));
+  const ObjectId sensor = f.library->add(
+      "sensor",
+      std::make_shared<const SensorObject>("sensor", SensorSpec{.width = 1.0, .height = 1.0, .nx = 2, .ny = 2}));
   const NodeId box = g.addInstance(kRootNode, f.objects[1], Affine::identity(), "box", 1u);
-  const NodeId front = g.addInstance(kRootNode, sensor, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 3}), "front", 8u);
-  const NodeId behind = g.addInstance(kRootNode, sensor, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -5}), "behind", 16u);
+  const NodeId front =
+      g.addInstance(kRootNode, sensor, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 3}), "front", 8u);
+  const NodeId behind =
+      g.addInstance(kRootNode, sensor, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -5}), "behind", 16u);
   g.commit();
   SceneTracer tracer(g);
   PinholeCamera cam;
@@ -379,7 +385,8 @@ TEST(SceneTracer, PickingFarFromTheOriginIsAsAccurateAsNearIt) {
     PinholeCamera cam;
     cam.eye = glm::dvec3(offset, offset, offset + 4.0);
     const auto hits = tracer.pick(cam, px, py, 64, 64);
-    return hits.empty() ? glm::dvec3(std::numeric_limits<double>::quiet_NaN()) : hits[0].position_ws - glm::dvec3(offset);
+    return hits.empty() ? glm::dvec3(std::numeric_limits<double>::quiet_NaN())
+                        : hits[0].position_ws - glm::dvec3(offset);
   };
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> u(20.0, 44.0);
@@ -396,7 +403,8 @@ TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
   Fixture f;
   std::mt19937_64 rng(8);
   std::vector<NodeId> all;
-  for (int i = 0; i < 300; ++i) all.push_back(f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 40.0)));
+  for (int i = 0; i < 300; ++i)
+    all.push_back(f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 40.0)));
   f.graph.commit();
   SceneTracer tracer(f.graph);
   const PinholeCamera cam = PinholeCamera::looking_at_box(tracer.bounds());

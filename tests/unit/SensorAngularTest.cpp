@@ -29,7 +29,7 @@ TEST(SensorAngular, BinGeometry) {
   EXPECT_EQ(s->angleBinAt(std::cos(35 * deg), 100 * deg), 3u * 9u + 3u);
   EXPECT_EQ(s->angleBinAt(-std::cos(35 * deg), 100 * deg), 3u * 9u + 3u);  // either face
   EXPECT_EQ(s->angleBinAt(1.0, 0.0), 0u);
-  EXPECT_EQ(s->angleBinAt(0.0, -1e-12), 11u * 9u + 8u);     // 90 degrees: last theta bin; phi just below 360
+  EXPECT_EQ(s->angleBinAt(0.0, -1e-12), 11u * 9u + 8u);          // 90 degrees: last theta bin; phi just below 360
   EXPECT_EQ(s->angleBinAt(0.5, 2.0 * kPi + 0.1), 0u * 9u + 6u);  // phi wraps; theta = 60 degrees: bin 6
   double total = 0.0;
   for (std::uint32_t b = 0; b < 9 * 12; ++b) total += s->angleBinSolidAngle(b);
@@ -174,7 +174,8 @@ TEST(SensorAngular, SceneFilesDeclareAngularBins) {
   auto write = [&](const std::string& bins) {
     std::ofstream(file) << R"({"format": "scene-json-v1", "objects": [], "instances": [],
       "lights": [{"type": "point", "position": [0, 0, 1], "power": 1}],
-      "sensors": [{"name": "s", "size": [1, 1], "angular_bins": )" << bins << R"(}]})";
+      "sensors": [{"name": "s", "size": [1, 1], "angular_bins": )"
+                        << bins << R"(}]})";
     return file;
   };
   {

@@ -103,8 +103,9 @@ TEST_P(SensorClosedMesh, MirrorShellEndsEveryPathAtTheDepthLimit) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(NearAndFar, SensorClosedMesh, ::testing::Values(0.0, 1.0e4),
-                         [](const auto& info) { return info.param == 0.0 ? std::string("AtTheOrigin") : std::string("TenThousandAway"); });
+INSTANTIATE_TEST_SUITE_P(NearAndFar, SensorClosedMesh, ::testing::Values(0.0, 1.0e4), [](const auto& info) {
+  return info.param == 0.0 ? std::string("AtTheOrigin") : std::string("TenThousandAway");
+});
 
 }  // namespace
 }  // namespace duplex

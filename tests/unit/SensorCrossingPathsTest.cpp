@@ -97,7 +97,8 @@ std::vector<Hit> bruteForce(const Scene& s, const Ray& ray, float t_max, std::ui
       out.push_back(h);
     }
   }
-  std::sort(out.begin(), out.end(), [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.instance_id < b.instance_id; });
+  std::sort(out.begin(), out.end(),
+            [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.instance_id < b.instance_id; });
   return out;
 }
 
@@ -105,7 +106,8 @@ struct Counts {
   std::size_t rays = 0, crossings = 0;
 };
 
-void expectSame(const std::vector<SensorCrossing>& got, const std::vector<Hit>& want, const Ray& ray, const char* path) {
+void expectSame(const std::vector<SensorCrossing>& got, const std::vector<Hit>& want, const Ray& ray,
+                const char* path) {
   ASSERT_EQ(got.size(), want.size()) << path << " " << ray;
   for (std::size_t k = 0; k < want.size(); ++k) {
     const Hit& g = got[k].hit;
@@ -253,8 +255,8 @@ void checkPaths(const glm::dvec3& offset, bool grid = true) {
     ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 0xFFFFFFFFu, far));
   }
   EXPECT_GT(random.crossings, 100u);
-  EXPECT_GT(aimed.crossings, 2000u);   // most aimed rays end past a border they count on
-  EXPECT_GT(front.crossings, 400u);     // one-sided sensors record rays arriving at the front...
+  EXPECT_GT(aimed.crossings, 2000u);  // most aimed rays end past a border they count on
+  EXPECT_GT(front.crossings, 400u);   // one-sided sensors record rays arriving at the front...
   EXPECT_EQ(parallel.rays, 1000u);
   EXPECT_EQ(back.rays, 500u);
   EXPECT_GT(far.crossings, 10u);
@@ -264,9 +266,7 @@ TEST(SensorCrossingPaths, GridAndFlatTestsAgreeWithTheTreeAndBruteForce) {
   ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(0.0)));
 }
 
-TEST(SensorCrossingPaths, AgreeFarFromTheOrigin) {
-  ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(1e4, -5e3, 2e3)));
-}
+TEST(SensorCrossingPaths, AgreeFarFromTheOrigin) { ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(1e4, -5e3, 2e3))); }
 
 // 10^5 from the origin a float coordinate steps by 1/128 and the plane test's bounds (relative to
 // the magnitudes) are wider than these sensors, so nearly everything goes to the exact test. The
@@ -488,7 +488,8 @@ TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
         for (int j = 0; j < 30; j += 7)
           for (int axis = 0; axis < 2; ++axis) {
             // From above the floor to (3k, j + 0.25) at t = 1 exactly, along x or along y.
-            const glm::vec3 end = axis == 0 ? glm::vec3(3.0f * k, j + 0.25f, 0.0f) : glm::vec3(j + 0.25f, 3.0f * k, 0.0f);
+            const glm::vec3 end =
+                axis == 0 ? glm::vec3(3.0f * k, j + 0.25f, 0.0f) : glm::vec3(j + 0.25f, 3.0f * k, 0.0f);
             Ray ray;
             ray.dir = axis == 0 ? glm::vec3(a, 0.125f, -b) : glm::vec3(0.125f, a, -b);
             ray.origin = end - ray.dir;

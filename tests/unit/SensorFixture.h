@@ -32,9 +32,10 @@ inline std::shared_ptr<const Object> quad(double half, const std::string& name, 
   return buildChecked(TriangleMesh::fromArrays(p, i, name));
 }
 
-inline std::shared_ptr<const SensorObject> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny, bool two_sided = true,
-                                                 const std::string& name = "sensor") {
-  return std::make_shared<const SensorObject>(name, SensorSpec{.width = w, .height = h, .nx = nx, .ny = ny, .two_sided = two_sided});
+inline std::shared_ptr<const SensorObject> sensor(double w, double h, std::uint32_t nx, std::uint32_t ny,
+                                                  bool two_sided = true, const std::string& name = "sensor") {
+  return std::make_shared<const SensorObject>(
+      name, SensorSpec{.width = w, .height = h, .nx = nx, .ny = ny, .two_sided = two_sided});
 }
 
 inline Affine translate(double x, double y, double z) {

@@ -158,12 +158,14 @@ TEST(SensorObject, RejectsBadSpecs) {
 TEST(CrossingQuery, CrossingsBeforeTheHitInOrderEachOnce) {
   // Sensors at z = 1, 2, 3 (the one at 2 is large: it spans many leaves), a wall at z = 2.5, and a
   // sensor lying on the wall.
-  std::vector<InstanceDesc> inst = {
-      {sensor(4, 4, 4, 4), translate(0, 0, 1), 10},  {sensor(40, 40, 8, 8), translate(0, 0, 2), 11},
-      {sensor(4, 4, 1, 1), translate(0, 0, 3), 12},  {quad(5, "wall", 2.5), Affine::identity(), 20},
-      {sensor(2, 2, 2, 2), translate(0, 0, 2.5), 13}};
+  std::vector<InstanceDesc> inst = {{sensor(4, 4, 4, 4), translate(0, 0, 1), 10},
+                                    {sensor(40, 40, 8, 8), translate(0, 0, 2), 11},
+                                    {sensor(4, 4, 1, 1), translate(0, 0, 3), 12},
+                                    {quad(5, "wall", 2.5), Affine::identity(), 20},
+                                    {sensor(2, 2, 2, 2), translate(0, 0, 2.5), 13}};
   // Many small sensors elsewhere so that the tree has several leaves.
-  for (std::uint32_t k = 0; k < 40; ++k) inst.push_back({sensor(0.5, 0.5, 1, 1), translate(10.0 + k, 7.0, -3.0 + 0.1 * k), 100 + k});
+  for (std::uint32_t k = 0; k < 40; ++k)
+    inst.push_back({sensor(0.5, 0.5, 1, 1), translate(10.0 + k, 7.0, -3.0 + 0.1 * k), 100 + k});
   TopLevel top;
   top.build(inst);
   QueryContext ctx;
@@ -214,10 +216,12 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
       glm::dvec3 axis(u(rng), u(rng), u(rng));
       axis = glm::normalize(axis + glm::dvec3(0, 0, 1e-3));
       const double a = 3.0 * u(rng), c = std::cos(a), sn = std::sin(a), kk = 1 - c;
-      const Affine w = translate(5 * u(rng), 5 * u(rng), 5 * u(rng)) *
-                       Affine::fromRowMajor3x4({c + axis.x * axis.x * kk, axis.x * axis.y * kk - axis.z * sn, axis.x * axis.z * kk + axis.y * sn, 0,
-                                                axis.y * axis.x * kk + axis.z * sn, c + axis.y * axis.y * kk, axis.y * axis.z * kk - axis.x * sn, 0,
-                                                axis.z * axis.x * kk - axis.y * sn, axis.z * axis.y * kk + axis.x * sn, c + axis.z * axis.z * kk, 0});
+      const Affine w =
+          translate(5 * u(rng), 5 * u(rng), 5 * u(rng)) *
+          Affine::fromRowMajor3x4(
+              {c + axis.x * axis.x * kk, axis.x * axis.y * kk - axis.z * sn, axis.x * axis.z * kk + axis.y * sn, 0,
+               axis.y * axis.x * kk + axis.z * sn, c + axis.y * axis.y * kk, axis.y * axis.z * kk - axis.x * sn, 0,
+               axis.z * axis.x * kk - axis.y * sn, axis.z * axis.y * kk + axis.x * sn, c + axis.z * axis.z * kk, 0});
       inst.push_back({s, w, k});
       sensors.push_back(s);
       sensor_world.push_back(w);

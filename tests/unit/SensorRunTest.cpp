@@ -27,7 +27,6 @@ namespace {
 
 using namespace test;
 
-
 // Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
 double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
   auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
@@ -87,14 +86,16 @@ TEST(SensorRun, SmallSensorSeesICosThetaOverDSquared) {
   (void)run.runUntil(200000);
   const SensorResult s = run.results().sensors[0];
   const double expected = intensity * std::cos(theta) / (d * d);
-  EXPECT_LT(std::abs(s.irradiance_w_m2[0] - expected), 4.0 * s.stderr_w_m2[0]) << s.irradiance_w_m2[0] << " vs " << expected;
+  EXPECT_LT(std::abs(s.irradiance_w_m2[0] - expected), 4.0 * s.stderr_w_m2[0])
+      << s.irradiance_w_m2[0] << " vs " << expected;
   EXPECT_LT(s.relative_stderr, 0.02);  // the check above is a sharp one
 }
 
 TEST(SensorRun, DirectionalLightFluxIsItsPowerTimesProjectedArea) {
   Fixture f;
   const double side = 0.5, tilt = 60.0 * kPi / 180.0;
-  f.add(sensor(side, side, 2, 2, true, "tilted"), facing({0.0, std::sin(tilt), std::cos(tilt)}, {0.1, 0.0, 0.0}), "tilted");
+  f.add(sensor(side, side, 2, 2, true, "tilted"), facing({0.0, std::sin(tilt), std::cos(tilt)}, {0.1, 0.0, 0.0}),
+        "tilted");
   Light sun;
   sun.type = LightType::Directional;
   sun.name = "sun";
@@ -109,7 +110,8 @@ TEST(SensorRun, DirectionalLightFluxIsItsPowerTimesProjectedArea) {
   const double expected = sun.power_w * side * side * std::cos(tilt) / (kPi * sun.radius * sun.radius);
   EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w);
   // Irradiance on a surface tilted by 60 degrees: E = (P / pi r^2) cos(tilt), the same in every bin.
-  for (double e : s.irradiance_w_m2) EXPECT_NEAR(e, sun.power_w / kPi * std::cos(tilt), 0.1 * sun.power_w / kPi * std::cos(tilt));
+  for (double e : s.irradiance_w_m2)
+    EXPECT_NEAR(e, sun.power_w / kPi * std::cos(tilt), 0.1 * sun.power_w / kPi * std::cos(tilt));
 }
 
 TEST(SensorRun, MirrorMakesAnImageSource) {
@@ -123,7 +125,8 @@ TEST(SensorRun, MirrorMakesAnImageSource) {
   SensorRun run(scene);
   (void)run.runUntil(300000);
   const SensorResult s = run.results().sensors[0];
-  const double expected = rectangleSolidAngle(-0.2, 0.2, -0.2, 0.2, 1.0) + 0.8 * rectangleSolidAngle(-0.2, 0.2, -0.2, 0.2, 3.0);
+  const double expected =
+      rectangleSolidAngle(-0.2, 0.2, -0.2, 0.2, 1.0) + 0.8 * rectangleSolidAngle(-0.2, 0.2, -0.2, 0.2, 3.0);
   EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w) << s.total_flux_w << " vs " << expected;
 }
 
@@ -224,7 +227,8 @@ TEST(SensorRun, PointSourceThroughACoaxialDisk) {
   // Bin (8, 8) is the square [0, 1/8] x [0, 1/8], wholly inside the disk: its exact solid angle.
   const std::size_t centre = 8 * 16 + 8;
   const double bin_flux = rectangleSolidAngle(0.0, 0.125, 0.0, 0.125, h);
-  EXPECT_LT(std::abs(s.flux_w[centre] - bin_flux), 4.5 * s.flux_stderr_w[centre]) << s.flux_w[centre] << " vs " << bin_flux;
+  EXPECT_LT(std::abs(s.flux_w[centre] - bin_flux), 4.5 * s.flux_stderr_w[centre])
+      << s.flux_w[centre] << " vs " << bin_flux;
   EXPECT_DOUBLE_EQ(s.bin_area_m2[centre], 0.125 * 0.125);
 }
 
@@ -281,7 +285,8 @@ TEST(SensorRun, DielectricReflectsTheFresnelFraction) {
     const double n = 1.5, ci = std::cos(th), ct = std::sqrt(1.0 - std::sin(th) * std::sin(th) / (n * n));
     const double rs = (ci - n * ct) / (ci + n * ct), rp = (n * ci - ct) / (n * ci + ct);
     const double fresnel = 0.5 * (rs * rs + rp * rp);
-    EXPECT_LT(std::abs(s.total_flux_w - fresnel), 4.0 * s.total_flux_stderr_w) << deg << " deg: " << s.total_flux_w << " vs " << fresnel;
+    EXPECT_LT(std::abs(s.total_flux_w - fresnel), 4.0 * s.total_flux_stderr_w)
+        << deg << " deg: " << s.total_flux_w << " vs " << fresnel;
     EXPECT_GT(s.total_flux_w, 0.0);
   }
 }
@@ -314,7 +319,8 @@ TEST(SensorRun, FogAttenuatesAndTheBalanceCloses) {
       const double x = -0.1 + (i + 0.5) * 0.2 / n, y = -0.1 + (j + 0.5) * 0.2 / n, d = std::sqrt(x * x + y * y + 1.0);
       expected += std::exp(-0.8 * 0.5 * d) / (d * d * d) * (0.2 / n) * (0.2 / n);
     }
-  EXPECT_LT(std::abs(above.total_flux_w - expected), 4.0 * above.total_flux_stderr_w) << above.total_flux_w << " vs " << expected;
+  EXPECT_LT(std::abs(above.total_flux_w - expected), 4.0 * above.total_flux_stderr_w)
+      << above.total_flux_w << " vs " << expected;
   // What reaches the box faces plus what the fog took is what was emitted.
   double faces = 0.0;
   for (std::size_t k = 1; k < r.sensors.size(); ++k) faces += r.sensors[k].total_flux_w;
@@ -347,15 +353,16 @@ TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
   const SensorRunResults with = run(0.9), without = run(0.0);
   const EnergyBalance& e = with.energy;
   EXPECT_GT(std::abs(e.roulette_w), 1e-4);  // the roulette acted
-  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w, e.emitted_w, 1e-12 * e.emitted_w);
+  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w, e.emitted_w,
+              1e-12 * e.emitted_w);
   EXPECT_NEAR(sensorSum(with), e.escaped_w, 1e-12);  // the closed box of sensors sees every escaping path
   for (const std::size_t k : {std::size_t{0}, std::size_t{1}, std::size_t{4}, std::size_t{5}}) {
     const SensorResult &a = with.sensors[k], &b = without.sensors[k];
     const double se = std::hypot(a.total_flux_stderr_w, b.total_flux_stderr_w);
-    EXPECT_LT(std::abs(a.total_flux_w - b.total_flux_w), 4.5 * se) << a.name << ": " << a.total_flux_w << " vs " << b.total_flux_w;
+    EXPECT_LT(std::abs(a.total_flux_w - b.total_flux_w), 4.5 * se)
+        << a.name << ": " << a.total_flux_w << " vs " << b.total_flux_w;
   }
 }
-
 
 TEST(SensorRun, ClosedBoxOfSensorsRecordsAllEmittedPower) {
   Fixture f;
@@ -397,7 +404,6 @@ SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32
   return run.results();
 }
 
-
 SensorScene reflectingBox(Fixture& f) {
   closeBox(f);
   Material white{MaterialType::Lambertian, 0.9, 1.5};
@@ -433,11 +439,13 @@ TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
     // Cancelled from the progress callback after the first batch, then continued.
     SensorRun run(scene, cfg);
     std::uint64_t calls = 0;
-    EXPECT_EQ(run.runUntil(150000, [&](const SensorProgress& p) {
-      ++calls;
-      EXPECT_LE(p.rays_done, p.rays_target);
-      run.cancel();
-    }), SensorRunStatus::Cancelled);
+    EXPECT_EQ(run.runUntil(150000,
+                           [&](const SensorProgress& p) {
+                             ++calls;
+                             EXPECT_LE(p.rays_done, p.rays_target);
+                             run.cancel();
+                           }),
+              SensorRunStatus::Cancelled);
     EXPECT_EQ(calls, 1u);
     EXPECT_EQ(run.raysDone(), 20000u);
     EXPECT_EQ(run.runUntil(150000), SensorRunStatus::Completed);
@@ -445,7 +453,8 @@ TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
   }
   {
     // Saved and loaded into a fresh run (another process would do the same).
-    const auto file = std::filesystem::temp_directory_path() / ("duplex_sensor_state_" + std::to_string(::getpid()) + ".bin");
+    const auto file =
+        std::filesystem::temp_directory_path() / ("duplex_sensor_state_" + std::to_string(::getpid()) + ".bin");
     SensorRun first(scene, cfg);
     (void)first.runUntil(60000);
     first.saveState(file);
@@ -519,7 +528,8 @@ std::filesystem::path writeScene(const std::string& name, const std::string& tex
   return path;
 }
 
-const char* kQuadObject = R"({"name": "floor", "mesh": {"positions": [-5,-5,0, 5,-5,0, 5,5,0, -5,5,0], "indices": [0,1,2, 0,2,3]}})";
+const char* kQuadObject =
+    R"({"name": "floor", "mesh": {"positions": [-5,-5,0, 5,-5,0, 5,5,0, -5,5,0], "indices": [0,1,2, 0,2,3]}})";
 
 TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
   const std::string text = std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
@@ -549,7 +559,8 @@ TEST(SensorSceneFile, UnknownKeysAreIgnoredInSceneJsonV1AndRefusedInTheOwnFormat
   const std::string lights = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2, "colour": "red"}])";
   const std::string sensors = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2], "vendor": "acme"}])";
   const SensorScene v1 = SensorScene::load(writeScene(
-      "v1_unknown.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "note": "x", )" + lights + ", " + sensors + "}"));
+      "v1_unknown.json",
+      R"({"format": "scene-json-v1", "objects": [], "instances": [], "note": "x", )" + lights + ", " + sensors + "}"));
   EXPECT_EQ(v1.totalPower(), 2.0);
   ASSERT_EQ(v1.sensors().size(), 1u);
   EXPECT_EQ(v1.sensors()[0].object->binCount(), 4u);
@@ -585,8 +596,9 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
 
 // An LM-63 file next to the scenes: rotationally symmetric, 100 cd at the nadir, 50 at the horizon.
 void writeLampIes() {
-  (void)writeScene("lamp.ies", "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
-                               "0 90 180\n0\n100 50 0\n");
+  (void)writeScene("lamp.ies",
+                   "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
+                   "0 90 180\n0\n100 50 0\n");
 }
 
 TEST(SensorSceneFile, ReadsAnIesLight) {
@@ -616,22 +628,40 @@ void expectFileError(const std::string& name, const std::string& body, const std
 
 TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {
   writeLampIes();
-  expectFileError("zero_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": 0}])", "/lights/0/power");
-  expectFileError("negative_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": -2}])", "power must be > 0");
-  expectFileError("no_position.json", R"("lights": [{"type": "point", "power": 1}])", "/lights/0: missing key \"position\"");
+  expectFileError("zero_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": 0}])",
+                  "/lights/0/power");
+  expectFileError("negative_power.json", R"("lights": [{"type": "point", "position": [0,0,1], "power": -2}])",
+                  "power must be > 0");
+  expectFileError("no_position.json", R"("lights": [{"type": "point", "power": 1}])",
+                  "/lights/0: missing key \"position\"");
   expectFileError("bad_type.json", R"("lights": [{"type": "laser", "power": 1}])", "/lights/0/type");
-  expectFileError("spot_angle.json", R"("lights": [{"type": "spot", "position": [0,0,1], "direction": [0,0,-1], "half_angle": 0, "power": 1}])", "/lights/0/half_angle");
-  expectFileError("zero_dir.json", R"("lights": [{"type": "directional", "position": [0,0,1], "direction": [0,0,0], "radius": 1, "power": 1}])", "/lights/0/direction");
+  expectFileError(
+      "spot_angle.json",
+      R"("lights": [{"type": "spot", "position": [0,0,1], "direction": [0,0,-1], "half_angle": 0, "power": 1}])",
+      "/lights/0/half_angle");
+  expectFileError(
+      "zero_dir.json",
+      R"("lights": [{"type": "directional", "position": [0,0,1], "direction": [0,0,0], "radius": 1, "power": 1}])",
+      "/lights/0/direction");
   expectFileError("no_size.json", R"("sensors": [{"name": "s", "bins": [2, 2]}])", "/sensors/0: missing key \"size\"");
-  expectFileError("zero_bins.json", R"("sensors": [{"name": "s", "size": [1, 1], "bins": [0, 2]}])", "/sensors/0/bins/0");
+  expectFileError("zero_bins.json", R"("sensors": [{"name": "s", "size": [1, 1], "bins": [0, 2]}])",
+                  "/sensors/0/bins/0");
   expectFileError("bad_shape.json", R"("sensors": [{"name": "s", "shape": "hexagon", "size": 1}])", "/sensors/0/shape");
-  expectFileError("disk_oval.json", R"("sensors": [{"name": "s", "shape": "disk", "size": [1, 2]}])", "/sensors/0/size");
-  expectFileError("short_transform.json", R"("sensors": [{"name": "s", "size": 1, "transform": [1, 0, 0]}])", "/sensors/0/transform");
-  expectFileError("singular.json", R"("sensors": [{"name": "s", "size": 1, "transform": [0,0,0,0, 0,0,0,0, 0,0,0,0]}])", "singular");
+  expectFileError("disk_oval.json", R"("sensors": [{"name": "s", "shape": "disk", "size": [1, 2]}])",
+                  "/sensors/0/size");
+  expectFileError("short_transform.json", R"("sensors": [{"name": "s", "size": 1, "transform": [1, 0, 0]}])",
+                  "/sensors/0/transform");
+  expectFileError("singular.json", R"("sensors": [{"name": "s", "size": 1, "transform": [0,0,0,0, 0,0,0,0, 0,0,0,0]}])",
+                  "singular");
   expectFileError("no_name.json", R"("sensors": [{"size": 1}])", "missing key \"name\"");
   expectFileError("twice.json", R"("sensors": [{"name": "s", "size": 1}, {"name": "s", "size": 1}])", "/sensors/1");
-  expectFileError("missing_ies.json", R"("lights": [{"type": "ies", "file": "no_such.ies", "position": [0,0,1], "power": 1}])", "/lights/0/file");
-  expectFileError("ies_sheared.json", R"("lights": [{"type": "ies", "file": "lamp.ies", "transform": [2,0,0,0, 0,1,0,0, 0,0,1,0], "power": 1}])", "rotation");
+  expectFileError("missing_ies.json",
+                  R"("lights": [{"type": "ies", "file": "no_such.ies", "position": [0,0,1], "power": 1}])",
+                  "/lights/0/file");
+  expectFileError(
+      "ies_sheared.json",
+      R"("lights": [{"type": "ies", "file": "lamp.ies", "transform": [2,0,0,0, 0,1,0,0, 0,0,1,0], "power": 1}])",
+      "rotation");
   expectFileError("sensors_not_array.json", R"("sensors": {"name": "s"})", "/sensors");
 }
 

@@ -86,7 +86,8 @@ std::shared_ptr<const VolumeObject> fogBlock(float sigma, double voxel, int lo, 
                                              const std::string& name) {
   openvdb::initialize();
   auto grid = openvdb::FloatGrid::create(0.0f);
-  grid->tree().fill(openvdb::CoordBBox(openvdb::Coord(lo, lo, zlo), openvdb::Coord(hi - 1, hi - 1, zhi - 1)), sigma, true);
+  grid->tree().fill(openvdb::CoordBBox(openvdb::Coord(lo, lo, zlo), openvdb::Coord(hi - 1, hi - 1, zhi - 1)), sigma,
+                    true);
   openvdb::math::Mat4d m = openvdb::math::Mat4d::identity();
   m.preScale(openvdb::Vec3d(voxel));
   m.postTranslate(openvdb::Vec3d(0.5 * voxel));
@@ -136,7 +137,8 @@ WalkResult referenceWalk(double h, double sigma, double albedo, double g, glm::d
       double c;
       do c = 2.0 * uni(gen) - 1.0;
       while (uni(gen) * pdf_max > hg.pdf(c));
-      const glm::dvec3 t = glm::normalize(std::abs(d.x) < 0.9 ? glm::cross(d, glm::dvec3(1, 0, 0)) : glm::cross(d, glm::dvec3(0, 1, 0)));
+      const glm::dvec3 t =
+          glm::normalize(std::abs(d.x) < 0.9 ? glm::cross(d, glm::dvec3(1, 0, 0)) : glm::cross(d, glm::dvec3(0, 1, 0)));
       const glm::dvec3 b = glm::cross(d, t);
       const double phi = 2.0 * kPi * uni(gen), sn = std::sqrt(1.0 - c * c);
       d = glm::normalize(c * d + sn * std::cos(phi) * t + sn * std::sin(phi) * b);
@@ -221,7 +223,8 @@ TEST(SensorScattering, ThinSlabSingleScatteringMatchesTheQuadrature) {
   Fixture f;
   // Slab [-10, 10]^2 x [0, 0.1]: optical depth 0.2, wide enough that a sideways ray leaving
   // through its rim is negligible.
-  f.add(fogBlock(static_cast<float>(sigma), 0.1, -100, 100, 0, 1, "slab"), Affine::identity(), "slab", medium(albedo, g));
+  f.add(fogBlock(static_cast<float>(sigma), 0.1, -100, 100, 0, 1, "slab"), Affine::identity(), "slab",
+        medium(albedo, g));
   f.add(sensor(80, 80, 1, 1, true, "top"), translate(0, 0, 0.2), "top");
   f.add(sensor(80, 80, 1, 1, true, "bottom"), translate(0, 0, -0.1), "bottom");
   Light beam;
@@ -247,7 +250,8 @@ TEST(SensorScattering, ThinSlabSingleScatteringMatchesTheQuadrature) {
   EXPECT_LT(std::abs(bottom.total_flux_w - t), 4.5 * bottom.total_flux_stderr_w) << bottom.total_flux_w << " vs " << t;
   EXPECT_GT(top.total_flux_w, 0.01);
   // Per path: reflected + transmitted + absorbed at the first collision + cut at the second = 1.
-  EXPECT_NEAR(top.total_flux_w + bottom.total_flux_w + r.energy.medium_absorbed_w + r.energy.depth_limited_w, 1.0, 1e-12);
+  EXPECT_NEAR(top.total_flux_w + bottom.total_flux_w + r.energy.medium_absorbed_w + r.energy.depth_limited_w, 1.0,
+              1e-12);
 }
 
 TEST(SensorScattering, AnalogAbsorptionAgreesWithAttenuation) {
@@ -328,7 +332,8 @@ TEST(SensorScattering, EveryFeatureOnIsBitIdenticalForAnyThreadCount) {
   const EnergyBalance& e = one.energy;
   EXPECT_GT(e.medium_absorbed_w, 0.1);
   EXPECT_GT(e.absorbed_w, 0.01);
-  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w, e.emitted_w, 1e-12 * e.emitted_w);
+  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w, e.emitted_w,
+              1e-12 * e.emitted_w);
   EXPECT_NEAR(one.sensors[scene.findSensor("ball")].total_flux_w, e.escaped_w, 1e-12);
   EXPECT_GT(one.sensors[scene.findSensor("angles")].angular_flux_w[0], 0.0);
 }
@@ -363,7 +368,8 @@ TEST(SensorScattering, ScenesThatCannotScatterAreRefused) {
 }
 
 TEST(SensorScattering, SceneFilesDeclareScatteringFogs) {
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("duplex_scatter_" + std::to_string(::getpid()));
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("duplex_scatter_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   {
     openvdb::initialize();
@@ -377,7 +383,8 @@ TEST(SensorScattering, SceneFilesDeclareScatteringFogs) {
   }
   auto write = [&](const std::string& material) {
     std::ofstream(dir / "s.json") << R"({"format": "scene-json-v1",
-      "objects": [{"name": "fog", "volume": {"file": "fog.vdb", "kind": "fog"}, "material": )" << material << R"(}],
+      "objects": [{"name": "fog", "volume": {"file": "fog.vdb", "kind": "fog"}, "material": )"
+                                  << material << R"(}],
       "instances": [{"object": "fog", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]}],
       "lights": [{"type": "point", "position": [0, 0, 0], "power": 1}],
       "sensors": [{"name": "s", "size": [1, 1], "transform": [1,0,0,0, 0,1,0,0, 0,0,1,1]}]})";

@@ -29,15 +29,18 @@ Light spectralPoint(glm::dvec3 p, double power, std::vector<double> spectrum) {
 SensorScene diffuseBox(Fixture& f, std::vector<std::string> bands, Material white) {
   closeBox(f);
   f.add(quad(0.6, "white"), translate(0, 0, -0.5), "white", white);
-  Light second = spectralPoint({0.3, 0.1, 0.4}, 1.0, bands.empty() ? std::vector<double>{} : std::vector<double>{0, 0, 1});
+  Light second =
+      spectralPoint({0.3, 0.1, 0.4}, 1.0, bands.empty() ? std::vector<double>{} : std::vector<double>{0, 0, 1});
   second.name = "blue";
-  const Light first = spectralPoint({0, 0, 0.2}, 3.0, bands.empty() ? std::vector<double>{} : std::vector<double>{1, 2, 1});
+  const Light first =
+      spectralPoint({0, 0, 0.2}, 3.0, bands.empty() ? std::vector<double>{} : std::vector<double>{1, 2, 1});
   return f.scene({first, second}, std::move(bands));
 }
 
 // A run state file in the temporary folder, named for the test and the process.
 std::filesystem::path tempState(const std::string& tag) {
-  return std::filesystem::temp_directory_path() / ("duplex_spectral_" + tag + "_" + std::to_string(::getpid()) + ".bin");
+  return std::filesystem::temp_directory_path() /
+         ("duplex_spectral_" + tag + "_" + std::to_string(::getpid()) + ".bin");
 }
 
 // Runs `rays` rays of `scene` and saves the state to `state`; returns the run's results.
@@ -87,7 +90,8 @@ TEST(SensorSpectral, EqualReflectanceBandsSplitTheSingleBandRun) {
     const double sum = s.band_total_flux_w[0] + s.band_total_flux_w[1] + s.band_total_flux_w[2];
     EXPECT_NEAR(sum, s.total_flux_w, 1e-12 * s.total_flux_w);
     for (std::size_t bin = 0; bin < s.flux_w.size(); ++bin)
-      EXPECT_NEAR(s.band_flux_w[0][bin] + s.band_flux_w[1][bin] + s.band_flux_w[2][bin], s.flux_w[bin], 1e-12 * (s.flux_w[bin] + 1e-300));
+      EXPECT_NEAR(s.band_flux_w[0][bin] + s.band_flux_w[1][bin] + s.band_flux_w[2][bin], s.flux_w[bin],
+                  1e-12 * (s.flux_w[bin] + 1e-300));
   }
   const SensorResult& top = b.sensors[4];  // face +z, above both lights
   // With equal reflectances each band gets its share of the power: light 1 is in band 2 only, so
@@ -199,9 +203,9 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
     second.name = "blue";
     return refused(f.scene({spectralPoint({0, 0, 0.2}, 3.0, {1, 2, 1}), second}, {"b", "g", "r"}));
   };
-  EXPECT_FALSE(moved(-0.5, {0.3, 0.1, 0.4}));  // the same scene again: accepted
-  EXPECT_TRUE(moved(-0.4, {0.3, 0.1, 0.4}));   // the floor moved
-  EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.3}));   // a light moved
+  EXPECT_FALSE(moved(-0.5, {0.3, 0.1, 0.4}));       // the same scene again: accepted
+  EXPECT_TRUE(moved(-0.4, {0.3, 0.1, 0.4}));        // the floor moved
+  EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.3}));        // a light moved
   EXPECT_TRUE(moved(-0.5, {0.3, 0.1, 0.4}, 0.55));  // the floor's mesh changed, not its name
   std::filesystem::remove(state);
 }
@@ -327,9 +331,11 @@ TEST(SensorSpectral, SceneFilesDeclareBandsSpectraAndPerBandReflectance) {
   auto load = [&](const std::string& bands, const std::string& spectrum, const std::string& reflectance) {
     std::ofstream(file) << R"({"format": "scene-json-v1", )" << bands << R"(
       "objects": [{"name": "wall", "mesh": {"positions": [-1,-1,0, 1,-1,0, 1,1,0], "indices": [0,1,2]},
-                   "material": {"type": "lambertian", "reflectance": )" << reflectance << R"(}}],
+                   "material": {"type": "lambertian", "reflectance": )"
+                        << reflectance << R"(}}],
       "instances": [{"object": "wall", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]}],
-      "lights": [{"type": "point", "position": [0, 0, 1], "power": 2)" << spectrum << R"(}],
+      "lights": [{"type": "point", "position": [0, 0, 1], "power": 2)"
+                        << spectrum << R"(}],
       "sensors": [{"name": "s", "size": [1, 1]}]})";
     return SensorScene::load(file);
   };
@@ -354,16 +360,19 @@ TEST(SensorSpectral, SceneFilesDeclareBandsSpectraAndPerBandReflectance) {
     EXPECT_TRUE(scene.bands().empty());
     EXPECT_EQ(scene.bandCount(), 1u);
   }
-  EXPECT_NE(error(R"("bands": ["a", "b"],)", R"(, "spectrum": [1, 2, 3])", "0.5").find("/lights/0/spectrum"), std::string::npos);
+  EXPECT_NE(error(R"("bands": ["a", "b"],)", R"(, "spectrum": [1, 2, 3])", "0.5").find("/lights/0/spectrum"),
+            std::string::npos);
   EXPECT_NE(error("", R"(, "spectrum": [1, 2])", "0.5").find("/lights/0/spectrum"), std::string::npos);
   EXPECT_NE(error(R"("bands": ["a", "b"],)", "", "[0.5]").find("/objects/0/material/reflectance"), std::string::npos);
-  EXPECT_NE(error(R"("bands": ["a", "b"],)", "", "[0.5, 1.5]").find("/objects/0/material/reflectance/1"), std::string::npos);
+  EXPECT_NE(error(R"("bands": ["a", "b"],)", "", "[0.5, 1.5]").find("/objects/0/material/reflectance/1"),
+            std::string::npos);
   EXPECT_NE(error(R"("bands": ["a", "a"],)", "", "0.5").find("/bands/1"), std::string::npos);
   EXPECT_NE(error(R"("bands": [],)", "", "0.5").find("/bands"), std::string::npos);
   {
     std::string many = R"("bands": [)";
     for (int b = 0; b < 257; ++b) many += (b ? ", \"b" : "\"b") + std::to_string(b) + "\"";
-    EXPECT_NE(error(many + "],", "", "0.5").find("/bands: 257 bands, at most 256"), std::string::npos) << error(many + "],", "", "0.5");
+    EXPECT_NE(error(many + "],", "", "0.5").find("/bands: 257 bands, at most 256"), std::string::npos)
+        << error(many + "],", "", "0.5");
   }
   EXPECT_NE(error(R"("bands": ["a", "b"],)", R"(, "spectrum": [0, -1])", "0.5").find("/lights/0"), std::string::npos);
   std::filesystem::remove(file);

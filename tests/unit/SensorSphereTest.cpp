@@ -19,8 +19,12 @@ using namespace test;
 
 std::shared_ptr<const SensorObject> sphere(double diameter, std::uint32_t nx, std::uint32_t ny, bool two_sided,
                                            const std::string& name) {
-  return std::make_shared<const SensorObject>(name, SensorSpec{.shape = SensorShape::Sphere, .width = diameter, .height = diameter,
-                                                                .nx = nx, .ny = ny, .two_sided = two_sided});
+  return std::make_shared<const SensorObject>(name, SensorSpec{.shape = SensorShape::Sphere,
+                                                               .width = diameter,
+                                                               .height = diameter,
+                                                               .nx = nx,
+                                                               .ny = ny,
+                                                               .two_sided = two_sided});
 }
 
 Ray ray(glm::vec3 o, glm::vec3 d) {
@@ -170,7 +174,8 @@ TEST(SensorSphere, BadSpheresAreRefused) {
       std::filesystem::temp_directory_path() / ("duplex_sphere_" + std::to_string(::getpid()) + ".json");
   auto load = [&](const std::string& sensor) {
     std::ofstream(file) << R"({"format": "scene-json-v1", "objects": [], "instances": [],
-      "lights": [{"type": "point", "position": [0, 0, 0], "power": 1}], "sensors": [)" << sensor << "]}";
+      "lights": [{"type": "point", "position": [0, 0, 0], "power": 1}], "sensors": [)"
+                        << sensor << "]}";
     return SensorScene::load(file);
   };
   const SensorScene scene = load(R"({"name": "ball", "shape": "sphere", "size": 3, "bins": [12, 6]})");
@@ -181,8 +186,10 @@ TEST(SensorSphere, BadSpheresAreRefused) {
            {R"({"name": "b", "shape": "sphere", "size": 3, "angular_bins": 4})", "/sensors/0/angular_bins"},
            {R"({"name": "b", "shape": "ball", "size": 3})", "/sensors/0/shape"},
            // Not a similarity: the error names the transform's pointer (it named no pointer).
-           {R"({"name": "b", "shape": "sphere", "size": 3, "transform": [1,0,0,0, 0,1,0,0, 0,0,0.5,0]})", "/sensors/0/transform"},
-           {R"({"name": "b", "shape": "sphere", "size": 3, "transform": [1,0.5,0,0, 0,1,0,0, 0,0,1,0]})", "/sensors/0/transform"}}) {
+           {R"({"name": "b", "shape": "sphere", "size": 3, "transform": [1,0,0,0, 0,1,0,0, 0,0,0.5,0]})",
+            "/sensors/0/transform"},
+           {R"({"name": "b", "shape": "sphere", "size": 3, "transform": [1,0.5,0,0, 0,1,0,0, 0,0,1,0]})",
+            "/sensors/0/transform"}}) {
     try {
       (void)load(bad);
       ADD_FAILURE() << bad << ": no error";

@@ -76,7 +76,7 @@ inline std::shared_ptr<const TriangleMesh> sharedMeshCached(const std::string& r
 }
 
 /// `GTEST_SKIP()`s the current test when the shared mesh is missing; otherwise binds it to `var`.
-#define DUPLEX_SHARED_MESH_OR_SKIP(var, relative)                                                           \
+#define DUPLEX_SHARED_MESH_OR_SKIP(var, relative)                                                          \
   const std::shared_ptr<const ::duplex::TriangleMesh> var = ::duplex::test::sharedMeshCached(relative);    \
   if (!(var))                                                                                              \
   GTEST_SKIP() << "shared mesh '" << (relative) << "' not found under " << ::duplex::test::sharedDataDir() \
@@ -138,8 +138,8 @@ inline std::vector<char> readBinaryFile(const std::filesystem::path& path) {
 /// 20 * 4^subdivisions triangles.
 inline TriangleMesh icosphere(int subdivisions, double radius = 1.0, glm::dvec3 centre = glm::dvec3(0.0)) {
   const double g = (1.0 + std::sqrt(5.0)) / 2.0;
-  std::vector<glm::dvec3> p = {{-1, g, 0}, {1, g, 0}, {-1, -g, 0}, {1, -g, 0}, {0, -1, g}, {0, 1, g},
-                               {0, -1, -g}, {0, 1, -g}, {g, 0, -1}, {g, 0, 1}, {-g, 0, -1}, {-g, 0, 1}};
+  std::vector<glm::dvec3> p = {{-1, g, 0},  {1, g, 0},  {-1, -g, 0}, {1, -g, 0}, {0, -1, g},  {0, 1, g},
+                               {0, -1, -g}, {0, 1, -g}, {g, 0, -1},  {g, 0, 1},  {-g, 0, -1}, {-g, 0, 1}};
   for (auto& q : p) q = glm::normalize(q);
   std::vector<TriangleMesh::Triangle> t = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                                            {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},

@@ -165,7 +165,8 @@ TEST(TopLevelIncremental, IntersectAllListsEveryInstanceHitSorted) {
   // A row of unit boxes along x; a ray down the row crosses each box twice.
   std::vector<InstanceDesc> row;
   for (std::uint32_t i = 0; i < 5; ++i)
-    row.push_back({objs[1], Affine::fromRowMajor3x4({1, 0, 0, 4.0 * i, 0, 1, 0, 0, 0, 0, 1, 0}), 10 + i, i % 2 ? 1u : 2u});
+    row.push_back(
+        {objs[1], Affine::fromRowMajor3x4({1, 0, 0, 4.0 * i, 0, 1, 0, 0, 0, 0, 1, 0}), 10 + i, i % 2 ? 1u : 2u});
   TopLevel top;
   top.build(row);
   Ray r;
@@ -204,12 +205,13 @@ TEST(TopLevelIncremental, RegionQueryMatchesBoxTest) {
     // An axis-aligned query box as six planes n.x <= d.
     const glm::dvec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
     const glm::dvec3 lo = glm::min(a, b), hi = glm::max(a, b);
-    const std::vector<glm::dvec4> planes = {{1, 0, 0, hi.x},  {-1, 0, 0, -lo.x}, {0, 1, 0, hi.y},
-                                            {0, -1, 0, -lo.y}, {0, 0, 1, hi.z},  {0, 0, -1, -lo.z}};
+    const std::vector<glm::dvec4> planes = {{1, 0, 0, hi.x},   {-1, 0, 0, -lo.x}, {0, 1, 0, hi.y},
+                                            {0, -1, 0, -lo.y}, {0, 0, 1, hi.z},   {0, 0, -1, -lo.z}};
     std::vector<std::uint32_t> want;
     for (const InstanceDesc& d : all) {
       const Box bb = top.instanceBounds(d.id);
-      if (bb.lo.x <= hi.x && bb.hi.x >= lo.x && bb.lo.y <= hi.y && bb.hi.y >= lo.y && bb.lo.z <= hi.z && bb.hi.z >= lo.z)
+      if (bb.lo.x <= hi.x && bb.hi.x >= lo.x && bb.lo.y <= hi.y && bb.hi.y >= lo.y && bb.lo.z <= hi.z &&
+          bb.hi.z >= lo.z)
         want.push_back(d.id);
     }
     std::sort(want.begin(), want.end());
@@ -327,8 +329,11 @@ TEST(TopLevelIncremental, RejectedEditsChangeNothing) {
   expectErrorNaming<InvalidArgument>([&] { top.set({objs[0], singular, 4}); }, "singular");
   expectErrorNaming<InvalidArgument>([&] { top.set({nullptr, Affine::identity(), 5}); }, "instance 5");
   expectErrorNaming<InvalidArgument>([&] { top.remove(77); }, "77");
-  expectErrorNaming<InvalidArgument>([&] { top.build(std::vector<InstanceDesc>{{objs[0], Affine::identity(), 9}, {objs[1], nan, 9}}); },
-                                     "instance 9");
+  expectErrorNaming<InvalidArgument>(
+      [&] {
+        top.build(std::vector<InstanceDesc>{{objs[0], Affine::identity(), 9}, {objs[1], nan, 9}});
+      },
+      "instance 9");
   top.commit();
   EXPECT_EQ(top.size(), 2u);
   EXPECT_TRUE(top.contains(1));

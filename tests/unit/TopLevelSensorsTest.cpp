@@ -67,9 +67,8 @@ struct Model {
         out.push_back(h);
       }
     }
-    std::sort(out.begin(), out.end(), [](const Hit& a, const Hit& b) {
-      return a.t != b.t ? a.t < b.t : a.instance_id < b.instance_id;
-    });
+    std::sort(out.begin(), out.end(),
+              [](const Hit& a, const Hit& b) { return a.t != b.t ? a.t < b.t : a.instance_id < b.instance_id; });
     return out;
   }
 };
@@ -142,8 +141,10 @@ TEST(TopLevelSensors, RandomEditsWithRoleChangesAgreeWithBruteForce) {
     }
     top.commit();
     ASSERT_EQ(top.size(), model.instances.size());
-    const std::size_t sensors = static_cast<std::size_t>(std::count_if(
-        model.instances.begin(), model.instances.end(), [](const auto& kv) { return kv.second.object->role() == ObjectRole::Sensor; }));
+    const std::size_t sensors =
+        static_cast<std::size_t>(std::count_if(model.instances.begin(), model.instances.end(), [](const auto& kv) {
+          return kv.second.object->role() == ObjectRole::Sensor;
+        }));
     ASSERT_EQ(top.stats().sensor_instances, sensors);
     ASSERT_EQ(top.stats().instances + sensors, model.instances.size());
     for (const auto& [id, d] : model.instances) ASSERT_TRUE(top.contains(id)) << id;
@@ -244,8 +245,8 @@ void checkManySmallSensors(const glm::dvec3& offset, const TopLevelConfig& confi
     // rotated at random.
     Affine a;
     if (id % 4 != 0) {
-      a = Affine::fromRowMajor3x4(test::rotationScaleTranslation(glm::dvec3(u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5 + 1e-3),
-                                                                 6.3 * u(rng), glm::dvec3(1.0), glm::dvec3(0.0)));
+      a = Affine::fromRowMajor3x4(test::rotationScaleTranslation(
+          glm::dvec3(u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5 + 1e-3), 6.3 * u(rng), glm::dvec3(1.0), glm::dvec3(0.0)));
     }
     a.translation = offset + glm::dvec3(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
     d.world_from_object = a;

@@ -82,8 +82,7 @@ World randomWorld(const Library& lib, int count, glm::dvec3 offset, double sprea
   World w;
   if (offset == glm::dvec3(0.0))
     w.add(lib.sphere, Affine::identity(), 100);  // placed as authored (the identity fast path)
-  else
-    w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, offset.x, 0, 1, 0, offset.y, 0, 0, 1, offset.z}), 100);
+  else w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, offset.x, 0, 1, 0, offset.y, 0, 0, 1, offset.z}), 100);
   w.add(lib.box, Affine::fromRowMajor3x4({2, 0, 0, offset.x, 0, 2, 0, offset.y, 0, 0, 2, offset.z}), 101);
   for (int i = 2; i < count; ++i) {
     glm::dvec3 scale(s(rng), s(rng), s(rng));
@@ -92,7 +91,8 @@ World randomWorld(const Library& lib, int count, glm::dvec3 offset, double sprea
     const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
     const auto m = rotationScaleTranslation(axis, 3.14159 * u(rng), scale,
                                             offset + 0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng)));
-    w.add(objects[static_cast<std::size_t>(i) % objects.size()], Affine::fromRowMajor3x4(m), 100 + static_cast<std::uint32_t>(i));
+    w.add(objects[static_cast<std::size_t>(i) % objects.size()], Affine::fromRowMajor3x4(m),
+          100 + static_cast<std::uint32_t>(i));
   }
   return w;
 }
@@ -136,7 +136,8 @@ DiffStats expectTopLevelAgrees(const TopLevel& top, const World& w, std::span<co
       fail(::testing::Message() << hit << ": barycentric point " << glm::length(pb - pr) << " from origin + t dir");
     if (check_normal && !w.isMirrored(hit.instance_id)) {
       const double c = glm::dot(glm::normalize(glm::dvec3(hit.ng)), glm::normalize(tri.n));
-      if (!(c > 1.0 - 1e-4)) fail(::testing::Message() << hit << ": ng not along the world triangle normal (cos " << c << ")");
+      if (!(c > 1.0 - 1e-4))
+        fail(::testing::Message() << hit << ": ng not along the world triangle normal (cos " << c << ")");
     }
   }
   EXPECT_EQ(s.failures, 0u) << label << ": " << s.failures << " of " << s.rays << " rays disagree";
@@ -202,9 +203,11 @@ TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {
   std::mt19937_64 rng(77);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (std::uint32_t i = 0; i < 60; ++i)
-    w.add(lib.sphere, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(u(rng), u(rng), 1.0), u(rng),
-                                                                       glm::dvec3(0.5 + 0.3 * u(rng)),
-                                                                       glm::dvec3(u(rng), u(rng), u(rng)))), i);
+    w.add(lib.sphere,
+          Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(u(rng), u(rng), 1.0), u(rng),
+                                                           glm::dvec3(0.5 + 0.3 * u(rng)),
+                                                           glm::dvec3(u(rng), u(rng), u(rng)))),
+          i);
   TopLevel top;
   buildTopChecked(top, w.instances);
   auto rays = worldRays(top.bounds(), 78);
@@ -218,8 +221,7 @@ TEST(TopLevel, AnalyticScaledBox) {
   // t is in units of the (unnormalised) world direction, and ng points along -z.
   const Library lib;
   TopLevel top;
-  const std::vector<InstanceDesc> inst = {
-      {lib.box, Affine::fromRowMajor3x4({2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0}), 7}};
+  const std::vector<InstanceDesc> inst = {{lib.box, Affine::fromRowMajor3x4({2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0}), 7}};
   buildTopChecked(top, inst);
   EXPECT_LE(top.bounds().lo.z, -2.0f);  // world box rounded outward, but tight
   EXPECT_GE(top.bounds().lo.z, -2.00001f);
@@ -242,8 +244,8 @@ TEST(TopLevel, AnalyticScaledBox) {
   r.tfar = 16.1f;
   EXPECT_TRUE(top.occluded(r, ctx));
   // Rotated 90 degrees about z and moved: the face x = +2 (object +y face) is hit from +x.
-  buildTopChecked(top, std::vector<InstanceDesc>{
-                        {lib.box, Affine::fromRowMajor3x4({0, -2, 0, 5, 2, 0, 0, 0, 0, 0, 2, 0}), 9}});
+  buildTopChecked(
+      top, std::vector<InstanceDesc>{{lib.box, Affine::fromRowMajor3x4({0, -2, 0, 5, 2, 0, 0, 0, 0, 0, 2, 0}), 9}});
   Ray s;
   s.origin = glm::vec3(20.0f, 0.25f, 0.5f);
   s.dir = glm::vec3(-1.0f, 0.0f, 0.0f);
@@ -261,10 +263,12 @@ TEST(TopLevel, AnalyticScaledBox) {
 TEST(TopLevel, NormalOfMirroredInstancesFollowsTheWorldTriangle) {
   const Library lib;
   World w;
-  w.add(lib.box, Affine::fromRowMajor3x4({-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}), 0);      // mirror x
-  w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, 4, 0, -2, 0, 0, 0, 0, 1, 0}), 1);   // mirror y, scaled
-  w.add(lib.soup, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(1, 2, 3), 0.7,
-                                                                  glm::dvec3(1.5, 0.5, -1.0), glm::dvec3(0, 4, 0))), 2);
+  w.add(lib.box, Affine::fromRowMajor3x4({-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}), 0);     // mirror x
+  w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, 4, 0, -2, 0, 0, 0, 0, 1, 0}), 1);  // mirror y, scaled
+  w.add(lib.soup,
+        Affine::fromRowMajor3x4(
+            rotationScaleTranslation(glm::dvec3(1, 2, 3), 0.7, glm::dvec3(1.5, 0.5, -1.0), glm::dvec3(0, 4, 0))),
+        2);
   TopLevel top;
   buildTopChecked(top, w.instances);
   QueryContext ctx;
@@ -276,9 +280,9 @@ TEST(TopLevel, NormalOfMirroredInstancesFollowsTheWorldTriangle) {
     ++checked;
     const double c = glm::dot(glm::normalize(glm::dvec3(h.ng)), glm::normalize(tri.n));
     if (!(c > 1.0 - 1e-4) && wrong++ < 5)
-      ADD_FAILURE() << r << " hits mirrored instance " << h.instance_id << " prim " << h.prim_id
-                    << ": ng (" << h.ng.x << ", " << h.ng.y << ", " << h.ng.z << ") vs world cross(v1 - v0, v2 - v0) ("
-                    << tri.n.x << ", " << tri.n.y << ", " << tri.n.z << "), cos " << c;
+      ADD_FAILURE() << r << " hits mirrored instance " << h.instance_id << " prim " << h.prim_id << ": ng (" << h.ng.x
+                    << ", " << h.ng.y << ", " << h.ng.z << ") vs world cross(v1 - v0, v2 - v0) (" << tri.n.x << ", "
+                    << tri.n.y << ", " << tri.n.z << "), cos " << c;
   }
   EXPECT_GT(checked, 500u);
   EXPECT_EQ(wrong, 0u) << "hits whose ng points against the world triangle's normal";
@@ -290,8 +294,10 @@ TEST(TopLevel, NormalIsTheWorldCrossProduct) {
   const Library lib;
   World w;
   w.add(lib.box, Affine::fromRowMajor3x4({3, 0, 0, 0, 0, 3, 0, 0, 0, 0, 3, 0}), 0);  // uniform scale 3
-  w.add(lib.sphere, Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(0, 1, 1), 0.4,
-                                                                    glm::dvec3(0.5, 2.0, 1.0), glm::dvec3(8, 0, 0))), 1);
+  w.add(lib.sphere,
+        Affine::fromRowMajor3x4(
+            rotationScaleTranslation(glm::dvec3(0, 1, 1), 0.4, glm::dvec3(0.5, 2.0, 1.0), glm::dvec3(8, 0, 0))),
+        1);
   TopLevel top;
   buildTopChecked(top, w.instances);
   QueryContext ctx;
@@ -378,9 +384,9 @@ TEST(TopLevel, InvalidInstancesThrowNamingTheInstance) {
   expect_throw({lib.box, Affine::fromRowMajor3x4({kNaNd, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}), 41}, "41");
   expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, kNaNd, 0, 1, 0, 0, 0, 0, 1, 0}), 42}, "42");
   expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, INFINITY, 0, 0, 1, 0}), 43}, "43");
-  expect_throw({lib.box, Affine::fromRowMajor3x4({0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}), 44}, "44");      // zero
-  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 5}), 45}, "45");      // flat
-  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 2, 3, 0, 2, 4, 6, 0, 1, 0, 1, 0}), 46}, "46");      // rank 2
+  expect_throw({lib.box, Affine::fromRowMajor3x4({0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}), 44}, "44");  // zero
+  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 5}), 45}, "45");  // flat
+  expect_throw({lib.box, Affine::fromRowMajor3x4({1, 2, 3, 0, 2, 4, 6, 0, 1, 0, 1, 0}), 46}, "46");  // rank 2
   expect_throw({nullptr, Affine::identity(), 47}, "47");
   // Finite in double, but the world box leaves float range: refused by the full build and by set(),
   // which leaves the top level as it was.

@@ -64,8 +64,7 @@ inline Hit bruteIntersect(const Model& model, const Ray& ray, std::uint32_t mask
 
 /// Same t bit for bit; a different (instance, primitive) only as an exact tie.
 inline ::testing::AssertionResult sameHit(const Hit& a, const Hit& b) {
-  if (a.valid() != b.valid() || (a.valid() && a.t != b.t))
-    return ::testing::AssertionFailure() << a << " vs " << b;
+  if (a.valid() != b.valid() || (a.valid() && a.t != b.t)) return ::testing::AssertionFailure() << a << " vs " << b;
   return ::testing::AssertionSuccess();
 }
 
@@ -129,7 +128,8 @@ inline ::testing::AssertionResult checkIncrementalTree(const TopLevel& top, cons
         problem("leaf " + std::to_string(i) + " references slot " + std::to_string(slot) + " of a dead instance");
         continue;
       }
-      if (!ids.insert(id).second) problem("leaf " + std::to_string(i) + " holds instance " + std::to_string(id) + " twice");
+      if (!ids.insert(id).second)
+        problem("leaf " + std::to_string(i) + " holds instance " + std::to_string(id) + " twice");
     }
     for (const auto& [id, d] : model) {
       const Box b = top.instanceBounds(id);

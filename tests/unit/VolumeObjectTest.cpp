@@ -82,7 +82,8 @@ std::vector<Ray> outsideRays(std::size_t count, std::uint32_t seed) {
 }
 
 double angleDeg(const glm::dvec3& a, const glm::dvec3& b) {
-  return std::acos(std::clamp(glm::dot(glm::normalize(a), glm::normalize(b)), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+  return std::acos(std::clamp(glm::dot(glm::normalize(a), glm::normalize(b)), -1.0, 1.0)) * 180.0 /
+         3.14159265358979323846;
 }
 
 // ---- level sets ----
@@ -128,9 +129,8 @@ TEST_P(LevelSetSphere, HitsMatchTheAnalyticSphere) {
       ++misses;
     }
   }
-  std::cout << "[ figures  ] voxel " << voxel << ": " << hits << " hits, " << misses
-            << " misses; max hit error " << max_pos_err << " (" << max_pos_err / voxel
-            << " voxel), max normal error " << max_angle << " deg\n";
+  std::cout << "[ figures  ] voxel " << voxel << ": " << hits << " hits, " << misses << " misses; max hit error "
+            << max_pos_err << " (" << max_pos_err / voxel << " voxel), max normal error " << max_angle << " deg\n";
   EXPECT_GT(hits, 1000);
   EXPECT_GT(misses, 200);
   EXPECT_LT(max_pos_err, 0.25 * voxel);
@@ -188,8 +188,8 @@ TEST(VolumeObject, InstanceMovedByTheTopLevelHitsAlike) {
   auto library = std::make_shared<ObjectLibrary>();
   const ObjectId id = library->add("sphere", object);
   SceneGraph graph(library);
-  const Affine world_from_object =
-      Affine::fromRowMajor3x4(test::rotationScaleTranslation(glm::dvec3(1, 2, 3), 0.7, glm::dvec3(2.0), glm::dvec3(5, -4, 9)));
+  const Affine world_from_object = Affine::fromRowMajor3x4(
+      test::rotationScaleTranslation(glm::dvec3(1, 2, 3), 0.7, glm::dvec3(2.0), glm::dvec3(5, -4, 9)));
   const NodeId node = graph.addInstance(kRootNode, id, world_from_object, "moved");
   graph.commit();
   SceneTracer tracer(graph);
@@ -327,7 +327,8 @@ TEST(VolumeObject, GridTransformsThatGiveNoFiniteBoundsAreRefused) {
   for (const double bad : {std::nan(""), double(INFINITY), 0.0}) {
     SCOPED_TRACE(bad);
     const auto path = patched(bad);
-    expectErrorNaming<Error>([&] { (void)VolumeObject::load(path); }, "patched.vdb: grid \"density\": grid transform is not finite and invertible");
+    expectErrorNaming<Error>([&] { (void)VolumeObject::load(path); },
+                             "patched.vdb: grid \"density\": grid transform is not finite and invertible");
   }
   // In memory: a voxel size that takes the active voxels beyond float range.
   grid->setTransform(openvdb::math::Transform::createLinearTransform(1e38));
@@ -411,13 +412,16 @@ TEST(VolumeObject, LoadsFilesByGridNameOrFirstFloatGrid) {
   EXPECT_EQ(first->gridName(), "density");
   EXPECT_EQ(first->kind(), VolumeKind::Fog);
   EXPECT_EQ(first->name(), "two:density");
-  const auto sphere = VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Auto, .name = {}, .query = {}});
+  const auto sphere =
+      VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Auto, .name = {}, .query = {}});
   EXPECT_EQ(sphere->kind(), VolumeKind::LevelSet);
-  const auto named = VolumeObject::load(dir / "two.vdb", {.grid = "density", .kind = VolumeKind::Auto, .name = "d", .query = {}});
+  const auto named =
+      VolumeObject::load(dir / "two.vdb", {.grid = "density", .kind = VolumeKind::Auto, .name = "d", .query = {}});
   EXPECT_EQ(named->kind(), VolumeKind::Fog);
   EXPECT_EQ(named->name(), "d");
   EXPECT_GT(named->memoryBytes(), 0u);
-  const auto forced = VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Fog, .name = {}, .query = {}});
+  const auto forced =
+      VolumeObject::load(dir / "two.vdb", {.grid = "sphere", .kind = VolumeKind::Fog, .name = {}, .query = {}});
   EXPECT_EQ(forced->role(), ObjectRole::Medium);
 }
 
@@ -430,11 +434,13 @@ TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
   vec->tree().setValue(openvdb::Coord(1, 2, 3), openvdb::Vec3s(1, 0, 0));
   writeGrids(dir / "vec.vdb", {vec});
   expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "vec.vdb"); }, "no float grid");
-  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "vec.vdb", {.grid = "velocity", .kind = {}, .name = {}, .query = {}}); },
-                               "not float");
+  expectErrorNaming<FileError>(
+      [&] { (void)VolumeObject::load(dir / "vec.vdb", {.grid = "velocity", .kind = {}, .name = {}, .query = {}}); },
+      "not float");
   writeGrids(dir / "sphere.vdb", {sphereGrid(0.1)});
-  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "sphere.vdb", {.grid = "smoke", .kind = {}, .name = {}, .query = {}}); },
-                               "no grid named \"smoke\"");
+  expectErrorNaming<FileError>(
+      [&] { (void)VolumeObject::load(dir / "sphere.vdb", {.grid = "smoke", .kind = {}, .name = {}, .query = {}}); },
+      "no grid named \"smoke\"");
   // Truncated at several lengths, and not a VDB file at all: errors, never a crash.
   const auto bytes = test::readBinaryFile(dir / "sphere.vdb");
   // Cuts inside the header and inside the (blosc-compressed) grid data, sanitizer builds included:
@@ -455,7 +461,8 @@ TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
   empty->setName("nothing");
   expectErrorNaming<InvalidArgument>([&] { (void)makeVolumeObject(empty); }, "grid \"nothing\": empty grid");
   writeGrids(dir / "empty.vdb", {empty});
-  expectErrorNaming<InvalidArgument>([&] { (void)VolumeObject::load(dir / "empty.vdb"); }, "empty.vdb: grid \"nothing\": empty");
+  expectErrorNaming<InvalidArgument>([&] { (void)VolumeObject::load(dir / "empty.vdb"); },
+                                     "empty.vdb: grid \"nothing\": empty");
   // A frustum transform.
   auto frustum = fogBox(1.0f, 0, 3);
   frustum->setName("frustum");
@@ -463,7 +470,8 @@ TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
       openvdb::BBoxd(openvdb::Vec3d(0), openvdb::Vec3d(10)), 0.5, 2.0, 0.1));
   expectErrorNaming<InvalidArgument>([&] { (void)makeVolumeObject(frustum); }, "non-linear");
   writeGrids(dir / "frustum.vdb", {frustum});
-  expectErrorNaming<InvalidArgument>([&] { (void)VolumeObject::load(dir / "frustum.vdb"); }, "frustum.vdb: grid \"frustum\"");
+  expectErrorNaming<InvalidArgument>([&] { (void)VolumeObject::load(dir / "frustum.vdb"); },
+                                     "frustum.vdb: grid \"frustum\"");
   expectErrorNaming<InvalidArgument>([&] { (void)makeVolumeObject(nullptr); }, "null grid");
 }
 
@@ -479,10 +487,11 @@ TEST(VolumeObject, DamagedGridDataIsRefusedNeverACrash) {
     std::uint32_t compression;
     bool half;
   };
-  for (const Variant v : {Variant{"blosc", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK, false},
-                          Variant{"zip", openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK, false},
-                          Variant{"none", openvdb::io::COMPRESS_NONE, false},
-                          Variant{"blosc_half", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK, true}}) {
+  for (const Variant v :
+       {Variant{"blosc", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK, false},
+        Variant{"zip", openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK, false},
+        Variant{"none", openvdb::io::COMPRESS_NONE, false},
+        Variant{"blosc_half", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK, true}}) {
     openvdb::FloatGrid::Ptr grid = sphereGrid(0.1);
     grid->setSaveFloatAsHalf(v.half);
     const auto clean = dir / (std::string(v.name) + ".vdb");
@@ -506,8 +515,8 @@ TEST(VolumeObject, DamagedGridDataIsRefusedNeverACrash) {
         if (trial % 2 == 0) {
           b[o] = static_cast<char>(rng());
         } else {  // a plausible length or count: small, negative, huge
-          const std::int64_t values[] = {-static_cast<std::int64_t>(rng() % 100000), static_cast<std::int64_t>(rng() % 100000),
-                                         std::int64_t{1} << 40, -1};
+          const std::int64_t values[] = {-static_cast<std::int64_t>(rng() % 100000),
+                                         static_cast<std::int64_t>(rng() % 100000), std::int64_t{1} << 40, -1};
           std::memcpy(b.data() + o, &values[rng() % 4], 8);
         }
       }
@@ -587,7 +596,8 @@ TEST(VolumeObject, RealFilesLoad) {
     }
     std::cout << "\n";
   }
-  if (loaded == 0) GTEST_SKIP() << "no real volumes under " << dir << " (the shared data folder is absent on this machine)";
+  if (loaded == 0)
+    GTEST_SKIP() << "no real volumes under " << dir << " (the shared data folder is absent on this machine)";
 }
 
 }  // namespace

@@ -168,8 +168,8 @@ TEST_P(FogEstimators, MeanIsTheExactTransmittanceWithinItsConfidenceInterval) {
     EXPECT_LT(std::abs(s.mean - exact), 4.5 * s.stderr_mean + 1e-6)
         << ray << " exact " << exact << " mean " << s.mean << " +- " << s.stderr_mean;
   }
-  std::cout << "[ figures  ] " << c.method << " level " << c.majorant_level << (c.residual ? " residual" : "")
-            << ": " << checked << " of " << tested << " rays attenuated, worst |mean - exact| = " << worst_z
+  std::cout << "[ figures  ] " << c.method << " level " << c.majorant_level << (c.residual ? " residual" : "") << ": "
+            << checked << " of " << tested << " rays attenuated, worst |mean - exact| = " << worst_z
             << " standard errors\n";
   EXPECT_GT(checked, 12);
 }
@@ -259,8 +259,8 @@ TEST(FreeFlight, HomogeneousDistancesFollowTheExponential) {
     }
     // 1.95 / sqrt(n): the KS critical value at significance 0.001.
     EXPECT_LT(d, 1.95 / std::sqrt(double(s.size()))) << "level " << level;
-    std::cout << "[ figures  ] free flight, majorant level " << level << ": KS distance " << d << " ("
-              << s.size() << " collisions), escaped " << escaped << " of " << n << "\n";
+    std::cout << "[ figures  ] free flight, majorant level " << level << ": KS distance " << d << " (" << s.size()
+              << " collisions), escaped " << escaped << " of " << n << "\n";
   }
 }
 
@@ -313,8 +313,8 @@ TEST(FogPicking, FirstVoxelAboveTheThresholdMatchesABruteForceMarch) {
       const double end = t ? double(*t) - dt : span ? span->second : 0.0;
       if (span) {
         for (double s = span->first; s < end; s += dt)
-          ASSERT_LE(density(ray, s), threshold) << ray << " threshold " << threshold << " at t " << s << ", pick "
-                                                << (t ? *t : -1.0f);
+          ASSERT_LE(density(ray, s), threshold)
+              << ray << " threshold " << threshold << " at t " << s << ", pick " << (t ? *t : -1.0f);
       }
       if (!t) continue;
       ++found;
@@ -336,12 +336,13 @@ TEST(TopLevelTransmittance, MultipliesMediaOnceEachAndIsZeroBehindSurfaces) {
   std::vector<InstanceDesc> instances;
   // 12 fog boxes in a row along x (overlapping pairs), rotated and scaled; a sphere further on.
   for (std::uint32_t k = 0; k < 12; ++k) {
-    const Affine m = Affine::fromRowMajor3x4(
-        test::rotationScaleTranslation(glm::dvec3(0.3, 1, 0.2), 0.1 * k, glm::dvec3(0.8 + 0.05 * k), glm::dvec3(1.2 * k, 0, 0)));
+    const Affine m = Affine::fromRowMajor3x4(test::rotationScaleTranslation(
+        glm::dvec3(0.3, 1, 0.2), 0.1 * k, glm::dvec3(0.8 + 0.05 * k), glm::dvec3(1.2 * k, 0, 0)));
     instances.push_back({fog, m, k});
   }
-  instances.push_back({sphere, Affine::fromRowMajor3x4(test::rotationScaleTranslation(glm::dvec3(0, 0, 1), 0.0, glm::dvec3(1.0),
-                                                                                      glm::dvec3(20, 0.6, 0.6))),
+  instances.push_back({sphere,
+                       Affine::fromRowMajor3x4(test::rotationScaleTranslation(glm::dvec3(0, 0, 1), 0.0, glm::dvec3(1.0),
+                                                                              glm::dvec3(20, 0.6, 0.6))),
                        100});
   TopLevel top;
   top.build(instances);
@@ -358,8 +359,8 @@ TEST(TopLevelTransmittance, MultipliesMediaOnceEachAndIsZeroBehindSurfaces) {
     double expected = 1.0;
     for (const InstanceDesc& d : instances) {
       const Affine inv = d.world_from_object.inverse();
-      const Ray ray_os{glm::vec3(inv.point(glm::dvec3(ray.origin))), ray.tnear, glm::vec3(inv.vector(glm::dvec3(ray.dir))),
-                       ray.tfar};
+      const Ray ray_os{glm::vec3(inv.point(glm::dvec3(ray.origin))), ray.tnear,
+                       glm::vec3(inv.vector(glm::dvec3(ray.dir))), ray.tfar};
       expected *= d.object->transmittance(ray_os, ctx);
     }
     const float got = top.transmittance(ray, ctx);
@@ -413,7 +414,11 @@ TEST(VolumeQueries, TwoThreadsGiveTheResultsOfOne) {
   EXPECT_EQ(one.flight, two.flight);
   // And through the top level.
   TopLevel top;
-  const std::vector<InstanceDesc> inst = {{ramp, Affine{}, 0}, {ramp, Affine::fromRowMajor3x4(test::rotationScaleTranslation(glm::dvec3(1, 0, 0), 0.5, glm::dvec3(1.0), glm::dvec3(0.3, 0, 0))), 1}};
+  const std::vector<InstanceDesc> inst = {{ramp, Affine{}, 0},
+                                          {ramp,
+                                           Affine::fromRowMajor3x4(test::rotationScaleTranslation(
+                                               glm::dvec3(1, 0, 0), 0.5, glm::dvec3(1.0), glm::dvec3(0.3, 0, 0))),
+                                           1}};
   top.build(inst);
   std::vector<float> t1(rays.size()), t2(rays.size());
   {
@@ -478,7 +483,9 @@ TEST(VolumeFailureCases, ThinFeaturesAreFoundWhenTheirNegativeRunIsAStepLong) {
   grid->setName("slab");
   const auto slab = makeVolumeObject(grid);
   auto cacc = grid->getConstAccessor();
-  auto field = [&](const glm::dvec3& p) { return openvdb::tools::BoxSampler::sample(cacc, openvdb::Vec3d(p.x, p.y, p.z)); };
+  auto field = [&](const glm::dvec3& p) {
+    return openvdb::tools::BoxSampler::sample(cacc, openvdb::Vec3d(p.x, p.y, p.z));
+  };
   QueryContext ctx;
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -569,7 +576,8 @@ TEST(VolumeFailureCases, InfiniteRaysThatMissTerminateForEveryMethod) {
     const bool aims_at_sphere = glm::length(to_c - glm::dot(to_c, d) * d) < 0.9 && glm::dot(to_c, d) > 0.0;
     Hit hit;
     EXPECT_EQ(sphere->intersect(ray, hit, ctx), aims_at_sphere) << ray;
-    for (const FogMethod m : {FogMethod::Exact, FogMethod::RatioTracking, FogMethod::DeltaTracking, FogMethod::RayMarching}) {
+    for (const FogMethod m :
+         {FogMethod::Exact, FogMethod::RatioTracking, FogMethod::DeltaTracking, FogMethod::RayMarching}) {
       const float t = ramp->transmittance(ray, ctx, m, k);
       EXPECT_GE(t, 0.0f);
       EXPECT_LE(t, 1.0f);
@@ -606,7 +614,7 @@ TEST(VolumeFailureCases, SingleActiveVoxel) {
   EXPECT_NEAR(s.mean, expected, 4.5 * s.stderr_mean + 1e-6);
   const auto pick = v->firstDensityAbove(ray, 1.0f, ctx);
   ASSERT_TRUE(pick);
-  EXPECT_NEAR(*pick, 1.0 + 2.5 * voxel, 1e-5);  // enters the voxel at x = 0.25
+  EXPECT_NEAR(*pick, 1.0 + 2.5 * voxel, 1e-5);         // enters the voxel at x = 0.25
   EXPECT_FALSE(v->firstDensityAbove(ray, 4.0f, ctx));  // strictly above
   // A single negative voxel as a level set (background +3 voxels): the interpolated distance
   // crosses zero 0.5 / 3.5 voxel either side of its centre.
@@ -657,9 +665,11 @@ TEST(VolumeFailureCases, NonFloatGridsAndBadConfigsGiveClearErrors) {
   mask->setName("mask");
   mask->tree().setValueOn(openvdb::Coord(1));
   writeGrids(dir / "other.vdb", {dbl, mask});
-  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "other.vdb"); }, "no float grid (grids: \"density\" (double)");
-  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "other.vdb", {.grid = "density", .kind = {}, .name = {}, .query = {}}); },
-                               "holds double values, not float");
+  expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "other.vdb"); },
+                               "no float grid (grids: \"density\" (double)");
+  expectErrorNaming<FileError>(
+      [&] { (void)VolumeObject::load(dir / "other.vdb", {.grid = "density", .kind = {}, .name = {}, .query = {}}); },
+      "holds double values, not float");
   const auto ramp = makeVolumeObject(rampGrid(8, 1.0f));
   using C = VolumeQueryConfig;
   expectErrorNaming<InvalidArgument>([&] { (void)ramp->withConfig(config([](C& c) { c.samples = 0; })); }, "samples");
@@ -670,7 +680,9 @@ TEST(VolumeFailureCases, NonFloatGridsAndBadConfigsGiveClearErrors) {
   expectErrorNaming<InvalidArgument>([&] { (void)ramp->withConfig(config([](C& c) { c.levelset_step = 2.0; })); },
                                      "levelset_step");
   expectErrorNaming<InvalidArgument>(
-      [&] { (void)makeVolumeObject(rampGrid(8, 1.0f), VolumeKind::Fog, "r", config([](C& c) { c.refine_steps = -1; })); },
+      [&] {
+        (void)makeVolumeObject(rampGrid(8, 1.0f), VolumeKind::Fog, "r", config([](C& c) { c.refine_steps = -1; }));
+      },
       "refine_steps");
 }
 
@@ -682,7 +694,9 @@ TEST(VolumeFailureCases, TruncatedAndDamagedFilesAreRefusedBeforeOpenVdbReadsThe
   writeGrids(dir / "two.vdb", {sphereLevelSet(1.0f, 0.05f), fog});
   const auto bytes = test::readBinaryFile(dir / "two.vdb");
   ASSERT_GT(bytes.size(), 10000u);
-  ASSERT_EQ(VolumeObject::load(dir / "two.vdb", {.grid = "box", .kind = {}, .name = {}, .query = {}})->activeVoxelCount(), 41u * 41u * 41u);
+  ASSERT_EQ(
+      VolumeObject::load(dir / "two.vdb", {.grid = "box", .kind = {}, .name = {}, .query = {}})->activeVoxelCount(),
+      41u * 41u * 41u);
   // Every 1/40 of the file, and a few bytes before the end.
   std::vector<std::size_t> cuts;
   for (int k = 0; k < 40; ++k) cuts.push_back(bytes.size() * k / 40);
@@ -690,8 +704,9 @@ TEST(VolumeFailureCases, TruncatedAndDamagedFilesAreRefusedBeforeOpenVdbReadsThe
   for (const std::size_t n : cuts) {
     test::writeBinaryFile(dir / "cut.vdb", std::vector<char>(bytes.begin(), bytes.begin() + std::ptrdiff_t(n)));
     for (const char* grid : {"", "box", "sphere"})
-      expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "cut.vdb", {.grid = grid, .kind = {}, .name = {}, .query = {}}); },
-                                   "cut.vdb");
+      expectErrorNaming<FileError>(
+          [&] { (void)VolumeObject::load(dir / "cut.vdb", {.grid = grid, .kind = {}, .name = {}, .query = {}}); },
+          "cut.vdb");
   }
   // The first grid descriptor: after the 57-byte header, the file metadata (none: a count of 0)
   // and the grid count; name, type and instance parent strings, then grid, block and end offsets.
@@ -726,12 +741,15 @@ TEST(VolumeFailureCases, TruncatedAndDamagedFilesAreRefusedBeforeOpenVdbReadsThe
 TEST(VolumeFailureCases, RealVolumesAnswerEveryMethod) {
   const std::filesystem::path dir = test::sharedDataDir() / "volumes";
   const auto file = dir / "cortex_smoke.vdb";
-  if (!std::filesystem::exists(file)) GTEST_SKIP() << "no " << file << " (the shared data folder is absent on this machine)";
+  if (!std::filesystem::exists(file))
+    GTEST_SKIP() << "no " << file << " (the shared data folder is absent on this machine)";
   // Lower-node majorants: ratio tracking with tight (leaf) majorants has heavy-tailed estimates
   // on this smoke (factors near 0), whose sample variance is unreliable at a few thousand samples;
   // the looser majorant gives many factors near 1 and a well-behaved interval.
-  const auto smoke = VolumeObject::load(file, {.grid = {}, .kind = VolumeKind::Fog, .name = {},
-                                               .query = config([](VolumeQueryConfig& c) { c.majorant_level = 1; })});
+  const auto smoke = VolumeObject::load(
+      file, {.grid = {}, .kind = VolumeKind::Fog, .name = {}, .query = config([](VolumeQueryConfig& c) {
+                                                                c.majorant_level = 1;
+                                                              })});
   QueryContext ctx;
   int attenuated = 0;
   for (const Ray& ray : raysThrough(smoke->bounds(), 20, 6)) {

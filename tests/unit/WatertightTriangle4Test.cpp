@@ -175,7 +175,7 @@ TEST(WatertightTriangle4, AxisParallelRaysAndFlatTrianglesEqualTheScalarTest) {
     ray.dir = glm::vec3(zeros[(i / 3) & 1], zeros[(i / 6) & 1], zeros[(i / 12) & 1]);
     ray.dir[axis] = (i / 24) & 1 ? 1.0f : -1.0f;
     if (i % 5 == 0) ray.dir[(axis + 1) % 3] = 0.5f * u(rng);  // one more non-zero component
-    if (i % 11 == 0) ray.origin[(axis + 2) % 3] = 0.25f;     // in the flat triangles' plane
+    if (i % 11 == 0) ray.origin[(axis + 2) % 3] = 0.25f;      // in the flat triangles' plane
     hits += compareRay(ray, tris, std::numeric_limits<float>::infinity());
     if (::testing::Test::HasFailure()) return;
   }

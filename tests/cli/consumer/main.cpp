@@ -22,16 +22,16 @@
 int main() {
   const float positions[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
   const std::uint32_t indices[] = {0, 1, 2, 0, 2, 3};
-  auto mesh = std::make_shared<const duplex::TriangleMesh>(duplex::TriangleMesh::fromArrays(positions, indices, "quad"));
+  auto mesh =
+      std::make_shared<const duplex::TriangleMesh>(duplex::TriangleMesh::fromArrays(positions, indices, "quad"));
 
   auto library = std::make_shared<duplex::ObjectLibrary>();
   const duplex::ObjectId quad = library->add("quad", std::make_shared<const duplex::MeshObject>(mesh));
   duplex::SceneGraph graph(library);
   (void)graph.addInstance(duplex::kRootNode, quad, duplex::Affine::identity(), "plain");
   // Object (x, y, z) -> world (2x + 3, 2y, 2z - 1).
-  const duplex::NodeId scaled =
-      graph.addInstance(duplex::kRootNode, quad, duplex::Affine::fromRowMajor3x4({2, 0, 0, 3, 0, 2, 0, 0, 0, 0, 2, -1}),
-                        "scaled");
+  const duplex::NodeId scaled = graph.addInstance(
+      duplex::kRootNode, quad, duplex::Affine::fromRowMajor3x4({2, 0, 0, 3, 0, 2, 0, 0, 0, 0, 2, -1}), "scaled");
   (void)graph.commit();
 
   const duplex::SceneTracer tracer(graph);
@@ -41,8 +41,8 @@ int main() {
   duplex::QueryContext ctx;
   const duplex::Hit hit = tracer.intersect(ray, ctx);
 
-  const bool ok = hit.valid() && hit.instance_id == scaled && hit.prim_id == 0 && hit.t == 2.0f && hit.u == 0.5f &&
-                  hit.v == 0.25f;
+  const bool ok =
+      hit.valid() && hit.instance_id == scaled && hit.prim_id == 0 && hit.t == 2.0f && hit.u == 0.5f && hit.v == 0.25f;
   std::cout << (ok ? "ok: " : "wrong hit: ") << hit << " (expected t=2, u=0.5, v=0.25, prim=0, inst=" << scaled
             << ")\n";
   // The scene-file readers are there too (ObjectTypeRegistry's readers take nlohmann::json specs).

@@ -13,6 +13,7 @@ namespace duplex {
 /// Writes `bytes` to `path` through "<path>.tmp". Throws FileError naming `path` and `what` (e.g.
 /// "bottom-level structure file") when the file cannot be written or replaced; the temporary file
 /// is removed then. Thread-safe for distinct paths.
-void writeFileAtomically(const std::filesystem::path& path, std::span<const unsigned char> bytes, std::string_view what);
+void writeFileAtomically(const std::filesystem::path& path, std::span<const unsigned char> bytes,
+                         std::string_view what);
 
 }  // namespace duplex

@@ -51,8 +51,7 @@ struct Box {
     return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
   }
   [[nodiscard]] bool overlaps(const Box& b) const {
-    return lo.x <= b.hi.x && b.lo.x <= hi.x && lo.y <= b.hi.y && b.lo.y <= hi.y && lo.z <= b.hi.z &&
-           b.lo.z <= hi.z;
+    return lo.x <= b.hi.x && b.lo.x <= hi.x && lo.y <= b.hi.y && b.lo.y <= hi.y && lo.z <= b.hi.z && b.lo.z <= hi.z;
   }
   bool operator==(const Box&) const = default;
 };
@@ -63,8 +62,8 @@ struct Box {
 }
 
 inline std::ostream& operator<<(std::ostream& os, const Box& b) {
-  return os << "Box{(" << b.lo.x << ", " << b.lo.y << ", " << b.lo.z << ") - (" << b.hi.x << ", " << b.hi.y
-            << ", " << b.hi.z << ")}";
+  return os << "Box{(" << b.lo.x << ", " << b.lo.y << ", " << b.lo.z << ") - (" << b.hi.x << ", " << b.hi.y << ", "
+            << b.hi.z << ")}";
 }
 
 }  // namespace duplex

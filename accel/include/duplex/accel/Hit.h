@@ -32,8 +32,8 @@ struct Hit {
 
 inline std::ostream& operator<<(std::ostream& os, const Hit& h) {
   if (!h.valid()) return os << "Hit{miss}";
-  return os << "Hit{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", prim=" << h.prim_id
-            << ", inst=" << h.instance_id << "}";
+  return os << "Hit{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", prim=" << h.prim_id << ", inst=" << h.instance_id
+            << "}";
 }
 
 }  // namespace duplex

@@ -19,15 +19,15 @@ struct KdTreeStats {
   std::uint32_t empty_leaves = 0;
   std::uint32_t references = 0;  ///< sum of leaf sizes
   std::uint32_t max_depth = 0;
-  double avg_leaf_size = 0.0;    ///< references / non-empty leaves
-  double sah_cost = 0.0;         ///< expected cost of a ray through the root box (build costs)
-  std::size_t bytes = 0;         ///< nodes + index list
+  double avg_leaf_size = 0.0;  ///< references / non-empty leaves
+  double sah_cost = 0.0;       ///< expected cost of a ray through the root box (build costs)
+  std::size_t bytes = 0;       ///< nodes + index list
 };
 
 /// Immutable after build; safe to traverse from any number of threads.
 struct KdTree {
-  Box bounds;                            ///< box of all primitives, in the primitives' space
-  std::vector<KdNode> nodes;             ///< depth-first; node 0 is the root
+  Box bounds;                               ///< box of all primitives, in the primitives' space
+  std::vector<KdNode> nodes;                ///< depth-first; node 0 is the root
   std::vector<std::uint32_t> prim_indices;  ///< leaf ranges index into this list
 
   [[nodiscard]] bool empty() const { return nodes.empty(); }

@@ -23,7 +23,8 @@ using KdClipFunction = std::function<Box(std::uint32_t prim, const Box& box)>;
 /// the plane at `pos` on `axis`: `lower` within box's half below the plane, `upper` above; either
 /// may be empty. The same contract as two KdClipFunction calls on the halves, in one call (a
 /// triangle is clipped once: splitTriangleInBox). Called from several threads at once.
-using KdSplitFunction = std::function<void(std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper)>;
+using KdSplitFunction =
+    std::function<void(std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper)>;
 
 /// Builds a kd-tree over `prim_bounds.size()` primitives. Primitives with empty or non-finite
 /// bounds are left out (the caller filters degenerate geometry before). With no usable primitive
@@ -53,6 +54,7 @@ using KdSplitFunction = std::function<void(std::uint32_t prim, const Box& box, i
 /// tree that a subtree replaces): the space between them is cut off where the SAH finds it worth
 /// it, and the tree's SAH cost is that of a ray through `root_bounds`. Throws InvalidArgument when
 /// `root_bounds` is not finite or does not contain every box. No usable box: an empty tree.
-[[nodiscard]] KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config, const Box& root_bounds);
+[[nodiscard]] KdTree buildKdTreeOverBoxes(std::span<const Box> boxes, const KdBuildConfig& config,
+                                          const Box& root_bounds);
 
 }  // namespace duplex

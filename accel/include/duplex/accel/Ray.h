@@ -44,8 +44,8 @@ struct RayD {
 }
 
 inline std::ostream& operator<<(std::ostream& os, const Ray& r) {
-  return os << "Ray{o=(" << r.origin.x << ", " << r.origin.y << ", " << r.origin.z << "), d=(" << r.dir.x
-            << ", " << r.dir.y << ", " << r.dir.z << "), t=[" << r.tnear << ", " << r.tfar << "]}";
+  return os << "Ray{o=(" << r.origin.x << ", " << r.origin.y << ", " << r.origin.z << "), d=(" << r.dir.x << ", "
+            << r.dir.y << ", " << r.dir.z << "), t=[" << r.tnear << ", " << r.tfar << "]}";
 }
 
 }  // namespace duplex

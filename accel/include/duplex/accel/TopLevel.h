@@ -40,7 +40,7 @@ struct WorldRay;  // the world ray in float and double (src/TopLevelState.h)
 struct InstanceDesc {
   std::shared_ptr<const Object> object;
   Affine world_from_object;
-  std::uint32_t id = 0;           ///< the caller's id, reported in Hit::instance_id; unique
+  std::uint32_t id = 0;              ///< the caller's id, reported in Hit::instance_id; unique
   std::uint32_t mask = 0xFFFFFFFFu;  ///< user bits; a query sees the instance when (mask & query mask) != 0
 };
 
@@ -107,12 +107,12 @@ struct TopLevelConfig {
 struct TopLevelStats {
   std::size_t instances = 0;
   KdTreeStats tree;
-  double sah_cost = 0.0;            ///< current
-  double fresh_sah_cost = 0.0;      ///< the estimate of a fresh build's cost it is compared with
+  double sah_cost = 0.0;        ///< current
+  double fresh_sah_cost = 0.0;  ///< the estimate of a fresh build's cost it is compared with
   std::uint64_t commits = 0;
   std::uint64_t full_rebuilds = 0;
   std::uint64_t subtree_rebuilds = 0;
-  std::size_t last_commit_edits = 0;   ///< instances set or removed by the last commit
+  std::size_t last_commit_edits = 0;  ///< instances set or removed by the last commit
   /// Nodes of tree().nodes that no traversal reaches: subtrees that a local rebuild replaced,
   /// dropped when the tree is compacted (TopLevelRefine.cpp).
   std::size_t garbage_nodes = 0;
@@ -184,7 +184,8 @@ class TopLevel {
   void intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,
                     std::uint32_t mask = 0xFFFFFFFFu) const;
   /// The same for a double-precision world ray (object-space rays computed in double).
-  void intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  void intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,
+                    std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Fraction of light that passes along [tnear, tfar] of a world-space ray, in [0, 1]: 0 when a
   /// blocking instance (role Surface) is hit within the segment, else the product of the
   /// transmittances of every medium instance (role Medium) the segment crosses, each counted once

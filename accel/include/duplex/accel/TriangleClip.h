@@ -18,7 +18,7 @@ namespace duplex {
 /// `lower` bounds its part on the closed side below the plane, `upper` the part above, each as
 /// clipTriangleToBox would give for the box's two halves (rounded outward, limited to the half),
 /// from one clip instead of two. Either is empty when the triangle has no point on that side.
-void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, int axis,
-                        float pos, Box& lower, Box& upper);
+void splitTriangleInBox(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Box& box, int axis, float pos,
+                        Box& lower, Box& upper);
 
 }  // namespace duplex

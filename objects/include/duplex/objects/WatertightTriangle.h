@@ -18,8 +18,8 @@ namespace duplex {
 /// Per-ray constants of the watertight test (computed once per ray and space).
 struct WatertightRay {
   float origin[3];
-  int kx, ky, kz;       // axis permutation: kz = dominant direction axis
-  float sx, sy, sz;     // shear constants
+  int kx, ky, kz;    // axis permutation: kz = dominant direction axis
+  float sx, sy, sz;  // shear constants
   float tnear;
 
   /// Uninitialised; for code that computes the constants itself (MeshObject's per-ray setup).
@@ -101,9 +101,8 @@ inline decltype(auto) dispatchPermutation(const WatertightRay& ray, F&& f) {
 /// Same test with the permutation chosen at run time (for callers outside hot loops).
 inline bool intersectWatertight(const WatertightRay& ray, const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                                 float t_max, float& t, float& u, float& v) {
-  return dispatchPermutation(ray, [&]<int KX, int KY, int KZ>() {
-    return intersectWatertight<KX, KY, KZ>(ray, a, b, c, t_max, t, u, v);
-  });
+  return dispatchPermutation(
+      ray, [&]<int KX, int KY, int KZ>() { return intersectWatertight<KX, KY, KZ>(ray, a, b, c, t_max, t, u, v); });
 }
 
 }  // namespace duplex

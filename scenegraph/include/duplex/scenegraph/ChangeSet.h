@@ -11,7 +11,8 @@
 namespace duplex {
 
 /// Instance nodes only (groups and transform nodes never reach the tracer); each list sorted by id.
-/// appeared and disappeared share no id with any other list. The lists describe the net effect of the whole batch, as seen by a tracer:
+/// appeared and disappeared share no id with any other list. The lists describe the net effect of the whole batch, as
+/// seen by a tracer:
 /// - appeared: instances that are visible now and were not at the last commit (added, or shown, or
 ///   moved under a visible parent from a hidden one);
 /// - disappeared: instances visible at the last commit that are not now (removed or hidden);

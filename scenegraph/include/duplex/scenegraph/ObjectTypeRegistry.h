@@ -101,7 +101,8 @@ struct ObjectSpecContext {
   /// A number or an array of `n` numbers (a number s means n copies of s), each > 0.
   [[nodiscard]] std::vector<double> positiveSizes(const nlohmann::json& v, const std::string& at, std::size_t n) const;
   /// In strict mode, fails on the first key of `obj` not in `allowed`.
-  void onlyKeys(const nlohmann::json& obj, const std::string& at, std::initializer_list<std::string_view> allowed) const;
+  void onlyKeys(const nlohmann::json& obj, const std::string& at,
+                std::initializer_list<std::string_view> allowed) const;
 };
 
 /// A reader's answer: the object, built now, or a factory for ObjectLibrary::addDeferred.

@@ -26,28 +26,28 @@ namespace duplex {
 /// A node of the file's tree, or of an "add" edit, as read (objects resolved to library ids).
 struct SceneNodeSpec {
   NodeKind kind = NodeKind::Group;
-  std::string name;                      ///< may be empty: the graph names it "<kind><id>"
-  Affine local;                          ///< parent_from_local (transform nodes and instances)
+  std::string name;  ///< may be empty: the graph names it "<kind><id>"
+  Affine local;      ///< parent_from_local (transform nodes and instances)
   bool visible = true;
-  ObjectId object = kInvalidObject;      ///< instances
-  std::uint32_t mask = 0xFFFFFFFFu;      ///< instances
-  std::vector<SceneNodeSpec> children;   ///< groups and transform nodes
-  std::string pointer;                   ///< JSON pointer, for messages
+  ObjectId object = kInvalidObject;     ///< instances
+  std::uint32_t mask = 0xFFFFFFFFu;     ///< instances
+  std::vector<SceneNodeSpec> children;  ///< groups and transform nodes
+  std::string pointer;                  ///< JSON pointer, for messages
 };
 
 enum class SceneEditKind : std::uint8_t { SetTransform, Add, Remove, SetVisible, SetObject, SetMask };
 
 /// One timed edit of the file's "edits" list; applied (by the demo, a player) with applyEdit().
 struct SceneEdit {
-  double time = 0.0;                   ///< seconds from the start of the animation, >= 0
+  double time = 0.0;  ///< seconds from the start of the animation, >= 0
   SceneEditKind kind = SceneEditKind::SetTransform;
-  std::string node;                    ///< path of the edited node; for Add, of the parent ("/" = root)
-  Affine transform;                    ///< SetTransform: the node's new local transform
-  bool visible = true;                 ///< SetVisible
-  ObjectId object = kInvalidObject;    ///< SetObject
-  std::uint32_t mask = 0xFFFFFFFFu;    ///< SetMask
+  std::string node;                            ///< path of the edited node; for Add, of the parent ("/" = root)
+  Affine transform;                            ///< SetTransform: the node's new local transform
+  bool visible = true;                         ///< SetVisible
+  ObjectId object = kInvalidObject;            ///< SetObject
+  std::uint32_t mask = 0xFFFFFFFFu;            ///< SetMask
   std::shared_ptr<const SceneNodeSpec> added;  ///< Add: the subtree to add
-  std::string pointer;                 ///< "/edits/3", for messages
+  std::string pointer;                         ///< "/edits/3", for messages
 };
 
 /// Figures of a load (milliseconds of wall time).
@@ -62,11 +62,11 @@ struct SceneLoadFigures {
   std::size_t degenerate_triangles = 0;
   std::size_t complex_edge_warnings = 0;
   std::size_t instances = 0;
-  std::size_t nodes = 0;              ///< graph nodes, root included
+  std::size_t nodes = 0;  ///< graph nodes, root included
 };
 
 struct SceneDocumentOptions {
-  KdBuildConfig build;                         ///< bottom-level build parameters
+  KdBuildConfig build;                           ///< bottom-level build parameters
   const ObjectTypeRegistry* registry = nullptr;  ///< nullptr: ObjectTypeRegistry::builtin()
   /// Honour "structure" keys (prepared bottom-level structures); false builds every object.
   bool use_structures = true;
@@ -76,14 +76,14 @@ struct SceneDocumentOptions {
 /// library, and what the file says beyond the graph.
 struct SceneDocument {
   std::filesystem::path file;
-  std::string format;                    ///< "scene-json-v1" or "duplex-scene-v1"
+  std::string format;  ///< "scene-json-v1" or "duplex-scene-v1"
   std::unique_ptr<SceneGraph> graph;
-  std::vector<ObjectId> objects;         ///< the "objects" entries, in file order
+  std::vector<ObjectId> objects;  ///< the "objects" entries, in file order
   /// Instance nodes in file order (depth first in the own format). For scene-json-v1 the position is
   /// the instance id of the hit file: instances[id] is its node. v1 instances are children of the
   /// root named "instance<k>".
   std::vector<NodeId> instances;
-  std::vector<SceneEdit> edits;          ///< sorted by time (stable: equal times keep file order)
+  std::vector<SceneEdit> edits;  ///< sorted by time (stable: equal times keep file order)
   SceneLoadFigures figures;
   /// The parsed file, for the layers above the graph: the top-level "lights" and "sensors" keys and
   /// the objects' "material" keys are read by duplex::sensors (SensorScene), not here.
@@ -95,7 +95,8 @@ struct SceneDocument {
 /// the same source built once, before the instances are added; then the graph is committed. Throws
 /// FileError naming the file and the JSON pointer of the first problem (objects: the first in file
 /// order whose build failed).
-[[nodiscard]] SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDocumentOptions& options = {});
+[[nodiscard]] SceneDocument loadSceneDocument(const std::filesystem::path& path,
+                                              const SceneDocumentOptions& options = {});
 
 /// Applies `edit` to doc.graph (without committing). Returns the nodes an Add created (its subtree,
 /// depth first), else nothing. Throws FileError naming doc.file and edit.pointer when the node path

@@ -37,12 +37,12 @@ enum class NodeKind : std::uint8_t { Group, Transform, Instance };
 struct NodeInfo {
   NodeId id = kInvalidNode;
   NodeKind kind = NodeKind::Group;
-  NodeId parent = kInvalidNode;  ///< kInvalidNode for the root
-  std::string_view name;          ///< valid until the next edit of the graph
-  Affine local;                  ///< parent_from_local (identity for groups)
-  bool visible = true;           ///< the node's own flag; hidden if it or an ancestor is hidden
-  ObjectId object = kInvalidObject;   ///< instances only
-  std::uint32_t mask = 0xFFFFFFFFu;   ///< instances only
+  NodeId parent = kInvalidNode;      ///< kInvalidNode for the root
+  std::string_view name;             ///< valid until the next edit of the graph
+  Affine local;                      ///< parent_from_local (identity for groups)
+  bool visible = true;               ///< the node's own flag; hidden if it or an ancestor is hidden
+  ObjectId object = kInvalidObject;  ///< instances only
+  std::uint32_t mask = 0xFFFFFFFFu;  ///< instances only
 };
 
 class SceneGraph {
@@ -69,8 +69,8 @@ class SceneGraph {
   NodeId addTransform(NodeId parent, const Affine& local, std::string name = {});
   /// Instance of library object `object` with its own local transform. The object is built now if it
   /// was deferred (a failed build rejects the edit).
-  NodeId addInstance(NodeId parent, ObjectId object, const Affine& local = Affine::identity(),
-                     std::string name = {}, std::uint32_t mask = 0xFFFFFFFFu);
+  NodeId addInstance(NodeId parent, ObjectId object, const Affine& local = Affine::identity(), std::string name = {},
+                     std::uint32_t mask = 0xFFFFFFFFu);
   /// Removes `node` and its whole subtree (not the root).
   void remove(NodeId node);
   /// Moves `node` (with its subtree) under `new_parent`, keeping its local transform (so its world

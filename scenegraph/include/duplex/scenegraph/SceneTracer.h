@@ -27,7 +27,7 @@ namespace duplex {
 
 /// A full hit, computed once for the winner (two-phase hits).
 struct SceneHit {
-  Hit hit;                    ///< t (units of the world ray's direction), u, v, prim_id, instance_id = node id, world ng
+  Hit hit;  ///< t (units of the world ray's direction), u, v, prim_id, instance_id = node id, world ng
   NodeId instance = kInvalidNode;
   glm::dvec3 position_ws{0.0};  ///< recomputed in double from the object-space hit
   glm::dvec3 normal_ws{0.0};    ///< unit geometric normal, world space
@@ -59,12 +59,14 @@ class SceneTracer {
   /// the product of the transmittances of the media (fog volumes) it crosses (TopLevel::transmittance).
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Every hit along the ray within [tnear, tfar], sorted by t (sensors included when the mask selects them).
-  [[nodiscard]] std::vector<Hit> intersectAll(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  [[nodiscard]] std::vector<Hit> intersectAll(const Ray& ray_ws, QueryContext& ctx,
+                                              std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Closest hit with position, normal and path; the ray is transformed in double. The node path is
   /// read from the graph: call it (and pick()) from the thread that edits the graph, or while no
   /// edit or commit runs; intersect(), occluded(), intersectAll() and the batch queries have no
   /// such restriction.
-  [[nodiscard]] SceneHit intersectDetailed(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  [[nodiscard]] SceneHit intersectDetailed(const RayD& ray_ws, QueryContext& ctx,
+                                           std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Batch versions, in parallel over the rays with TBB (one QueryContext per task). `hits` /
   /// `occluded` / `transmittance` must have the size of `rays` (else InvalidArgument, nothing

@@ -15,7 +15,8 @@ namespace duplex {
 
 class CounterRng {
  public:
-  CounterRng(std::uint64_t seed, std::uint64_t index) : key_(mix(mix(seed ^ 0x6A09E667F3BCC909ull) + index * kGolden)) {}
+  CounterRng(std::uint64_t seed, std::uint64_t index)
+      : key_(mix(mix(seed ^ 0x6A09E667F3BCC909ull) + index * kGolden)) {}
 
   /// The next 64 random bits.
   std::uint64_t next() { return mix(key_ + (++counter_) * kGolden); }

@@ -92,8 +92,8 @@ class IesProfile {
   int lamps_ = 1;
   std::vector<double> vertical_deg_, horizontal_deg_;
   std::vector<double> vertical_rad_, horizontal_rad_;
-  std::vector<double> candela_;     // [h * nv + v], unfolded, scaled
-  std::vector<double> cell_cdf_;    // cumulative cell integrals, cell = h * (nv - 1) + v
+  std::vector<double> candela_;   // [h * nv + v], unfolded, scaled
+  std::vector<double> cell_cdf_;  // cumulative cell integrals, cell = h * (nv - 1) + v
   double total_ = 0.0;
 };
 

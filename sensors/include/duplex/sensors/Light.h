@@ -30,17 +30,17 @@ enum class LightType : std::uint8_t {
 /// One light. Only the fields of its type are used; validate() checks them.
 struct Light {
   LightType type = LightType::Point;
-  std::string name;             ///< for messages (the scene file's "name", or "lights/<k>")
-  double power_w = 1.0;         ///< total emitted power, > 0
-  glm::dvec3 position{0.0};     ///< Point, Spot; Directional: the centre of its disk
+  std::string name;                      ///< for messages (the scene file's "name", or "lights/<k>")
+  double power_w = 1.0;                  ///< total emitted power, > 0
+  glm::dvec3 position{0.0};              ///< Point, Spot; Directional: the centre of its disk
   glm::dvec3 direction{0.0, 0.0, -1.0};  ///< Spot (cone axis), Directional (ray direction); any length > 0
-  double cone_angle = 0.5;      ///< Spot: half-angle in radians, in (0, pi]
-  double radius = 1.0;          ///< Directional: disk radius, > 0
-  double width = 1.0;           ///< Area: along local x, > 0
-  double height = 1.0;          ///< Area: along local y, > 0
-  Affine world_from_light;      ///< Area: placement of the local rectangle; Goniometric: its rotation orients the luminaire
+  double cone_angle = 0.5;               ///< Spot: half-angle in radians, in (0, pi]
+  double radius = 1.0;                   ///< Directional: disk radius, > 0
+  double width = 1.0;                    ///< Area: along local x, > 0
+  double height = 1.0;                   ///< Area: along local y, > 0
+  Affine world_from_light;  ///< Area: placement of the local rectangle; Goniometric: its rotation orients the luminaire
   std::shared_ptr<const IesProfile> profile;  ///< Goniometric: the intensity table (its shape; power_w scales it)
-  bool two_sided = false;       ///< Area: also emits towards -z (half the power each side)
+  bool two_sided = false;                     ///< Area: also emits towards -z (half the power each side)
   /// Spectral scenes: relative power per band (>= 0, not all 0; normalised by the scene); empty:
   /// the power is shared equally among the bands. Its length must be the scene's band count.
   std::vector<double> spectrum;

@@ -35,7 +35,8 @@ struct Material {
 
 inline std::ostream& operator<<(std::ostream& os, const Material& m) {
   static const char* names[] = {"absorber", "lambertian", "mirror", "dielectric", "medium"};
-  os << "Material{" << names[static_cast<int>(m.type)] << ", rho=" << m.reflectance << ", ior=" << m.ior << ", g=" << m.g;
+  os << "Material{" << names[static_cast<int>(m.type)] << ", rho=" << m.reflectance << ", ior=" << m.ior
+     << ", g=" << m.g;
   if (!m.band_reflectance.empty()) {
     os << ", bands=[";
     for (std::size_t k = 0; k < m.band_reflectance.size(); ++k) os << (k ? ", " : "") << m.band_reflectance[k];

@@ -26,12 +26,12 @@ struct SensorResult {
   std::uint32_t nx = 0, ny = 0;
   bool two_sided = true;
   /// Row-major nx * ny arrays, bin (0, 0) at local (-w/2, -h/2), x fastest.
-  std::vector<double> flux_w;             ///< W
-  std::vector<double> flux_stderr_w;      ///< standard error of flux_w
-  std::vector<double> irradiance_w_m2;    ///< W per square scene unit (0 for bins of zero area)
-  std::vector<double> stderr_w_m2;        ///< standard error of irradiance_w_m2
-  std::vector<double> bin_area_m2;        ///< world area of each bin
-  std::vector<std::uint64_t> ray_count;   ///< emitted rays whose path crossed the bin
+  std::vector<double> flux_w;            ///< W
+  std::vector<double> flux_stderr_w;     ///< standard error of flux_w
+  std::vector<double> irradiance_w_m2;   ///< W per square scene unit (0 for bins of zero area)
+  std::vector<double> stderr_w_m2;       ///< standard error of irradiance_w_m2
+  std::vector<double> bin_area_m2;       ///< world area of each bin
+  std::vector<std::uint64_t> ray_count;  ///< emitted rays whose path crossed the bin
   double total_flux_w = 0.0;
   double total_flux_stderr_w = 0.0;
   double relative_stderr = 0.0;  ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
@@ -72,9 +72,9 @@ struct SensorRunResults {
   std::uint64_t rays = 0;  ///< emitted rays
   std::uint64_t seed = 0;
   EnergyBalance energy;
-  std::vector<std::string> bands;       ///< the scene's band names (empty: one radiometric band)
-  std::vector<double> band_emitted_w;   ///< per band: the lights' power in it (exact, from their spectra)
-  std::vector<SensorResult> sensors;  ///< in the scene's sensor order
+  std::vector<std::string> bands;      ///< the scene's band names (empty: one radiometric band)
+  std::vector<double> band_emitted_w;  ///< per band: the lights' power in it (exact, from their spectra)
+  std::vector<SensorResult> sensors;   ///< in the scene's sensor order
 };
 
 }  // namespace duplex

@@ -32,8 +32,8 @@ namespace duplex {
 
 struct SensorRunConfig {
   std::uint64_t seed = 1;
-  unsigned threads = 0;             ///< worker threads; 0 = all hardware threads
-  std::uint32_t max_depth = 32;     ///< surface interactions after which a path is cut (depth_limited_w)
+  unsigned threads = 0;          ///< worker threads; 0 = all hardware threads
+  std::uint32_t max_depth = 32;  ///< surface interactions after which a path is cut (depth_limited_w)
   /// Scattering fogs: collisions after which a path is cut (depth_limited_w); 1 keeps single
   /// scattering only.
   std::uint32_t max_scatterings = 100000;
@@ -44,7 +44,7 @@ struct SensorRunConfig {
   /// Rays between progress reports and stop-rule checks; the stop point depends on it (not on the
   /// thread count).
   std::uint64_t batch_rays = 1u << 16;
-  CrossingQuery query;              ///< which instances block, record, attenuate
+  CrossingQuery query;  ///< which instances block, record, attenuate
   /// Benchmark baseline: trace the same paths with the plain closest-hit query, record nothing.
   /// Paths are identical when the scene has no media (sensors never change a path).
   bool closest_hit_only = false;
@@ -73,8 +73,8 @@ enum class SensorRunStatus : std::uint8_t { Completed, TargetReached, Cancelled 
 
 /// Counters of the traced segments (for benchmarks).
 struct SensorRunCounters {
-  std::uint64_t segments = 0;   ///< crossing (or closest-hit) queries
-  std::uint64_t crossings = 0;  ///< sensor crossings recorded
+  std::uint64_t segments = 0;     ///< crossing (or closest-hit) queries
+  std::uint64_t crossings = 0;    ///< sensor crossings recorded
   std::uint64_t scatterings = 0;  ///< collisions in scattering fogs
 };
 

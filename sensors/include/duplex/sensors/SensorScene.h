@@ -96,9 +96,7 @@ class SensorScene {
   /// Total number of angular bins over all sensors.
   [[nodiscard]] std::uint32_t angleBinCount() const { return angle_bin_count_; }
   /// Sensor index of instance `node` (a hit's instance_id), or -1 when it is not a sensor.
-  [[nodiscard]] int sensorOf(NodeId node) const {
-    return node < sensor_of_node_.size() ? sensor_of_node_[node] : -1;
-  }
+  [[nodiscard]] int sensorOf(NodeId node) const { return node < sensor_of_node_.size() ? sensor_of_node_[node] : -1; }
   /// Material of instance `node` (absorber when none was given).
   [[nodiscard]] const Material& materialOf(NodeId node) const {
     return node < material_of_node_.size() ? material_of_node_[node] : kAbsorber;
@@ -106,7 +104,9 @@ class SensorScene {
   /// Spectral band names (empty: a single radiometric band).
   [[nodiscard]] const std::vector<std::string>& bands() const { return bands_; }
   /// Number of bands transported (1 when the scene has no "bands").
-  [[nodiscard]] std::uint32_t bandCount() const { return bands_.empty() ? 1u : static_cast<std::uint32_t>(bands_.size()); }
+  [[nodiscard]] std::uint32_t bandCount() const {
+    return bands_.empty() ? 1u : static_cast<std::uint32_t>(bands_.size());
+  }
   /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1); `light`
   /// must be < lights().size() (not checked: the run's hot loop).
   [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return band_cdf_[light]; }

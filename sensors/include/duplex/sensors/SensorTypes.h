@@ -7,8 +7,8 @@
 ///                          "bins": [nx, ny] | n, "two_sided": true | false,
 ///                          "angular_bins": n_theta | [n_theta, n_phi]}}
 /// Defaults: shape "rectangle", bins [1, 1], two_sided true, no angular bins (n_phi default 1);
-/// "size" is required (a disk's or sphere's size is its diameter: a number or [d, d]). The same keys (plus "name" and "transform") make an entry of the
-/// top-level "sensors" list (SensorScene.h).
+/// "size" is required (a disk's or sphere's size is its diameter: a number or [d, d]). The same keys (plus "name" and
+/// "transform") make an entry of the top-level "sensors" list (SensorScene.h).
 
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
 #include "duplex/sensors/SensorObject.h"
