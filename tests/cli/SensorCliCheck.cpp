@@ -230,7 +230,7 @@ int check(const std::string& duplex, const fs::path& dir) {
     std::string text;
     const char* needle;
   };
-  const std::vector<Bad> bad = {
+  std::vector<Bad> bad = {
       {"zero_power.json", boxScene("0"), "/lights/0/power"},
       {"negative_power.json", boxScene("-3"), "power must be > 0"},
       {"bad_bins.json",
@@ -240,23 +240,17 @@ int check(const std::string& duplex, const fs::path& dir) {
       {"no_lights.json",
        R"({"format": "scene-json-v1", "objects": [], "instances": [], "sensors": [{"name": "s", "size": 1}]})",
        "no lights"}};
-  auto twoSensors = [](const char* a, const char* b) {
-    return std::string(
-               R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [{"type": "point", "position": [0,0,0], "power": 1}],
-        "sensors": [{"name": ")") +
-           a + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]},
-                    {"name": ")" +
-           b + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]}]})";
+  // Sensors whose output files would collide: refused before the run, like the bad entries above.
+  const auto twoSensors = [](const std::string& a, const std::string& b) {
+    const auto sensor = [](const std::string& name) {
+      return R"({"name": ")" + name + R"(", "shape": "rectangle", "size": [1, 1], "bins": [1, 1]})";
+    };
+    return R"({"format": "scene-json-v1", "objects": [], "instances": [],
+               "lights": [{"type": "point", "position": [0, 0, 0], "power": 1}], "sensors": [)" +
+           sensor(a) + ", " + sensor(b) + "]}";
   };
-  const std::vector<Bad> bad_names = {{"same_file.json", twoSensors("a b", "a_b"), "would both write a_b.json"},
-                                      {"run_name.json", twoSensors("x", "run"), "would write run.json"}};
-  for (const Bad& b : bad_names) {
-    write(dir / b.file, b.text);
-    const RunResult r = run(sensorArgs(duplex, dir / b.file, "100", "1", dir / "bad"), dir.string());
-    expect(r.exited && r.exit_code != 0, std::string(b.file) + ": expected a non-zero exit, got " + describe(r));
-    expect(r.err.find((dir / b.file).string()) != std::string::npos && r.err.find(b.needle) != std::string::npos,
-           std::string(b.file) + ": message does not name the file and '" + b.needle + "':\n" + r.err);
-  }
+  bad.push_back({"same_file.json", twoSensors("a b", "a_b"), "would both write a_b.json"});
+  bad.push_back({"run_name.json", twoSensors("x", "run"), "would write run.json"});
   {
     std::vector<std::string> args = sensorArgs(duplex, scene, "100", "1", dir / "bad");
     for (const char* a : {"--target-error", "0.1", "--target-sensor", "no-such-face"}) args.push_back(a);
