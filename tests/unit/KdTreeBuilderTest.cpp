@@ -139,7 +139,7 @@ TEST(KdTreeBuilder, GivenRootBoundsFrameTheTree) {
   const glm::vec3 margin = all.extent();
   const Box root(all.lo - margin, all.hi + 2.0f * margin);
   const KdTree tree = buildKdTreeOverBoxes(boxes, KdBuildConfig{}, root);
-  EXPECT_TRUE(tree.bounds == root);
+  EXPECT_TRUE(checkBoxKdTree(tree, boxes, 0, &root));
   for (std::uint32_t i = 0; i < boxes.size(); ++i) {
     const glm::dvec3 lo(boxes[i].lo), hi(boxes[i].hi);
     EXPECT_TRUE(kdcheck_detail::pointCovered(tree, 0.5 * (lo + hi), i)) << "box " << i;
@@ -159,6 +159,7 @@ TEST(KdTreeBuilder, GivenRootBoundsFrameTheTree) {
   // The cost is that of a ray through the root: cutting off the margin costs a few node steps more
   // than the tree over the boxes' own bounds, scaled by the area ratio.
   const KdTree tight = buildKdTreeOverBoxes(boxes);
+  EXPECT_TRUE(checkBoxKdTree(tight, boxes));
   const double area_ratio = static_cast<double>(all.area()) / static_cast<double>(root.area());
   const KdBuildConfig costs{};  // weigh both trees by the costs they were built for
   EXPECT_LT(tree.stats(costs.traversal_cost, costs.intersection_cost).sah_cost,

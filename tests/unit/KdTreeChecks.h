@@ -162,9 +162,12 @@ inline int depthBound(std::size_t usable, int max_depth) {
 
 /// Structural and geometric checks shared by triangle and box trees. `prim_bounds[i]` is the
 /// bound of primitive i; `usable[i]` whether the builder may reference it (its bounds are
-/// non-empty and finite). `max_depth` is the configured bound (0: automatic).
+/// non-empty and finite). `max_depth` is the configured bound (0: automatic). `root_bounds`: the
+/// bounds the tree was built for when the caller gave them (buildKdTreeOverBoxes with root bounds),
+/// else the tree's bounds must be the union of the usable bounds.
 inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span<const Box> prim_bounds,
-                                                   const std::vector<char>& usable, int max_depth = 0) {
+                                                   const std::vector<char>& usable, int max_depth = 0,
+                                                   const Box* root_bounds = nullptr) {
   using namespace kdcheck_detail;
   Failures f;
   const std::size_t prim_count = prim_bounds.size();
@@ -184,8 +187,14 @@ inline ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span
     f.add([&](auto& os) { os << usable_count << " usable primitives but the tree is empty"; });
     return f.result("kd-tree structure");
   }
-  if (!(tree.bounds == expected))
+  if (root_bounds) {
+    if (!(tree.bounds == *root_bounds))
+      f.add([&](auto& os) { os << "tree.bounds " << tree.bounds << " != the given root bounds " << *root_bounds; });
+    if (!(intersection(*root_bounds, expected) == expected))
+      f.add([&](auto& os) { os << "root bounds " << *root_bounds << " do not contain the primitives " << expected; });
+  } else if (!(tree.bounds == expected)) {
     f.add([&](auto& os) { os << "tree.bounds " << tree.bounds << " != union of usable bounds " << expected; });
+  }
 
   const int bound = depthBound(usable_count, max_depth);
   std::vector<char> visited(tree.nodes.size(), 0);
@@ -385,8 +394,10 @@ inline ::testing::AssertionResult checkTriangleKdTree(const KdTree& tree,
   return f.result("kd-tree triangle coverage");
 }
 
-/// Full check of a tree over boxes (top level, or buildKdTreeOverBoxes).
-inline ::testing::AssertionResult checkBoxKdTree(const KdTree& tree, std::span<const Box> boxes, int max_depth = 0) {
+/// Full check of a tree over boxes (top level, or buildKdTreeOverBoxes; `root_bounds` as for
+/// checkKdStructure).
+inline ::testing::AssertionResult checkBoxKdTree(const KdTree& tree, std::span<const Box> boxes, int max_depth = 0,
+                                                 const Box* root_bounds = nullptr) {
   using namespace kdcheck_detail;
   std::vector<char> usable(boxes.size());
   for (std::size_t i = 0; i < boxes.size(); ++i) {
@@ -395,7 +406,7 @@ inline ::testing::AssertionResult checkBoxKdTree(const KdTree& tree, std::span<c
     for (int k = 0; k < 3; ++k) ok = ok && std::isfinite(b.lo[k]) && std::isfinite(b.hi[k]);
     usable[i] = ok;
   }
-  auto structure = checkKdStructure(tree, boxes, usable, max_depth);
+  auto structure = checkKdStructure(tree, boxes, usable, max_depth, root_bounds);
   if (!structure || tree.nodes.empty()) return structure;
 
   Failures f;
