@@ -181,6 +181,12 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
+// The figures of one kd-tree level in the benchmark's JSON.
+nlohmann::json treeJson(const KdTreeStats& t) {
+  return {{"nodes", t.nodes},           {"leaves", t.leaves},       {"empty_leaves", t.empty_leaves},
+          {"references", t.references}, {"max_depth", t.max_depth}, {"sah_cost", t.sah_cost}};
+}
+
 nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned threads, int repeat,
                         const std::string& data_dir) {
   std::string meshes;
@@ -224,23 +230,12 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
   }
   const double t_with = median(with), t_without = median(without);
   const TopLevelStats top = setup->scene->tracer().topLevel().stats();
+  nlohmann::json sensorLevel = treeJson(top.sensor_tree);
+  sensorLevel["grid_cells"] = top.sensor_grid_cells;
+  sensorLevel["grid_entries"] = top.sensor_grid_entries;
   return {{"sensors", sensors},
-          {"top_level",
-           {{"nodes", top.tree.nodes},
-            {"leaves", top.tree.leaves},
-            {"empty_leaves", top.tree.empty_leaves},
-            {"references", top.tree.references},
-            {"max_depth", top.tree.max_depth},
-            {"sah_cost", top.tree.sah_cost}}},
-          {"sensor_level",
-           {{"nodes", top.sensor_tree.nodes},
-            {"leaves", top.sensor_tree.leaves},
-            {"empty_leaves", top.sensor_tree.empty_leaves},
-            {"references", top.sensor_tree.references},
-            {"max_depth", top.sensor_tree.max_depth},
-            {"sah_cost", top.sensor_tree.sah_cost},
-            {"grid_cells", top.sensor_grid_cells},
-            {"grid_entries", top.sensor_grid_entries}}},
+          {"top_level", treeJson(top.tree)},
+          {"sensor_level", sensorLevel},
           {"bins", setup->scene->binCount()},
           {"instances", setup->graph.instances().size()},
           {"meshes", meshes},

@@ -28,15 +28,20 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--random", options.random_rays, "random rays per mesh (duplex::randomRays)")->capture_default_str();
-  app.add_option(
-         "--primary",
-         [&options](const CLI::results_t& r) {
-           options.primary_width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
-           options.primary_height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
-           return true;
-         },
-         "primary rays: W H (duplex::primaryRays, default 1024 1024)")
-      ->expected(2);
+  // An option of two numbers, an image's width and height.
+  const auto addSizeOption = [&app](const char* name, std::uint32_t& width, std::uint32_t& height, const char* help) {
+    app.add_option(
+           name,
+           [&width, &height](const CLI::results_t& r) {
+             width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
+             height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
+             return true;
+           },
+           help)
+        ->expected(2);
+  };
+  addSizeOption("--primary", options.primary_width, options.primary_height,
+                "primary rays: W H (duplex::primaryRays, default 1024 1024)");
   app.add_option("--threads", options.threads, "thread counts, comma separated")->delimiter(',')->capture_default_str();
   app.add_option("--repeat", options.repeat, "repetitions; figures are medians")
       ->check(CLI::PositiveNumber)
@@ -52,15 +57,8 @@ int main(int argc, char** argv) {
   app.add_flag("--sweep", sweep, "heuristic/cost sweep: build ms vs trace ms (1 thread) over KdBuildConfig settings");
   app.add_option("--sweep-meshes", options.sweep_meshes, "meshes of the sweep")->delimiter(',')->capture_default_str();
   app.add_option("--sweep-random", options.sweep_random_rays, "random rays per sweep setting")->capture_default_str();
-  app.add_option(
-         "--sweep-primary",
-         [&options](const CLI::results_t& r) {
-           options.sweep_primary_width = static_cast<std::uint32_t>(std::stoul(r.at(0)));
-           options.sweep_primary_height = static_cast<std::uint32_t>(std::stoul(r.at(1)));
-           return true;
-         },
-         "primary rays of the sweep: W H (default 512 512)")
-      ->expected(2);
+  addSizeOption("--sweep-primary", options.sweep_primary_width, options.sweep_primary_height,
+                "primary rays of the sweep: W H (default 512 512)");
 
   bool callgrind = false;
   app.add_flag(

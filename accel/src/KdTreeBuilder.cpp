@@ -265,6 +265,11 @@ struct SmallEvents {
 constexpr std::size_t kPassChunk = 8192;
 constexpr std::size_t kParallelPassMin = 2 * kPassChunk;
 
+// Chunks of a pass over n references: 1 (serial) below kParallelPassMin or in a serial build.
+constexpr std::size_t passChunkCount(std::size_t n, bool parallel) {
+  return parallel && n >= kParallelPassMin ? (n + kPassChunk - 1) / kPassChunk : 1;
+}
+
 class Builder {
  public:
   // Exactly one of `clip` and `split` is non-null.
@@ -349,10 +354,7 @@ class Builder {
   }
 
  private:
-  // Chunks of a pass over n references: 1 (serial) below kParallelPassMin or in a serial build.
-  [[nodiscard]] std::size_t passChunks(std::size_t n) const {
-    return cfg_.parallel_threshold > 0 && n >= kParallelPassMin ? (n + kPassChunk - 1) / kPassChunk : 1;
-  }
+  [[nodiscard]] std::size_t passChunks(std::size_t n) const { return passChunkCount(n, cfg_.parallel_threshold > 0); }
 
   // Bins every reference into `bins` (initialised, counts zero): chunks bin into copies whose
   // counts are added.
@@ -989,7 +991,7 @@ bool finiteBox(const Box& b) {
 // chunk in order, which gives the serial loop's result (Box::extend keeps the earlier of equal values).
 void prepareRefs(std::span<const Box> prim_bounds, bool parallel, RefVec& refs, Box& bounds) {
   const std::size_t n = prim_bounds.size();
-  const std::size_t chunks = parallel && n >= kParallelPassMin ? (n + kPassChunk - 1) / kPassChunk : 1;
+  const std::size_t chunks = passChunkCount(n, parallel);
   refs.resize(n);
   std::vector<std::size_t> kept(chunks);
   std::vector<Box> chunk_bounds(chunks);

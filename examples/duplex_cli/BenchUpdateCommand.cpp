@@ -352,13 +352,18 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   out["build_ms"] = doc->figures.build_ms + ours->topBuildMs();
   out["bottom_build_ms"] = doc->figures.build_ms;
   out["top_build_ms"] = ours->topBuildMs();
+  // The library's objects, held while the full builds below and Embree use their meshes.
+  std::vector<std::shared_ptr<const Object>> held;
+  std::vector<const MeshObject*> mesh_objects;
+  for (ObjectId i = 0; i < library.size(); ++i) {
+    held.push_back(library.get(i));
+    if (const auto* m = dynamic_cast<const MeshObject*>(held.back().get())) mesh_objects.push_back(m);
+  }
 #if DUPLEX_BENCH_HAVE_EMBREE
   // Embree's side: the same meshes and instances, one device for the whole run.
-  std::vector<std::shared_ptr<const Object>> embree_held;  // keeps the meshes alive while Embree copies them
   std::vector<const TriangleMesh*> meshes;
   for (ObjectId i = 0; i < library.size(); ++i) {
-    embree_held.push_back(library.get(i));
-    const auto* mesh_object = dynamic_cast<const MeshObject*>(embree_held.back().get());
+    const auto* mesh_object = dynamic_cast<const MeshObject*>(held[i].get());
     if (!mesh_object)
       throw InvalidArgument(options.scene.string() + ": object " + library.name(i) +
                             " is not a mesh (Embree baseline)");
@@ -383,12 +388,6 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   // derived from the tree) and builds a fresh top level. The files were just written, so they are
   // read from the page cache, as in an application that opens the same library again.
   {
-    std::vector<std::shared_ptr<const Object>> held;
-    std::vector<const MeshObject*> mesh_objects;
-    for (ObjectId i = 0; i < library.size(); ++i) {
-      held.push_back(library.get(i));
-      if (const auto* m = dynamic_cast<const MeshObject*>(held.back().get())) mesh_objects.push_back(m);
-    }
     const PreparedLibraryDir library_dir;
     const std::filesystem::path& dir = library_dir.path();
     std::vector<std::filesystem::path> files(mesh_objects.size());

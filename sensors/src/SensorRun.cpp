@@ -662,10 +662,14 @@ std::uint64_t SensorRun::fingerprint() const {
 namespace {
 
 // Version 3's fingerprint hashes mesh contents; version 2 ended with the same checksum of every
-// byte before it; version 1 ("DXSENSR1") had none. Older versions are refused by name.
+// byte before it; version 1 had none. Older versions are refused by name, saying what they lack.
 constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '3'};
-constexpr char kStateMagicV1[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'};
-constexpr char kStateMagicV2[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'};
+struct OlderState {
+  char magic[8];
+  const char* lacks;
+};
+constexpr OlderState kOlderStates[] = {{{'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'}, "no checksum"},
+                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'}, "mesh contents not fingerprinted"}};
 
 // The checksum of the state: XXH64 of every byte before it.
 std::uint64_t stateChecksum(std::span<const char> bytes) {
@@ -721,12 +725,10 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   if (!in) throw FileError(file.string() + ": cannot read the run state");
   constexpr std::size_t kHead = sizeof kStateMagic + 5 * sizeof(std::uint64_t);
-  if (bytes.size() >= sizeof kStateMagicV1 && std::memcmp(bytes.data(), kStateMagicV1, sizeof kStateMagicV1) == 0)
-    throw FileError(file.string() + ": a run state of an older version (no checksum): run again without resuming");
-  if (bytes.size() >= sizeof kStateMagicV2 && std::memcmp(bytes.data(), kStateMagicV2, sizeof kStateMagicV2) == 0)
-    throw FileError(file.string() +
-                    ": a run state of an older version (mesh contents not fingerprinted): run again "
-                    "without resuming");
+  for (const OlderState& older : kOlderStates)
+    if (bytes.size() >= sizeof older.magic && std::memcmp(bytes.data(), older.magic, sizeof older.magic) == 0)
+      throw FileError(file.string() + ": a run state of an older version (" + older.lacks +
+                      "): run again without resuming");
   if (bytes.size() < kHead || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
     throw FileError(file.string() + ": not a sensor run state");
   std::uint64_t header[5];

@@ -111,8 +111,8 @@ class SensorRun {
   /// a fingerprint of the sensors, bins, lights, instances, materials and mesh contents; volume
   /// grids are not hashed). Throws FileError naming the file for another scene or configuration, a
   /// size that disagrees with the scene (truncated, extended), a checksum mismatch (damaged), a
-  /// state of the older format without checksum, or negative / non-finite sums; the run is then
-  /// unchanged.
+  /// state of an older format (without checksum, or without mesh contents in its fingerprint), or
+  /// negative / non-finite sums; the run is then unchanged.
   void loadState(const std::filesystem::path& file);
 
  private:
