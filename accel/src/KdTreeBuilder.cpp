@@ -867,15 +867,22 @@ class Builder {
 
   template <bool kLowerBinned, bool kUpperBinned>
   void partitionRange(const RefVec& refs, std::size_t begin, std::size_t end, const Split& s, const Box& lower_box,
-                      const Box& upper_box, Sink& lower, Sink& upper) const {
+                      const Box& upper_box, Sink& lower_out, Sink& upper_out) const {
     const int axis = s.axis;
     const float pos = s.pos;
+    // The sinks' state and the input in locals: put()'s 16-byte stores may alias anything (the
+    // intrinsics' vector types are may_alias), so through the references every reference would
+    // reload and store the output pointers and extents, a chain through memory per reference
+    // (one thread's build of the robot's link_1 and the hammer: -9%, same trees).
+    Sink lower = lower_out, upper = upper_out;
+    const PrimRef* data = refs.data();
+    const bool planar_left = s.planar_left;
     for (std::size_t i = begin; i < end; ++i) {
-      const PrimRef& r = refs[i];
+      const PrimRef& r = data[i];
       const float a = r.lo[axis], b = r.hi[axis];
       if (b <= pos) {
         // Below the plane, or lying in it.
-        if (a == pos && !s.planar_left) upper.put<kUpperBinned>(r);
+        if (a == pos && !planar_left) upper.put<kUpperBinned>(r);
         else lower.put<kLowerBinned>(r);
       } else if (a >= pos) {
         upper.put<kUpperBinned>(r);
@@ -897,6 +904,8 @@ class Builder {
         if (!parts[1].empty()) upper.put<kUpperBinned>(PrimRef(parts[1], r.id));
       }
     }
+    lower_out = lower;
+    upper_out = upper;
   }
 
   // Splits `refs` into the two children, binning each child expected to be large enough, over its
