@@ -24,10 +24,11 @@ std::array<float, 12> rowMajor3x4(const Affine& a) {
   return f;
 }
 
-// One object scene with Embree's default (medium) build quality.
-RTCScene newObjectScene(EmbreeDevice& device, const TriangleMesh& mesh) {
+// One object scene of the given build quality (Embree's default: medium).
+RTCScene newObjectScene(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality) {
   RTCScene scene = rtcNewScene(device.get());
-  attachTriangleMesh(device, scene, mesh, RTC_BUILD_QUALITY_MEDIUM);
+  rtcSetSceneBuildQuality(scene, quality);
+  attachTriangleMesh(device, scene, mesh, quality);
   rtcCommitScene(scene);
   return scene;
 }
@@ -39,12 +40,13 @@ const char* toString(EmbreeTopLevelMode mode) {
 }
 
 EmbreeTwoLevel::EmbreeTwoLevel(EmbreeDevice& device, std::span<const TriangleMesh* const> meshes,
-                               std::span<const EmbreeInstanceDesc> instances, EmbreeTopLevelMode mode)
+                               std::span<const EmbreeInstanceDesc> instances, EmbreeTopLevelMode mode,
+                               RTCBuildQuality object_quality)
     : device_(device) {
   const auto start = std::chrono::steady_clock::now();
   object_scenes_.assign(meshes.size(), nullptr);
   tbb::parallel_for(std::size_t{0}, meshes.size(),
-                    [&](std::size_t i) { object_scenes_[i] = newObjectScene(device, *meshes[i]); });
+                    [&](std::size_t i) { object_scenes_[i] = newObjectScene(device, *meshes[i], object_quality); });
   device.check("object scenes");
   build_times_.objects_ms = msSince(start);
 

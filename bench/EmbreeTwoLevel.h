@@ -24,8 +24,8 @@
 
 namespace duplex::bench {
 
-/// Build flags of the top-level scene. Object scenes always use Embree's defaults (medium quality,
-/// static).
+/// Build flags of the top-level scene. Object scenes use Embree's defaults (medium quality, static)
+/// unless the constructor is given another object quality.
 enum class EmbreeTopLevelMode : std::uint8_t {
   Default,     ///< RTC_BUILD_QUALITY_MEDIUM, no scene flags (Embree's defaults)
   DynamicLow,  ///< RTC_SCENE_FLAG_DYNAMIC + RTC_BUILD_QUALITY_LOW (Embree's advice for scenes that change)
@@ -49,9 +49,11 @@ class EmbreeTwoLevel {
  public:
   /// Builds one scene per mesh (in parallel, in the calling thread's TBB arena) and the committed
   /// top level; instance ids are positions in `instances`. The meshes are copied into Embree
-  /// buffers (they need not outlive the scene).
+  /// buffers (they need not outlive the scene). `object_quality`: the object scenes' build quality
+  /// (RTC_BUILD_QUALITY_HIGH adds spatial splits, Embree's counterpart of our clipped references).
   EmbreeTwoLevel(EmbreeDevice& device, std::span<const TriangleMesh* const> meshes,
-                 std::span<const EmbreeInstanceDesc> instances, EmbreeTopLevelMode mode);
+                 std::span<const EmbreeInstanceDesc> instances, EmbreeTopLevelMode mode,
+                 RTCBuildQuality object_quality = RTC_BUILD_QUALITY_MEDIUM);
   ~EmbreeTwoLevel();
   EmbreeTwoLevel(const EmbreeTwoLevel&) = delete;
   EmbreeTwoLevel& operator=(const EmbreeTwoLevel&) = delete;
