@@ -182,6 +182,30 @@ void SceneTracer::transmittance(std::span<const Ray> rays, std::span<float> tran
              [&](const Ray& r, QueryContext& ctx) { return top.transmittance(r, ctx, mask); });
 }
 
+void SceneTracer::intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
+                               std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  // Each ray's hits in its own list first (their counts are unknown until traced), then one
+  // prefix sum and a parallel copy into the flat result.
+  std::vector<std::vector<Hit>> per_ray(rays.size());
+  forEachRay("SceneTracer::intersectAll", rays, std::span<std::vector<Hit>>(per_ray),
+             [&](const Ray& r, QueryContext& ctx) {
+               std::vector<Hit> layer;
+               top.intersectAll(r, layer, ctx, mask);
+               return layer;
+             });
+  offsets.assign(rays.size() + 1, 0);
+  for (std::size_t i = 0; i < rays.size(); ++i) offsets[i + 1] = offsets[i] + per_ray[i].size();
+  hits.resize(offsets.back());
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
+      for (std::size_t i = range.begin(); i != range.end(); ++i)
+        std::copy(per_ray[i].begin(), per_ray[i].end(), hits.begin() + static_cast<std::ptrdiff_t>(offsets[i]));
+    });
+  });
+}
+
 namespace {
 
 void requireImage(const char* what, std::uint32_t width, std::uint32_t height) {

@@ -1,8 +1,8 @@
 // SceneTracer over a SceneGraph: 10,000 random graph edits (add, remove, move, re-parent, replace,
 // hide, mask) in random batches, each commit checked against a brute force over the visible
 // instances and the top-level invariants; picking (nearest, all, per instance) with node paths,
-// sensors in picks, precision 10^6 units from the origin, rectangle selection, batch queries on 1
-// and 2 threads, lazy builds, and what queries see before a commit.
+// sensors in picks, precision 10^6 units from the origin, rectangle selection, batch queries (intersectAll
+// too) on 1 and 2 threads, lazy builds, and what queries see before a commit.
 
 #include "MeshChecks.h"
 #include "TestSupport.h"
@@ -487,6 +487,52 @@ TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
   EXPECT_GT(hits, rays.size() / 10);
   std::vector<Hit> wrong(3);
   expectErrorNaming<InvalidArgument>([&] { tracer.intersect(rays, wrong); }, "20000 rays");
+}
+
+TEST(SceneTracer, BatchIntersectAllEqualsOneRayAtATimeOnOneAndTwoThreads) {
+  Fixture f;
+  std::mt19937_64 rng(13);
+  // Overlapping instances, so that many rays pass several layers.
+  for (int i = 0; i < 120; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 6.0));
+  f.graph.commit();
+  SceneTracer tracer(f.graph);
+  const std::vector<Ray> rays = randomRays(tracer.bounds(), 4000, 5);
+  std::vector<Hit> flat[2];
+  std::vector<std::size_t> offsets[2];
+  for (int threads = 1; threads <= 2; ++threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+    offsets[threads - 1] = {7, 7};  // replaced, not appended to
+    tracer.intersectAll(rays, flat[threads - 1], offsets[threads - 1]);
+  }
+  QueryContext ctx;
+  std::size_t layered = 0;
+  for (int k = 0; k < 2; ++k) {
+    ASSERT_EQ(offsets[k].size(), rays.size() + 1);
+    ASSERT_EQ(offsets[k].front(), 0u);
+    ASSERT_EQ(offsets[k].back(), flat[k].size());
+  }
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const std::vector<Hit> single = tracer.intersectAll(rays[i], ctx);
+    const Hit closest = tracer.intersect(rays[i], ctx);
+    for (int k = 0; k < 2; ++k) {
+      const std::size_t b = offsets[k][i], e = offsets[k][i + 1];
+      ASSERT_EQ(e - b, single.size()) << "ray " << i << ", " << k + 1 << " threads";
+      for (std::size_t j = 0; j < single.size(); ++j) {
+        ASSERT_TRUE(sameHit(flat[k][b + j], single[j])) << i << " " << j;
+        ASSERT_EQ(flat[k][b + j].instance_id, single[j].instance_id) << i << " " << j;
+        if (j > 0) {
+          ASSERT_LE(flat[k][b + j - 1].t, flat[k][b + j].t) << i << " " << j;
+        }
+      }
+      // The first of the layers is the closest hit.
+      ASSERT_EQ(e > b, closest.valid()) << i;
+      if (e > b) {
+        ASSERT_EQ(flat[k][b].t, closest.t) << i;
+      }
+    }
+    layered += single.size() >= 2;
+  }
+  EXPECT_GT(layered, rays.size() / 20) << "too few rays pass several layers to test the batch";
 }
 
 TEST(SceneTracer, ObjectsAreBuiltLazilyOnceAndShared) {

@@ -74,6 +74,12 @@ class SceneTracer {
   void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu) const;
   void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu) const;
   void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Batch intersectAll (picking through layers, many rays): on return `offsets` holds rays.size()
+  /// + 1 entries and the hits of rays[i] are hits[offsets[i], offsets[i + 1]), sorted by t as
+  /// intersectAll(ray) returns them (world t, world normal; sensors when the mask selects them).
+  /// Both vectors are replaced. Flat rather than a vector per ray: one allocation for the result.
+  void intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
+                    std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Picking through pixel (px, py) (continuous pixel coordinates, (0, 0) the top-left corner,
   /// (w, h) the bottom-right) of a width x height image seen by `camera` (world space). Throws
