@@ -20,6 +20,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <string>
 
 namespace duplex::cli {
 
@@ -137,6 +138,13 @@ class ProgressPrinter {
       std::cerr << line << std::flush;
     }
   }
+  // A line of its own between progress reports (after a drawn bar: on the next line; the bar is
+  // drawn again below it by the next report).
+  void note(const std::string& text) {
+    if (drawn_) std::cerr << '\n';
+    drawn_ = false;
+    std::cerr << text << '\n' << std::flush;
+  }
   ~ProgressPrinter() {
     if (drawn_) std::cerr << '\n';
   }
@@ -214,6 +222,8 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   if (o.rays == 0) throw InvalidArgument("--rays must be at least 1");
   if (o.target_error < 0.0 || !std::isfinite(o.target_error))
     throw InvalidArgument("--target-error must be a finite number >= 0");
+  if (!(o.checkpoint_s >= 0.0 && std::isfinite(o.checkpoint_s)))
+    throw InvalidArgument("--checkpoint must be a finite number of seconds >= 0 (0: save only at the end)");
   if (!(o.roulette >= 0.0 && o.roulette < 1.0))
     throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
   WorkerThreads workers(o.threads);
@@ -252,8 +262,27 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   {
     const StopSignals signals(run);
     ProgressPrinter printer(o.progress, start);
+    // Periodic saves between batches (the accumulators are whole there). A failed save is reported
+    // and the run goes on: the previous state file stays intact (saveState writes and renames).
+    double last_save = 0.0;
+    const auto checkpoint = [&](const SensorProgress& p) {
+      if (o.checkpoint_s <= 0.0 || p.seconds - last_save < o.checkpoint_s || p.rays_done >= p.rays_target) return;
+      last_save = p.seconds;
+      try {
+        run.saveState(state);
+        if (o.progress != "none")
+          printer.note("checkpoint: " + std::to_string(p.rays_done) + " rays saved to " + state.string());
+      } catch (const FileError& e) {
+        printer.note(std::string("duplex sensor: checkpoint failed (the run goes on): ") + e.what());
+      }
+    };
     status = run.runUntil(
-        o.rays, [&](const SensorProgress& p) { printer(p); }, stop);
+        o.rays,
+        [&](const SensorProgress& p) {
+          printer(p);
+          checkpoint(p);
+        },
+        stop);
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   run.saveState(state);

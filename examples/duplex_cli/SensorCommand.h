@@ -40,6 +40,10 @@ struct SensorOptions {
   double roulette = SensorRunConfig{}.roulette_threshold;
   /// "auto": a progress bar when stderr is a terminal, plain lines otherwise; "bar", "lines", "none".
   std::string progress = "auto";
+  /// Seconds between saves of DIR/run_state.bin while the run goes on (0: only at the end), so that
+  /// a run killed outright (SIGKILL, power loss) loses at most this much work: --resume continues
+  /// from the last save and gives the files of one uninterrupted run.
+  double checkpoint_s = 60.0;
 };
 
 /// Runs the command; returns the report (keys: rays, seed, threads, max_depth, max_scatterings,

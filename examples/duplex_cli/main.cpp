@@ -10,7 +10,7 @@
 //                       [--primary W] [--build-repeat B] [--baseline-repeat B]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
-//                 [--roulette R] [--progress MODE]
+//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS]
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -255,6 +255,10 @@ int main(int argc, char** argv) {
       "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
   sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
       ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
+  sensor_cmd
+      ->add_option("--checkpoint", sensor.checkpoint_s,
+                   "Seconds between saves of DIR/run_state.bin during the run (default 60; 0: only at the end)")
+      ->check(CLI::Range(0.0, 1e9));
   sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");
 
   try {

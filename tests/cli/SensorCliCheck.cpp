@@ -215,6 +215,30 @@ int check(const std::string& duplex, const fs::path& dir) {
     expectSameMaps(dir / "straight", dir / "stopped", "run stopped by SIGINT and resumed");
   }
 
+  // A run killed outright (SIGKILL: no handler runs, nothing is saved at the end) resumes from its
+  // last periodic checkpoint and ends with the files of one uninterrupted run of the same total.
+  {
+    std::vector<std::string> args = sensorArgs(duplex, scene, "2000000000", "2", dir / "killed");
+    for (const char* a : {"--checkpoint", "0.05"}) args.push_back(a);
+    const RunResult killed = runAndSignal(args, dir.string(), SIGKILL, "checkpoint: ", 120.0);
+    expect(!killed.exited && killed.signal == SIGKILL, "SIGKILL: expected death by signal 9, got " + describe(killed));
+    // The last checkpoint line on stderr; a later save may have landed before the kill.
+    const std::string marker = "checkpoint: ";
+    const std::size_t at = killed.err.rfind(marker);
+    expect(at != std::string::npos, "SIGKILL: no checkpoint line on stderr:\n" + killed.err);
+    const std::uint64_t saved = std::stoull(killed.err.substr(at + marker.size()));
+    expect(saved > 0 && std::filesystem::exists(dir / "killed" / "run_state.bin"),
+           "SIGKILL: no saved state after a checkpoint line:\n" + killed.err);
+    const std::string total_rays = std::to_string(saved + 300000);
+    std::vector<std::string> resume_killed = sensorArgs(duplex, scene, total_rays, "2", dir / "killed");
+    resume_killed.push_back("--resume");
+    const nlohmann::json continued = runJson(resume_killed, dir);
+    expect(continued["resumed_from"].get<std::uint64_t>() >= saved && continued["status"] == "completed",
+           "resume after SIGKILL: " + continued.dump());
+    (void)runJson(sensorArgs(duplex, scene, total_rays, "1", dir / "straight_killed"), dir);
+    expectSameMaps(dir / "straight_killed", dir / "killed", "run killed by SIGKILL and resumed from its checkpoint");
+  }
+
   // Stop on a target relative error.
   std::vector<std::string> target = sensorArgs(duplex, scene, "50000000", "2", dir / "target");
   for (const char* a : {"--target-error", "0.05", "--target-sensor", "face4"}) target.push_back(a);
