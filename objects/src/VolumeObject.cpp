@@ -13,6 +13,7 @@
 #include "VdbFileCheck.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/Xxh64.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/tools/Interpolation.h>
@@ -304,6 +305,51 @@ std::shared_ptr<const VolumeObject> VolumeObject::withConfig(const VolumeQueryCo
 VolumeObject::~VolumeObject() = default;
 
 Box VolumeObject::bounds() const { return grid_->bounds_os; }
+
+std::uint64_t VolumeObject::contentHash() const {
+  // Streamed through a buffer of 1 MiB: each full buffer's hash seeds the next one's.
+  std::vector<unsigned char> buffer;
+  buffer.reserve(std::size_t{1} << 20);
+  std::uint64_t h = 0;
+  const auto add = [&](const void* p, std::size_t n) {
+    const auto* c = static_cast<const unsigned char*>(p);
+    buffer.insert(buffer.end(), c, c + n);
+    if (buffer.size() >= (std::size_t{1} << 20)) {
+      h = xxh64(buffer, h);
+      buffer.clear();
+    }
+  };
+  const volume_detail::vdb::FloatGrid& grid = *grid_->grid;
+  const auto kind = static_cast<std::uint8_t>(grid_->kind);
+  add(&kind, 1);
+  const volume_detail::vdb::Mat4d m = grid.transform().baseMap()->getAffineMap()->getMat4();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) {
+      const double x = m(r, c);
+      add(&x, sizeof x);
+    }
+  const float background = grid.background();
+  add(&background, sizeof background);
+  for (auto it = grid.cbeginValueOn(); it; ++it) {
+    const volume_detail::vdb::Coord ijk = it.getCoord();
+    const std::int32_t record[4] = {ijk.x(), ijk.y(), ijk.z(), static_cast<std::int32_t>(it.getDepth())};
+    const float value = *it;
+    add(record, sizeof record);
+    add(&value, sizeof value);
+  }
+  const VolumeQueryConfig& q = config_;
+  const auto method = static_cast<std::uint8_t>(q.transmittance);
+  const std::uint8_t residual = q.residual ? 1 : 0;
+  add(&method, 1);
+  add(&q.samples, sizeof q.samples);
+  add(&q.march_step, sizeof q.march_step);
+  add(&q.majorant_level, sizeof q.majorant_level);
+  add(&residual, 1);
+  add(&q.seed, sizeof q.seed);
+  add(&q.levelset_step, sizeof q.levelset_step);
+  add(&q.refine_steps, sizeof q.refine_steps);
+  return xxh64(buffer, h);
+}
 VolumeKind VolumeObject::kind() const { return grid_->kind; }
 const std::string& VolumeObject::gridName() const { return grid_->grid_name; }
 double VolumeObject::voxelSize() const { return grid_->grid->voxelSize().x(); }

@@ -582,7 +582,7 @@ SensorRunResults SensorRun::results() const {
   return r;
 }
 
-// ---- saved state: "DXSENSR2", fingerprint, seed, rays, sizes, the raw accumulators, XXH64 checksum ----
+// ---- saved state: "DXSENSR4", fingerprint, seed, rays, sizes, the raw accumulators, XXH64 checksum ----
 
 std::uint64_t SensorRun::fingerprint() const {
   // FNV-1a over what the accumulators' meaning depends on.
@@ -617,7 +617,7 @@ std::uint64_t SensorRun::fingerprint() const {
   // What the paths depend on: every visible instance's object name and content (a mesh's positions
   // and triangles; hashed once per object), placement, mask and material, the sensors' shapes and
   // the lights' geometry (a state of a scene where any of these changed would be mixed silently
-  // into the continued run). Volume grids are not hashed (their type computes no content hash).
+  // into the continued run). Objects hash their contents (meshes, volume grids: Object::contentHash).
   auto addAffine = [&add](const Affine& a) {
     const std::array<double, 12> m = a.toRowMajor3x4();
     add(m.data(), sizeof m);
@@ -661,15 +661,17 @@ std::uint64_t SensorRun::fingerprint() const {
 
 namespace {
 
-// Version 3's fingerprint hashes mesh contents; version 2 ended with the same checksum of every
-// byte before it; version 1 had none. Older versions are refused by name, saying what they lack.
-constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '3'};
+// Version 4's fingerprint hashes volume grids too; version 3's hashed mesh contents only; version 2
+// ended with the same checksum of every byte before it; version 1 had none. Older versions are
+// refused by name, saying what they lack.
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '4'};
 struct OlderState {
   char magic[8];
   const char* lacks;
 };
 constexpr OlderState kOlderStates[] = {{{'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'}, "no checksum"},
-                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'}, "mesh contents not fingerprinted"}};
+                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'}, "mesh contents not fingerprinted"},
+                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '3'}, "volume grids not fingerprinted"}};
 
 // The checksum of the state: XXH64 of every byte before it.
 std::uint64_t stateChecksum(std::span<const char> bytes) {

@@ -293,6 +293,45 @@ TEST(SensorScattering, BitIdenticalForAnyThreadCount) {
   EXPECT_GT(one.energy.medium_absorbed_w, 0.0);
 }
 
+// A run state fingerprints the fog's grid (VolumeObject::contentHash): resuming it in a scene
+// whose fog has another density, or one more voxel, under the same object name is refused; the
+// same grid built again resumes.
+TEST(SensorScattering, ResumeRefusesAStateWhoseFogGridChanged) {
+  const std::filesystem::path state =
+      std::filesystem::temp_directory_path() / ("duplex_fog_state_" + std::to_string(::getpid()) + ".bin");
+  const auto scene = [](Fixture& f, float sigma, int hi) {
+    closeBox(f);
+    f.add(fogBlock(sigma, 0.05, -10, hi, -10, 10, "fog"), Affine::identity(), "fog", medium(0.9, 0.0));
+    return f.scene({pointLight({0.1, -0.05, 0.2}, 3.0)});
+  };
+  SensorRunConfig cfg;
+  cfg.seed = 5;
+  {
+    Fixture f;
+    const SensorScene s = scene(f, 3.0f, 10);
+    SensorRun run(s, cfg);
+    (void)run.runUntil(2000);
+    run.saveState(state);
+  }
+  const auto resumes = [&](float sigma, int hi) {
+    Fixture f;
+    const SensorScene s = scene(f, sigma, hi);
+    SensorRun run(s, cfg);
+    try {
+      run.loadState(state);
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(state.filename().string()), std::string::npos) << e.what();
+      EXPECT_EQ(run.raysDone(), 0u);
+      return false;
+    }
+    return run.raysDone() == 2000u;
+  };
+  EXPECT_TRUE(resumes(3.0f, 10));   // the same grid, built again
+  EXPECT_FALSE(resumes(3.5f, 10));  // another density
+  EXPECT_FALSE(resumes(3.0f, 11));  // a larger block (same object name)
+  std::filesystem::remove(state);
+}
+
 // Every feature at once: a scattering fog with a per-band albedo, bands, a per-band Lambertian
 // floor, a sensor with angular bins, a sphere sensor around everything, roulette acting (threshold
 // 0.5). 1 and 2 threads and two chunk sizes give the same bits; the sphere (two-sided, enclosing

@@ -257,6 +257,8 @@ TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   refusedWith(b, "older version");
   b[7] = '2';  // the version whose fingerprint lacked mesh contents
   refusedWith(b, "mesh contents not fingerprinted");
+  b[7] = '3';  // the version whose fingerprint lacked volume grids
+  refusedWith(b, "volume grids not fingerprinted");
   // The clean file still resumes to the same accumulators.
   {
     std::ofstream out(state, std::ios::binary | std::ios::trunc);

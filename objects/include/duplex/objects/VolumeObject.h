@@ -74,6 +74,11 @@ class VolumeObject final : public Object {
   /// Object-space bounds of the active voxels (each voxel a unit cube around its centre in index
   /// space; level sets get one more voxel of margin for the interpolated surface).
   [[nodiscard]] Box bounds() const override;
+  /// XXH64 over what the queries answer from: the kind, the grid's index-to-object transform and
+  /// background, every active value (voxels and tiles, with their coordinates and levels) in the
+  /// tree's order, and the query options. Linear in the active values (a sensor run's state file
+  /// fingerprints its scene with it, so a changed grid is refused on --resume).
+  [[nodiscard]] std::uint64_t contentHash() const override;
 
   /// Level sets: the first zero crossing of the trilinearly interpolated distance along
   /// [tnear, min(tfar, hit.t)], found by stepping half a voxel through the active spans of the

@@ -108,11 +108,11 @@ class SensorRun {
   /// leaves the previous state intact. Throws FileError naming the file.
   void saveState(const std::filesystem::path& file) const;
   /// Loads a saved state into this run (whose scene and seed must match the saved ones: checked by
-  /// a fingerprint of the sensors, bins, lights, instances, materials and mesh contents; volume
-  /// grids are not hashed). Throws FileError naming the file for another scene or configuration, a
+  /// a fingerprint of the sensors, bins, lights, instances, materials and the contents of meshes
+  /// and volume grids). Throws FileError naming the file for another scene or configuration, a
   /// size that disagrees with the scene (truncated, extended), a checksum mismatch (damaged), a
-  /// state of an older format (without checksum, or without mesh contents in its fingerprint), or
-  /// negative / non-finite sums; the run is then unchanged.
+  /// state of an older format (without checksum, or without mesh or volume contents in its
+  /// fingerprint), or negative / non-finite sums; the run is then unchanged.
   void loadState(const std::filesystem::path& file);
 
  private:
