@@ -40,6 +40,14 @@ struct Fixture {
   }
 };
 
+/// `count` instances of the fixture's objects in turn under the root, placed at random within
+/// `spread` (randomPlacement), committed.
+void scatterInstances(Fixture& f, int count, double spread, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  for (int i = 0; i < count; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, spread));
+  f.graph.commit();
+}
+
 /// The visible instances as the graph says after its last commit.
 Model visibleModel(const SceneGraph& graph) {
   Model m;
@@ -457,9 +465,7 @@ TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
 
 TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
   Fixture f;
-  std::mt19937_64 rng(12);
-  for (int i = 0; i < 200; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 20.0));
-  f.graph.commit();
+  scatterInstances(f, 200, 20.0, 12);
   SceneTracer tracer(f.graph);
   const std::vector<Ray> rays = randomRays(tracer.bounds(), 20000, 4);
   std::vector<Hit> one(rays.size()), two(rays.size());
@@ -491,10 +497,7 @@ TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
 
 TEST(SceneTracer, BatchIntersectAllEqualsOneRayAtATimeOnOneAndTwoThreads) {
   Fixture f;
-  std::mt19937_64 rng(13);
-  // Overlapping instances, so that many rays pass several layers.
-  for (int i = 0; i < 120; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, 6.0));
-  f.graph.commit();
+  scatterInstances(f, 120, 6.0, 13);  // overlapping, so that many rays pass several layers
   SceneTracer tracer(f.graph);
   const std::vector<Ray> rays = randomRays(tracer.bounds(), 4000, 5);
   std::vector<Hit> flat[2];
