@@ -295,6 +295,11 @@ struct NodeGeometry {
 struct SmallEvents {
   static constexpr std::size_t kMax = 32;
   bool valid = false;
+  // Per axis: whether the lists are sorted. sweepSmall needs no order (ties go to the lowest plane
+  // explicitly), so the lists are sorted only for an axis that sweepSorted merges: most nodes of a
+  // top level (1-8 boxes, no planar one) never sort, where sorting nine lists per node was a
+  // visible part of paper-2's top-level build.
+  bool sorted[3] = {false, false, false};
   std::uint8_t n_starts[3], n_ends[3], n_planars[3];
   float starts[3][kMax], ends[3][kMax], planars[3][kMax];
 };
@@ -553,7 +558,9 @@ class Builder {
       Split best;
       for (int axis = 0; axis < 3; ++axis) {
         if (!(g.hi[axis] > g.lo[axis])) continue;
-        const Split s = n <= kSmallSweep && events.n_planars[axis] == 0 ? sweepSmall(g, axis, events, n)
+        const bool small = n <= kSmallSweep && events.n_planars[axis] == 0;
+        if (!small && n <= SmallEvents::kMax) sortSmallEvents(events, axis);
+        const Split s = small ? sweepSmall(g, axis, events, n)
                         : n <= SmallEvents::kMax
                             ? sweepSorted(g, axis, events.starts[axis], events.n_starts[axis], events.ends[axis],
                                           events.n_ends[axis], events.planars[axis], events.n_planars[axis], 0, 0)
@@ -787,8 +794,17 @@ class Builder {
     return best;
   }
 
+  // Sorts one axis' lists of a small node's events, once.
+  static void sortSmallEvents(SmallEvents& e, int axis) {
+    if (e.sorted[axis]) return;
+    sortFew(e.starts[axis], e.n_starts[axis]);
+    sortFew(e.ends[axis], e.n_ends[axis]);
+    sortFew(e.planars[axis], e.n_planars[axis]);
+    e.sorted[axis] = true;
+  }
+
   // The events of every axis of a small node (every event lies in the node: references are clipped
-  // to it), sorted.
+  // to it), in reference order (sortSmallEvents sorts an axis when it is merged).
   static void collectSmallEvents(const RefVec& refs, SmallEvents& e) {
     for (int axis = 0; axis < 3; ++axis) {
       std::uint8_t n_planars = 0;
@@ -801,9 +817,7 @@ class Builder {
       }
       e.n_starts[axis] = e.n_ends[axis] = static_cast<std::uint8_t>(refs.size());
       e.n_planars[axis] = n_planars;
-      sortFew(e.starts[axis], refs.size());
-      sortFew(e.ends[axis], refs.size());
-      sortFew(e.planars[axis], n_planars);
+      e.sorted[axis] = false;
       // Padding that no plane counts: sweepSmall reads kSmallSweep events.
       for (std::size_t j = refs.size(); j < kSmallSweep; ++j) {
         e.starts[axis][j] = std::numeric_limits<float>::infinity();
