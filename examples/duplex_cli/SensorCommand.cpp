@@ -16,6 +16,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 #include <iostream>
 #include <limits>
@@ -272,7 +273,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
         run.saveState(state);
         if (o.progress != "none")
           printer.note("checkpoint: " + std::to_string(p.rays_done) + " rays saved to " + state.string());
-      } catch (const FileError& e) {
+      } catch (const std::exception& e) {  // FileError (disk full), or bad_alloc for a huge state
         printer.note(std::string("duplex sensor: checkpoint failed (the run goes on): ") + e.what());
       }
     };

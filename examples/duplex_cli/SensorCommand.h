@@ -41,8 +41,9 @@ struct SensorOptions {
   /// "auto": a progress bar when stderr is a terminal, plain lines otherwise; "bar", "lines", "none".
   std::string progress = "auto";
   /// Seconds between saves of DIR/run_state.bin while the run goes on (0: only at the end), so that
-  /// a run killed outright (SIGKILL, power loss) loses at most this much work: --resume continues
-  /// from the last save and gives the files of one uninterrupted run.
+  /// a run killed outright (SIGKILL, power loss) loses about this much work (saves happen between
+  /// batches of 65,536 rays, so at most this plus one batch): --resume continues from the last save
+  /// and gives the files of one uninterrupted run.
   double checkpoint_s = 60.0;
 };
 

@@ -309,7 +309,7 @@ Box VolumeObject::bounds() const { return grid_->bounds_os; }
 std::uint64_t VolumeObject::contentHash() const {
   // Streamed through a buffer of 1 MiB: each full buffer's hash seeds the next one's.
   std::vector<unsigned char> buffer;
-  buffer.reserve(std::size_t{1} << 20);
+  buffer.reserve(std::size_t{1} << 21);
   std::uint64_t h = 0;
   const auto add = [&](const void* p, std::size_t n) {
     const auto* c = static_cast<const unsigned char*>(p);
@@ -319,10 +319,11 @@ std::uint64_t VolumeObject::contentHash() const {
       buffer.clear();
     }
   };
-  const volume_detail::vdb::FloatGrid& grid = *grid_->grid;
+  using namespace volume_detail;
+  const vdb::FloatGrid& grid = *grid_->grid;
   const auto kind = static_cast<std::uint8_t>(grid_->kind);
   add(&kind, 1);
-  const volume_detail::vdb::Mat4d m = grid.transform().baseMap()->getAffineMap()->getMat4();
+  const vdb::Mat4d m = grid.transform().baseMap()->getAffineMap()->getMat4();
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) {
       const double x = m(r, c);
@@ -330,14 +331,35 @@ std::uint64_t VolumeObject::contentHash() const {
     }
   const float background = grid.background();
   add(&background, sizeof background);
-  for (auto it = grid.cbeginValueOn(); it; ++it) {
-    const volume_detail::vdb::Coord ijk = it.getCoord();
-    const std::int32_t record[4] = {ijk.x(), ijk.y(), ijk.z(), static_cast<std::int32_t>(it.getDepth())};
-    const float value = *it;
+  // Every value, active or not: level sets interpolate inactive voxels and read the sign of
+  // inactive tiles across gaps. Values above the leaves (tiles) one by one with their place and
+  // state; each leaf as its origin, its value mask and its 512 values in one piece.
+  const TreeT& tree = grid.constTree();
+  auto tiles = tree.cbeginValueAll();
+  tiles.setMaxDepth(TreeT::ValueAllCIter::LEAF_DEPTH - 1);
+  for (; tiles; ++tiles) {
+    const vdb::Coord ijk = tiles.getCoord();
+    const std::int32_t record[5] = {ijk.x(), ijk.y(), ijk.z(), static_cast<std::int32_t>(tiles.getDepth()),
+                                    tiles.isValueOn() ? 1 : 0};
+    const float value = *tiles;
     add(record, sizeof record);
     add(&value, sizeof value);
   }
+  for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
+    const vdb::Coord o = leaf->origin();
+    const std::int32_t origin[3] = {o.x(), o.y(), o.z()};
+    add(origin, sizeof origin);
+    const auto& mask = leaf->getValueMask();
+    for (vdb::Index w = 0; w < mask.WORD_COUNT; ++w) {
+      const auto word = mask.template getWord<vdb::Index64>(w);
+      add(&word, sizeof word);
+    }
+    add(leaf->buffer().data(), sizeof(float) * LeafT::SIZE);
+  }
+  // The query options change the answers too (a new field must be added here: the assert counts
+  // them by size).
   const VolumeQueryConfig& q = config_;
+  static_assert(sizeof(VolumeQueryConfig) == 48, "VolumeQueryConfig changed: hash its new fields here");
   const auto method = static_cast<std::uint8_t>(q.transmittance);
   const std::uint8_t residual = q.residual ? 1 : 0;
   add(&method, 1);
@@ -350,6 +372,7 @@ std::uint64_t VolumeObject::contentHash() const {
   add(&q.refine_steps, sizeof q.refine_steps);
   return xxh64(buffer, h);
 }
+
 VolumeKind VolumeObject::kind() const { return grid_->kind; }
 const std::string& VolumeObject::gridName() const { return grid_->grid_name; }
 double VolumeObject::voxelSize() const { return grid_->grid->voxelSize().x(); }

@@ -585,6 +585,11 @@ SensorRunResults SensorRun::results() const {
 // ---- saved state: "DXSENSR4", fingerprint, seed, rays, sizes, the raw accumulators, XXH64 checksum ----
 
 std::uint64_t SensorRun::fingerprint() const {
+  std::call_once(fingerprint_once_, [this] { fingerprint_ = computeFingerprint(); });
+  return fingerprint_;
+}
+
+std::uint64_t SensorRun::computeFingerprint() const {
   // FNV-1a over what the accumulators' meaning depends on.
   std::uint64_t h = 1469598103934665603ull;
   auto add = [&h](const void* p, std::size_t n) {

@@ -425,6 +425,42 @@ TEST(VolumeObject, LoadsFilesByGridNameOrFirstFloatGrid) {
   EXPECT_EQ(forced->role(), ObjectRole::Medium);
 }
 
+// contentHash (a sensor run state's fingerprint of volumes): the same grid read twice hashes equal;
+// another query option, one changed active voxel, and one changed *inactive* value of a level set
+// (read by interpolation and by the sign of inactive tiles) each change it.
+TEST(VolumeObject, ContentHashSeesEveryValueAndTheQueryOptions) {
+  TempDir dir;
+  writeGrids(dir / "sphere.vdb", {sphereGrid(0.1)});
+  const VolumeLoadOptions options{.grid = "sphere", .kind = VolumeKind::Auto, .name = {}, .query = {}};
+  const auto a = VolumeObject::load(dir / "sphere.vdb", options);
+  const auto b = VolumeObject::load(dir / "sphere.vdb", options);
+  const std::uint64_t h = a->contentHash();
+  EXPECT_NE(h, 0u);
+  EXPECT_EQ(h, b->contentHash());
+  VolumeQueryConfig coarse;
+  coarse.levelset_step = 0.75;
+  EXPECT_NE(h, a->withConfig(coarse)->contentHash());
+
+  const auto changed = [&](bool active) {
+    openvdb::FloatGrid::Ptr grid = sphereGrid(0.1);
+    // A voxel of the narrow band (active) or one just outside it in a leaf that holds band voxels
+    // (inactive, but stored: interpolation reads it).
+    for (auto leaf = grid->tree().beginLeaf(); leaf; ++leaf) {
+      for (openvdb::Index i = 0; i < leaf->SIZE; ++i)
+        if (leaf->isValueOn(i) == active) {
+          leaf->setValueOnly(i, leaf->getValue(i) + 0.01f);
+          return makeVolumeObject(grid, VolumeKind::Auto, "sphere")->contentHash();
+        }
+    }
+    ADD_FAILURE() << "no " << (active ? "active" : "inactive") << " voxel in a leaf";
+    return std::uint64_t{0};
+  };
+  const std::uint64_t same_in_memory = makeVolumeObject(sphereGrid(0.1), VolumeKind::Auto, "sphere")->contentHash();
+  EXPECT_EQ(h, same_in_memory);
+  EXPECT_NE(h, changed(true));
+  EXPECT_NE(h, changed(false));
+}
+
 TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
   TempDir dir;
   openvdb::initialize();

@@ -1,8 +1,9 @@
 #pragma once
 /// \file AtomicFile.h
 /// Writing a whole file so that readers never see it half-written: the bytes go to "<path>.tmp",
-/// which is then renamed over `path` (atomic on POSIX file systems). A process killed while writing
-/// leaves the previous file intact.
+/// are flushed to the disk (fsync), and the file is then renamed over `path` (atomic on POSIX file
+/// systems) and the folder flushed. A process killed while writing, or a power loss, leaves either
+/// the previous file or the whole new one.
 
 #include <filesystem>
 #include <span>

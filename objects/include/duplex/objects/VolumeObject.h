@@ -75,9 +75,10 @@ class VolumeObject final : public Object {
   /// space; level sets get one more voxel of margin for the interpolated surface).
   [[nodiscard]] Box bounds() const override;
   /// XXH64 over what the queries answer from: the kind, the grid's index-to-object transform and
-  /// background, every active value (voxels and tiles, with their coordinates and levels) in the
-  /// tree's order, and the query options. Linear in the active values (a sensor run's state file
-  /// fingerprints its scene with it, so a changed grid is refused on --resume).
+  /// background, every value of the tree, active or not (tiles with their coordinates, levels and
+  /// states; each leaf's origin, value mask and values), and the query options. Linear in the
+  /// tree's size (a sensor run's state file fingerprints its scene with it, once per run, so a
+  /// changed grid is refused on --resume).
   [[nodiscard]] std::uint64_t contentHash() const override;
 
   /// Level sets: the first zero crossing of the trilinearly interpolated distance along

@@ -26,6 +26,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <mutex>
 #include <vector>
 
 namespace duplex {
@@ -123,9 +124,15 @@ class SensorRun {
   /// [0, t_max] (t_max infinite: the whole ray): the medium, with t_collision, or nullptr.
   const MediumInstance* sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max, CounterRng& rng,
                                         QueryContext& ctx, double& t_collision) const;
+  /// Hash of what the accumulators' meaning depends on (computeFingerprint), computed on the first
+  /// save or load and kept: the scene is unchanged for the run's life, and hashing every mesh and
+  /// grid again at each periodic checkpoint would stall the workers.
   [[nodiscard]] std::uint64_t fingerprint() const;
+  [[nodiscard]] std::uint64_t computeFingerprint() const;
 
   const SensorScene& scene_;
+  mutable std::once_flag fingerprint_once_;
+  mutable std::uint64_t fingerprint_ = 0;
   SensorRunConfig config_;
   std::vector<double> light_cdf_;
   std::atomic<bool> cancel_{false};
