@@ -22,6 +22,7 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/Log.h"
+#include "RadixSortFloats.h"
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
@@ -133,49 +134,11 @@ void sortFew(float* v, std::size_t n) {
   }
 }
 
-// Sorts many events by their bits: least significant byte first, four stable counting passes
-// over keys that order as the floats do (sign bit flipped for positives, all bits for negatives),
-// a pass skipped when every key has the same byte there (the exponent bytes of a node's events
-// often agree). std::sort's comparisons are coin flips on these lists (events come in mesh order):
-// a mispredicted branch per comparison made sorting a tenth of a mesh build (link_1: 11.5% of
-// the samples -> 5%; one-thread builds of link_1, hammer, koala -7%). The result is the
-// same list as std::sort's, except that -0 sorts before +0 where std::sort leaves them in either
-// order (both orders are sorted).
-void radixSortFloats(float* v, std::size_t n) {
-  thread_local std::vector<std::uint32_t> scratch;
-  if (scratch.size() < 2 * n) scratch.resize(2 * n);
-  std::uint32_t* keys = scratch.data();
-  std::uint32_t* other = keys + n;
-  std::uint32_t count[4][256] = {};
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto bits = std::bit_cast<std::uint32_t>(v[i]);
-    const std::uint32_t key = bits ^ ((bits >> 31) != 0u ? 0xFFFFFFFFu : 0x80000000u);
-    keys[i] = key;
-    for (int b = 0; b < 4; ++b) ++count[b][(key >> (8 * b)) & 0xFFu];
-  }
-  for (int b = 0; b < 4; ++b) {
-    const std::uint32_t first = (keys[0] >> (8 * b)) & 0xFFu;
-    if (count[b][first] == n) continue;  // every key has this byte: the pass would not move any
-    std::uint32_t offset = 0;
-    for (std::uint32_t& c : count[b]) {
-      const std::uint32_t here = c;
-      c = offset;
-      offset += here;
-    }
-    for (std::size_t i = 0; i < n; ++i) other[count[b][(keys[i] >> (8 * b)) & 0xFFu]++] = keys[i];
-    std::swap(keys, other);
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint32_t key = keys[i];
-    v[i] = std::bit_cast<float>(key ^ ((key >> 31) != 0u ? 0x80000000u : 0xFFFFFFFFu));
-  }
-}
-
 // Sorts events: few inline, many by radix.
 void sortEvents(float* v, std::size_t n) {
   if (n <= 16) sortFew(v, n);
   else if (n < kRadixSortMin) std::sort(v, v + n);
-  else radixSortFloats(v, n);
+  else kd_detail::radixSortFloats(v, n);
 }
 
 // Exact extent of a set of references.
@@ -232,14 +195,14 @@ struct Bins {
   // outside the frame (rounding at its faces) and the ignored fourth lane defined.
   void add(__m128 rlo, __m128 rhi) { addWith(rlo, rhi, sse_lo, sse_scale, sse_max); }
   // add() with the frame's constants passed in (a pass keeps them in registers).
-  void addWith(__m128 rlo, __m128 rhi, __m128 sse_lo, __m128 sse_scale, __m128 sse_max) {
+  void addWith(__m128 rlo, __m128 rhi, __m128 frame_lo, __m128 scale, __m128 last_bin) {
     alignas(16) std::int32_t b0[4], b1[4];
-    const __m128 f0 = _mm_mul_ps(_mm_sub_ps(rlo, sse_lo), sse_scale);
-    const __m128 f1 = _mm_mul_ps(_mm_sub_ps(rhi, sse_lo), sse_scale);
+    const __m128 f0 = _mm_mul_ps(_mm_sub_ps(rlo, frame_lo), scale);
+    const __m128 f1 = _mm_mul_ps(_mm_sub_ps(rhi, frame_lo), scale);
     _mm_store_si128(reinterpret_cast<__m128i*>(b0),
-                    _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), sse_max)));
+                    _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, _mm_setzero_ps()), last_bin)));
     _mm_store_si128(reinterpret_cast<__m128i*>(b1),
-                    _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), sse_max)));
+                    _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, _mm_setzero_ps()), last_bin)));
     for (int k = 0; k < 3; ++k) {
       ++start[k][b0[k]];
       ++end[k][b1[k]];
@@ -900,6 +863,7 @@ class Builder {
     // The bins' frame constants, copied once per pass: read through `bins` they were reloaded per
     // reference behind the may_alias stores (link_1, hammer, koala, base_link, plane: -2 to -6%).
     __m128 bin_lo = _mm_setzero_ps(), bin_scale = _mm_setzero_ps(), bin_max = _mm_setzero_ps();
+    // Called by partitionRange before its first put() (the only caller of put()).
     void cacheFrame() {
       if (bins) bin_lo = bins->sse_lo, bin_scale = bins->sse_scale, bin_max = bins->sse_max;
     }

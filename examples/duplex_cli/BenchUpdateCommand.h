@@ -70,9 +70,10 @@ struct BenchUpdateOptions {
 /// prepared_build_ms_median, prepared_bottom_load_ms_median, prepared_library_bytes,
 /// full_build_rounds, and with Embree full_build_ratio_median / _min / _max and
 /// prepared_build_ratio_median / _min / _max (over the rounds, each round's ours / Embree's full
-/// two-level build, timed side by side); machine. Times are wall-clock milliseconds. Progress goes
-/// to stderr.
-/// Throws duplex::Error for bad input.
+/// two-level build, timed side by side), embree_high_build_ms and
+/// full_build_ratio_vs_embree_high_median / _min / _max (the same against Embree's object scenes of
+/// high quality, with spatial splits, built in each round after its default build); machine. Times are wall-clock
+/// milliseconds. Progress goes to stderr. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options);
 
 }  // namespace duplex::cli

@@ -509,7 +509,8 @@ int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
       expect(number(j, "agreement_with_embree") >= 0.99, "ours and Embree disagree after the same edits: " + j.dump());
       expect(number(j, "hits") == number(j, "embree_hits"), "ours and Embree hit different ray counts: " + j.dump());
       // The full builds' interleaved rounds (7 by default): per-round ratios ours / Embree.
-      for (const std::string key : {"full_build_ratio", "prepared_build_ratio"})
+      expect(number(j, "embree_high_build_ms") > 0.0, "\"embree_high_build_ms\" is not positive: " + j.dump());
+      for (const std::string key : {"full_build_ratio", "prepared_build_ratio", "full_build_ratio_vs_embree_high"})
         expect(number(j, (key + "_min").c_str()) > 0.0 &&
                    number(j, (key + "_min").c_str()) <= number(j, (key + "_median").c_str()) &&
                    number(j, (key + "_median").c_str()) <= number(j, (key + "_max").c_str()),

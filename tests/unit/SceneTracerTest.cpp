@@ -536,6 +536,16 @@ TEST(SceneTracer, BatchIntersectAllEqualsOneRayAtATimeOnOneAndTwoThreads) {
     layered += single.size() >= 2;
   }
   EXPECT_GT(layered, rays.size() / 20) << "too few rays pass several layers to test the batch";
+  // Results replace what the vectors held; no rays give offsets {0} and no hits.
+  std::vector<Hit> old_hits(5);
+  std::vector<std::size_t> old_offsets{3, 4};
+  tracer.intersectAll(std::span<const Ray>(rays.data(), 1), old_hits, old_offsets);
+  ASSERT_EQ(old_offsets.size(), 2u);
+  EXPECT_EQ(old_hits.size(), old_offsets[1]);
+  EXPECT_EQ(old_hits.size(), offsets[0][1]);
+  tracer.intersectAll(std::span<const Ray>(), old_hits, old_offsets);
+  EXPECT_EQ(old_offsets, std::vector<std::size_t>{0});
+  EXPECT_TRUE(old_hits.empty());
 }
 
 TEST(SceneTracer, ObjectsAreBuiltLazilyOnceAndShared) {

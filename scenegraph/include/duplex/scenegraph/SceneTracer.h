@@ -77,7 +77,9 @@ class SceneTracer {
   /// Batch intersectAll (picking through layers, many rays): on return `offsets` holds rays.size()
   /// + 1 entries and the hits of rays[i] are hits[offsets[i], offsets[i + 1]), sorted by t as
   /// intersectAll(ray) returns them (world t, world normal; sensors when the mask selects them).
-  /// Both vectors are replaced. Flat rather than a vector per ray: one allocation for the result.
+  /// Both vectors are replaced (an empty span gives offsets {0} and no hits). Flat rather than a
+  /// vector per ray, so the result is one allocation (each ray's hits are gathered in a list of
+  /// its own while tracing, then copied).
   void intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
                     std::uint32_t mask = 0xFFFFFFFFu) const;
 
