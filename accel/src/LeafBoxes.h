@@ -88,7 +88,10 @@ struct LeafBoxes {
   // `records`, when given, holds a 64-byte record per reference that the caller reads for every
   // reference met: the 16- and 8-wide tests ask for the record of the first box each vector meets
   // as soon as it is known, so that its load overlaps the remaining tests (without a branch: when
-  // a vector meets nothing, the prefetched line is that of a stale index, which costs nothing).
+  // a vector meets nothing, the prefetched line is that of the vector's next reference, which
+  // costs nothing). That index comes from the mask, not from `out`: reading back the index just
+  // stored waits for the store (on AMD Zen 5 the sensors' part of the crossing query took about 10%
+  // longer; docs/sensors.md, "Speed").
   std::uint32_t metInRuns(const KdRay& ray, float t_max, const std::uint32_t* runs, std::uint32_t run_count,
                           std::uint32_t* out, const void* records = nullptr) const {
 #if defined(DUPLEX_LEAF_BOXES_X86)
@@ -138,6 +141,11 @@ struct LeafBoxes {
   static std::uint32_t inRun(std::uint32_t left) {
     return static_cast<std::uint32_t>((std::uint64_t{1} << std::min<std::uint32_t>(left, 32u)) - 1u);
   }
+  // The lane of the lowest set bit of `met`, or `lanes` when none is set (no branch: the record
+  // prefetched for an empty mask is that of the next vector's first reference).
+  static std::uint32_t firstLane(std::uint32_t met, std::uint32_t lanes) {
+    return static_cast<std::uint32_t>(std::countr_zero(met | (1u << lanes)));
+  }
   // The positions of the set bits of every 8-bit mask, packed: byte k of kPacked[m] is the lane of
   // the k-th set bit of m. Met boxes are appended by storing a whole vector of i + those lanes and
   // advancing by the bit count, with no branch per met box (a loop over the set bits mispredicts
@@ -157,7 +165,9 @@ struct LeafBoxes {
   // and the smallest exit are widened by their magnitude times kWiden (as clipIntervalToBox
   // widens each axis's) and clipped to [tnear, t_max]. The running bound is the second operand of
   // max / min: a NaN slab bound (0 * inf) leaves it. Loads past a run's end read the next run or
-  // the padding; their bits are cleared. The three differ only in vector width.
+  // the padding; their bits are cleared. The three differ only in vector width. The 16-wide test
+  // packs the met lanes in a register and stores the whole vector (`out` has room): the compress
+  // store to memory is slower on AMD Zen 4 / 5.
   __attribute__((target("avx512f,popcnt"))) std::uint32_t runs16(const KdRay& ray, float t_max,
                                                                  const std::uint32_t* runs, std::uint32_t run_count,
                                                                  std::uint32_t* out, std::uintptr_t records,
@@ -186,8 +196,10 @@ struct LeafBoxes {
         enter = _mm512_maskz_max_ps(kAll, _mm512_sub_ps(enter, _mm512_mul_ps(_mm512_abs_ps(enter), widen)), t_near);
         leave = _mm512_maskz_min_ps(kAll, _mm512_add_ps(leave, _mm512_mul_ps(_mm512_abs_ps(leave), widen)), t_far);
         const __mmask16 met = _mm512_cmp_ps_mask(enter, leave, _CMP_LE_OQ) & inRun(end - i);
-        _mm512_mask_compressstoreu_epi32(out + n, met, _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(i)), iota));
-        __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{out[n]} << shift)));
+        const __m512i index = _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(i)), iota);
+        _mm512_storeu_si512(out + n, _mm512_maskz_compress_epi32(met, index));
+        const std::uint32_t first = i + firstLane(met, 16);
+        __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{first} << shift)));
         n += static_cast<std::uint32_t>(std::popcount(static_cast<unsigned>(met)));
       }
     }
@@ -225,7 +237,8 @@ struct LeafBoxes {
             _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&kPacked[met])));
         _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n),
                             _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(i)), lanes_met));
-        __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{out[n]} << shift)));
+        const std::uint32_t first = i + firstLane(met, 8);
+        __builtin_prefetch(reinterpret_cast<const void*>(records + (std::uintptr_t{first} << shift)));
         n += static_cast<std::uint32_t>(std::popcount(met));
       }
     }
