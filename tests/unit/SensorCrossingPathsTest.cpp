@@ -457,14 +457,9 @@ TEST(SensorCrossingPaths, PlaneTestDropsOnlyWhatTheExactTestMisses) {
   }
 }
 
-// Segments that end exactly on one of the grid's cell planes, on the border two tiles share: a floor
-// of 1 x 1 tiles whose borders lie on the cell planes (30 x 30 tiles on two levels give cells of
-// exactly 3 units), and rays reaching (3k, y) at t = tfar = 1. Borders are closed, so both tiles
-// are crossed: the walk must still enter the cell beyond the plane although the plane's t is the
-// segment's end (rounded either way). (Removing the grid's margin does not make this fail: the
-// interval clipped to the grid's bounds is widened past the end; no ray here or above comes
-// near enough to a cell plane for the margin itself to matter.)
-TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
+// A floor of 1 x 1 tiles on two levels (z = 0 and 7), 30 x 30 each: the grid's cells are then
+// exactly 3 units, their planes on the tiles' borders.
+Scene tileFloor() {
   Scene s;
   const auto tile = sensor(SensorShape::Rectangle, 1.0, 1, true);
   for (int level = 0; level < 2; ++level)
@@ -478,6 +473,18 @@ TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
         s.instances.push_back(d);
         s.half.push_back(0.5);
       }
+  return s;
+}
+
+// Segments that end exactly on one of the grid's cell planes, on the border two tiles share: a floor
+// of 1 x 1 tiles whose borders lie on the cell planes (30 x 30 tiles on two levels give cells of
+// exactly 3 units), and rays reaching (3k, y) at t = tfar = 1. Borders are closed, so both tiles
+// are crossed: the walk must still enter the cell beyond the plane although the plane's t is the
+// segment's end (rounded either way). (Removing the grid's margin does not make this fail: the
+// interval clipped to the grid's bounds is widened past the end; no ray here or above comes
+// near enough to a cell plane for the margin itself to matter.)
+TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
+  const Scene s = tileFloor();
   const BothWalks walks(s.instances);
   ASSERT_GT(walks.fast.stats().sensor_grid_cells, 0u);
   Counts counts;
@@ -500,6 +507,33 @@ TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
           }
   // The rays do end on the shared borders: every one crosses the two tiles meeting there.
   EXPECT_EQ(two_tiles, counts.rays);
+}
+
+// Rays that start exactly on the grid's cell planes and edges (the floor of tiles above: cells of
+// exactly 3 units) and leave them downwards on those axes: the first plane's t is then -0 (0 times a
+// negative reciprocal), on two axes at once from an edge. The walk orders the planes' t by integer
+// keys (-0 before +0, unlike the float compare); the grid must find exactly what the tree and the
+// brute force find, from cells entered at a plane, an edge or a corner.
+TEST(SensorCrossingPaths, RaysLeavingCellEdgesDownwardsAgree) {
+  const Scene s = tileFloor();
+  const BothWalks walks(s.instances);
+  ASSERT_GT(walks.fast.stats().sensor_grid_cells, 0u);
+  Counts counts;
+  for (int k = 1; k < 10; k += 2)
+    for (int m = 1; m < 10; m += 3)
+      for (const float z : {0.0f, 3.5f, 7.0f})
+        for (const glm::vec3 dir :
+             {glm::vec3(-1.0f, -1.0f, -0.5f), glm::vec3(-1.0f, -0.25f, 0.5f), glm::vec3(-0.25f, -1.0f, -1.0f),
+              glm::vec3(-3.0f, -3.0f, -7.0f), glm::vec3(-1.0f, 0.5f, -1.0f), glm::vec3(0.5f, -1.0f, 1.0f)}) {
+          Ray ray;
+          ray.origin = glm::vec3(3.0f * k, 3.0f * m, z);  // on the edge of four cells
+          ray.dir = dir;
+          ray.tfar = 2.0f;
+          ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, ray, 1u, counts));
+          ray.origin.y += 1.25f;  // on the plane x = 3k only
+          ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, ray, 1u, counts));
+        }
+  EXPECT_GT(counts.crossings, counts.rays / 2);  // the rays do cross tiles
 }
 
 }  // namespace
