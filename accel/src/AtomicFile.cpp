@@ -30,8 +30,8 @@ bool writeAll(int fd, std::span<const unsigned char> bytes) {
 
 }  // namespace
 
-void writeFileAtomically(const std::filesystem::path& path, std::span<const unsigned char> bytes,
-                         std::string_view what) {
+void writeFileAtomically(const std::filesystem::path& path, std::span<const unsigned char> bytes, std::string_view what,
+                         bool sync) {
   std::filesystem::path tmp = path;
   tmp += ".tmp";
   const auto fail = [&](const std::string& problem, int err) {
@@ -46,7 +46,7 @@ void writeFileAtomically(const std::filesystem::path& path, std::span<const unsi
                     std::strerror(errno) + ")");
   // The data reach the disk before the rename makes them the file: after a power loss the path
   // then holds either the previous file or the whole new one (the rename alone orders nothing).
-  const bool written = writeAll(fd, bytes) && ::fsync(fd) == 0;
+  const bool written = writeAll(fd, bytes) && (!sync || ::fsync(fd) == 0);
   const int write_errno = written ? 0 : errno;
   if (::close(fd) != 0 && written) fail("closing", errno);
   if (!written) fail("writing (disk full?)", write_errno);
@@ -57,6 +57,7 @@ void writeFileAtomically(const std::filesystem::path& path, std::span<const unsi
     std::filesystem::remove(tmp, ignored);
     throw FileError(path.string() + ": cannot replace the " + std::string(what) + " (" + ec.message() + ")");
   }
+  if (!sync) return;
   // And the rename itself: the folder's entry is flushed too. Best effort (some file systems refuse
   // fsync on a folder); the file is complete either way.
   std::filesystem::path dir = path.parent_path();

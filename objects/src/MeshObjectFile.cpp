@@ -101,7 +101,9 @@ void saveMeshObject(const MeshObject& object, const std::filesystem::path& path)
   const std::uint64_t checksum = xxh64(std::span(bytes).first(bytes.size() - kChecksumBytes), 0);
   std::memcpy(bytes.data() + bytes.size() - kChecksumBytes, &checksum, kChecksumBytes);
 
-  writeFileAtomically(path, bytes, "bottom-level structure file");
+  // Not flushed to the disk per file: a prepared library may hold tens of thousands, and a file a
+  // power loss damages is refused on loading (checksum) and prepared again.
+  writeFileAtomically(path, bytes, "bottom-level structure file", /*sync=*/false);
 }
 
 std::shared_ptr<const MeshObject> loadMeshObject(const std::filesystem::path& path,

@@ -720,7 +720,8 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
   append(bytes, &checksum, 1);
   // Written beside the file and renamed over it: a process killed while saving leaves the previous
   // state intact, never a half-written one.
-  writeFileAtomically(file, {reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()}, "run state");
+  writeFileAtomically(file, {reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()}, "run state",
+                      /*sync=*/true);
 }
 
 void SensorRun::loadState(const std::filesystem::path& file) {
