@@ -34,29 +34,24 @@ void writeFileAtomically(const std::filesystem::path& path, std::span<const unsi
                          bool sync) {
   std::filesystem::path tmp = path;
   tmp += ".tmp";
-  const auto fail = [&](const std::string& problem, int err) {
+  // Every failure: the temporary file removed (if there is one), and an error naming the file.
+  const auto fail = [&](const std::string& problem, const std::string& detail) {
     std::error_code ignored;
     std::filesystem::remove(tmp, ignored);
-    throw FileError(path.string() + ": " + problem + " the " + std::string(what) + " (" + tmp.string() +
-                    (err != 0 ? std::string(": ") + std::strerror(err) : std::string()) + ")");
+    throw FileError(path.string() + ": " + problem + " the " + std::string(what) + " (" + detail + ")");
   };
+  const auto systemError = [&](int err) { return tmp.string() + ": " + std::strerror(err); };
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0)
-    throw FileError(path.string() + ": cannot write the " + std::string(what) + " (" + tmp.string() + ": " +
-                    std::strerror(errno) + ")");
+  if (fd < 0) fail("cannot write", systemError(errno));
   // The data reach the disk before the rename makes them the file: after a power loss the path
   // then holds either the previous file or the whole new one (the rename alone orders nothing).
   const bool written = writeAll(fd, bytes) && (!sync || ::fsync(fd) == 0);
   const int write_errno = written ? 0 : errno;
-  if (::close(fd) != 0 && written) fail("closing", errno);
-  if (!written) fail("writing (disk full?)", write_errno);
+  if (::close(fd) != 0 && written) fail("closing", systemError(errno));
+  if (!written) fail("writing (disk full?)", systemError(write_errno));
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::error_code ignored;
-    std::filesystem::remove(tmp, ignored);
-    throw FileError(path.string() + ": cannot replace the " + std::string(what) + " (" + ec.message() + ")");
-  }
+  if (ec) fail("cannot replace", ec.message());
   if (!sync) return;
   // And the rename itself: the folder's entry is flushed too. Best effort (some file systems refuse
   // fsync on a folder); the file is complete either way.

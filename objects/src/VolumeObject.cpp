@@ -307,9 +307,10 @@ VolumeObject::~VolumeObject() = default;
 Box VolumeObject::bounds() const { return grid_->bounds_os; }
 
 std::uint64_t VolumeObject::contentHash() const {
-  // Streamed through a buffer of 1 MiB: each full buffer's hash seeds the next one's.
+  // Streamed through a buffer flushed at 1 MiB (each flushed buffer's hash seeds the next one's),
+  // reserved with room for the append that crosses that mark (at most a leaf's 2 KiB).
   std::vector<unsigned char> buffer;
-  buffer.reserve(std::size_t{1} << 21);
+  buffer.reserve((std::size_t{1} << 20) + 4096);
   std::uint64_t h = 0;
   const auto add = [&](const void* p, std::size_t n) {
     const auto* c = static_cast<const unsigned char*>(p);
