@@ -37,20 +37,11 @@ struct LeafBoxes {
 
   // Copies boxes[prim_indices[i]] for every reference (O(references)).
   void refresh(const std::vector<Box>& boxes, const std::vector<std::uint32_t>& prim_indices) {
-    count = 0;
-    lanes = widestTest();
-    for (int k = 0; k < 3; ++k) {
-      lo[k].assign(prim_indices.size() + kPad, 0.0f);
-      hi[k].assign(prim_indices.size() + kPad, 0.0f);
-    }
-    for (std::size_t i = 0; i < prim_indices.size(); ++i) {
-      const Box& b = boxes[prim_indices[i]];
-      for (int k = 0; k < 3; ++k) {
-        lo[k][i] = b.lo[k];
-        hi[k][i] = b.hi[k];
-      }
-    }
-    count = prim_indices.size();
+    assign(prim_indices.size(), [&](std::size_t i) -> const Box& { return boxes[prim_indices[i]]; });
+  }
+  // Copies boxes[i] for every reference i (boxes already in reference order).
+  void refresh(const std::vector<Box>& boxes) {
+    assign(boxes.size(), [&](std::size_t i) -> const Box& { return boxes[i]; });
   }
 
   // Calls hit(i) for every reference i in [begin, begin + n) whose box the ray meets within
@@ -110,6 +101,24 @@ struct LeafBoxes {
   }
 
  private:
+  template <class BoxOf>
+  void assign(std::size_t n, BoxOf&& box_of) {
+    count = 0;
+    lanes = widestTest();
+    for (int k = 0; k < 3; ++k) {
+      lo[k].assign(n + kPad, 0.0f);
+      hi[k].assign(n + kPad, 0.0f);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const Box& b = box_of(i);
+      for (int k = 0; k < 3; ++k) {
+        lo[k][i] = b.lo[k];
+        hi[k][i] = b.hi[k];
+      }
+    }
+    count = n;
+  }
+
   static constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
 
   // The widest test the CPU runs, capped by the environment variable DUPLEX_ISA ("sse2", "avx2",

@@ -16,13 +16,25 @@
 // below that margin; other rays, and levels where a grid would be poor (few sensors, or sensors
 // spanning many cells), take the kd-tree. Either way the boxes met are a superset of the sensors
 // crossed, and the crossings themselves come from the same exact test.
+//
+// Flat sensors (a world rectangle, FlatQuad) are listed only in the cells their rectangle, not
+// just their box, comes within `margin` of, and an entry's box is the box of the part of the
+// rectangle within `margin` of its cell (widened by the margin, within the sensor's own box): a
+// tilted sensor that straddles a cell plane is then met in the cell where the ray passes it, not
+// in every cell its box reaches. Exact for the same reason as above: a crossing lies on the
+// rectangle (up to the object-space ray's rounding, far below the margin) and in or within the
+// walk's rounding of a cell the walk visits, so within `margin` of that cell, and so inside that
+// cell's entry box.
 
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/Ray.h"
 #include "LeafBoxes.h"
 
+#include <glm/vec3.hpp>
+
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -30,6 +42,13 @@
 #include <vector>
 
 namespace duplex::toplevel_detail {
+
+// A flat instance's rectangle in world space: its corners in order around it (double: the clip
+// against cells must not lose what the margin keeps). `valid` false: not flat, use the box.
+struct FlatQuad {
+  std::array<glm::dvec3, 4> corner;
+  bool valid = false;
+};
 
 struct SensorGrid {
   // Below this many live boxes the kd-tree is as fast and the grid is not built.
@@ -57,8 +76,9 @@ struct SensorGrid {
   [[nodiscard]] bool usable() const { return !cell_begin.empty(); }
 
   // Rebuilds over the non-empty boxes of `by_slot` (free slots hold empty boxes), or leaves the
-  // grid unusable when it would not pay.
-  void refresh(const std::vector<Box>& by_slot) {
+  // grid unusable when it would not pay. `quads` (optional, by slot): the flat instances'
+  // rectangles, which narrow their entries (see the top of this file).
+  void refresh(const std::vector<Box>& by_slot, const std::vector<FlatQuad>* quads = nullptr) {
     cell_begin.clear();
     slots.clear();
     std::size_t n = 0;
@@ -104,38 +124,60 @@ struct SensorGrid {
     constexpr float eps = std::numeric_limits<float>::epsilon();
     margin = 1e-3f * std::max({cell[0], cell[1], cell[2]}) + 128.0f * eps * magnitude;
     bounds = Box(all.lo - glm::vec3(margin), all.hi + glm::vec3(margin));
-    // Count, then place: each box in every cell within `margin` of it.
-    std::vector<std::uint32_t> count(cells + 1, 0);
-    std::uint64_t refs = 0;
+    // The cells within `margin` of each box; the grid is dropped when they are too many.
     auto range = [&](const Box& b, std::uint32_t a[3], std::uint32_t z[3]) {
       for (int k = 0; k < 3; ++k) {
         a[k] = cellOf(k, b.lo[k] - margin);
         z[k] = cellOf(k, b.hi[k] + margin);
       }
     };
+    std::uint64_t refs = 0;
     for (const Box& b : by_slot) {
       if (b.empty()) continue;
       std::uint32_t a[3], z[3];
       range(b, a, z);
       refs += std::uint64_t{z[0] - a[0] + 1} * (z[1] - a[1] + 1) * (z[2] - a[2] + 1);
       if (static_cast<double>(refs) > kMaxRefsPerBox * static_cast<double>(n)) return;
-      for (std::uint32_t iz = a[2]; iz <= z[2]; ++iz)
-        for (std::uint32_t iy = a[1]; iy <= z[1]; ++iy)
-          for (std::uint32_t ix = a[0]; ix <= z[0]; ++ix) ++count[index(ix, iy, iz) + 1];
     }
-    for (std::size_t c = 1; c <= cells; ++c) count[c] += count[c - 1];
-    slots.resize(refs);
-    std::vector<std::uint32_t> fill(count.begin(), count.end() - 1);
+    // The entries (slot order within a cell), with their boxes: a flat instance only where its
+    // rectangle comes within `margin` of the cell, with the box of that part.
+    struct Entry {
+      std::uint32_t cell, slot;
+      Box box;
+    };
+    std::vector<Entry> entries;
+    entries.reserve(refs);
+    std::vector<std::uint32_t> count(cells + 1, 0);
     for (std::uint32_t slot = 0; slot < by_slot.size(); ++slot) {
       const Box& b = by_slot[slot];
       if (b.empty()) continue;
+      const FlatQuad* quad = quads && slot < quads->size() && (*quads)[slot].valid ? &(*quads)[slot] : nullptr;
       std::uint32_t a[3], z[3];
       range(b, a, z);
       for (std::uint32_t iz = a[2]; iz <= z[2]; ++iz)
         for (std::uint32_t iy = a[1]; iy <= z[1]; ++iy)
-          for (std::uint32_t ix = a[0]; ix <= z[0]; ++ix) slots[fill[index(ix, iy, iz)]++] = slot;
+          for (std::uint32_t ix = a[0]; ix <= z[0]; ++ix) {
+            Box entry_box = b;
+            if (quad) {
+              const std::uint32_t at[3] = {ix, iy, iz};
+              if (!quadNearCell(*quad, at, entry_box)) continue;
+              entry_box = intersection(entry_box, b);
+            }
+            const std::uint32_t c = index(ix, iy, iz);
+            entries.push_back({c, slot, entry_box});
+            ++count[c + 1];
+          }
     }
-    boxes.refresh(by_slot, slots);
+    for (std::size_t c = 1; c <= cells; ++c) count[c] += count[c - 1];
+    slots.resize(entries.size());
+    std::vector<Box> entry_boxes(entries.size());
+    std::vector<std::uint32_t> fill(count.begin(), count.end() - 1);
+    for (const Entry& e : entries) {
+      const std::uint32_t at = fill[e.cell]++;
+      slots[at] = e.slot;
+      entry_boxes[at] = e.box;
+    }
+    boxes.refresh(entry_boxes);
     cell_begin = std::move(count);
   }
 
@@ -249,6 +291,53 @@ struct SensorGrid {
   }
 
  private:
+  // Whether the rectangle comes within `margin` of cell `at` (the cell's box widened by the margin;
+  // open outwards at the grid's boundary, where the walk clamps); if so, `box` is the box of that
+  // part of the rectangle widened by the margin, rounded outwards to float. Sutherland-Hodgman in
+  // double: its rounding (about 1e-16 of the coordinates) is far below the margin.
+  [[nodiscard]] bool quadNearCell(const FlatQuad& quad, const std::uint32_t at[3], Box& box) const {
+    constexpr std::size_t kMaxVertices = 4 + 6;  // each plane adds at most one vertex
+    std::array<glm::dvec3, kMaxVertices> poly, next;
+    std::size_t size = 4;
+    std::copy(quad.corner.begin(), quad.corner.end(), poly.begin());
+    for (int k = 0; k < 3; ++k) {
+      const double cell_lo = static_cast<double>(lo[k]) + static_cast<double>(at[k]) * static_cast<double>(cell[k]);
+      const double bound[2] = {cell_lo - margin, cell_lo + static_cast<double>(cell[k]) + margin};
+      for (int side = 0; side < 2; ++side) {
+        if (side == 0 ? at[k] == 0 : at[k] + 1 == dims[k]) continue;  // open outwards
+        // Inside: p[k] >= bound (lower side) or p[k] <= bound (upper side).
+        auto inside = [&](const glm::dvec3& p) { return side == 0 ? p[k] >= bound[0] : p[k] <= bound[1]; };
+        std::size_t out = 0;
+        for (std::size_t i = 0; i < size; ++i) {
+          const glm::dvec3& p = poly[i];
+          const glm::dvec3& q = poly[(i + 1) % size];
+          const bool p_in = inside(p), q_in = inside(q);
+          if (p_in) next[out++] = p;
+          if (p_in != q_in) {
+            const double s = (bound[side] - p[k]) / (q[k] - p[k]);
+            glm::dvec3 x = p + s * (q - p);
+            x[k] = bound[side];
+            next[out++] = x;
+          }
+        }
+        size = out;
+        if (size == 0) return false;
+        poly = next;
+      }
+    }
+    glm::dvec3 a = poly[0], b = poly[0];
+    for (std::size_t i = 1; i < size; ++i) {
+      a = glm::min(a, poly[i]);
+      b = glm::max(b, poly[i]);
+    }
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    for (int k = 0; k < 3; ++k) {
+      box.lo[k] = std::nextafter(static_cast<float>(a[k] - margin), -kInf);
+      box.hi[k] = std::nextafter(static_cast<float>(b[k] + margin), kInf);
+    }
+    return true;
+  }
+
   // The cell of coordinate x on axis k, clamped to the grid (NaN to cell 0): floor((x - lo) / cell)
   // clamped to [0, dims - 1], computed as a clamp and a truncation (maxss, minss, cvttss2si: the
   // same cell, with no branch; std::floor without SSE4.1 and the test for cells below 0 each had one,

@@ -51,13 +51,14 @@ struct Scene {
 };
 
 /// 2,000 sensors at random places and orientations in a 10 x 10 x 4 room offset by `offset`:
-/// two- and one-sided squares (0.1, 4 x 4 bins), disks (0.12, 3 x 3) and a few spheres (0.1).
-Scene makeScene(const glm::dvec3& offset) {
-  const auto square = sensor(SensorShape::Rectangle, 0.1, 4, true);
-  const auto square_front = sensor(SensorShape::Rectangle, 0.1, 4, false);
-  const auto disk = sensor(SensorShape::Disk, 0.12, 3, true);
-  const auto disk_front = sensor(SensorShape::Disk, 0.12, 3, false);
-  const auto ball = sensor(SensorShape::Sphere, 0.1, 4, true);
+/// two- and one-sided squares (0.1, 4 x 4 bins), disks (0.12, 3 x 3) and a few spheres (0.1), all
+/// sizes times `scale`.
+Scene makeScene(const glm::dvec3& offset, double scale = 1.0) {
+  const auto square = sensor(SensorShape::Rectangle, 0.1 * scale, 4, true);
+  const auto square_front = sensor(SensorShape::Rectangle, 0.1 * scale, 4, false);
+  const auto disk = sensor(SensorShape::Disk, 0.12 * scale, 3, true);
+  const auto disk_front = sensor(SensorShape::Disk, 0.12 * scale, 3, false);
+  const auto ball = sensor(SensorShape::Sphere, 0.1 * scale, 4, true);
   std::mt19937_64 rng(2026);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   Scene s;
@@ -66,7 +67,7 @@ Scene makeScene(const glm::dvec3& offset) {
     d.id = id;
     const int kind = static_cast<int>(id % 10);
     d.object = kind < 4 ? square : kind < 6 ? square_front : kind < 8 ? disk : kind < 9 ? disk_front : ball;
-    s.half.push_back(kind < 6 || kind == 9 ? 0.05 : 0.06);
+    s.half.push_back((kind < 6 || kind == 9 ? 0.05 : 0.06) * scale);
     const glm::dvec3 at = offset + glm::dvec3(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
     if (id % 8 == 0) {  // axis-aligned: flat world boxes, the border in a box face
       d.world_from_object.translation = at;
@@ -275,6 +276,36 @@ TEST(SensorCrossingPaths, AgreeFarFromTheOrigin) { ASSERT_NO_FATAL_FAILURE(check
 // tree with the plane test must still agree with the brute force bit for bit.
 TEST(SensorCrossingPaths, AgreeAHundredThousandUnitsFromTheOrigin) {
   ASSERT_NO_FATAL_FAILURE(checkPaths(glm::dvec3(1e5, -5e4, 2e4), false));
+}
+
+// Sensors five times larger (0.5 squares, cells of about 1.2): most straddle a cell plane, and the
+// grid lists a flat sensor only in the cells its rectangle (not its box) comes near, with the box
+// of that part. Rays aimed at random points of each rectangle (where it crosses cell planes among
+// them) and at its border must find the same crossings as the tree and the brute force.
+TEST(SensorCrossingPaths, SensorsStraddlingCellPlanesAgree) {
+  const Scene s = makeScene(glm::dvec3(0.0), 5.0);
+  BothWalks walks(s.instances);
+  ASSERT_GT(walks.fast.stats().sensor_grid_cells, 0u);
+  // Every sensor keeps at least one entry (its rectangle lies in the grid's cells).
+  EXPECT_GE(walks.fast.stats().sensor_grid_entries, s.instances.size());
+  std::mt19937_64 r(17);
+  std::uniform_real_distribution<double> v(0.0, 1.0);
+  Counts counts;
+  for (int i = 0; i < 6000; ++i) {
+    const InstanceDesc& d = s.instances[r() % s.instances.size()];
+    if (d.id % 10 == 9) continue;  // spheres keep their boxes
+    const double h = s.half[d.id];
+    glm::dvec3 local(-h + 2.0 * h * v(r), -h + 2.0 * h * v(r), 0.0);
+    if (i % 4 == 0) local.x = i % 8 ? h : -h;  // on the border
+    const glm::dvec3 target = d.world_from_object.point(local);
+    const glm::dvec3 from(-5.0 + 10.0 * v(r), -5.0 + 10.0 * v(r), 4.0 * v(r));
+    Ray ray;
+    ray.origin = glm::vec3(from);
+    ray.dir = glm::vec3(target - from);
+    ray.tfar = 1.5f;
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, ray, 0xFFFFFFFFu, counts));
+  }
+  EXPECT_GT(counts.crossings, 5000u);
 }
 
 TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
