@@ -29,6 +29,7 @@
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/Ray.h"
+#include "FloatRounding.h"
 #include "LeafBoxes.h"
 
 #include <glm/vec3.hpp>
@@ -44,10 +45,9 @@
 namespace duplex::toplevel_detail {
 
 // A flat instance's rectangle in world space: its corners in order around it (double: the clip
-// against cells must not lose what the margin keeps). `valid` false: not flat, use the box.
+// against cells must not lose what the margin keeps).
 struct FlatQuad {
   std::array<glm::dvec3, 4> corner;
-  bool valid = false;
 };
 
 struct SensorGrid {
@@ -76,9 +76,17 @@ struct SensorGrid {
   [[nodiscard]] bool usable() const { return !cell_begin.empty(); }
 
   // Rebuilds over the non-empty boxes of `by_slot` (free slots hold empty boxes), or leaves the
-  // grid unusable when it would not pay. `quads` (optional, by slot): the flat instances'
-  // rectangles, which narrow their entries (see the top of this file).
-  void refresh(const std::vector<Box>& by_slot, const std::vector<FlatQuad>* quads = nullptr) {
+  // grid unusable when it would not pay.
+  void refresh(const std::vector<Box>& by_slot) {
+    refresh(by_slot, [](std::uint32_t, FlatQuad&) { return false; });
+  }
+  // The same, with the flat instances' rectangles, which narrow their entries (see the top of this
+  // file): quad_of(slot, quad) fills in the rectangle of a flat slot and returns true (false: use
+  // its box). Asked only for boxes that reach into more than one cell (a box within one cell has
+  // one entry, its own box), so that a commit of the level (which refreshes the grid) stays O(n)
+  // with a small constant.
+  template <class QuadOf>
+  void refresh(const std::vector<Box>& by_slot, QuadOf&& quad_of) {
     cell_begin.clear();
     slots.clear();
     std::size_t n = 0;
@@ -141,26 +149,24 @@ struct SensorGrid {
     }
     // The entries (slot order within a cell), with their boxes: a flat instance only where its
     // rectangle comes within `margin` of the cell, with the box of that part.
-    struct Entry {
-      std::uint32_t cell, slot;
-      Box box;
-    };
-    std::vector<Entry> entries;
+    std::vector<Entry>& entries = scratch_entries_;
+    entries.clear();
     entries.reserve(refs);
     std::vector<std::uint32_t> count(cells + 1, 0);
     for (std::uint32_t slot = 0; slot < by_slot.size(); ++slot) {
       const Box& b = by_slot[slot];
       if (b.empty()) continue;
-      const FlatQuad* quad = quads && slot < quads->size() && (*quads)[slot].valid ? &(*quads)[slot] : nullptr;
       std::uint32_t a[3], z[3];
       range(b, a, z);
+      FlatQuad quad;
+      const bool flat = (a[0] != z[0] || a[1] != z[1] || a[2] != z[2]) && quad_of(slot, quad);
       for (std::uint32_t iz = a[2]; iz <= z[2]; ++iz)
         for (std::uint32_t iy = a[1]; iy <= z[1]; ++iy)
           for (std::uint32_t ix = a[0]; ix <= z[0]; ++ix) {
             Box entry_box = b;
-            if (quad) {
+            if (flat) {
               const std::uint32_t at[3] = {ix, iy, iz};
-              if (!quadNearCell(*quad, at, entry_box)) continue;
+              if (!quadNearCell(quad, b, at, entry_box)) continue;
               entry_box = intersection(entry_box, b);
             }
             const std::uint32_t c = index(ix, iy, iz);
@@ -170,7 +176,8 @@ struct SensorGrid {
     }
     for (std::size_t c = 1; c <= cells; ++c) count[c] += count[c - 1];
     slots.resize(entries.size());
-    std::vector<Box> entry_boxes(entries.size());
+    std::vector<Box>& entry_boxes = scratch_boxes_;
+    entry_boxes.resize(entries.size());
     std::vector<std::uint32_t> fill(count.begin(), count.end() - 1);
     for (const Entry& e : entries) {
       const std::uint32_t at = fill[e.cell]++;
@@ -291,20 +298,34 @@ struct SensorGrid {
   }
 
  private:
+  struct Entry {
+    std::uint32_t cell, slot;
+    Box box;
+  };
+  // Scratch lists of refresh(), kept between commits: fresh ones of this size (hundreds of KB)
+  // come from new pages, whose faults cost more than the refresh itself.
+  std::vector<Entry> scratch_entries_;
+  std::vector<Box> scratch_boxes_;
+
   // Whether the rectangle comes within `margin` of cell `at` (the cell's box widened by the margin;
   // open outwards at the grid's boundary, where the walk clamps); if so, `box` is the box of that
   // part of the rectangle widened by the margin, rounded outwards to float. Sutherland-Hodgman in
-  // double: its rounding (about 1e-16 of the coordinates) is far below the margin.
-  [[nodiscard]] bool quadNearCell(const FlatQuad& quad, const std::uint32_t at[3], Box& box) const {
+  // double: its rounding (about 1e-16 of the coordinates) is far below the margin. Planes that do
+  // not cut the rectangle's box `rect_box` are skipped (clipping less keeps more: never too little).
+  [[nodiscard]] bool quadNearCell(const FlatQuad& quad, const Box& rect_box, const std::uint32_t at[3],
+                                  Box& box) const {
     constexpr std::size_t kMaxVertices = 4 + 6;  // each plane adds at most one vertex
-    std::array<glm::dvec3, kMaxVertices> poly, next;
+    std::array<glm::dvec3, kMaxVertices> buffers[2];
+    glm::dvec3* poly = buffers[0].data();
+    glm::dvec3* next = buffers[1].data();
     std::size_t size = 4;
-    std::copy(quad.corner.begin(), quad.corner.end(), poly.begin());
+    std::copy(quad.corner.begin(), quad.corner.end(), poly);
     for (int k = 0; k < 3; ++k) {
       const double cell_lo = static_cast<double>(lo[k]) + static_cast<double>(at[k]) * static_cast<double>(cell[k]);
       const double bound[2] = {cell_lo - margin, cell_lo + static_cast<double>(cell[k]) + margin};
       for (int side = 0; side < 2; ++side) {
         if (side == 0 ? at[k] == 0 : at[k] + 1 == dims[k]) continue;  // open outwards
+        if (side == 0 ? rect_box.lo[k] >= bound[0] : rect_box.hi[k] <= bound[1]) continue;
         // Inside: p[k] >= bound (lower side) or p[k] <= bound (upper side).
         auto inside = [&](const glm::dvec3& p) { return side == 0 ? p[k] >= bound[0] : p[k] <= bound[1]; };
         std::size_t out = 0;
@@ -322,7 +343,7 @@ struct SensorGrid {
         }
         size = out;
         if (size == 0) return false;
-        poly = next;
+        std::swap(poly, next);
       }
     }
     glm::dvec3 a = poly[0], b = poly[0];
@@ -330,10 +351,9 @@ struct SensorGrid {
       a = glm::min(a, poly[i]);
       b = glm::max(b, poly[i]);
     }
-    constexpr float kInf = std::numeric_limits<float>::infinity();
     for (int k = 0; k < 3; ++k) {
-      box.lo[k] = std::nextafter(static_cast<float>(a[k] - margin), -kInf);
-      box.hi[k] = std::nextafter(static_cast<float>(b[k] + margin), kInf);
+      box.lo[k] = detail::floatBelow(a[k] - margin);
+      box.hi[k] = detail::floatAbove(b[k] + margin);
     }
     return true;
   }

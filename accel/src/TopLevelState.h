@@ -203,28 +203,29 @@ struct TopLevel::State {
   void refreshLeafBoxes(const KdTree& tree) {
     leaf_boxes.refresh(boxes, tree.prim_indices);
     flat.assign(records.size(), {});
-    std::vector<toplevel_detail::FlatQuad> quads(records.size());
     for (std::size_t slot = 0; slot < records.size(); ++slot) {
       const Record& rec = records[slot];
       if (!rec.object || boxes[slot].empty()) continue;
-      if (const std::optional<FlatCrossings> f = rec.object->flatCrossings()) {
-        const Affine object_from_world = rec.identity ? Affine::identity() : rec.object_from_world;
-        flat[slot] = toplevel_detail::FlatPlane(object_from_world, *f, static_cast<std::uint32_t>(slot),
+      if (const std::optional<FlatCrossings> f = rec.object->flatCrossings())
+        flat[slot] = toplevel_detail::FlatPlane(rec.identity ? Affine::identity() : rec.object_from_world, *f,
+                                                static_cast<std::uint32_t>(slot),
                                                 rec.role == ObjectRole::Sensor ? rec.mask : 0u);
-        // The rectangle |x| <= w/2, |y| <= h/2 of the object's plane z = 0, in world space.
-        const Affine world_from_object = object_from_world.inverse();
-        const double w = f->half_width, h = f->half_height;
-        const glm::dvec3 local[4] = {{-w, -h, 0.0}, {w, -h, 0.0}, {w, h, 0.0}, {-w, h, 0.0}};
-        toplevel_detail::FlatQuad& q = quads[slot];
-        q.valid = true;
-        for (int c = 0; c < 4; ++c) {
-          q.corner[c] = world_from_object.point(local[c]);
-          q.valid =
-              q.valid && std::isfinite(q.corner[c].x) && std::isfinite(q.corner[c].y) && std::isfinite(q.corner[c].z);
-        }
-      }
     }
-    grid.refresh(boxes, &quads);
+    // A flat slot's rectangle |x| <= w/2, |y| <= h/2 of its object's plane z = 0, in world space.
+    grid.refresh(boxes, [&](std::uint32_t slot, toplevel_detail::FlatQuad& q) {
+      const toplevel_detail::FlatPlane& f = flat[slot];
+      if (!f.valid()) return false;
+      const Record& rec = records[slot];
+      const Affine world_from_object = rec.identity ? Affine::identity() : rec.object_from_world.inverse();
+      const double w = f.half_width, h = f.half_height;
+      const glm::dvec3 local[4] = {{-w, -h, 0.0}, {w, -h, 0.0}, {w, h, 0.0}, {-w, h, 0.0}};
+      for (int c = 0; c < 4; ++c) {
+        q.corner[c] = world_from_object.point(local[c]);
+        if (!(std::isfinite(q.corner[c].x) && std::isfinite(q.corner[c].y) && std::isfinite(q.corner[c].z)))
+          return false;
+      }
+      return true;
+    });
     grid_planes.clear();
     if (grid.usable()) {
       grid_planes.resize(grid.slots.size());
