@@ -76,13 +76,9 @@ struct SensorGrid {
   [[nodiscard]] bool usable() const { return !cell_begin.empty(); }
 
   // Rebuilds over the non-empty boxes of `by_slot` (free slots hold empty boxes), or leaves the
-  // grid unusable when it would not pay.
-  void refresh(const std::vector<Box>& by_slot) {
-    refresh(by_slot, [](std::uint32_t, FlatQuad&) { return false; });
-  }
-  // The same, with the flat instances' rectangles, which narrow their entries (see the top of this
-  // file): quad_of(slot, quad) fills in the rectangle of a flat slot and returns true (false: use
-  // its box). Asked only for boxes that reach into more than one cell (a box within one cell has
+  // grid unusable when it would not pay. The flat instances' rectangles narrow their entries (see
+  // the top of this file): quad_of(slot, quad) fills in the rectangle of a flat slot and returns
+  // true (false: use its box). Asked only for boxes that reach into more than one cell (a box within one cell has
   // one entry, its own box), so that a commit of the level (which refreshes the grid) stays O(n)
   // with a small constant.
   template <class QuadOf>

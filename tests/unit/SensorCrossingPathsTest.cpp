@@ -120,6 +120,15 @@ void expectSame(const std::vector<SensorCrossing>& got, const std::vector<Hit>& 
   }
 }
 
+/// The segment from `from` through `target` and half as far again (target at t = 1, tfar 1.5).
+Ray pastTarget(const glm::dvec3& from, const glm::dvec3& target) {
+  Ray ray;
+  ray.origin = glm::vec3(from);
+  ray.dir = glm::vec3(target - from);
+  ray.tfar = 1.5f;
+  return ray;
+}
+
 /// One ray through both paths and the brute force; the two paths must also agree on the normal.
 void checkRay(const Scene& s, const TopLevel& fast, const TopLevel& general, const Ray& ray, std::uint32_t mask,
               Counts& counts) {
@@ -213,12 +222,7 @@ void checkPaths(const glm::dvec3& offset, bool grid = true) {
     if (i % 2) std::swap(local.x, local.y);
     if (i % 3 == 0) local.y = edges[r() % 5];  // a corner of bins, or of the sensor
     const glm::dvec3 target = d.world_from_object.point(local);
-    const glm::dvec3 from = inRoom();
-    Ray ray;
-    ray.origin = glm::vec3(from);
-    ray.dir = glm::vec3(target - from);
-    ray.tfar = 1.5f;
-    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, ray, 0xFFFFFFFFu, aimed));
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, fast, general, pastTarget(inRoom(), target), 0xFFFFFFFFu, aimed));
   }
   // Parallel to a sensor: in its plane through its middle, and just beside the plane.
   for (int i = 0; i < 1000; ++i) {
@@ -299,11 +303,7 @@ TEST(SensorCrossingPaths, SensorsStraddlingCellPlanesAgree) {
     if (i % 4 == 0) local.x = i % 8 ? h : -h;  // on the border
     const glm::dvec3 target = d.world_from_object.point(local);
     const glm::dvec3 from(-5.0 + 10.0 * v(r), -5.0 + 10.0 * v(r), 4.0 * v(r));
-    Ray ray;
-    ray.origin = glm::vec3(from);
-    ray.dir = glm::vec3(target - from);
-    ray.tfar = 1.5f;
-    ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, ray, 0xFFFFFFFFu, counts));
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, pastTarget(from, target), 0xFFFFFFFFu, counts));
   }
   EXPECT_GT(counts.crossings, 5000u);
 }
@@ -377,11 +377,7 @@ TEST(SensorCrossingPaths, ThinLayoutsGetFewCells) {
     const glm::dvec3 target = d.world_from_object.point(glm::dvec3(3.0 * v(r) - 1.5, 3.0 * v(r) - 1.5, 0.0));
     const glm::dvec3 from = i % 2 ? target + glm::dvec3(50.0 * v(r) - 25.0, 50.0 * v(r) - 25.0, 5.0)
                                   : target + glm::dvec3(400.0 * v(r) - 200.0, 400.0 * v(r) - 200.0, 0.5);
-    Ray ray;
-    ray.origin = glm::vec3(from);
-    ray.dir = glm::vec3(target - from);
-    ray.tfar = 1.5f;
-    ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, ray, 1u, counts));
+    ASSERT_NO_FATAL_FAILURE(checkRay(s, walks.fast, walks.general, pastTarget(from, target), 1u, counts));
   }
   EXPECT_GT(counts.crossings, 500u);
 }
