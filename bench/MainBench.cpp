@@ -6,7 +6,7 @@
 #include "BenchMeshes.h"
 #include "BenchModes.h"
 // The objects library's private per-ray setup, for the time split only (as its unit test does).
-#include "../objects/src/MeshRay.h"
+#include "../objects/mesh/src/MeshRay.h"
 
 #if DUPLEX_BENCH_HAVE_EMBREE
 #include "EmbreeBaseline.h"

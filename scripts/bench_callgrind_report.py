@@ -119,7 +119,7 @@ def short_fn(name, width=90):
 
 # Where our instructions go, by the file the (inlined) code is written in. A heuristic mapping, kept
 # next to the raw per-file list: traversal = the kd-tree walk, triangle = the triangle tests (SIMD
-# intrinsics headers count here: the traversal is scalar; the per-ray setup of objects/src/MeshRay.h
+# intrinsics headers count here: the traversal is scalar; the per-ray setup of objects/mesh/src/MeshRay.h
 # uses intrinsics too, a few dozen instructions per ray that land here), everything else = per-ray
 # setup and the bench loop.
 def category(file_name):

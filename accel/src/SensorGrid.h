@@ -29,7 +29,7 @@
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/Ray.h"
-#include "FloatRounding.h"
+#include "duplex/accel/FloatRounding.h"
 #include "LeafBoxes.h"
 
 #include <glm/vec3.hpp>

@@ -159,9 +159,7 @@ int main(int argc, char** argv) {
     arena.execute([&] {
       // Sensor objects of duplex-scene-v1 files are read as by every `duplex` command (they never
       // block a ray, so they do not show in the frames).
-      duplex::SceneDocumentOptions load_options;
-      load_options.registry = &duplex::sensorTypeRegistry();
-      doc = duplex::loadSceneDocument(opt.scene, load_options);
+      doc = duplex::loadSceneDocument(opt.scene, duplex::sensorTypeRegistry());
       const auto t0 = Clock::now();
       tracer.emplace(*doc.graph);
       top_build_ms = msSince(t0);
@@ -186,7 +184,8 @@ int main(int argc, char** argv) {
 
     std::printf("Duplex demo: %s (%s)\n", opt.scene.string().c_str(), doc.format.c_str());
     std::printf("  scene    %zu objects, %zu instances (%zu nodes), %zu triangles in the library, %zu timed edits\n",
-                doc.figures.objects, doc.figures.instances, doc.figures.nodes, doc.figures.triangles, doc.edits.size());
+                doc.figures.objects, doc.figures.instances, doc.figures.nodes, doc.figures.count("triangles"),
+                doc.edits.size());
     std::printf("  load     %8.3f ms  (scene parse + mesh files)\n", doc.figures.load_ms);
     std::printf("  build    %8.3f ms  (bottom levels %.3f ms + top level %.3f ms; graph %.3f ms)\n",
                 doc.figures.build_ms + top_build_ms, doc.figures.build_ms, top_build_ms, doc.figures.graph_ms);
@@ -295,7 +294,7 @@ int main(int argc, char** argv) {
     j["full_rebuild"] = opt.full_rebuild;
     j["objects"] = doc.figures.objects;
     j["instances"] = doc.figures.instances;
-    j["triangles"] = doc.figures.triangles;
+    j["triangles"] = doc.figures.count("triangles");
     j["load_ms"] = round4(doc.figures.load_ms);
     j["bottom_build_ms"] = round4(doc.figures.build_ms);
     j["top_build_ms"] = round4(top_build_ms);

@@ -337,7 +337,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   out["format"] = doc->format;
   out["objects"] = library.size();
   out["instances"] = n;
-  out["triangles"] = doc->figures.triangles;
+  out["triangles"] = doc->figures.count("triangles");
   out["threads"] = threads;
   out["seed"] = options.seed;
   out["moves"] = moves;

@@ -2,7 +2,6 @@
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/Hit.h>
-#include <duplex/objects/MeshObject.h>
 #include <duplex/sensors/SensorTypes.h>
 
 #include <algorithm>
@@ -15,9 +14,7 @@ namespace duplex::cli {
 SceneDocument loadDocumentNamed(const std::filesystem::path& path, const SceneDocumentOptions& options) {
   try {
     // Every command reads sensor objects of duplex-scene-v1 files (they never block a ray).
-    SceneDocumentOptions with_sensors = options;
-    if (!with_sensors.registry) with_sensors.registry = &sensorTypeRegistry();
-    return loadSceneDocument(path, with_sensors);
+    return loadSceneDocument(path, sensorTypeRegistry(), options);
   } catch (const Error&) {
     throw;  // already names the file
   } catch (const std::bad_alloc&) {
@@ -47,8 +44,8 @@ std::size_t instancedTriangles(const SceneDocument& doc) {
   const SceneGraph& graph = *doc.graph;
   std::size_t n = 0;
   for (const NodeId node : doc.instances) {
-    const auto object = graph.library().get(graph.node(node).object);
-    if (const auto* mesh = dynamic_cast<const MeshObject*>(object.get())) n += mesh->mesh().triangleCount();
+    for (const ObjectFigure& figure : graph.library().get(graph.node(node).object)->figures())
+      if (figure.name == "triangles") n += figure.value;
   }
   return n;
 }

@@ -14,8 +14,8 @@
 
 namespace duplex::cli {
 
-/// Same as duplex::loadSceneDocument, with the sensor object type registered (when options name no
-/// registry: duplex::sensorTypeRegistry()). Some failures reach callers as other exceptions (e.g.
+/// Same as duplex::loadSceneDocument with duplex::sensorTypeRegistry() (the built-in object types and
+/// the sensor type). Some failures reach callers as other exceptions (e.g.
 /// nlohmann's out_of_range for a number such as 1e999); they are rethrown as
 /// FileError("<file>: <what>") so that the tool's message always names the file.
 [[nodiscard]] SceneDocument loadDocumentNamed(const std::filesystem::path& path,

@@ -117,7 +117,7 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   report["any_hit"] = options.any_hit;
   report["objects"] = figures.objects;
   report["instances"] = doc->instances.size();
-  report["triangles"] = figures.triangles;
+  report["triangles"] = figures.count("triangles");
   report["instanced_triangles"] = instancedTriangles(*doc);
   report["bottom_build_ms"] = figures.build_ms;
   report["top_build_ms"] = top_build_ms;

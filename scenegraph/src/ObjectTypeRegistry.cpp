@@ -1,11 +1,6 @@
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
 
 #include "duplex/accel/Error.h"
-#include "duplex/objects/MeshLoader.h"
-#include "duplex/objects/MeshObject.h"
-#include "duplex/objects/MeshObjectFile.h"
-#include "duplex/objects/ProceduralMesh.h"
-#include "duplex/objects/VolumeObject.h"
 
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
@@ -19,49 +14,71 @@ using nlohmann::json;
 
 // ---- SceneLoadCache ----
 
-SceneLoadCache::MeshEntry& SceneLoadCache::meshEntry(const std::filesystem::path& file) {
-  // One entry per file however it is spelt ("a/../b.obj", "./b.obj"); read under the first spelling.
+namespace {
+std::filesystem::path canonicalKey(const std::filesystem::path& file) {
+  // One entry per file however it is spelt ("a/../b.obj", "./b.obj").
   std::error_code ec;
   std::filesystem::path key = std::filesystem::weakly_canonical(file, ec);
-  if (ec) key = file;
+  return ec ? file : key;
+}
+}  // namespace
+
+SceneLoadCache::FileEntry* SceneLoadCache::findEntry(std::string_view kind, const std::filesystem::path& file,
+                                                     const FileReader* reader) {
+  std::pair<std::string, std::filesystem::path> key(std::string(kind), canonicalKey(file));
   std::lock_guard lock(mutex_);
-  auto& slot = meshes_[key];
-  if (!slot) {
-    slot = std::make_unique<MeshEntry>();
-    slot->file = file;
+  if (!reader) {
+    const auto it = files_.find(key);
+    return it == files_.end() ? nullptr : it->second.get();
   }
-  return *slot;
+  auto& slot = files_[std::move(key)];
+  if (!slot) {
+    slot = std::make_unique<FileEntry>();
+    slot->kind = std::string(kind);
+    slot->file = file;
+    slot->reader = *reader;
+  }
+  return slot.get();
 }
 
-void SceneLoadCache::requestMesh(const std::filesystem::path& file) { (void)meshEntry(file); }
+void SceneLoadCache::requestFile(std::string_view kind, const std::filesystem::path& file, FileReader reader) {
+  if (!reader) throw InvalidArgument("SceneLoadCache::requestFile: no reader for " + file.string());
+  (void)findEntry(kind, file, &reader);
+}
 
-std::shared_ptr<const TriangleMesh> SceneLoadCache::mesh(const std::filesystem::path& file) {
-  MeshEntry& e = meshEntry(file);
-  // OpenMesh's reader runs no TBB work, so waiting in call_once cannot block a nested task.
+std::shared_ptr<const void> SceneLoadCache::read(FileEntry& e) {
+  // File readers run no TBB work of their own, so waiting in call_once cannot block a nested task.
   std::call_once(e.once, [&] {
     try {
-      MeshLoadReport report;
-      e.mesh = std::make_shared<const TriangleMesh>(loadMesh(e.file, &report));
-      e.complex_edge_warnings = report.complex_edge_warnings;
+      e.value = e.reader(e.file, *this);
+      if (!e.value) e.error = e.file.string() + ": the reader returned nothing";
     } catch (const std::exception& ex) {
       e.error = ex.what();
     }
   });
-  if (!e.mesh) throw FileError(e.error);
-  return e.mesh;
+  if (!e.value) throw FileError(e.error);
+  return e.value;
+}
+
+std::shared_ptr<const void> SceneLoadCache::fileValue(std::string_view kind, const std::filesystem::path& file) {
+  FileEntry* e = findEntry(kind, file, nullptr);
+  if (!e)
+    throw InvalidArgument("SceneLoadCache::file: " + file.string() + " was not requested as a " + std::string(kind) +
+                          " file");
+  return read(*e);
 }
 
 void SceneLoadCache::readRequested() {
-  std::vector<std::filesystem::path> files;
+  std::vector<FileEntry*> entries;
   {
     std::lock_guard lock(mutex_);
-    for (const auto& [file, entry] : meshes_) files.push_back(file);
+    for (const auto& [key, entry] : files_) entries.push_back(entry.get());
   }
-  tbb::parallel_for(std::size_t{0}, files.size(), [&](std::size_t i) {
+  tbb::parallel_for(std::size_t{0}, entries.size(), [&](std::size_t i) {
     try {
-      (void)mesh(files[i]);
+      (void)read(*entries[i]);
     } catch (const std::exception&) {
-      // kept in the entry; thrown to the object that needs the mesh
+      // kept in the entry; thrown to the object that needs the file
     }
   });
 }
@@ -82,16 +99,25 @@ std::shared_ptr<const Object> SceneLoadCache::shared(const std::string& key,
   return e->object;
 }
 
-std::size_t SceneLoadCache::meshFiles() const {
+void SceneLoadCache::addCount(std::string_view name, std::size_t n) {
   std::lock_guard lock(mutex_);
-  return meshes_.size();
+  auto it = counts_.find(name);
+  if (it == counts_.end()) it = counts_.emplace(std::string(name), 0).first;
+  it->second += n;
 }
 
-std::size_t SceneLoadCache::complexEdgeWarnings() const {
+std::size_t SceneLoadCache::files(std::string_view kind) const {
   std::lock_guard lock(mutex_);
   std::size_t n = 0;
-  for (const auto& [file, entry] : meshes_) n += entry->complex_edge_warnings;
+  for (const auto& [key, entry] : files_) n += key.first == kind;
   return n;
+}
+
+std::map<std::string, std::size_t, std::less<>> SceneLoadCache::counts() const {
+  std::lock_guard lock(mutex_);
+  auto out = counts_;
+  for (const auto& [key, entry] : files_) ++out[key.first + "_files"];
+  return out;
 }
 
 // ---- ObjectSpecContext ----
@@ -148,161 +174,7 @@ void ObjectSpecContext::onlyKeys(const json& obj, const std::string& at,
   }
 }
 
-// ---- built-in types ----
-
-namespace {
-
-// A mesh object over `mesh`, from the prepared structure when the entry names one.
-std::shared_ptr<const Object> meshObjectFor(std::shared_ptr<const TriangleMesh> mesh, const ObjectSpecContext& ctx) {
-  if (!ctx.structure) return std::make_shared<const MeshObject>(std::move(mesh), ctx.build);
-  std::shared_ptr<const MeshObject> object;
-  try {
-    object = loadMeshObject(*ctx.structure, std::move(mesh));
-  } catch (const FileError& e) {
-    ctx.fail(ctx.entry_pointer + "/structure", e.what());
-  }
-  ++ctx.cache->structures_loaded;
-  return object;
-}
-
-ObjectSpecResult readMesh(const json& spec, const ObjectSpecContext& ctx) {
-  const std::string& p = ctx.pointer;
-  if (!spec.is_object()) ctx.fail(p, "expected an object");
-  if (spec.contains("file")) {
-    // scene-json-v1: "file" wins over inline arrays; the own format refuses both at once.
-    ctx.onlyKeys(spec, p, {"file"});
-    const std::filesystem::path file = ctx.resolve(ctx.string(spec["file"], p + "/file"));
-    ctx.cache->requestMesh(file);
-    // Entries naming the same file (and the same structure) share one object.
-    std::error_code ec;
-    auto key = std::filesystem::weakly_canonical(file, ec);
-    if (ec) key = file;
-    std::string share_key = "mesh:" + key.string();
-    if (ctx.structure) share_key += "|structure:" + std::filesystem::weakly_canonical(*ctx.structure, ec).string();
-    return ObjectLibrary::Factory([ctx, file, share_key] {
-      return ctx.cache->shared(share_key, [&] { return meshObjectFor(ctx.cache->mesh(file), ctx); });
-    });
-  }
-  if (!spec.contains("positions") && !spec.contains("indices"))
-    ctx.fail(p, "expected \"file\" or \"positions\" and \"indices\"");
-  ctx.onlyKeys(spec, p, {"positions", "indices"});
-  const json& pos = ctx.member(spec, p, "positions");
-  const json& idx = ctx.member(spec, p, "indices");
-  if (!pos.is_array()) ctx.fail(p + "/positions", "expected an array");
-  if (!idx.is_array()) ctx.fail(p + "/indices", "expected an array");
-  std::vector<float> positions;
-  positions.reserve(pos.size());
-  for (std::size_t k = 0; k < pos.size(); ++k) {
-    const std::string pp = p + "/positions/" + std::to_string(k);
-    const float v = static_cast<float>(ctx.number(pos[k], pp));
-    // Positions are stored as float: a finite double beyond float range would become an infinite
-    // vertex and silently a degenerate triangle.
-    if (!std::isfinite(v)) ctx.fail(pp, "outside float range");
-    positions.push_back(v);
-  }
-  std::vector<std::uint32_t> indices;
-  indices.reserve(idx.size());
-  for (std::size_t k = 0; k < idx.size(); ++k) {
-    const std::string ip = p + "/indices/" + std::to_string(k);
-    const double d = ctx.number(idx[k], ip);
-    if (d < 0.0 || d > 4294967295.0 || d != std::floor(d)) ctx.fail(ip, "expected a vertex index (integer >= 0)");
-    indices.push_back(static_cast<std::uint32_t>(d));
-  }
-  // The mesh is validated in the factory, in parallel with the other objects' builds.
-  return ObjectLibrary::Factory([ctx, positions = std::move(positions), indices = std::move(indices)] {
-    return meshObjectFor(
-        std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, ctx.object_name)), ctx);
-  });
-}
-
-// A procedural shape: parameters are read now, the mesh is generated and built by the factory.
-template <class Generate>
-ObjectSpecResult deferredShape(const ObjectSpecContext& ctx, Generate generate) {
-  return ObjectLibrary::Factory([ctx, generate] {
-    return std::shared_ptr<const Object>(
-        std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(generate(ctx.object_name)), ctx.build));
-  });
-}
-
-ObjectSpecResult readSphere(const json& spec, const ObjectSpecContext& ctx) {
-  const std::string& p = ctx.pointer;
-  if (!spec.is_object()) ctx.fail(p, "expected an object");
-  ctx.onlyKeys(spec, p, {"radius", "subdivisions"});
-  const double radius = spec.contains("radius") ? ctx.positiveNumber(spec["radius"], p + "/radius") : 1.0;
-  int subdivisions = 3;
-  if (spec.contains("subdivisions")) {
-    const double s = ctx.number(spec["subdivisions"], p + "/subdivisions");
-    if (s < 0 || s > kMaxSphereSubdivisions || s != std::floor(s))
-      ctx.fail(p + "/subdivisions", "expected an integer in [0, " + std::to_string(kMaxSphereSubdivisions) + "]");
-    subdivisions = static_cast<int>(s);
-  }
-  return deferredShape(
-      ctx, [radius, subdivisions](const std::string& name) { return makeSphere(radius, subdivisions, name); });
-}
-
-ObjectSpecResult readBox(const json& spec, const ObjectSpecContext& ctx) {
-  const std::string& p = ctx.pointer;
-  if (!spec.is_object()) ctx.fail(p, "expected an object");
-  ctx.onlyKeys(spec, p, {"size"});
-  const auto s = spec.contains("size") ? ctx.positiveSizes(spec["size"], p + "/size", 3) : std::vector<double>(3, 1.0);
-  const glm::dvec3 size(s[0], s[1], s[2]);
-  return deferredShape(ctx, [size](const std::string& name) { return makeBox(size, name); });
-}
-
-ObjectSpecResult readPlane(const json& spec, const ObjectSpecContext& ctx) {
-  const std::string& p = ctx.pointer;
-  if (!spec.is_object()) ctx.fail(p, "expected an object");
-  ctx.onlyKeys(spec, p, {"size"});
-  const auto s = spec.contains("size") ? ctx.positiveSizes(spec["size"], p + "/size", 2) : std::vector<double>(2, 1.0);
-  const glm::dvec2 size(s[0], s[1]);
-  return deferredShape(ctx, [size](const std::string& name) { return makePlane(size, name); });
-}
-
-// An OpenVDB volume: {"file": PATH.vdb, "grid": G?, "kind": "fog" | "levelset"?} (scene-json-v1,
-// issue 4 section 2). Read by the factory; entries with the same file, grid and kind share one object.
-ObjectSpecResult readVolume(const json& spec, const ObjectSpecContext& ctx) {
-  const std::string& p = ctx.pointer;
-  if (!spec.is_object()) ctx.fail(p, "expected an object");
-  ctx.onlyKeys(spec, p, {"file", "grid", "kind"});
-  const std::filesystem::path file = ctx.resolve(ctx.string(ctx.member(spec, p, "file"), p + "/file"));
-  VolumeLoadOptions options;
-  if (spec.contains("grid")) {
-    options.grid = ctx.string(spec["grid"], p + "/grid");
-    if (options.grid.empty()) ctx.fail(p + "/grid", "expected a non-empty grid name");
-  }
-  if (spec.contains("kind")) {
-    const std::string kind = ctx.string(spec["kind"], p + "/kind");
-    if (kind == "fog") options.kind = VolumeKind::Fog;
-    else if (kind == "levelset") options.kind = VolumeKind::LevelSet;
-    else ctx.fail(p + "/kind", "expected \"fog\" or \"levelset\", got \"" + kind + "\"");
-  }
-  options.name = ctx.object_name;
-  std::error_code ec;
-  auto key = std::filesystem::weakly_canonical(file, ec);
-  if (ec) key = file;
-  const std::string share_key =
-      "volume:" + key.string() + "|grid:" + options.grid + "|kind:" + std::string(toString(options.kind));
-  return ObjectLibrary::Factory([ctx, file, options, share_key] {
-    return ctx.cache->shared(share_key,
-                             [&] { return std::shared_ptr<const Object>(VolumeObject::load(file, options)); });
-  });
-}
-}  // namespace
-
 // ---- ObjectTypeRegistry ----
-
-const ObjectTypeRegistry& ObjectTypeRegistry::builtin() {
-  static const ObjectTypeRegistry registry = [] {
-    ObjectTypeRegistry r;
-    r.add({std::string(MeshObject::kTypeName), readMesh, /*in_scene_json_v1=*/true, /*accepts_structure=*/true});
-    r.add({"sphere", readSphere, false, false});
-    r.add({"box", readBox, false, false});
-    r.add({"plane", readPlane, false, false});
-    r.add({std::string(VolumeObject::kTypeName), readVolume, /*in_scene_json_v1=*/true, /*accepts_structure=*/false});
-    return r;
-  }();
-  return registry;
-}
 
 void ObjectTypeRegistry::add(ObjectTypeInfo info) {
   if (info.name.empty()) throw InvalidArgument("ObjectTypeRegistry::add: empty type name");

@@ -1,8 +1,6 @@
 #include "duplex/scenegraph/SceneDocument.h"
 
 #include "duplex/accel/Error.h"
-#include "duplex/objects/MeshObject.h"
-#include "duplex/objects/MeshObjectFile.h"
 
 #include <nlohmann/json.hpp>
 
@@ -269,9 +267,9 @@ json parseFile(const std::filesystem::path& path) {
 
 }  // namespace
 
-SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDocumentOptions& options) {
+SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectTypeRegistry& registry,
+                                const SceneDocumentOptions& options) {
   const auto t_load = Clock::now();
-  const ObjectTypeRegistry& registry = options.registry ? *options.registry : ObjectTypeRegistry::builtin();
   SceneDocument doc;
   doc.file = path;
   doc.graph = std::make_unique<SceneGraph>();
@@ -417,16 +415,16 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const SceneDo
 
   SceneLoadFigures& f = doc.figures;
   f.objects = library.size();
-  f.mesh_files = ctx.cache->meshFiles();
   f.structures_loaded = ctx.cache->structures_loaded.load();
-  f.complex_edge_warnings = ctx.cache->complexEdgeWarnings();
+  f.counts = ctx.cache->counts();
   std::unordered_set<const Object*> seen;
   for (ObjectId id = 0; id < library.size(); ++id) {
     const auto object = library.get(id);
     if (!seen.insert(object.get()).second) continue;
-    if (const auto* mesh = dynamic_cast<const MeshObject*>(object.get())) {
-      f.triangles += mesh->mesh().triangleCount();
-      f.degenerate_triangles += mesh->mesh().degenerateCount();
+    for (const ObjectFigure& figure : object->figures()) {
+      auto it = f.counts.find(figure.name);
+      if (it == f.counts.end()) it = f.counts.emplace(std::string(figure.name), 0).first;
+      it->second += figure.value;
     }
   }
   f.instances = doc.instances.size();
@@ -470,13 +468,13 @@ std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, cons
   std::vector<std::filesystem::path> written(library.size());
   for (ObjectId id = 0; id < library.size(); ++id) {
     const auto object = library.get(id);
-    const auto* mesh = dynamic_cast<const MeshObject*>(object.get());
-    if (!mesh) continue;
+    const std::string_view extension = object->preparedExtension();
+    if (extension.empty()) continue;
     std::string name = library.name(id);
     for (char& c : name)
       if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) c = '_';
-    written[id] = dir / (std::to_string(id) + "_" + name + ".dkdt");
-    saveMeshObject(*mesh, written[id]);
+    written[id] = dir / (std::to_string(id) + "_" + name + std::string(extension));
+    object->savePrepared(written[id]);
   }
   return written;
 }

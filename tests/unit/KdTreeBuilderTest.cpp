@@ -13,8 +13,8 @@
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/accel/RayGenerator.h"
-#include "duplex/accel/TriangleClip.h"
-#include "../../accel/src/RadixSortFloats.h"
+#include "duplex/objects/TriangleClip.h"
+#include "RadixSortFloats.h"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>

@@ -11,6 +11,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/QueryContext.h"
 #include "duplex/accel/TopLevel.h"
+#include "duplex/objects/BuiltinTypes.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/MeshObjectFile.h"
 #include "duplex/objects/ProceduralMesh.h"
@@ -77,10 +78,11 @@ void expectError(Load&& load, const std::filesystem::path& file, const std::stri
 }
 
 void expectDocError(const SceneDir& d, const std::string& json, const std::string& pointer,
-                    const std::string& also = "", const SceneDocumentOptions& options = {}) {
+                    const std::string& also = "", const SceneDocumentOptions& options = {},
+                    const ObjectTypeRegistry& registry = builtinObjectTypes()) {
   SCOPED_TRACE(json);
   const auto path = d.write(json, "bad_scene.json");
-  expectError([&] { (void)loadSceneDocument(path, options); }, path, pointer, also);
+  expectError([&] { (void)loadSceneDocument(path, registry, options); }, path, pointer, also);
 }
 
 ::testing::AssertionResult sameAffine(const Affine& a, const Affine& b, double tol = 0.0) {
@@ -98,7 +100,7 @@ const char* kTetraInline =
 
 /// Loads a scene file and runs the tree checker on every mesh object of its "objects" list.
 SceneDocument loadChecked(const std::filesystem::path& path, const SceneDocumentOptions& options = {}) {
-  SceneDocument doc = loadSceneDocument(path, options);
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes(), options);
   const ObjectLibrary& lib = doc.graph->library();
   for (const ObjectId id : doc.objects) {
     if (const auto* m = dynamic_cast<const MeshObject*>(lib.get(id).get())) {
@@ -152,10 +154,10 @@ TEST(SceneDocumentV1, InlineAndFileObjectsInstancesAndUnknownKeys) {
   EXPECT_EQ(lib.get(doc.objects[0]).get(), lib.get(doc.objects[2]).get());
   EXPECT_EQ(lib.get(doc.objects[0]).get(), lib.get(doc.objects[3]).get());
   EXPECT_NE(lib.get(doc.objects[0]).get(), lib.get(doc.objects[1]).get());
-  EXPECT_EQ(doc.figures.mesh_files, 1u);
+  EXPECT_EQ(doc.figures.count("mesh_files"), 1u);
   EXPECT_EQ(doc.figures.objects, 4u);
-  EXPECT_EQ(doc.figures.triangles, 12u + 4u);
-  EXPECT_EQ(doc.figures.degenerate_triangles, 0u);
+  EXPECT_EQ(doc.figures.count("triangles"), 12u + 4u);
+  EXPECT_EQ(doc.figures.count("degenerate_triangles"), 0u);
 
   const auto* cube = dynamic_cast<const MeshObject*>(lib.get(doc.objects[0]).get());
   const auto* tetra = dynamic_cast<const MeshObject*>(lib.get(doc.objects[1]).get());
@@ -234,7 +236,7 @@ TEST(SceneDocumentV1, InstancesAndTransformsAreExactlyTheFilesValues) {
       d.write(R"({"format": "scene-json-v1", "extra": {"x": 1}, "objects": [)" + kCube + "," + kTetra +
               R"(, {"name": "cube2", "mesh": {"file": "./meshes/quad_cube.obj"}, "sphere": 3}], "instances": )" +
               instances.dump() + "}");
-  const SceneDocument doc = loadSceneDocument(path);
+  const SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   EXPECT_EQ(doc.format, "scene-json-v1");
   ASSERT_EQ(doc.instances.size(), 4u);
   for (std::size_t k = 0; k < doc.instances.size(); ++k) {
@@ -247,8 +249,8 @@ TEST(SceneDocumentV1, InstancesAndTransformsAreExactlyTheFilesValues) {
     EXPECT_EQ(doc.graph->worldTransform(doc.instances[k]).toRowMajor3x4(), transforms[k]);
     EXPECT_TRUE(doc.graph->isVisibleInstance(doc.instances[k]));
   }
-  EXPECT_EQ(doc.figures.triangles, 12u + 4u);
-  EXPECT_EQ(doc.figures.mesh_files, 1u);
+  EXPECT_EQ(doc.figures.count("triangles"), 12u + 4u);
+  EXPECT_EQ(doc.figures.count("mesh_files"), 1u);
   EXPECT_EQ(doc.figures.objects, 3u);
   const ObjectLibrary& lib = doc.graph->library();
   EXPECT_EQ(lib.get(doc.objects[0]).get(), lib.get(doc.objects[2]).get()) << "one object per distinct file";
@@ -266,12 +268,13 @@ TEST(SceneDocumentV1, RelativeMeshPathIsResolvedAgainstTheJsonFolderNotTheWorkin
   {
     // ... from the scene folder's parent, with a relative JSON path ...
     const WorkingDirectory cwd(d.dir.path());
-    EXPECT_EQ(cubeTriangles(loadSceneDocument(std::filesystem::path("scenes") / "scene.json")), 12u);
+    EXPECT_EQ(cubeTriangles(loadSceneDocument(std::filesystem::path("scenes") / "scene.json", builtinObjectTypes())),
+              12u);
   }
   {
     // ... and from inside the meshes folder, where "meshes/quad_cube.obj" does not exist.
     const WorkingDirectory cwd(d.scenes / "meshes");
-    EXPECT_EQ(cubeTriangles(loadSceneDocument(std::filesystem::path("..") / "scene.json")), 12u);
+    EXPECT_EQ(cubeTriangles(loadSceneDocument(std::filesystem::path("..") / "scene.json", builtinObjectTypes())), 12u);
   }
 }
 
@@ -319,7 +322,7 @@ TEST(SceneDocumentV1Errors, DocumentLevel) {
 TEST(SceneDocumentV1Errors, MissingSceneFileNamesIt) {
   SceneDir d;
   const auto path = d.scenes / "no_such_scene.json";
-  expectError([&] { (void)loadSceneDocument(path); }, path, kParserError);
+  expectError([&] { (void)loadSceneDocument(path, builtinObjectTypes()); }, path, kParserError);
 }
 
 TEST(SceneDocumentV1Errors, Objects) {
@@ -409,7 +412,7 @@ TEST(SceneDocumentOwn, WorldTransformsAreTheHandComputedProducts) {
     {"group": "free", "matrix": [0, 0, 1, 7, 0, 1, 0, 8, -1, 0, 0, 9], "children": [
        {"instance": "e", "object": "tetra", "transform": {"rotate": {"euler_xyz": [90, 0, 90]}}}]})";
   const auto path = d.write(own(kCube + "," + kTetra, nodes));
-  const SceneDocument doc = loadSceneDocument(path);
+  const SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   EXPECT_EQ(doc.format, "duplex-scene-v1");
   ASSERT_EQ(doc.instances.size(), 3u);
   const SceneGraph& g = *doc.graph;
@@ -439,7 +442,7 @@ TEST(SceneDocumentOwn, ProceduralObjects) {
       {"name": "ground", "plane": {"size": [10, 20]}}, {"name": "unit", "sphere": {}})",
                                 R"({"instance": "b", "object": "ball"}, {"instance": "c", "object": "crate"},
       {"instance": "g", "object": "ground"})"));
-  const SceneDocument doc = loadSceneDocument(path);
+  const SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   const ObjectLibrary& lib = doc.graph->library();
   auto mesh = [&](ObjectId id) { return &dynamic_cast<const MeshObject&>(*lib.get(id)).mesh(); };
   EXPECT_EQ(mesh(doc.objects[0])->triangleCount(), 320u);
@@ -450,7 +453,7 @@ TEST(SceneDocumentOwn, ProceduralObjects) {
   EXPECT_EQ(mesh(doc.objects[3])->triangleCount(), 2u);
   EXPECT_EQ(mesh(doc.objects[3])->bounds(), Box(glm::vec3(-5.0f, -10.0f, 0.0f), glm::vec3(5.0f, 10.0f, 0.0f)));
   EXPECT_EQ(mesh(doc.objects[4])->triangleCount(), 20u * 64u);
-  EXPECT_EQ(doc.figures.triangles, 320u + 12u + 12u + 2u + 1280u);
+  EXPECT_EQ(doc.figures.count("triangles"), 320u + 12u + 12u + 2u + 1280u);
   // Outward winding: the box's normals point away from its centre.
   const TriangleMesh& box = *mesh(doc.objects[1]);
   for (std::size_t t = 0; t < box.triangleCount(); ++t) {
@@ -474,7 +477,7 @@ TEST(SceneDocumentOwn, TimedEditsAreReadSortedAndApplied) {
       own(kCube + "," + kTetra,
           R"({"group": "arm", "matrix": )" + kIdentity + R"(, "children": [{"instance": "tip", "object": "tetra"}]})",
           edits));
-  SceneDocument doc = loadSceneDocument(path);
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   ASSERT_EQ(doc.edits.size(), 7u);
   std::vector<std::string> order;
   for (const auto& e : doc.edits) order.push_back(e.pointer);
@@ -505,7 +508,7 @@ TEST(SceneDocumentOwn, TimedEditsAreReadSortedAndApplied) {
 // The complete example of docs/scene-format.md loads and all its edits apply (mesh files replaced by
 // a fixture, the prepared structure dropped).
 TEST(SceneDocumentOwn, TheDocumentedExampleLoadsAndPlays) {
-  const auto doc_path = fixtureDir() / ".." / ".." / ".." / "docs" / "scene-format.md";
+  const auto doc_path = sourceDir() / "docs" / "scene-format.md";
   std::ifstream in(doc_path);
   ASSERT_TRUE(in) << doc_path;
   std::stringstream text;
@@ -521,9 +524,9 @@ TEST(SceneDocumentOwn, TheDocumentedExampleLoadsAndPlays) {
   }
   SceneDir d;
   const auto path = d.write(scene.dump(2));
-  SceneDocument doc = loadSceneDocument(path);
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   EXPECT_EQ(doc.instances.size(), 9u);
-  EXPECT_EQ(doc.figures.mesh_files, 1u);
+  EXPECT_EQ(doc.figures.count("mesh_files"), 1u);
   EXPECT_EQ(doc.graph->visibleInstances().size(), 7u);
   ASSERT_EQ(doc.edits.size(), 6u);
   for (const SceneEdit& e : doc.edits) {
@@ -621,7 +624,7 @@ TEST(SceneDocumentOwn, EditsThatTheGraphRefusesNameTheEditAndChangeNothing) {
                                    {"time": 0, "add": {"group": "h", "children": [{"instance": "i", "object": "cube"},
                                                                                     {"instance": "i", "object": "cube"}]}},
                                    {"time": 0, "remove": "/"})"));
-  SceneDocument doc = loadSceneDocument(path);
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   const std::size_t nodes = doc.graph->nodeCount();
   expectError([&] { (void)applyEdit(doc, doc.edits[0]); }, path, "/edits/0");  // a plain group has no transform
   expectError([&] { (void)applyEdit(doc, doc.edits[1]); }, path, "/edits/1/add/children/1");
@@ -637,7 +640,7 @@ TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
   SceneDir d;
   const std::string objs = kCube + "," + kTetra + R"(, {"name": "ball", "sphere": {"subdivisions": 2}})";
   const auto path = d.write(own(objs, R"({"instance": "a", "object": "cube"}, {"instance": "b", "object": "tetra"})"));
-  const SceneDocument built = loadSceneDocument(path);
+  const SceneDocument built = loadSceneDocument(path, builtinObjectTypes());
   EXPECT_EQ(built.figures.structures_loaded, 0u);
   const auto files = saveStructures(built, d.scenes / "prepared");
   ASSERT_EQ(files.size(), 3u);
@@ -654,10 +657,10 @@ TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
                 format + ".json");
     if (format == std::string("duplex-scene-v1")) {
       // "instances" is not a key of the own format.
-      expectError([&] { (void)loadSceneDocument(p2); }, p2, "/instances", "unknown key");
+      expectError([&] { (void)loadSceneDocument(p2, builtinObjectTypes()); }, p2, "/instances", "unknown key");
       d.write(own(prepared, ""), format + ".json");
     }
-    const SceneDocument loaded = loadSceneDocument(p2);
+    const SceneDocument loaded = loadSceneDocument(p2, builtinObjectTypes());
     EXPECT_EQ(loaded.figures.structures_loaded, 2u);
     for (int k = 0; k < 2; ++k) {
       const auto& a = dynamic_cast<const MeshObject&>(*built.graph->library().get(built.objects[k]));
@@ -667,29 +670,30 @@ TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
     }
     SceneDocumentOptions no_structures;
     no_structures.use_structures = false;
-    EXPECT_EQ(loadSceneDocument(p2, no_structures).figures.structures_loaded, 0u);
+    EXPECT_EQ(loadSceneDocument(p2, builtinObjectTypes(), no_structures).figures.structures_loaded, 0u);
   }
   // A structure saved for another mesh is refused: the scene file, the entry and the structure file.
   const auto wrong = d.write(
       own(R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/1_tetra.dkdt"})", ""),
       "wrong.json");
-  expectError([&] { (void)loadSceneDocument(wrong); }, wrong, "/objects/0/structure", "1_tetra.dkdt");
+  expectError([&] { (void)loadSceneDocument(wrong, builtinObjectTypes()); }, wrong, "/objects/0/structure",
+              "1_tetra.dkdt");
 }
 
 // ---- the registry ----
 
 TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
-  const auto names = ObjectTypeRegistry::builtin().names();
+  const auto names = builtinObjectTypes().names();
   EXPECT_EQ(names, (std::vector<std::string>{"mesh", "sphere", "box", "plane", "volume"}));
-  ObjectTypeRegistry registry = ObjectTypeRegistry::builtin();
+  ObjectTypeRegistry registry = builtinObjectTypes();
   expectErrorNaming<InvalidArgument>(
       [&] {
-        registry.add({"mesh", ObjectTypeRegistry::builtin().find("mesh")->reader});
+        registry.add({"mesh", builtinObjectTypes().find("mesh")->reader});
       },
       "already registered");
   expectErrorNaming<InvalidArgument>(
       [&] {
-        registry.add({"name", ObjectTypeRegistry::builtin().find("mesh")->reader});
+        registry.add({"name", builtinObjectTypes().find("mesh")->reader});
       },
       "name");
   expectErrorNaming<InvalidArgument>([&] { registry.add({"x", nullptr}); }, "no reader");
@@ -714,23 +718,23 @@ TEST(ObjectTypeRegistry, BuiltinAndCustomTypes) {
                   });
                 }});
   SceneDir d;
-  SceneDocumentOptions options;
-  options.registry = &registry;
+  const SceneDocumentOptions options;
   const auto path = d.write(own(R"({"name": "t", "tetra": {"edge": 2}}, {"name": "l", "lazy_tetra": {"edge": 3}})",
                                 R"({"instance": "a", "object": "t"}, {"instance": "b", "object": "l"})"));
-  const SceneDocument doc = loadSceneDocument(path, options);
+  const SceneDocument doc = loadSceneDocument(path, registry, options);
   EXPECT_EQ(built_now, 1);
   EXPECT_EQ(doc.graph->library().typeName(doc.objects[1]), "lazy_tetra");
   EXPECT_EQ(doc.graph->library().get(doc.objects[1])->bounds().hi.x, 3.0f);
   EXPECT_EQ(doc.instances.size(), 2u);
-  expectDocError(d, own(R"({"name": "t", "tetra": {"edge": -2}})", ""), "/objects/0/tetra/edge", "", options);
-  expectDocError(d, own(R"({"name": "t", "tetra": {}})", ""), "/objects/0/tetra", "edge", options);
+  expectDocError(d, own(R"({"name": "t", "tetra": {"edge": -2}})", ""), "/objects/0/tetra/edge", "", options, registry);
+  expectDocError(d, own(R"({"name": "t", "tetra": {}})", ""), "/objects/0/tetra", "edge", options, registry);
   expectDocError(d, own(kCube + R"(, {"name": "l", "lazy_tetra": {"edge": 300}})", ""), "/objects/1/lazy_tetra",
-                 "edge too long", options);
+                 "edge too long", options, registry);
   // Without the registry, the key is no type at all.
   expectDocError(d, own(R"({"name": "t", "tetra": {"edge": 2}})", ""), "/objects/0", "no object type");
   // Not a scene-json-v1 type: v1 files ignore the key.
-  expectDocError(d, v1(R"({"name": "t", "tetra": {"edge": 2}})", ""), "/objects/0", "no object type", options);
+  expectDocError(d, v1(R"({"name": "t", "tetra": {"edge": 2}})", ""), "/objects/0", "no object type", options,
+                 registry);
 }
 
 // Many small objects: each deferred build runs once, in parallel, before the instances are added.
@@ -750,10 +754,10 @@ TEST(SceneDocumentScale, ThousandsOfInlineObjects) {
     scene["instances"].push_back({{"object", name}, {"transform", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, i}}});
   }
   const auto path = d.write(scene.dump());
-  const SceneDocument doc = loadSceneDocument(path);
+  const SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   EXPECT_EQ(doc.instances.size(), std::size_t(n));
   EXPECT_EQ(doc.graph->library().buildCount(), std::size_t(n));
-  EXPECT_EQ(doc.figures.triangles, std::size_t(4 * n));
+  EXPECT_EQ(doc.figures.count("triangles"), std::size_t(4 * n));
   EXPECT_EQ(doc.graph->worldTransform(doc.instances[17]).translation.z, 17.0);
   std::printf("%d inline objects: load %.1f ms, build %.1f ms, graph %.1f ms\n", n, doc.figures.load_ms,
               doc.figures.build_ms, doc.figures.graph_ms);

@@ -7,6 +7,7 @@
 #include <duplex/accel/Hit.h>
 #include <duplex/accel/QueryContext.h>
 #include <duplex/accel/Ray.h>
+#include <duplex/objects/BuiltinTypes.h>
 #include <duplex/objects/MeshObject.h>
 #include <duplex/objects/TriangleMesh.h>
 #include <duplex/scenegraph/ObjectLibrary.h>
@@ -46,7 +47,7 @@ int main() {
   std::cout << (ok ? "ok: " : "wrong hit: ") << hit << " (expected t=2, u=0.5, v=0.25, prim=0, inst=" << scaled
             << ")\n";
   // The scene-file readers are there too (ObjectTypeRegistry's readers take nlohmann::json specs).
-  const bool types = duplex::ObjectTypeRegistry::builtin().find("mesh") != nullptr;
+  const bool types = duplex::builtinObjectTypes().find("mesh") != nullptr;
   if (!types) std::cout << "no built-in \"mesh\" object type\n";
   return ok && types ? 0 : 1;
 }

@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -37,6 +38,13 @@ struct FlatCrossings {
   float half_width = 0.0f;
   float half_height = 0.0f;
   bool front_only = false;
+};
+
+/// One named count an object reports about itself for load summaries and JSON figures, e.g.
+/// {"triangles", 12}. The name is a string literal of the type (it outlives the object).
+struct ObjectFigure {
+  std::string_view name;
+  std::size_t value = 0;
 };
 
 /// An immutable, shareable object (a mesh, a volume, a sensor). Any number of instances refer to
@@ -86,6 +94,19 @@ class Object {
 
   /// Bytes held by the object's geometry and acceleration structure.
   [[nodiscard]] virtual std::size_t memoryBytes() const = 0;
+
+  /// Named counts for load summaries ("triangles", "degenerate_triangles", "active_voxels", ...):
+  /// the scene loader sums each name over the distinct objects of a scene. Default: none.
+  [[nodiscard]] virtual std::vector<ObjectFigure> figures() const { return {}; }
+
+  /// File name extension (with its dot, e.g. ".dkdt") of this type's prepared bottom-level
+  /// structures: files that savePrepared() writes and the type's scene-file reader loads (the
+  /// entry's "structure" key) instead of building. Empty (the default): the type has none.
+  [[nodiscard]] virtual std::string_view preparedExtension() const { return {}; }
+  /// Writes the bottom-level structure to `path` (replacing it atomically). Throws FileError naming
+  /// the file when it cannot be written; InvalidArgument naming the object when its type has no
+  /// prepared format (preparedExtension() empty, the default).
+  virtual void savePrepared(const std::filesystem::path& path) const;
 
  protected:
   explicit Object(std::string name, ObjectRole role = ObjectRole::Surface) : name_(std::move(name)), role_(role) {}

@@ -5,14 +5,13 @@
 /// key the entry has (exactly one) and hands SPEC to that type's reader, which returns the object
 /// built, or a factory that ObjectLibrary calls later (in parallel, ObjectLibrary::buildAll).
 ///
-/// Built in: "mesh" (`{"file": PATH}` or `{"positions": [...], "indices": [...]}`), and procedural
-/// meshes "sphere" (`{"radius": r, "subdivisions": s}`), "box" (`{"size": [x, y, z] | s}`) and
-/// "plane" (`{"size": [w, h] | s}`), and "volume" (`{"file": PATH.vdb, "grid": G, "kind": "fog" |
-/// "levelset"}`, VolumeObject). Sensors register the same way (duplex::registerSensorTypes).
+/// The scene graph knows no object type: each type's folder registers its own
+/// (`registerMeshTypes`, `registerShapeTypes`, `registerVolumeTypes` in duplex::objects,
+/// `registerSensorTypes` in duplex::sensors), and duplex::builtinObjectTypes() holds the types of
+/// duplex::objects. docs/object-types.md shows how a new type plugs in.
 
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/Object.h"
-#include "duplex/objects/TriangleMesh.h"
 #include "duplex/scenegraph/ObjectLibrary.h"
 
 #include <nlohmann/json_fwd.hpp>
@@ -27,6 +26,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -36,14 +36,25 @@ namespace duplex {
 /// it. Thread-safe.
 class SceneLoadCache {
  public:
-  /// Registers a mesh file (a resolved path) to be read by readRequested(); readers call it while
-  /// the scene file is parsed, so that the files are read in parallel, once each, before any build.
-  void requestMesh(const std::filesystem::path& file);
-  /// Reads every requested file not read yet, in parallel (TBB). Errors are kept and thrown by mesh().
+  /// Reads one file for a type (a mesh file, ...) into a value of the type's choosing (never null).
+  /// May call `cache`.addCount() (warnings found, ...). Throws on failure; the message names the file.
+  using FileReader =
+      std::function<std::shared_ptr<const void>(const std::filesystem::path& file, SceneLoadCache& cache)>;
+
+  /// Registers `file` (a resolved path) to be read by `reader` under `kind` ("mesh"); readers call it
+  /// while the scene file is parsed, so that the files are read in parallel by readRequested(), once
+  /// per (kind, file) however the path is spelt, before any build. The first request's reader and
+  /// spelling are kept.
+  void requestFile(std::string_view kind, const std::filesystem::path& file, FileReader reader);
+  /// Reads every requested file not read yet, in parallel (TBB). Errors are kept and thrown by file().
   void readRequested();
-  /// The mesh of `file`, read at most once per load (now, if it was not read before); throws the
-  /// reader's FileError (naming the mesh file).
-  [[nodiscard]] std::shared_ptr<const TriangleMesh> mesh(const std::filesystem::path& file);
+  /// The value read from `file` under `kind` (now, if it was not read before), cast to the type its
+  /// reader returned; throws the reader's error as FileError, or InvalidArgument when the file was
+  /// never requested under `kind`.
+  template <class T>
+  [[nodiscard]] std::shared_ptr<const T> file(std::string_view kind, const std::filesystem::path& file) {
+    return std::static_pointer_cast<const T>(fileValue(kind, file));
+  }
   /// The object stored under `key`, built by `build` on the first call for that key (concurrent
   /// callers wait; the build runs isolated from their TBB work, so nested parallel builds cannot
   /// deadlock). Objects of several entries with the same source (mesh file, prepared structure)
@@ -51,27 +62,36 @@ class SceneLoadCache {
   [[nodiscard]] std::shared_ptr<const Object> shared(const std::string& key,
                                                      const std::function<std::shared_ptr<const Object>()>& build);
 
-  /// Figures of the load (summed over all files and objects).
-  [[nodiscard]] std::size_t meshFiles() const;
-  [[nodiscard]] std::size_t complexEdgeWarnings() const;
+  /// Adds `n` to the load's count `name` (summed over files and objects, reported in
+  /// SceneLoadFigures::counts).
+  void addCount(std::string_view name, std::size_t n);
+  /// Distinct files requested under `kind`.
+  [[nodiscard]] std::size_t files(std::string_view kind) const;
+  /// The counts added, and "<kind>_files" for each kind requested: its number of distinct files.
+  [[nodiscard]] std::map<std::string, std::size_t, std::less<>> counts() const;
   std::atomic<std::size_t> structures_loaded{0};  ///< prepared structures read instead of built
 
  private:
-  struct MeshEntry {
+  struct FileEntry {
+    std::string kind;
     std::filesystem::path file;  // as first requested (messages name it)
+    FileReader reader;
     std::once_flag once;
-    std::shared_ptr<const TriangleMesh> mesh;
+    std::shared_ptr<const void> value;
     std::string error;
-    std::size_t complex_edge_warnings = 0;
   };
   struct SharedEntry {
     std::mutex mutex;
     std::shared_ptr<const Object> object;
   };
-  MeshEntry& meshEntry(const std::filesystem::path& file);
+  FileEntry* findEntry(std::string_view kind, const std::filesystem::path& file, const FileReader* reader);
+  [[nodiscard]] std::shared_ptr<const void> fileValue(std::string_view kind, const std::filesystem::path& file);
+  [[nodiscard]] std::shared_ptr<const void> read(FileEntry& entry);
   mutable std::mutex mutex_;  // guards the maps (entries never move: held by unique_ptr)
-  std::map<std::filesystem::path, std::unique_ptr<MeshEntry>> meshes_;  // by canonical path
+  // by kind, then canonical path
+  std::map<std::pair<std::string, std::filesystem::path>, std::unique_ptr<FileEntry>> files_;
   std::map<std::string, std::unique_ptr<SharedEntry>> shared_;
+  std::map<std::string, std::size_t, std::less<>> counts_;
 };
 
 /// What a type's reader is given besides its spec.
@@ -123,12 +143,10 @@ struct ObjectTypeInfo {
   bool accepts_structure = false;
 };
 
-/// A set of object types. Copy builtin() and add() your own. Not thread-safe for add().
+/// A set of object types. Start from duplex::builtinObjectTypes() (or an empty registry) and add()
+/// your own. Not thread-safe for add().
 class ObjectTypeRegistry {
  public:
-  /// "mesh" (scene-json-v1, accepts structures), "sphere", "box", "plane", "volume" (scene-json-v1).
-  [[nodiscard]] static const ObjectTypeRegistry& builtin();
-
   /// Registers a type; throws InvalidArgument for an empty or taken name or a null reader.
   void add(ObjectTypeInfo info);
   [[nodiscard]] const ObjectTypeInfo* find(std::string_view name) const;

@@ -17,8 +17,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <map>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace duplex {
@@ -52,22 +55,28 @@ struct SceneEdit {
 
 /// Figures of a load (milliseconds of wall time).
 struct SceneLoadFigures {
-  double load_ms = 0.0;   ///< reading and parsing the JSON, the object specs, and the mesh files
+  double load_ms = 0.0;   ///< reading and parsing the JSON, the object specs, and the files they name
   double build_ms = 0.0;  ///< bottom-level structures (built, or loaded from prepared files), in parallel
   double graph_ms = 0.0;  ///< adding the nodes to the graph and the first commit
   std::size_t objects = 0;
-  std::size_t mesh_files = 0;         ///< distinct mesh files read
   std::size_t structures_loaded = 0;  ///< prepared bottom-level structures read instead of built
-  std::size_t triangles = 0;          ///< over distinct mesh objects
-  std::size_t degenerate_triangles = 0;
-  std::size_t complex_edge_warnings = 0;
   std::size_t instances = 0;
   std::size_t nodes = 0;  ///< graph nodes, root included
+  /// What the object types report, summed: each object's Object::figures() over the distinct
+  /// objects ("triangles", "degenerate_triangles", ...), the counts their readers added while
+  /// reading files ("complex_edge_warnings"), and "<kind>_files", the distinct files read per kind
+  /// ("mesh_files").
+  std::map<std::string, std::size_t, std::less<>> counts;
+
+  /// counts[name], 0 when absent.
+  [[nodiscard]] std::size_t count(std::string_view name) const {
+    const auto it = counts.find(name);
+    return it == counts.end() ? 0 : it->second;
+  }
 };
 
 struct SceneDocumentOptions {
-  KdBuildConfig build;                           ///< bottom-level build parameters
-  const ObjectTypeRegistry* registry = nullptr;  ///< nullptr: ObjectTypeRegistry::builtin()
+  KdBuildConfig build;  ///< bottom-level build parameters
   /// Honour "structure" keys (prepared bottom-level structures); false builds every object.
   bool use_structures = true;
 };
@@ -90,12 +99,13 @@ struct SceneDocument {
   std::shared_ptr<const nlohmann::json> parsed;
 };
 
-/// Reads `path` (either format, by its "format" key). Objects are read through the registry; their
+/// Reads `path` (either format, by its "format" key). Objects are read through `registry` (e.g.
+/// duplex::builtinObjectTypes(), or duplex::sensorTypeRegistry() with sensors); their
 /// bottom-level structures are built (or loaded) in parallel, each mesh file read once and objects of
 /// the same source built once, before the instances are added; then the graph is committed. Throws
 /// FileError naming the file and the JSON pointer of the first problem (objects: the first in file
 /// order whose build failed).
-[[nodiscard]] SceneDocument loadSceneDocument(const std::filesystem::path& path,
+[[nodiscard]] SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectTypeRegistry& registry,
                                               const SceneDocumentOptions& options = {});
 
 /// Applies `edit` to doc.graph (without committing). Returns the nodes an Add created (its subtree,
@@ -103,11 +113,12 @@ struct SceneDocument {
 /// does not exist (now) or the graph refuses the edit; the graph is then unchanged.
 std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit);
 
-/// Writes the bottom-level structure of every mesh object of doc's library (built now if deferred) to
-/// `dir` (created if needed) as "<object id>_<name>.dkdt" (characters other than [A-Za-z0-9._-]
+/// Writes the prepared bottom-level structure of every object of doc's library whose type has a
+/// prepared format (Object::preparedExtension(); meshes: ".dkdt"), built now if deferred, to `dir`
+/// (created if needed) as "<object id>_<name><extension>" (characters other than [A-Za-z0-9._-]
 /// replaced by '_'), for use as "structure" in a scene file. Returns the path per library object id
-/// (empty for objects of other types). An object shared by several entries is written once per entry.
-/// Throws FileError naming the folder or file that cannot be created or written.
+/// (empty for objects of types without one). An object shared by several entries is written once
+/// per entry. Throws FileError naming the folder or file that cannot be created or written.
 std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, const std::filesystem::path& dir);
 
 }  // namespace duplex

@@ -1,0 +1,12 @@
+#include "duplex/accel/Object.h"
+
+#include "duplex/accel/Error.h"
+
+namespace duplex {
+
+void Object::savePrepared(const std::filesystem::path& path) const {
+  throw InvalidArgument("object '" + name() + "' of type '" + std::string(typeName()) +
+                        "' has no prepared structure format (cannot write " + path.string() + ")");
+}
+
+}  // namespace duplex

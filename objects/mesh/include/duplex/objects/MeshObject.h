@@ -1,0 +1,83 @@
+#pragma once
+/// \file MeshObject.h
+/// The triangle-mesh object type: a TriangleMesh with its SAH kd-tree.
+
+#include "duplex/accel/KdBuildConfig.h"
+#include "duplex/accel/KdTree.h"
+#include "duplex/accel/Object.h"
+#include "duplex/objects/TriangleMesh.h"
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace duplex {
+
+namespace detail {
+struct TriangleBlock4;
+}
+
+/// Immutable after construction; all queries are thread-safe.
+class MeshObject final : public Object {
+ public:
+  static constexpr std::string_view kTypeName = "mesh";
+
+  /// Builds the kd-tree over the mesh's valid triangles (object space). Throws InvalidArgument for a
+  /// null mesh or an invalid `config` (see buildKdTree).
+  explicit MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config = {});
+  ~MeshObject() override;
+
+  /// From a kd-tree built before (e.g. read from a file by loadMeshObject) over `mesh`'s triangles:
+  /// no build. The tree is checked first, so that no later query can read out of bounds or loop:
+  /// nodes in depth-first layout (each inner node's upper child right after its lower subtree, every
+  /// node reached once), depth within the traversal stack, finite split planes, leaf ranges inside
+  /// prim_indices, every index a valid (non-degenerate) triangle of `mesh`, and finite bounds that
+  /// hold the mesh's bounds. Throws InvalidArgument naming the first violation. Linear time.
+  [[nodiscard]] static std::shared_ptr<const MeshObject> fromParts(std::shared_ptr<const TriangleMesh> mesh,
+                                                                   KdTree tree);
+
+  [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
+  [[nodiscard]] Box bounds() const override { return mesh_->bounds(); }
+  bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
+  [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
+  void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
+  [[nodiscard]] std::size_t memoryBytes() const override;
+  /// meshChecksum() of the mesh (XXH64 of positions and triangle indices, as prepared structure
+  /// files check it).
+  [[nodiscard]] std::uint64_t contentHash() const override;
+  /// "triangles" and "degenerate_triangles" of the mesh.
+  [[nodiscard]] std::vector<ObjectFigure> figures() const override;
+  /// ".dkdt": the kd-tree files of MeshObjectFile.h.
+  [[nodiscard]] std::string_view preparedExtension() const override { return ".dkdt"; }
+  /// saveMeshObject(*this, path) (MeshObjectFile.h).
+  void savePrepared(const std::filesystem::path& path) const override;
+
+  /// The same queries without the virtual call and context (for benchmarks and the bottom level).
+  bool intersect(const Ray& ray_os, Hit& hit) const;
+  [[nodiscard]] bool occluded(const Ray& ray_os) const;
+
+  [[nodiscard]] const TriangleMesh& mesh() const { return *mesh_; }
+  [[nodiscard]] const KdTree& tree() const { return tree_; }
+  /// Bytes of the acceleration structure (nodes, index list, per-leaf triangle blocks).
+  [[nodiscard]] std::size_t accelBytes() const;
+
+ private:
+  struct PartsTag {};
+  MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag);
+  /// Fills blocks_ and block_tree_ from tree_ (see below).
+  void buildLeafBlocks();
+
+  std::shared_ptr<const TriangleMesh> mesh_;
+  KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
+  // Each non-empty leaf's triangles copied into consecutive 4-wide blocks (structure of arrays, in
+  // the leaf's reference order, the last block padded), so that a leaf is a few sequential loads
+  // and its test needs neither an index list nor a transpose. A triangle referenced by several
+  // leaves is copied into each (about 40 bytes per reference).
+  std::vector<detail::TriangleBlock4> blocks_;
+  // What queries traverse: tree_'s bounds and nodes, with each leaf's offset pointing at its first
+  // block instead of into prim_indices (which stays empty), so reaching a leaf's triangles costs no
+  // dependent load through an index list.
+  KdTree block_tree_;
+};
+
+}  // namespace duplex

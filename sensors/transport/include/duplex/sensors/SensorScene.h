@@ -1,0 +1,145 @@
+#pragma once
+/// \file SensorScene.h
+/// A scene prepared for light transport: the graph and its tracer, the lights, the materials of the
+/// objects and the sensor instances (each with its range of global bins).
+///
+/// Scene files (docs/scene-format.md, docs/sensors.md): beside the graph (either format), the
+/// top-level "lights" and "sensors" lists and each object entry's "material". A "sensors" entry
+/// becomes an object of type "sensor" named "sensors/<name>" with one instance under the root named
+/// <name>; in duplex-scene-v1 files sensor objects may also be instanced in the node tree like any
+/// object. Every visible instance of a SensorObject is a sensor of the run, named after its
+/// instance node.
+
+#include "duplex/objects/VolumeObject.h"
+#include "duplex/scenegraph/SceneDocument.h"
+#include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/scenegraph/SceneTracer.h"
+#include "duplex/sensors/Light.h"
+#include "duplex/sensors/Material.h"
+#include "duplex/sensors/SensorObject.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace duplex {
+
+/// One sensor instance of a scene.
+struct SensorInstance {
+  std::string name;  ///< the instance node's name (unique among the scene's sensors)
+  NodeId node = kInvalidNode;
+  std::shared_ptr<const SensorObject> object;
+  Affine world_from_object;
+  /// World area per object-space area of the sensor plane: |cross(L e_x, L e_y)| for the linear
+  /// part L of world_from_object.
+  double area_scale = 1.0;
+  std::uint32_t first_bin = 0;  ///< offset of its bins in the run's global bin array
+  /// Offset of its angular bins in the run's global angular-bin array (SensorScene::angleBinCount).
+  std::uint32_t first_angle_bin = 0;
+  /// World-space orthonormal frame of the sensor: frame_x along its local x, normal its +z side
+  /// (right-handed), frame_y = cross(normal, frame_x). Angular bins are measured in it.
+  glm::dvec3 frame_x{1.0, 0.0, 0.0}, frame_y{0.0, 1.0, 0.0}, normal{0.0, 0.0, 1.0};
+
+  /// World-space area (square scene units) of bin `bin`.
+  [[nodiscard]] double binAreaWorld(std::uint32_t bin) const { return object->binArea(bin) * area_scale; }
+};
+
+/// A fog instance of a scene whose media scatter (SensorScene::scatteringMedia()): light tracing
+/// samples free flights through it (VolumeObject::sampleFreeFlight) instead of weighting rays by
+/// its transmittance.
+struct MediumInstance {
+  NodeId node = kInvalidNode;
+  std::shared_ptr<const VolumeObject> volume;
+  Affine object_from_world;
+  glm::dvec3 world_lo{0.0}, world_hi{0.0};  ///< world-space box of the instance
+  std::uint32_t mask = 0xFFFFFFFFu;         ///< the instance's mask (tested against the run's medium_mask)
+  /// Medium (scatters with its albedo and g) or Absorber (a fog without "material": every collision
+  /// absorbs, which is pure attenuation in expectation).
+  Material material;
+};
+
+class SensorScene {
+ public:
+  /// Reads `path` (either format) with the object types of `registry` (nullptr:
+  /// sensorTypeRegistry(), the built-in types and the sensor type), plus its lights, sensors and
+  /// materials. Throws FileError naming the file and the JSON pointer of the first problem (a light
+  /// with zero or negative power, a malformed sensor, an unknown material, ...), and
+  /// InvalidArgument-derived FileErrors for duplicate sensor names.
+  static SensorScene load(const std::filesystem::path& path, const SceneDocumentOptions& options = {},
+                          const ObjectTypeRegistry* registry = nullptr);
+
+  /// A scene over a committed `graph` (kept by reference: it must outlive this scene and must not
+  /// be edited while a run traces it). `materials` is indexed by ObjectId; objects beyond its end
+  /// are absorbers. `bands` names the spectral bands (empty: one radiometric band, no per-band
+  /// output). Validates the lights (InvalidArgument naming the light). A scene without lights can
+  /// be made (for picking or inspection), but SensorRun::run refuses it. Throws InvalidArgument
+  /// naming the object or light for a reflectance or albedo outside [0, 1] or NaN, an index of
+  /// refraction that is not finite and positive, a "medium" material on an object that is not a
+  /// fog, a surface material on a fog, a fog that cannot be sampled (a medium of another type) in
+  /// a scene whose media scatter, per-band values whose count is not the band count, or empty or
+  /// repeated band names.
+  SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
+              std::vector<std::string> bands = {});
+  SensorScene(SensorScene&&) noexcept;
+  SensorScene& operator=(SensorScene&&) noexcept;
+  ~SensorScene();
+
+  [[nodiscard]] const std::vector<Light>& lights() const { return lights_; }
+  /// Sum of the lights' power (W).
+  [[nodiscard]] double totalPower() const { return total_power_; }
+  /// Sensor instances, sorted by node id.
+  [[nodiscard]] const std::vector<SensorInstance>& sensors() const { return sensors_; }
+  /// Index into sensors() of the sensor with this name, or -1.
+  [[nodiscard]] int findSensor(const std::string& name) const;
+  /// Total number of bins over all sensors.
+  [[nodiscard]] std::uint32_t binCount() const { return bin_count_; }
+  /// Total number of angular bins over all sensors.
+  [[nodiscard]] std::uint32_t angleBinCount() const { return angle_bin_count_; }
+  /// Sensor index of instance `node` (a hit's instance_id), or -1 when it is not a sensor.
+  [[nodiscard]] int sensorOf(NodeId node) const { return node < sensor_of_node_.size() ? sensor_of_node_[node] : -1; }
+  /// Material of instance `node` (absorber when none was given).
+  [[nodiscard]] const Material& materialOf(NodeId node) const {
+    return node < material_of_node_.size() ? material_of_node_[node] : kAbsorber;
+  }
+  /// Spectral band names (empty: a single radiometric band).
+  [[nodiscard]] const std::vector<std::string>& bands() const { return bands_; }
+  /// Number of bands transported (1 when the scene has no "bands").
+  [[nodiscard]] std::uint32_t bandCount() const {
+    return bands_.empty() ? 1u : static_cast<std::uint32_t>(bands_.size());
+  }
+  /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1); `light`
+  /// must be < lights().size() (not checked: the run's hot loop).
+  [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return band_cdf_[light]; }
+  /// Whether `linear` is a rotation (or reflection) times a uniform scale, to relative 1e-9: the
+  /// transforms a sphere sensor accepts (its bins keep equal areas only under these).
+  [[nodiscard]] static bool isSimilarity(const glm::dmat3& linear);
+  /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
+  /// scatteringMedia() and transported by free flights, else fogs only attenuate.
+  [[nodiscard]] bool scatters() const { return !media_.empty(); }
+  [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return media_; }
+  [[nodiscard]] const SceneTracer& tracer() const { return *tracer_; }
+  [[nodiscard]] const SceneGraph& graph() const { return *graph_; }
+  /// The document when the scene was loaded from a file, else nullptr.
+  [[nodiscard]] const SceneDocument* document() const { return doc_.get(); }
+
+ private:
+  static inline const Material kAbsorber{};
+  void prepare(std::vector<Material> materials);
+  std::unique_ptr<SceneDocument> doc_;
+  SceneGraph* graph_ = nullptr;
+  std::unique_ptr<SceneTracer> tracer_;
+  std::vector<Light> lights_;
+  double total_power_ = 0.0;
+  std::vector<SensorInstance> sensors_;
+  std::uint32_t bin_count_ = 0;
+  std::uint32_t angle_bin_count_ = 0;
+  std::vector<int> sensor_of_node_;
+  std::vector<Material> material_of_node_;
+  std::vector<std::string> bands_;
+  std::vector<std::vector<double>> band_cdf_;
+  std::vector<MediumInstance> media_;
+};
+
+}  // namespace duplex

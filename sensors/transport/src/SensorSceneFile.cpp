@@ -1,0 +1,253 @@
+// SensorScene::load: the scene file's "lights", "sensors" and per-object "material" keys
+// (docs/sensors.md). The graph itself is read by loadSceneDocument with the sensor type registered.
+
+#include "duplex/accel/Error.h"
+#include "duplex/sensors/SensorScene.h"
+#include "duplex/sensors/SensorTypes.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cmath>
+#include <numbers>
+
+namespace duplex {
+
+using nlohmann::json;
+
+namespace {
+
+std::string at(const std::string& p, std::string_view key) { return p + "/" + std::string(key); }
+std::string at(const std::string& p, std::size_t i) { return p + "/" + std::to_string(i); }
+
+glm::dvec3 vec3(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  if (!v.is_array() || v.size() != 3) ctx.fail(p, "expected an array of 3 numbers");
+  return {ctx.number(v[0], at(p, 0)), ctx.number(v[1], at(p, 1)), ctx.number(v[2], at(p, 2))};
+}
+
+Affine transform12(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  if (!v.is_array() || v.size() != 12) ctx.fail(p, "expected 12 numbers (row-major 3x4)");
+  std::array<double, 12> m{};
+  for (std::size_t k = 0; k < 12; ++k) m[k] = ctx.number(v[k], at(p, k));
+  const Affine a = Affine::fromRowMajor3x4(m);
+  if (a.isSingular()) ctx.fail(p, "singular transform");
+  return a;
+}
+
+glm::dvec3 direction(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  const glm::dvec3 d = vec3(v, p, ctx);
+  if (d == glm::dvec3(0.0)) ctx.fail(p, "direction must be a non-zero vector");
+  return d;
+}
+
+// A non-empty array of numbers (per-band values).
+std::vector<double> numbers(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  if (!v.is_array() || v.empty()) ctx.fail(p, "expected a non-empty array of numbers (one per band)");
+  std::vector<double> out;
+  for (std::size_t k = 0; k < v.size(); ++k) out.push_back(ctx.number(v[k], at(p, k)));
+  return out;
+}
+
+Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  if (!v.is_object()) ctx.fail(p, "expected a light (an object with \"type\")");
+  Light l;
+  l.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
+  const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
+  const double power = ctx.number(ctx.member(v, p, "power"), at(p, "power"));
+  if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
+  l.power_w = power;
+  if (type == "point") {
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position"});
+    l.type = LightType::Point;
+    l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
+  } else if (type == "spot") {
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position", "direction", "half_angle"});
+    l.type = LightType::Spot;
+    l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
+    l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
+    const double deg = ctx.number(ctx.member(v, p, "half_angle"), at(p, "half_angle"));
+    if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
+    l.cone_angle = deg * std::numbers::pi / 180.0;
+  } else if (type == "directional") {
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position", "direction", "radius"});
+    l.type = LightType::Directional;
+    l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
+    l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
+    l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
+  } else if (type == "area") {
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "size", "transform", "two_sided"});
+    l.type = LightType::Area;
+    const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
+    l.width = size[0];
+    l.height = size[1];
+    if (v.contains("transform")) l.world_from_light = transform12(v["transform"], at(p, "transform"), ctx);
+    if (v.contains("two_sided")) {
+      if (!v["two_sided"].is_boolean()) ctx.fail(at(p, "two_sided"), "expected true or false");
+      l.two_sided = v["two_sided"].get<bool>();
+    }
+  } else if (type == "ies") {
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "file", "position", "transform"});
+    l.type = LightType::Goniometric;
+    if (v.contains("position") == v.contains("transform"))
+      ctx.fail(p, "an \"ies\" light has either \"position\" or \"transform\" (rotation and translation)");
+    if (v.contains("transform")) {
+      l.world_from_light = transform12(v["transform"], at(p, "transform"), ctx);
+      l.position = l.world_from_light.translation;
+    } else {
+      l.position = vec3(v["position"], at(p, "position"), ctx);
+    }
+    const std::filesystem::path file = ctx.resolve(ctx.string(ctx.member(v, p, "file"), at(p, "file")));
+    try {
+      l.profile = std::make_shared<const IesProfile>(IesProfile::load(file));
+    } catch (const Error& e) {
+      ctx.fail(at(p, "file"), e.what());
+    }
+  } else {
+    ctx.fail(at(p, "type"), "unknown light type \"" + type +
+                                "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
+  }
+  if (v.contains("spectrum")) l.spectrum = numbers(v["spectrum"], at(p, "spectrum"), ctx);
+  try {
+    l.validate();
+  } catch (const InvalidArgument& e) {
+    ctx.fail(p, e.what());
+  }
+  return l;
+}
+
+Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+  if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
+  Material m;
+  const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
+  // A number in [0, 1], or one per band (then `reflectance` keeps their mean, for messages).
+  auto fraction = [&](const char* key) {
+    const json& x = ctx.member(v, p, key);
+    const std::vector<double> values =
+        x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
+    double sum = 0.0;
+    for (std::size_t k = 0; k < values.size(); ++k) {
+      if (!(values[k] >= 0.0 && values[k] <= 1.0))
+        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key),
+                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key + " in [0, 1]");
+      sum += values[k];
+    }
+    if (x.is_array()) m.band_reflectance = values;
+    return sum / static_cast<double>(values.size());
+  };
+  auto reflectance = [&] { return fraction("reflectance"); };
+  if (type == "absorber") {
+    ctx.onlyKeys(v, p, {"type"});
+  } else if (type == "lambertian") {
+    ctx.onlyKeys(v, p, {"type", "reflectance"});
+    m.type = MaterialType::Lambertian;
+    m.reflectance = reflectance();
+  } else if (type == "mirror") {
+    ctx.onlyKeys(v, p, {"type", "reflectance"});
+    m.type = MaterialType::Mirror;
+    m.reflectance = v.contains("reflectance") ? reflectance() : 1.0;
+  } else if (type == "dielectric") {
+    ctx.onlyKeys(v, p, {"type", "ior"});
+    m.type = MaterialType::Dielectric;
+    m.ior = ctx.positiveNumber(ctx.member(v, p, "ior"), at(p, "ior"));
+  } else if (type == "medium") {
+    ctx.onlyKeys(v, p, {"type", "albedo", "g"});
+    m.type = MaterialType::Medium;
+    m.reflectance = fraction("albedo");
+    if (v.contains("g")) {
+      m.g = ctx.number(v["g"], at(p, "g"));
+      if (!(m.g > -1.0 && m.g < 1.0)) ctx.fail(at(p, "g"), "expected a Henyey-Greenstein g in (-1, 1)");
+    }
+  } else {
+    ctx.fail(at(p, "type"), "unknown material \"" + type +
+                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\" or \"medium\")");
+  }
+  return m;
+}
+
+}  // namespace
+
+SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocumentOptions& options,
+                              const ObjectTypeRegistry* registry) {
+  auto doc =
+      std::make_unique<SceneDocument>(loadSceneDocument(path, registry ? *registry : sensorTypeRegistry(), options));
+  const json& root = *doc->parsed;
+  ObjectSpecContext ctx;
+  ctx.scene_file = path;
+  ctx.strict = doc->format != "scene-json-v1";
+  ctx.cache = std::make_shared<SceneLoadCache>();
+  SceneGraph& graph = *doc->graph;
+
+  // Materials by object (file order = library order of the "objects" entries).
+  std::vector<Material> materials(graph.library().size());
+  const json& objects = root["objects"];
+  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i)
+    if (objects[i].contains("material"))
+      materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx);
+
+  std::vector<std::string> bands;
+  if (root.contains("bands")) {
+    const json& list = root["bands"];
+    if (!list.is_array() || list.empty()) ctx.fail("/bands", "expected a non-empty array of band names");
+    if (list.size() > 256) ctx.fail("/bands", std::to_string(list.size()) + " bands, at most 256");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      bands.push_back(ctx.string(list[i], at("/bands", i)));
+      for (std::size_t j = 0; j < i; ++j)
+        if (bands[j] == bands[i] || bands[i].empty())
+          ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
+    }
+  }
+  auto bandCount = [&](const std::vector<double>& values, const std::string& p) {
+    if (!values.empty() && values.size() != std::max<std::size_t>(1, bands.size()))
+      ctx.fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
+                      (bands.empty() ? std::string("no \"bands\"") : std::to_string(bands.size()) + " bands"));
+  };
+  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
+    const Material& m = materials[doc->objects[i]];
+    bandCount(m.band_reflectance,
+              at(at(at("/objects", i), "material"), m.type == MaterialType::Medium ? "albedo" : "reflectance"));
+  }
+
+  std::vector<Light> lights;
+  if (root.contains("lights")) {
+    const json& list = root["lights"];
+    if (!list.is_array()) ctx.fail("/lights", "expected an array of lights");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      lights.push_back(readLight(list[i], at("/lights", i), ctx));
+      bandCount(lights.back().spectrum, at(at("/lights", i), "spectrum"));
+    }
+  }
+
+  if (root.contains("sensors")) {
+    const json& list = root["sensors"];
+    if (!list.is_array()) ctx.fail("/sensors", "expected an array of sensors");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string p = at("/sensors", i);
+      const json& e = list[i];
+      ObjectSpecContext sctx = ctx;
+      sctx.pointer = p;
+      const SensorSpec spec = readSensorSpec(e, sctx, {"name", "transform"});
+      const std::string name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
+      if (name.empty()) ctx.fail(at(p, "name"), "expected a non-empty sensor name");
+      const Affine world =
+          e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();
+      if (spec.shape == SensorShape::Sphere && !SensorScene::isSimilarity(world.linear))
+        ctx.fail(at(p, "transform"), "a sphere sensor's transform must be a rotation with uniform scale");
+      try {
+        const ObjectId id = graph.library().add("sensors/" + name, std::make_shared<const SensorObject>(name, spec));
+        (void)graph.addInstance(kRootNode, id, world, name);
+      } catch (const InvalidArgument& ex) {
+        ctx.fail(p, ex.what());
+      }
+    }
+    (void)graph.commit();
+  }
+  try {
+    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands));
+    scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
+    return scene;
+  } catch (const InvalidArgument& ex) {
+    ctx.fail("", ex.what());  // names the object, light or sensor
+  }
+}
+
+}  // namespace duplex
