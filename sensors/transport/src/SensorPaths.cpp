@@ -1,0 +1,297 @@
+// The light paths of a sensor run: each chunk's rays are emitted from the lights, traced through
+// the scene's surfaces, materials and media, and their deposits on the sensors recorded per ray
+// (merged per bin within the path, so that a bin's sum of squares is over emitted rays).
+
+#include "duplex/sensors/CounterRng.h"
+#include "duplex/sensors/HenyeyGreenstein.h"
+#include "duplex/sensors/SensorRun.h"
+
+#include "OrthonormalBasis.h"
+#include "SensorRunChunk.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <vector>
+
+namespace duplex {
+
+using detail::BinEvent;
+using detail::SensorEvent;
+
+namespace {
+
+// Cosine-weighted direction about unit normal n.
+glm::dvec3 cosineDirection(const glm::dvec3& n, double u0, double u1) {
+  glm::dvec3 t, b;
+  detail::orthonormalBasis(n, t, b);
+  const double r = std::sqrt(u0), phi = 2.0 * std::numbers::pi * u1;
+  return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - u0)) * n;
+}
+
+glm::dvec3 reflect(const glm::dvec3& d, const glm::dvec3& n) { return d - 2.0 * glm::dot(d, n) * n; }
+
+// A direction scattered from unit propagation direction d by phase function hg.
+glm::dvec3 phaseDirection(const glm::dvec3& d, const HenyeyGreenstein& hg, double u0, double u1) {
+  const double c = hg.sampleCos(u0), sn = std::sqrt(std::max(0.0, 1.0 - c * c)), phi = 2.0 * std::numbers::pi * u1;
+  glm::dvec3 t, b;
+  detail::orthonormalBasis(d, t, b);
+  return glm::normalize(sn * std::cos(phi) * t + sn * std::sin(phi) * b + c * d);
+}
+
+// Whether the segment origin + t dir, t in [0, t_max], meets the box [lo, hi] (slab test; an
+// infinite t_max is a ray).
+bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_max, const glm::dvec3& lo,
+                     const glm::dvec3& hi) {
+  double t0 = 0.0, t1 = t_max;
+  for (int a = 0; a < 3; ++a) {
+    const double inv = 1.0 / dir[a];
+    double ta = (lo[a] - origin[a]) * inv, tb = (hi[a] - origin[a]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    if (!(ta <= t1 && tb >= t0)) {
+      if (std::isnan(ta) || std::isnan(tb)) continue;  // dir[a] == 0 with the origin on a face: keep
+      return false;
+    }
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 <= t1;
+}
+
+// Sorts a path's deposits by bin, keeping the path order within a bin. Most paths deposit in a
+// handful of bins: a stable insertion sort, where std::stable_sort would allocate a buffer per path.
+void sortByBin(std::vector<BinEvent>& events) {
+  if (events.size() > 32) {
+    std::stable_sort(events.begin(), events.end(), [](const BinEvent& a, const BinEvent& b) { return a.bin < b.bin; });
+    return;
+  }
+  for (std::size_t i = 1; i < events.size(); ++i) {
+    const BinEvent e = events[i];
+    std::size_t j = i;
+    for (; j > 0 && events[j - 1].bin > e.bin; --j) events[j] = events[j - 1];
+    events[j] = e;
+  }
+}
+
+}  // namespace
+
+void SensorRun::traceChunk(Chunk& chunk) const {
+  const TopLevel& top = scene_.tracer().topLevel();
+  const auto& lights = scene_.lights();
+  const auto& sensors = scene_.sensors();
+  const double power = scene_.totalPower();
+  const double rr_level = config_.roulette_threshold * power;
+  const std::uint32_t bands = scene_.bandCount();
+  const std::uint32_t angle_base = scene_.binCount();  // angular bins follow the spatial ones
+  // In a scene whose fogs scatter, every fog acts through sampled free flights, not through the
+  // crossing query's transmittance.
+  const bool scatter = scene_.scatters();
+  CrossingQuery query = config_.query;
+  if (scatter) query.medium_mask = 0;
+  QueryContext ctx;
+  std::vector<SensorCrossing> crossings;
+  std::vector<BinEvent> path_bins;  // this path's deposits before merging
+  chunk.bins.clear();
+  chunk.bin_end.clear();
+  chunk.sensors.clear();
+  chunk.sensor_end.clear();
+  chunk.band.assign(bands > 1 ? chunk.count : 0, 0);
+  chunk.energy.assign(chunk.count, EnergyBalance{});
+  chunk.counters = {};
+
+  for (std::uint64_t k = 0; k < chunk.count; ++k) {
+    if (cancel_.load(std::memory_order_relaxed)) return;  // chunk stays not done
+    CounterRng rng(config_.seed, chunk.first + k);
+    EnergyBalance& e = chunk.energy[k];
+    // Light by power, then a ray of it.
+    const double pick = rng.uniform() * power;
+    const std::size_t li = std::min<std::size_t>(
+        lights.size() - 1,
+        static_cast<std::size_t>(std::upper_bound(light_cdf_.begin(), light_cdf_.end(), pick) - light_cdf_.begin()));
+    // The band by the light's spectrum, from where `pick` fell inside the light's share: the path's
+    // other random numbers stay those of a single-band run (equal reflectances: equal paths).
+    std::uint32_t band = 0;
+    if (bands > 1) {
+      const double lo = li ? light_cdf_[li - 1] : 0.0;
+      const double ub = std::clamp((pick - lo) / lights[li].power_w, 0.0, 1.0);
+      const std::vector<double>& cdf = scene_.bandCdf(li);
+      band =
+          std::min(bands - 1, static_cast<std::uint32_t>(std::upper_bound(cdf.begin(), cdf.end(), ub) - cdf.begin()));
+      // ub rounded up to 1 lands past the end: never in a band of zero share.
+      while (band > 0 && cdf[band] == cdf[band - 1]) --band;
+      chunk.band[k] = static_cast<std::uint16_t>(band);
+    }
+    double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
+    const EmittedRay emitted = sampleLight(lights[li], u);
+    glm::dvec3 origin = emitted.origin, dir = emitted.dir;
+    double w = power * emitted.weight;
+    path_bins.clear();
+
+    std::uint32_t depth = 0, scatterings = 0;
+    for (;;) {
+      Ray ray;
+      ray.origin = glm::vec3(origin);
+      ray.dir = glm::vec3(dir);
+      ++chunk.counters.segments;
+      SegmentEnd end;
+      if (config_.closest_hit_only) end.hit = top.intersect(ray, ctx, config_.query.surface_mask);
+      else end = top.intersectWithCrossings(ray, crossings, ctx, query);
+      // A collision in a scattering fog before the blocking hit ends the segment there.
+      const MediumInstance* collided = nullptr;
+      double t_collision = std::numeric_limits<double>::infinity();
+      if (scatter) {
+        collided = sampleCollision(origin, dir, end.hit.valid() ? end.hit.t : std::numeric_limits<float>::infinity(),
+                                   rng, ctx, t_collision);
+      }
+      if (!config_.closest_hit_only) {
+        for (const SensorCrossing& c : crossings) {
+          if (c.hit.t > t_collision) break;  // sorted by t
+          if (c.hit.instance_id >= deposit_targets_.size()) continue;
+          const DepositTarget target = deposit_targets_[c.hit.instance_id];
+          const int s = target.sensor;
+          if (s < 0) continue;
+          const double value = w * c.transmittance;
+          path_bins.push_back({target.first_bin + c.hit.prim_id, static_cast<std::uint32_t>(s), value});
+          if (target.angular) {  // the incoming direction, in the sensor's world frame
+            const SensorInstance& si = sensors[static_cast<std::size_t>(s)];
+            const glm::dvec3 in = -dir;
+            const std::uint32_t ab = si.object->angleBinAt(
+                glm::dot(in, si.normal), std::atan2(glm::dot(in, si.frame_y), glm::dot(in, si.frame_x)));
+            path_bins.push_back({angle_base + si.first_angle_bin + ab, kInvalidId, value});
+          }
+          ++chunk.counters.crossings;
+        }
+      }
+      if (collided) {
+        ++chunk.counters.scatterings;
+        if (scatterings == config_.max_scatterings) {
+          e.depth_limited_w += w;
+          break;
+        }
+        ++scatterings;
+        const double albedo =
+            collided->material.type == MaterialType::Medium ? collided->material.reflectanceIn(band) : 0.0;
+        if (!(rng.uniform() < albedo)) {
+          e.medium_absorbed_w += w;
+          break;
+        }
+        const glm::dvec3 d = glm::normalize(dir);
+        origin = origin + t_collision * dir;
+        dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, rng.uniform(), rng.uniform());
+        continue;
+      }
+      const double w_after = w * end.transmittance;
+      e.medium_absorbed_w += w - w_after;
+      w = w_after;
+      if (!end.hit.valid()) {
+        e.escaped_w += w;
+        break;
+      }
+      if (depth == config_.max_depth) {
+        e.depth_limited_w += w;
+        break;
+      }
+      ++depth;
+      // Scatter by the material; a path ends in an absorber or by the albedo's roulette.
+      const Material& m = scene_.materialOf(end.hit.instance_id);
+      const glm::dvec3 p = origin + static_cast<double>(end.hit.t) * dir;
+      glm::dvec3 n = glm::normalize(glm::dvec3(end.hit.ng));
+      const glm::dvec3 d = glm::normalize(dir);
+      const bool front = glm::dot(d, n) < 0.0;
+      const glm::dvec3 nf = front ? n : -n;  // faces the incoming ray
+      glm::dvec3 next;
+      if (m.type == MaterialType::Absorber || m.type == MaterialType::Medium) {
+        e.absorbed_w += w;
+        break;
+      } else if (m.type == MaterialType::Lambertian || m.type == MaterialType::Mirror) {
+        if (rng.uniform() >= m.reflectanceIn(band)) {
+          e.absorbed_w += w;
+          break;
+        }
+        next = m.type == MaterialType::Mirror ? reflect(d, nf) : cosineDirection(nf, rng.uniform(), rng.uniform());
+      } else {  // dielectric: exact Fresnel for unpolarised light, reflect or refract by it
+        const double eta_i = front ? 1.0 : m.ior, eta_t = front ? m.ior : 1.0;
+        const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
+        const double sin_t2 = (eta_i / eta_t) * (eta_i / eta_t) * (1.0 - cos_i * cos_i);
+        double fresnel = 1.0, cos_t = 0.0;
+        if (sin_t2 < 1.0) {
+          cos_t = std::sqrt(1.0 - sin_t2);
+          const double rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
+          const double rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
+          fresnel = 0.5 * (rs * rs + rp * rp);
+        }
+        if (rng.uniform() < fresnel) next = reflect(d, nf);
+        else next = (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - cos_t) * nf;
+      }
+      // Russian roulette on power lost to media (materials keep a surviving path's power).
+      if (w < rr_level) {
+        if (rng.uniform() * rr_level >= w) {
+          e.roulette_w += w;
+          break;
+        }
+        e.roulette_w -= rr_level - w;
+        w = rr_level;
+      }
+      // Leave the surface on the side the new direction points to. The float hit's error grows
+      // with the magnitude of the primitive's coordinates (a few ulps of them, not of the hit
+      // point: a large triangle hit near the origin is off by ulps of its far vertices), so the
+      // offset scales with the hit instance's world box as well as with the point.
+      const Box box = top.instanceBounds(end.hit.instance_id);
+      const double scale = std::max({1.0, std::abs(p.x), std::abs(p.y), std::abs(p.z), std::abs(double(box.lo.x)),
+                                     std::abs(double(box.lo.y)), std::abs(double(box.lo.z)), std::abs(double(box.hi.x)),
+                                     std::abs(double(box.hi.y)), std::abs(double(box.hi.z))});
+      origin = p + (glm::dot(next, n) >= 0.0 ? n : -n) * (1e-5 * scale);
+      dir = glm::normalize(next);
+    }
+
+    // Merge this path's deposits per bin (in path order within a bin) and per sensor.
+    sortByBin(path_bins);
+    const std::size_t sensor_first = chunk.sensors.size();
+    for (std::size_t i = 0; i < path_bins.size();) {
+      BinEvent merged = path_bins[i];
+      for (++i; i < path_bins.size() && path_bins[i].bin == merged.bin; ++i) merged.value += path_bins[i].value;
+      chunk.bins.push_back(merged);
+    }
+    // Sensor totals: bins are sorted, and a sensor's spatial bins are contiguous, so its sum follows.
+    for (std::size_t i = chunk.bin_end.empty() ? 0 : chunk.bin_end.back(); i < chunk.bins.size(); ++i) {
+      const BinEvent& b = chunk.bins[i];
+      if (b.bin >= angle_base) break;  // angular bins (sorted after the spatial ones) repeat the same power
+      const std::uint32_t s = b.sensor;
+      if (chunk.sensors.size() > sensor_first && chunk.sensors.back().sensor == s)
+        chunk.sensors.back().value += b.value;
+      else chunk.sensors.push_back({s, b.value});
+    }
+    chunk.bin_end.push_back(static_cast<std::uint32_t>(chunk.bins.size()));
+    chunk.sensor_end.push_back(static_cast<std::uint32_t>(chunk.sensors.size()));
+  }
+  chunk.done = true;
+}
+
+const MediumInstance* SensorRun::sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max,
+                                                 CounterRng& rng, QueryContext& ctx, double& t_collision) const {
+  // The first collision among independent free flights is a free flight through the summed
+  // density; each later medium only needs to be sampled up to the best collision so far.
+  const MediumInstance* found = nullptr;
+  float t_best = t_max;
+  for (const MediumInstance& m : scene_.scatteringMedia()) {
+    const std::uint64_t seed = rng.next();  // drawn for every medium: the stream does not depend on the geometry
+    if ((m.mask & config_.query.medium_mask) == 0) continue;
+    if (!segmentMeetsBox(origin, dir, t_best, m.world_lo, m.world_hi)) continue;
+    Ray ray_os;  // object space, direction not renormalised: t is the world t
+    ray_os.origin = glm::vec3(m.object_from_world.point(origin));
+    ray_os.dir = glm::vec3(m.object_from_world.vector(dir));
+    ray_os.tnear = 0.0f;
+    ray_os.tfar = t_best;
+    if (const std::optional<float> t = m.volume->sampleFreeFlight(ray_os, ctx, seed); t && *t < t_best) {
+      t_best = *t;
+      found = &m;
+    }
+  }
+  t_collision = found ? static_cast<double>(t_best) : std::numeric_limits<double>::infinity();
+  return found;
+}
+
+}  // namespace duplex

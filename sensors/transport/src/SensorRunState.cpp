@@ -1,0 +1,238 @@
+// Saved states of a sensor run (checkpoints and resume): the raw accumulators with the run's
+// fingerprint, written atomically and checked on reading.
+
+#include "duplex/sensors/SensorRun.h"
+
+#include "duplex/accel/AtomicFile.h"
+#include "duplex/accel/Error.h"
+#include "duplex/accel/Xxh64.h"
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+namespace duplex {
+
+// ---- saved state: "DXSENSR4", fingerprint, seed, rays, sizes, the raw accumulators, XXH64 checksum ----
+
+std::uint64_t SensorRun::fingerprint() const {
+  std::call_once(fingerprint_once_, [this] { fingerprint_ = computeFingerprint(); });
+  return fingerprint_;
+}
+
+std::uint64_t SensorRun::computeFingerprint() const {
+  // FNV-1a over what the accumulators' meaning depends on.
+  std::uint64_t h = 1469598103934665603ull;
+  auto add = [&h](const void* p, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
+  };
+  for (const SensorInstance& s : scene_.sensors()) {
+    add(s.name.data(), s.name.size());
+    const std::uint32_t bins = s.object->binCount();
+    add(&bins, sizeof bins);
+  }
+  for (const Light& l : scene_.lights()) add(&l.power_w, sizeof l.power_w);
+  add(&config_.seed, sizeof config_.seed);
+  add(&config_.max_depth, sizeof config_.max_depth);
+  add(&config_.roulette_threshold, sizeof config_.roulette_threshold);
+  // Bands, angular bins and free flights are added only where a scene uses them.
+  for (std::size_t l = 0; !scene_.bands().empty() && l < scene_.lights().size(); ++l) {
+    const std::vector<double>& cdf = scene_.bandCdf(l);
+    add(cdf.data(), cdf.size() * sizeof(double));
+  }
+  for (const std::string& b : scene_.bands()) add(b.data(), b.size() + 1);
+  for (const SensorInstance& s : scene_.sensors()) {
+    const SensorSpec& spec = s.object->spec();
+    if (spec.theta_bins != 0) {
+      add(s.name.data(), s.name.size());
+      add(&spec.theta_bins, sizeof spec.theta_bins);
+      add(&spec.phi_bins, sizeof spec.phi_bins);
+    }
+  }
+  if (scene_.scatters()) add(&config_.max_scatterings, sizeof config_.max_scatterings);
+  // What the paths depend on: every visible instance's object name and content (a mesh's positions
+  // and triangles; hashed once per object), placement, mask and material, the sensors' shapes and
+  // the lights' geometry (a state of a scene where any of these changed would be mixed silently
+  // into the continued run). Objects hash their contents (meshes, volume grids: Object::contentHash).
+  auto addAffine = [&add](const Affine& a) {
+    const std::array<double, 12> m = a.toRowMajor3x4();
+    add(m.data(), sizeof m);
+  };
+  auto addDouble = [&add](double x) { add(&x, sizeof x); };
+  std::vector<NodeId> instances = scene_.graph().visibleInstances();
+  std::sort(instances.begin(), instances.end());
+  std::unordered_map<ObjectId, std::uint64_t> content;  // per object: copies share it
+  for (const NodeId node : instances) {
+    const NodeInfo info = scene_.graph().node(node);
+    const std::string_view object = scene_.graph().library().name(info.object);
+    add(object.data(), object.size() + 1);
+    auto [it, fresh] = content.try_emplace(info.object, 0);
+    if (fresh) it->second = scene_.graph().library().get(info.object)->contentHash();
+    add(&it->second, sizeof it->second);
+    addAffine(scene_.graph().worldTransform(node));
+    add(&info.mask, sizeof info.mask);
+    const Material& m = scene_.materialOf(node);
+    add(&m.type, sizeof m.type);
+    for (const double x : {m.reflectance, m.ior, m.g}) addDouble(x);
+    add(m.band_reflectance.data(), m.band_reflectance.size() * sizeof(double));
+  }
+  for (const SensorInstance& s : scene_.sensors()) {
+    const SensorSpec& spec = s.object->spec();
+    add(&spec.shape, sizeof spec.shape);
+    for (const double x : {spec.width, spec.height}) addDouble(x);
+    const std::uint32_t grid[3] = {spec.nx, spec.ny, spec.two_sided ? 1u : 0u};
+    add(grid, sizeof grid);
+  }
+  for (const Light& l : scene_.lights()) {
+    add(&l.type, sizeof l.type);
+    for (const glm::dvec3& v : {l.position, l.direction}) addDouble(v.x), addDouble(v.y), addDouble(v.z);
+    for (const double x : {l.cone_angle, l.radius, l.width, l.height}) addDouble(x);
+    addAffine(l.world_from_light);
+    const std::uint8_t two_sided = l.two_sided ? 1 : 0;
+    add(&two_sided, 1);
+    if (l.profile) addDouble(l.profile->integral());
+  }
+  return h;
+}
+
+namespace {
+
+// Version 4's fingerprint hashes volume grids too; version 3's hashed mesh contents only; version 2
+// ended with the same checksum of every byte before it; version 1 had none. Older versions are
+// refused by name, saying what they lack.
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '4'};
+struct OlderState {
+  char magic[8];
+  const char* lacks;
+};
+constexpr OlderState kOlderStates[] = {{{'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'}, "no checksum"},
+                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'}, "mesh contents not fingerprinted"},
+                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '3'}, "volume grids not fingerprinted"}};
+
+// The checksum of the state: XXH64 of every byte before it.
+std::uint64_t stateChecksum(std::span<const char> bytes) {
+  return xxh64({reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()});
+}
+
+template <class T>
+void append(std::vector<char>& out, const T* data, std::size_t count) {
+  const auto* p = reinterpret_cast<const char*>(data);
+  out.insert(out.end(), p, p + count * sizeof(T));
+}
+
+}  // namespace
+
+void SensorRun::saveState(const std::filesystem::path& file) const {
+  std::vector<char> bytes;
+  const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bins_.size(), sensor_sums_.size()};
+  append(bytes, kStateMagic, sizeof kStateMagic);
+  append(bytes, header, 5);
+  // The file keeps one array per quantity (the layout of states saved before the accumulators
+  // became structures).
+  auto put = [&bytes](const auto& v) { append(bytes, v.data(), v.size()); };
+  auto column = [](const auto& v, auto field) {
+    std::vector<std::remove_cvref_t<decltype(v[0].*field)>> out(v.size());
+    for (std::size_t i = 0; i < v.size(); ++i) out[i] = v[i].*field;
+    return out;
+  };
+  put(column(bins_, &BinSums::sum));
+  put(column(bins_, &BinSums::sum2));
+  put(column(bins_, &BinSums::count));
+  put(column(sensor_sums_, &SensorSums::sum));
+  put(column(sensor_sums_, &SensorSums::sum2));
+  const double energy[5] = {energy_sum_.escaped_w, energy_sum_.absorbed_w, energy_sum_.medium_absorbed_w,
+                            energy_sum_.depth_limited_w, energy_sum_.roulette_w};
+  append(bytes, energy, 5);
+  put(band_bin_sum_);  // empty unless the scene has bands
+  put(band_bin_sum2_);
+  put(band_sensor_sum_);
+  put(band_sensor_sum2_);
+  const std::uint64_t checksum = stateChecksum(bytes);
+  append(bytes, &checksum, 1);
+  // Written beside the file and renamed over it: a process killed while saving leaves the previous
+  // state intact, never a half-written one.
+  writeFileAtomically(file, {reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()}, "run state",
+                      /*sync=*/true);
+}
+
+void SensorRun::loadState(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary | std::ios::ate);
+  if (!in) throw FileError(file.string() + ": cannot open the run state");
+  const std::streamoff size = in.tellg();
+  in.seekg(0);
+  std::vector<char> bytes(static_cast<std::size_t>(std::max<std::streamoff>(size, 0)));
+  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!in) throw FileError(file.string() + ": cannot read the run state");
+  constexpr std::size_t kHead = sizeof kStateMagic + 5 * sizeof(std::uint64_t);
+  for (const OlderState& older : kOlderStates)
+    if (bytes.size() >= sizeof older.magic && std::memcmp(bytes.data(), older.magic, sizeof older.magic) == 0)
+      throw FileError(file.string() + ": a run state of an older version (" + older.lacks +
+                      "): run again without resuming");
+  if (bytes.size() < kHead || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
+    throw FileError(file.string() + ": not a sensor run state");
+  std::uint64_t header[5];
+  std::memcpy(header, bytes.data() + sizeof kStateMagic, sizeof header);
+  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() ||
+      header[4] != sensor_sums_.size())
+    throw FileError(file.string() + ": the saved run is of another scene, seed or configuration (seed " +
+                    std::to_string(header[1]) + ", " + std::to_string(header[3]) + " bins)");
+  const std::size_t nb = bins_.size(), ns = sensor_sums_.size();
+  const std::size_t expected =
+      kHead + nb * (2 * sizeof(double) + sizeof(std::uint64_t)) + ns * 2 * sizeof(double) + 5 * sizeof(double) +
+      (band_bin_sum_.size() + band_bin_sum2_.size() + band_sensor_sum_.size() + band_sensor_sum2_.size()) *
+          sizeof(double) +
+      sizeof(std::uint64_t);
+  if (bytes.size() != expected)
+    throw FileError(file.string() + ": run state of " + std::to_string(bytes.size()) + " bytes, expected " +
+                    std::to_string(expected) + " (truncated or extended)");
+  std::uint64_t stored;
+  std::memcpy(&stored, bytes.data() + expected - sizeof stored, sizeof stored);
+  if (stateChecksum(std::span<const char>(bytes).first(expected - sizeof stored)) != stored)
+    throw FileError(file.string() + ": run state checksum mismatch (damaged file)");
+  // Read into copies and check them: a refused file leaves this run as it was.
+  std::size_t at = kHead;
+  auto get = [&bytes, &at](auto& v) {
+    if (v.empty()) return;  // an empty vector's data() may be null, which memcpy must not get
+    std::memcpy(v.data(), bytes.data() + at, v.size() * sizeof(v[0]));
+    at += v.size() * sizeof(v[0]);
+  };
+  std::vector<double> b1(nb), b2(nb), s1(ns), s2(ns);
+  std::vector<std::uint64_t> bc(nb);
+  get(b1);
+  get(b2);
+  get(bc);
+  get(s1);
+  get(s2);
+  std::array<double, 5> energy;
+  get(energy);
+  auto bb1 = band_bin_sum_, bb2 = band_bin_sum2_, bs1 = band_sensor_sum_, bs2 = band_sensor_sum2_;
+  get(bb1);
+  get(bb2);
+  get(bs1);
+  get(bs2);
+  // Powers are finite and non-negative, counts at most the rays done: anything else is not a
+  // state this code wrote (a checksum is no proof against a forged file).
+  const auto valid = [](std::span<const double> v) {
+    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
+  };
+  const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= header[2]; });
+  if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(bb1) || !valid(bb2) || !valid(bs1) ||
+      !valid(bs2) || !valid(energy) || !counts_ok)
+    throw FileError(file.string() + ": run state holds negative, non-finite or impossible values");
+  band_bin_sum_ = std::move(bb1);
+  band_bin_sum2_ = std::move(bb2);
+  band_sensor_sum_ = std::move(bs1);
+  band_sensor_sum2_ = std::move(bs2);
+  for (std::size_t i = 0; i < nb; ++i) bins_[i] = {b1[i], b2[i], bc[i]};
+  for (std::size_t i = 0; i < ns; ++i) sensor_sums_[i] = {s1[i], s2[i]};
+  energy_sum_ = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
+  rays_done_ = header[2];
+}
+
+}  // namespace duplex
