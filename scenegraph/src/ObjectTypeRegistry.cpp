@@ -258,8 +258,8 @@ ObjectSpecResult readPlane(const json& spec, const ObjectSpecContext& ctx) {
   return deferredShape(ctx, [size](const std::string& name) { return makePlane(size, name); });
 }
 
-// An OpenVDB volume: {"file": PATH.vdb, "grid": G?, "kind": "fog" | "levelset"?} (scene-json-v1,
-// issue 4 section 2). Read by the factory; entries with the same file, grid and kind share one object.
+// An OpenVDB volume: {"file": PATH.vdb, "grid": G?, "kind": "fog" | "levelset"?} (also a
+// scene-json-v1 type). Read by the factory; entries with the same file, grid and kind share one object.
 ObjectSpecResult readVolume(const json& spec, const ObjectSpecContext& ctx) {
   const std::string& p = ctx.pointer;
   if (!spec.is_object()) ctx.fail(p, "expected an object");
