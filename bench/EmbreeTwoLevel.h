@@ -1,6 +1,6 @@
 #pragma once
 /// \file EmbreeTwoLevel.h
-/// Embree 3 two-level scenes as the baseline of the update benchmark (issue 3, section 6): one
+/// Embree 3 two-level scenes as the baseline of the update benchmark (`duplex bench update`): one
 /// Embree scene per object, a top-level scene with one RTC_GEOMETRY_TYPE_INSTANCE per instance.
 /// Moving, adding or removing an instance edits its instance geometry; commit() then recommits the
 /// top level, which Embree rebuilds over all instances. Compiled only when Embree is found

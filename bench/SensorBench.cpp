@@ -1,5 +1,5 @@
 /// \file SensorBench.cpp
-/// duplex_bench_sensor (issue 5, sections 3 and 4): prints one JSON object.
+/// duplex_bench_sensor: prints one JSON object.
 ///
 /// "overhead": a room of Lambertian walls with meshes inside and a point light, traced with
 /// 0, 1, 100 and 10,000 sensors. Each configuration runs the same emitted paths twice, as a sensor
@@ -8,7 +8,7 @@
 /// Sensors never change a path, so every configuration traces the same segments:
 /// overhead_ratio compares the two runs in one scene (the cost of recording), and
 /// overhead_vs_no_sensors compares the sensor run with closest-hit tracing of the scene without
-/// sensors (the issue's measure: what adding the sensors costs in all).
+/// sensors (what adding the sensors costs in all).
 ///
 /// "sensor_level": the crossing query alone on the 10,000 small sensors: the sensors' tree built
 /// with several SAH parameters (TopLevelConfig::sensor_build, sensor_grid off) and the shipped
@@ -510,7 +510,7 @@ int main(int argc, char** argv) {
     out["repeat"] = repeat;
     nlohmann::json rows = nlohmann::json::array();
     for (const std::size_t c : counts) rows.push_back(overhead(c, rays, threads, repeat, data_dir));
-    // The issue's measure: the run with sensors against the same paths in the scene without them.
+    // What adding sensors costs in all: the run with sensors against the same paths without them.
     for (const auto& base : rows)
       if (base["sensors"] == 0)
         for (auto& row : rows)

@@ -122,14 +122,14 @@ std::vector<Setting> settings(bool quick) {
   // and both together.
   add(sah(1.5f * ct, ci, eb, true));
   add(sah(2.0f * ct, ci, eb, true));
-  // Beyond node cost 2 (issue 3's full-build goal): where do build and trace stop improving together?
+  // Beyond node cost 2: where do build and trace stop improving together?
   for (const float k : {3.0f, 4.0f, 6.0f, 8.0f}) add(sah(k * ct, ci, eb, true));
   for (const float b : {0.0f, 0.5f}) add(sah(ct, ci, b, true));
   add(sah(ct, ci, eb, false));
   add(sah(1.5f * ct, ci, eb, false));
   for (const float k : {3.0f, 4.0f}) add(sah(k * ct, ci, eb, false));
   add(sah(ct, 1.5f, eb, false));
-  // Leaf size 2 is left out: Median L2 builds 20-30x slower than the SAH (koala: 18 s) and would
+  // Leaf size 2 is left out: the median heuristic then builds far slower than the SAH and would
   // dominate the run time.
   for (const std::uint32_t leaf : {4u, 8u, 16u}) add(simple(KdHeuristic::Median, leaf));
   for (const std::uint32_t leaf : {4u, 8u, 16u}) add(simple(KdHeuristic::SpatialMiddle, leaf));
@@ -198,8 +198,8 @@ nlohmann::json runSweep(const Options& options) {
       // Instruction counts: one repetition, every section dumped by name; no timing, no Embree.
       for (std::size_t i = 0; i < all.size(); ++i) {
         // Only the SAH settings that could replace the defaults: the median / middle heuristics and
-        // intersection costs above twice the default trace 1.3-20x slower (docs/bench/sweep.txt) and
-        // would take most of the (50x slowed) run.
+        // intersection costs above twice the default trace much slower (docs/bench/sweep.txt) and
+        // would take most of the run, which valgrind slows many times.
         if (all[i].config.heuristic != KdHeuristic::Sah ||
             all[i].config.intersection_cost > 2.0f * defaults.intersection_cost)
           continue;

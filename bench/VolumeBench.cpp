@@ -1,4 +1,4 @@
-// duplex_bench_volume: accuracy against speed for volume objects (issue 4, section 3), one JSON
+// duplex_bench_volume: accuracy against speed for volume objects, one JSON
 // object on stdout (scripts/plot_volumes.py draws docs/volumes/*.png from it).
 //
 //   levelset_sphere  hit error against the analytic sphere (OpenVDB's createLevelSetSphere), per

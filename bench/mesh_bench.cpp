@@ -1,7 +1,7 @@
 // duplex_bench_mesh: build and trace figures of our kd-tree against Embree 3 on single meshes, the
 // heuristic/cost sweep (--sweep) and a fixed workload for callgrind (--callgrind). Writes one JSON
 // document (--out) and prints a compact table to stderr. Not a timed test: it measures, it does not
-// judge (the JSON's "goals" section states the targets next to the figures).
+// judge (the JSON's "goals" section states the targets next to the figures).
 
 #include "BenchCommon.h"
 #include "BenchModes.h"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The update benchmark of the paper's table (issue 3, section 6): generates the scenes from
+# The update benchmark of the paper's table: generates the scenes from
 # ../shared/data/meshes, runs `duplex bench update` on each (1 moved instance and 1% moved per
 # commit), and writes docs/bench/update/<scene>_<moves>.json and docs/bench/update/table.md
 # (ours beside the paper's figures and Embree's, as ratios from the same run).

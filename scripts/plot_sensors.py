@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Charts of duplex_bench_sensor's JSON (issue 5, sections 3 and 4).
+"""Charts of duplex_bench_sensor's JSON.
 
   scripts/plot_sensors.py BENCH.json OUT_DIR
 

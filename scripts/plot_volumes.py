@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Charts of duplex_bench_volume's JSON (issue 4, section 3) into docs/volumes/*.png.
+"""Charts of duplex_bench_volume's JSON into docs/volumes/*.png.
 
     build/bench/duplex_bench_volume > docs/volumes/volume_bench.json
     scripts/plot_volumes.py docs/volumes/volume_bench.json docs/volumes

@@ -2,9 +2,9 @@
 // perfect splits, TBB subtree tasks and parallel partitions.
 //
 // Cost model of the build. A kd-tree with empty-space cuts is deep (koala: 26 levels for 100k
-// triangles, half the inner nodes cut off empty space), and every level used to cost three passes
-// over its references (binning, collecting the exact events near the binned plane, the partition)
-// plus, in nodes of up to 12 references, a sorted sweep of every axis. Now:
+// triangles, half the inner nodes cut off empty space), so passes over a level's references are
+// what a build costs; three per level (binning, collecting the exact events near the binned plane,
+// the partition) would be too many. So:
 //  - The partition of a node bins its children on the fly (the child boxes are known before the
 //    partition) and keeps their exact extent (min / max of the clipped bounds), so binning costs
 //    no pass of its own.
@@ -270,10 +270,9 @@ struct SmallEvents {
 // Passes over a node's references (the root's preparation and binning, the refinement's event
 // collection, the partition) run in parallel chunks of kPassChunk references in nodes of at least
 // kParallelPassMin, so that the top levels, which subtree tasks cannot split, keep both threads busy
-// (the hammer's 60k references used to be prepared, binned, refined and partitioned on one thread
-// while the other waited). Every chunked pass gives the serial pass's result bit for bit: outputs
-// are concatenated in chunk order, bin counts added, and extents merged as the serial pass folds
-// them (on equal values, -0 and +0, the later one wins, as _mm_min_ps / _mm_max_ps keep it).
+// (otherwise a mesh's first few levels run on one thread while the other waits). Every chunked pass gives the serial
+// pass's result bit for bit: outputs are concatenated in chunk order, bin counts added, and extents merged as the
+// serial pass folds them (on equal values, -0 and +0, the later one wins, as _mm_min_ps / _mm_max_ps keep it).
 constexpr std::size_t kPassChunk = 8192;
 constexpr std::size_t kParallelPassMin = 2 * kPassChunk;
 
@@ -860,8 +859,8 @@ class Builder {
     PrimRef* next;
     ExtentAcc extent;
     Bins* bins;  // null: not binned
-    // The bins' frame constants, copied once per pass: read through `bins` they were reloaded per
-    // reference behind the may_alias stores (link_1, hammer, koala, base_link, plane: -2 to -6%).
+    // The bins' frame constants, copied once per pass: read through `bins` they would be reloaded
+    // per reference behind the may_alias stores.
     __m128 bin_lo = _mm_setzero_ps(), bin_scale = _mm_setzero_ps(), bin_max = _mm_setzero_ps();
     // Called by partitionRange before its first put() (the only caller of put()).
     void cacheFrame() {
@@ -900,8 +899,7 @@ class Builder {
     const float pos = s.pos;
     // The sinks' state and the input in locals: put()'s 16-byte stores may alias anything (the
     // intrinsics' vector types are may_alias), so through the references every reference would
-    // reload and store the output pointers and extents, a chain through memory per reference
-    // (one thread's build of the robot's link_1 and the hammer: -9%, same trees).
+    // reload and store the output pointers and extents, a chain through memory per reference.
     Sink lower = lower_out, upper = upper_out;
     lower.cacheFrame();
     upper.cacheFrame();

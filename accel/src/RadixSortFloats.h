@@ -13,8 +13,7 @@ namespace duplex::kd_detail {
 // over keys that order as the floats do (sign bit flipped for positives, all bits for negatives),
 // a pass skipped when every key has the same byte there (the exponent bytes of a node's events
 // often agree). std::sort's comparisons are coin flips on these lists (events come in mesh order):
-// a mispredicted branch per comparison made sorting a tenth of a mesh build (link_1: 11.5% of
-// the samples -> 5%; one-thread builds of link_1, hammer, koala -7%). The result is the
+// a mispredicted branch per comparison makes sorting a large share of a mesh build. The result is the
 // same list as std::sort's, except that -0 sorts before +0 where std::sort leaves them in either
 // order (both orders are sorted).
 inline void radixSortFloats(float* v, std::size_t n) {

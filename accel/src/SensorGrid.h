@@ -55,8 +55,8 @@ struct SensorGrid {
   static constexpr std::size_t kMinBoxes = 256;
   // Cells per box (cubic cells over the boxes' bounds): a cell holds about eight boxes (a dozen
   // entries with the boxes that reach in from its neighbours), one or two vector tests. Finer
-  // grids take more cell steps than they save box tests: on the benchmark's 10,000 sensors
-  // (callgrind, AVX2) 1 cell per box costs 1.5x the instructions of 1/8, 1/32 costs 1.09x.
+  // grids take more cell steps than they save box tests, coarser ones more box tests than they
+  // save cell steps (docs/sensors.md, "Speed").
   static constexpr double kCellsPerBox = 0.125;
   // The grid is dropped when boxes span more cells than this on average (large sensors).
   static constexpr double kMaxRefsPerBox = 4.0;
@@ -219,13 +219,12 @@ struct SensorGrid {
     std::uint32_t count[3];
     // The plane crossings' t as integer keys that order like the floats (orderKey): the merge's
     // chain from one cell to the next is a load, three compares and an add, and integer loads and
-    // compares are shorter than float ones (AMD Zen 5: 7-cycle float loads against 4-cycle
-    // integer loads; the query's sensor share 0.84-0.92x).
+    // compares are shorter than float ones (on AMD Zen 5 a float load takes about twice as long).
     std::int32_t plane_t[3][kMaxDim + 8];
     const std::int32_t axis_stride[3] = {1, static_cast<std::int32_t>(dims[0]),
                                          static_cast<std::int32_t>(dims[0] * dims[1])};
     // No branch on the direction's sign or the entry cell either (each is a coin flip for random
-    // rays: about two mispredicted branches per segment, 10% of the sensors' share of the query).
+    // rays).
     const float d[3] = {dir.x, dir.y, dir.z};
     for (int k = 0; k < 3; ++k) {
       c[k] = static_cast<std::int32_t>(cellOf(k, ray.origin[k] + t0 * d[k]));

@@ -38,15 +38,14 @@ constexpr std::size_t kMaxJumpRebuild = 64;
 
 // Frontier subtrees (TopLevelState.h) hold at most max(kMinFrontierRefs, references /
 // kFrontiersPerTree) references.
-constexpr std::uint32_t kMinFrontierRefs = 1024;  // 256: the same quality, twice the commits with a rebuild
+constexpr std::uint32_t kMinFrontierRefs = 1024;  // smaller frontiers: no better tree, more commits with a rebuild
 constexpr std::uint32_t kFrontiersPerTree = 64;
 // A frontier is due for a rebuild when the references added to or removed from it since its last
-// build exceed this share of its references (plus 4). Measured on paper-3 (1,000 commits of one
-// moved instance, then 1,000 added and removed ones): SAH cost +0.5% over a fresh build at 0.05,
-// +0.8% at 0.1 and +5.8% at 0.25 (where frontiers hardly ever come due).
+// build exceed this share of its references (plus 4). Larger shares let a frontier drift further
+// from a fresh build before it comes due (docs/two-level.md, "The incremental top level").
 constexpr double kFrontierEditShare = 0.05;
-// References of rebuild work each reference edit pays for (see rebuildEditedFrontiers). Paper-3 as
-// above: SAH cost +0.5% at 16, +2.5% at 8, +3.6% at 4.
+// References of rebuild work each reference edit pays for (see rebuildEditedFrontiers); less
+// credit leaves frontiers waiting longer, and the tree's cost drifts up.
 constexpr double kCreditPerEdit = 16.0;
 // Frontier rebuilds run in commits that edit at most this share of the instances (at least one).
 constexpr double kFrontierBatchShare = 1.0 / 256.0;

@@ -1,6 +1,6 @@
 #pragma once
 /// \file BenchUpdateCommand.h
-/// `duplex bench update`: the update benchmark of issue 3, section 6. Loads a scene (scene-json-v1
+/// `duplex bench update`: the update benchmark of the paper's table. Loads a scene (scene-json-v1
 /// or duplex-scene-v1) and measures, for every two-level structure on the same seeded edit plan:
 /// full build; update after moving M instances (median over --repeat commits); add and remove of
 /// one instance; primary-ray Mrays/s right after the updates (and, for ours, after a fresh

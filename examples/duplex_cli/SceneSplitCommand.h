@@ -1,7 +1,7 @@
 #pragma once
 /// \file SceneSplitCommand.h
-/// `duplex scene split`: cut one mesh into K objects by the deterministic rule of issue 3,
-/// section 6 (the paper's scenes: koala in 19, 6,804 and 20,968 objects), written as scene-json-v1
+/// `duplex scene split`: cut one mesh into K objects by a deterministic rule (the paper's
+/// scenes: koala in 19, 6,804 and 20,968 objects; docs/cli.md), written as scene-json-v1
 /// with inline arrays and one identity instance per object.
 
 #include <duplex/objects/TriangleMesh.h>

@@ -1,6 +1,6 @@
 #pragma once
 /// \file SceneWriter.h
-/// Writing scene-json-v1 files (the interchange format of issue 2, section 5) for the `duplex scene`
+/// Writing scene-json-v1 files (the interchange format, docs/cli.md) for the `duplex scene`
 /// generators. Floats are written as the shortest decimal that reads back as the same float,
 /// transforms as the shortest decimal that reads back as the same double.
 

@@ -1,6 +1,6 @@
 #pragma once
 /// \file SensorCommand.h
-/// `duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR]` (issue 5, exact):
+/// `duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR]`:
 /// a light-tracing run over the scene's lights and sensors (SensorRun). Writes for each sensor
 /// DIR/<name>.json (keys: name, rays, seed, shape, size, bins, two_sided, emitted_power_w,
 /// total_flux_w, total_flux_stderr_w, relative_stderr, efficiency, and row-major nx * ny arrays

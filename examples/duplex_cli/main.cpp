@@ -126,7 +126,7 @@ int main(int argc, char** argv) {
   CLI::App* split_cmd = scene_cmd->add_subcommand(
       "split", "Split a mesh into K objects (the paper's scenes), one identity instance each");
   split_cmd->footer(
-      "Rule (issue 3, section 6): split(tris, k): k == 1 gives one object; else kl = k div 2, order the\n"
+      "Rule: split(tris, k): k == 1 gives one object; else kl = k div 2, order the\n"
       "triangles by (centroid on the longest axis of their centroid box, ties x, y, z; triangle index),\n"
       "the first (2 n kl + k) div 2k go left with kl, the rest right with k - kl. Objects part0..part<K-1>\n"
       "(depth-first, left to right) hold inline arrays: triangles in their original order, vertices\n"
@@ -215,7 +215,7 @@ int main(int argc, char** argv) {
       ->check(kDecimal)
       ->check(CLI::Range(1, 100));
 
-  // duplex sensor (issue 5)
+  // duplex sensor
   duplex::cli::SensorOptions sensor;
   CLI::App* sensor_cmd = app.add_subcommand(
       "sensor", "Light-tracing run: power from the scene's lights arriving at its sensors (irradiance maps)");

@@ -284,7 +284,7 @@ int checkSharedData(const std::string& duplex, const fs::path& dir, const fs::pa
   return 0;
 }
 
-// ---- duplex-scene-v1, prepared structures and the update benchmark (issue 3) ----
+// ---- duplex-scene-v1, prepared structures and the update benchmark ----
 
 // A row-major 3x4 matrix [r00 r01 r02 t0 r10 ... t2], world_from_object, composed by hand here.
 using Mat34 = std::array<double, 12>;
@@ -490,7 +490,7 @@ int checkPrepareKoala(const std::string& duplex, const fs::path& dir, const fs::
   return 0;
 }
 
-// `duplex bench update` on tiny scenes: the keys of the issue, positive times, and, with Embree,
+// `duplex bench update` on tiny scenes: the documented keys, positive times, and, with Embree,
 // agreement of the hits after the same edits.
 int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
   const fs::path dir = fixtures / "bench_update";

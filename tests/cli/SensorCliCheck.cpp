@@ -1,4 +1,4 @@
-// `duplex sensor` as an outside tool drives it (issue 5): output files and keys, the closed box of
+// `duplex sensor` as an outside tool drives it: output files and keys, the closed box of
 // sensors registering all emitted power, bit-identical results for 1 and 2 threads, --resume equal
 // to one longer run, --target-error, and clear errors for bad lights and sensors; spectral bands
 // and angular bins in the sensor files.

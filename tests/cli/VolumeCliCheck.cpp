@@ -1,4 +1,4 @@
-// `duplex trace` on a scene with volumes (issue 4, interchange): --transmittance writes exactly one
+// `duplex trace` on a scene with volumes (the interchange contract): --transmittance writes exactly one
 // float32 per ray (the transmittance along [tnear, tfar] through all fog volumes, 0 where a surface
 // blocks), checked against exp(-sigma L) computed here by slabs; level sets give ordinary hit
 // records (prim_id 0, u = v = 0) at the analytic sphere; 1 and 2 threads write identical bytes;
@@ -235,7 +235,7 @@ int check(const std::string& duplex, const fs::path& dir) {
                "--transmittance", (dir / "no_such_dir" / "t.bin").string()},
               dir, "no_such_dir");
 
-  // duplex sensor's path limits act on fog (issue 5): light from the fog's far side is attenuated
+  // duplex sensor's path limits act on fog: light from the fog's far side is attenuated
   // (transmittance down to exp(-sigma 2.4) ~ 0.04 across the box), crosses a sensor wall and is
   // reflected by a white wall behind it, where roulette is decided on the power left.
   // --roulette 0 plays no roulette (roulette_w exactly 0), --roulette 0.5 does; with a scattering

@@ -2,7 +2,7 @@
 """Contract tests of `duplex scene split|instances|robot`, run from CTest.
 
 Independent of the tool's code: the split rule, the grid placement and the URDF forward kinematics
-are written here again from the issue text (issue 3, section 6) and the URDF specification.
+are written here again from the rule's text (docs/cli.md, `duplex scene`) and the URDF specification.
 
   scene_check.py split DUPLEX DIR        split rule against a reference implementation
   scene_check.py instances DUPLEX DIR    grid, rotations, seed determinism, relative mesh path
@@ -84,7 +84,7 @@ def grid_mesh(nx, ny, degenerate):
 
 
 def reference_split(vertices, triangles, k):
-    """The rule of issue 3, section 6, written from its text."""
+    """The split rule, written from its text."""
     centroid = []
     for t in triangles:
         a, b, c = (vertices[v] for v in t)

@@ -8,8 +8,8 @@
 // objects headers; only the sign of a zero tmin / tmax may differ, which no comparison sees), as
 // tests/unit/MeshRaySetupTest.cpp checks; only the way they are computed differs: two vector
 // divisions instead of six scalar ones, the three slabs of the box at once, one branch for the
-// validity checks. Measured on koala's random rays: about 5-9% more throughput together with the
-// run-time permutation of the triangle test (docs/kdtree.md, "Traversal").
+// validity checks, and no dispatch per ray together with the run-time permutation of the
+// triangle test (docs/kdtree.md, "Traversal").
 
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"

@@ -71,7 +71,7 @@ void roundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays, const
 TEST(MeshObjectFile, RoundTripIcosphere) { roundTrip(std::make_shared<const TriangleMesh>(icosphere(4)), 4000); }
 
 // A file holds the tree, not the costs it was built with: a structure saved under another build
-// configuration (the former mesh default, intersection cost 0.1, or the top level's 1) still loads and
+// configuration (intersection cost 0.1, or the top level's 1) still loads and
 // answers like the object it was saved from.
 TEST(MeshObjectFile, RoundTripTreesBuiltWithOtherCosts) {
   for (const float ci : {0.1f, 1.0f}) {

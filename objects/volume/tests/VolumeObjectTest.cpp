@@ -1,7 +1,7 @@
 // VolumeObject (OpenVDB grids): level-set hits against the analytic sphere at two voxel sizes,
 // rays from inside, instancing through the SceneTracer, 2 threads against 1, fog transmittance
-// against exp(-sigma L) through a box, scene files, and the errors of issue 4 that this slice
-// covers. The only test file that includes OpenVDB (slow to compile).
+// against exp(-sigma L) through a box, scene files, and the load errors. The only test file that includes OpenVDB (slow
+// to compile).
 
 #include "TestSupport.h"
 

@@ -1,4 +1,4 @@
-// VolumeObject queries beyond the first slice (issue 4): the fog estimators against the exact
+// VolumeObject queries beyond level-set hits: the fog estimators against the exact
 // integral (unbiased means within their confidence intervals, seeded), delta-tracking free flights
 // against the analytic exponential and against the exact heterogeneous CDF, picking against a
 // brute-force march, the top level's transmittance through several media and surfaces, 2 threads
@@ -436,7 +436,7 @@ TEST(VolumeQueries, TwoThreadsGiveTheResultsOfOne) {
   EXPECT_EQ(t1, t2);
 }
 
-// ---- where methods fail (issue 4, section 4) ----
+// ---- where methods fail (docs/volumes.md) ----
 
 openvdb::FloatGrid::Ptr sphereLevelSet(float radius, float voxel, float half_width = 3.0f) {
   openvdb::initialize();

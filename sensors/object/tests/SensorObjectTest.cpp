@@ -1,4 +1,4 @@
-// Sensor objects and the top level's crossing query (issue 5, section 1): bins and border rules,
+// Sensor objects and the top level's crossing query: bins and border rules,
 // one- and two-sided sensors, parallel rays, disk bin areas, and the crossing semantics (each
 // crossing once, in t order, only before the first blocking hit) against a brute force.
 

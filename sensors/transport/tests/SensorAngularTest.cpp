@@ -1,4 +1,4 @@
-// Angular bins of the incoming direction (issue 5, section 1: "optional angular bins"): a point
+// Angular bins of the incoming direction (optional per sensor): a point
 // source at a known direction fills exactly one bin; the light leaving a Lambertian area source
 // follows the cosine law, P (sin^2 theta1 - sin^2 theta0) per polar bin, uniform in azimuth; bin
 // geometry; bit-identical for any thread count; scene-file keys.

@@ -1,4 +1,4 @@
-// Sensor runs against analytic answers (issue 5, section 3): a point source's irradiance on a small
+// Sensor runs against analytic answers: a point source's irradiance on a small
 // sensor (I cos(theta) / d^2) and the exact per-bin flux over a large plane, directional light,
 // a mirror's image source, energy conservation in a closed box of sensors (with and without an
 // absorber), bit-identical results for any thread count, extension, resume, cancel and the stop

@@ -1,4 +1,4 @@
-// Scattering fog in sensor runs (issue 5, section 2: "fog volumes attenuate and scatter"): the
+// Scattering fog in sensor runs (fog volumes attenuate and scatter): the
 // Henyey-Greenstein sampler against its density and mean cosine; a closed box of sensors around a
 // scattering fog registers all emitted power at albedo 1, and what a fog of albedo < 1 absorbs
 // matches an independent random walk; single scattering in a thin slab against the quadrature of
@@ -34,7 +34,7 @@ double hgCdf(double g, double c) {
 }
 
 // The sampler is the exact inverse of the CDF for every g in (-1, 1), small |g| included (a
-// sampler that switched to the isotropic 2u - 1 below |g| = 1e-3 was off by up to 1.5 |g|, a mean
+// sampler that switches to the isotropic 2u - 1 below |g| = 1e-3 is off by up to 1.5 |g|, a mean
 // cosine of 0 instead of g, too little for the statistical test below to see). Reference: the
 // closed-form inversion in long double (its cancellation costs ~1e-19 / |g|).
 TEST(HenyeyGreenstein, SampleCosIsTheExactInverseOfTheCdf) {

@@ -1,4 +1,4 @@
-// Spectral bands in sensor runs (issue 5, section 2: "N spectral bands only when the scene asks"):
+// Spectral bands in sensor runs (only when the scene asks for them):
 // with equal reflectances the bands split the single-band run (same paths, same totals, each band
 // its share of the power); a band-dependent mirror removes exactly its band; threads, resume and
 // scene-file keys.

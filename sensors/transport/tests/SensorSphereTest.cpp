@@ -1,4 +1,4 @@
-// Sphere sensors (issue 5, section 1: "optionally a sphere (flux through it, by direction bins)"):
+// Sphere sensors (flux through a sphere, binned by direction):
 // crossing geometry (in and out, tangent rays, rays from inside, one-sided), the crossing query's
 // order with a wall, an isotropic source at the centre filling equal-area bins, a source outside
 // entering through the sphere's solid angle, and the errors.

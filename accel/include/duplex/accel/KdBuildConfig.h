@@ -34,13 +34,10 @@ struct KdBuildConfig {
   /// By instruction count a watertight triangle test costs about 4 node steps (1 in a 4-wide leaf
   /// packet), but the SAH model ignores what a node step really costs on incoherent rays (a
   /// dependent load and an unpredictable branch per node), so smaller, shallower trees with larger
-  /// leaves win, up to a point. Timed sweep (bench/SweepBench.cpp, docs/bench/sweep_node_cost.txt;
-  /// CPU time, one thread) on koala, hammer, plane, spot and the robot's link_1 and base_link,
-  /// against the former 0.1: the tree builds in 0.65-0.71x the time, traces random and primary rays
-  /// in 0.90-1.06x (within the run's noise) and takes 23-27% fewer bytes; a node cost of 3 (0.033)
-  /// builds in 0.55-0.63x but traces primary rays 1.3-1.4x slower on spot and link_1; 0.1 -> 0.2
-  /// builds 1.7x slower and traces no faster. The top level and the sensors' level set their own
-  /// intersection costs (TopLevel.h) and keep traversal_cost 1, so change this one, not that.
+  /// leaves win, up to a point: higher costs build slower and trace no faster, lower ones build
+  /// faster but trace primary rays slower on large flat regions (docs/kdtree.md, "Costs"; the sweep
+  /// is bench/SweepBench.cpp). The top level and the sensors' level set their own intersection
+  /// costs (TopLevel.h) and keep traversal_cost 1, so change this one, not that.
   float intersection_cost = 0.05f;
   /// Relative cost reduction for a split that cuts off empty space (Wald & Havran 2006: 0.2),
   /// which isolates geometry from empty space and pays off for rays that miss.
@@ -50,24 +47,21 @@ struct KdBuildConfig {
   /// Leaf size at which the Median / SpatialMiddle heuristics stop splitting.
   std::uint32_t max_leaf_size = 4;
   /// Build subtrees on TBB's threads when they hold at least this many references (0: serial, and
-  /// no pass runs in parallel chunks either). The tree does not depend on it. 1024 rather than the
-  /// former 4096: the nodes of 1-4k references above the serial subtrees were most of what kept a
-  /// second thread idle (critical path of paper-2's top level 23 -> 6 ms of a 69 ms one-thread
-  /// build, of the hammer's 3.4 -> 2.2 of 36 ms; KdTreeBuilder.cpp's chunked passes do the rest).
+  /// no pass runs in parallel chunks either). The tree does not depend on it. Low enough that the
+  /// nodes of a few thousand references above the serial subtrees do not keep a second thread idle
+  /// on the critical path (KdTreeBuilder.cpp's chunked passes cover the larger nodes).
   std::uint32_t parallel_threshold = 1024;
   /// Clip primitives to node boxes ("perfect splits"). Off: keep unclipped bounds (faster build,
   /// worse tree), so the benchmark can chart the difference.
   bool clip_primitives = true;
   /// SAH: nodes of at most this many references sweep every event (clipped bound) of every axis;
   /// larger nodes are binned (8 to 32 bins per axis) with exact empty-space cuts. In a mesh tree
-  /// (leaves of ~12 references) it hardly matters (koala: same SAH cost from 0 to 48; 4 builds in
-  /// 5% fewer instructions than 12); in a top level (leaves of 1-3 instances) it does: 1,000
-  /// hammers' top-level SAH cost is +3.4% at 4, +1% at 8, 0 at 12 against the full sweep, while
-  /// paper-3's top-level build takes +8% instructions at 6, +14% at 8, +21% at 12 against 4.
+  /// (leaves of ~12 references) it hardly matters; in a top level (leaves of 1-3 instances) a
+  /// smaller value gives a costlier tree and a larger one a slower build: 8 balances the two.
   std::uint32_t exact_sweep_max = 8;
   /// SAH: binned nodes of at most this many references move the binned plane to the best exact
-  /// event in the two bins around it (one more pass over the node). 0: never (koala: 4% faster
-  /// build, 1.4% higher SAH cost, 13% more references); the default refines everywhere.
+  /// event in the two bins around it (one more pass over the node). 0: never (a slightly faster
+  /// build, a costlier tree with more references); the default refines everywhere.
   std::uint32_t refine_max = 0xFFFFFFFFu;
 };
 

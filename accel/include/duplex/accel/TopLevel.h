@@ -57,9 +57,8 @@ enum class TopLevelUpdate : std::uint8_t {
 
 /// The top level's build defaults: an instance test (ray transform, bottom-level setup and
 /// traversal) costs far more than a triangle test, so the intersection cost is 1 node step rather
-/// than the bottom level's 0.1. Measured (primary and random rays, koala split into 19 and 6,804
-/// objects, 1,000 hammers, the robot): 0.1 is 1.3-2.2x slower to trace than 1; 2 and 4 trace no
-/// faster than 1 on most scenes but reference each instance 12-17 times and build 2-3x slower.
+/// than the bottom level's. Lower costs make deeper trees that trace slower; higher ones trace no
+/// faster but reference each overlapping instance box many times and build slower.
 inline KdBuildConfig topLevelBuildDefaults() {
   KdBuildConfig c;
   c.intersection_cost = 1.0f;
@@ -70,9 +69,8 @@ inline KdBuildConfig topLevelBuildDefaults() {
 /// or 4 boxes at a time from a leaf-ordered copy of the boxes (no instance record is read unless a box
 /// is met), which costs far less than a node step, and a small sensor gains little from an
 /// empty-space cut, which costs every ray passing near it a node step. So: intersection cost 0.05
-/// and no empty bonus, a shallow tree with leaves of several sensors. Measured on the benchmark's
-/// 10,000 small sensors (docs/sensors.md, "Speed"): crossing query 0.55x the time with the
-/// top-level defaults (1, 0.2); flat from 0.02 to 0.05, 0.61x at 0.1, 0.75x at 0.3.
+/// and no empty bonus, a shallow tree with leaves of several sensors (the benchmark's many small
+/// sensors query about twice as fast as with the top-level defaults; docs/sensors.md, "Speed").
 inline KdBuildConfig sensorLevelBuildDefaults() {
   KdBuildConfig c;
   c.intersection_cost = 0.05f;

@@ -22,7 +22,7 @@ inline constexpr int kMaxSphereSubdivisions = 8;
 /// Axis-aligned box with edge lengths `size` (each > 0, finite): 12 triangles, 8 vertices.
 [[nodiscard]] TriangleMesh makeBox(const glm::dvec3& size, std::string name);
 /// Rectangle in the plane z = 0, `size.x` along x and `size.y` along y (each > 0, finite), normal +z:
-/// 2 triangles (the sensor convention of the light-transport issue: local plane z = 0, normal +z).
+/// 2 triangles (the sensors' convention: local plane z = 0, normal +z).
 [[nodiscard]] TriangleMesh makePlane(const glm::dvec2& size, std::string name);
 
 }  // namespace duplex

@@ -4,7 +4,7 @@
 /// and reports every crossing (ObjectRole::Sensor). Crossings are found by the top level's
 /// crossing query (TopLevel::intersectWithCrossings) and turned into deposited power by SensorRun.
 ///
-/// Geometry (object space, the scene file's convention, issue 5): the sensor lies in the plane
+/// Geometry (object space, the scene file's convention): the sensor lies in the plane
 /// z = 0, centred at the origin, normal +z; width w along x, height h along y (a disk has diameter
 /// w = h). Bins form an nx x ny grid over [-w/2, w/2] x [-h/2, h/2]; bin (0, 0) is at (-w/2, -h/2),
 /// bin index = iy * nx + ix (x fastest).

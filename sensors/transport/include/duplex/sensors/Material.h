@@ -1,6 +1,6 @@
 #pragma once
 /// \file Material.h
-/// The surface and medium materials of light transport (issue 5): no more than a scene needs.
+/// The surface and medium materials of light transport: no more than a scene needs.
 
 #include <cstdint>
 #include <ostream>

@@ -5,8 +5,8 @@
 ///
 /// Scene files (docs/scene-format.md, docs/sensors.md): beside the graph (either format), the
 /// top-level "lights" and "sensors" lists and each object entry's "material". A "sensors" entry
-/// becomes an object of type "sensor" named "sensors/<name>" with one instance under the root named
-/// <name>; in duplex-scene-v1 files sensor objects may also be instanced in the node tree like any
+/// becomes an object of type "sensor" named `sensors/<name>` with one instance under the root named
+/// `<name>`; in duplex-scene-v1 files sensor objects may also be instanced in the node tree like any
 /// object. Every visible instance of a SensorObject is a sensor of the run, named after its
 /// instance node.
 
