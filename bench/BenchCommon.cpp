@@ -1,9 +1,5 @@
 #include "BenchCommon.h"
 
-#if DUPLEX_BENCH_HAVE_EMBREE
-#include <embree3/rtcore.h>
-#endif
-
 #include <oneapi/tbb/version.h>
 
 #include <algorithm>
@@ -42,18 +38,6 @@ tbb::task_arena& Arenas::get(int threads) {
 
 namespace {
 
-// First line of a command's output, or "" when it fails.
-std::string commandLine(const std::string& command) {
-  std::string out;
-  if (FILE* pipe = ::popen(command.c_str(), "r")) {
-    char buf[512];
-    if (std::fgets(buf, sizeof buf, pipe)) out = buf;
-    ::pclose(pipe);
-  }
-  while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
-  return out;
-}
-
 std::string cpuModel() {
   std::ifstream in("/proc/cpuinfo");
   std::string line;
@@ -84,7 +68,7 @@ std::string loadAverage() {
   return one + " " + five + " " + fifteen;
 }
 
-nlohmann::json machineInfo() {
+nlohmann::json machineInfo(const BuildFacts& build) {
   nlohmann::json m;
   // Other engineers share the two cores: the load average says how much of the machine we had.
   m["loadavg_at_start"] = loadAverage();
@@ -100,20 +84,15 @@ nlohmann::json machineInfo() {
   m["ndebug"] = false;
 #endif
   m["tbb_version"] = std::string(TBB_VERSION_STRING);
-  const std::string src = DUPLEX_BENCH_SOURCE_DIR;
-  // The working tree when the bench runs; what was compiled is what the scripts saw right before
-  // `make` (DUPLEX_BENCH_BUILD_INFO: revision, "+dirty:<hash of the diff>" for uncommitted changes in
-  // accel/ or objects/), which is the one to trust while someone edits the library.
-  m["duplex_git_revision"] = commandLine("git -C '" + src + "' rev-parse --short HEAD 2>/dev/null");
-  m["duplex_library_dirty"] =
-      !commandLine("git -C '" + src + "' status --porcelain -- accel objects 2>/dev/null").empty();
+  const auto orNull = [](const std::string& s) { return s.empty() ? nlohmann::json(nullptr) : nlohmann::json(s); };
+  m["duplex_git_revision"] = orNull(build.git_revision);
+  m["duplex_library_dirty"] = build.library_dirty ? nlohmann::json(*build.library_dirty) : nlohmann::json(nullptr);
+  // What was compiled is what the scripts saw right before `make` (DUPLEX_BENCH_BUILD_INFO: revision,
+  // "+dirty:<hash of the diff>" for uncommitted changes in accel/ or objects/), the one to trust
+  // while someone edits the library.
   const char* built = std::getenv("DUPLEX_BENCH_BUILD_INFO");
   m["duplex_library_at_build"] = built ? nlohmann::json(built) : nlohmann::json(nullptr);
-#if DUPLEX_BENCH_HAVE_EMBREE
-  m["embree_version"] = std::string(RTC_VERSION_STRING);
-#else
-  m["embree_version"] = nullptr;
-#endif
+  m["embree_version"] = orNull(build.embree_version);
   const std::time_t now = std::time(nullptr);
   char stamp[64];
   std::strftime(stamp, sizeof stamp, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));

@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -185,8 +186,18 @@ void parallelFor(tbb::task_arena& arena, std::size_t n, const Fn& fn) {
   });
 }
 
-/// nproc, CPU model, compiler, the measured library's git revision, Embree version, load average.
-[[nodiscard]] nlohmann::json machineInfo();
+/// What a program knows about its own build, beyond what machineInfo() reads from the machine.
+/// Unknown facts are JSON null: the installed `duplex` tool knows neither (it has no source tree
+/// and no Embree); the benchmarks fill them in with thisBuild() (BenchBuild.h).
+struct BuildFacts {
+  std::string git_revision;           ///< `git rev-parse --short HEAD` at configure time; "" unknown
+  std::optional<bool> library_dirty;  ///< uncommitted changes in accel/ or objects/ at configure time
+  std::string embree_version;         ///< the linked Embree's version; "" without Embree
+};
+
+/// nproc, CPU model, compiler, load average, and `build`: the measured library's git revision and
+/// the Embree version.
+[[nodiscard]] nlohmann::json machineInfo(const BuildFacts& build = {});
 /// The 1, 5 and 15 minute load averages from /proc/loadavg, as one string.
 [[nodiscard]] std::string loadAverage();
 

@@ -3,6 +3,7 @@
 // query. Run it under `valgrind --tool=callgrind --instr-atstart=no` (scripts/bench_callgrind.sh);
 // without callgrind.h the loops are the noinline functions *callgrindLoop*, for --toggle-collect.
 
+#include "BenchBuild.h"
 #include "BenchChecks.h"
 #include "BenchMeshes.h"
 #include "BenchModes.h"
@@ -69,7 +70,7 @@ nlohmann::json runCallgrind(const Options& options) {
   const std::vector<Ray> rays = randomRays(loaded.mesh->bounds(), options.callgrind_rays, options.seed);
   nlohmann::json doc;
   doc["kind"] = "duplex_bench_callgrind";
-  doc["machine"] = machineInfo();
+  doc["machine"] = machineInfo(thisBuild());
   doc["mesh"] = loaded.spec.label();
   doc["triangles"] = loaded.mesh->triangleCount();
   doc["rays"] = rays.size();

@@ -2,6 +2,7 @@
 // same rays, builds and traces interleaved per repetition, medians of the repetitions, ratios taken
 // within the run.
 
+#include "BenchBuild.h"
 #include "BenchChecks.h"
 #include "BenchMeshes.h"
 #include "BenchModes.h"
@@ -673,7 +674,7 @@ nlohmann::json runMainBench(const Options& options) {
 
   nlohmann::json doc;
   doc["kind"] = "duplex_bench_mesh";
-  doc["machine"] = machineInfo();
+  doc["machine"] = machineInfo(thisBuild());
   doc["config"] = {
       {"data", options.data_dir},
       {"meshes", options.meshes},

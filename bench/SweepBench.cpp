@@ -5,6 +5,7 @@
 // and primary rays, closest and any hit) are instrumented sections of their own, dumped by name: their
 // instruction counts repeat exactly, where times on the shared machine do not.
 
+#include "BenchBuild.h"
 #include "BenchMeshes.h"
 #include "BenchModes.h"
 
@@ -164,7 +165,7 @@ nlohmann::json runSweep(const Options& options) {
 
   nlohmann::json doc;
   doc["kind"] = "duplex_bench_sweep";
-  doc["machine"] = machineInfo();
+  doc["machine"] = machineInfo(thisBuild());
   doc["config"] = {{"meshes", options.sweep_meshes},
                    {"random_rays", options.sweep_random_rays},
                    {"primary", {options.sweep_primary_width, options.sweep_primary_height}},

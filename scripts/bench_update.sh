@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The update benchmark of the paper's table: generates the scenes from
-# ../shared/data/meshes, runs `duplex bench update` on each (1 moved instance and 1% moved per
+# ../shared/data/meshes, runs `duplex bench update` with the Embree baseline (the benchmark
+# duplex_bench_update: the installed `duplex` tool has no Embree) on each (1 moved instance and 1% moved per
 # commit), and writes docs/bench/update/<scene>_<moves>.json and docs/bench/update/table.md
 # (ours beside the paper's figures and Embree's, as ratios from the same run).
 #
@@ -11,7 +12,7 @@
 #   hammer1k  1,000 randomly rotated instances of the hammer
 #
 # Environment:
-#   BUILD_DIR   build directory with bin/duplex (default: build)
+#   BUILD_DIR   build directory with bin/duplex and bench/duplex_bench_update (default: build)
 #   OUTDIR      results (default: docs/bench/update)
 #   SCENE_DIR   generated scenes (default: out/paper)
 #   REPEAT      commits per measurement of ours (default 1000: the trace after 1,000 commits)
@@ -20,8 +21,9 @@
 #               interleaved) per run (default 7)
 #   SCENES      subset, e.g. "paper-1 robot5"
 #
-# Unattended: configures BUILD_DIR (Release, examples and benchmarks on, so that `duplex` has the
-# Embree baseline when Embree is installed), builds duplex_cli, generates the scenes and runs.
+# Unattended: configures BUILD_DIR (Release, examples and benchmarks on; duplex_bench_update has the
+# Embree baseline when Embree is installed), builds duplex_cli (scene generation) and
+# duplex_bench_update, generates the scenes and runs.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
@@ -33,9 +35,10 @@ BUILD_REPEAT=${BUILD_REPEAT:-7}
 SCENES=${SCENES:-"paper-1 paper-2 paper-3 robot5 hammer1k"}
 DATA=$ROOT/../shared/data/meshes
 DUPLEX=$BUILD_DIR/bin/duplex
+BENCH_UPDATE=$BUILD_DIR/bench/duplex_bench_update
 if [ ! -d "$DATA" ]; then echo "bench_update.sh: $DATA is absent; the paper's scenes need it" >&2; exit 1; fi
 cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DDUPLEX_BUILD_EXAMPLES=ON -DDUPLEX_BUILD_BENCH=ON >/dev/null
-cmake --build "$BUILD_DIR" -j2 --target duplex_cli >/dev/null
+cmake --build "$BUILD_DIR" -j2 --target duplex_cli duplex_bench_update >/dev/null
 mkdir -p "$OUTDIR" "$SCENE_DIR"
 
 make_scene() {
@@ -56,7 +59,7 @@ for scene in $SCENES; do
   for moves in 1 1%; do
     tag=${moves%\%}; [ "$moves" = "1%" ] && tag=1pct
     echo "== $scene, $moves moved per commit" >&2
-    "$DUPLEX" bench update --scene "$SCENE_DIR/$scene.json" --moves "$moves" --repeat "$REPEAT" \
+    "$BENCH_UPDATE" --scene "$SCENE_DIR/$scene.json" --moves "$moves" --repeat "$REPEAT" \
       --baseline-repeat "$BASELINE_REPEAT" --build-repeat "$BUILD_REPEAT" --seed 1 > "$OUTDIR/${scene}_${tag}.json"
   done
 done

@@ -52,9 +52,6 @@ std::vector<HitRecord> readHitFile(const std::filesystem::path& path) { return r
 void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits) {
   writeRecords(path, hits, "hit");
 }
-std::vector<float> readTransmittanceFile(const std::filesystem::path& path) {
-  return readRecords<float>(path, "transmittance");
-}
 void writeTransmittanceFile(const std::filesystem::path& path, std::span<const float> transmittance) {
   writeRecords(path, transmittance, "transmittance");
 }

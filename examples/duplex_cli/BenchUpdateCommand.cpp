@@ -3,7 +3,7 @@
 #include "LoadScene.h"
 #include "WorkerThreads.h"
 
-#include "BenchCommon.h"
+#include "BenchBuild.h"
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/RayGenerator.h>
@@ -377,7 +377,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   std::vector<double> embree_build_ms, embree_objects_ms, embree_top_ms;
   // The same with object scenes of high quality (spatial splits: the BVH counterpart of our
   // kd-trees' clipped references), for scale: the goal is judged against the default above.
-  std::vector<double> embree_high_build_ms, high_ratio;
+  std::vector<double> embree_high_build_ms;
 #endif
 
   // Full builds, ours and Embree's, in interleaved rounds: per round (--build-repeat rounds) ours
@@ -424,7 +424,8 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     const auto prepared = [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) {
       return loadMeshObject(files[k], std::move(mesh));
     };
-    std::vector<double> warm_ms, warm_bottom_ms, prepared_ms, prepared_bottom_ms, warm_ratio, prepared_ratio;
+    std::vector<double> warm_ms, warm_bottom_ms, prepared_ms, prepared_bottom_ms, warm_ratio, prepared_ratio,
+        high_ratio;
     for (int round = 0; round < options.build_repeat; ++round) {
       const auto oursRound = [&] {
         const auto [w, wb] = fullBuild(warm);
@@ -626,7 +627,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   }
   out["embree_update_over_ours"] = out["embree_update_ms_median"].get<double>() / out["update_ms_median"].get<double>();
 #endif
-  out["machine"] = bench::machineInfo();
+  out["machine"] = bench::machineInfo(bench::thisBuild());
   return out;
 }
 

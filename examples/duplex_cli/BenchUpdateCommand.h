@@ -31,6 +31,10 @@
 #include <filesystem>
 #include <string>
 
+namespace CLI {
+class App;
+}
+
 namespace duplex::cli {
 
 struct BenchUpdateOptions {
@@ -75,5 +79,9 @@ struct BenchUpdateOptions {
 /// high quality, with spatial splits, built in each round after its default build); machine. Times are wall-clock
 /// milliseconds. Progress goes to stderr. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options);
+
+/// Adds the command line of the benchmark to `cmd` (the tool's `bench update`, or the whole command
+/// line of duplex_bench_update), parsed into `options`.
+void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options);
 
 }  // namespace duplex::cli

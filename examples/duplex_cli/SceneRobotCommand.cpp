@@ -5,6 +5,8 @@
 #include <duplex/accel/Error.h>
 #include <duplex/objects/MeshLoader.h>
 
+#include <tinyxml2.h>
+
 #include <glm/geometric.hpp>
 
 #include <algorithm>
@@ -23,167 +25,15 @@ namespace duplex::cli {
 
 namespace {
 
-// ---- A tiny XML reader: elements and attributes only (text, comments, declarations skipped). ----
+// ---- XML access (tinyxml2). ----
 
-struct XmlElement {
-  std::string name;
-  std::vector<std::pair<std::string, std::string>> attributes;
-  std::vector<XmlElement> children;
-  int line = 0;
+using tinyxml2::XMLElement;
 
-  [[nodiscard]] const std::string* attribute(std::string_view key) const {
-    for (const auto& [k, v] : attributes)
-      if (k == key) return &v;
-    return nullptr;
-  }
-  [[nodiscard]] const XmlElement* child(std::string_view child_name) const {
-    for (const XmlElement& c : children)
-      if (c.name == child_name) return &c;
-    return nullptr;
-  }
-};
-
-class XmlReader {
- public:
-  XmlReader(std::string text, std::string file) : text_(std::move(text)), file_(std::move(file)) {}
-
-  XmlElement parseDocument() {
-    std::vector<XmlElement> stack;
-    std::optional<XmlElement> root;
-    while (true) {
-      const std::size_t open = text_.find('<', pos_);
-      if (open == std::string::npos) break;
-      advanceTo(open);
-      if (startsWith("<?")) {
-        skipPast("?>");
-      } else if (startsWith("<!--")) {
-        skipPast("-->");
-      } else if (startsWith("<![CDATA[")) {
-        skipPast("]]>");
-      } else if (startsWith("<!")) {
-        skipPast(">");
-      } else if (startsWith("</")) {
-        advanceTo(pos_ + 2);
-        const std::string name = readName();
-        skipSpace();
-        expectChar('>');
-        if (stack.empty() || stack.back().name != name)
-          fail("closing tag </" + name + "> does not match " +
-               (stack.empty() ? "any open element" : "<" + stack.back().name + ">"));
-        XmlElement done = std::move(stack.back());
-        stack.pop_back();
-        finish(std::move(done), stack, root);
-      } else {
-        advanceTo(pos_ + 1);
-        XmlElement element;
-        element.line = line_;
-        element.name = readName();
-        bool self_closing = false;
-        while (true) {
-          skipSpace();
-          if (startsWith("/>")) {
-            advanceTo(pos_ + 2);
-            self_closing = true;
-            break;
-          }
-          if (startsWith(">")) {
-            advanceTo(pos_ + 1);
-            break;
-          }
-          std::string key = readName();
-          skipSpace();
-          expectChar('=');
-          skipSpace();
-          element.attributes.emplace_back(std::move(key), readQuoted());
-        }
-        if (self_closing) finish(std::move(element), stack, root);
-        else stack.push_back(std::move(element));
-      }
-    }
-    if (!stack.empty())
-      fail("<" + stack.back().name + "> (line " + std::to_string(stack.back().line) + ") is never closed");
-    if (!root) fail("no XML element");
-    return std::move(*root);
-  }
-
- private:
-  void finish(XmlElement element, std::vector<XmlElement>& stack, std::optional<XmlElement>& root) {
-    if (!stack.empty()) {
-      stack.back().children.push_back(std::move(element));
-    } else {
-      if (root) fail("more than one top-level element");
-      root = std::move(element);
-    }
-  }
-  [[noreturn]] void fail(const std::string& what) const {
-    throw FileError(file_ + ": line " + std::to_string(line_) + ": " + what);
-  }
-  bool startsWith(std::string_view s) const { return std::string_view(text_).substr(pos_).starts_with(s); }
-  void advanceTo(std::size_t to) {
-    line_ += static_cast<int>(std::count(text_.begin() + static_cast<std::ptrdiff_t>(pos_),
-                                         text_.begin() + static_cast<std::ptrdiff_t>(to), '\n'));
-    pos_ = to;
-  }
-  void skipPast(std::string_view end) {
-    const std::size_t at = text_.find(end, pos_);
-    if (at == std::string::npos) fail("unterminated markup (missing '" + std::string(end) + "')");
-    advanceTo(at + end.size());
-  }
-  void skipSpace() {
-    std::size_t p = pos_;
-    while (p < text_.size() && std::isspace(static_cast<unsigned char>(text_[p]))) ++p;
-    advanceTo(p);
-  }
-  void expectChar(char c) {
-    if (pos_ >= text_.size() || text_[pos_] != c)
-      fail(std::string("expected '") + c + "'" +
-           (pos_ < text_.size() ? std::string(" before '") + text_[pos_] + "'" : " before the end"));
-    advanceTo(pos_ + 1);
-  }
-  std::string readName() {
-    std::size_t p = pos_;
-    while (p < text_.size() && (std::isalnum(static_cast<unsigned char>(text_[p])) ||
-                                std::string_view("_-.:").find(text_[p]) != std::string_view::npos))
-      ++p;
-    if (p == pos_) fail("expected a name");
-    std::string name = text_.substr(pos_, p - pos_);
-    advanceTo(p);
-    return name;
-  }
-  std::string readQuoted() {
-    if (pos_ >= text_.size() || (text_[pos_] != '"' && text_[pos_] != '\'')) fail("expected a quoted attribute value");
-    const char quote = text_[pos_];
-    const std::size_t end = text_.find(quote, pos_ + 1);
-    if (end == std::string::npos) fail("unterminated attribute value");
-    std::string raw = text_.substr(pos_ + 1, end - pos_ - 1);
-    advanceTo(end + 1);
-    // The five predefined entities.
-    std::string value;
-    for (std::size_t i = 0; i < raw.size(); ++i) {
-      if (raw[i] != '&') {
-        value += raw[i];
-        continue;
-      }
-      static const std::pair<std::string_view, char> kEntities[] = {
-          {"&amp;", '&'}, {"&lt;", '<'}, {"&gt;", '>'}, {"&quot;", '"'}, {"&apos;", '\''}};
-      bool known = false;
-      for (const auto& [entity, c] : kEntities)
-        if (std::string_view(raw).substr(i).starts_with(entity)) {
-          value += c;
-          i += entity.size() - 1;
-          known = true;
-          break;
-        }
-      if (!known) fail("unsupported entity in attribute value '" + raw + "'");
-    }
-    return value;
-  }
-
-  std::string text_;
-  std::string file_;
-  std::size_t pos_ = 0;
-  int line_ = 1;
-};
+// The attribute `key` of `element`, or nullopt when it has none.
+std::optional<std::string> attribute(const XMLElement& element, const char* key) {
+  const char* value = element.Attribute(key);
+  return value ? std::optional<std::string>(value) : std::nullopt;
+}
 
 // ---- The URDF structure this command needs. ----
 
@@ -223,9 +73,9 @@ std::vector<double> parseNumbers(const std::string& text, std::size_t count, con
   return values;
 }
 
-glm::dvec3 vec3Attribute(const XmlElement* element, const char* key, glm::dvec3 fallback, const std::string& where) {
+glm::dvec3 vec3Attribute(const XMLElement* element, const char* key, glm::dvec3 fallback, const std::string& where) {
   if (!element) return fallback;
-  const std::string* text = element->attribute(key);
+  const std::optional<std::string> text = attribute(*element, key);
   if (!text) return fallback;
   const std::vector<double> v = parseNumbers(*text, 3, where + " " + key);
   return {v[0], v[1], v[2]};
@@ -243,7 +93,7 @@ glm::dmat3 axisAngle(const glm::dvec3& axis, double angle) {
 }
 
 // URDF <origin>: translate(xyz) * Rz(yaw) * Ry(pitch) * Rx(roll).
-Affine originTransform(const XmlElement* origin, const std::string& where) {
+Affine originTransform(const XMLElement* origin, const std::string& where) {
   const glm::dvec3 xyz = vec3Attribute(origin, "xyz", glm::dvec3(0.0), where + " <origin>");
   const glm::dvec3 rpy = vec3Attribute(origin, "rpy", glm::dvec3(0.0), where + " <origin>");
   Affine a;
@@ -257,43 +107,66 @@ struct Urdf {
   std::vector<UrdfJoint> joints;
 };
 
-Urdf readUrdf(const std::filesystem::path& path) {
+// The URDF's <robot> element in `doc`, loaded from `path`. Malformed XML is refused with the file,
+// the line tinyxml2 reports and its description of the problem.
+const XMLElement& loadRobotElement(tinyxml2::XMLDocument& doc, const std::filesystem::path& path) {
+  const std::string file = path.string();
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw FileError(path.string() + ": cannot open the URDF file");
+  if (!in) throw FileError(file + ": cannot open the URDF file");
   std::stringstream buffer;
   buffer << in.rdbuf();
+  const std::string text = buffer.str();
+  if (doc.Parse(text.data(), text.size()) != tinyxml2::XML_SUCCESS) {
+    // ErrorStr() is "Error=<name> ErrorID=<n> (0x..) Line number=<line>[: <detail>]": keep the detail.
+    const std::string str = doc.ErrorStr() ? doc.ErrorStr() : "";
+    const std::size_t colon = str.find(": ");
+    const std::string detail = colon == std::string::npos ? "" : ", " + str.substr(colon + 2);
+    const std::string line = doc.ErrorLineNum() > 0 ? ": line " + std::to_string(doc.ErrorLineNum()) : "";
+    throw FileError(file + line + ": malformed XML (tinyxml2: " + doc.ErrorName() + detail + ")");
+  }
+  const XMLElement* root = doc.RootElement();
+  if (!root) throw FileError(file + ": no XML element");
+  if (const XMLElement* second = root->NextSiblingElement())
+    throw FileError(file + ": line " + std::to_string(second->GetLineNum()) + ": more than one top-level element");
+  if (std::string_view(root->Name()) != "robot")
+    throw FileError(file + ": the top-level element is <" + root->Name() + ">, not <robot>");
+  return *root;
+}
+
+Urdf readUrdf(const std::filesystem::path& path) {
   const std::string file = path.string();
-  const XmlElement root = XmlReader(buffer.str(), file).parseDocument();
-  if (root.name != "robot") throw FileError(file + ": the top-level element is <" + root.name + ">, not <robot>");
+  tinyxml2::XMLDocument doc;
+  const XMLElement& root = loadRobotElement(doc, path);
 
   Urdf urdf;
-  for (const XmlElement& e : root.children) {
-    const std::string* name = e.attribute("name");
-    const std::string where =
-        file + ": line " + std::to_string(e.line) + ": <" + e.name + (name ? " name=\"" + *name + "\"" : "") + ">";
-    if (e.name == "link") {
+  for (const XMLElement* e = root.FirstChildElement(); e; e = e->NextSiblingElement()) {
+    const std::string element = e->Name();
+    const std::optional<std::string> name = attribute(*e, "name");
+    const std::string where = file + ": line " + std::to_string(e->GetLineNum()) + ": <" + element +
+                              (name ? " name=\"" + *name + "\"" : "") + ">";
+    if (element == "link") {
       if (!name) throw FileError(where + " has no name");
       UrdfLink link;
       link.name = *name;
       // The visual mesh, else the collision mesh.
       for (const char* kind : {"visual", "collision"}) {
-        const XmlElement* shape = e.child(kind);
-        const XmlElement* geometry = shape ? shape->child("geometry") : nullptr;
-        const XmlElement* mesh = geometry ? geometry->child("mesh") : nullptr;
+        const XMLElement* shape = e->FirstChildElement(kind);
+        const XMLElement* geometry = shape ? shape->FirstChildElement("geometry") : nullptr;
+        const XMLElement* mesh = geometry ? geometry->FirstChildElement("mesh") : nullptr;
         if (!mesh) continue;
-        const std::string* filename = mesh->attribute("filename");
+        const std::optional<std::string> filename = attribute(*mesh, "filename");
         if (!filename || filename->empty()) throw FileError(where + ": <mesh> without a filename");
         link.mesh_uri = *filename;
         link.mesh_scale = vec3Attribute(mesh, "scale", glm::dvec3(1.0), where + " <mesh>");
-        link.link_from_visual = originTransform(shape->child("origin"), where + " <" + kind + ">");
+        link.link_from_visual = originTransform(shape->FirstChildElement("origin"), where + " <" + kind + ">");
         break;
       }
       urdf.links.push_back(std::move(link));
-    } else if (e.name == "joint") {
+    } else if (element == "joint") {
       if (!name) throw FileError(where + " has no name");
       UrdfJoint joint;
       joint.name = *name;
-      const std::string* type = e.attribute("type");
+      const std::optional<std::string> type = attribute(*e, "type");
       if (!type) throw FileError(where + " has no type");
       if (*type == "fixed") joint.kind = JointKind::Fixed;
       else if (*type == "revolute" || *type == "continuous") joint.kind = JointKind::Revolute;
@@ -301,23 +174,24 @@ Urdf readUrdf(const std::filesystem::path& path) {
       else
         throw FileError(where + ": joint type '" + *type +
                         "' is not supported (fixed, revolute, continuous, prismatic)");
-      joint.parent_from_joint = originTransform(e.child("origin"), where);
-      const glm::dvec3 axis = vec3Attribute(e.child("axis"), "xyz", {1.0, 0.0, 0.0}, where + " <axis>");
+      joint.parent_from_joint = originTransform(e->FirstChildElement("origin"), where);
+      const glm::dvec3 axis = vec3Attribute(e->FirstChildElement("axis"), "xyz", {1.0, 0.0, 0.0}, where + " <axis>");
       if (!(glm::length(axis) > 0.0)) throw FileError(where + ": <axis xyz> is the zero vector");
       joint.axis = glm::normalize(axis);
-      const XmlElement* parent = e.child("parent");
-      const XmlElement* child = e.child("child");
-      if (!parent || !parent->attribute("link") || !child || !child->attribute("link"))
-        throw FileError(where + ": needs <parent link=...> and <child link=...>");
-      joint.parent = *parent->attribute("link");
-      joint.child = *child->attribute("link");
+      const XMLElement* parent = e->FirstChildElement("parent");
+      const XMLElement* child = e->FirstChildElement("child");
+      const std::optional<std::string> parent_link = parent ? attribute(*parent, "link") : std::nullopt;
+      const std::optional<std::string> child_link = child ? attribute(*child, "link") : std::nullopt;
+      if (!parent_link || !child_link) throw FileError(where + ": needs <parent link=...> and <child link=...>");
+      joint.parent = *parent_link;
+      joint.child = *child_link;
       if (*type == "revolute" || *type == "prismatic") {
-        if (const XmlElement* limit = e.child("limit");
-            limit && limit->attribute("lower") && limit->attribute("upper")) {
-          const double lower = parseNumbers(*limit->attribute("lower"), 1, where + " <limit lower>")[0];
-          const double upper = parseNumbers(*limit->attribute("upper"), 1, where + " <limit upper>")[0];
-          joint.limits = std::make_pair(lower, upper);
-        }
+        const XMLElement* limit = e->FirstChildElement("limit");
+        const std::optional<std::string> lower = limit ? attribute(*limit, "lower") : std::nullopt;
+        const std::optional<std::string> upper = limit ? attribute(*limit, "upper") : std::nullopt;
+        if (lower && upper)
+          joint.limits = std::make_pair(parseNumbers(*lower, 1, where + " <limit lower>")[0],
+                                        parseNumbers(*upper, 1, where + " <limit upper>")[0]);
       }
       urdf.joints.push_back(std::move(joint));
     }

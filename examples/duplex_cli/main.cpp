@@ -16,6 +16,7 @@
 // message naming the file and the problem and a non-zero exit status.
 
 #include "BenchUpdateCommand.h"
+#include "DecimalOption.h"
 #include "PrepareCommand.h"
 #include "RaysCommand.h"
 #include "SceneInstancesCommand.h"
@@ -41,17 +42,7 @@ namespace {
 constexpr int kExitBadInput = 1;  // duplex::Error: a file or argument the library refused
 constexpr int kExitInternal = 3;  // anything else: a bug, reported rather than crashing
 
-// Integers in plain decimal only: CLI11 parses them with base 0 (strtoull), so "010" would be 8 and
-// "0x10" 16, and it would wrap "-1" around for an unsigned 64-bit option.
-const CLI::Validator kDecimal(
-    [](std::string& value) {
-      if (value.empty() || !std::all_of(value.begin(), value.end(), [](char c) { return c >= '0' && c <= '9'; }))
-        return std::string("must be a non-negative decimal integer, got '" + value + "'");
-      if (value.size() > 1 && value.front() == '0')
-        return std::string("must be written without leading zeros (decimal), got '" + value + "'");
-      return std::string();
-    },
-    "UINT");
+using duplex::cli::kDecimal;
 
 }  // namespace
 
@@ -189,31 +180,10 @@ int main(int argc, char** argv) {
   bench_cmd->require_subcommand(1);
   duplex::cli::BenchUpdateOptions bench_update;
   CLI::App* update_cmd = bench_cmd->add_subcommand(
-      "update", "Time commits of moved, added and removed instances (ours incremental, ours full rebuild, Embree)");
-  update_cmd->footer("The seeded edit plan is described in examples/duplex_cli/BenchUpdateCommand.h.");
-  update_cmd->add_option("--scene", bench_update.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
-  update_cmd->add_option("--moves", bench_update.moves,
-                         "Instances moved per commit: a count or a percentage such as 1% (default 1)");
-  update_cmd->add_option("--repeat", bench_update.repeat, "Commits per measurement, medians reported (default 50)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 1000000));
-  update_cmd->add_option("--seed", bench_update.seed, "Seed of the edit plan (default 1)")->check(kDecimal);
-  update_cmd->add_option("--threads", bench_update.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 4096));
-  update_cmd->add_option("--primary", bench_update.primary, "Primary rays of a W x W image (default 512)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1u, 8192u));
-  update_cmd
-      ->add_option("--baseline-repeat", bench_update.baseline_repeat,
-                   "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
-      ->check(kDecimal)
-      ->check(CLI::Range(0, 1000000));
-  update_cmd
-      ->add_option("--build-repeat", bench_update.build_repeat,
-                   "Rounds of full builds, ours and Embree's interleaved (default 7)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 100));
+      "update",
+      "Time commits of moved, added and removed instances (ours incremental, ours full rebuild; the Embree "
+      "baseline is in the benchmark duplex_bench_update)");
+  duplex::cli::addBenchUpdateOptions(*update_cmd, bench_update);
 
   // duplex sensor
   duplex::cli::SensorOptions sensor;

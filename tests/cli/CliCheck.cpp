@@ -13,6 +13,7 @@
 //   duplex_cli_check prepare DUPLEX DIR                `duplex prepare`: structures loaded, same hits
 //   duplex_cli_check prepare-koala DUPLEX DIR DATA_DIR koala in 19 objects, prepared (skipped without data)
 //   duplex_cli_check bench-update DUPLEX DIR           `duplex bench update` keys and figures on tiny scenes
+//   duplex_cli_check bench-update-embree BENCH DIR     the same by duplex_bench_update, with Embree's keys
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
@@ -490,24 +491,30 @@ int checkPrepareKoala(const std::string& duplex, const fs::path& dir, const fs::
   return 0;
 }
 
-// `duplex bench update` on tiny scenes: the documented keys, positive times, and, with Embree,
-// agreement of the hits after the same edits.
-int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
-  const fs::path dir = fixtures / "bench_update";
+// `duplex bench update` on tiny scenes: the documented keys and positive times. The installed
+// tool has no Embree baseline: no Embree figure, ratio or version in its JSON, and no source
+// revision (it never reads the checkout it was built from). duplex_bench_update built with Embree
+// (`embree`) has them all, and ours and Embree's hits agree after the same edits.
+int checkBenchUpdate(const std::vector<std::string>& command, const fs::path& fixtures, bool embree) {
+  const fs::path dir = fixtures / (embree ? "bench_update_embree" : "bench_update");
   writeDocumentFixtures(dir);
   for (const fs::path& scene : {fixtures / "quad.json", dir / "doc_tree.json"}) {
-    const nlohmann::json j = parseOneLine(runOk({duplex, "bench", "update", "--scene", scene.string(), "--moves", "2",
-                                                 "--repeat", "3", "--seed", "4", "--threads", "2", "--primary", "48"},
-                                                dir)
-                                              .out);
+    std::vector<std::string> args = command;
+    args.insert(args.end(), {"--scene", scene.string(), "--moves", "2", "--repeat", "3", "--seed", "4", "--threads",
+                             "2", "--primary", "48"});
+    const nlohmann::json j = parseOneLine(runOk(args, dir).out);
     expect(number(j, "moves") == 2.0 && number(j, "repeat") == 3.0, "moves/repeat not as given: " + j.dump());
     for (const char* key : {"update_ms_median", "full_rebuild_ms_median", "add_ms_median", "remove_ms_median",
                             "build_ms", "mrays_per_s", "prepared_build_ms_median", "prepared_library_bytes"})
       expect(number(j, key) > 0.0, std::string("\"") + key + "\" is not positive: " + j.dump());
-    if (j.contains("embree_update_ms_median")) {
+    expect(j.contains("machine") && j["machine"].is_object(), "no \"machine\" object: " + j.dump());
+    const nlohmann::json& machine = j["machine"];
+    if (embree) {
       expect(number(j, "embree_update_ms_median") > 0.0, "\"embree_update_ms_median\" is not positive: " + j.dump());
       expect(number(j, "agreement_with_embree") >= 0.99, "ours and Embree disagree after the same edits: " + j.dump());
       expect(number(j, "hits") == number(j, "embree_hits"), "ours and Embree hit different ray counts: " + j.dump());
+      expect(number(j, "embree_dynamic_low_update_ms_median") > 0.0,
+             "\"embree_dynamic_low_update_ms_median\" is not positive: " + j.dump());
       // The full builds' interleaved rounds (7 by default): per-round ratios ours / Embree.
       expect(number(j, "embree_high_build_ms") > 0.0, "\"embree_high_build_ms\" is not positive: " + j.dump());
       for (const std::string key : {"full_build_ratio", "prepared_build_ratio", "full_build_ratio_vs_embree_high"})
@@ -515,6 +522,15 @@ int checkBenchUpdate(const std::string& duplex, const fs::path& fixtures) {
                    number(j, (key + "_min").c_str()) <= number(j, (key + "_median").c_str()) &&
                    number(j, (key + "_median").c_str()) <= number(j, (key + "_max").c_str()),
                "\"" + key + "\" min / median / max out of order: " + j.dump());
+      expect(machine.value("embree_version", nlohmann::json()).is_string(),
+             "machine.embree_version is not a string: " + machine.dump());
+    } else {
+      for (const auto& [key, value] : j.items())
+        expect(key.find("embree") == std::string::npos && key.find("ratio") == std::string::npos,
+               "the tool, built without Embree, reports \"" + key + "\": " + j.dump());
+      for (const char* key : {"embree_version", "duplex_git_revision", "duplex_library_dirty"})
+        expect(machine.contains(key) && machine[key].is_null(),
+               std::string("machine.") + key + " is not null in the tool: " + machine.dump());
     }
     expect(number(j, "full_build_rounds") == 7.0, "\"full_build_rounds\" is not the default 7: " + j.dump());
     std::cout << "bench update " << scene.filename().string() << ": " << j.dump() << "\n";
@@ -526,7 +542,7 @@ int usage() {
   std::cerr << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
                "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR |\n"
                "       document DUPLEX DIR | prepare DUPLEX DIR | prepare-koala DUPLEX DIR DATA_DIR |\n"
-               "       bench-update DUPLEX DIR\n";
+               "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR\n";
   return 2;
 }
 
@@ -550,7 +566,9 @@ int main(int argc, char** argv) {
     if (args.size() == 3 && args[0] == "document") return checkDocument(args[1], args[2]);
     if (args.size() == 3 && args[0] == "prepare") return checkPrepare(args[1], args[2]);
     if (args.size() == 4 && args[0] == "prepare-koala") return checkPrepareKoala(args[1], args[2], args[3]);
-    if (args.size() == 3 && args[0] == "bench-update") return checkBenchUpdate(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "bench-update")
+      return checkBenchUpdate({args[1], "bench", "update"}, args[2], false);
+    if (args.size() == 3 && args[0] == "bench-update-embree") return checkBenchUpdate({args[1]}, args[2], true);
     return usage();
   });
 }

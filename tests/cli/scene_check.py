@@ -450,6 +450,19 @@ def check_bad(duplex, workdir):
     broken = os.path.join(workdir, "broken.urdf")
     with open(broken, "w") as f:
         f.write('<robot name="r">\n  <link name="a">\n</robot>\n')
+    # Malformed XML and documents that are not a URDF robot: refused naming the file (and the line).
+    bad_urdf = {
+        "empty.urdf": "",
+        "unquoted.urdf": '<robot name="r">\n\n  <link name=a/>\n</robot>\n',
+        "two_roots.urdf": '<robot name="r"><link name="a"/></robot>\n<robot name="s"/>\n',
+        "not_robot.urdf": '<?xml version="1.0"?>\n<model name="r"><link name="a"/></model>\n',
+        "joint_no_type.urdf": '<robot name="r">\n<link name="a"/>\n<link name="b"/>\n<joint name="j">'
+                              '<parent link="a"/><child link="b"/></joint>\n</robot>\n',
+    }
+    for name, text in bad_urdf.items():
+        with open(os.path.join(workdir, name), "w") as f:
+            f.write(text)
+    bad_path = lambda name: os.path.join(workdir, name)
     missing_mesh = os.path.join(workdir, "fixture_pkg", "urdf", "missing_mesh.urdf")
     with open(missing_mesh, "w") as f:
         f.write('<robot name="r"><link name="a"><visual><geometry><mesh filename="package://fixture_pkg/meshes/gone.stl"/>'
@@ -468,7 +481,17 @@ def check_bad(duplex, workdir):
         (["scene", "robot", "--urdf", urdf, "--joints", "0.1", "--out", out], "has 2 movable joints (j1, j3)"),
         (["scene", "robot", "--urdf", urdf, "--joints", "3,0", "--out", out], "outside its limits"),
         (["scene", "robot", "--urdf", urdf, "--copies", "0", "--out", out], "--copies"),
-        (["scene", "robot", "--urdf", broken, "--out", out], broken + ": line 3"),
+        # tinyxml2 reports the line of the element left open.
+        (["scene", "robot", "--urdf", broken, "--out", out], broken + ": line 2: malformed XML"),
+        (["scene", "robot", "--urdf", bad_path("empty.urdf"), "--out", out], bad_path("empty.urdf") + ": malformed XML"),
+        (["scene", "robot", "--urdf", bad_path("unquoted.urdf"), "--out", out],
+         bad_path("unquoted.urdf") + ": line 3: malformed XML"),
+        (["scene", "robot", "--urdf", bad_path("two_roots.urdf"), "--out", out],
+         bad_path("two_roots.urdf") + ": line 2: more than one top-level element"),
+        (["scene", "robot", "--urdf", bad_path("not_robot.urdf"), "--out", out],
+         bad_path("not_robot.urdf") + ": the top-level element is <model>, not <robot>"),
+        (["scene", "robot", "--urdf", bad_path("joint_no_type.urdf"), "--out", out],
+         bad_path("joint_no_type.urdf") + ': line 4: <joint name="j"> has no type'),
         (["scene", "robot", "--urdf", missing_mesh, "--out", out], "gone.stl"),
         (["scene"], "subcommand"),
     ]

@@ -103,17 +103,24 @@ std::uint64_t SensorRun::computeFingerprint() const {
 
 namespace {
 
-// Version 4's fingerprint hashes volume grids too; version 3's hashed mesh contents only; version 2
-// ended with the same checksum of every byte before it; version 1 had none. Older versions are
-// refused by name, saying what they lack.
+// The format is "DXSENSR" and one version character. A 0.x library owes no compatibility with its
+// own earlier states: any other magic or version is refused, naming both.
 constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '4'};
-struct OlderState {
-  char magic[8];
-  const char* lacks;
-};
-constexpr OlderState kOlderStates[] = {{{'D', 'X', 'S', 'E', 'N', 'S', 'R', '1'}, "no checksum"},
-                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '2'}, "mesh contents not fingerprinted"},
-                                       {{'D', 'X', 'S', 'E', 'N', 'S', 'R', '3'}, "volume grids not fingerprinted"}};
+
+// The first bytes of a file as a quoted string, non-printable bytes as \xNN.
+std::string quotedPrefix(std::span<const char> bytes) {
+  std::string out = "\"";
+  for (const char c : bytes) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u >= 0x20 && u < 0x7f && c != '"' && c != '\\') {
+      out += c;
+    } else {
+      constexpr char kHex[] = "0123456789abcdef";
+      out += {'\\', 'x', kHex[u >> 4], kHex[u & 15]};
+    }
+  }
+  return out + "\"";
+}
 
 // The checksum of the state: XXH64 of every byte before it.
 std::uint64_t stateChecksum(std::span<const char> bytes) {
@@ -170,12 +177,12 @@ void SensorRun::loadState(const std::filesystem::path& file) {
   in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   if (!in) throw FileError(file.string() + ": cannot read the run state");
   constexpr std::size_t kHead = sizeof kStateMagic + 5 * sizeof(std::uint64_t);
-  for (const OlderState& older : kOlderStates)
-    if (bytes.size() >= sizeof older.magic && std::memcmp(bytes.data(), older.magic, sizeof older.magic) == 0)
-      throw FileError(file.string() + ": a run state of an older version (" + older.lacks +
-                      "): run again without resuming");
-  if (bytes.size() < kHead || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
-    throw FileError(file.string() + ": not a sensor run state");
+  if (bytes.size() < sizeof kStateMagic || std::memcmp(bytes.data(), kStateMagic, sizeof kStateMagic) != 0)
+    throw FileError(file.string() + ": not a run state of this version (found " +
+                    quotedPrefix(std::span<const char>(bytes).first(std::min(bytes.size(), sizeof kStateMagic))) +
+                    ", expected " + quotedPrefix(kStateMagic) + "): run again without resuming");
+  if (bytes.size() < kHead)
+    throw FileError(file.string() + ": run state of " + std::to_string(bytes.size()) + " bytes, truncated");
   std::uint64_t header[5];
   std::memcpy(header, bytes.data() + sizeof kStateMagic, sizeof header);
   if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() ||

@@ -44,12 +44,11 @@ void SensorScene::prepare(std::vector<Material> materials) {
   }
   if (graph_->hasPendingEdits()) throw InvalidArgument("SensorScene: the scene graph has uncommitted edits");
   tracer_ = std::make_unique<SceneTracer>(*graph_);
-  // Per-node tables (node ids are small integers): which sensor, which material.
+  // Per-node table (node ids are small integers): which material.
   std::vector<NodeId> instances = graph_->visibleInstances();
   std::sort(instances.begin(), instances.end());
   const NodeId max_node = instances.empty() ? 0 : instances.back();
-  sensor_of_node_.assign(instances.empty() ? 0 : max_node + 1, -1);
-  material_of_node_.assign(sensor_of_node_.size(), Material{});
+  material_of_node_.assign(instances.empty() ? 0 : max_node + 1, Material{});
   const ObjectLibrary& library = graph_->library();
   std::unordered_set<std::string> names;
   for (std::size_t id = 0; id < materials.size(); ++id) {
@@ -113,7 +112,6 @@ void SensorScene::prepare(std::vector<Material> materials) {
     if (static_cast<std::uint64_t>(angle_bin_count_) + s.object->spec().angleBinCount() > 0x7FFFFFF0ull)
       throw InvalidArgument("SensorScene: more than 2^31 angular bins");
     angle_bin_count_ += s.object->spec().angleBinCount();
-    sensor_of_node_[node] = static_cast<int>(sensors_.size());
     sensors_.push_back(std::move(s));
   }
   if (static_cast<std::uint64_t>(bin_count_) + angle_bin_count_ > 0xFFFFFFF0ull)

@@ -252,13 +252,15 @@ TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   b = clean;
   b.push_back(0);
   refusedWith(b, "truncated or extended");
+  // Any other version, older or newer, and any other file: one message with what was found and
+  // what this build reads.
   b = clean;
-  b[7] = '1';  // the version without checksum
-  refusedWith(b, "older version");
-  b[7] = '2';  // the version whose fingerprint lacked mesh contents
-  refusedWith(b, "mesh contents not fingerprinted");
-  b[7] = '3';  // the version whose fingerprint lacked volume grids
-  refusedWith(b, "volume grids not fingerprinted");
+  for (const char version : {'1', '3', '5'}) {
+    b[7] = version;
+    refusedWith(b, std::string("found \"DXSENSR") + version + "\", expected \"DXSENSR4\"");
+  }
+  refusedWith(std::vector<char>{'P', 'K', '\x03', '\x04'}, "found \"PK\\x03\\x04\", expected \"DXSENSR4\"");
+  refusedWith(std::vector<char>(clean.begin(), clean.begin() + 12), "12 bytes, truncated");
   // The clean file still resumes to the same accumulators.
   {
     std::ofstream out(state, std::ios::binary | std::ios::trunc);

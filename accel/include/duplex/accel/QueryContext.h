@@ -61,8 +61,6 @@ class QueryContext {
     slots_.push_back(Slot{key, &typeid(T), ErasedPtr(value, [](void* p) { delete static_cast<T*>(p); })});
     return *value;
   }
-  /// Drops every cached slot (the objects they belong to rebuild theirs on the next query).
-  void clearCache() { slots_.clear(); }
   /// Number of cached slots (for tests).
   [[nodiscard]] std::size_t cachedSlots() const { return slots_.size(); }
 

@@ -36,9 +36,8 @@ void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays);
 [[nodiscard]] std::vector<HitRecord> readHitFile(const std::filesystem::path& path);
 /// Writes 20-byte hit records; throws FileError naming the file when it cannot be written.
 void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits);
-/// Transmittance file (`duplex trace --transmittance`): one little-endian float32 per ray, in ray
-/// order, nothing else. Throws FileError naming the file.
-[[nodiscard]] std::vector<float> readTransmittanceFile(const std::filesystem::path& path);
+/// Writes a transmittance file (`duplex trace --transmittance`): one little-endian float32 per ray,
+/// in ray order, nothing else. Throws FileError naming the file when it cannot be written.
 void writeTransmittanceFile(const std::filesystem::path& path, std::span<const float> transmittance);
 
 }  // namespace duplex

@@ -229,7 +229,6 @@ class TopLevel {
   struct State;  // instance records, id map, pending edits, leaf bookkeeping (TopLevel.cpp)
   struct SensorLevelTag {};
   TopLevel(const TopLevelConfig& config, SensorLevelTag);  // the nested level: keeps every role
-  [[nodiscard]] bool isSensorLevel() const { return !separate_sensors_; }
   TopLevel& sensorLevelForEdit();
   void buildHere(std::span<const InstanceDesc> instances, const KdBuildConfig& config);
   void setHere(const InstanceDesc& instance);

@@ -68,8 +68,7 @@ class IesProfile {
   /// Density (per steradian) of sample()'s directions.
   [[nodiscard]] double pdf(const glm::dvec3& direction_lf) const;
 
-  /// Tabulated angles in degrees after unfolding (horizontal: 0 ... 360).
-  [[nodiscard]] const std::vector<double>& verticalAngles() const { return vertical_deg_; }
+  /// Tabulated horizontal angles in degrees after unfolding (0 ... 360).
   [[nodiscard]] const std::vector<double>& horizontalAngles() const { return horizontal_deg_; }
   /// Keywords of the header ("[TEST]" -> "TEST"), [MORE] lines appended with a newline.
   [[nodiscard]] const std::map<std::string, std::string>& keywords() const { return keywords_; }

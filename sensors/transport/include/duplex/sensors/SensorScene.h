@@ -97,8 +97,6 @@ class SensorScene {
   [[nodiscard]] std::uint32_t binCount() const { return bin_count_; }
   /// Total number of angular bins over all sensors.
   [[nodiscard]] std::uint32_t angleBinCount() const { return angle_bin_count_; }
-  /// Sensor index of instance `node` (a hit's instance_id), or -1 when it is not a sensor.
-  [[nodiscard]] int sensorOf(NodeId node) const { return node < sensor_of_node_.size() ? sensor_of_node_[node] : -1; }
   /// Material of instance `node` (absorber when none was given).
   [[nodiscard]] const Material& materialOf(NodeId node) const {
     return node < material_of_node_.size() ? material_of_node_[node] : kAbsorber;
@@ -135,7 +133,6 @@ class SensorScene {
   std::vector<SensorInstance> sensors_;
   std::uint32_t bin_count_ = 0;
   std::uint32_t angle_bin_count_ = 0;
-  std::vector<int> sensor_of_node_;
   std::vector<Material> material_of_node_;
   std::vector<std::string> bands_;
   std::vector<std::vector<double>> band_cdf_;

@@ -1,0 +1,34 @@
+#include "BenchUpdateCommand.h"
+
+#include "DecimalOption.h"
+
+#include <CLI/CLI.hpp>
+
+namespace duplex::cli {
+
+void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options) {
+  cmd.footer("The seeded edit plan is described in examples/duplex_cli/BenchUpdateCommand.h.");
+  cmd.add_option("--scene", options.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  cmd.add_option("--moves", options.moves,
+                 "Instances moved per commit: a count or a percentage such as 1% (default 1)");
+  cmd.add_option("--repeat", options.repeat, "Commits per measurement, medians reported (default 50)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 1000000));
+  cmd.add_option("--seed", options.seed, "Seed of the edit plan (default 1)")->check(kDecimal);
+  cmd.add_option("--threads", options.threads, "Worker threads (default: all hardware threads)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 4096));
+  cmd.add_option("--primary", options.primary, "Primary rays of a W x W image (default 512)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1u, 8192u));
+  cmd.add_option("--baseline-repeat", options.baseline_repeat,
+                 "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
+      ->check(kDecimal)
+      ->check(CLI::Range(0, 1000000));
+  cmd.add_option("--build-repeat", options.build_repeat,
+                 "Rounds of full builds, ours and Embree's interleaved (default 7)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 100));
+}
+
+}  // namespace duplex::cli
