@@ -353,23 +353,23 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   out["build_ms"] = doc->figures.build_ms + ours->topBuildMs();
   out["bottom_build_ms"] = doc->figures.build_ms;
   out["top_build_ms"] = ours->topBuildMs();
-  // The library's objects, held while the full builds below and Embree use their meshes.
+  // The library's objects, held while the full builds below and Embree use their meshes. The
+  // benchmark rebuilds meshes and compares them with Embree's triangle geometry: a scene with other
+  // object types is refused, with or without Embree, so that every build measures the same work.
   std::vector<std::shared_ptr<const Object>> held;
   std::vector<const MeshObject*> mesh_objects;
   for (ObjectId i = 0; i < library.size(); ++i) {
     held.push_back(library.get(i));
-    if (const auto* m = dynamic_cast<const MeshObject*>(held.back().get())) mesh_objects.push_back(m);
+    const auto* m = dynamic_cast<const MeshObject*>(held.back().get());
+    if (!m)
+      throw InvalidArgument(options.scene.string() + ": object '" + library.name(i) + "' is of type " +
+                            library.typeName(i) + ": bench update measures scenes of mesh objects only");
+    mesh_objects.push_back(m);
   }
 #if DUPLEX_BENCH_HAVE_EMBREE
   // Embree's side: the same meshes and instances, one device for the whole run.
   std::vector<const TriangleMesh*> meshes;
-  for (ObjectId i = 0; i < library.size(); ++i) {
-    const auto* mesh_object = dynamic_cast<const MeshObject*>(held[i].get());
-    if (!mesh_object)
-      throw InvalidArgument(options.scene.string() + ": object " + library.name(i) +
-                            " is not a mesh (Embree baseline)");
-    meshes.push_back(&mesh_object->mesh());
-  }
+  for (const MeshObject* mesh_object : mesh_objects) meshes.push_back(&mesh_object->mesh());
   std::vector<bench::EmbreeInstanceDesc> embree_instances;
   for (std::size_t i = 0; i < n; ++i) embree_instances.push_back({graph.node(instances[i]).object, initial[i]});
   bench::EmbreeDevice device(threads, "");

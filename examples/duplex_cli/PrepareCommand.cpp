@@ -4,7 +4,9 @@
 #include "WorkerThreads.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/scenegraph/ObjectTypeRegistry.h>
 #include <duplex/scenegraph/SceneDocument.h>
+#include <duplex/sensors/SensorTypes.h>
 
 #include <tbb/task_arena.h>
 
@@ -37,24 +39,30 @@ json readJson(const fs::path& path) {
 }
 
 /// `file` as named in the source scene, as it must be named in a scene file in `out_dir`.
-std::string rebaseMeshPath(const std::string& file, const fs::path& source_dir, const fs::path& out_dir) {
+std::string rebasePath(const std::string& file, const fs::path& source_dir, const fs::path& out_dir) {
   const fs::path named(file);
   const fs::path target = (named.is_absolute() ? named : fs::absolute(source_dir / named)).lexically_normal();
   const fs::path relative = target.lexically_relative(fs::absolute(out_dir).lexically_normal());
   return relative.empty() ? target.string() : relative.generic_string();
 }
 
-/// A mesh spec for the copy: the file rebased, or the inline arrays ("file" wins, as in v1).
-json meshSpec(const json& mesh, bool v1, const fs::path& source_dir, const fs::path& out_dir) {
-  json spec = v1 ? json::object() : mesh;
-  if (mesh.contains("file")) {
-    if (v1) spec = json::object();
-    spec["file"] = rebaseMeshPath(mesh["file"].get<std::string>(), source_dir, out_dir);
-  } else if (v1) {
-    spec["positions"] = mesh["positions"];
-    spec["indices"] = mesh["indices"];
+/// A type's spec for the copy: a "file" key rebased to `out_dir`. A v1 mesh keeps only what v1
+/// reads ("file" wins over the inline arrays); the own format's specs are copied as they are.
+json specForCopy(const std::string& type, const json& spec, bool v1, const fs::path& source_dir,
+                 const fs::path& out_dir) {
+  json out = spec;
+  if (v1 && type == "mesh") {
+    out = json::object();
+    if (spec.contains("file")) {
+      out["file"] = spec["file"];
+    } else {
+      out["positions"] = spec["positions"];
+      out["indices"] = spec["indices"];
+    }
   }
-  return spec;
+  if (out.is_object() && out.contains("file") && out["file"].is_string())
+    out["file"] = rebasePath(out["file"].get<std::string>(), source_dir, out_dir);
+  return out;
 }
 
 /// Compact JSON with one line per top-level key and per element of its arrays (objects, nodes,
@@ -118,22 +126,29 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
   json copy = json::object();
   copy["format"] = "duplex-scene-v1";
   copy["objects"] = json::array();
-  std::size_t mesh_objects = 0;
+  std::size_t mesh_objects = 0, structures = 0;
+  const ObjectLibrary& library = doc->graph->library();
+  const ObjectTypeRegistry& registry = sensorTypeRegistry();  // the types loadDocumentNamed reads
   const json& objects = source["objects"];
   for (std::size_t k = 0; k < objects.size(); ++k) {
     const json& entry = objects[k];
-    const fs::path& structure = saved.at(doc->objects.at(k));
+    const ObjectId id = doc->objects.at(k);
+    const fs::path& structure = saved.at(id);
+    // The entry's type is the registered key the loader found in it.
+    const std::string type(library.typeName(id));
+    const ObjectTypeInfo* info = registry.find(type);
     json out_entry = v1 ? json{{"name", entry["name"]}} : entry;
-    if (entry.contains("mesh")) {
-      out_entry["mesh"] = meshSpec(entry["mesh"], v1, source_dir, options.out);
+    out_entry[type] = specForCopy(type, entry[type], v1, source_dir, options.out);
+    if (info && info->accepts_structure) {
       if (structure.empty())
-        throw InvalidArgument(options.scene.string() + ": /objects/" + std::to_string(k) +
-                              ": mesh object without a saved structure");
+        throw InvalidArgument(options.scene.string() + ": /objects/" + std::to_string(k) + ": " + type +
+                              " object without a saved structure");
       out_entry["structure"] = structure.filename().string();
-      ++mesh_objects;
+      ++structures;
     } else if (!structure.empty()) {
-      fs::remove(structure, ec);  // procedural types are rebuilt from their spec: no structure key
+      fs::remove(structure, ec);  // types without structure files (procedural shapes) rebuild from their spec
     }
+    if (type == "mesh") ++mesh_objects;
     copy["objects"].push_back(std::move(out_entry));
   }
   if (v1) {
@@ -154,7 +169,7 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
   report["format_in"] = doc->format;
   report["objects"] = objects.size();
   report["mesh_objects"] = mesh_objects;
-  report["structures"] = mesh_objects;
+  report["structures"] = structures;
   report["load_ms"] = doc->figures.load_ms + doc->figures.graph_ms;
   report["build_ms"] = doc->figures.build_ms;
   report["save_ms"] = save_ms;

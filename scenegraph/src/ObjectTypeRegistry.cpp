@@ -14,57 +14,62 @@ using nlohmann::json;
 
 // ---- SceneLoadCache ----
 
-namespace {
-std::filesystem::path canonicalKey(const std::filesystem::path& file) {
-  // One entry per file however it is spelt ("a/../b.obj", "./b.obj").
+std::filesystem::path SceneLoadCache::fileKey(const std::filesystem::path& file) {
   std::error_code ec;
   std::filesystem::path key = std::filesystem::weakly_canonical(file, ec);
-  return ec ? file : key;
+  return ec || key.empty() ? file : key;
 }
-}  // namespace
 
-SceneLoadCache::FileEntry* SceneLoadCache::findEntry(std::string_view kind, const std::filesystem::path& file,
-                                                     const FileReader* reader) {
-  std::pair<std::string, std::filesystem::path> key(std::string(kind), canonicalKey(file));
+SceneLoadCache::FileEntry* SceneLoadCache::findEntry(std::string_view kind, const std::filesystem::path& file) {
+  const std::pair<std::string, std::filesystem::path> key(std::string(kind), fileKey(file));
   std::lock_guard lock(mutex_);
-  if (!reader) {
-    const auto it = files_.find(key);
-    return it == files_.end() ? nullptr : it->second.get();
-  }
+  const auto it = files_.find(key);
+  return it == files_.end() ? nullptr : it->second.get();
+}
+
+void SceneLoadCache::request(std::string_view kind, const std::filesystem::path& file, std::type_index type,
+                             ErasedReader reader) {
+  std::pair<std::string, std::filesystem::path> key(std::string(kind), fileKey(file));
+  std::lock_guard lock(mutex_);
   auto& slot = files_[std::move(key)];
   if (!slot) {
     slot = std::make_unique<FileEntry>();
     slot->kind = std::string(kind);
     slot->file = file;
-    slot->reader = *reader;
+    slot->type = type;
+    slot->reader = std::move(reader);
+  } else if (slot->type != type) {
+    throw InvalidArgument("SceneLoadCache: " + file.string() + " is requested as a " + std::string(kind) +
+                          " file with two value types");
   }
-  return slot.get();
-}
-
-void SceneLoadCache::requestFile(std::string_view kind, const std::filesystem::path& file, FileReader reader) {
-  if (!reader) throw InvalidArgument("SceneLoadCache::requestFile: no reader for " + file.string());
-  (void)findEntry(kind, file, &reader);
 }
 
 std::shared_ptr<const void> SceneLoadCache::read(FileEntry& e) {
-  // File readers run no TBB work of their own, so waiting in call_once cannot block a nested task.
   std::call_once(e.once, [&] {
     try {
-      e.value = e.reader(e.file, *this);
+      // Isolated: a reader that runs TBB work must not pick up, while it waits, a task that waits for
+      // this same once-flag.
+      tbb::this_task_arena::isolate([&] { e.value = e.reader(e.file, *this); });
       if (!e.value) e.error = e.file.string() + ": the reader returned nothing";
     } catch (const std::exception& ex) {
       e.error = ex.what();
+    } catch (...) {
+      e.error = e.file.string() + ": unknown error while reading";
     }
   });
   if (!e.value) throw FileError(e.error);
   return e.value;
 }
 
-std::shared_ptr<const void> SceneLoadCache::fileValue(std::string_view kind, const std::filesystem::path& file) {
-  FileEntry* e = findEntry(kind, file, nullptr);
+std::shared_ptr<const void> SceneLoadCache::fileValue(std::string_view kind, const std::filesystem::path& file,
+                                                      std::type_index type) {
+  FileEntry* e = findEntry(kind, file);
   if (!e)
     throw InvalidArgument("SceneLoadCache::file: " + file.string() + " was not requested as a " + std::string(kind) +
                           " file");
+  if (e->type != type)
+    throw InvalidArgument("SceneLoadCache::file: " + file.string() + " holds a " + std::string(kind) +
+                          " value of another type");
   return read(*e);
 }
 
@@ -104,13 +109,6 @@ void SceneLoadCache::addCount(std::string_view name, std::size_t n) {
   auto it = counts_.find(name);
   if (it == counts_.end()) it = counts_.emplace(std::string(name), 0).first;
   it->second += n;
-}
-
-std::size_t SceneLoadCache::files(std::string_view kind) const {
-  std::lock_guard lock(mutex_);
-  std::size_t n = 0;
-  for (const auto& [key, entry] : files_) n += key.first == kind;
-  return n;
 }
 
 std::map<std::string, std::size_t, std::less<>> SceneLoadCache::counts() const {

@@ -6,6 +6,7 @@
 
 #include "KdTreeChecks.h"
 #include "MeshChecks.h"
+#include "SceneFiles.h"
 #include "TestSupport.h"
 
 #include "duplex/accel/Error.h"
@@ -32,59 +33,6 @@
 namespace duplex::test {
 namespace {
 
-const std::string kCube = R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}})";
-const std::string kTetra =
-    R"({"name": "tetra", "mesh": {"positions": [0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1], "indices": [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3]}})";
-const std::string kIdentity = "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]";
-
-struct SceneDir {
-  TempDir dir;
-  std::filesystem::path scenes = dir.path() / "scenes";
-  SceneDir() {
-    std::filesystem::create_directories(scenes / "meshes");
-    std::filesystem::copy_file(fixtureDir() / "quad_cube.obj", scenes / "meshes" / "quad_cube.obj");
-  }
-  std::filesystem::path write(const std::string& json, const std::string& name = "scene.json") const {
-    writeTextFile(scenes / name, json);
-    return scenes / name;
-  }
-};
-
-std::string v1(const std::string& objects, const std::string& instances) {
-  return R"({"format": "scene-json-v1", "objects": [)" + objects + R"(], "instances": [)" + instances + "]}";
-}
-std::string own(const std::string& objects, const std::string& nodes, const std::string& edits = "") {
-  return R"({"format": "duplex-scene-v1", "objects": [)" + objects + R"(], "nodes": [)" + nodes + "]" +
-         (edits.empty() ? "" : R"(, "edits": [)" + edits + "]") + "}";
-}
-
-/// `load` must throw FileError naming the file and `pointer` (and `also` when given).
-template <class Load>
-void expectError(Load&& load, const std::filesystem::path& file, const std::string& pointer,
-                 const std::string& also = "") {
-  try {
-    load();
-    ADD_FAILURE() << "no FileError (expected " << pointer << ")";
-  } catch (const FileError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find(file.filename().string()), std::string::npos) << "does not name the file: " << msg;
-    EXPECT_NE(msg.find(pointer + ":"), std::string::npos) << "does not name '" << pointer << "': " << msg;
-    if (!also.empty()) {
-      EXPECT_NE(msg.find(also), std::string::npos) << "does not mention '" << also << "': " << msg;
-    }
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "wrong exception type: " << e.what();
-  }
-}
-
-void expectDocError(const SceneDir& d, const std::string& json, const std::string& pointer,
-                    const std::string& also = "", const SceneDocumentOptions& options = {},
-                    const ObjectTypeRegistry& registry = builtinObjectTypes()) {
-  SCOPED_TRACE(json);
-  const auto path = d.write(json, "bad_scene.json");
-  expectError([&] { (void)loadSceneDocument(path, registry, options); }, path, pointer, also);
-}
-
 ::testing::AssertionResult sameAffine(const Affine& a, const Affine& b, double tol = 0.0) {
   const auto x = a.toRowMajor3x4(), y = b.toRowMajor3x4();
   for (std::size_t k = 0; k < 12; ++k)
@@ -94,30 +42,6 @@ void expectDocError(const SceneDir& d, const std::string& json, const std::strin
 }
 
 // ---- scene-json-v1 ----
-
-const char* kTetraInline =
-    R"({"positions": [0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1], "indices": [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3]})";
-
-/// Loads a scene file and runs the tree checker on every mesh object of its "objects" list.
-SceneDocument loadChecked(const std::filesystem::path& path, const SceneDocumentOptions& options = {}) {
-  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes(), options);
-  const ObjectLibrary& lib = doc.graph->library();
-  for (const ObjectId id : doc.objects) {
-    if (const auto* m = dynamic_cast<const MeshObject*>(lib.get(id).get())) {
-      EXPECT_TRUE(checkMeshTree(*m, options.build.max_depth)) << "object '" << lib.name(id) << "'";
-    }
-  }
-  return doc;
-}
-
-/// The working directory for one scope (restored even when an assertion throws).
-struct WorkingDirectory {
-  std::filesystem::path saved = std::filesystem::current_path();
-  explicit WorkingDirectory(const std::filesystem::path& dir) { std::filesystem::current_path(dir); }
-  ~WorkingDirectory() { std::filesystem::current_path(saved); }
-  WorkingDirectory(const WorkingDirectory&) = delete;
-  WorkingDirectory& operator=(const WorkingDirectory&) = delete;
-};
 
 TEST(SceneDocumentV1, InlineAndFileObjectsInstancesAndUnknownKeys) {
   SceneDir d;
@@ -257,27 +181,6 @@ TEST(SceneDocumentV1, InstancesAndTransformsAreExactlyTheFilesValues) {
   EXPECT_EQ(doc.graph->commitCount(), 1u);
 }
 
-TEST(SceneDocumentV1, RelativeMeshPathIsResolvedAgainstTheJsonFolderNotTheWorkingDirectory) {
-  SceneDir d;
-  const auto path = d.write(v1(kCube, R"({"object": "cube", "transform": )" + kIdentity + "}"));
-  auto cubeTriangles = [](const SceneDocument& doc) {
-    return dynamic_cast<const MeshObject&>(*doc.graph->library().get(doc.objects.at(0))).mesh().triangleCount();
-  };
-  // From the test's working directory (elsewhere) ...
-  EXPECT_EQ(cubeTriangles(loadChecked(path)), 12u);
-  {
-    // ... from the scene folder's parent, with a relative JSON path ...
-    const WorkingDirectory cwd(d.dir.path());
-    EXPECT_EQ(cubeTriangles(loadSceneDocument(std::filesystem::path("scenes") / "scene.json", builtinObjectTypes())),
-              12u);
-  }
-  {
-    // ... and from inside the meshes folder, where "meshes/quad_cube.obj" does not exist.
-    const WorkingDirectory cwd(d.scenes / "meshes");
-    EXPECT_EQ(cubeTriangles(loadSceneDocument(std::filesystem::path("..") / "scene.json", builtinObjectTypes())), 12u);
-  }
-}
-
 TEST(SceneDocumentV1, EmptyObjectAndInstanceLists) {
   SceneDir d;
   const SceneDocument doc = loadChecked(d.write(v1("", "")));
@@ -286,18 +189,6 @@ TEST(SceneDocumentV1, EmptyObjectAndInstanceLists) {
   EXPECT_TRUE(doc.instances.empty());
   EXPECT_TRUE(doc.graph->instances().empty());
   EXPECT_TRUE(SceneTracer(*doc.graph).bounds().empty());
-}
-
-TEST(SceneDocumentV1, BuildOptionsReachTheMeshes) {
-  SceneDir d;
-  SceneDocumentOptions options;
-  options.build.heuristic = KdHeuristic::SpatialMiddle;
-  options.build.max_depth = 2;
-  const SceneDocument doc = loadChecked(d.write(v1(kCube, "")), options);
-  const auto* cube = dynamic_cast<const MeshObject*>(doc.graph->library().get(doc.objects.at(0)).get());
-  ASSERT_NE(cube, nullptr);
-  EXPECT_LE(cube->tree().stats(1.0f, 1.0f).max_depth, 2u);
-  EXPECT_GT(cube->tree().nodes.size(), 1u);  // the middle heuristic splits 12 triangles
 }
 
 // ---- scene-json-v1: malformed input names the file and the JSON pointer ----
@@ -344,29 +235,6 @@ TEST(SceneDocumentV1Errors, Objects) {
   expectDocError(d, v1(R"({"name": "txt", "mesh": {"file": "bad_scene.json"}})", ""), "/objects/0/mesh");  // not a mesh
   // A type that is not part of scene-json-v1 does not count as a type there.
   expectDocError(d, v1(R"({"name": "s", "sphere": {"radius": 1}})", ""), "/objects/0", "no object type");
-}
-
-TEST(SceneDocumentV1Errors, InlineMeshes) {
-  SceneDir d;
-  auto inline_object = [](const std::string& positions, const std::string& indices) {
-    return R"({"name": "m", "mesh": {"positions": )" + positions + R"(, "indices": )" + indices + "}}";
-  };
-  const std::string good_positions = "[0, 0, 0, 1, 0, 0, 0, 1, 0]";
-  expectDocError(d, v1(inline_object(R"([0, 0, 0, 1, "x", 0, 0, 1, 0])", "[0, 1, 2]"), ""),
-                 "/objects/0/mesh/positions/4");
-  // Finite as a double, infinite as the float it is stored in.
-  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0, 0, 0, 1e39, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh/positions/7",
-                 "float range");
-  expectDocError(d, v1(inline_object(good_positions, "[0, -1, 2]"), ""), "/objects/0/mesh/indices/1");
-  expectDocError(d, v1(inline_object(good_positions, "[0, 1.5, 2]"), ""), "/objects/0/mesh/indices/1");
-  expectDocError(d, v1(inline_object(good_positions, "[0, 1, null]"), ""), "/objects/0/mesh/indices/2");
-  expectDocError(d, v1(inline_object(good_positions, "{}"), ""), "/objects/0/mesh/indices");
-  expectDocError(d, v1(R"({"name": "m", "mesh": {"positions": [0, 0, 0]}})", ""), "/objects/0/mesh", "indices");
-  expectDocError(d, v1(inline_object(good_positions, "[0, 1, 7]"), ""), "/objects/0/mesh");     // out of range
-  expectDocError(d, v1(inline_object(good_positions, "[]"), ""), "/objects/0/mesh");            // no triangle
-  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0]", "[0, 1, 2]"), ""), "/objects/0/mesh");  // ragged
-  expectDocError(d, v1(inline_object("[0, 0, 0, 1, 0, 0, 2, 0, 0]", "[0, 1, 2]"), ""),
-                 "/objects/0/mesh");  // degenerate
 }
 
 TEST(SceneDocumentV1Errors, Instances) {
@@ -433,34 +301,6 @@ TEST(SceneDocumentOwn, WorldTransformsAreTheHandComputedProducts) {
   const Affine free = Affine::fromRowMajor3x4({0, 0, 1, 7, 0, 1, 0, 8, -1, 0, 0, 9});
   EXPECT_TRUE(sameAffine(g.worldTransform(doc.instances[2]), free * euler, 1e-12));
   EXPECT_EQ(g.visibleInstances().size(), 2u);
-}
-
-TEST(SceneDocumentOwn, ProceduralObjects) {
-  SceneDir d;
-  const auto path = d.write(own(R"({"name": "ball", "sphere": {"radius": 2, "subdivisions": 2}},
-      {"name": "crate", "box": {"size": [1, 2, 3]}}, {"name": "cubeish", "box": {"size": 4}},
-      {"name": "ground", "plane": {"size": [10, 20]}}, {"name": "unit", "sphere": {}})",
-                                R"({"instance": "b", "object": "ball"}, {"instance": "c", "object": "crate"},
-      {"instance": "g", "object": "ground"})"));
-  const SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
-  const ObjectLibrary& lib = doc.graph->library();
-  auto mesh = [&](ObjectId id) { return &dynamic_cast<const MeshObject&>(*lib.get(id)).mesh(); };
-  EXPECT_EQ(mesh(doc.objects[0])->triangleCount(), 320u);
-  EXPECT_NEAR(mesh(doc.objects[0])->bounds().hi.x, 2.0f, 1e-5f);
-  EXPECT_EQ(mesh(doc.objects[1])->triangleCount(), 12u);
-  EXPECT_EQ(mesh(doc.objects[1])->bounds(), Box(glm::vec3(-0.5f, -1.0f, -1.5f), glm::vec3(0.5f, 1.0f, 1.5f)));
-  EXPECT_EQ(mesh(doc.objects[2])->bounds(), Box(glm::vec3(-2.0f), glm::vec3(2.0f)));
-  EXPECT_EQ(mesh(doc.objects[3])->triangleCount(), 2u);
-  EXPECT_EQ(mesh(doc.objects[3])->bounds(), Box(glm::vec3(-5.0f, -10.0f, 0.0f), glm::vec3(5.0f, 10.0f, 0.0f)));
-  EXPECT_EQ(mesh(doc.objects[4])->triangleCount(), 20u * 64u);
-  EXPECT_EQ(doc.figures.count("triangles"), 320u + 12u + 12u + 2u + 1280u);
-  // Outward winding: the box's normals point away from its centre.
-  const TriangleMesh& box = *mesh(doc.objects[1]);
-  for (std::size_t t = 0; t < box.triangleCount(); ++t) {
-    const auto v = box.vertices(t);
-    const glm::vec3 n = glm::cross(v[1] - v[0], v[2] - v[0]);
-    EXPECT_GT(glm::dot(n, (v[0] + v[1] + v[2]) / 3.0f), 0.0f) << "triangle " << t;
-  }
 }
 
 TEST(SceneDocumentOwn, TimedEditsAreReadSortedAndApplied) {
@@ -552,15 +392,6 @@ TEST(SceneDocumentOwn, MalformedInputNamesFileAndPointer) {
   expectDocError(d, own(R"({"name": "c"})", ""), "/objects/0", "no object type");
   expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj", "positions": []}})", ""),
                  "/objects/0/mesh/positions", "unknown key");
-  expectDocError(d, own(R"({"name": "s", "sphere": {"radius": -1}})", ""), "/objects/0/sphere/radius");
-  expectDocError(d, own(R"({"name": "s", "sphere": {"subdivisions": 9}})", ""), "/objects/0/sphere/subdivisions");
-  expectDocError(d, own(R"({"name": "s", "sphere": {"subdivisions": 1.5}})", ""), "/objects/0/sphere/subdivisions");
-  expectDocError(d, own(R"({"name": "s", "sphere": {"radius": 1, "segments": 3}})", ""), "/objects/0/sphere/segments");
-  expectDocError(d, own(R"({"name": "b", "box": {"size": [1, 2]}})", ""), "/objects/0/box/size");
-  expectDocError(d, own(R"({"name": "b", "box": {"size": [1, 0, 2]}})", ""), "/objects/0/box/size/1");
-  expectDocError(d, own(R"({"name": "p", "plane": {"size": "big"}})", ""), "/objects/0/plane/size");
-  expectDocError(d, own(R"({"name": "p", "plane": 3})", ""), "/objects/0/plane");
-  expectDocError(d, own(R"({"name": "s", "sphere": {}, "structure": "x.dkdt"})", ""), "/objects/0/structure");
   expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": 5})", ""),
                  "/objects/0/structure");
   expectDocError(d, own(R"({"name": "c", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "none.dkdt"})", ""),
@@ -635,50 +466,6 @@ TEST(SceneDocumentOwn, EditsThatTheGraphRefusesNameTheEditAndChangeNothing) {
 }
 
 // ---- prepared structures ----
-
-TEST(SceneDocumentStructures, SavedStructuresAreLoadedInsteadOfBuilt) {
-  SceneDir d;
-  const std::string objs = kCube + "," + kTetra + R"(, {"name": "ball", "sphere": {"subdivisions": 2}})";
-  const auto path = d.write(own(objs, R"({"instance": "a", "object": "cube"}, {"instance": "b", "object": "tetra"})"));
-  const SceneDocument built = loadSceneDocument(path, builtinObjectTypes());
-  EXPECT_EQ(built.figures.structures_loaded, 0u);
-  const auto files = saveStructures(built, d.scenes / "prepared");
-  ASSERT_EQ(files.size(), 3u);
-  EXPECT_EQ(files[0].filename(), "0_cube.dkdt");
-  EXPECT_EQ(files[1].filename(), "1_tetra.dkdt");
-  const std::string prepared =
-      R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/0_cube.dkdt"},)"
-      R"({"name": "tetra", "mesh": )" +
-      nlohmann::json::parse(kTetra)["mesh"].dump() + R"(, "structure": "prepared/1_tetra.dkdt"})";
-  for (const std::string format : {"duplex-scene-v1", "scene-json-v1"}) {
-    SCOPED_TRACE(format);
-    const auto p2 =
-        d.write(R"({"format": ")" + format + R"(", "objects": [)" + prepared + R"(], "instances": [], "nodes": []})",
-                format + ".json");
-    if (format == std::string("duplex-scene-v1")) {
-      // "instances" is not a key of the own format.
-      expectError([&] { (void)loadSceneDocument(p2, builtinObjectTypes()); }, p2, "/instances", "unknown key");
-      d.write(own(prepared, ""), format + ".json");
-    }
-    const SceneDocument loaded = loadSceneDocument(p2, builtinObjectTypes());
-    EXPECT_EQ(loaded.figures.structures_loaded, 2u);
-    for (int k = 0; k < 2; ++k) {
-      const auto& a = dynamic_cast<const MeshObject&>(*built.graph->library().get(built.objects[k]));
-      const auto& b = dynamic_cast<const MeshObject&>(*loaded.graph->library().get(loaded.objects[k]));
-      EXPECT_EQ(a.tree().prim_indices, b.tree().prim_indices);
-      EXPECT_EQ(a.tree().nodes.size(), b.tree().nodes.size());
-    }
-    SceneDocumentOptions no_structures;
-    no_structures.use_structures = false;
-    EXPECT_EQ(loadSceneDocument(p2, builtinObjectTypes(), no_structures).figures.structures_loaded, 0u);
-  }
-  // A structure saved for another mesh is refused: the scene file, the entry and the structure file.
-  const auto wrong = d.write(
-      own(R"({"name": "cube", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared/1_tetra.dkdt"})", ""),
-      "wrong.json");
-  expectError([&] { (void)loadSceneDocument(wrong, builtinObjectTypes()); }, wrong, "/objects/0/structure",
-              "1_tetra.dkdt");
-}
 
 // ---- the registry ----
 

@@ -6,7 +6,7 @@
 //
 // The values are bit for bit those of isQueryable, KdRay, WatertightRay and clipRayToBox (accel /
 // objects headers; only the sign of a zero tmin / tmax may differ, which no comparison sees), as
-// tests/unit/MeshRaySetupTest.cpp checks; only the way they are computed differs: two vector
+// objects/mesh/tests/MeshRaySetupTest.cpp checks; only the way they are computed differs: two vector
 // divisions instead of six scalar ones, the three slabs of the box at once, one branch for the
 // validity checks, and no dispatch per ray together with the run-time permutation of the
 // triangle test (docs/kdtree.md, "Traversal").

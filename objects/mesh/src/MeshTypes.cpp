@@ -21,7 +21,7 @@ namespace {
 // The scene load reads each mesh file once, in parallel with the others, before any build.
 constexpr std::string_view kMeshFileKind = "mesh";
 
-std::shared_ptr<const void> readMeshFile(const std::filesystem::path& file, SceneLoadCache& cache) {
+std::shared_ptr<const TriangleMesh> readMeshFile(const std::filesystem::path& file, SceneLoadCache& cache) {
   MeshLoadReport report;
   auto mesh = std::make_shared<const TriangleMesh>(loadMesh(file, &report));
   cache.addCount("complex_edge_warnings", report.complex_edge_warnings);
@@ -48,13 +48,10 @@ ObjectSpecResult readMesh(const json& spec, const ObjectSpecContext& ctx) {
     // scene-json-v1: "file" wins over inline arrays; the own format refuses both at once.
     ctx.onlyKeys(spec, p, {"file"});
     const std::filesystem::path file = ctx.resolve(ctx.string(spec["file"], p + "/file"));
-    ctx.cache->requestFile(kMeshFileKind, file, readMeshFile);
+    ctx.cache->requestFile<TriangleMesh>(kMeshFileKind, file, readMeshFile);
     // Entries naming the same file (and the same structure) share one object.
-    std::error_code ec;
-    auto key = std::filesystem::weakly_canonical(file, ec);
-    if (ec) key = file;
-    std::string share_key = "mesh:" + key.string();
-    if (ctx.structure) share_key += "|structure:" + std::filesystem::weakly_canonical(*ctx.structure, ec).string();
+    std::string share_key = "mesh:" + SceneLoadCache::fileKey(file).string();
+    if (ctx.structure) share_key += "|structure:" + SceneLoadCache::fileKey(*ctx.structure).string();
     return ObjectLibrary::Factory([ctx, file, share_key] {
       return ctx.cache->shared(share_key,
                                [&] { return meshObjectFor(ctx.cache->file<TriangleMesh>(kMeshFileKind, file), ctx); });

@@ -167,9 +167,8 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
 }  // namespace
 
 SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocumentOptions& options,
-                              const ObjectTypeRegistry* registry) {
-  auto doc =
-      std::make_unique<SceneDocument>(loadSceneDocument(path, registry ? *registry : sensorTypeRegistry(), options));
+                              const ObjectTypeRegistry& registry) {
+  auto doc = std::make_unique<SceneDocument>(loadSceneDocument(path, registry, options));
   const json& root = *doc->parsed;
   ObjectSpecContext ctx;
   ctx.scene_file = path;

@@ -101,7 +101,7 @@ struct SceneDocument {
 
 /// Reads `path` (either format, by its "format" key). Objects are read through `registry` (e.g.
 /// duplex::builtinObjectTypes(), or duplex::sensorTypeRegistry() with sensors); their
-/// bottom-level structures are built (or loaded) in parallel, each mesh file read once and objects of
+/// bottom-level structures are built (or loaded) in parallel, each file a type requests read once and objects of
 /// the same source built once, before the instances are added; then the graph is committed. Throws
 /// FileError naming the file and the JSON pointer of the first problem (objects: the first in file
 /// order whose build failed).

@@ -17,6 +17,7 @@
 #include "duplex/sensors/Light.h"
 #include "duplex/sensors/Material.h"
 #include "duplex/sensors/SensorObject.h"
+#include "duplex/sensors/SensorTypes.h"
 
 #include <cstdint>
 #include <filesystem>
@@ -62,13 +63,12 @@ struct MediumInstance {
 
 class SensorScene {
  public:
-  /// Reads `path` (either format) with the object types of `registry` (nullptr:
-  /// sensorTypeRegistry(), the built-in types and the sensor type), plus its lights, sensors and
-  /// materials. Throws FileError naming the file and the JSON pointer of the first problem (a light
+  /// Reads `path` (either format) with the object types of `registry` (sensorTypeRegistry(): the
+  /// built-in types and the sensor type), plus its lights, sensors and materials. Throws FileError naming the file and the JSON pointer of the first problem (a light
   /// with zero or negative power, a malformed sensor, an unknown material, ...), and
   /// InvalidArgument-derived FileErrors for duplicate sensor names.
   static SensorScene load(const std::filesystem::path& path, const SceneDocumentOptions& options = {},
-                          const ObjectTypeRegistry* registry = nullptr);
+                          const ObjectTypeRegistry& registry = sensorTypeRegistry());
 
   /// A scene over a committed `graph` (kept by reference: it must outlive this scene and must not
   /// be edited while a run traces it). `materials` is indexed by ObjectId; objects beyond its end
