@@ -1,7 +1,7 @@
 // The crossing query of light transport (TopLevel::intersectWithCrossings): one closest-hit
 // traversal of the top level that also collects sensor crossings and the media the ray passes.
 //
-// Sensors live in a level of their own (TopLevel::sensors_): the first traversal, of the other
+// Sensors live in a tree of their own (TopLevel::sensors_, an InstanceTree): the first traversal, of the other
 // instances, finds the closest blocking hit and the media; the second walks the sensors' tree only
 // up to that hit (a sensor behind a wall costs nothing): through a uniform grid over the sensors'
 // boxes (SensorGrid.h, TopLevelConfig::sensor_grid) or else their shallow kd-tree, whose leaves'
@@ -13,7 +13,9 @@
 // Media met along the way are kept and their transmittance is applied segment by segment between
 // the sorted crossings, so each medium is integrated once over [tnear, t_hit].
 
-#include "TopLevelState.h"
+#include "duplex/accel/TopLevel.h"
+
+#include "InstanceTreeState.h"
 
 #include <algorithm>
 
@@ -49,12 +51,13 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   ++ctx.stats.rays;
   crossings.clear();
   SegmentEnd end;
+  const KdTree& tree = blocking_.tree_;
   const bool have_sensors = sensors_ && !sensors_->tree_.empty();
-  if (!isQueryable(ray_ws) || (tree_.empty() && !have_sensors)) return end;
+  if (!isQueryable(ray_ws) || (tree.empty() && !have_sensors)) return end;
   const WorldRay w = fromFloat(ray_ws);
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  const Box* boxes = state_->boxes.data();
+  const Record* records = blocking_.state_->records.data();
+  const SlotFilter* filters = blocking_.state_->filters.data();
+  const Box* boxes = blocking_.state_->boxes.data();
   CrossingScratch& scratch_lists = ctx.cached<CrossingScratch>(&kScratchKey, [] { return CrossingScratch{}; });
   std::vector<const Record*>& media = scratch_lists.media;
   std::vector<Hit>& scratch = scratch_lists.hits;
@@ -87,11 +90,11 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   Mailbox mailbox;
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
-  if (!tree_.empty())
-    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
+  if (!tree.empty())
+    traverseKdTree<false>(tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
       bool found = false;
       for (std::uint32_t i = begin; i < begin + count; ++i) {
-        const std::uint32_t slot = tree_.prim_indices[i];
+        const std::uint32_t slot = tree.prim_indices[i];
         // Surfaces and media only: sensors live in the sensors' level, walked below.
         const SlotFilter f = filters[slot];
         const std::uint32_t role_mask = f.role == ObjectRole::Surface  ? query.surface_mask
@@ -125,7 +128,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   // (one contiguous run, four boxes per test) and tested first: most references a ray meets are
   // missed, and a miss then reads nothing else (filter, mailbox and record come after).
   if (have_sensors && query.sensor_mask != 0) {
-    const State& ss = *sensors_->state_;
+    const InstanceTree::State& ss = *sensors_->state_;
     const KdTree& s_tree = sensors_->tree_;
     const std::uint32_t* s_prims = s_tree.prim_indices.data();
     const Record* s_records = ss.records.data();
@@ -176,7 +179,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
         prefetchLine(rec + sizeof(Record) - 1);
       }
     };
-    const bool by_grid = leaf_boxes && config_.sensor_grid && ss.grid.usable() &&
+    const bool by_grid = leaf_boxes && config().sensor_grid && ss.grid.usable() &&
                          ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met,
                                             visitEntry, grid_planes, prefetchRecords);
     float t_limit = t_keep;

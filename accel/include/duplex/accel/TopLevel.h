@@ -15,6 +15,7 @@
 /// set() / remove() / commit() / build() run (the caller serialises them; SceneTracer does).
 
 #include "duplex/accel/Affine.h"
+#include "duplex/accel/InstanceTree.h"
 #include "duplex/accel/Crossing.h"
 #include "duplex/accel/Hit.h"
 #include "duplex/accel/KdBuildConfig.h"
@@ -32,77 +33,6 @@
 
 namespace duplex {
 
-namespace toplevel_detail {
-struct WorldRay;  // the world ray in float and double (src/TopLevelState.h)
-}  // namespace toplevel_detail
-
-/// One instance as the top level sees it.
-struct InstanceDesc {
-  std::shared_ptr<const Object> object;
-  Affine world_from_object;
-  std::uint32_t id = 0;              ///< the caller's id, reported in Hit::instance_id; unique
-  std::uint32_t mask = 0xFFFFFFFFu;  ///< user bits; a query sees the instance when (mask & query mask) != 0
-};
-
-/// How commit() brings the tree up to date.
-enum class TopLevelUpdate : std::uint8_t {
-  /// Re-insert only the edited instances into the leaves their old and new boxes touch; rebuild a
-  /// subtree when its leaves overflow, and the whole tree when its SAH cost drifts above the cost
-  /// of a fresh build by more than TopLevelConfig::rebuild_ratio.
-  Incremental,
-  /// Rebuild the whole tree on every commit that changed something (the paper's method; the
-  /// baseline of the update benchmark).
-  FullRebuild,
-};
-
-/// The top level's build defaults: an instance test (ray transform, bottom-level setup and
-/// traversal) costs far more than a triangle test, so the intersection cost is 1 node step rather
-/// than the bottom level's 0.1. Measured (primary and random rays, koala split into 19 and 6,804
-/// objects, 1,000 hammers, the robot): 0.1 is 1.3-2.2x slower to trace than 1; 2 and 4 trace no
-/// faster than 1 on most scenes but reference each instance 12-17 times and build 2-3x slower.
-inline KdBuildConfig topLevelBuildDefaults() {
-  KdBuildConfig c;
-  c.intersection_cost = 1.0f;
-  return c;
-}
-
-/// The sensors' level's build defaults (TopLevelConfig::sensor_build). Its leaves are tested 16, 8
-/// or 4 boxes at a time from a leaf-ordered copy of the boxes (no instance record is read unless a box
-/// is met), which costs far less than a node step, and a small sensor gains little from an
-/// empty-space cut, which costs every ray passing near it a node step. So: intersection cost 0.05
-/// and no empty bonus, a shallow tree with leaves of several sensors. Measured on the benchmark's
-/// 10,000 small sensors (docs/sensors.md, "Speed"): crossing query 0.55x the time with the
-/// top-level defaults (1, 0.2); flat from 0.02 to 0.05, 0.61x at 0.1, 0.75x at 0.3.
-inline KdBuildConfig sensorLevelBuildDefaults() {
-  KdBuildConfig c;
-  c.intersection_cost = 0.05f;
-  c.empty_bonus = 0.0f;
-  return c;
-}
-
-struct TopLevelConfig {
-  KdBuildConfig build = topLevelBuildDefaults();  ///< for full and subtree builds
-  /// The same for the sensors' own level (see TopLevel); build() with an explicit configuration
-  /// sets `build` only.
-  KdBuildConfig sensor_build = sensorLevelBuildDefaults();
-  /// The crossing query walks a uniform grid over the sensors' boxes instead of their kd-tree
-  /// when the level holds many sensors (at least 256, each spanning few cells) and the ray's
-  /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
-  /// "The crossing query"). false: always the kd-tree (for comparisons).
-  bool sensor_grid = true;
-  TopLevelUpdate update = TopLevelUpdate::Incremental;
-  /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
-  /// scaled to the current instance count).
-  double rebuild_ratio = 1.05;
-  /// A leaf that grows past this many references is rebuilt as a subtree.
-  std::uint32_t leaf_split_size = 8;
-  /// Below this many instances every commit rebuilds the whole tree (it costs microseconds).
-  std::size_t min_incremental_instances = 16;
-  /// A commit that edits more than this fraction of the instances rebuilds the whole tree: cheaper
-  /// than as many re-insertions, and a better tree.
-  double max_incremental_fraction = 0.125;
-};
-
 /// Figures of the current tree and of the last commit (for tests and the benchmark).
 struct TopLevelStats {
   std::size_t instances = 0;
@@ -114,7 +44,7 @@ struct TopLevelStats {
   std::uint64_t subtree_rebuilds = 0;
   std::size_t last_commit_edits = 0;  ///< instances set or removed by the last commit
   /// Nodes of tree().nodes that no traversal reaches: subtrees that a local rebuild replaced,
-  /// dropped when the tree is compacted (TopLevelRefine.cpp).
+  /// dropped when the tree is compacted (InstanceTreeRefine.cpp).
   std::size_t garbage_nodes = 0;
   bool last_commit_full_rebuild = false;
   /// The sensors' own tree (see TopLevel): its instances and figures. `instances` and `tree` above
@@ -143,7 +73,7 @@ class TopLevel {
   TopLevel(TopLevel&&) noexcept = default;
   TopLevel& operator=(TopLevel&&) noexcept = default;
 
-  [[nodiscard]] const TopLevelConfig& config() const { return config_; }
+  [[nodiscard]] const TopLevelConfig& config() const { return blocking_.config(); }
   /// Takes effect at the next build or commit; validated as in the constructor.
   void setConfig(const TopLevelConfig& config);
 
@@ -190,7 +120,7 @@ class TopLevel {
   /// blocking instance (role Surface) is hit within the segment, else the product of the
   /// transmittances of every medium instance (role Medium) the segment crosses, each counted once
   /// (Object::transmittance on the object-space ray, same t). Sensors are ignored. 1 for a ray that
-  /// cannot be queried (NaN, zero direction) or an empty scene. Defined in TopLevelTransmittance.cpp.
+  /// cannot be queried (NaN, zero direction) or an empty scene. Defined in InstanceTreeTransmittance.cpp.
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Light transport's query, in one traversal: the closest blocking hit of a world-space ray among
   /// instances selected by query.surface_mask, and in `crossings` (cleared first) every crossing of
@@ -217,43 +147,24 @@ class TopLevel {
   /// World-space bounds of everything, sensors included (last commit).
   [[nodiscard]] Box bounds() const;
   /// Instances of the last commit, sensors included.
-  [[nodiscard]] std::size_t size() const { return live_count_ + (sensors_ ? sensors_->size() : 0); }
+  [[nodiscard]] std::size_t size() const { return blocking_.size() + (sensors_ ? sensors_->size() : 0); }
   /// The tree over every instance except sensors (idAt() maps its slots to ids).
-  [[nodiscard]] const KdTree& tree() const { return tree_; }
-  /// The sensors' own level (nullptr before the first sensor arrives); its tree() and idAt() are
+  [[nodiscard]] const KdTree& tree() const { return blocking_.tree(); }
+  /// The sensors' own tree (nullptr before the first sensor arrives); its tree() and idAt() are
   /// those of the sensor instances.
-  [[nodiscard]] const TopLevel* sensorLevel() const { return sensors_.get(); }
+  [[nodiscard]] const InstanceTree* sensorLevel() const { return sensors_.get(); }
   [[nodiscard]] TopLevelStats stats() const;
   /// Bytes the top level holds per instance, excluding tree references (instance record and id map).
   [[nodiscard]] static std::size_t bytesPerInstance();
 
  private:
-  struct State;  // instance records, id map, pending edits, leaf bookkeeping (TopLevel.cpp)
-  struct SensorLevelTag {};
-  TopLevel(const TopLevelConfig& config, SensorLevelTag);  // the nested level: keeps every role
-  [[nodiscard]] bool isSensorLevel() const { return !separate_sensors_; }
-  TopLevel& sensorLevelForEdit();
-  void buildHere(std::span<const InstanceDesc> instances, const KdBuildConfig& config);
-  void setHere(const InstanceDesc& instance);
-  void removeHere(std::uint32_t id);
-  [[nodiscard]] bool containsHere(std::uint32_t id) const;
-  void commitHere();
-  void collectAllHere(const toplevel_detail::WorldRay& w, std::vector<Hit>& hits, QueryContext& ctx,
-                      std::uint32_t mask) const;
-  void fullRebuild();
-  void install(KdTree&& tree);
-  void commitEdits();
-  void compact();
-  Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
+  InstanceTree& sensorLevelForEdit();
   void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
                         std::uint32_t mask) const;
-  TopLevelConfig config_;
-  KdTree tree_;
-  std::size_t live_count_ = 0;
-  std::shared_ptr<State> state_;
-  /// Sensor instances, in a nested level of their own (see the class comment).
-  std::unique_ptr<TopLevel> sensors_;
-  bool separate_sensors_ = true;  // false in the nested level itself
+  /// Surfaces and media; its config() is this top level's.
+  InstanceTree blocking_;
+  /// Sensor instances, in a tree of their own (see the class comment).
+  std::unique_ptr<InstanceTree> sensors_;
 };
 
 }  // namespace duplex
