@@ -128,7 +128,7 @@ namespace toplevel_detail {
 void validateConfig(const TopLevelConfig& c) {
   auto bad = [](const std::string& what) { throw InvalidArgument("top level configuration: " + what); };
   validateBuild(c.build, "");
-  validateBuild(c.sensor_build, "sensor_build.");
+  validateBuild(c.crossing_build, "crossing_build.");
   if (!(c.rebuild_ratio >= 1.0)) bad("rebuild_ratio must be at least 1");
   if (!(c.max_incremental_fraction >= 0.0)) bad("max_incremental_fraction must not be negative");
   if (c.leaf_split_size < 1) bad("leaf_split_size must be at least 1");
@@ -139,14 +139,14 @@ void validateConfig(const TopLevelConfig& c) {
 // ---------------------------------------------------------------------------------------------
 // Edits
 
-// A crossing tree builds with the non-blocking instances' configuration (TopLevelConfig::sensor_build).
+// A crossing tree builds with the non-blocking instances' configuration (TopLevelConfig::crossing_build).
 InstanceTree::InstanceTree(const TopLevelConfig& config, Kind kind) : config_(config), kind_(kind) {
-  if (kind_ == Kind::Crossing) config_.build = config.sensor_build;
+  if (kind_ == Kind::Crossing) config_.build = config.crossing_build;
 }
 
 void InstanceTree::setConfig(const TopLevelConfig& config) {
   config_ = config;
-  if (kind_ == Kind::Crossing) config_.build = config.sensor_build;
+  if (kind_ == Kind::Crossing) config_.build = config.crossing_build;
 }
 
 void InstanceTree::ensureState() {

@@ -10,7 +10,7 @@
 #include "duplex/accel/InstanceTree.h"
 #include "FlatPlane.h"
 #include "LeafBoxes.h"
-#include "SensorGrid.h"
+#include "CrossingGrid.h"
 
 #include <glm/matrix.hpp>
 
@@ -224,9 +224,9 @@ struct InstanceTree::State {
   // Crossing trees only (InstanceTree::Kind::Crossing): the boxes in leaf order (LeafBoxes.h), refreshed after every
   // commit and build (O(references)); a count that differs from tree.prim_indices (a failed commit) means "not
   // available", and the crossing query reads `boxes` by slot instead. With them, a uniform grid over the same boxes
-  // (SensorGrid.h), refreshed at the same times.
+  // (CrossingGrid.h), refreshed at the same times.
   toplevel_detail::LeafBoxes leaf_boxes;
-  toplevel_detail::SensorGrid grid;
+  toplevel_detail::CrossingGrid grid;
   std::vector<toplevel_detail::FlatPlane> flat;  // by slot: the flat instances' planes (FlatPlane.h)
   // By grid entry (grid.slots order): the same records, so that an entry whose box a ray meets is
   // filtered, mailboxed and plane-tested from one cache line (slot and mask packed in the record)

@@ -22,26 +22,26 @@ using namespace toplevel_detail;
 
 namespace {
 
-bool isSensor(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Sensor; }
+bool isCrossing(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Sensor; }
 
 }  // namespace
 
 TopLevel::TopLevel(const TopLevelConfig& config) : blocking_(config) { validateConfig(config); }
 
-InstanceTree& TopLevel::sensorLevelForEdit() {
-  if (!sensors_) sensors_ = std::make_unique<InstanceTree>(config(), InstanceTree::Kind::Crossing);
-  return *sensors_;
+InstanceTree& TopLevel::crossingLevelForEdit() {
+  if (!crossing_) crossing_ = std::make_unique<InstanceTree>(config(), InstanceTree::Kind::Crossing);
+  return *crossing_;
 }
 
 void TopLevel::setConfig(const TopLevelConfig& config) {
   validateConfig(config);
   blocking_.setConfig(config);
-  if (sensors_) sensors_->setConfig(config);
+  if (crossing_) crossing_->setConfig(config);
 }
 
 void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
-  const bool any_sensor = std::any_of(instances.begin(), instances.end(), isSensor);
-  if (!any_sensor && !sensors_) {
+  const bool any_crossing = std::any_of(instances.begin(), instances.end(), isCrossing);
+  if (!any_crossing && !crossing_) {
     blocking_.build(instances, config);
     return;
   }
@@ -52,15 +52,15 @@ void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfi
   ids.reserve(instances.size());
   for (const InstanceDesc& d : instances) {
     if (!ids.insert(d.id).second) throw InvalidArgument(describeInstance(d) + ": duplicate instance id");
-    (isSensor(d) ? sensors : others).push_back(d);
+    (isCrossing(d) ? sensors : others).push_back(d);
   }
   TopLevelConfig c = this->config();
   c.build = config;
   validateConfig(c);
   auto level = std::make_unique<InstanceTree>(c, InstanceTree::Kind::Crossing);
-  level->build(sensors, c.sensor_build);
+  level->build(sensors, c.crossing_build);
   blocking_.build(others, config);
-  sensors_ = std::move(level);
+  crossing_ = std::move(level);
 }
 
 void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances, config().build); }
@@ -68,36 +68,36 @@ void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances,
 void TopLevel::set(const InstanceDesc& instance) {
   // Set in the tree the instance belongs to first (it validates and throws before recording
   // anything), then take it out of the other one (an object that changed role moves).
-  if (isSensor(instance)) {
+  if (isCrossing(instance)) {
     blocking_.ensureState();  // queries read the (empty) records of the blocking tree
-    sensorLevelForEdit().set(instance);
+    crossingLevelForEdit().set(instance);
     if (blocking_.contains(instance.id)) blocking_.remove(instance.id);
     return;
   }
   blocking_.set(instance);
-  if (sensors_ && sensors_->contains(instance.id)) sensors_->remove(instance.id);
+  if (crossing_ && crossing_->contains(instance.id)) crossing_->remove(instance.id);
 }
 
 void TopLevel::remove(std::uint32_t id) {
   if (blocking_.contains(id)) {
     blocking_.remove(id);
-  } else if (sensors_ && sensors_->contains(id)) {
-    sensors_->remove(id);
+  } else if (crossing_ && crossing_->contains(id)) {
+    crossing_->remove(id);
   } else {
     throw InvalidArgument("top level: remove of instance " + std::to_string(id) + ", which is not present");
   }
 }
 
 bool TopLevel::contains(std::uint32_t id) const {
-  return blocking_.contains(id) || (sensors_ && sensors_->contains(id));
+  return blocking_.contains(id) || (crossing_ && crossing_->contains(id));
 }
 
 void TopLevel::commit() {
   // Both trees commit even when one throws (each then keeps its own promise, InstanceTree::commit).
   std::exception_ptr failure;
-  if (sensors_) {
+  if (crossing_) {
     try {
-      sensors_->commit();
+      crossing_->commit();
     } catch (...) {
       failure = std::current_exception();
     }
@@ -107,7 +107,7 @@ void TopLevel::commit() {
 }
 
 void TopLevel::rebuild() {
-  if (sensors_) sensors_->rebuild();
+  if (crossing_) crossing_->rebuild();
   blocking_.rebuild();
 }
 
@@ -143,14 +143,14 @@ void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vecto
   const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
   if (!blocking_.tree().empty()) blocking_.collectAll(w, hits, ctx, mask);
   // The sensors' tree answers the same query (one ray in the statistics, not two).
-  if (sensors_ && !sensors_->tree().empty()) sensors_->collectAll(w, hits, ctx, mask);
+  if (crossing_ && !crossing_->tree().empty()) crossing_->collectAll(w, hits, ctx, mask);
   sortHits(hits);
 }
 
 std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {
   checkRegionPlanes(planes);
   std::vector<std::uint32_t> out;
-  if (sensors_) sensors_->appendInRegion(planes, mask, out);
+  if (crossing_) crossing_->appendInRegion(planes, mask, out);
   blocking_.appendInRegion(planes, mask, out);
   std::sort(out.begin(), out.end());
   return out;
@@ -158,15 +158,15 @@ std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec
 
 const Affine& TopLevel::objectFromWorld(std::uint32_t id) const {
   if (const Affine* a = blocking_.findObjectFromWorld(id)) return *a;
-  if (sensors_)
-    if (const Affine* a = sensors_->findObjectFromWorld(id)) return *a;
+  if (crossing_)
+    if (const Affine* a = crossing_->findObjectFromWorld(id)) return *a;
   throw InvalidArgument("top level: unknown instance " + std::to_string(id));
 }
 
 Box TopLevel::instanceBounds(std::uint32_t id) const {
   if (const Box* b = blocking_.findBounds(id)) return *b;
-  if (sensors_)
-    if (const Box* b = sensors_->findBounds(id)) return *b;
+  if (crossing_)
+    if (const Box* b = crossing_->findBounds(id)) return *b;
   throw InvalidArgument("top level: unknown instance " + std::to_string(id));
 }
 
@@ -187,15 +187,15 @@ TopLevelStats TopLevel::stats() const {
     st.last_commit_full_rebuild = s->last_full;
     st.garbage_nodes = s->garbage_nodes;
   }
-  if (sensors_) {
-    st.sensor_instances = sensors_->size();
-    const KdBuildConfig& b = sensors_->config().build;
-    st.sensor_tree = sensors_->tree().stats(b.traversal_cost, b.intersection_cost);
-    if (const InstanceTree::State* s = sensors_->state_.get()) {
-      st.sensor_box_lanes = s->leaf_boxes.lanes;
-      if (config.sensor_grid && s->grid.usable()) {
-        st.sensor_grid_cells = std::size_t{s->grid.dims[0]} * s->grid.dims[1] * s->grid.dims[2];
-        st.sensor_grid_entries = s->grid.slots.size();
+  if (crossing_) {
+    st.crossing_instances = crossing_->size();
+    const KdBuildConfig& b = crossing_->config().build;
+    st.crossing_tree = crossing_->tree().stats(b.traversal_cost, b.intersection_cost);
+    if (const InstanceTree::State* s = crossing_->state_.get()) {
+      st.crossing_box_lanes = s->leaf_boxes.lanes;
+      if (config.crossing_grid && s->grid.usable()) {
+        st.crossing_grid_cells = std::size_t{s->grid.dims[0]} * s->grid.dims[1] * s->grid.dims[2];
+        st.crossing_grid_entries = s->grid.slots.size();
       }
     }
   }
@@ -204,8 +204,8 @@ TopLevelStats TopLevel::stats() const {
 
 Box TopLevel::bounds() const {
   Box b = blocking_.tree().bounds;
-  if (sensors_ && !sensors_->tree().empty()) {
-    const Box& o = sensors_->tree().bounds;
+  if (crossing_ && !crossing_->tree().empty()) {
+    const Box& o = crossing_->tree().bounds;
     b = blocking_.tree().empty() ? o : Box{glm::min(b.lo, o.lo), glm::max(b.hi, o.hi)};
   }
   return b;

@@ -63,14 +63,15 @@ inline KdBuildConfig topLevelBuildDefaults() {
   return c;
 }
 
-/// The sensors' level's build defaults (TopLevelConfig::sensor_build). Its leaves are tested 16, 8
+/// The crossing level's build defaults (TopLevelConfig::crossing_build), tuned for small flat
+/// non-blocking instances (light sensors). Its leaves are tested 16, 8
 /// or 4 boxes at a time from a leaf-ordered copy of the boxes (no instance record is read unless a box
 /// is met), which costs far less than a node step, and a small sensor gains little from an
 /// empty-space cut, which costs every ray passing near it a node step. So: intersection cost 0.05
 /// and no empty bonus, a shallow tree with leaves of several sensors. Measured on the benchmark's
 /// 10,000 small sensors (docs/sensors.md, "Speed"): crossing query 0.55x the time with the
 /// top-level defaults (1, 0.2); flat from 0.02 to 0.05, 0.61x at 0.1, 0.75x at 0.3.
-inline KdBuildConfig sensorLevelBuildDefaults() {
+inline KdBuildConfig crossingLevelBuildDefaults() {
   KdBuildConfig c;
   c.intersection_cost = 0.05f;
   c.empty_bonus = 0.0f;
@@ -79,14 +80,14 @@ inline KdBuildConfig sensorLevelBuildDefaults() {
 
 struct TopLevelConfig {
   KdBuildConfig build = topLevelBuildDefaults();  ///< for full and subtree builds
-  /// The same for the sensors' own level (see TopLevel); build() with an explicit configuration
+  /// The same for the crossing level (non-blocking instances, see TopLevel); build() with an explicit configuration
   /// sets `build` only.
-  KdBuildConfig sensor_build = sensorLevelBuildDefaults();
-  /// The crossing query walks a uniform grid over the sensors' boxes instead of their kd-tree
-  /// when the level holds many sensors (at least 256, each spanning few cells) and the ray's
+  KdBuildConfig crossing_build = crossingLevelBuildDefaults();
+  /// The crossing query walks a uniform grid over the crossing level's boxes instead of its
+  /// kd-tree when the level holds many instances (at least 256, each spanning few cells) and the ray's
   /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
   /// "The crossing query"). false: always the kd-tree (for comparisons).
-  bool sensor_grid = true;
+  bool crossing_grid = true;
   TopLevelUpdate update = TopLevelUpdate::Incremental;
   /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
   /// scaled to the current instance count).
@@ -107,7 +108,7 @@ class TopLevel;
 class InstanceTree {
  public:
   /// Which instances the tree holds. A crossing tree (non-blocking instances) builds with
-  /// TopLevelConfig::sensor_build and keeps, after every build and commit, a leaf-ordered copy of
+  /// TopLevelConfig::crossing_build and keeps, after every build and commit, a leaf-ordered copy of
   /// its boxes, the planes of its flat instances and a uniform grid, for the crossing query.
   enum class Kind : std::uint8_t { Blocking, Crossing };
 

@@ -4,10 +4,12 @@
 /// instances, built with the same builder and traversed with the same code as the bottom level,
 /// and updated incrementally when instances move, appear or disappear.
 ///
-/// Sensors (ObjectRole::Sensor) live in a second tree of their own, kept by the same rules: closest-
-/// hit, occlusion and transmittance queries never traverse it, so rendering costs the same with
-/// 10,000 sensors in the scene as without; intersectAll, instancesInRegion and the crossing query
-/// traverse both. An instance whose object changes role moves between the two on commit.
+/// Non-blocking instances (ObjectRole::Sensor: objects that record the rays crossing them, such as
+/// light sensors) live in a second tree of their own, the crossing level, kept by the same rules
+/// (both are InstanceTrees): closest-hit, occlusion and transmittance queries never traverse it, so
+/// rendering costs the same with 10,000 of them in the scene as without; intersectAll,
+/// instancesInRegion and the crossing query traverse both. An instance whose object changes role
+/// moves between the two on commit.
 ///
 /// Lifecycle (after Embree's edit -> commit -> trace): set() / remove() record edits; commit()
 /// applies them to the tree; queries see the state of the last commit. Queries are const and may
@@ -47,18 +49,18 @@ struct TopLevelStats {
   /// dropped when the tree is compacted (InstanceTreeRefine.cpp).
   std::size_t garbage_nodes = 0;
   bool last_commit_full_rebuild = false;
-  /// The sensors' own tree (see TopLevel): its instances and figures. `instances` and `tree` above
-  /// count the other instances only.
-  std::size_t sensor_instances = 0;
-  KdTreeStats sensor_tree;
-  /// The uniform grid the crossing query walks over the sensors (TopLevelConfig::sensor_grid):
-  /// its cells and entries (sensors times the cells each is listed in); 0 when it walks the tree.
-  std::size_t sensor_grid_cells = 0;
-  std::size_t sensor_grid_entries = 0;
-  /// Sensor boxes per vector test: 16 (AVX-512F), 8 (AVX2) or 4 (SSE2), the widest the CPU runs,
+  /// The crossing level (non-blocking instances, see TopLevel): its instances and figures.
+  /// `instances` and `tree` above count the other instances only.
+  std::size_t crossing_instances = 0;
+  KdTreeStats crossing_tree;
+  /// The uniform grid the crossing query walks over the crossing level (TopLevelConfig::crossing_grid):
+  /// its cells and entries (instances times the cells each is listed in); 0 when it walks the tree.
+  std::size_t crossing_grid_cells = 0;
+  std::size_t crossing_grid_entries = 0;
+  /// Crossing-level boxes per vector test: 16 (AVX-512F), 8 (AVX2) or 4 (SSE2), the widest the CPU runs,
   /// capped by the environment variable DUPLEX_ISA ("sse2", "avx2") when the level was last
-  /// committed; 1 on other CPUs or without sensors.
-  std::uint32_t sensor_box_lanes = 1;
+  /// committed; 1 on other CPUs or without non-blocking instances.
+  std::uint32_t crossing_box_lanes = 1;
 };
 
 class TopLevel {
@@ -124,11 +126,11 @@ class TopLevel {
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Light transport's query, in one traversal: the closest blocking hit of a world-space ray among
   /// instances selected by query.surface_mask, and in `crossings` (cleared first) every crossing of
-  /// a sensor instance selected by query.sensor_mask with t in [tnear, hit t (1 + kCrossingSlack)]
+  /// a sensor instance selected by query.crossing_mask with t in [tnear, hit t (1 + kCrossingSlack)]
   /// (all of [tnear, tfar] on a miss), each once, sorted by t (ties by instance id), with the
   /// transmittance of the media selected by query.medium_mask from tnear to each crossing and to
   /// the hit. Defined in TopLevelCrossings.cpp.
-  [[nodiscard]] SegmentEnd intersectWithCrossings(const Ray& ray_ws, std::vector<SensorCrossing>& crossings,
+  [[nodiscard]] SegmentEnd intersectWithCrossings(const Ray& ray_ws, std::vector<Crossing>& crossings,
                                                   QueryContext& ctx, const CrossingQuery& query = {}) const;
   /// Ids of the instances whose world box meets the convex region {x : dot(n_i, x) <= d_i for all
   /// planes}, planes given as (n.x, n.y, n.z, d) in world space, mask-filtered; sorted by id. The
@@ -144,27 +146,27 @@ class TopLevel {
   /// The id of the instance that tree().prim_indices entry `slot` refers to (for tests and tools);
   /// kInvalidId for a free slot.
   [[nodiscard]] std::uint32_t idAt(std::uint32_t slot) const;
-  /// World-space bounds of everything, sensors included (last commit).
+  /// World-space bounds of everything, non-blocking instances included (last commit).
   [[nodiscard]] Box bounds() const;
-  /// Instances of the last commit, sensors included.
-  [[nodiscard]] std::size_t size() const { return blocking_.size() + (sensors_ ? sensors_->size() : 0); }
-  /// The tree over every instance except sensors (idAt() maps its slots to ids).
+  /// Instances of the last commit, non-blocking ones included.
+  [[nodiscard]] std::size_t size() const { return blocking_.size() + (crossing_ ? crossing_->size() : 0); }
+  /// The tree over the blocking and medium instances (idAt() maps its slots to ids).
   [[nodiscard]] const KdTree& tree() const { return blocking_.tree(); }
-  /// The sensors' own tree (nullptr before the first sensor arrives); its tree() and idAt() are
-  /// those of the sensor instances.
-  [[nodiscard]] const InstanceTree* sensorLevel() const { return sensors_.get(); }
+  /// The crossing level: the tree of the non-blocking instances (nullptr before the first one
+  /// arrives); its tree() and idAt() are those of these instances.
+  [[nodiscard]] const InstanceTree* crossingLevel() const { return crossing_.get(); }
   [[nodiscard]] TopLevelStats stats() const;
   /// Bytes the top level holds per instance, excluding tree references (instance record and id map).
   [[nodiscard]] static std::size_t bytesPerInstance();
 
  private:
-  InstanceTree& sensorLevelForEdit();
+  InstanceTree& crossingLevelForEdit();
   void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
                         std::uint32_t mask) const;
   /// Surfaces and media; its config() is this top level's.
   InstanceTree blocking_;
-  /// Sensor instances, in a tree of their own (see the class comment).
-  std::unique_ptr<InstanceTree> sensors_;
+  /// Non-blocking instances, in a tree of their own (see the class comment).
+  std::unique_ptr<InstanceTree> crossing_;
 };
 
 }  // namespace duplex
