@@ -11,8 +11,8 @@
 /// sensors (what adding the sensors costs in all).
 ///
 /// "sensor_level": the crossing query alone on the 10,000 small sensors: the sensors' tree built
-/// with several SAH parameters (TopLevelConfig::sensor_build, sensor_grid off) and the shipped
-/// walk (the uniform grid, TopLevelConfig::sensor_grid), CPU time per query against the main
+/// with several SAH parameters (TopLevelConfig::crossing_build, crossing_grid off) and the shipped
+/// walk (the uniform grid, TopLevelConfig::crossing_grid), CPU time per query against the main
 /// level's tree defaults (sensorLevelSweep; --sweep-segments 0 skips it).
 ///
 /// "convergence": two configurations with exact answers, the relative error of the total flux
@@ -230,12 +230,12 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
   }
   const double t_with = median(with), t_without = median(without);
   const TopLevelStats top = setup->scene->tracer().topLevel().stats();
-  nlohmann::json sensorLevel = treeJson(top.sensor_tree);
-  sensorLevel["grid_cells"] = top.sensor_grid_cells;
-  sensorLevel["grid_entries"] = top.sensor_grid_entries;
+  nlohmann::json crossingLevel = treeJson(top.crossing_tree);
+  crossingLevel["grid_cells"] = top.crossing_grid_cells;
+  crossingLevel["grid_entries"] = top.crossing_grid_entries;
   return {{"sensors", sensors},
           {"top_level", treeJson(top.tree)},
-          {"sensor_level", sensorLevel},
+          {"sensor_level", crossingLevel},
           {"bins", setup->scene->binCount()},
           {"instances", setup->graph.instances().size()},
           {"meshes", meshes},
@@ -258,9 +258,9 @@ nlohmann::json overhead(std::size_t sensors, std::uint64_t rays, unsigned thread
 
 /// "sensor_level": the crossing query alone on the overhead scene's 10,000 small sensors (no
 /// meshes), with the sensors' tree built with several intersection costs and empty bonuses
-/// (TopLevelConfig::sensor_build, walked without the grid), and as shipped (the grid): process CPU time per query (best
-/// of `repeat` interleaved rounds; CPU time, because the machine may be shared) on wall-to-wall segments of the room,
-/// each from a random wall point (by area) in a cosine-distributed direction, as diffuse bounces leave.
+/// (TopLevelConfig::crossing_build, walked without the grid), and as shipped (the grid): process CPU time per query
+/// (best of `repeat` interleaved rounds; CPU time, because the machine may be shared) on wall-to-wall segments of the
+/// room, each from a random wall point (by area) in a cosine-distributed direction, as diffuse bounces leave.
 nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int repeat) {
   SensorSpec spec;
   spec.width = 0.1;
@@ -299,9 +299,9 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   }
   struct Variant {
     float intersection_cost, empty_bonus;
-    bool grid;  // TopLevelConfig::sensor_grid: the uniform grid instead of the tree
+    bool grid;  // TopLevelConfig::crossing_grid: the uniform grid instead of the tree
   };
-  const KdBuildConfig shipped = sensorLevelBuildDefaults(), main_level = topLevelBuildDefaults();
+  const KdBuildConfig shipped = crossingLevelBuildDefaults(), main_level = topLevelBuildDefaults();
   const std::vector<Variant> variants{{main_level.intersection_cost, main_level.empty_bonus, false},
                                       {0.3f, 0.0f, false},
                                       {0.1f, 0.0f, false},
@@ -313,9 +313,9 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   std::vector<std::unique_ptr<TopLevel>> tops;
   for (const Variant& v : variants) {
     TopLevelConfig c;
-    c.sensor_build.intersection_cost = v.intersection_cost;
-    c.sensor_build.empty_bonus = v.empty_bonus;
-    c.sensor_grid = v.grid;
+    c.crossing_build.intersection_cost = v.intersection_cost;
+    c.crossing_build.empty_bonus = v.empty_bonus;
+    c.crossing_grid = v.grid;
     tops.push_back(std::make_unique<TopLevel>(c));
     tops.back()->build(instances);
   }
@@ -324,7 +324,7 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   for (int round = 0; round < repeat; ++round) {
     for (std::size_t k = 0; k < tops.size(); ++k) {
       QueryContext ctx;
-      std::vector<SensorCrossing> found;
+      std::vector<Crossing> found;
       std::uint64_t n = 0;
       const std::clock_t c0 = std::clock();
       for (const Ray& r : rays) {
@@ -338,12 +338,12 @@ nlohmann::json sensorLevelSweep(std::size_t sensors, std::size_t segments, int r
   nlohmann::json rows = nlohmann::json::array();
   for (std::size_t k = 0; k < variants.size(); ++k) {
     const TopLevelStats tst = tops[k]->stats();
-    const KdTreeStats& st = tst.sensor_tree;
+    const KdTreeStats& st = tst.crossing_tree;
     rows.push_back({{"intersection_cost", variants[k].intersection_cost},
                     {"empty_bonus", variants[k].empty_bonus},
                     {"grid", variants[k].grid},
-                    {"grid_cells", tst.sensor_grid_cells},
-                    {"grid_entries", tst.sensor_grid_entries},
+                    {"grid_cells", tst.crossing_grid_cells},
+                    {"grid_entries", tst.crossing_grid_entries},
                     {"shipped", k + 1 == variants.size()},
                     {"nodes", st.nodes},
                     {"references", st.references},

@@ -1,40 +1,20 @@
-// The top level: a kd-tree over instance world boxes, kept up to date incrementally.
-//
-// Incremental update (commit): an edited instance is routed through the split planes with its old
-// and new world boxes; it leaves the leaves only the old box touches and joins the leaves only the
-// new box touches. A leaf that gains references is re-split by a small SAH build over its own
-// references (clipped to its cell) when it overflows or when it now holds empty space worth cutting
-// off; the subtree is appended to the node array and the leaf becomes a jump node to it, so no
-// other node moves. Local builds are redone when their boxes change: a small jump subtree that lost
-// a quarter of its references is rebuilt over the rest, and a frontier subtree of the last full
-// build (max(1,024, 1/64) of the references, at most 1/8) is rebuilt once edits changed 5% of its
-// references, one per commit as the edits pay for it (TopLevelRefine.cpp); replaced nodes are
-// garbage until the tree is compacted depth first. The SAH cost of the tree is tracked per edit
-// and per refinement, and made exact (with the root shrunk to its boxes) every 32 commits or
-// before a rebuild decision; when it exceeds the cost of the last full build by
-// TopLevelConfig::rebuild_ratio, the instance count drifted far from that build's, or the tree
-// grew to 4 times its nodes or references, the whole tree is rebuilt. A leaf that grows is moved to the end of the
-// index list (its old range becomes garbage, compacted when garbage outweighs live references), so an edit costs
-// O(leaves touched), independent of the scene size, apart from the amortised exact recomputations.
+// The top level: two instance trees (InstanceTree.cpp), one over the instances that block or
+// attenuate rays and one over the non-blocking ones (ObjectRole::Sensor), so that closest-hit,
+// occlusion and transmittance queries never traverse the second. This file routes edits to the
+// tree an instance belongs to (moving it when its object changes role) and merges the answers of
+// the queries that see both; the crossing query is in TopLevelCrossings.cpp.
 
 #include "duplex/accel/TopLevel.h"
 
 #include "duplex/accel/Error.h"
-#include "duplex/accel/KdTraversal.h"
-#include "duplex/accel/KdTreeBuilder.h"
-
-#include <glm/matrix.hpp>
 
 #include <algorithm>
-#include <cmath>
-#include <limits>
-#include <optional>
+#include <exception>
 #include <string>
-#include <unordered_map>
 #include <unordered_set>
 #include <utility>
 
-#include "TopLevelState.h"
+#include "InstanceTreeState.h"
 
 namespace duplex {
 
@@ -42,602 +22,109 @@ using namespace toplevel_detail;
 
 namespace {
 
-std::string describe(const InstanceDesc& d) {
-  std::string s = "instance " + std::to_string(d.id);
-  if (d.object) s += " (object '" + d.object->name() + "')";
-  return s;
-}
-
-Prepared prepare(const InstanceDesc& d) {
-  if (!d.object) throw InvalidArgument(describe(d) + ": no object");
-  if (!d.world_from_object.isFinite()) throw InvalidArgument(describe(d) + ": transform has NaN or infinite entries");
-  if (d.world_from_object.isSingular()) throw InvalidArgument(describe(d) + ": transform is singular");
-  if (d.id == kInvalidId) throw InvalidArgument(describe(d) + ": id 0xFFFFFFFF is reserved for misses");
-  Prepared p;
-  const glm::dmat3& l = d.world_from_object.linear;
-  p.record.object = d.object.get();
-  p.record.object_from_world = d.world_from_object.inverse();
-  p.record.id = d.id;
-  p.record.mask = d.mask;
-  p.record.role = d.object->role();
-  p.record.identity = l == glm::dmat3(1.0) && d.world_from_object.translation == glm::dvec3(0.0);
-  p.owner = d.object;
-  p.box = d.world_from_object.apply(d.object->bounds());
-  // A finite double transform can still carry the box beyond float range (a scale of 1e30 on an
-  // object of size 1e10): the builder would drop such a box and an incremental commit would grow the
-  // root to infinity, so the instance is refused here, on both paths alike.
-  if (!p.box.empty() && !p.box.finite())
-    throw InvalidArgument(describe(d) + ": world box exceeds float range (transform too large for the object)");
-  return p;
-}
-
-double boxArea(const Box& b) { return static_cast<double>(b.area()); }
+bool isCrossing(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Sensor; }
 
 }  // namespace
 
-namespace {
+TopLevel::TopLevel(const TopLevelConfig& config) : blocking_(config) { validateConfig(config); }
 
-// Calls f(LeafVisit) for every leaf whose closed cell meets `box` (a superset of the leaves the
-// builder put the box in: touching counts on both sides of a plane).
-// `frontier_of` maps node indices to frontier indices (TopLevel::State::frontiers).
-template <class F>
-void forEachLeaf(const KdTree& tree, const std::vector<std::uint32_t>& frontier_of, const Box& box, F&& f) {
-  if (tree.nodes.empty()) return;
-  LeafVisit stack[kKdStackSize + 1];
-  int top = 0;
-  stack[top++] = {0, tree.bounds, 0, tree.bounds, kNoJump, {}, 0, kNoJump};
-  while (top > 0) {
-    LeafVisit v = stack[--top];
-    if (v.node < frontier_of.size() && frontier_of[v.node] != kNoJump) v.frontier = frontier_of[v.node];
-    KdNode n = tree.nodes[v.node];
-    while (n.isJump()) {
-      v.jump = v.node;
-      v.jump_cell = v.cell;
-      v.jump_depth = v.depth;
-      v.node = n.jumpTarget();
-      n = tree.nodes[v.node];
-    }
-    if (n.isLeaf()) {
-      f(v);
-      continue;
-    }
-    const int a = n.axis();
-    const float s = n.split();
-    // Cells are clamped to their parent: after the root shrank, a plane may lie outside it.
-    if (box.hi[a] >= s) {
-      LeafVisit u = v;
-      u.node = n.upperChild();
-      ++u.depth;
-      u.cell.lo[a] = std::max(s, v.cell.lo[a]);
-      stack[top++] = u;
-    }
-    if (box.lo[a] <= s) {
-      LeafVisit l = v;
-      ++l.node;
-      ++l.depth;
-      l.cell.hi[a] = std::min(s, v.cell.hi[a]);
-      stack[top++] = l;
-    }
-  }
+InstanceTree& TopLevel::crossingLevelForEdit() {
+  if (!crossing_) crossing_ = std::make_unique<InstanceTree>(config(), InstanceTree::Kind::Crossing);
+  return *crossing_;
 }
-
-}  // namespace
-
-// ---------------------------------------------------------------------------------------------
-// Edits
-
-namespace {
-
-void validateBuild(const KdBuildConfig& b, const std::string& which) {
-  auto bad = [&](const std::string& what) { throw InvalidArgument("top level configuration: " + which + what); };
-  if (!(std::isfinite(b.traversal_cost) && b.traversal_cost > 0.0f)) bad("traversal_cost must be finite and positive");
-  if (!(std::isfinite(b.intersection_cost) && b.intersection_cost > 0.0f))
-    bad("intersection_cost must be finite and positive");
-  if (!(b.empty_bonus >= 0.0f && b.empty_bonus < 1.0f)) bad("empty_bonus must be in [0, 1)");
-  if (b.max_depth < 0) bad("max_depth must not be negative (0 = automatic)");
-}
-
-void validateConfig(const TopLevelConfig& c) {
-  auto bad = [](const std::string& what) { throw InvalidArgument("top level configuration: " + what); };
-  validateBuild(c.build, "");
-  validateBuild(c.sensor_build, "sensor_build.");
-  if (!(c.rebuild_ratio >= 1.0)) bad("rebuild_ratio must be at least 1");
-  if (!(c.max_incremental_fraction >= 0.0)) bad("max_incremental_fraction must not be negative");
-  if (c.leaf_split_size < 1) bad("leaf_split_size must be at least 1");
-}
-
-}  // namespace
-
-TopLevel::TopLevel(const TopLevelConfig& config) : config_(config) { validateConfig(config_); }
-
-// The nested level builds with the sensors' configuration (TopLevelConfig::sensor_build).
-TopLevel::TopLevel(const TopLevelConfig& config, SensorLevelTag) : TopLevel(config) {
-  separate_sensors_ = false;
-  config_.build = config.sensor_build;
-}
-
-TopLevel& TopLevel::sensorLevelForEdit() {
-  if (!sensors_) sensors_.reset(new TopLevel(config_, SensorLevelTag{}));
-  return *sensors_;
-}
-
-namespace {
-bool isSensor(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Sensor; }
-}  // namespace
 
 void TopLevel::setConfig(const TopLevelConfig& config) {
   validateConfig(config);
-  config_ = config;
-  if (!separate_sensors_) config_.build = config.sensor_build;
-  if (sensors_) sensors_->setConfig(config);
+  blocking_.setConfig(config);
+  if (crossing_) crossing_->setConfig(config);
 }
 
 void TopLevel::build(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
-  const bool any_sensor = std::any_of(instances.begin(), instances.end(), isSensor);
-  if (!separate_sensors_ || (!any_sensor && !sensors_)) {
-    buildHere(instances, config);
+  const bool any_crossing = std::any_of(instances.begin(), instances.end(), isCrossing);
+  if (!any_crossing && !crossing_) {
+    blocking_.build(instances, config);
     return;
   }
-  // Ids are unique over both levels; the sensors' level is built aside first, so that a failure of
+  // Ids are unique over both trees; the sensors' tree is built aside first, so that a failure of
   // either build leaves everything as it was.
   std::vector<InstanceDesc> others, sensors;
   std::unordered_set<std::uint32_t> ids;
   ids.reserve(instances.size());
   for (const InstanceDesc& d : instances) {
-    if (!ids.insert(d.id).second) throw InvalidArgument(describe(d) + ": duplicate instance id");
-    (isSensor(d) ? sensors : others).push_back(d);
+    if (!ids.insert(d.id).second) throw InvalidArgument(describeInstance(d) + ": duplicate instance id");
+    (isCrossing(d) ? sensors : others).push_back(d);
   }
-  TopLevelConfig c = config_;
+  TopLevelConfig c = this->config();
   c.build = config;
   validateConfig(c);
-  std::unique_ptr<TopLevel> level(new TopLevel(c, SensorLevelTag{}));
-  level->buildHere(sensors, c.sensor_build);
-  buildHere(others, config);
-  sensors_ = std::move(level);
+  auto level = std::make_unique<InstanceTree>(c, InstanceTree::Kind::Crossing);
+  level->build(sensors, c.crossing_build);
+  blocking_.build(others, config);
+  crossing_ = std::move(level);
 }
 
-void TopLevel::buildHere(std::span<const InstanceDesc> instances, const KdBuildConfig& config) {
-  TopLevelConfig c = config_;
-  c.build = config;
-  validateConfig(c);
-  // Validate everything before touching the current state.
-  std::vector<Prepared> prepared;
-  prepared.reserve(instances.size());
-  std::unordered_map<std::uint32_t, std::uint32_t> slot_of_id;
-  slot_of_id.reserve(instances.size());
-  for (const InstanceDesc& d : instances) {
-    prepared.push_back(prepare(d));
-    if (!slot_of_id.emplace(d.id, static_cast<std::uint32_t>(prepared.size() - 1)).second)
-      throw InvalidArgument(describe(d) + ": duplicate instance id");
-  }
-  auto state = std::make_shared<State>();
-  state->records.reserve(prepared.size());
-  for (Prepared& p : prepared) {
-    state->records.push_back(p.record);
-    state->filters.push_back(filterOf(p.record));
-    state->owners.push_back(std::move(p.owner));
-    state->boxes.push_back(p.box);
-  }
-  state->slot_of_id = std::move(slot_of_id);
-  if (state_) {
-    state->commits = state_->commits;
-    state->full_rebuilds = state_->full_rebuilds;
-    state->subtree_rebuilds = state_->subtree_rebuilds;
-  }
-  // The tree first: if the build throws, nothing has changed.
-  KdTree tree = buildKdTreeOverBoxes(state->boxes, c.build);
-  config_ = c;
-  state_ = std::move(state);
-  live_count_ = prepared.size();
-  install(std::move(tree));
-}
-
-void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances, config_.build); }
+void TopLevel::build(std::span<const InstanceDesc> instances) { build(instances, config().build); }
 
 void TopLevel::set(const InstanceDesc& instance) {
-  // Set on the level the instance belongs to first (it validates and throws before recording
+  // Set in the tree the instance belongs to first (it validates and throws before recording
   // anything), then take it out of the other one (an object that changed role moves).
-  if (separate_sensors_ && isSensor(instance)) {
-    if (!state_) state_ = std::make_shared<State>();  // queries read the (empty) records of this level
-    sensorLevelForEdit().set(instance);
-    if (containsHere(instance.id)) removeHere(instance.id);
+  if (isCrossing(instance)) {
+    blocking_.ensureState();  // queries read the (empty) records of the blocking tree
+    crossingLevelForEdit().set(instance);
+    if (blocking_.contains(instance.id)) blocking_.remove(instance.id);
     return;
   }
-  setHere(instance);
-  if (sensors_ && sensors_->contains(instance.id)) sensors_->remove(instance.id);
+  blocking_.set(instance);
+  if (crossing_ && crossing_->contains(instance.id)) crossing_->remove(instance.id);
 }
 
 void TopLevel::remove(std::uint32_t id) {
-  if (containsHere(id)) {
-    removeHere(id);
-  } else if (sensors_ && sensors_->contains(id)) {
-    sensors_->remove(id);
+  if (blocking_.contains(id)) {
+    blocking_.remove(id);
+  } else if (crossing_ && crossing_->contains(id)) {
+    crossing_->remove(id);
   } else {
     throw InvalidArgument("top level: remove of instance " + std::to_string(id) + ", which is not present");
   }
 }
 
-bool TopLevel::contains(std::uint32_t id) const { return containsHere(id) || (sensors_ && sensors_->contains(id)); }
-
-void TopLevel::setHere(const InstanceDesc& instance) {
-  if (!state_) state_ = std::make_shared<State>();
-  Prepared p = prepare(instance);
-  State& s = *state_;
-  const auto it = s.pending_index.find(instance.id);
-  if (it != s.pending_index.end()) {
-    s.pending[it->second].second = std::move(p);
-  } else {
-    s.pending_index.emplace(instance.id, s.pending.size());
-    s.pending.emplace_back(instance.id, std::move(p));
-  }
-}
-
-void TopLevel::removeHere(std::uint32_t id) {
-  State& s = *state_;
-  const auto it = s.pending_index.find(id);
-  if (it != s.pending_index.end()) {
-    s.pending[it->second].second.reset();
-  } else {
-    s.pending_index.emplace(id, s.pending.size());
-    s.pending.emplace_back(id, std::nullopt);
-  }
-}
-
-bool TopLevel::containsHere(std::uint32_t id) const {
-  if (!state_) return false;
-  const auto it = state_->pending_index.find(id);
-  if (it != state_->pending_index.end()) return state_->pending[it->second].second.has_value();
-  return state_->slot_of_id.count(id) != 0;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Commit
-
-void TopLevel::install(KdTree&& tree) {
-  State& s = *state_;
-  tree_ = std::move(tree);
-  s.garbage = 0;
-  s.garbage_nodes = 0;
-  s.touched_jumps.clear();
-  s.jump_losses.clear();
-  s.markFrontiers(tree_);
-  const KdTreeStats st = tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
-  s.sah_cost = st.sah_cost;
-  s.fresh_cost = st.sah_cost;
-  s.fresh_count = live_count_;
-  s.fresh_nodes = tree_.nodes.size();
-  s.fresh_refs = tree_.prim_indices.size();
-  s.cost_stale = false;
-  s.boundary_left = false;
-  s.needs_rebuild = false;
-  ++s.full_rebuilds;
-  s.last_full = true;
-  if (!separate_sensors_) s.refreshLeafBoxes(tree_);
-}
-
-void TopLevel::fullRebuild() {
-  // Free slots hold empty boxes, which the builder leaves out.
-  install(buildKdTreeOverBoxes(state_->boxes, config_.build));
-}
-
-void TopLevel::rebuild() {
-  if (sensors_) sensors_->rebuild();
-  if (!state_) return;
-  fullRebuild();
+bool TopLevel::contains(std::uint32_t id) const {
+  return blocking_.contains(id) || (crossing_ && crossing_->contains(id));
 }
 
 void TopLevel::commit() {
-  // Both levels commit even when one throws (each then keeps its own promise below).
+  // Both trees commit even when one throws (each then keeps its own promise, InstanceTree::commit).
   std::exception_ptr failure;
-  if (sensors_) {
+  if (crossing_) {
     try {
-      sensors_->commit();
+      crossing_->commit();
     } catch (...) {
       failure = std::current_exception();
     }
   }
-  commitHere();
+  blocking_.commit();
   if (failure) std::rethrow_exception(failure);
 }
 
-void TopLevel::commitHere() {
-  if (!state_ || (state_->pending.empty() && !state_->needs_rebuild)) return;
-  try {
-    commitEdits();
-    if (!separate_sensors_) state_->refreshLeafBoxes(tree_);
-  } catch (...) {
-    // The records already describe the new scene; a tree that no longer matches them must not be
-    // traversed. Rebuild from the records, or (when even that fails) answer nothing until the next
-    // commit rebuilds.
-    State& s = *state_;
-    try {
-      fullRebuild();
-    } catch (...) {
-      tree_ = KdTree{};
-      s.needs_rebuild = true;
-    }
-    throw;
-  }
-}
-
-void TopLevel::commitEdits() {
-  State& s = *state_;  // with needs_rebuild set, the edits go to the records and the tree is rebuilt
-  auto pending = std::move(s.pending);
-  s.pending.clear();
-  s.pending_index.clear();
-  ++s.commits;
-  s.last_edits = pending.size();
-  s.last_full = false;
-  s.touched_jumps.clear();
-  s.touched_frontiers.clear();
-
-  // A batch that edits a large part of the scene is cheaper, and gives a better tree, as one
-  // full rebuild than as as many re-insertions (the same holds for scenes of a few instances).
-  const bool large_batch =
-      static_cast<double>(pending.size()) > config_.max_incremental_fraction * static_cast<double>(live_count_);
-  const bool incremental =
-      config_.update == TopLevelUpdate::Incremental && !tree_.empty() && !large_batch && !s.needs_rebuild;
-  const float ci = config_.build.intersection_cost;
-  std::vector<LeafVisit> grown;  // leaves that gained references
-
-  auto leaf_area_weight = [&](const Box& cell) { return ci * boxArea(cell); };
-  const double root_area_before = std::max(1e-30, boxArea(tree_.bounds));
-
-  auto remove_from = [&](const LeafVisit& v, std::uint32_t slot) {
-    KdNode& n = tree_.nodes[v.node];
-    const std::uint32_t off = n.primOffset(), cnt = n.primCount();
-    std::uint32_t* refs = tree_.prim_indices.data() + off;
-    for (std::uint32_t i = 0; i < cnt; ++i) {
-      if (refs[i] != slot) continue;
-      refs[i] = refs[cnt - 1];
-      n = KdNode::leaf(off, cnt - 1);
-      ++s.garbage;
-      s.sah_cost -= leaf_area_weight(v.cell) / root_area_before;
-      if (v.jump != kNoJump) s.touched_jumps.push_back(v);  // its local build no longer fits
-      s.countEdit(v);
-      return;
-    }
-    // Not there: the builder placed a box that only touches a plane on one side only.
-  };
-  auto append_to = [&](const LeafVisit& v, std::uint32_t slot) {
-    KdNode& n = tree_.nodes[v.node];
-    const std::uint32_t off = n.primOffset(), cnt = n.primCount();
-    auto& idx = tree_.prim_indices;
-    if (cnt == 0 || off + cnt == idx.size()) {
-      if (cnt == 0) n = KdNode::leaf(static_cast<std::uint32_t>(idx.size()), 0);
-      idx.push_back(slot);
-    } else {
-      // Move the leaf's range to the end; the old range becomes garbage.
-      const std::size_t new_off = idx.size();
-      idx.resize(new_off + cnt + 1);
-      std::copy_n(idx.begin() + off, cnt, idx.begin() + static_cast<std::ptrdiff_t>(new_off));
-      idx.back() = slot;
-      s.garbage += cnt;
-      n = KdNode::leaf(static_cast<std::uint32_t>(new_off), cnt);
-    }
-    n = KdNode::leaf(n.primOffset(), cnt + 1);
-    s.sah_cost += leaf_area_weight(v.cell) / root_area_before;
-    grown.push_back(v);
-    s.countEdit(v);
-  };
-  auto grow_root = [&](const Box& box) {
-    if (box.empty()) return;
-    if (tree_.bounds.lo.x <= box.lo.x && tree_.bounds.lo.y <= box.lo.y && tree_.bounds.lo.z <= box.lo.z &&
-        tree_.bounds.hi.x >= box.hi.x && tree_.bounds.hi.y >= box.hi.y && tree_.bounds.hi.z >= box.hi.z)
-      return;
-    // Boundary cells grow with the root. Every node's weight is its area over the root's: rescale
-    // the tracked cost now (the boundary cells' growth is left to the next exact recomputation).
-    const double before = std::max(1e-30, boxArea(tree_.bounds));
-    tree_.bounds.extend(box);
-    s.sah_cost *= before / std::max(1e-30, boxArea(tree_.bounds));
-    s.cost_stale = true;
-  };
-
-  // Whether a box that held up a face of the root bounds moved or vanished: the bounds may then
-  // shrink (rays that miss everything stop traversing the emptied margin).
-  bool& boundary_left = s.boundary_left;
-  auto on_boundary = [&](const Box& b) {
-    const Box& r = tree_.bounds;
-    return !b.empty() && (b.lo.x <= r.lo.x || b.lo.y <= r.lo.y || b.lo.z <= r.lo.z || b.hi.x >= r.hi.x ||
-                          b.hi.y >= r.hi.y || b.hi.z >= r.hi.z);
-  };
-
-  // The per-slot arrays grow together: reserve them all first, so that a bad_alloc cannot leave
-  // one longer than another (queries index all of them by the tree's slots).
-  const std::size_t max_slots = s.records.size() + pending.size();
-  s.records.reserve(max_slots);
-  s.filters.reserve(max_slots);
-  s.owners.reserve(max_slots);
-  s.boxes.reserve(max_slots);
-
-  for (auto& [id, edit] : pending) {
-    const auto it = s.slot_of_id.find(id);
-    if (!edit) {
-      if (it == s.slot_of_id.end()) continue;  // added and removed within this batch
-      const std::uint32_t slot = it->second;
-      boundary_left |= on_boundary(s.boxes[slot]);
-      if (incremental)
-        forEachLeaf(tree_, s.frontier_of, s.boxes[slot], [&](const LeafVisit& v) { remove_from(v, slot); });
-      s.boxes[slot] = Box();
-      s.records[slot] = Record{};
-      s.filters[slot] = SlotFilter{};
-      s.owners[slot].reset();
-      s.free_slots.push_back(slot);
-      s.slot_of_id.erase(it);
-      --live_count_;
-      continue;
-    }
-    std::uint32_t slot;
-    Box old_box;
-    if (it != s.slot_of_id.end()) {
-      slot = it->second;
-      old_box = s.boxes[slot];
-    } else {
-      if (!s.free_slots.empty()) {
-        slot = s.free_slots.back();
-        s.free_slots.pop_back();
-      } else {
-        slot = static_cast<std::uint32_t>(s.records.size());
-        s.records.emplace_back();
-        s.filters.emplace_back();
-        s.owners.emplace_back();
-        s.boxes.emplace_back();
-      }
-      s.slot_of_id.emplace(id, slot);
-      ++live_count_;
-    }
-    s.records[slot] = edit->record;
-    s.filters[slot] = filterOf(edit->record);
-    s.owners[slot] = std::move(edit->owner);
-    s.boxes[slot] = edit->box;
-    if (!incremental || old_box == edit->box) continue;
-    boundary_left |= on_boundary(old_box);
-    // Leave the leaves only the old box touches, join those only the new box touches.
-    s.scratch_old.clear();
-    s.scratch_new.clear();
-    if (!old_box.empty())
-      forEachLeaf(tree_, s.frontier_of, old_box, [&](const LeafVisit& v) { s.scratch_old.push_back(v); });
-    grow_root(edit->box);
-    if (!edit->box.empty())
-      forEachLeaf(tree_, s.frontier_of, edit->box, [&](const LeafVisit& v) { s.scratch_new.push_back(v); });
-    auto in = [](const std::vector<LeafVisit>& list, std::uint32_t node) {
-      return std::any_of(list.begin(), list.end(), [&](const LeafVisit& v) { return v.node == node; });
-    };
-    for (const LeafVisit& v : s.scratch_old)
-      if (!in(s.scratch_new, v.node)) remove_from(v, slot);
-    for (const LeafVisit& v : s.scratch_new) {
-      if (in(s.scratch_old, v.node)) {
-        // The builder may have left the old box out of a leaf it only touched.
-        const KdNode& n = tree_.nodes[v.node];
-        const std::uint32_t* refs = tree_.prim_indices.data() + n.primOffset();
-        if (std::find(refs, refs + n.primCount(), slot) != refs + n.primCount()) continue;
-      }
-      append_to(v, slot);
-    }
-  }
-
-  if (!incremental) {
-    fullRebuild();
-    return;
-  }
-  // Too few instances to bother, or the count drifted far from the last full build's: rebuild.
-  const double drift = std::abs(static_cast<double>(live_count_) - static_cast<double>(s.fresh_count));
-  if (live_count_ < config_.min_incremental_instances ||
-      drift > 0.25 * static_cast<double>(std::max<std::size_t>(s.fresh_count, 1))) {
-    fullRebuild();
-    return;
-  }
-  s.refineLeaves(*this, grown);
-  // Refinement without bound fragments cells (each local build is optimal only locally): a tree
-  // grown far beyond the last full build is rebuilt whatever its estimated cost.
-  const std::size_t live_refs = tree_.prim_indices.size() - s.garbage;
-  const std::size_t live_nodes = tree_.nodes.size() - s.garbage_nodes;
-  if (live_nodes > 4 * s.fresh_nodes + 4096 || live_refs > 4 * s.fresh_refs + 4096) {
-    fullRebuild();
-    return;
-  }
-  // O(instances) and O(nodes) work, amortised: shrinking the root and recomputing the exact cost
-  // happen every kExactEvery commits at most (and before a rebuild decision rests on an estimate).
-  constexpr std::uint64_t kExactEvery = 32;
-  const bool periodic = s.commits % kExactEvery == 0;
-  // A small top level shrinks its root at once (the loop costs less than the rest of the commit):
-  // a root left loose for up to kExactEvery commits made rays that miss everything walk the margin.
-  constexpr std::size_t kShrinkAlwaysBelow = 256;
-  if (s.boundary_left && (periodic || s.boxes.size() <= kShrinkAlwaysBelow)) {
-    // Shrinking the root is always valid: every box stays inside, and a split plane outside the
-    // smaller root just leaves one child empty (cells are clamped to the root when walked).
-    Box tight;
-    for (const Box& b : s.boxes) tight.extend(b);
-    if (!(tight == tree_.bounds)) {
-      tree_.bounds = tight;
-      s.cost_stale = true;
-    }
-    s.boundary_left = false;
-  }
-  const bool over = s.sah_cost > config_.rebuild_ratio * s.fresh_cost;
-  if (s.cost_stale && (periodic || over)) {
-    s.sah_cost = tree_.stats(config_.build.traversal_cost, ci).sah_cost;
-    s.cost_stale = false;
-  }
-  if (s.sah_cost > config_.rebuild_ratio * s.fresh_cost) {
-    fullRebuild();
-    return;
-  }
-  if ((s.garbage > 1024 && s.garbage > tree_.prim_indices.size() / 2) ||
-      (s.garbage_nodes > 4096 && s.garbage_nodes > tree_.nodes.size() / 4))
-    compact();
-}
-
-// ---------------------------------------------------------------------------------------------
-// Queries (the per-ray helpers are in TopLevelState.h)
-
-Hit TopLevel::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
-  ++ctx.stats.rays;
-  if (!isQueryable(ray_f) || tree_.empty()) return Hit{};
-  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_f);
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  const Box* boxes = state_->boxes.data();
-  Hit best;
-  best.t = ray_f.tfar;
-  const Record* winner = nullptr;
-  Mailbox mailbox;
-  const KdRay kray(ray_f);
-  float t_best = ray_f.tfar;
-  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
-    bool found = false;
-    for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t slot = tree_.prim_indices[i];
-      const SlotFilter f = filters[slot];
-      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) ||
-          mailbox.seen(slot))
-        continue;
-      const Record& rec = records[slot];
-      ++ctx.stats.instance_visits;
-      if (closerHit(rec, w, best, t, ctx)) {
-        winner = &rec;
-        found = true;
-      }
-    }
-    return found;
-  });
-  if (!winner) return Hit{};
-  best.instance_id = winner->id;
-  best.ng = normalToWorld(*winner, best.ng);
-  return best;
+void TopLevel::rebuild() {
+  if (crossing_) crossing_->rebuild();
+  blocking_.rebuild();
 }
 
 Hit TopLevel::intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
-  return intersectImpl(ray_ws, nullptr, ctx, mask);
+  return blocking_.intersect(ray_ws, ctx, mask);
 }
 
 Hit TopLevel::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
-  return intersectImpl(fromDouble(ray_ws).f, &ray_ws, ctx, mask);
+  return blocking_.intersect(ray_ws, ctx, mask);
 }
 
 bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
-  ++ctx.stats.rays;
-  if (!isQueryable(ray_ws) || tree_.empty()) return false;
-  const WorldRay w = fromFloat(ray_ws);
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  const Box* boxes = state_->boxes.data();
-  Mailbox mailbox;
-  const KdRay kray(ray_ws);
-  float t_best = ray_ws.tfar;
-  return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
-    for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t slot = tree_.prim_indices[i];
-      const SlotFilter f = filters[slot];
-      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
-          mailbox.seen(slot))
-        continue;
-      const Record& rec = records[slot];
-      ++ctx.stats.instance_visits;
-      if (rec.object->occluded(toObject(rec, w), ctx)) return true;
-    }
-    return false;
-  });
+  return blocking_.occluded(ray_ws, ctx, mask);
+}
+
+float TopLevel::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+  return blocking_.transmittance(ray_ws, ctx, mask);
 }
 
 void TopLevel::intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask) const {
@@ -648,153 +135,78 @@ void TopLevel::intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryCon
   intersectAllImpl(fromDouble(ray_ws).f, &ray_ws, hits, ctx, mask);
 }
 
-void TopLevel::collectAllHere(const toplevel_detail::WorldRay& w, std::vector<Hit>& hits, QueryContext& ctx,
-                              std::uint32_t mask) const {
-  const Ray& ray_ws = w.f;
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  std::vector<std::uint32_t> visited;  // every instance once, however many leaves hold it
-  const KdRay kray(ray_ws);
-  float t_best = ray_ws.tfar;  // never lowered: all leaves along the ray
-  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
-    for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t slot = tree_.prim_indices[i];
-      if ((filters[slot].mask & mask) == 0 || std::find(visited.begin(), visited.end(), slot) != visited.end())
-        continue;
-      const Record& rec = records[slot];
-      visited.push_back(slot);
-      ++ctx.stats.instance_visits;
-      const std::size_t first = hits.size();
-      rec.object->intersectAll(toObject(rec, w), hits, ctx);
-      for (std::size_t k = first; k < hits.size(); ++k) {
-        hits[k].instance_id = rec.id;
-        hits[k].ng = normalToWorld(rec, hits[k].ng);
-      }
-    }
-    return false;
-  });
-}
-
 void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
                                 std::uint32_t mask) const {
   ++ctx.stats.rays;
   hits.clear();
   if (!isQueryable(ray_ws)) return;
-  const toplevel_detail::WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
-  if (!tree_.empty()) collectAllHere(w, hits, ctx, mask);
-  // The sensors' level answers the same query (one ray in the statistics, not two).
-  if (sensors_ && !sensors_->tree_.empty()) sensors_->collectAllHere(w, hits, ctx, mask);
-  std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-    if (a.t != b.t) return a.t < b.t;
-    if (a.instance_id != b.instance_id) return a.instance_id < b.instance_id;
-    return a.prim_id < b.prim_id;
-  });
+  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
+  if (!blocking_.tree().empty()) blocking_.collectAll(w, hits, ctx, mask);
+  // The sensors' tree answers the same query (one ray in the statistics, not two).
+  if (crossing_ && !crossing_->tree().empty()) crossing_->collectAll(w, hits, ctx, mask);
+  sortHits(hits);
 }
 
 std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {
-  // A NaN plane is never "outside", so it would select everything: refuse it.
-  for (const glm::dvec4& p : planes)
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(p.w) ||
-        !(p.x != 0.0 || p.y != 0.0 || p.z != 0.0))
-      throw InvalidArgument(
-          "TopLevel::instancesInRegion: a plane has a non-finite or zero normal, or a non-finite offset");
-  std::vector<std::uint32_t> out = sensors_ ? sensors_->instancesInRegion(planes, mask) : std::vector<std::uint32_t>{};
-  if (tree_.empty()) return out;
-  // A box is outside when its corner furthest along a plane's normal is still outside it.
-  auto outside = [&](const Box& b) {
-    for (const glm::dvec4& p : planes) {
-      const glm::dvec3 corner(p.x >= 0 ? b.lo.x : b.hi.x, p.y >= 0 ? b.lo.y : b.hi.y, p.z >= 0 ? b.lo.z : b.hi.z);
-      if (p.x * corner.x + p.y * corner.y + p.z * corner.z > p.w) return true;
-    }
-    return false;
-  };
-  std::vector<std::uint32_t> slots;
-  std::vector<std::pair<std::uint32_t, Box>> stack{{0u, tree_.bounds}};
-  while (!stack.empty()) {
-    const auto [i, cell] = stack.back();
-    stack.pop_back();
-    if (outside(cell)) continue;
-    const KdNode& n = tree_.nodes[i];
-    if (n.isJump()) {
-      stack.emplace_back(n.jumpTarget(), cell);
-      continue;
-    }
-    if (n.isLeaf()) {
-      for (std::uint32_t k = 0; k < n.primCount(); ++k) slots.push_back(tree_.prim_indices[n.primOffset() + k]);
-      continue;
-    }
-    Box lower = cell, upper = cell;
-    lower.hi[n.axis()] = std::min(n.split(), cell.hi[n.axis()]);
-    upper.lo[n.axis()] = std::max(n.split(), cell.lo[n.axis()]);
-    stack.emplace_back(n.upperChild(), upper);
-    stack.emplace_back(i + 1, lower);
-  }
-  std::sort(slots.begin(), slots.end());
-  slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
-  for (const std::uint32_t slot : slots) {
-    const Record& rec = state_->records[slot];
-    if ((rec.mask & mask) != 0 && !outside(state_->boxes[slot])) out.push_back(rec.id);
-  }
+  checkRegionPlanes(planes);
+  std::vector<std::uint32_t> out;
+  if (crossing_) crossing_->appendInRegion(planes, mask, out);
+  blocking_.appendInRegion(planes, mask, out);
   std::sort(out.begin(), out.end());
   return out;
 }
 
 const Affine& TopLevel::objectFromWorld(std::uint32_t id) const {
-  if (state_) {
-    const auto it = state_->slot_of_id.find(id);
-    if (it != state_->slot_of_id.end()) return state_->records[it->second].object_from_world;
-  }
-  if (sensors_) return sensors_->objectFromWorld(id);
+  if (const Affine* a = blocking_.findObjectFromWorld(id)) return *a;
+  if (crossing_)
+    if (const Affine* a = crossing_->findObjectFromWorld(id)) return *a;
   throw InvalidArgument("top level: unknown instance " + std::to_string(id));
 }
 
 Box TopLevel::instanceBounds(std::uint32_t id) const {
-  if (state_) {
-    const auto it = state_->slot_of_id.find(id);
-    if (it != state_->slot_of_id.end()) return state_->boxes[it->second];
-  }
-  if (sensors_) return sensors_->instanceBounds(id);
+  if (const Box* b = blocking_.findBounds(id)) return *b;
+  if (crossing_)
+    if (const Box* b = crossing_->findBounds(id)) return *b;
   throw InvalidArgument("top level: unknown instance " + std::to_string(id));
 }
 
-std::uint32_t TopLevel::idAt(std::uint32_t slot) const {
-  if (!state_ || slot >= state_->records.size()) return kInvalidId;
-  return state_->records[slot].id;
-}
+std::uint32_t TopLevel::idAt(std::uint32_t slot) const { return blocking_.idAt(slot); }
 
 TopLevelStats TopLevel::stats() const {
   TopLevelStats st;
-  st.instances = live_count_;
-  st.tree = tree_.stats(config_.build.traversal_cost, config_.build.intersection_cost);
-  if (state_) {
-    st.sah_cost = state_->sah_cost;
-    st.fresh_sah_cost = state_->fresh_cost;
-    st.commits = state_->commits;
-    st.full_rebuilds = state_->full_rebuilds;
-    st.subtree_rebuilds = state_->subtree_rebuilds;
-    st.last_commit_edits = state_->last_edits;
-    st.last_commit_full_rebuild = state_->last_full;
-    st.garbage_nodes = state_->garbage_nodes;
+  const TopLevelConfig& config = this->config();
+  st.instances = blocking_.size();
+  st.tree = blocking_.tree().stats(config.build.traversal_cost, config.build.intersection_cost);
+  if (const InstanceTree::State* s = blocking_.state_.get()) {
+    st.sah_cost = s->sah_cost;
+    st.fresh_sah_cost = s->fresh_cost;
+    st.commits = s->commits;
+    st.full_rebuilds = s->full_rebuilds;
+    st.subtree_rebuilds = s->subtree_rebuilds;
+    st.last_commit_edits = s->last_edits;
+    st.last_commit_full_rebuild = s->last_full;
+    st.garbage_nodes = s->garbage_nodes;
   }
-  if (sensors_) {
-    st.sensor_instances = sensors_->live_count_;
-    const KdBuildConfig& b = sensors_->config_.build;
-    st.sensor_tree = sensors_->tree_.stats(b.traversal_cost, b.intersection_cost);
-    if (sensors_->state_) st.sensor_box_lanes = sensors_->state_->leaf_boxes.lanes;
-    if (sensors_->state_ && config_.sensor_grid && sensors_->state_->grid.usable()) {
-      const auto& g = sensors_->state_->grid;
-      st.sensor_grid_cells = std::size_t{g.dims[0]} * g.dims[1] * g.dims[2];
-      st.sensor_grid_entries = g.slots.size();
+  if (crossing_) {
+    st.crossing_instances = crossing_->size();
+    const KdBuildConfig& b = crossing_->config().build;
+    st.crossing_tree = crossing_->tree().stats(b.traversal_cost, b.intersection_cost);
+    if (const InstanceTree::State* s = crossing_->state_.get()) {
+      st.crossing_box_lanes = s->leaf_boxes.lanes;
+      if (config.crossing_grid && s->grid.usable()) {
+        st.crossing_grid_cells = std::size_t{s->grid.dims[0]} * s->grid.dims[1] * s->grid.dims[2];
+        st.crossing_grid_entries = s->grid.slots.size();
+      }
     }
   }
   return st;
 }
 
 Box TopLevel::bounds() const {
-  Box b = tree_.bounds;
-  if (sensors_ && !sensors_->tree_.empty()) {
-    const Box& o = sensors_->tree_.bounds;
-    b = tree_.empty() ? o : Box{glm::min(b.lo, o.lo), glm::max(b.hi, o.hi)};
+  Box b = blocking_.tree().bounds;
+  if (crossing_ && !crossing_->tree().empty()) {
+    const Box& o = crossing_->tree().bounds;
+    b = blocking_.tree().empty() ? o : Box{glm::min(b.lo, o.lo), glm::max(b.hi, o.hi)};
   }
   return b;
 }
@@ -802,8 +214,7 @@ Box TopLevel::bounds() const {
 std::size_t TopLevel::bytesPerInstance() {
   // Record, query filter, owner pointer, world box, and the id map's node (key, value, next
   // pointer, hash).
-  return sizeof(Record) + sizeof(toplevel_detail::SlotFilter) + sizeof(std::shared_ptr<const Object>) + sizeof(Box) +
-         4 * sizeof(void*);
+  return sizeof(Record) + sizeof(SlotFilter) + sizeof(std::shared_ptr<const Object>) + sizeof(Box) + 4 * sizeof(void*);
 }
 
 }  // namespace duplex

@@ -1,19 +1,21 @@
 // The crossing query of light transport (TopLevel::intersectWithCrossings): one closest-hit
 // traversal of the top level that also collects sensor crossings and the media the ray passes.
 //
-// Sensors live in a level of their own (TopLevel::sensors_): the first traversal, of the other
+// Sensors live in a tree of their own (TopLevel::crossing_, an InstanceTree): the first traversal, of the other
 // instances, finds the closest blocking hit and the media; the second walks the sensors' tree only
 // up to that hit (a sensor behind a wall costs nothing): through a uniform grid over the sensors'
-// boxes (SensorGrid.h, TopLevelConfig::sensor_grid) or else their shallow kd-tree, whose leaves'
+// boxes (CrossingGrid.h, TopLevelConfig::crossing_grid) or else their shallow kd-tree, whose leaves'
 // boxes are tested 16, 8 or 4 at a time from a leaf-ordered copy (LeafBoxes.h,
-// TopLevelConfig::sensor_build). A flat sensor whose plane the ray plainly misses is dropped by a
+// TopLevelConfig::crossing_build). A flat sensor whose plane the ray plainly misses is dropped by a
 // float test with rounding bounds (Object::flatCrossings, FlatPlane.h); any other whose box the ray
 // meets is asked for its crossings up to the hit, once (mailbox, then a check of the crossings
 // kept), and they are inserted in order.
 // Media met along the way are kept and their transmittance is applied segment by segment between
 // the sorted crossings, so each medium is integrated once over [tnear, t_hit].
 
-#include "TopLevelState.h"
+#include "duplex/accel/TopLevel.h"
+
+#include "InstanceTreeState.h"
 
 #include <algorithm>
 
@@ -44,17 +46,18 @@ inline void prefetchLine(const char* p) {
 
 }  // namespace
 
-SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<SensorCrossing>& crossings,
-                                            QueryContext& ctx, const CrossingQuery& query) const {
+SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Crossing>& crossings, QueryContext& ctx,
+                                            const CrossingQuery& query) const {
   ++ctx.stats.rays;
   crossings.clear();
   SegmentEnd end;
-  const bool have_sensors = sensors_ && !sensors_->tree_.empty();
-  if (!isQueryable(ray_ws) || (tree_.empty() && !have_sensors)) return end;
+  const KdTree& tree = blocking_.tree_;
+  const bool have_crossing = crossing_ && !crossing_->tree_.empty();
+  if (!isQueryable(ray_ws) || (tree.empty() && !have_crossing)) return end;
   const WorldRay w = fromFloat(ray_ws);
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  const Box* boxes = state_->boxes.data();
+  const Record* records = blocking_.state_->records.data();
+  const SlotFilter* filters = blocking_.state_->filters.data();
+  const Box* boxes = blocking_.state_->boxes.data();
   CrossingScratch& scratch_lists = ctx.cached<CrossingScratch>(&kScratchKey, [] { return CrossingScratch{}; });
   std::vector<const Record*>& media = scratch_lists.media;
   std::vector<Hit>& scratch = scratch_lists.hits;
@@ -66,8 +69,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   // id): a ray meets few sensors, so keeping the list sorted costs less than sorting it. An
   // instance in many leaves may come back after the mailbox forgot it; it is asked once.
   auto addCrossings = [&](const Record& rec, float t_reach) {
-    if (std::any_of(crossings.begin(), crossings.end(),
-                    [&](const SensorCrossing& c) { return c.hit.instance_id == rec.id; }))
+    if (std::any_of(crossings.begin(), crossings.end(), [&](const Crossing& c) { return c.hit.instance_id == rec.id; }))
       return;
     Ray ray_os = toObject(rec, w);
     ray_os.tfar = t_reach;
@@ -77,21 +79,20 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
       if (!(h.t <= t_reach)) continue;
       h.instance_id = rec.id;
       h.ng = normalToWorld(rec, h.ng);
-      const auto at =
-          std::upper_bound(crossings.begin(), crossings.end(), h, [](const Hit& a, const SensorCrossing& b) {
-            return a.t < b.hit.t || (a.t == b.hit.t && a.instance_id < b.hit.instance_id);
-          });
+      const auto at = std::upper_bound(crossings.begin(), crossings.end(), h, [](const Hit& a, const Crossing& b) {
+        return a.t < b.hit.t || (a.t == b.hit.t && a.instance_id < b.hit.instance_id);
+      });
       crossings.insert(at, {h, 1.0f});
     }
   };
   Mailbox mailbox;
   const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
-  if (!tree_.empty())
-    traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
+  if (!tree.empty())
+    traverseKdTree<false>(tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
       bool found = false;
       for (std::uint32_t i = begin; i < begin + count; ++i) {
-        const std::uint32_t slot = tree_.prim_indices[i];
+        const std::uint32_t slot = tree.prim_indices[i];
         // Surfaces and media only: sensors live in the sensors' level, walked below.
         const SlotFilter f = filters[slot];
         const std::uint32_t role_mask = f.role == ObjectRole::Surface  ? query.surface_mask
@@ -124,9 +125,9 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
   // The sensors' level, up to the blocking hit. A leaf's boxes are read from the leaf-ordered copy
   // (one contiguous run, four boxes per test) and tested first: most references a ray meets are
   // missed, and a miss then reads nothing else (filter, mailbox and record come after).
-  if (have_sensors && query.sensor_mask != 0) {
-    const State& ss = *sensors_->state_;
-    const KdTree& s_tree = sensors_->tree_;
+  if (have_crossing && query.crossing_mask != 0) {
+    const InstanceTree::State& ss = *crossing_->state_;
+    const KdTree& s_tree = crossing_->tree_;
     const std::uint32_t* s_prims = s_tree.prim_indices.data();
     const Record* s_records = ss.records.data();
     const SlotFilter* s_filters = ss.filters.data();
@@ -140,9 +141,9 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     // plane-tested and asked once), the plane test, then the object.
     auto visit = [&](std::uint32_t slot) {
       const SlotFilter f = s_filters[slot];
-      if ((f.mask & query.sensor_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
+      if ((f.mask & query.crossing_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
       if (flat && flat[slot].valid() && plainlyMisses(flat[slot], plane_ray, t_keep)) {
-        ++ctx.stats.sensor_plane_misses;
+        ++ctx.stats.crossing_plane_misses;
         return;
       }
       ++ctx.stats.instance_visits;
@@ -155,9 +156,9 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
     auto visitEntry = [&](std::uint32_t entry) {
       if (!grid_planes || !grid_planes[entry].valid()) return visit(ss.grid.slots[entry]);
       const FlatPlane& p = grid_planes[entry];
-      if ((p.mask & query.sensor_mask) == 0 || s_mailbox.seen(p.slot())) return;
+      if ((p.mask & query.crossing_mask) == 0 || s_mailbox.seen(p.slot())) return;
       if (plainlyMisses(p, plane_ray, t_keep)) {
-        ++ctx.stats.sensor_plane_misses;
+        ++ctx.stats.crossing_plane_misses;
         return;
       }
       ++ctx.stats.instance_visits;
@@ -176,7 +177,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
         prefetchLine(rec + sizeof(Record) - 1);
       }
     };
-    const bool by_grid = leaf_boxes && config_.sensor_grid && ss.grid.usable() &&
+    const bool by_grid = leaf_boxes && config().crossing_grid && ss.grid.usable() &&
                          ss.grid.forEachMet(kray, ray_ws.dir, t_keep, scratch_lists.grid_runs, scratch_lists.grid_met,
                                             visitEntry, grid_planes, prefetchRecords);
     float t_limit = t_keep;
@@ -209,7 +210,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Senso
       t0 = std::max(t0, t1);
       return running;
     };
-    for (SensorCrossing& c : crossings) c.transmittance = segment(c.hit.t);
+    for (Crossing& c : crossings) c.transmittance = segment(c.hit.t);
     end.transmittance = segment(t_end);
   }
   return end;

@@ -249,7 +249,7 @@ std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, 
     Hit nearest = impl_->top.intersect(ray, ctx, mask);
     // Sensors never block, so intersect() looks through them; a pick whose mask selects sensors
     // wants the nearest thing under the cursor, sensor or surface (a tie goes to the surface).
-    if (const TopLevel* sensors = impl_->top.sensorLevel()) {
+    if (const InstanceTree* sensors = impl_->top.crossingLevel()) {
       RayD up_to = ray;
       if (nearest.valid()) up_to.tfar = nearest.t;
       std::vector<Hit> crossings;

@@ -1,6 +1,6 @@
 /// \file SensorCrossingPathsTest.cpp
 /// The crossing query's fast paths against its general path and a brute force. With many sensors
-/// the query walks a uniform grid over the sensors' boxes (TopLevelConfig::sensor_grid), tests
+/// the query walks a uniform grid over the sensors' boxes (TopLevelConfig::crossing_grid), tests
 /// boxes 16, 8 or 4 at a time, and skips flat sensors a ray clearly misses (Object::flatCrossings)
 /// before asking intersectAll; the general path walks the sensors' kd-tree. Both must report the
 /// same crossings (instance, bin, t, u, v, normal, bit for bit) as every sensor asked directly, on
@@ -107,8 +107,7 @@ struct Counts {
   std::size_t rays = 0, crossings = 0;
 };
 
-void expectSame(const std::vector<SensorCrossing>& got, const std::vector<Hit>& want, const Ray& ray,
-                const char* path) {
+void expectSame(const std::vector<Crossing>& got, const std::vector<Hit>& want, const Ray& ray, const char* path) {
   ASSERT_EQ(got.size(), want.size()) << path << " " << ray;
   for (std::size_t k = 0; k < want.size(); ++k) {
     const Hit& g = got[k].hit;
@@ -133,9 +132,9 @@ Ray pastTarget(const glm::dvec3& from, const glm::dvec3& target) {
 void checkRay(const Scene& s, const TopLevel& fast, const TopLevel& general, const Ray& ray, std::uint32_t mask,
               Counts& counts) {
   CrossingQuery q;
-  q.sensor_mask = mask;
+  q.crossing_mask = mask;
   QueryContext ctx;
-  std::vector<SensorCrossing> a, b;
+  std::vector<Crossing> a, b;
   const SegmentEnd end_a = fast.intersectWithCrossings(ray, a, ctx, q);
   const SegmentEnd end_b = general.intersectWithCrossings(ray, b, ctx, q);
   ASSERT_FALSE(end_a.hit.valid());  // sensors never block
@@ -149,12 +148,12 @@ void checkRay(const Scene& s, const TopLevel& fast, const TopLevel& general, con
 }
 
 /// The crossing query's two walks over the same sensors: the grid (the default) and the kd-tree
-/// alone (sensor_grid off).
+/// alone (crossing_grid off).
 struct BothWalks {
   TopLevel fast;
   TopLevel general{[] {
     TopLevelConfig tree_only;
-    tree_only.sensor_grid = false;
+    tree_only.crossing_grid = false;
     return tree_only;
   }()};
   explicit BothWalks(const std::vector<InstanceDesc>& instances) {
@@ -172,15 +171,15 @@ void checkPaths(const glm::dvec3& offset, bool grid = true) {
   const TopLevel& general = walks.general;
   // The fast path is the one under test: the grid must be there (and only there).
   if (grid) {
-    ASSERT_GT(fast.stats().sensor_grid_cells, 0u);
+    ASSERT_GT(fast.stats().crossing_grid_cells, 0u);
   } else {
-    ASSERT_EQ(fast.stats().sensor_grid_cells, 0u);
+    ASSERT_EQ(fast.stats().crossing_grid_cells, 0u);
   }
-  EXPECT_EQ(general.stats().sensor_grid_cells, 0u);
+  EXPECT_EQ(general.stats().crossing_grid_cells, 0u);
   // ctest runs this file again with DUPLEX_ISA=sse2 and avx2: the box test must use that width
   // (SSE2 always; AVX2 where the CPU has it), so every vector path is tested on one machine.
 #if defined(__GNUC__) && defined(__x86_64__)
-  const std::uint32_t lanes = fast.stats().sensor_box_lanes;
+  const std::uint32_t lanes = fast.stats().crossing_box_lanes;
   const char* isa = std::getenv("DUPLEX_ISA");
   if (isa && std::string_view(isa) == "sse2") {
     EXPECT_EQ(lanes, 4u);
@@ -289,9 +288,9 @@ TEST(SensorCrossingPaths, AgreeAHundredThousandUnitsFromTheOrigin) {
 TEST(SensorCrossingPaths, SensorsStraddlingCellPlanesAgree) {
   const Scene s = makeScene(glm::dvec3(0.0), 5.0);
   BothWalks walks(s.instances);
-  ASSERT_GT(walks.fast.stats().sensor_grid_cells, 0u);
+  ASSERT_GT(walks.fast.stats().crossing_grid_cells, 0u);
   // Every sensor keeps at least one entry (its rectangle lies in the grid's cells).
-  EXPECT_GE(walks.fast.stats().sensor_grid_entries, s.instances.size());
+  EXPECT_GE(walks.fast.stats().crossing_grid_entries, s.instances.size());
   std::mt19937_64 r(17);
   std::uniform_real_distribution<double> v(0.0, 1.0);
   Counts counts;
@@ -313,7 +312,7 @@ TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
   TopLevel top;
   top.build(s.instances);
   const TopLevelStats before = top.stats();
-  ASSERT_GT(before.sensor_grid_cells, 0u);
+  ASSERT_GT(before.crossing_grid_cells, 0u);
   // Moving sensors far away (a commit rebuilds the grid over the new bounds): still exact.
   std::mt19937_64 r(5);
   for (std::uint32_t id = 0; id < 2000; id += 97) {
@@ -322,7 +321,7 @@ TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
   }
   top.commit();
   TopLevelConfig tree_only;
-  tree_only.sensor_grid = false;
+  tree_only.crossing_grid = false;
   TopLevel general(tree_only);
   general.build(s.instances);
   Counts counts;
@@ -338,14 +337,14 @@ TEST(SensorCrossingPaths, GridFollowsEditsAndIsDroppedWhenItWouldNotPay) {
   // Few sensors: no grid, the tree alone.
   TopLevel few;
   few.build(std::vector<InstanceDesc>(s.instances.begin(), s.instances.begin() + 100));
-  EXPECT_EQ(few.stats().sensor_grid_cells, 0u);
+  EXPECT_EQ(few.stats().crossing_grid_cells, 0u);
   // Large sensors spanning many cells: no grid either.
   std::vector<InstanceDesc> large = s.instances;
   const auto big = sensor(SensorShape::Rectangle, 8.0, 4, true);
   for (InstanceDesc& d : large) d.object = big;
   TopLevel spanning;
   spanning.build(large);
-  EXPECT_EQ(spanning.stats().sensor_grid_cells, 0u);
+  EXPECT_EQ(spanning.stats().crossing_grid_cells, 0u);
 }
 
 // A thin, nearly flat layout (sensors on a floor tilted by 1e-6, 1,000 units wide): the grid must
@@ -367,7 +366,7 @@ TEST(SensorCrossingPaths, ThinLayoutsGetFewCells) {
     s.half.push_back(1.0);
   }
   const BothWalks walks(s.instances);
-  const std::uint64_t cells = walks.fast.stats().sensor_grid_cells;
+  const std::uint64_t cells = walks.fast.stats().crossing_grid_cells;
   ASSERT_GT(cells, 0u);
   EXPECT_LE(cells, s.instances.size());
   Counts counts;
@@ -460,9 +459,9 @@ TEST(SensorCrossingPaths, PlaneTestDropsOnlyWhatTheExactTestMisses) {
       if (d.id % 10 < 6) squares.push_back(d);
     TopLevel top;
     top.build(squares);
-    ASSERT_GT(top.stats().sensor_grid_cells, 0u);
+    ASSERT_GT(top.stats().crossing_grid_cells, 0u);
     QueryContext ctx;
-    std::vector<SensorCrossing> found;
+    std::vector<Crossing> found;
     std::uint64_t crossed = 0;
     for (int i = 0; i < 3000; ++i) {
       Ray ray;
@@ -472,7 +471,7 @@ TEST(SensorCrossingPaths, PlaneTestDropsOnlyWhatTheExactTestMisses) {
       (void)top.intersectWithCrossings(ray, found, ctx);
       crossed += found.size();
     }
-    const std::uint64_t settled = ctx.stats.sensor_plane_misses, asked = ctx.stats.instance_visits;
+    const std::uint64_t settled = ctx.stats.crossing_plane_misses, asked = ctx.stats.instance_visits;
     EXPECT_GT(crossed, 100u);
     EXPECT_GE(asked, crossed);
     // Far from the origin the bounds (relative to the coordinates' magnitude, 1e4 here) are wider
@@ -513,7 +512,7 @@ Scene tileFloor() {
 TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
   const Scene s = tileFloor();
   const BothWalks walks(s.instances);
-  ASSERT_GT(walks.fast.stats().sensor_grid_cells, 0u);
+  ASSERT_GT(walks.fast.stats().crossing_grid_cells, 0u);
   Counts counts;
   std::size_t two_tiles = 0;
   for (const float a : {3.0f, 6.0f, 0.75f, 2.25f, 1.5f})
@@ -544,7 +543,7 @@ TEST(SensorCrossingPaths, SegmentsEndingOnACellPlaneFindTheTileBeyondIt) {
 TEST(SensorCrossingPaths, RaysLeavingCellEdgesDownwardsAgree) {
   const Scene s = tileFloor();
   const BothWalks walks(s.instances);
-  ASSERT_GT(walks.fast.stats().sensor_grid_cells, 0u);
+  ASSERT_GT(walks.fast.stats().crossing_grid_cells, 0u);
   Counts counts;
   for (int k = 1; k < 10; k += 2)
     for (int m = 1; m < 10; m += 3)

@@ -170,7 +170,7 @@ TEST(CrossingQuery, CrossingsBeforeTheHitInOrderEachOnce) {
   TopLevel top;
   top.build(inst);
   QueryContext ctx;
-  std::vector<SensorCrossing> crossings;
+  std::vector<Crossing> crossings;
   Ray r;
   r.origin = glm::vec3(0.3f, 0.2f, 0.0f);
   r.dir = glm::vec3(0.0f, 0.0f, 1.0f);
@@ -198,7 +198,7 @@ TEST(CrossingQuery, CrossingsBeforeTheHitInOrderEachOnce) {
   EXPECT_EQ(crossings[0].hit.instance_id, 11u);
   // Masks: no sensor role, no crossings; the hit stays.
   CrossingQuery q;
-  q.sensor_mask = 0;
+  q.crossing_mask = 0;
   EXPECT_EQ(top.intersectWithCrossings(r, crossings, ctx, q).hit.instance_id, 20u);
   EXPECT_TRUE(crossings.empty());
 }
@@ -232,7 +232,7 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
     TopLevel top;
     top.build(inst);
     QueryContext ctx;
-    std::vector<SensorCrossing> crossings;
+    std::vector<Crossing> crossings;
     std::size_t total = 0;
     for (int i = 0; i < 2000; ++i) {
       Ray r;
@@ -280,7 +280,7 @@ TEST(CrossingQuery, MediaAttenuateEachSegment) {
   TopLevel top;
   top.build(inst);
   QueryContext ctx;
-  std::vector<SensorCrossing> crossings;
+  std::vector<Crossing> crossings;
   Ray r;
   r.dir = glm::vec3(0, 0, 1);
   const SegmentEnd end = top.intersectWithCrossings(r, crossings, ctx);

@@ -145,13 +145,13 @@ TEST(TopLevelSensors, RandomEditsWithRoleChangesAgreeWithBruteForce) {
         static_cast<std::size_t>(std::count_if(model.instances.begin(), model.instances.end(), [](const auto& kv) {
           return kv.second.object->role() == ObjectRole::Sensor;
         }));
-    ASSERT_EQ(top.stats().sensor_instances, sensors);
+    ASSERT_EQ(top.stats().crossing_instances, sensors);
     ASSERT_EQ(top.stats().instances + sensors, model.instances.size());
     for (const auto& [id, d] : model.instances) ASSERT_TRUE(top.contains(id)) << id;
 
     const auto rays = randomRays(top.bounds(), 250, 900 + static_cast<std::uint64_t>(round));
     QueryContext ctx;
-    std::vector<SensorCrossing> crossings;
+    std::vector<Crossing> crossings;
     std::vector<Hit> all;
     for (const Ray& ray : rays) {
       for (const std::uint32_t mask : {0xFFFFFFFFu, 1u}) {
@@ -164,7 +164,7 @@ TEST(TopLevelSensors, RandomEditsWithRoleChangesAgreeWithBruteForce) {
         }
         CrossingQuery q;
         q.surface_mask = mask;
-        q.sensor_mask = mask;
+        q.crossing_mask = mask;
         const SegmentEnd end = top.intersectWithCrossings(ray, crossings, ctx, q);
         ASSERT_EQ(end.hit.valid(), expect.valid());
         if (expect.valid()) {
@@ -201,14 +201,14 @@ TEST(TopLevelSensors, ClosestHitNeverTraversesTheSensors) {
   TopLevel top;
   top.build(instances);
   EXPECT_EQ(top.stats().instances, 1u);
-  EXPECT_EQ(top.stats().sensor_instances, 2000u);
+  EXPECT_EQ(top.stats().crossing_instances, 2000u);
   EXPECT_EQ(top.tree().prim_indices.size(), 1u);
-  ASSERT_NE(top.sensorLevel(), nullptr);
+  ASSERT_NE(top.crossingLevel(), nullptr);
   QueryContext ctx;
   for (const Ray& ray : randomRays(top.bounds(), 500, 6)) (void)top.intersect(ray, ctx);
   EXPECT_LE(ctx.stats.instance_visits, 500u) << "closest-hit queries reached sensor instances";
   // The sensors' level is still complete: every sensor's box holds its own instance.
-  EXPECT_EQ(top.sensorLevel()->size(), 2000u);
+  EXPECT_EQ(top.crossingLevel()->size(), 2000u);
   EXPECT_FALSE(top.bounds().empty());
   for (std::uint32_t i = 0; i < 2000; i += 97) EXPECT_TRUE(top.contains(i));
   EXPECT_THROW(top.remove(99999), InvalidArgument);
@@ -267,9 +267,9 @@ void checkManySmallSensors(const glm::dvec3& offset, const TopLevelConfig& confi
   std::size_t checked = 0, crossed = 0, axis_rays = 0, aimed = 0;
   auto check = [&](const Ray& ray, std::uint32_t mask) {
     CrossingQuery q;
-    q.sensor_mask = mask;
+    q.crossing_mask = mask;
     QueryContext ctx;
-    std::vector<SensorCrossing> crossings;
+    std::vector<Crossing> crossings;
     const SegmentEnd end = top.intersectWithCrossings(ray, crossings, ctx, q);
     const Hit expect = model.closest(ray, 0xFFFFFFFFu);
     ASSERT_EQ(end.hit.valid(), expect.valid());
@@ -354,7 +354,7 @@ TEST(TopLevelSensors, ManySmallSensorsAgreeUnderTheMainLevelsBuildDefaults) {
   // The sensors' tree shape changes nothing but speed: deep tree with small leaves, as the main
   // level builds it.
   TopLevelConfig config;
-  config.sensor_build = topLevelBuildDefaults();
+  config.crossing_build = topLevelBuildDefaults();
   ASSERT_NO_FATAL_FAILURE(checkManySmallSensors(glm::dvec3(0.0), config));
 }
 
@@ -363,30 +363,30 @@ TEST(TopLevelSensors, SensorLevelBuildsWithItsOwnConfiguration) {
   TopLevel shallow;
   shallow.build(instances);
   TopLevelConfig deep_config;
-  deep_config.sensor_build = topLevelBuildDefaults();
+  deep_config.crossing_build = topLevelBuildDefaults();
   TopLevel deep(deep_config);
   deep.build(instances);
   // A lower intersection cost and no empty bonus: fewer nodes, more references per leaf.
-  const KdTreeStats a = shallow.stats().sensor_tree, b = deep.stats().sensor_tree;
+  const KdTreeStats a = shallow.stats().crossing_tree, b = deep.stats().crossing_tree;
   EXPECT_LT(a.nodes, b.nodes);
   EXPECT_GT(static_cast<double>(a.references) / static_cast<double>(a.leaves - a.empty_leaves),
             static_cast<double>(b.references) / static_cast<double>(b.leaves - b.empty_leaves));
   // setConfig reaches the nested level: after a rebuild the trees are the same.
   shallow.setConfig(deep_config);
   shallow.rebuild();
-  EXPECT_EQ(shallow.stats().sensor_tree.nodes, b.nodes);
+  EXPECT_EQ(shallow.stats().crossing_tree.nodes, b.nodes);
   EXPECT_EQ(shallow.stats().tree.nodes, deep.stats().tree.nodes);
   // The sensors' configuration is validated like the main one, naming it.
   TopLevelConfig bad;
-  bad.sensor_build.intersection_cost = 0.0f;
+  bad.crossing_build.intersection_cost = 0.0f;
   try {
     TopLevel t(bad);
     ADD_FAILURE() << "no exception";
   } catch (const InvalidArgument& e) {
-    EXPECT_NE(std::string(e.what()).find("sensor_build"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("crossing_build"), std::string::npos) << e.what();
   }
   bad = TopLevelConfig{};
-  bad.sensor_build.empty_bonus = 1.0f;
+  bad.crossing_build.empty_bonus = 1.0f;
   EXPECT_THROW(shallow.setConfig(bad), InvalidArgument);
 }
 

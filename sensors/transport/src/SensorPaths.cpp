@@ -92,7 +92,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   CrossingQuery query = config_.query;
   if (scatter) query.medium_mask = 0;
   QueryContext ctx;
-  std::vector<SensorCrossing> crossings;
+  std::vector<Crossing> crossings;
   std::vector<BinEvent> path_bins;  // this path's deposits before merging
   chunk.bins.clear();
   chunk.bin_end.clear();
@@ -147,7 +147,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
                                    rng, ctx, t_collision);
       }
       if (!config_.closest_hit_only) {
-        for (const SensorCrossing& c : crossings) {
+        for (const Crossing& c : crossings) {
           if (c.hit.t > t_collision) break;  // sorted by t
           if (c.hit.instance_id >= deposit_targets_.size()) continue;
           const DepositTarget target = deposit_targets_[c.hit.instance_id];

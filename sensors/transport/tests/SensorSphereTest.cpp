@@ -83,7 +83,7 @@ TEST(SensorSphere, CrossingQueryReportsBothCrossingsBeforeTheWall) {
   f.add(sphere(1.0, 4, 2, true, "ball"), translate(0, 0, 2), "ball");
   f.add(sensor(4, 4, 1, 1, true, "plane"), translate(0, 0, 4), "plane");
   SensorScene open = f.scene({pointLight({0, 0, 0}, 1.0)});
-  std::vector<SensorCrossing> crossings;
+  std::vector<Crossing> crossings;
   QueryContext ctx;
   Ray r = ray({0.1f, 0, 0}, {0, 0, 1});
   (void)open.tracer().topLevel().intersectWithCrossings(r, crossings, ctx, CrossingQuery{});

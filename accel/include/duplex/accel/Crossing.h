@@ -1,7 +1,8 @@
 #pragma once
 /// \file Crossing.h
 /// Records of the crossing query (TopLevel::intersectWithCrossings): a ray's closest blocking hit
-/// together with every sensor crossing before it, and the transmittance of media along the way.
+/// together with every crossing of a non-blocking instance (a sensor) before it, and the transmittance of media along
+/// the way.
 
 #include "duplex/accel/Hit.h"
 
@@ -14,15 +15,15 @@ namespace duplex {
 /// Which instances a crossing query sees, by role; an instance takes part when (its mask & the
 /// role's mask) != 0. A zero mask switches the role off (e.g. medium_mask = 0: no attenuation).
 struct CrossingQuery {
-  std::uint32_t surface_mask = 0xFFFFFFFFu;  ///< blocking instances (the closest hit)
-  std::uint32_t sensor_mask = 0xFFFFFFFFu;   ///< sensors whose crossings are reported
-  std::uint32_t medium_mask = 0xFFFFFFFFu;   ///< media whose transmittance is applied
+  std::uint32_t surface_mask = 0xFFFFFFFFu;   ///< blocking instances (the closest hit)
+  std::uint32_t crossing_mask = 0xFFFFFFFFu;  ///< non-blocking instances whose crossings are reported
+  std::uint32_t medium_mask = 0xFFFFFFFFu;    ///< media whose transmittance is applied
 };
 
-/// One crossing of a sensor instance. `hit` as intersectAll reports it: world t (units of the
-/// ray's direction), u, v (the object's local crossing data; sensors: local x, y), prim_id (a
-/// sensor's bin), instance_id, world-space ng.
-struct SensorCrossing {
+/// One crossing of a non-blocking instance (ObjectRole::Sensor). `hit` as intersectAll reports it: world t (units of
+/// the ray's direction), u, v (the object's local crossing data; sensors: local x, y), prim_id (a sensor's bin),
+/// instance_id, world-space ng.
+struct Crossing {
   Hit hit;
   /// Fraction of the ray's power that reaches the crossing through the selected media, in [0, 1].
   float transmittance = 1.0f;
@@ -40,8 +41,8 @@ struct SegmentEnd {
 /// computed by different formulas and may differ by rounding.
 inline constexpr float kCrossingSlack = 16.0f * std::numeric_limits<float>::epsilon();
 
-inline std::ostream& operator<<(std::ostream& os, const SensorCrossing& c) {
-  return os << "SensorCrossing{" << c.hit << ", T=" << c.transmittance << "}";
+inline std::ostream& operator<<(std::ostream& os, const Crossing& c) {
+  return os << "Crossing{" << c.hit << ", T=" << c.transmittance << "}";
 }
 
 }  // namespace duplex

@@ -1,6 +1,7 @@
 #pragma once
 /// \file Error.h
-/// Typed exceptions for bad input. Internal invariants are checked separately (DUPLEX_CHECK).
+/// Typed exceptions: Error and its subclasses for bad input; InternalError for a broken internal
+/// invariant (thrown by DUPLEX_CHECK / DUPLEX_DCHECK, Check.h).
 
 #include <stdexcept>
 #include <string>
@@ -23,6 +24,13 @@ class InvalidArgument : public Error {
 class FileError : public Error {
  public:
   using Error::Error;
+};
+
+/// A broken internal invariant: a bug in Duplex, whatever the input. Deliberately not an Error, so
+/// that code which handles bad input (catch (const Error&)) does not take it for one.
+class InternalError : public std::logic_error {
+ public:
+  using std::logic_error::logic_error;
 };
 
 }  // namespace duplex

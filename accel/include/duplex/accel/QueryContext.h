@@ -19,7 +19,7 @@ struct QueryStats {
   /// Crossing queries: plane tests that settled a flat sensor whose box the ray met as plainly
   /// missed, without asking the object. The mailbox runs first, so a sensor the walk lists in
   /// several cells or leaves is tested once per query (while the 8-entry mailbox holds it).
-  std::uint64_t sensor_plane_misses = 0;
+  std::uint64_t crossing_plane_misses = 0;
 };
 
 /// One per thread; cheap to create (no allocation until an object caches something). Not

@@ -4,10 +4,12 @@
 /// instances, built with the same builder and traversed with the same code as the bottom level,
 /// and updated incrementally when instances move, appear or disappear.
 ///
-/// Sensors (ObjectRole::Sensor) live in a second tree of their own, kept by the same rules: closest-
-/// hit, occlusion and transmittance queries never traverse it, so rendering costs the same with
-/// 10,000 sensors in the scene as without; intersectAll, instancesInRegion and the crossing query
-/// traverse both. An instance whose object changes role moves between the two on commit.
+/// Non-blocking instances (ObjectRole::Sensor: objects that record the rays crossing them, such as
+/// light sensors) live in a second tree of their own, the crossing level, kept by the same rules
+/// (both are InstanceTrees): closest-hit, occlusion and transmittance queries never traverse it, so
+/// rendering costs the same with 10,000 of them in the scene as without; intersectAll,
+/// instancesInRegion and the crossing query traverse both. An instance whose object changes role
+/// moves between the two on commit.
 ///
 /// Lifecycle (after Embree's edit -> commit -> trace): set() / remove() record edits; commit()
 /// applies them to the tree; queries see the state of the last commit. Queries are const and may
@@ -15,6 +17,7 @@
 /// set() / remove() / commit() / build() run (the caller serialises them; SceneTracer does).
 
 #include "duplex/accel/Affine.h"
+#include "duplex/accel/InstanceTree.h"
 #include "duplex/accel/Crossing.h"
 #include "duplex/accel/Hit.h"
 #include "duplex/accel/KdBuildConfig.h"
@@ -32,75 +35,6 @@
 
 namespace duplex {
 
-namespace toplevel_detail {
-struct WorldRay;  // the world ray in float and double (src/TopLevelState.h)
-}  // namespace toplevel_detail
-
-/// One instance as the top level sees it.
-struct InstanceDesc {
-  std::shared_ptr<const Object> object;
-  Affine world_from_object;
-  std::uint32_t id = 0;              ///< the caller's id, reported in Hit::instance_id; unique
-  std::uint32_t mask = 0xFFFFFFFFu;  ///< user bits; a query sees the instance when (mask & query mask) != 0
-};
-
-/// How commit() brings the tree up to date.
-enum class TopLevelUpdate : std::uint8_t {
-  /// Re-insert only the edited instances into the leaves their old and new boxes touch; rebuild a
-  /// subtree when its leaves overflow, and the whole tree when its SAH cost drifts above the cost
-  /// of a fresh build by more than TopLevelConfig::rebuild_ratio.
-  Incremental,
-  /// Rebuild the whole tree on every commit that changed something (the paper's method; the
-  /// baseline of the update benchmark).
-  FullRebuild,
-};
-
-/// The top level's build defaults: an instance test (ray transform, bottom-level setup and
-/// traversal) costs far more than a triangle test, so the intersection cost is 1 node step rather
-/// than the bottom level's. Lower costs make deeper trees that trace slower; higher ones trace no
-/// faster but reference each overlapping instance box many times and build slower.
-inline KdBuildConfig topLevelBuildDefaults() {
-  KdBuildConfig c;
-  c.intersection_cost = 1.0f;
-  return c;
-}
-
-/// The sensors' level's build defaults (TopLevelConfig::sensor_build). Its leaves are tested 16, 8
-/// or 4 boxes at a time from a leaf-ordered copy of the boxes (no instance record is read unless a box
-/// is met), which costs far less than a node step, and a small sensor gains little from an
-/// empty-space cut, which costs every ray passing near it a node step. So: intersection cost 0.05
-/// and no empty bonus, a shallow tree with leaves of several sensors (the benchmark's many small
-/// sensors query about twice as fast as with the top-level defaults; docs/sensors.md, "Speed").
-inline KdBuildConfig sensorLevelBuildDefaults() {
-  KdBuildConfig c;
-  c.intersection_cost = 0.05f;
-  c.empty_bonus = 0.0f;
-  return c;
-}
-
-struct TopLevelConfig {
-  KdBuildConfig build = topLevelBuildDefaults();  ///< for full and subtree builds
-  /// The same for the sensors' own level (see TopLevel); build() with an explicit configuration
-  /// sets `build` only.
-  KdBuildConfig sensor_build = sensorLevelBuildDefaults();
-  /// The crossing query walks a uniform grid over the sensors' boxes instead of their kd-tree
-  /// when the level holds many sensors (at least 256, each spanning few cells) and the ray's
-  /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
-  /// "The crossing query"). false: always the kd-tree (for comparisons).
-  bool sensor_grid = true;
-  TopLevelUpdate update = TopLevelUpdate::Incremental;
-  /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
-  /// scaled to the current instance count).
-  double rebuild_ratio = 1.05;
-  /// A leaf that grows past this many references is rebuilt as a subtree.
-  std::uint32_t leaf_split_size = 8;
-  /// Below this many instances every commit rebuilds the whole tree (it costs microseconds).
-  std::size_t min_incremental_instances = 16;
-  /// A commit that edits more than this fraction of the instances rebuilds the whole tree: cheaper
-  /// than as many re-insertions, and a better tree.
-  double max_incremental_fraction = 0.125;
-};
-
 /// Figures of the current tree and of the last commit (for tests and the benchmark).
 struct TopLevelStats {
   std::size_t instances = 0;
@@ -112,21 +46,21 @@ struct TopLevelStats {
   std::uint64_t subtree_rebuilds = 0;
   std::size_t last_commit_edits = 0;  ///< instances set or removed by the last commit
   /// Nodes of tree().nodes that no traversal reaches: subtrees that a local rebuild replaced,
-  /// dropped when the tree is compacted (TopLevelRefine.cpp).
+  /// dropped when the tree is compacted (InstanceTreeRefine.cpp).
   std::size_t garbage_nodes = 0;
   bool last_commit_full_rebuild = false;
-  /// The sensors' own tree (see TopLevel): its instances and figures. `instances` and `tree` above
-  /// count the other instances only.
-  std::size_t sensor_instances = 0;
-  KdTreeStats sensor_tree;
-  /// The uniform grid the crossing query walks over the sensors (TopLevelConfig::sensor_grid):
-  /// its cells and entries (sensors times the cells each is listed in); 0 when it walks the tree.
-  std::size_t sensor_grid_cells = 0;
-  std::size_t sensor_grid_entries = 0;
-  /// Sensor boxes per vector test: 16 (AVX-512F), 8 (AVX2) or 4 (SSE2), the widest the CPU runs,
+  /// The crossing level (non-blocking instances, see TopLevel): its instances and figures.
+  /// `instances` and `tree` above count the other instances only.
+  std::size_t crossing_instances = 0;
+  KdTreeStats crossing_tree;
+  /// The uniform grid the crossing query walks over the crossing level (TopLevelConfig::crossing_grid):
+  /// its cells and entries (instances times the cells each is listed in); 0 when it walks the tree.
+  std::size_t crossing_grid_cells = 0;
+  std::size_t crossing_grid_entries = 0;
+  /// Crossing-level boxes per vector test: 16 (AVX-512F), 8 (AVX2) or 4 (SSE2), the widest the CPU runs,
   /// capped by the environment variable DUPLEX_ISA ("sse2", "avx2") when the level was last
-  /// committed; 1 on other CPUs or without sensors.
-  std::uint32_t sensor_box_lanes = 1;
+  /// committed; 1 on other CPUs or without non-blocking instances.
+  std::uint32_t crossing_box_lanes = 1;
 };
 
 class TopLevel {
@@ -141,7 +75,7 @@ class TopLevel {
   TopLevel(TopLevel&&) noexcept = default;
   TopLevel& operator=(TopLevel&&) noexcept = default;
 
-  [[nodiscard]] const TopLevelConfig& config() const { return config_; }
+  [[nodiscard]] const TopLevelConfig& config() const { return blocking_.config(); }
   /// Takes effect at the next build or commit; validated as in the constructor.
   void setConfig(const TopLevelConfig& config);
 
@@ -188,15 +122,15 @@ class TopLevel {
   /// blocking instance (role Surface) is hit within the segment, else the product of the
   /// transmittances of every medium instance (role Medium) the segment crosses, each counted once
   /// (Object::transmittance on the object-space ray, same t). Sensors are ignored. 1 for a ray that
-  /// cannot be queried (NaN, zero direction) or an empty scene. Defined in TopLevelTransmittance.cpp.
+  /// cannot be queried (NaN, zero direction) or an empty scene. Defined in InstanceTreeTransmittance.cpp.
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Light transport's query, in one traversal: the closest blocking hit of a world-space ray among
   /// instances selected by query.surface_mask, and in `crossings` (cleared first) every crossing of
-  /// a sensor instance selected by query.sensor_mask with t in [tnear, hit t (1 + kCrossingSlack)]
+  /// a sensor instance selected by query.crossing_mask with t in [tnear, hit t (1 + kCrossingSlack)]
   /// (all of [tnear, tfar] on a miss), each once, sorted by t (ties by instance id), with the
   /// transmittance of the media selected by query.medium_mask from tnear to each crossing and to
   /// the hit. Defined in TopLevelCrossings.cpp.
-  [[nodiscard]] SegmentEnd intersectWithCrossings(const Ray& ray_ws, std::vector<SensorCrossing>& crossings,
+  [[nodiscard]] SegmentEnd intersectWithCrossings(const Ray& ray_ws, std::vector<Crossing>& crossings,
                                                   QueryContext& ctx, const CrossingQuery& query = {}) const;
   /// Ids of the instances whose world box meets the convex region {x : dot(n_i, x) <= d_i for all
   /// planes}, planes given as (n.x, n.y, n.z, d) in world space, mask-filtered; sorted by id. The
@@ -212,45 +146,27 @@ class TopLevel {
   /// The id of the instance that tree().prim_indices entry `slot` refers to (for tests and tools);
   /// kInvalidId for a free slot.
   [[nodiscard]] std::uint32_t idAt(std::uint32_t slot) const;
-  /// World-space bounds of everything, sensors included (last commit).
+  /// World-space bounds of everything, non-blocking instances included (last commit).
   [[nodiscard]] Box bounds() const;
-  /// Instances of the last commit, sensors included.
-  [[nodiscard]] std::size_t size() const { return live_count_ + (sensors_ ? sensors_->size() : 0); }
-  /// The tree over every instance except sensors (idAt() maps its slots to ids).
-  [[nodiscard]] const KdTree& tree() const { return tree_; }
-  /// The sensors' own level (nullptr before the first sensor arrives); its tree() and idAt() are
-  /// those of the sensor instances.
-  [[nodiscard]] const TopLevel* sensorLevel() const { return sensors_.get(); }
+  /// Instances of the last commit, non-blocking ones included.
+  [[nodiscard]] std::size_t size() const { return blocking_.size() + (crossing_ ? crossing_->size() : 0); }
+  /// The tree over the blocking and medium instances (idAt() maps its slots to ids).
+  [[nodiscard]] const KdTree& tree() const { return blocking_.tree(); }
+  /// The crossing level: the tree of the non-blocking instances (nullptr before the first one
+  /// arrives); its tree() and idAt() are those of these instances.
+  [[nodiscard]] const InstanceTree* crossingLevel() const { return crossing_.get(); }
   [[nodiscard]] TopLevelStats stats() const;
   /// Bytes the top level holds per instance, excluding tree references (instance record and id map).
   [[nodiscard]] static std::size_t bytesPerInstance();
 
  private:
-  struct State;  // instance records, id map, pending edits, leaf bookkeeping (TopLevel.cpp)
-  struct SensorLevelTag {};
-  TopLevel(const TopLevelConfig& config, SensorLevelTag);  // the nested level: keeps every role
-  TopLevel& sensorLevelForEdit();
-  void buildHere(std::span<const InstanceDesc> instances, const KdBuildConfig& config);
-  void setHere(const InstanceDesc& instance);
-  void removeHere(std::uint32_t id);
-  [[nodiscard]] bool containsHere(std::uint32_t id) const;
-  void commitHere();
-  void collectAllHere(const toplevel_detail::WorldRay& w, std::vector<Hit>& hits, QueryContext& ctx,
-                      std::uint32_t mask) const;
-  void fullRebuild();
-  void install(KdTree&& tree);
-  void commitEdits();
-  void compact();
-  Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
+  InstanceTree& crossingLevelForEdit();
   void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
                         std::uint32_t mask) const;
-  TopLevelConfig config_;
-  KdTree tree_;
-  std::size_t live_count_ = 0;
-  std::shared_ptr<State> state_;
-  /// Sensor instances, in a nested level of their own (see the class comment).
-  std::unique_ptr<TopLevel> sensors_;
-  bool separate_sensors_ = true;  // false in the nested level itself
+  /// Surfaces and media; its config() is this top level's.
+  InstanceTree blocking_;
+  /// Non-blocking instances, in a tree of their own (see the class comment).
+  std::unique_ptr<InstanceTree> crossing_;
 };
 
 }  // namespace duplex

@@ -1,12 +1,12 @@
-// TopLevel::transmittance: shadow and sensor rays through fog. One front-to-back traversal of the
-// top-level tree over the whole segment (media anywhere on it count), ending at the first blocking
+// InstanceTree::transmittance (TopLevel::transmittance): shadow and sensor rays through fog. One front-to-back
+// traversal of the top-level tree over the whole segment (media anywhere on it count), ending at the first blocking
 // surface (transmittance 0). Each instance is asked once however many leaves hold it: a medium
 // counted twice would square its transmittance, so the mailbox of the closest-hit query (which may
 // forget) is not enough; the instances seen are kept in a per-thread list.
 
-#include "duplex/accel/TopLevel.h"
+#include "duplex/accel/InstanceTree.h"
 
-#include "TopLevelState.h"
+#include "InstanceTreeState.h"
 
 #include <algorithm>
 #include <vector>
@@ -27,7 +27,7 @@ const int kSeenSlotsKey = 0;
 
 }  // namespace
 
-float TopLevel::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
+float InstanceTree::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
   if (!isQueryable(ray_ws) || tree_.empty()) return 1.0f;
   const WorldRay w = fromFloat(ray_ws);

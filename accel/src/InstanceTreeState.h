@@ -1,22 +1,26 @@
 #pragma once
-// Private to accel/src: the top level's instance records and the per-ray helpers every top-level
-// query shares. Queries beyond the basic ones (sensor crossings, transmittance) live in their own
-// .cpp files and include this header.
+// Private to accel/src: an instance tree's records and the per-ray helpers every top-level query
+// shares. Queries beyond the basic ones (crossings, transmittance) live in their own .cpp files and
+// include this header.
 
 #include "duplex/accel/Affine.h"
 #include "duplex/accel/Box.h"
+#include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
-#include "duplex/accel/TopLevel.h"
+#include "duplex/accel/InstanceTree.h"
 #include "FlatPlane.h"
 #include "LeafBoxes.h"
-#include "SensorGrid.h"
+#include "CrossingGrid.h"
 
 #include <glm/matrix.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
+#include <string>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -24,6 +28,34 @@
 namespace duplex {
 
 namespace toplevel_detail {
+
+inline std::string describeInstance(const InstanceDesc& d) {
+  std::string s = "instance " + std::to_string(d.id);
+  if (d.object) s += " (object '" + d.object->name() + "')";
+  return s;
+}
+
+// Throws InvalidArgument for a configuration out of range (InstanceTree.cpp).
+void validateConfig(const TopLevelConfig& c);
+
+// Throws InvalidArgument for a region plane with a non-finite or zero normal or a non-finite
+// offset: a NaN plane is never "outside", so it would select everything.
+inline void checkRegionPlanes(std::span<const glm::dvec4> planes) {
+  for (const glm::dvec4& p : planes)
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(p.w) ||
+        !(p.x != 0.0 || p.y != 0.0 || p.z != 0.0))
+      throw InvalidArgument(
+          "TopLevel::instancesInRegion: a plane has a non-finite or zero normal, or a non-finite offset");
+}
+
+// Sorts hits by t, ties by instance id, then primitive id (the order intersectAll reports).
+inline void sortHits(std::vector<Hit>& hits) {
+  std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
+    if (a.t != b.t) return a.t < b.t;
+    if (a.instance_id != b.instance_id) return a.instance_id < b.instance_id;
+    return a.prim_id < b.prim_id;
+  });
+}
 
 // What traversal reads for an instance: one record, no pointer chase but the object.
 struct Record {
@@ -64,7 +96,7 @@ struct LeafVisit {
   std::uint32_t jump = kNoJump;
   Box jump_cell;
   std::uint32_t jump_depth = 0;
-  std::uint32_t frontier = kNoJump;  // the frontier subtree it belongs to (TopLevel::State::frontiers)
+  std::uint32_t frontier = kNoJump;  // the frontier subtree it belongs to (InstanceTree::State::frontiers)
 };
 
 // A subtree of the last full build that is rebuilt on its own once edits changed a good part of
@@ -159,7 +191,7 @@ struct Mailbox {
 
 }  // namespace toplevel_detail
 
-struct TopLevel::State {
+struct InstanceTree::State {
   using Record = toplevel_detail::Record;
   using LeafVisit = toplevel_detail::LeafVisit;
   using Prepared = toplevel_detail::Prepared;
@@ -189,12 +221,12 @@ struct TopLevel::State {
 
   std::vector<LeafVisit> scratch_old, scratch_new;
 
-  // The sensors' level only: the boxes in leaf order (LeafBoxes.h), refreshed after every commit
-  // and build (O(references)); a count that differs from tree.prim_indices (a failed commit) means
-  // "not available", and the crossing query reads `boxes` by slot instead.
-  // With them, a uniform grid over the same boxes (SensorGrid.h), refreshed at the same times.
+  // Crossing trees only (InstanceTree::Kind::Crossing): the boxes in leaf order (LeafBoxes.h), refreshed after every
+  // commit and build (O(references)); a count that differs from tree.prim_indices (a failed commit) means "not
+  // available", and the crossing query reads `boxes` by slot instead. With them, a uniform grid over the same boxes
+  // (CrossingGrid.h), refreshed at the same times.
   toplevel_detail::LeafBoxes leaf_boxes;
-  toplevel_detail::SensorGrid grid;
+  toplevel_detail::CrossingGrid grid;
   std::vector<toplevel_detail::FlatPlane> flat;  // by slot: the flat instances' planes (FlatPlane.h)
   // By grid entry (grid.slots order): the same records, so that an entry whose box a ray meets is
   // filtered, mailboxed and plane-tested from one cache line (slot and mask packed in the record)
@@ -243,23 +275,24 @@ struct TopLevel::State {
     ++frontiers[v.frontier].edits;
     touched_frontiers.push_back(v.frontier);
   }
-  // Finds the frontiers of a freshly built tree (TopLevelRefine.cpp).
+  // Finds the frontiers of a freshly built tree (InstanceTreeRefine.cpp).
   void markFrontiers(const KdTree& tree);
   // Rebuilds the touched frontiers whose edits exceed a fraction of their references; returns them.
-  std::vector<std::uint32_t> rebuildEditedFrontiers(TopLevel& top);
+  std::vector<std::uint32_t> rebuildEditedFrontiers(InstanceTree& top);
   // Jump subtrees that lost references in this commit (visits of their leaves), and the references
   // each jump subtree lost since it was built (cleared by full builds and compaction).
   std::vector<LeafVisit> touched_jumps;
   std::unordered_map<std::uint32_t, std::uint32_t> jump_losses;
 
   // Re-splits grown leaves by local builds, after rebuilding the small jump subtrees in
-  // touched_jumps over their current references (TopLevelRefine.cpp); returns whether the tree
+  // touched_jumps over their current references (InstanceTreeRefine.cpp); returns whether the tree
   // changed.
-  bool refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves);
+  bool refineLeaves(InstanceTree& top, std::vector<LeafVisit>& grown_leaves);
   // Rebuilds the jump subtrees of touched_jumps that hold at most kMaxJumpRebuild references;
   // returns the jump nodes whose subtrees are gone (rebuilt, or inside a rebuilt one).
   // Visits of rebuilt frontiers (`rebuilt_frontiers`) are skipped.
-  std::vector<std::uint32_t> rebuildTouchedJumps(TopLevel& top, const std::vector<std::uint32_t>& rebuilt_frontiers);
+  std::vector<std::uint32_t> rebuildTouchedJumps(InstanceTree& top,
+                                                 const std::vector<std::uint32_t>& rebuilt_frontiers);
 };
 
 }  // namespace duplex

@@ -1,6 +1,6 @@
 #pragma once
 // Private to accel/src: a uniform grid over the sensors' level, the crossing query's walk when the
-// level holds many sensors (TopLevel::intersectWithCrossings; TopLevelConfig::sensor_grid).
+// level holds many sensors (TopLevel::intersectWithCrossings; TopLevelConfig::crossing_grid).
 //
 // Why a grid beside the kd-tree: the sensors' walk asks for every sensor box a segment meets up
 // to a known t (no closest hit, no early exit), and benchmark-like scenes spread thousands of small
@@ -50,7 +50,7 @@ struct FlatQuad {
   std::array<glm::dvec3, 4> corner;
 };
 
-struct SensorGrid {
+struct CrossingGrid {
   // Below this many live boxes the kd-tree is as fast and the grid is not built.
   static constexpr std::size_t kMinBoxes = 256;
   // Cells per box (cubic cells over the boxes' bounds): a cell holds about eight boxes (a dozen

@@ -1,4 +1,4 @@
-// Local rebuilds of the incremental top level (called by TopLevel::commit, see TopLevel.cpp).
+// Local rebuilds of an incremental instance tree (called by InstanceTree::commit, see InstanceTree.cpp).
 //
 // - A leaf that grew is re-split by a small SAH build over its references clipped to its cell,
 //   rooted at the cell (so empty space between the cell and its content is cut off where it pays);
@@ -16,7 +16,7 @@
 
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/KdTreeBuilder.h"
-#include "duplex/accel/TopLevel.h"
+#include "duplex/accel/InstanceTree.h"
 
 #include <algorithm>
 #include <span>
@@ -24,7 +24,7 @@
 #include <cmath>
 #include <vector>
 
-#include "TopLevelState.h"
+#include "InstanceTreeState.h"
 
 namespace duplex {
 
@@ -36,7 +36,7 @@ namespace {
 // build over them costs a few microseconds.
 constexpr std::size_t kMaxJumpRebuild = 64;
 
-// Frontier subtrees (TopLevelState.h) hold at most max(kMinFrontierRefs, references /
+// Frontier subtrees (InstanceTreeState.h) hold at most max(kMinFrontierRefs, references /
 // kFrontiersPerTree) references.
 constexpr std::uint32_t kMinFrontierRefs = 1024;  // smaller frontiers: no better tree, more commits with a rebuild
 constexpr std::uint32_t kFrontiersPerTree = 64;
@@ -185,7 +185,7 @@ bool inRebuilt(const LeafVisit& v, const std::vector<std::uint32_t>& rebuilt_fro
 
 }  // namespace
 
-void TopLevel::State::markFrontiers(const KdTree& tree) {
+void InstanceTree::State::markFrontiers(const KdTree& tree) {
   frontiers.clear();
   frontier_of.assign(tree.nodes.size(), kNoJump);
   touched_frontiers.clear();
@@ -197,7 +197,7 @@ void TopLevel::State::markFrontiers(const KdTree& tree) {
     refs[i] = n.isLeaf() ? n.primCount() : refs[i + 1] + refs[n.upperChild()];
   }
   // At most an eighth of the tree: a small tree has no frontiers (a full rebuild costs microseconds,
-  // and the SAH check in TopLevel.cpp orders it).
+  // and the SAH check in InstanceTree.cpp orders it).
   const auto total = static_cast<std::uint32_t>(tree.prim_indices.size());
   const std::uint32_t max_refs = std::min(std::max(kMinFrontierRefs, total / kFrontiersPerTree), total / 8);
   std::vector<std::tuple<std::uint32_t, Box, std::uint32_t>> stack{{0u, tree.bounds, 0u}};
@@ -220,7 +220,7 @@ void TopLevel::State::markFrontiers(const KdTree& tree) {
   }
 }
 
-std::vector<std::uint32_t> TopLevel::State::rebuildEditedFrontiers(TopLevel& top) {
+std::vector<std::uint32_t> InstanceTree::State::rebuildEditedFrontiers(InstanceTree& top) {
   KdTree& tree = top.tree_;
   const TopLevelConfig& config = top.config_;
   std::vector<std::uint32_t> rebuilt;
@@ -248,7 +248,7 @@ std::vector<std::uint32_t> TopLevel::State::rebuildEditedFrontiers(TopLevel& top
   if (pick != kNoJump && frontier_credit >= static_cast<double>(frontiers[pick].refs))
     touched_frontiers.push_back(pick);
   // Large batches drift the tree faster than one frontier per commit repairs; their quality is left
-  // to the SAH check and full rebuilds (TopLevel.cpp), and their commits stay as cheap as before.
+  // to the SAH check and full rebuilds (InstanceTree.cpp), and their commits stay as cheap as before.
   if (static_cast<double>(last_edits) >
       std::max(1.0, kFrontierBatchShare * static_cast<double>(boxes.size() - free_slots.size())))
     touched_frontiers.clear();
@@ -272,8 +272,8 @@ std::vector<std::uint32_t> TopLevel::State::rebuildEditedFrontiers(TopLevel& top
   return rebuilt;
 }
 
-std::vector<std::uint32_t> TopLevel::State::rebuildTouchedJumps(TopLevel& top,
-                                                                const std::vector<std::uint32_t>& rebuilt_frontiers) {
+std::vector<std::uint32_t> InstanceTree::State::rebuildTouchedJumps(
+    InstanceTree& top, const std::vector<std::uint32_t>& rebuilt_frontiers) {
   KdTree& tree = top.tree_;
   const TopLevelConfig& config = top.config_;
   std::vector<std::uint32_t> gone;
@@ -307,7 +307,7 @@ std::vector<std::uint32_t> TopLevel::State::rebuildTouchedJumps(TopLevel& top,
   return gone;
 }
 
-bool TopLevel::State::refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_leaves) {
+bool InstanceTree::State::refineLeaves(InstanceTree& top, std::vector<LeafVisit>& grown_leaves) {
   KdTree& tree = top.tree_;
   const TopLevelConfig& config = top.config_;
   const std::vector<std::uint32_t> rebuilt = rebuildEditedFrontiers(top);
@@ -353,7 +353,7 @@ bool TopLevel::State::refineLeaves(TopLevel& top, std::vector<LeafVisit>& grown_
   return changed;
 }
 
-void TopLevel::compact() {
+void InstanceTree::compact() {
   State& s = *state_;
   const KdTree& in = tree_;
   if (in.nodes.empty()) return;
