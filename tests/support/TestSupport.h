@@ -261,6 +261,14 @@ inline TriangleMesh triangleSoup(std::size_t count, std::uint64_t seed, std::str
   return TriangleMesh::fromTriangles(std::move(p), std::move(t), std::move(name));
 }
 
+/// The triangles of triangleSoup(count, seed) as corner triples.
+inline std::vector<std::array<glm::vec3, 3>> randomTriangles(std::size_t count, std::uint64_t seed) {
+  const TriangleMesh soup = triangleSoup(count, seed);
+  std::vector<std::array<glm::vec3, 3>> tris(soup.triangleCount());
+  for (std::size_t i = 0; i < tris.size(); ++i) tris[i] = soup.vertices(i);
+  return tris;
+}
+
 /// Row-major 3x4 of rotation(axis, angle) * diag(scale), then translation.
 inline std::array<double, 12> rotationScaleTranslation(glm::dvec3 axis, double angle, glm::dvec3 scale,
                                                        glm::dvec3 translation) {
