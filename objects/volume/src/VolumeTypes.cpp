@@ -30,8 +30,8 @@ ObjectSpecResult readVolume(const json& spec, const ObjectSpecContext& ctx) {
     else ctx.fail(p + "/kind", "expected \"fog\" or \"levelset\", got \"" + kind + "\"");
   }
   options.name = ctx.object_name;
-  const std::string share_key =
-      "volume:" + SceneLoadCache::fileKey(file).string() + "|grid:" + options.grid + "|kind:" + std::string(toString(options.kind));
+  const std::string share_key = "volume:" + SceneLoadCache::fileKey(file).string() + "|grid:" + options.grid +
+                                "|kind:" + std::string(toString(options.kind));
   return ObjectLibrary::Factory([ctx, file, options, share_key] {
     return ctx.cache->shared(share_key,
                              [&] { return std::shared_ptr<const Object>(VolumeObject::load(file, options)); });

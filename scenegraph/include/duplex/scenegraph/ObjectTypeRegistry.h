@@ -53,10 +53,9 @@ class SceneLoadCache {
   template <class T>
   void requestFile(std::string_view kind, const std::filesystem::path& file, FileReader<T> reader) {
     if (!reader) throw InvalidArgument("SceneLoadCache::requestFile: no reader for " + file.string());
-    request(kind, file, typeid(T),
-            [reader = std::move(reader)](const std::filesystem::path& f, SceneLoadCache& cache) {
-              return std::shared_ptr<const void>(reader(f, cache));
-            });
+    request(kind, file, typeid(T), [reader = std::move(reader)](const std::filesystem::path& f, SceneLoadCache& cache) {
+      return std::shared_ptr<const void>(reader(f, cache));
+    });
   }
   /// Reads every requested file not read yet, in parallel (TBB). Errors are kept and thrown by file().
   void readRequested();

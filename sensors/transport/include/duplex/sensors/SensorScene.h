@@ -64,9 +64,10 @@ struct MediumInstance {
 class SensorScene {
  public:
   /// Reads `path` (either format) with the object types of `registry` (sensorTypeRegistry(): the
-  /// built-in types and the sensor type), plus its lights, sensors and materials. Throws FileError naming the file and the JSON pointer of the first problem (a light
-  /// with zero or negative power, a malformed sensor, an unknown material, ...), and
-  /// InvalidArgument-derived FileErrors for duplicate sensor names.
+  /// built-in types and the sensor type), plus its lights, sensors and materials. Throws FileError
+  /// naming the file and the JSON pointer of the first problem (a light with zero or negative power,
+  /// a malformed sensor, an unknown material, ...), and InvalidArgument-derived FileErrors for
+  /// duplicate sensor names.
   static SensorScene load(const std::filesystem::path& path, const SceneDocumentOptions& options = {},
                           const ObjectTypeRegistry& registry = sensorTypeRegistry());
 
