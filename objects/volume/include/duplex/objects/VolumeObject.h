@@ -138,14 +138,15 @@ class VolumeObject final : public Object {
   /// majorant_level outside [0, 2], levelset_step outside (0, 1] or refine_steps outside [0, 60].
   [[nodiscard]] std::shared_ptr<const VolumeObject> withConfig(const VolumeQueryConfig& config) const;
 
-  /// The OpenVDB side (defined in VolumeObject.cpp; VolumeObjectVdb.h builds one).
+  /// The OpenVDB side (defined in src/VolumeGrid.h; VolumeObjectVdb.h builds one).
   struct Grid;
+  /// Keeps the constructor below to load(), withConfig() and makeVolumeObject().
   struct ConstructTag {};
   /// For load(), withConfig() and makeVolumeObject() only (public for std::make_shared; ConstructTag keeps other
   /// callers out): `grid` as given, `config` already validated.
   VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid, const VolumeQueryConfig& config,
                ConstructTag);
-  /// The OpenVDB side (for VolumeObject.cpp and tools that include VolumeObjectVdb.h).
+  /// The OpenVDB side (a complete type only in the volume sources).
   [[nodiscard]] const Grid& grid() const { return *grid_; }
 
  private:
