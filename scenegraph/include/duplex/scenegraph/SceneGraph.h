@@ -77,7 +77,7 @@ class SceneGraph {
   // Transforms must be finite and non-singular. Every error throws InvalidArgument naming the node
   // (by path or id) and the problem, and changes nothing.
 
-  /// Adds a group under `parent` (its children keep their transforms: a group has none).
+  /// Adds a group under `parent`: no transform of its own, its children are placed in `parent`'s space.
   NodeId addGroup(NodeId parent, std::string name = {});
   /// Adds a transform node under `parent` with parent_from_local transform `local`.
   NodeId addTransform(NodeId parent, const Affine& local, std::string name = {});
