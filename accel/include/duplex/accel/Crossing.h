@@ -24,14 +24,14 @@ struct CrossingQuery {
 /// the ray's direction), u, v (the object's local crossing data; sensors: local x, y), prim_id (a sensor's bin),
 /// instance_id, world-space ng.
 struct Crossing {
-  Hit hit;
+  Hit hit;  ///< the crossing, as described above
   /// Fraction of the ray's power that reaches the crossing through the selected media, in [0, 1].
   float transmittance = 1.0f;
 };
 
 /// The blocking end of the segment: hit.valid() false for a miss.
 struct SegmentEnd {
-  Hit hit;
+  Hit hit;  ///< the closest blocking hit (world t, world-space ng)
   /// Fraction of the ray's power that reaches the hit (or, for a miss, leaves the media), in [0, 1].
   float transmittance = 1.0f;
 };
@@ -41,6 +41,7 @@ struct SegmentEnd {
 /// computed by different formulas and may differ by rounding.
 inline constexpr float kCrossingSlack = 16.0f * std::numeric_limits<float>::epsilon();
 
+/// Writes the hit and the transmittance, for logs and test messages.
 inline std::ostream& operator<<(std::ostream& os, const Crossing& c) {
   return os << "Crossing{" << c.hit << ", T=" << c.transmittance << "}";
 }

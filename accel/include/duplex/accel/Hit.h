@@ -20,16 +20,21 @@ inline constexpr std::uint32_t kInvalidId = 0xFFFFFFFFu;
 /// Other object types fill u, v (and prim_id) with their own coordinates: sensors the hit's local
 /// position (SensorObject.h), volumes 0 (VolumeObject.h).
 struct Hit {
+  /// Ray parameter of the hit, in units of the ray's direction; +inf for a miss.
   float t = std::numeric_limits<float>::infinity();
-  float u = 0.0f;
-  float v = 0.0f;
+  float u = 0.0f;  ///< first barycentric coordinate (or the type's own coordinate)
+  float v = 0.0f;  ///< second barycentric coordinate (or the type's own coordinate)
+  /// Primitive within the object (a triangle, a sensor's bin); kInvalidId for a miss.
   std::uint32_t prim_id = kInvalidId;
+  /// Instance of the scene, set by scene queries (objects leave it); kInvalidId for a miss.
   std::uint32_t instance_id = kInvalidId;
-  glm::vec3 ng{0.0f};
+  glm::vec3 ng{0.0f};  ///< geometric normal, not normalised, in the space of the query
 
+  /// Whether the record holds a hit (prim_id set).
   [[nodiscard]] bool valid() const { return prim_id != kInvalidId; }
 };
 
+/// Writes t, u, v and the ids (or "miss"), for logs and test messages.
 inline std::ostream& operator<<(std::ostream& os, const Hit& h) {
   if (!h.valid()) return os << "Hit{miss}";
   return os << "Hit{t=" << h.t << ", u=" << h.u << ", v=" << h.v << ", prim=" << h.prim_id << ", inst=" << h.instance_id

@@ -35,10 +35,10 @@ struct Prepared;   // a validated instance edit (src/InstanceTreeState.h)
 
 /// One instance as the top level sees it.
 struct InstanceDesc {
-  std::shared_ptr<const Object> object;
-  Affine world_from_object;
-  std::uint32_t id = 0;              ///< the caller's id, reported in Hit::instance_id; unique
-  std::uint32_t mask = 0xFFFFFFFFu;  ///< user bits; a query sees the instance when (mask & query mask) != 0
+  std::shared_ptr<const Object> object;  ///< the object, shared with other instances; not null
+  Affine world_from_object;              ///< maps the object's space to world space; finite and not singular
+  std::uint32_t id = 0;                  ///< the caller's id, reported in Hit::instance_id; unique
+  std::uint32_t mask = 0xFFFFFFFFu;      ///< user bits; a query sees the instance when (mask & query mask) != 0
 };
 
 /// How commit() brings the tree up to date.
@@ -76,6 +76,7 @@ inline KdBuildConfig crossingLevelBuildDefaults() {
   return c;
 }
 
+/// Parameters of the top level (both of its trees) and of how commit() updates them.
 struct TopLevelConfig {
   KdBuildConfig build = topLevelBuildDefaults();  ///< for full and subtree builds
   /// The same for the crossing level (non-blocking instances, see TopLevel); build() with an explicit configuration
@@ -86,7 +87,7 @@ struct TopLevelConfig {
   /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
   /// "The crossing query"). false: always the kd-tree (for comparisons).
   bool crossing_grid = true;
-  TopLevelUpdate update = TopLevelUpdate::Incremental;
+  TopLevelUpdate update = TopLevelUpdate::Incremental;  ///< how commit() brings the trees up to date
   /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
   /// scaled to the current instance count).
   double rebuild_ratio = 1.05;
@@ -108,14 +109,19 @@ class InstanceTree {
   /// Which instances the tree holds. A crossing tree (non-blocking instances) builds with
   /// TopLevelConfig::crossing_build and keeps, after every build and commit, a leaf-ordered copy of
   /// its boxes, the planes of its flat instances and a uniform grid, for the crossing query.
-  enum class Kind : std::uint8_t { Blocking, Crossing };
+  enum class Kind : std::uint8_t {
+    Blocking,  ///< instances that block or attenuate rays (surfaces and media)
+    Crossing   ///< non-blocking instances (sensors): the crossing level
+  };
 
   InstanceTree() = default;
   /// `config` is not validated here (TopLevel validates it).
   explicit InstanceTree(const TopLevelConfig& config, Kind kind = Kind::Blocking);
   InstanceTree(const InstanceTree&) = delete;
   InstanceTree& operator=(const InstanceTree&) = delete;
+  /// Moves the instances and the tree.
   InstanceTree(InstanceTree&&) noexcept = default;
+  /// Moves the instances and the tree.
   InstanceTree& operator=(InstanceTree&&) noexcept = default;
 
   /// The configuration; config().build is the one this tree builds with.
@@ -139,6 +145,7 @@ class InstanceTree {
 
   /// Closest hit among Surface instances whose mask meets `mask` (see TopLevel::intersect).
   [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// The same for a double-precision world ray (object-space rays computed in double).
   [[nodiscard]] Hit intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Whether a Surface instance whose mask meets `mask` is hit within [tnear, tfar].
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
@@ -146,6 +153,7 @@ class InstanceTree {
   /// sorted by t (ties by instance id, then primitive id); world-space t and ng.
   void intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,
                     std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// The same for a double-precision world ray (object-space rays computed in double).
   void intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,
                     std::uint32_t mask = 0xFFFFFFFFu) const;
   /// See TopLevel::transmittance (this tree's instances only). InstanceTreeTransmittance.cpp.
@@ -162,6 +170,7 @@ class InstanceTree {
   [[nodiscard]] std::uint32_t idAt(std::uint32_t slot) const;
   /// Instances of the last commit.
   [[nodiscard]] std::size_t size() const { return live_count_; }
+  /// The tree of the last commit, over slots (idAt() maps them to ids); world space.
   [[nodiscard]] const KdTree& tree() const { return tree_; }
 
  private:

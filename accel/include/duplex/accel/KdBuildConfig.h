@@ -20,6 +20,7 @@ enum class KdHeuristic {
   SpatialMiddle,
 };
 
+/// The name parseKdHeuristic() reads: "sah", "median" or "middle".
 std::string_view toString(KdHeuristic h);
 /// Parses "sah", "median", "middle"; throws InvalidArgument otherwise.
 KdHeuristic parseKdHeuristic(std::string_view name);
@@ -27,7 +28,7 @@ KdHeuristic parseKdHeuristic(std::string_view name);
 /// Build parameters. Costs are relative units: the SAH estimates the cost of a ray through a node
 /// as traversal_cost + intersection_cost * (expected number of primitives tested).
 struct KdBuildConfig {
-  KdHeuristic heuristic = KdHeuristic::Sah;
+  KdHeuristic heuristic = KdHeuristic::Sah;  ///< how split planes are chosen
   /// Cost of one inner-node step. 1 by convention; only the ratio to intersection_cost matters.
   float traversal_cost = 1.0f;
   /// Cost of one primitive test relative to a node step: 0.05, a node cost of 20 triangle tests.
@@ -65,6 +66,7 @@ struct KdBuildConfig {
   std::uint32_t refine_max = 0xFFFFFFFFu;
 };
 
+/// Writes every parameter on one line, for logs and benchmark output.
 std::ostream& operator<<(std::ostream& os, const KdBuildConfig& c);
 
 }  // namespace duplex

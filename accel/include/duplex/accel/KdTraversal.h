@@ -21,20 +21,21 @@ namespace duplex {
 /// Plain arrays rather than glm::vec3: the traversal indexes by a run-time axis, and GLM's
 /// operator[] is a switch.
 struct KdRay {
-  float origin[3];
+  float origin[3];  ///< ray origin, in the tree's space
   /// 1/dir with tiny or zero components replaced by +-inf of the same sign, so that +0 and -0
   /// directions classify as "never crosses" and a ray lying in a split plane visits both sides.
   float inv_dir[3];
   /// All bits set where the direction is negative (sign bit of inv_dir): swaps near and far child
   /// without a branch.
   std::uint32_t neg_mask[3];
-  bool zero[3];
-  float tnear;
-  float tfar;
+  bool zero[3];  ///< axes along which the ray does not move (direction 0 or too small to invert)
+  float tnear;   ///< start of the segment, in units of the ray's direction
+  float tfar;    ///< end of the segment, in units of the ray's direction
 
   /// Uninitialised; for callers that compute the same values themselves (MeshObject's per-ray
   /// setup does it with SSE, together with the triangle test's constants).
   KdRay() = default;
+  /// The values for ray `r`, given in the tree's space.
   explicit KdRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear), tfar(r.tfar) {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     for (int k = 0; k < 3; ++k) {

@@ -13,15 +13,15 @@ namespace duplex {
 
 /// Summary figures of a tree (for benchmarks and tests).
 struct KdTreeStats {
-  std::uint32_t nodes = 0;
-  std::uint32_t inner_nodes = 0;
-  std::uint32_t leaves = 0;
-  std::uint32_t empty_leaves = 0;
-  std::uint32_t references = 0;  ///< sum of leaf sizes
-  std::uint32_t max_depth = 0;
-  double avg_leaf_size = 0.0;  ///< references / non-empty leaves
-  double sah_cost = 0.0;       ///< expected cost of a ray through the root box (build costs)
-  std::size_t bytes = 0;       ///< nodes + index list
+  std::uint32_t nodes = 0;         ///< all nodes, inner and leaves
+  std::uint32_t inner_nodes = 0;   ///< nodes with a split plane
+  std::uint32_t leaves = 0;        ///< leaves, empty ones included
+  std::uint32_t empty_leaves = 0;  ///< leaves with no primitive
+  std::uint32_t references = 0;    ///< sum of leaf sizes
+  std::uint32_t max_depth = 0;     ///< depth of the deepest leaf (root: 0)
+  double avg_leaf_size = 0.0;      ///< references / non-empty leaves
+  double sah_cost = 0.0;           ///< expected cost of a ray through the root box (build costs)
+  std::size_t bytes = 0;           ///< nodes + index list
 };
 
 /// Immutable after build; safe to traverse from any number of threads.
@@ -30,6 +30,7 @@ struct KdTree {
   std::vector<KdNode> nodes;                ///< depth-first; node 0 is the root
   std::vector<std::uint32_t> prim_indices;  ///< leaf ranges index into this list
 
+  /// Whether the tree has no node (built over no primitive).
   [[nodiscard]] bool empty() const { return nodes.empty(); }
   /// Statistics; `traversal_cost` / `intersection_cost` weigh the SAH cost.
   [[nodiscard]] KdTreeStats stats(float traversal_cost, float intersection_cost) const;

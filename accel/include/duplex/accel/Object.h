@@ -35,16 +35,16 @@ enum class ObjectRole : std::uint8_t {
 /// rectangle |x| <= half_width, |y| <= half_height of the plane z = 0, and, when front_only, only
 /// for rays travelling towards -z.
 struct FlatCrossings {
-  float half_width = 0.0f;
-  float half_height = 0.0f;
-  bool front_only = false;
+  float half_width = 0.0f;   ///< half extent along object-space x, object units
+  float half_height = 0.0f;  ///< half extent along object-space y, object units
+  bool front_only = false;   ///< only rays travelling towards -z cross
 };
 
 /// One named count an object reports about itself for load summaries and JSON figures, e.g.
 /// {"triangles", 12}. The name is a string literal of the type (it outlives the object).
 struct ObjectFigure {
-  std::string_view name;
-  std::size_t value = 0;
+  std::string_view name;  ///< what is counted, e.g. "triangles"
+  std::size_t value = 0;  ///< the count
 };
 
 /// An immutable, shareable object (a mesh, a volume, a sensor). Any number of instances refer to
@@ -58,6 +58,7 @@ class Object {
   [[nodiscard]] virtual std::string_view typeName() const = 0;
   /// The user-visible name (the scene file's object name, or the file name).
   [[nodiscard]] const std::string& name() const { return name_; }
+  /// What the object does to a ray that meets it (fixed at construction).
   [[nodiscard]] ObjectRole role() const { return role_; }
   /// Whether a hit on this object stops a ray (role() == Surface).
   [[nodiscard]] bool blocks() const { return role_ == ObjectRole::Surface; }
@@ -109,6 +110,7 @@ class Object {
   virtual void savePrepared(const std::filesystem::path& path) const;
 
  protected:
+  /// For the types: the user-visible `name` and the object's `role`.
   explicit Object(std::string name, ObjectRole role = ObjectRole::Surface) : name_(std::move(name)), role_(role) {}
 
  private:

@@ -14,7 +14,7 @@ namespace duplex {
 
 /// Counters a test or benchmark can read. Plain integers: a context belongs to one thread.
 struct QueryStats {
-  std::uint64_t rays = 0;
+  std::uint64_t rays = 0;             ///< rays queried with this context
   std::uint64_t instance_visits = 0;  ///< top-level leaf tests that reached an object
   /// Crossing queries: plane tests that settled a flat sensor whose box the ray met as plainly
   /// missed, without asking the object. The mailbox runs first, so a sensor the walk lists in
@@ -26,16 +26,19 @@ struct QueryStats {
 /// thread-safe by design.
 class QueryContext {
  public:
-  QueryStats stats;
+  QueryStats stats;  ///< counters of the queries run with this context
 
   QueryContext() = default;
   /// A copy takes the counters only: cached per-thread state is never shared between contexts.
   QueryContext(const QueryContext& other) : stats(other.stats) {}
+  /// Takes the counters only, like the copy constructor; the cached state stays.
   QueryContext& operator=(const QueryContext& other) {
     stats = other.stats;
     return *this;
   }
+  /// Moves the counters and the cached state.
   QueryContext(QueryContext&&) noexcept = default;
+  /// Moves the counters and the cached state.
   QueryContext& operator=(QueryContext&&) noexcept = default;
   ~QueryContext() = default;
 

@@ -18,10 +18,10 @@ namespace duplex {
 /// The memory layout is exactly one record of the ray file (32 bytes, little endian:
 /// ox, oy, oz, tnear, dx, dy, dz, tfar), so ray files are read without conversion.
 struct Ray {
-  glm::vec3 origin{0.0f};
-  float tnear = 0.0f;
-  glm::vec3 dir{0.0f, 0.0f, 1.0f};
-  float tfar = std::numeric_limits<float>::infinity();
+  glm::vec3 origin{0.0f};                               ///< origin, in the ray's space
+  float tnear = 0.0f;                                   ///< start of the segment, in units of dir
+  glm::vec3 dir{0.0f, 0.0f, 1.0f};                      ///< direction, any non-zero length
+  float tfar = std::numeric_limits<float>::infinity();  ///< end of the segment, in units of dir (+inf: unbounded)
 };
 static_assert(sizeof(Ray) == 32, "Ray must match the 32-byte ray-file record");
 
@@ -29,10 +29,10 @@ static_assert(sizeof(Ray) == 32, "Ray must match the 32-byte ray-file record");
 /// converts it to object space in double, so a hit's accuracy depends on the object's size, not on
 /// its distance from the origin.
 struct RayD {
-  glm::dvec3 origin{0.0};
-  glm::dvec3 dir{0.0, 0.0, 1.0};
-  double tnear = 0.0;
-  double tfar = std::numeric_limits<double>::infinity();
+  glm::dvec3 origin{0.0};                                 ///< origin, world space
+  glm::dvec3 dir{0.0, 0.0, 1.0};                          ///< direction, world space, any non-zero length
+  double tnear = 0.0;                                     ///< start of the segment, in units of dir
+  double tfar = std::numeric_limits<double>::infinity();  ///< end of the segment, in units of dir (+inf: unbounded)
 };
 
 /// A ray that queries can answer: finite origin and direction, non-zero direction, tnear not NaN
@@ -43,6 +43,7 @@ struct RayD {
   return finite && (r.dir.x != 0.0f || r.dir.y != 0.0f || r.dir.z != 0.0f) && r.tnear <= r.tfar;
 }
 
+/// Writes origin, direction and [tnear, tfar], for logs and test messages.
 inline std::ostream& operator<<(std::ostream& os, const Ray& r) {
   return os << "Ray{o=(" << r.origin.x << ", " << r.origin.y << ", " << r.origin.z << "), d=(" << r.dir.x << ", "
             << r.dir.y << ", " << r.dir.z << "), t=[" << r.tnear << ", " << r.tfar << "]}";

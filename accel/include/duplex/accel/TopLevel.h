@@ -37,32 +37,34 @@ namespace duplex {
 
 /// Figures of the current tree and of the last commit (for tests and the benchmark).
 struct TopLevelStats {
-  std::size_t instances = 0;
-  KdTreeStats tree;
-  double sah_cost = 0.0;        ///< current
-  double fresh_sah_cost = 0.0;  ///< the estimate of a fresh build's cost it is compared with
-  std::uint64_t commits = 0;
-  std::uint64_t full_rebuilds = 0;
-  std::uint64_t subtree_rebuilds = 0;
-  std::size_t last_commit_edits = 0;  ///< instances set or removed by the last commit
+  std::size_t instances = 0;           ///< blocking and medium instances of the last commit
+  KdTreeStats tree;                    ///< figures of the tree over those instances
+  double sah_cost = 0.0;               ///< current
+  double fresh_sah_cost = 0.0;         ///< the estimate of a fresh build's cost it is compared with
+  std::uint64_t commits = 0;           ///< commits that applied edits (the blocking and medium tree)
+  std::uint64_t full_rebuilds = 0;     ///< whole-tree builds: build(), rebuild() and commits that rebuilt
+  std::uint64_t subtree_rebuilds = 0;  ///< subtrees rebuilt by commits (overflowing leaves, refinement)
+  std::size_t last_commit_edits = 0;   ///< instances set or removed by the last commit
   /// Nodes of tree().nodes that no traversal reaches: subtrees that a local rebuild replaced,
   /// dropped when the tree is compacted (InstanceTreeRefine.cpp).
   std::size_t garbage_nodes = 0;
-  bool last_commit_full_rebuild = false;
+  bool last_commit_full_rebuild = false;  ///< whether the last commit or build built the whole tree
   /// The crossing level (non-blocking instances, see TopLevel): its instances and figures.
   /// `instances` and `tree` above count the other instances only.
   std::size_t crossing_instances = 0;
-  KdTreeStats crossing_tree;
+  KdTreeStats crossing_tree;  ///< figures of the crossing level's tree
   /// The uniform grid the crossing query walks over the crossing level (TopLevelConfig::crossing_grid):
   /// its cells and entries (instances times the cells each is listed in); 0 when it walks the tree.
   std::size_t crossing_grid_cells = 0;
-  std::size_t crossing_grid_entries = 0;
+  std::size_t crossing_grid_entries = 0;  ///< entries of that grid (see above)
   /// Crossing-level boxes per vector test: 16 (AVX-512F), 8 (AVX2) or 4 (SSE2), the widest the CPU runs,
   /// capped by the environment variable DUPLEX_ISA ("sse2", "avx2") when the level was last
   /// committed; 1 on other CPUs or without non-blocking instances.
   std::uint32_t crossing_box_lanes = 1;
 };
 
+/// The top level over object instances: a tree of the blocking and medium instances and the crossing level of the
+/// non-blocking ones (see the file comment). Queries take world-space rays; t is in units of the world ray's direction.
 class TopLevel {
  public:
   TopLevel() = default;
@@ -72,9 +74,12 @@ class TopLevel {
   // Not copyable: the copy would share the instance records. Movable.
   TopLevel(const TopLevel&) = delete;
   TopLevel& operator=(const TopLevel&) = delete;
+  /// Moves the instances and both trees.
   TopLevel(TopLevel&&) noexcept = default;
+  /// Moves the instances and both trees.
   TopLevel& operator=(TopLevel&&) noexcept = default;
 
+  /// The configuration of both trees (config().build is the one the blocking tree builds with).
   [[nodiscard]] const TopLevelConfig& config() const { return blocking_.config(); }
   /// Takes effect at the next build or commit; validated as in the constructor.
   void setConfig(const TopLevelConfig& config);
@@ -155,6 +160,7 @@ class TopLevel {
   /// The crossing level: the tree of the non-blocking instances (nullptr before the first one
   /// arrives); its tree() and idAt() are those of these instances.
   [[nodiscard]] const InstanceTree* crossingLevel() const { return crossing_.get(); }
+  /// Figures of both trees and of the last commit.
   [[nodiscard]] TopLevelStats stats() const;
   /// Bytes the top level holds per instance, excluding tree references (instance record and id map).
   [[nodiscard]] static std::size_t bytesPerInstance();

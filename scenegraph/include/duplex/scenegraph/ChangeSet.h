@@ -22,18 +22,20 @@ namespace duplex {
 /// An instance that moved and was given another object is listed in both moved and object_changed.
 /// An instance added and removed within one batch appears nowhere.
 struct ChangeSet {
-  std::uint64_t commit = 0;  ///< 1 for the first commit, +1 per commit that changed anything
-  std::vector<NodeId> appeared;
-  std::vector<NodeId> disappeared;
-  std::vector<NodeId> moved;
-  std::vector<NodeId> object_changed;
-  std::vector<NodeId> mask_changed;
+  std::uint64_t commit = 0;            ///< 1 for the first commit, +1 per commit that changed anything
+  std::vector<NodeId> appeared;        ///< instances visible now and not at the last commit
+  std::vector<NodeId> disappeared;     ///< instances visible at the last commit and not now
+  std::vector<NodeId> moved;           ///< visible before and after, world transform changed
+  std::vector<NodeId> object_changed;  ///< visible before and after, object replaced
+  std::vector<NodeId> mask_changed;    ///< visible before and after, mask changed
 
+  /// Whether no instance changed (commit still carries the number of the last commit that did).
   [[nodiscard]] bool empty() const {
     return appeared.empty() && disappeared.empty() && moved.empty() && object_changed.empty() && mask_changed.empty();
   }
 };
 
+/// Writes the commit number and the non-empty lists, for logs and test messages.
 std::ostream& operator<<(std::ostream& os, const ChangeSet& c);
 
 }  // namespace duplex

@@ -35,11 +35,15 @@ class ObjectLibrary {
   /// messages and listings. Same errors as add().
   ObjectId addDeferred(std::string name, std::string type_name, Factory factory);
 
+  /// Number of objects, built or deferred.
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
+  /// The id of the object named `name`, or nullopt.
   [[nodiscard]] std::optional<ObjectId> find(std::string_view name) const;
   /// name, typeName, isBuilt: throw InvalidArgument for an unknown id.
   [[nodiscard]] const std::string& name(ObjectId id) const;
+  /// The registered type name the object was added with ("mesh", ...).
   [[nodiscard]] const std::string& typeName(ObjectId id) const;
+  /// Whether the object exists already (added built, or its factory ran).
   [[nodiscard]] bool isBuilt(ObjectId id) const;
 
   /// The object, built now if it was deferred (blocking; concurrent callers wait for one build).

@@ -132,9 +132,13 @@ struct ObjectSpecContext {
   [[nodiscard]] std::filesystem::path resolve(const std::string& path) const;
 
   // JSON helpers with errors naming the file and pointer (`at` is the value's pointer).
+  /// obj[key]; fails when `obj` is not an object or has no `key`.
   [[nodiscard]] const nlohmann::json& member(const nlohmann::json& obj, const std::string& at, const char* key) const;
+  /// `v` as a finite number; fails otherwise.
   [[nodiscard]] double number(const nlohmann::json& v, const std::string& at) const;
+  /// `v` as a finite number > 0; fails otherwise.
   [[nodiscard]] double positiveNumber(const nlohmann::json& v, const std::string& at) const;
+  /// `v` as a string; fails otherwise.
   [[nodiscard]] std::string string(const nlohmann::json& v, const std::string& at) const;
   /// A number or an array of `n` numbers (a number s means n copies of s), each > 0.
   [[nodiscard]] std::vector<double> positiveSizes(const nlohmann::json& v, const std::string& at, std::size_t n) const;
@@ -150,9 +154,10 @@ using ObjectSpecResult = std::variant<std::shared_ptr<const Object>, ObjectLibra
 /// needs (the context by value) and throws on failure (the scene reader adds file and pointer).
 using ObjectTypeReader = std::function<ObjectSpecResult(const nlohmann::json& spec, const ObjectSpecContext& ctx)>;
 
+/// One object type as the scene reader sees it: its key and its reader.
 struct ObjectTypeInfo {
-  std::string name;  ///< the key in an object entry ("mesh")
-  ObjectTypeReader reader;
+  std::string name;         ///< the key in an object entry ("mesh")
+  ObjectTypeReader reader;  ///< reads the type's spec; not null
   /// The key belongs to the scene-json-v1 interchange format (read in v1 files; other keys are
   /// ignored there, as v1 requires).
   bool in_scene_json_v1 = false;
@@ -167,6 +172,7 @@ class ObjectTypeRegistry {
  public:
   /// Registers a type; throws InvalidArgument for an empty or taken name or a null reader.
   void add(ObjectTypeInfo info);
+  /// The type registered under `name`, or nullptr.
   [[nodiscard]] const ObjectTypeInfo* find(std::string_view name) const;
   /// Registered names, in registration order.
   [[nodiscard]] std::vector<std::string> names() const;

@@ -28,40 +28,48 @@ namespace duplex {
 
 /// A node of the file's tree, or of an "add" edit, as read (objects resolved to library ids).
 struct SceneNodeSpec {
-  NodeKind kind = NodeKind::Group;
-  std::string name;  ///< may be empty: the graph names it "<kind><id>"
-  Affine local;      ///< parent_from_local (transform nodes and instances)
-  bool visible = true;
+  NodeKind kind = NodeKind::Group;      ///< group, transform node or instance
+  std::string name;                     ///< may be empty: the graph names it "<kind><id>"
+  Affine local;                         ///< parent_from_local (transform nodes and instances)
+  bool visible = true;                  ///< the node's own visibility flag
   ObjectId object = kInvalidObject;     ///< instances
   std::uint32_t mask = 0xFFFFFFFFu;     ///< instances
   std::vector<SceneNodeSpec> children;  ///< groups and transform nodes
   std::string pointer;                  ///< JSON pointer, for messages
 };
 
-enum class SceneEditKind : std::uint8_t { SetTransform, Add, Remove, SetVisible, SetObject, SetMask };
+/// What a timed edit does (the key of the edit in the file).
+enum class SceneEditKind : std::uint8_t {
+  SetTransform,  ///< "set_transform": replace the node's local transform
+  Add,           ///< "add": add a subtree under the node
+  Remove,        ///< "remove": remove the node and its subtree
+  SetVisible,    ///< "visible": hide or show the node
+  SetObject,     ///< "object": give the instance another library object
+  SetMask        ///< "mask": set the instance's mask
+};
 
 /// One timed edit of the file's "edits" list; applied (by the demo, a player) with applyEdit().
 struct SceneEdit {
-  double time = 0.0;  ///< seconds from the start of the animation, >= 0
-  SceneEditKind kind = SceneEditKind::SetTransform;
-  std::string node;                            ///< path of the edited node; for Add, of the parent ("/" = root)
-  Affine transform;                            ///< SetTransform: the node's new local transform
-  bool visible = true;                         ///< SetVisible
-  ObjectId object = kInvalidObject;            ///< SetObject
-  std::uint32_t mask = 0xFFFFFFFFu;            ///< SetMask
-  std::shared_ptr<const SceneNodeSpec> added;  ///< Add: the subtree to add
-  std::string pointer;                         ///< "/edits/3", for messages
+  double time = 0.0;                                 ///< seconds from the start of the animation, >= 0
+  SceneEditKind kind = SceneEditKind::SetTransform;  ///< what the edit does (the other fields it uses are marked)
+  std::string node;                                  ///< path of the edited node; for Add, of the parent ("/" = root)
+  Affine transform;                                  ///< SetTransform: the node's new local transform
+  bool visible = true;                               ///< SetVisible
+  ObjectId object = kInvalidObject;                  ///< SetObject
+  std::uint32_t mask = 0xFFFFFFFFu;                  ///< SetMask
+  std::shared_ptr<const SceneNodeSpec> added;        ///< Add: the subtree to add
+  std::string pointer;                               ///< "/edits/3", for messages
 };
 
 /// Figures of a load (milliseconds of wall time).
 struct SceneLoadFigures {
-  double load_ms = 0.0;   ///< reading and parsing the JSON, the object specs, and the files they name
-  double build_ms = 0.0;  ///< bottom-level structures (built, or loaded from prepared files), in parallel
-  double graph_ms = 0.0;  ///< adding the nodes to the graph and the first commit
-  std::size_t objects = 0;
+  double load_ms = 0.0;               ///< reading and parsing the JSON, the object specs, and the files they name
+  double build_ms = 0.0;              ///< bottom-level structures (built, or loaded from prepared files), in parallel
+  double graph_ms = 0.0;              ///< adding the nodes to the graph and the first commit
+  std::size_t objects = 0;            ///< library objects (the "objects" entries)
   std::size_t structures_loaded = 0;  ///< prepared bottom-level structures read instead of built
-  std::size_t instances = 0;
-  std::size_t nodes = 0;  ///< graph nodes, root included
+  std::size_t instances = 0;          ///< instance nodes
+  std::size_t nodes = 0;              ///< graph nodes, root included
   /// What the object types report, summed: each object's Object::figures() over the distinct
   /// objects ("triangles", "degenerate_triangles", ...), the counts their readers added while
   /// reading files ("complex_edge_warnings"), and "<kind>_files", the distinct files read per kind
@@ -75,6 +83,7 @@ struct SceneLoadFigures {
   }
 };
 
+/// Options of loadSceneDocument().
 struct SceneDocumentOptions {
   KdBuildConfig build;  ///< bottom-level build parameters
   /// Honour "structure" keys (prepared bottom-level structures); false builds every object.
@@ -84,16 +93,16 @@ struct SceneDocumentOptions {
 /// A loaded scene file: the graph (committed once, so a SceneTracer sees every instance), with its
 /// library, and what the file says beyond the graph.
 struct SceneDocument {
-  std::filesystem::path file;
-  std::string format;  ///< "scene-json-v1" or "duplex-scene-v1"
-  std::unique_ptr<SceneGraph> graph;
-  std::vector<ObjectId> objects;  ///< the "objects" entries, in file order
+  std::filesystem::path file;         ///< the scene file, as given (messages name it)
+  std::string format;                 ///< "scene-json-v1" or "duplex-scene-v1"
+  std::unique_ptr<SceneGraph> graph;  ///< the scene, committed once; never null
+  std::vector<ObjectId> objects;      ///< the "objects" entries, in file order
   /// Instance nodes in file order (depth first in the own format). For scene-json-v1 the position is
   /// the instance id of the hit file: instances[id] is its node. v1 instances are children of the
   /// root named "instance<k>".
   std::vector<NodeId> instances;
   std::vector<SceneEdit> edits;  ///< sorted by time (stable: equal times keep file order)
-  SceneLoadFigures figures;
+  SceneLoadFigures figures;      ///< what the load took and counted
   /// The parsed file, for the layers above the graph: the top-level "lights" and "sensors" keys and
   /// the objects' "material" keys are read by duplex::sensors (SensorScene), not here.
   std::shared_ptr<const nlohmann::json> parsed;

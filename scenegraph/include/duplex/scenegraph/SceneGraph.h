@@ -31,12 +31,17 @@
 
 namespace duplex {
 
-enum class NodeKind : std::uint8_t { Group, Transform, Instance };
+/// What a scene-graph node is.
+enum class NodeKind : std::uint8_t {
+  Group,      ///< children only, no transform of its own
+  Transform,  ///< children under a local transform
+  Instance    ///< an instance of a library object (a leaf)
+};
 
 /// A read-only view of one node (as of the edits made so far; world transforms as of the last commit).
 struct NodeInfo {
-  NodeId id = kInvalidNode;
-  NodeKind kind = NodeKind::Group;
+  NodeId id = kInvalidNode;          ///< the node's id
+  NodeKind kind = NodeKind::Group;   ///< group, transform node or instance
   NodeId parent = kInvalidNode;      ///< kInvalidNode for the root
   std::string_view name;             ///< valid until the next edit of the graph
   Affine local;                      ///< parent_from_local (identity for groups)
@@ -45,9 +50,13 @@ struct NodeInfo {
   std::uint32_t mask = 0xFFFFFFFFu;  ///< instances only
 };
 
+/// The hierarchical scene of groups, transform nodes and instances (see the file comment for the lifecycle, threading
+/// and spaces).
 class SceneGraph {
  public:
+  /// Called by commit() with the batch's ChangeSet.
   using Observer = std::function<void(const ChangeSet&)>;
+  /// Handle of a subscription, for unsubscribe().
   using ObserverId = std::uint64_t;
 
   /// An empty graph (just the root group, named "") over `library` (a new one when null).
@@ -55,8 +64,11 @@ class SceneGraph {
   SceneGraph(const SceneGraph&) = delete;
   SceneGraph& operator=(const SceneGraph&) = delete;
 
+  /// The library whose objects the instances refer to.
   [[nodiscard]] ObjectLibrary& library() { return *library_; }
+  /// The library whose objects the instances refer to.
   [[nodiscard]] const ObjectLibrary& library() const { return *library_; }
+  /// The library as shared with other graphs or loaders.
   [[nodiscard]] const std::shared_ptr<ObjectLibrary>& sharedLibrary() const { return library_; }
 
   // ---- edits (pending until commit) ----
@@ -65,7 +77,9 @@ class SceneGraph {
   // Transforms must be finite and non-singular. Every error throws InvalidArgument naming the node
   // (by path or id) and the problem, and changes nothing.
 
+  /// Adds a group under `parent`: no transform of its own, its children are placed in `parent`'s space.
   NodeId addGroup(NodeId parent, std::string name = {});
+  /// Adds a transform node under `parent` with parent_from_local transform `local`.
   NodeId addTransform(NodeId parent, const Affine& local, std::string name = {});
   /// Instance of library object `object` with its own local transform. The object is built now if it
   /// was deferred (a failed build rejects the edit).
@@ -76,6 +90,7 @@ class SceneGraph {
   /// Moves `node` (with its subtree) under `new_parent`, keeping its local transform (so its world
   /// transform changes with the new parent's). Rejects cycles and the root.
   void reparent(NodeId node, NodeId new_parent);
+  /// Renames `node` (not the root) under the name rules above.
   void rename(NodeId node, std::string name);
   /// Transform and instance nodes only.
   void setTransform(NodeId node, const Affine& local);
@@ -106,12 +121,15 @@ class SceneGraph {
   // ---- observers ----
   /// `observer` is called on every commit that changed something.
   ObserverId subscribe(Observer observer);
+  /// Ends subscription `id` (no effect for an unknown id).
   void unsubscribe(ObserverId id);
 
   // ---- queries (edits so far; world transforms and visibility as of the last commit) ----
+  /// Whether node `id` exists (edits so far).
   [[nodiscard]] bool contains(NodeId id) const;
   /// Throws InvalidArgument for an unknown id.
   [[nodiscard]] NodeInfo node(NodeId id) const;
+  /// Children of `id` in insertion order; throws InvalidArgument for an unknown id.
   [[nodiscard]] std::vector<NodeId> children(NodeId id) const;
   /// "/a/b/c" from the root's children down; the root is "/".
   [[nodiscard]] std::string path(NodeId id) const;
@@ -135,7 +153,9 @@ class SceneGraph {
   /// Visible instances as of the last commit, sorted by id (an instance removed since is listed
   /// until the next commit). Scans the node table.
   [[nodiscard]] std::vector<NodeId> visibleInstances() const;
+  /// Nodes that exist (edits so far), the root included.
   [[nodiscard]] std::size_t nodeCount() const;
+  /// Commits that changed something (the number the last such ChangeSet carries).
   [[nodiscard]] std::uint64_t commitCount() const;
 
   /// Bytes the graph holds per instance node (documented in the README): the node record (local and

@@ -28,20 +28,24 @@ namespace duplex {
 /// A full hit, computed once for the winner (two-phase hits).
 struct SceneHit {
   Hit hit;  ///< t (units of the world ray's direction), u, v, prim_id, instance_id = node id, world ng
-  NodeId instance = kInvalidNode;
-  glm::dvec3 position_ws{0.0};  ///< recomputed in double from the object-space hit
-  glm::dvec3 normal_ws{0.0};    ///< unit geometric normal, world space
-  std::vector<NodeId> path;     ///< node ids from below the root down to the instance, as of the last commit
+  NodeId instance = kInvalidNode;  ///< the instance node hit (kInvalidNode for a miss)
+  glm::dvec3 position_ws{0.0};     ///< recomputed in double from the object-space hit
+  glm::dvec3 normal_ws{0.0};       ///< unit geometric normal, world space
+  std::vector<NodeId> path;        ///< node ids from below the root down to the instance, as of the last commit
 
+  /// Whether the ray hit something.
   [[nodiscard]] bool valid() const { return hit.valid(); }
 };
 
+/// Which hits pick() returns.
 enum class PickMode : std::uint8_t {
   Nearest,      ///< the closest hit: a surface, or a sensor when the mask selects sensors
   AllSorted,    ///< every hit along the ray, sorted by t
   PerInstance,  ///< the closest hit of each instance, sorted by t
 };
 
+/// Ray queries against a SceneGraph, kept up to date by its commits (see the file comment). Rays and hits are in world
+/// space; t is in units of the world ray's direction.
 class SceneTracer {
  public:
   /// Subscribes to `graph` (which must outlive the tracer) and builds the top level over its
@@ -54,6 +58,7 @@ class SceneTracer {
 
   /// Closest blocking hit (preliminary: world t, u, v, prim_id, instance_id = node id, world ng).
   [[nodiscard]] Hit intersect(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Whether a surface blocks the world ray within [tnear, tfar].
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Fraction of light passing along [tnear, tfar] of a world ray: 0 when a surface blocks it, else
   /// the product of the transmittances of the media (fog volumes) it crosses (TopLevel::transmittance).
@@ -72,7 +77,9 @@ class SceneTracer {
   /// `occluded` / `transmittance` must have the size of `rays` (else InvalidArgument, nothing
   /// written).
   void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Batch occluded(): occluded[i] is 1 when rays[i] is blocked, else 0.
   void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Batch transmittance(): transmittance[i] in [0, 1] for rays[i].
   void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Batch intersectAll (picking through layers, many rays): on return `offsets` holds rays.size()
   /// + 1 entries and the hits of rays[i] are hits[offsets[i], offsets[i + 1]), sorted by t as
@@ -101,11 +108,13 @@ class SceneTracer {
   /// every commit for up to 256 instances; above that it may stay larger than tight for up to 32
   /// commits after instances moved inwards or disappeared (the shrink is amortised).
   [[nodiscard]] Box bounds() const;
+  /// Figures of the top level and of its last update.
   [[nodiscard]] TopLevelStats stats() const;
   /// Milliseconds the last commit spent in the tracer (top-level update).
   [[nodiscard]] double lastUpdateMs() const;
   /// Forces a full top-level rebuild now (benchmark baseline).
   void rebuild();
+  /// The observed graph.
   [[nodiscard]] const SceneGraph& graph() const { return graph_; }
   /// The top level itself, for tools and tests (no locking: do not use while the graph commits).
   [[nodiscard]] const TopLevel& topLevel() const;

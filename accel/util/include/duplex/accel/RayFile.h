@@ -17,10 +17,22 @@ namespace duplex {
 
 /// One hit-file record.
 struct HitRecord {
+  /// \var t
+  /// Hit::t: units of the ray's direction, +inf for a miss.
+  /// \var u
+  /// Hit::u (0 for a miss).
+  /// \var v
+  /// Hit::v (0 for a miss).
   float t, u, v;
+  /// \var instance_id
+  /// Hit::instance_id; kInvalidId (0xFFFFFFFF) for a miss.
+  /// \var prim_id
+  /// Hit::prim_id; kInvalidId (0xFFFFFFFF) for a miss.
   std::uint32_t instance_id, prim_id;
 
+  /// The record of `h` (world t, u, v, ids); miss() when `h` is not valid.
   static HitRecord from(const Hit& h);
+  /// The record of a miss: t = +inf, u = v = 0, both ids kInvalidId.
   static HitRecord miss();
 };
 static_assert(sizeof(HitRecord) == 20, "HitRecord must match the 20-byte hit-file record");

@@ -13,11 +13,11 @@ namespace duplex {
 
 /// Pinhole camera in world space.
 struct PinholeCamera {
-  glm::dvec3 eye{0.0};
+  glm::dvec3 eye{0.0};                 ///< centre of projection, world space
   glm::dvec3 forward{0.0, 0.0, -1.0};  ///< unit
   glm::dvec3 right{1.0, 0.0, 0.0};     ///< unit
   glm::dvec3 up{0.0, 1.0, 0.0};        ///< unit
-  double vertical_fov_deg = 45.0;
+  double vertical_fov_deg = 45.0;      ///< full vertical field of view, degrees
 
   /// The camera of `duplex rays --primary`: at 1.0 x the bbox diagonal from the bbox centre along
   /// normalize(1, 0.6, 0.8), looking at the centre, up = +y, 45 degrees vertical field of view.

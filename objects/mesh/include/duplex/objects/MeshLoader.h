@@ -12,7 +12,7 @@ namespace duplex {
 /// What OpenMesh reported while reading, instead of printing it per face.
 struct MeshLoadReport {
   std::size_t complex_edge_warnings = 0;  ///< non-manifold faces OpenMesh re-added with new vertices
-  std::size_t other_warnings = 0;
+  std::size_t other_warnings = 0;         ///< any other lines OpenMesh wrote while reading
   std::size_t polygons_triangulated = 0;  ///< faces with more than 3 corners, fan-triangulated
 };
 

@@ -20,6 +20,7 @@ struct TriangleBlock4;
 /// Immutable after construction; all queries are thread-safe.
 class MeshObject final : public Object {
  public:
+  /// The registered type name.
   static constexpr std::string_view kTypeName = "mesh";
 
   /// Builds the kd-tree over the mesh's valid triangles (object space). Throws InvalidArgument for a
@@ -54,9 +55,12 @@ class MeshObject final : public Object {
 
   /// The same queries without the virtual call and context (for benchmarks and the bottom level).
   bool intersect(const Ray& ray_os, Hit& hit) const;
+  /// Whether anything blocks `ray_os` (object space) within [tnear, tfar], without the context.
   [[nodiscard]] bool occluded(const Ray& ray_os) const;
 
+  /// The mesh, object space.
   [[nodiscard]] const TriangleMesh& mesh() const { return *mesh_; }
+  /// The kd-tree over the mesh's triangles (object space; prim_indices hold triangle ids).
   [[nodiscard]] const KdTree& tree() const { return tree_; }
   /// Bytes of the acceleration structure (nodes, index list, per-leaf triangle blocks).
   [[nodiscard]] std::size_t accelBytes() const;

@@ -20,6 +20,7 @@ namespace duplex {
 /// counted in degenerateCount().
 class TriangleMesh {
  public:
+  /// Vertex indices of one triangle, into positions().
   using Triangle = std::array<std::uint32_t, 3>;
 
   /// From flat arrays: positions x0 y0 z0 x1 ..., indices i0 i1 i2 (three per triangle). The CAD
@@ -31,16 +32,22 @@ class TriangleMesh {
   static TriangleMesh fromTriangles(std::vector<glm::vec3> positions, std::vector<Triangle> triangles,
                                     std::string name);
 
+  /// The name given at construction (used in error messages).
   [[nodiscard]] const std::string& name() const { return name_; }
+  /// Vertex positions, object space.
   [[nodiscard]] const std::vector<glm::vec3>& positions() const { return positions_; }
+  /// Triangles as index triples, degenerate ones included; the index is the primitive id.
   [[nodiscard]] const std::vector<Triangle>& triangles() const { return triangles_; }
+  /// Number of triangles, degenerate ones included.
   [[nodiscard]] std::size_t triangleCount() const { return triangles_.size(); }
   /// Whether triangle `i` can be hit (not degenerate). Precondition here and in vertices():
   /// i < triangleCount() (not checked: per-triangle loops).
   [[nodiscard]] bool isValid(std::size_t i) const { return valid_[i] != 0; }
+  /// Number of triangles that are never hit (see the class comment).
   [[nodiscard]] std::size_t degenerateCount() const { return degenerate_count_; }
   /// Object-space bounds of the valid triangles.
   [[nodiscard]] const Box& bounds() const { return bounds_; }
+  /// The three object-space vertices of triangle `i`.
   [[nodiscard]] std::array<glm::vec3, 3> vertices(std::size_t i) const {
     const Triangle& t = triangles_[i];
     return {positions_[t[0]], positions_[t[1]], positions_[t[2]]};

@@ -17,13 +17,26 @@ namespace duplex {
 
 /// Per-ray constants of the watertight test (computed once per ray and space).
 struct WatertightRay {
-  float origin[3];
-  int kx, ky, kz;    // axis permutation: kz = dominant direction axis
+  float origin[3];  ///< ray origin, in the space of the triangles
+  /// \var kx
+  /// First axis of the sheared frame (0 x, 1 y, 2 z).
+  /// \var ky
+  /// Second axis of the sheared frame, chosen with kx so that the winding is kept.
+  /// \var kz
+  /// Dominant axis of the ray's direction.
+  int kx, ky, kz;  // axis permutation: kz = dominant direction axis
+  /// \var sx
+  /// Shear of axis kx: dir[kx] / dir[kz].
+  /// \var sy
+  /// Shear of axis ky: dir[ky] / dir[kz].
+  /// \var sz
+  /// Scale of axis kz: 1 / dir[kz].
   float sx, sy, sz;  // shear constants
-  float tnear;
+  float tnear;       ///< start of the segment, in units of the ray's direction
 
   /// Uninitialised; for code that computes the constants itself (MeshObject's per-ray setup).
   WatertightRay() = default;
+  /// The constants for ray `r`, given in the space of the triangles.
   explicit WatertightRay(const Ray& r) : origin{r.origin.x, r.origin.y, r.origin.z}, tnear(r.tnear) {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     const float a[3] = {std::abs(d[0]), std::abs(d[1]), std::abs(d[2])};

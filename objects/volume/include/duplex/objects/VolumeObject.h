@@ -35,7 +35,9 @@ enum class VolumeKind : std::uint8_t {
   Fog,
 };
 
+/// "auto", "levelset" or "fog".
 [[nodiscard]] std::string_view toString(VolumeKind kind);
+/// Writes toString(kind).
 std::ostream& operator<<(std::ostream& os, VolumeKind kind);
 
 /// Options of VolumeObject::load.
@@ -55,6 +57,7 @@ struct VolumeLoadOptions {
 /// OpenVDB accessor and scratch lists live in its QueryContext, see QueryContext::cached).
 class VolumeObject final : public Object {
  public:
+  /// The registered type name.
   static constexpr std::string_view kTypeName = "volume";
 
   /// Reads a float grid from a .vdb file (fully, no delayed loading: a truncated file fails here,
@@ -116,6 +119,7 @@ class VolumeObject final : public Object {
 
   [[nodiscard]] std::size_t memoryBytes() const override;
 
+  /// LevelSet or Fog (never Auto: resolved at construction).
   [[nodiscard]] VolumeKind kind() const;
   /// The grid's name in its file (or as made).
   [[nodiscard]] const std::string& gridName() const;
@@ -127,17 +131,22 @@ class VolumeObject final : public Object {
   /// Fog: the largest effective density (0 for level sets).
   [[nodiscard]] float maxDensity() const;
 
+  /// How queries are answered.
   [[nodiscard]] const VolumeQueryConfig& config() const { return config_; }
   /// The same volume (the grid is shared, not copied) answering queries with `config`, under the
   /// same name. Throws InvalidArgument for samples 0, a non-positive or non-finite march_step, a
   /// majorant_level outside [0, 2], levelset_step outside (0, 1] or refine_steps outside [0, 60].
   [[nodiscard]] std::shared_ptr<const VolumeObject> withConfig(const VolumeQueryConfig& config) const;
 
-  /// The OpenVDB side (defined in VolumeObject.cpp; VolumeObjectVdb.h builds one).
+  /// The OpenVDB side (defined in src/VolumeGrid.h; VolumeObjectVdb.h builds one).
   struct Grid;
+  /// Keeps the constructor below to load(), withConfig() and makeVolumeObject().
   struct ConstructTag {};
+  /// For load(), withConfig() and makeVolumeObject() only (public for std::make_shared; ConstructTag keeps other
+  /// callers out): `grid` as given, `config` already validated.
   VolumeObject(std::string name, ObjectRole role, std::shared_ptr<const Grid> grid, const VolumeQueryConfig& config,
                ConstructTag);
+  /// The OpenVDB side (a complete type only in the volume sources).
   [[nodiscard]] const Grid& grid() const { return *grid_; }
 
  private:

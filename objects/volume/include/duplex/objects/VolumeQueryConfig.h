@@ -31,9 +31,12 @@ enum class FogMethod : std::uint8_t {
   RayMarching,
 };
 
+/// "exact", "ratio", "delta" or "march".
 [[nodiscard]] std::string_view toString(FogMethod method);
+/// Writes toString(method).
 std::ostream& operator<<(std::ostream& os, FogMethod method);
 
+/// Query options of a VolumeObject (validated by VolumeObject::withConfig and load).
 struct VolumeQueryConfig {
   /// Method of VolumeObject::transmittance() (and so of TopLevel / SceneTracer transmittance and
   /// `duplex trace --transmittance`). Default Exact: it is deterministic (the same answer for a ray

@@ -38,16 +38,21 @@
 
 namespace duplex {
 
-enum class SensorShape : std::uint8_t { Rectangle, Disk, Sphere };
+/// The form of a sensor (see the file comment).
+enum class SensorShape : std::uint8_t {
+  Rectangle,  ///< w x h rectangle in the plane z = 0
+  Disk,       ///< disk of diameter w = h in the plane z = 0
+  Sphere      ///< sphere of diameter w = h, bins by outward normal
+};
 
 /// What a sensor looks like. Lengths in object-space units.
 struct SensorSpec {
-  SensorShape shape = SensorShape::Rectangle;
-  double width = 1.0;   ///< along x (a disk's or sphere's diameter)
-  double height = 1.0;  ///< along y (a disk or sphere: equal to width)
-  std::uint32_t nx = 1;
-  std::uint32_t ny = 1;
-  bool two_sided = true;
+  SensorShape shape = SensorShape::Rectangle;  ///< rectangle, disk or sphere
+  double width = 1.0;                          ///< along x (a disk's or sphere's diameter)
+  double height = 1.0;                         ///< along y (a disk or sphere: equal to width)
+  std::uint32_t nx = 1;                        ///< bins along x (a sphere: azimuth steps), >= 1
+  std::uint32_t ny = 1;                        ///< bins along y (a sphere: steps of n.z), >= 1
+  bool two_sided = true;  ///< records rays arriving at both faces (else only the front face, travelling towards -z)
   /// Optional angular bins of the incoming direction (per sensor, not per spatial bin): 0 = none.
   /// theta: the angle between the incoming direction (towards where the light came from) and the
   /// normal of the face it arrives at, [0, 90] degrees in theta_bins equal steps; phi: its azimuth
@@ -55,8 +60,9 @@ struct SensorSpec {
   /// Angular bin index: iphi * theta_bins + itheta (theta fastest); an angle on an inner edge goes
   /// to the bin above it, 90 degrees to the last theta bin.
   std::uint32_t theta_bins = 0;
-  std::uint32_t phi_bins = 1;
+  std::uint32_t phi_bins = 1;  ///< azimuth bins (>= 1 when theta_bins > 0)
 
+  /// Number of angular bins: theta_bins * phi_bins (0: none).
   [[nodiscard]] std::uint32_t angleBinCount() const { return theta_bins * phi_bins; }
 };
 
@@ -64,11 +70,13 @@ struct SensorSpec {
 struct SensorCell {
   std::uint32_t bin = 0;  ///< iy * nx + ix
   float x = 0.0f;         ///< local position of the crossing
-  float y = 0.0f;
+  float y = 0.0f;         ///< local y of the crossing (spheres: n.z)
 };
 
+/// The sensor object type (ObjectRole::Sensor): see the file comment for its geometry and rules.
 class SensorObject final : public Object {
  public:
+  /// The registered type name.
   static constexpr std::string_view kTypeName = "sensor";
   /// Throws InvalidArgument (naming `name`) for non-finite or non-positive sizes, zero bins, more
   /// than 2^26 bins, or a disk or sphere whose width and height differ; phi_bins 0 with theta
@@ -76,7 +84,9 @@ class SensorObject final : public Object {
   SensorObject(std::string name, const SensorSpec& spec);
 
   [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
+  /// Shape, size (object-space units) and bins, as validated.
   [[nodiscard]] const SensorSpec& spec() const { return spec_; }
+  /// Number of spatial bins: nx * ny.
   [[nodiscard]] std::uint32_t binCount() const { return spec_.nx * spec_.ny; }
   /// Object-space area of bin `bin` that belongs to the sensor (for a disk, the exact area of the
   /// bin's square inside the circle; zero for bins outside it). Precondition: bin < binCount()

@@ -13,8 +13,10 @@
 
 namespace duplex {
 
+/// The random stream of one ray of a run (see the file comment): not shared between threads, cheap to create.
 class CounterRng {
  public:
+  /// The stream of ray `index` of a run with seed `seed`.
   CounterRng(std::uint64_t seed, std::uint64_t index)
       : key_(mix(mix(seed ^ 0x6A09E667F3BCC909ull) + index * kGolden)) {}
 

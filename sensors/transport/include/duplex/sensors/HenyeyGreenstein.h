@@ -11,8 +11,9 @@
 
 namespace duplex {
 
+/// The phase function with asymmetry `g` (see the file comment).
 struct HenyeyGreenstein {
-  double g = 0.0;
+  double g = 0.0;  ///< mean cosine of the scattering angle, in (-1, 1)
 
   /// Density per steradian of the new direction at scattering-angle cosine `cos_theta`:
   /// (1 - g^2) / (4 pi (1 + g^2 - 2 g cos_theta)^1.5). Integrates to 1 over the sphere.

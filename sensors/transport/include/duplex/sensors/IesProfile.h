@@ -28,10 +28,15 @@
 
 namespace duplex {
 
+/// A goniometric intensity table of type C photometry (see the file comment); immutable, shareable between lights.
 class IesProfile {
  public:
   /// How the file treats lamp tilt.
-  enum class Tilt { None, Include, File };
+  enum class Tilt {
+    None,     ///< TILT=NONE
+    Include,  ///< TILT=INCLUDE: tilt data follow in the file (parsed, not applied)
+    File      ///< TILT= a file name: tilt data in another file (not read)
+  };
 
   /// Reads an LM-63 file. Throws FileError "<file>: line N: <problem>" for anything malformed:
   /// no TILT line, a missing, non-numeric or non-finite number, counts < 1, fewer than 2 vertical
@@ -60,7 +65,7 @@ class IesProfile {
   /// weight stays near 1 where the table is smooth).
   struct Sample {
     glm::dvec3 direction_lf;  ///< unit vector, luminaire frame
-    double weight;
+    double weight;            ///< intensity / (pdf * integral()): mean 1 over sample()'s directions
   };
   /// From two uniform numbers in [0, 1). Chooses a table cell by its share of integral(), then a
   /// direction uniform in the cell's solid angle.
@@ -72,10 +77,13 @@ class IesProfile {
   [[nodiscard]] const std::vector<double>& horizontalAngles() const { return horizontal_deg_; }
   /// Keywords of the header ("[TEST]" -> "TEST"), [MORE] lines appended with a newline.
   [[nodiscard]] const std::map<std::string, std::string>& keywords() const { return keywords_; }
+  /// The file's TILT line (recorded; tilt factors are not applied).
   [[nodiscard]] Tilt tilt() const { return tilt_; }
   /// Lumens per lamp as written (-1: absolute photometry), and the number of lamps.
   [[nodiscard]] double lumensPerLamp() const { return lumens_per_lamp_; }
+  /// Number of lamps, as written.
   [[nodiscard]] int lamps() const { return lamps_; }
+  /// The file (or the `source` given to parse() or fromTable()), as messages name it.
   [[nodiscard]] const std::string& source() const { return source_; }
 
  private:

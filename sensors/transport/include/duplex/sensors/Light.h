@@ -17,6 +17,7 @@
 
 namespace duplex {
 
+/// Kinds of light source.
 enum class LightType : std::uint8_t {
   Point,        ///< isotropic point: intensity P / (4 pi) W/sr in every direction
   Spot,         ///< point emitting uniformly into a cone of half-angle cone_angle about direction
@@ -29,7 +30,7 @@ enum class LightType : std::uint8_t {
 
 /// One light. Only the fields of its type are used; validate() checks them.
 struct Light {
-  LightType type = LightType::Point;
+  LightType type = LightType::Point;     ///< kind of light (which fields below apply)
   std::string name;                      ///< for messages (the scene file's "name", or "lights/<k>")
   double power_w = 1.0;                  ///< total emitted power, > 0
   glm::dvec3 position{0.0};              ///< Point, Spot; Directional: the centre of its disk
@@ -57,8 +58,8 @@ struct Light {
 
 /// One emitted ray: world-space origin and unit direction.
 struct EmittedRay {
-  glm::dvec3 origin{0.0};
-  glm::dvec3 dir{0.0, 0.0, 1.0};
+  glm::dvec3 origin{0.0};         ///< world space, scene units
+  glm::dvec3 dir{0.0, 0.0, 1.0};  ///< world space, unit length
   /// Power of this ray relative to the light's mean ray power (1 for all but goniometric lights,
   /// whose directions are importance-sampled from the table with weights of mean 1).
   double weight = 1.0;

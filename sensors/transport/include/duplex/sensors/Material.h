@@ -8,6 +8,7 @@
 
 namespace duplex {
 
+/// How a surface or medium treats a ray that meets it.
 enum class MaterialType : std::uint8_t {
   Absorber,    ///< absorbs every ray (the default of an object without "material")
   Lambertian,  ///< diffuse reflection with albedo `reflectance`, both faces
@@ -19,8 +20,9 @@ enum class MaterialType : std::uint8_t {
   Medium,
 };
 
+/// The material of an object (a scene file's "material" key): its type and the parameters of that type.
 struct Material {
-  MaterialType type = MaterialType::Absorber;
+  MaterialType type = MaterialType::Absorber;  ///< what the material does; the fields below apply by type
   double reflectance = 0.0;  ///< Lambertian, Mirror: in [0, 1]; Medium: single-scattering albedo in [0, 1]
   double ior = 1.5;          ///< Dielectric: > 0; the mesh's geometric normal points outside
   double g = 0.0;            ///< Medium: Henyey-Greenstein mean cosine, in (-1, 1)
@@ -33,6 +35,7 @@ struct Material {
   }
 };
 
+/// Writes the type and parameters, for logs and test messages.
 inline std::ostream& operator<<(std::ostream& os, const Material& m) {
   static const char* names[] = {"absorber", "lambertian", "mirror", "dielectric", "medium"};
   os << "Material{" << names[static_cast<int>(m.type)] << ", rho=" << m.reflectance << ", ior=" << m.ior

@@ -19,12 +19,17 @@
 
 namespace duplex {
 
+/// What one sensor measured (see the file comment for the estimator).
 struct SensorResult {
-  std::string name;
-  NodeId node = kInvalidNode;
-  SensorShape shape = SensorShape::Rectangle;
+  std::string name;                            ///< the sensor's name (its instance node's)
+  NodeId node = kInvalidNode;                  ///< the sensor's instance node
+  SensorShape shape = SensorShape::Rectangle;  ///< rectangle, disk or sphere
+  /// \var nx
+  /// Bins along local x (spheres: azimuth steps).
+  /// \var ny
+  /// Bins along local y (spheres: steps of n.z).
   std::uint32_t nx = 0, ny = 0;
-  bool two_sided = true;
+  bool two_sided = true;  ///< records both faces
   /// Row-major nx * ny arrays, bin (0, 0) at local (-w/2, -h/2), x fastest.
   std::vector<double> flux_w;            ///< W
   std::vector<double> flux_stderr_w;     ///< standard error of flux_w
@@ -32,18 +37,22 @@ struct SensorResult {
   std::vector<double> stderr_w_m2;       ///< standard error of irradiance_w_m2
   std::vector<double> bin_area_m2;       ///< world area of each bin
   std::vector<std::uint64_t> ray_count;  ///< emitted rays whose path crossed the bin
-  double total_flux_w = 0.0;
-  double total_flux_stderr_w = 0.0;
-  double relative_stderr = 0.0;  ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
-  double efficiency = 0.0;       ///< total_flux_w / emitted power
+  double total_flux_w = 0.0;             ///< flux over all bins, W
+  double total_flux_stderr_w = 0.0;      ///< standard error of total_flux_w, W
+  double relative_stderr = 0.0;          ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
+  double efficiency = 0.0;               ///< total_flux_w / emitted power
   /// Angular bins of the incoming direction (SensorSpec::theta_bins; empty without): index
   /// iphi * theta_bins + itheta. Flux (W) that arrived from directions in the bin, its standard
   /// error, the bin's solid angle on one face, and the emitted rays that crossed with such a direction.
+  /// \var theta_bins
+  /// Angular bins of the angle to the normal (0: no angular bins).
+  /// \var phi_bins
+  /// Angular bins of the azimuth.
   std::uint32_t theta_bins = 0, phi_bins = 0;
-  std::vector<double> angular_flux_w;
-  std::vector<double> angular_stderr_w;
-  std::vector<double> angular_solid_angle_sr;
-  std::vector<std::uint64_t> angular_ray_count;
+  std::vector<double> angular_flux_w;            ///< [angular bin], W
+  std::vector<double> angular_stderr_w;          ///< [angular bin], standard error of angular_flux_w, W
+  std::vector<double> angular_solid_angle_sr;    ///< [angular bin], solid angle on one face, sr
+  std::vector<std::uint64_t> angular_ray_count;  ///< [angular bin], emitted rays that crossed from such a direction
   /// Spectral scenes with angular bins: [band][angular bin], W.
   std::vector<std::vector<double>> band_angular_flux_w;
   /// Spectral scenes (SensorRunResults::bands not empty): per band, the same quantities; the
@@ -60,7 +69,7 @@ struct SensorResult {
 /// medium_absorbed counts attenuation (fogs that do not scatter) and absorbing collisions (fogs
 /// that do); depth_limited also paths cut after SensorRunConfig::max_scatterings collisions.
 struct EnergyBalance {
-  double emitted_w = 0.0;
+  double emitted_w = 0.0;          ///< the lights' total power (0 before any ray is traced)
   double escaped_w = 0.0;          ///< left the scene (no blocking hit)
   double absorbed_w = 0.0;         ///< absorbed by surfaces
   double medium_absorbed_w = 0.0;  ///< attenuated by media
@@ -68,10 +77,11 @@ struct EnergyBalance {
   double roulette_w = 0.0;         ///< net power removed by Russian roulette (zero in expectation)
 };
 
+/// What a sensor run measured: every sensor's result and the energy balance, over the rays traced so far.
 struct SensorRunResults {
-  std::uint64_t rays = 0;  ///< emitted rays
-  std::uint64_t seed = 0;
-  EnergyBalance energy;
+  std::uint64_t rays = 0;              ///< emitted rays
+  std::uint64_t seed = 0;              ///< the run's seed (SensorRunConfig::seed)
+  EnergyBalance energy;                ///< where the emitted power went
   std::vector<std::string> bands;      ///< the scene's band names (empty: one radiometric band)
   std::vector<double> band_emitted_w;  ///< per band: the lights' power in it (exact, from their spectra)
   std::vector<SensorResult> sensors;   ///< in the scene's sensor order

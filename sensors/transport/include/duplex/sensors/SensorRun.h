@@ -31,8 +31,9 @@
 
 namespace duplex {
 
+/// Parameters of a sensor run (validated by SensorRun's constructor).
 struct SensorRunConfig {
-  std::uint64_t seed = 1;
+  std::uint64_t seed = 1;        ///< seed of every ray's random stream (CounterRng)
   unsigned threads = 0;          ///< worker threads; 0 = all hardware threads
   std::uint32_t max_depth = 32;  ///< surface interactions after which a path is cut (depth_limited_w)
   /// Scattering fogs: collisions after which a path is cut (depth_limited_w); 1 keeps single
@@ -55,22 +56,28 @@ struct SensorRunConfig {
   std::uint64_t max_accumulator_bytes = std::uint64_t{4} << 30;
 };
 
+/// Passed to runUntil()'s progress callback after each batch.
 struct SensorProgress {
-  std::uint64_t rays_done = 0;    ///< emitted rays finished (the whole run, resumed rays included)
-  std::uint64_t rays_target = 0;  ///< the total asked of runUntil
-  double seconds = 0.0;           ///< wall time of this runUntil call so far
-  std::uint64_t rays_this_call = 0;
+  std::uint64_t rays_done = 0;       ///< emitted rays finished (the whole run, resumed rays included)
+  std::uint64_t rays_target = 0;     ///< the total asked of runUntil
+  double seconds = 0.0;              ///< wall time of this runUntil call so far
+  std::uint64_t rays_this_call = 0;  ///< emitted rays finished by this runUntil call
 };
 
 /// Stop when sensor `sensor`'s total-flux relative standard error is at most `target` (checked
 /// after each batch, once at least `min_rays` rays were traced). sensor < 0: no rule.
 struct SensorStopRule {
-  int sensor = -1;
-  double target = 0.0;
-  std::uint64_t min_rays = 10000;
+  int sensor = -1;                 ///< index into SensorScene::sensors(); < 0: no rule
+  double target = 0.0;             ///< relative standard error to reach
+  std::uint64_t min_rays = 10000;  ///< rays traced before the rule is checked
 };
 
-enum class SensorRunStatus : std::uint8_t { Completed, TargetReached, Cancelled };
+/// Why runUntil() returned.
+enum class SensorRunStatus : std::uint8_t {
+  Completed,      ///< the total number of rays is traced
+  TargetReached,  ///< the stop rule holds
+  Cancelled       ///< cancel() was called
+};
 
 /// Counters of the traced segments (for benchmarks).
 struct SensorRunCounters {
@@ -79,6 +86,7 @@ struct SensorRunCounters {
   std::uint64_t scatterings = 0;  ///< collisions in scattering fogs
 };
 
+/// A light-tracing run over a SensorScene (see the file comment for the transport, determinism and threading).
 class SensorRun {
  public:
   /// The scene must outlive the run and stay unchanged. Throws InvalidArgument for a bad config
@@ -96,12 +104,16 @@ class SensorRun {
   /// Asks a running runUntil to stop after the chunks in flight. Thread-safe.
   void cancel() { cancel_.store(true, std::memory_order_relaxed); }
 
+  /// Emitted rays finished (resumed rays included).
   [[nodiscard]] std::uint64_t raysDone() const { return rays_done_; }
+  /// The configuration, as validated.
   [[nodiscard]] const SensorRunConfig& config() const { return config_; }
+  /// Fluxes, irradiances (per square scene unit) and standard errors over the rays done so far.
   [[nodiscard]] SensorRunResults results() const;
   /// Relative standard error of sensor `sensor`'s total flux now (infinity before any power arrived).
   /// Throws InvalidArgument for a sensor index outside [0, sensor count).
   [[nodiscard]] double relativeStderr(int sensor) const;
+  /// Counters of the segments traced so far.
   [[nodiscard]] SensorRunCounters counters() const { return counters_; }
 
   /// Saves the accumulators (exact binary doubles, then a checksum) so that a later process can

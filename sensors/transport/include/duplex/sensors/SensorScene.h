@@ -29,18 +29,23 @@ namespace duplex {
 
 /// One sensor instance of a scene.
 struct SensorInstance {
-  std::string name;  ///< the instance node's name (unique among the scene's sensors)
-  NodeId node = kInvalidNode;
-  std::shared_ptr<const SensorObject> object;
-  Affine world_from_object;
+  std::string name;                            ///< the instance node's name (unique among the scene's sensors)
+  NodeId node = kInvalidNode;                  ///< the sensor's instance node
+  std::shared_ptr<const SensorObject> object;  ///< the sensor object (object-space geometry and bins)
+  Affine world_from_object;                    ///< the instance's world transform when the scene was made
   /// World area per object-space area of the sensor plane: |cross(L e_x, L e_y)| for the linear
   /// part L of world_from_object.
   double area_scale = 1.0;
   std::uint32_t first_bin = 0;  ///< offset of its bins in the run's global bin array
   /// Offset of its angular bins in the run's global angular-bin array (SensorScene::angleBinCount).
   std::uint32_t first_angle_bin = 0;
-  /// World-space orthonormal frame of the sensor: frame_x along its local x, normal its +z side
-  /// (right-handed), frame_y = cross(normal, frame_x). Angular bins are measured in it.
+  /// \var frame_x
+  /// World-space unit vector along the sensor's local x. With frame_y and normal the sensor's
+  /// orthonormal frame, in which angular bins are measured.
+  /// \var frame_y
+  /// World-space unit vector: cross(normal, frame_x).
+  /// \var normal
+  /// World-space unit normal of the sensor's +z side (the frame is right-handed).
   glm::dvec3 frame_x{1.0, 0.0, 0.0}, frame_y{0.0, 1.0, 0.0}, normal{0.0, 0.0, 1.0};
 
   /// World-space area (square scene units) of bin `bin`.
@@ -51,16 +56,22 @@ struct SensorInstance {
 /// samples free flights through it (VolumeObject::sampleFreeFlight) instead of weighting rays by
 /// its transmittance.
 struct MediumInstance {
-  NodeId node = kInvalidNode;
-  std::shared_ptr<const VolumeObject> volume;
-  Affine object_from_world;
-  glm::dvec3 world_lo{0.0}, world_hi{0.0};  ///< world-space box of the instance
-  std::uint32_t mask = 0xFFFFFFFFu;         ///< the instance's mask (tested against the run's medium_mask)
+  NodeId node = kInvalidNode;                  ///< the fog's instance node
+  std::shared_ptr<const VolumeObject> volume;  ///< the fog volume
+  Affine object_from_world;                    ///< inverse of the instance's world transform
+  /// \var world_lo
+  /// Lower corner of the instance's world-space box.
+  /// \var world_hi
+  /// Upper corner of the instance's world-space box.
+  glm::dvec3 world_lo{0.0}, world_hi{0.0};
+  std::uint32_t mask = 0xFFFFFFFFu;  ///< the instance's mask (tested against the run's medium_mask)
   /// Medium (scatters with its albedo and g) or Absorber (a fog without "material": every collision
   /// absorbs, which is pure attenuation in expectation).
   Material material;
 };
 
+/// A scene prepared for light transport (see the file comment): graph and tracer, lights, materials, sensors and
+/// scattering media.
 class SensorScene {
  public:
   /// Reads `path` (either format) with the object types of `registry` (sensorTypeRegistry(): the
@@ -83,10 +94,13 @@ class SensorScene {
   /// repeated band names.
   SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
               std::vector<std::string> bands = {});
+  /// Moves everything (the graph stays where it is: a loaded scene owns it through its document).
   SensorScene(SensorScene&&) noexcept;
+  /// Moves everything, like the move constructor.
   SensorScene& operator=(SensorScene&&) noexcept;
   ~SensorScene();
 
+  /// The lights, validated; positions and directions in world space.
   [[nodiscard]] const std::vector<Light>& lights() const { return lights_; }
   /// Sum of the lights' power (W).
   [[nodiscard]] double totalPower() const { return total_power_; }
@@ -117,8 +131,11 @@ class SensorScene {
   /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
   /// scatteringMedia() and transported by free flights, else fogs only attenuate.
   [[nodiscard]] bool scatters() const { return !media_.empty(); }
+  /// The fog instances transported by free flights (empty unless scatters()).
   [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return media_; }
+  /// The tracer over the graph.
   [[nodiscard]] const SceneTracer& tracer() const { return *tracer_; }
+  /// The graph (owned by the document of a loaded scene, else the caller's).
   [[nodiscard]] const SceneGraph& graph() const { return *graph_; }
   /// The document when the scene was loaded from a file, else nullptr.
   [[nodiscard]] const SceneDocument* document() const { return doc_.get(); }
