@@ -241,7 +241,7 @@ struct InstanceTree::State {
       if (const std::optional<FlatCrossings> f = rec.object->flatCrossings())
         flat[slot] = toplevel_detail::FlatPlane(rec.identity ? Affine::identity() : rec.object_from_world, *f,
                                                 static_cast<std::uint32_t>(slot),
-                                                rec.role == ObjectRole::Sensor ? rec.mask : 0u);
+                                                rec.role == ObjectRole::Crossing ? rec.mask : 0u);
     }
     // A flat slot's rectangle |x| <= w/2, |y| <= h/2 of its object's plane z = 0, in world space.
     grid.refresh(boxes, [&](std::uint32_t slot, toplevel_detail::FlatQuad& q) {

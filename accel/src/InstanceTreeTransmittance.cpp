@@ -43,7 +43,7 @@ float InstanceTree::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uin
     for (std::uint32_t i = begin; i < begin + count; ++i) {
       const std::uint32_t slot = tree_.prim_indices[i];
       const SlotFilter f = filters[slot];
-      if ((f.mask & mask) == 0 || f.role == ObjectRole::Sensor || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
+      if ((f.mask & mask) == 0 || f.role == ObjectRole::Crossing || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
           std::find(seen.begin(), seen.end(), slot) != seen.end())
         continue;
       const Record& rec = records[slot];

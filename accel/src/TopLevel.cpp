@@ -1,5 +1,5 @@
 // The top level: two instance trees (InstanceTree.cpp), one over the instances that block or
-// attenuate rays and one over the non-blocking ones (ObjectRole::Sensor), so that closest-hit,
+// attenuate rays and one over the non-blocking ones (ObjectRole::Crossing), so that closest-hit,
 // occlusion and transmittance queries never traverse the second. This file routes edits to the
 // tree an instance belongs to (moving it when its object changes role) and merges the answers of
 // the queries that see both; the crossing query is in TopLevelCrossings.cpp.
@@ -22,7 +22,7 @@ using namespace toplevel_detail;
 
 namespace {
 
-bool isCrossing(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Sensor; }
+bool isCrossing(const InstanceDesc& d) { return d.object && d.object->role() == ObjectRole::Crossing; }
 
 }  // namespace
 

@@ -141,7 +141,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Cross
     // plane-tested and asked once), the plane test, then the object.
     auto visit = [&](std::uint32_t slot) {
       const SlotFilter f = s_filters[slot];
-      if ((f.mask & query.crossing_mask) == 0 || f.role != ObjectRole::Sensor || s_mailbox.seen(slot)) return;
+      if ((f.mask & query.crossing_mask) == 0 || f.role != ObjectRole::Crossing || s_mailbox.seen(slot)) return;
       if (flat && flat[slot].valid() && plainlyMisses(flat[slot], plane_ray, t_keep)) {
         ++ctx.stats.crossing_plane_misses;
         return;

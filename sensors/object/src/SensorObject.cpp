@@ -44,7 +44,7 @@ double diskRectangleArea(double r, double x0, double x1, double y0, double y1) {
 }
 
 SensorObject::SensorObject(std::string name, const SensorSpec& spec)
-    : Object(std::move(name), ObjectRole::Sensor), spec_(spec) {
+    : Object(std::move(name), ObjectRole::Crossing), spec_(spec) {
   auto bad = [this](const std::string& what) { throw InvalidArgument("sensor '" + this->name() + "': " + what); };
   if (!(std::isfinite(spec.width) && spec.width > 0.0) || !(std::isfinite(spec.height) && spec.height > 0.0))
     bad("size must be finite and > 0");

@@ -57,7 +57,7 @@ struct Model {
     std::vector<Hit> out;
     QueryContext ctx;
     for (const auto& [id, d] : instances) {
-      if (d.object->role() != ObjectRole::Sensor || (d.mask & mask) == 0) continue;
+      if (d.object->role() != ObjectRole::Crossing || (d.mask & mask) == 0) continue;
       Ray r = d.world_from_object.inverse().apply(ray);
       r.tfar = t_max;
       std::vector<Hit> hits;
@@ -143,7 +143,7 @@ TEST(TopLevelSensors, RandomEditsWithRoleChangesAgreeWithBruteForce) {
     ASSERT_EQ(top.size(), model.instances.size());
     const std::size_t sensors =
         static_cast<std::size_t>(std::count_if(model.instances.begin(), model.instances.end(), [](const auto& kv) {
-          return kv.second.object->role() == ObjectRole::Sensor;
+          return kv.second.object->role() == ObjectRole::Crossing;
         }));
     ASSERT_EQ(top.stats().crossing_instances, sensors);
     ASSERT_EQ(top.stats().instances + sensors, model.instances.size());
@@ -184,7 +184,7 @@ TEST(TopLevelSensors, RandomEditsWithRoleChangesAgreeWithBruteForce) {
       // intersectAll sees both levels.
       top.intersectAll(ray, all, ctx);
       std::size_t sensor_hits = 0;
-      for (const Hit& h : all) sensor_hits += model.instances.at(h.instance_id).object->role() == ObjectRole::Sensor;
+      for (const Hit& h : all) sensor_hits += model.instances.at(h.instance_id).object->role() == ObjectRole::Crossing;
       ASSERT_EQ(sensor_hits, model.crossings(ray, ray.tfar, 0xFFFFFFFFu).size());
     }
   }

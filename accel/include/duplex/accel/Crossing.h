@@ -20,7 +20,7 @@ struct CrossingQuery {
   std::uint32_t medium_mask = 0xFFFFFFFFu;    ///< media whose transmittance is applied
 };
 
-/// One crossing of a non-blocking instance (ObjectRole::Sensor). `hit` as intersectAll reports it: world t (units of
+/// One crossing of a non-blocking instance (ObjectRole::Crossing). `hit` as intersectAll reports it: world t (units of
 /// the ray's direction), u, v (the object's local crossing data; sensors: local x, y), prim_id (a sensor's bin),
 /// instance_id, world-space ng.
 struct Crossing {

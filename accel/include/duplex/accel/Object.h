@@ -27,8 +27,9 @@ enum class ObjectRole : std::uint8_t {
   /// Attenuates rays without a hard hit: answered through transmittance() (fog volumes).
   Medium,
   /// Never blocks or changes a ray; records the rays that cross it (light sensors). Closest-hit
-  /// and any-hit queries ignore it; intersectAll() reports its crossings.
-  Sensor,
+  /// and any-hit queries ignore it; intersectAll() reports its crossings, and the top level keeps
+  /// such instances in a tree of their own (the crossing level).
+  Crossing,
 };
 
 /// Where a flat object's crossings can lie (see Object::flatCrossings): object space, the closed

@@ -4,7 +4,7 @@
 /// instances, built with the same builder and traversed with the same code as the bottom level,
 /// and updated incrementally when instances move, appear or disappear.
 ///
-/// Non-blocking instances (ObjectRole::Sensor: objects that record the rays crossing them, such as
+/// Non-blocking instances (ObjectRole::Crossing: objects that record the rays crossing them, such as
 /// light sensors) live in a second tree of their own, the crossing level, kept by the same rules
 /// (both are InstanceTrees): closest-hit, occlusion and transmittance queries never traverse it, so
 /// rendering costs the same with 10,000 of them in the scene as without; intersectAll,

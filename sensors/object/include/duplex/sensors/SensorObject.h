@@ -1,7 +1,7 @@
 #pragma once
 /// \file SensorObject.h
 /// A light sensor: a flat rectangle or disk (or a sphere) with a grid of bins that never blocks or changes a ray
-/// and reports every crossing (ObjectRole::Sensor). Crossings are found by the top level's
+/// and reports every crossing (ObjectRole::Crossing). Crossings are found by the top level's
 /// crossing query (TopLevel::intersectWithCrossings) and turned into deposited power by SensorRun.
 ///
 /// Geometry (object space, the scene file's convention): the sensor lies in the plane
@@ -73,7 +73,7 @@ struct SensorCell {
   float y = 0.0f;         ///< local y of the crossing (spheres: n.z)
 };
 
-/// The sensor object type (ObjectRole::Sensor): see the file comment for its geometry and rules.
+/// The sensor object type (ObjectRole::Crossing): see the file comment for its geometry and rules.
 class SensorObject final : public Object {
  public:
   /// The registered type name.
