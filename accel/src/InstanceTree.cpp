@@ -627,22 +627,14 @@ void InstanceTree::collectAll(const toplevel_detail::WorldRay& w, std::vector<Hi
 }
 
 void InstanceTree::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
-                                    std::uint32_t mask) const {
-  ++ctx.stats.rays;
+                                    std::uint32_t mask, const InstanceTree* also) const {
+  ++ctx.stats.rays;  // one ray in the statistics, however many trees answer it
   hits.clear();
   if (!isQueryable(ray_ws)) return;
   const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
   if (!tree_.empty()) collectAll(w, hits, ctx, mask);
+  if (also && !also->tree_.empty()) also->collectAll(w, hits, ctx, mask);
   sortHits(hits);
-}
-
-std::vector<std::uint32_t> InstanceTree::instancesInRegion(std::span<const glm::dvec4> planes,
-                                                           std::uint32_t mask) const {
-  checkRegionPlanes(planes);
-  std::vector<std::uint32_t> out;
-  appendInRegion(planes, mask, out);
-  std::sort(out.begin(), out.end());
-  return out;
 }
 
 void InstanceTree::appendInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask,

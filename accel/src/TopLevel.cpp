@@ -128,23 +128,11 @@ float TopLevel::transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_
 }
 
 void TopLevel::intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask) const {
-  intersectAllImpl(ray_ws, nullptr, hits, ctx, mask);
+  blocking_.intersectAllImpl(ray_ws, nullptr, hits, ctx, mask, crossing_.get());
 }
 
 void TopLevel::intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryContext& ctx, std::uint32_t mask) const {
-  intersectAllImpl(fromDouble(ray_ws).f, &ray_ws, hits, ctx, mask);
-}
-
-void TopLevel::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
-                                std::uint32_t mask) const {
-  ++ctx.stats.rays;
-  hits.clear();
-  if (!isQueryable(ray_ws)) return;
-  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_ws);
-  if (!blocking_.tree().empty()) blocking_.collectAll(w, hits, ctx, mask);
-  // The sensors' tree answers the same query (one ray in the statistics, not two).
-  if (crossing_ && !crossing_->tree().empty()) crossing_->collectAll(w, hits, ctx, mask);
-  sortHits(hits);
+  blocking_.intersectAllImpl(fromDouble(ray_ws).f, &ray_ws, hits, ctx, mask, crossing_.get());
 }
 
 std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {

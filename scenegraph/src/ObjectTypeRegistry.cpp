@@ -34,7 +34,6 @@ void SceneLoadCache::request(std::string_view kind, const std::filesystem::path&
   auto& slot = files_[std::move(key)];
   if (!slot) {
     slot = std::make_unique<FileEntry>();
-    slot->kind = std::string(kind);
     slot->file = file;
     slot->type = type;
     slot->reader = std::move(reader);

@@ -416,17 +416,13 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   SceneLoadFigures& f = doc.figures;
   f.objects = library.size();
   f.structures_loaded = ctx.cache->structures_loaded.load();
-  f.counts = ctx.cache->counts();
   std::unordered_set<const Object*> seen;
   for (ObjectId id = 0; id < library.size(); ++id) {
     const auto object = library.get(id);
     if (!seen.insert(object.get()).second) continue;
-    for (const ObjectFigure& figure : object->figures()) {
-      auto it = f.counts.find(figure.name);
-      if (it == f.counts.end()) it = f.counts.emplace(std::string(figure.name), 0).first;
-      it->second += figure.value;
-    }
+    for (const ObjectFigure& figure : object->figures()) ctx.cache->addCount(figure.name, figure.value);
   }
+  f.counts = ctx.cache->counts();
   f.instances = doc.instances.size();
   f.nodes = graph.nodeCount();
   return doc;

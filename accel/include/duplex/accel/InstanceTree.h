@@ -158,9 +158,6 @@ class InstanceTree {
                     std::uint32_t mask = 0xFFFFFFFFu) const;
   /// See TopLevel::transmittance (this tree's instances only). InstanceTreeTransmittance.cpp.
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
-  /// See TopLevel::instancesInRegion (this tree's instances only).
-  [[nodiscard]] std::vector<std::uint32_t> instancesInRegion(std::span<const glm::dvec4> planes,
-                                                             std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// object_from_world of instance `id` (last commit); nullptr for an id this tree does not hold.
   [[nodiscard]] const Affine* findObjectFromWorld(std::uint32_t id) const;
@@ -195,8 +192,9 @@ class InstanceTree {
   void shrinkRootIfDue(bool periodic);
   void compact();
   Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
+  /// Every hit of this tree and, when given, of `also` (the top level's other tree): one query.
   void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
-                        std::uint32_t mask) const;
+                        std::uint32_t mask, const InstanceTree* also = nullptr) const;
   TopLevelConfig config_;
   Kind kind_ = Kind::Blocking;
   KdTree tree_;

@@ -167,8 +167,6 @@ class TopLevel {
 
  private:
   InstanceTree& crossingLevelForEdit();
-  void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
-                        std::uint32_t mask) const;
   /// Surfaces and media; its config() is this top level's.
   InstanceTree blocking_;
   /// Non-blocking instances, in a tree of their own (see the class comment).

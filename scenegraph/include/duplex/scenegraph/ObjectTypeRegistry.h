@@ -88,7 +88,6 @@ class SceneLoadCache {
   using ErasedReader =
       std::function<std::shared_ptr<const void>(const std::filesystem::path& file, SceneLoadCache& cache)>;
   struct FileEntry {
-    std::string kind;
     std::filesystem::path file;  // as first requested (messages name it)
     std::type_index type = typeid(void);
     ErasedReader reader;
