@@ -7,15 +7,14 @@
 
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/SimdIsa.h"
 
 #include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
 #include <limits>
-#include <string_view>
 #include <vector>
 
 #if defined(__GNUC__) && defined(__x86_64__)
@@ -120,26 +119,19 @@ struct LeafBoxes {
 
   static constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
 
-  // The widest test the CPU runs, capped by the environment variable DUPLEX_ISA ("sse2", "avx2",
-  // "avx512"; unset or anything else: no cap), so that tests and benchmarks can run every path on
-  // one machine (the results are equal: the paths differ only in vector width). Decided once per
-  // process, not at every commit's refresh.
+  // The widest test the CPU runs, capped by DUPLEX_ISA (SimdIsa.h): the paths differ only in vector
+  // width, so their results are equal.
   static std::uint32_t widestTest() {
-    static const std::uint32_t widest = [] {
 #if defined(DUPLEX_LEAF_BOXES_X86)
-      std::uint32_t cap = 16;
-      if (const char* isa = std::getenv("DUPLEX_ISA")) {
-        const std::string_view v(isa);
-        cap = v == "sse2" ? 4 : v == "avx2" ? 8 : 16;
-      }
-      if (cap >= 16 && __builtin_cpu_supports("avx512f")) return 16u;
-      if (cap >= 8 && __builtin_cpu_supports("avx2")) return 8u;
-      return 4u;  // SSE2 is part of x86-64
+    switch (widestSimdIsa()) {
+      case SimdIsa::Avx512: return 16u;
+      case SimdIsa::Avx2: return 8u;
+      case SimdIsa::Sse2: return 4u;
+    }
+    return 4u;
 #else
-      return 1u;
+    return 1u;
 #endif
-    }();
-    return widest;
   }
 
 #if defined(DUPLEX_LEAF_BOXES_X86)

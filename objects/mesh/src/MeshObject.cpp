@@ -6,6 +6,8 @@
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/objects/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
+#include "MeshBvh.h"
+#include "MeshLeafTest.h"
 #include "MeshRay.h"
 #include "TriangleBlock4.h"
 #include "WatertightTriangle4.h"
@@ -40,9 +42,6 @@ void forChunks(std::size_t n, std::size_t grain, const Body& body) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
                     [&](const tbb::blocked_range<std::size_t>& range) { body(range.begin(), range.end()); });
 }
-
-// Lane masks of a block holding n (1..4) of the leaf's triangles.
-constexpr int kLaneMask[5] = {0x0, 0x1, 0x3, 0x7, 0xF};
 
 // The checks of MeshObject::fromParts (see MeshObject.h): what traversal and the leaf tests rely
 // on, so that a tree from a file, however damaged, can only be refused, never crash a query.
@@ -104,14 +103,114 @@ void checkTreeAgainstMesh(const KdTree& tree, const TriangleMesh& mesh) {
   }
 }
 
-}  // namespace
+// The checks of MeshObject::fromParts for a BVH (see MeshObject.h): what traversal and the leaf
+// tests rely on, and that every box holds what it bounds, so that a BVH from a file, however
+// damaged, can only be refused, never crash a query or miss a triangle.
+void checkBvhAgainstMesh(const WideBvh& bvh, const TriangleMesh& mesh) {
+  auto fail = [](const std::string& problem) { throw InvalidArgument("BVH does not fit its mesh: " + problem); };
+  if (bvh.leaf_block != 4) fail("leaf block " + std::to_string(bvh.leaf_block) + " (expected 4)");
+  const std::vector<std::uint32_t>& prims = bvh.prim_indices;
+  if (prims.size() % 4 != 0) fail("prim_indices not a whole number of blocks");
+  const std::size_t block_count = prims.size() / 4;
+  const Box& mb = mesh.bounds();
+  if (bvh.root == BvhRef::kEmpty) {
+    if (!bvh.nodes.empty() || !prims.empty()) fail("an empty root with nodes or indices");
+    for (std::size_t t = 0; t < mesh.triangleCount(); ++t)
+      if (mesh.isValid(t)) fail("an empty tree for a mesh with valid triangles");
+    return;
+  }
+  if (!bvh.bounds.finite() || bvh.bounds.empty()) fail("bounds not finite");
+  if (!bvh.bounds.contains(mb.lo) || !bvh.bounds.contains(mb.hi)) fail("bounds do not contain the mesh");
+  if (bvh.nodes.size() > BvhRef::kMaxNodes) fail("more nodes than a reference can address");
+  std::vector<bool> block_seen(block_count, false);
+  const auto& tris = mesh.triangles();
+  const auto& pos = mesh.positions();
+  // A leaf's range: inside prim_indices, valid triangles inside `box`, padding to the block end,
+  // blocks referenced once.
+  auto checkLeaf = [&](std::uint32_t ref, const Box& box, const std::string& where) {
+    const std::size_t block = BvhRef::leafBlock(ref), count = BvhRef::leafCount(ref);
+    const std::size_t blocks = (count + 3) / 4;
+    if (block + blocks > block_count)
+      fail(where + ": leaf blocks [" + std::to_string(block) + ", " + std::to_string(block + blocks) +
+           ") beyond prim_indices (" + std::to_string(block_count) + " blocks)");
+    for (std::size_t b = block; b < block + blocks; ++b) {
+      if (block_seen[b]) fail(where + ": block " + std::to_string(b) + " referenced twice");
+      block_seen[b] = true;
+    }
+    for (std::size_t i = 4 * block; i < 4 * (block + blocks); ++i) {
+      const std::uint32_t prim = prims[i];
+      if (i >= 4 * block + count) {
+        if (prim != WideBvh::kPadding) fail(where + ": prim_indices[" + std::to_string(i) + "] is not padding");
+        continue;
+      }
+      if (prim >= mesh.triangleCount() || !mesh.isValid(prim))
+        fail(where + ": prim_indices[" + std::to_string(i) + "] = " + std::to_string(prim) +
+             " is not a valid triangle (" + std::to_string(mesh.triangleCount()) + " triangles)");
+      for (int k = 0; k < 3; ++k)
+        if (!box.contains(pos[tris[prim][k]]))
+          fail(where + ": triangle " + std::to_string(prim) + " outside its leaf's box");
+    }
+  };
+  if (BvhRef::isLeaf(bvh.root)) {
+    if (!bvh.nodes.empty()) fail("a leaf root with nodes");
+    checkLeaf(bvh.root, bvh.bounds, "root");
+  } else {
+    if (bvh.root != 0 || bvh.nodes.empty()) fail("root " + std::to_string(bvh.root) + " is not node 0");
+    // Depth-first from the root: every inner node must be the next in the array when reached.
+    struct Pending {
+      std::uint32_t node;
+      int depth;
+      Box box;
+    };
+    std::vector<Pending> stack{{0, 1, bvh.bounds}};
+    std::uint32_t next = 0;
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    while (!stack.empty()) {
+      const Pending p = stack.back();
+      stack.pop_back();
+      const std::string at = "node " + std::to_string(p.node);
+      if (p.node != next)
+        fail(at + " reached where node " + std::to_string(next) + " should be (not depth-first, or shared)");
+      ++next;
+      if (p.depth > WideBvh::kMaxDepth) fail(at + ": deeper than " + std::to_string(WideBvh::kMaxDepth));
+      const BvhNode8& node = bvh.nodes[p.node];
+      int used = 0;
+      for (int k = 0; k < BvhNode8::kWidth; ++k) {
+        const std::uint32_t c = node.child[k];
+        const Box box = node.childBox(k);
+        const std::string slot = at + " slot " + std::to_string(k);
+        if (c == BvhRef::kEmpty) {
+          for (int a = 0; a < 3; ++a)
+            if (!(node.lo[a][k] == kInf && node.hi[a][k] == -kInf)) fail(slot + ": empty slot with a box");
+          continue;
+        }
+        if (used != k) fail(slot + ": used after an empty slot");
+        ++used;
+        if (!box.finite() || box.empty()) fail(slot + ": box not finite");
+        if (!p.box.contains(box.lo) || !p.box.contains(box.hi)) fail(slot + ": box outside its parent's");
+        if (BvhRef::isLeaf(c)) checkLeaf(c, box, slot);
+        else if (c <= p.node || c >= bvh.nodes.size()) fail(slot + ": child " + std::to_string(c) + " out of range");
+      }
+      if (used < 2) fail(at + ": fewer than two children");
+      for (int k = used - 1; k >= 0; --k)
+        if (BvhRef::isInner(node.child[k])) stack.push_back({node.child[k], p.depth + 1, node.childBox(k)});
+    }
+    if (next != bvh.nodes.size()) fail(std::to_string(bvh.nodes.size() - next) + " nodes not reached from the root");
+  }
+  for (std::size_t b = 0; b < block_count; ++b)
+    if (!block_seen[b]) fail("block " + std::to_string(b) + " not referenced by any leaf");
+  // Every valid triangle referenced: the scene would silently lose the others.
+  std::vector<bool> referenced(mesh.triangleCount(), false);
+  for (const std::uint32_t prim : prims)
+    if (prim != WideBvh::kPadding) referenced[prim] = true;
+  for (std::size_t t = 0; t < mesh.triangleCount(); ++t)
+    if (mesh.isValid(t) && !referenced[t]) fail("valid triangle " + std::to_string(t) + " not referenced");
+}
 
-MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config)
-    : Object(mesh ? mesh->name() : std::string()), mesh_(std::move(mesh)) {
-  if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
-  const TriangleMesh& m = *mesh_;
-  // Degenerate triangles get an empty box, which the builder leaves out. In parallel: on its own
-  // this pass would hold the other threads idle before the build (as the leaf blocks after it).
+// Object-space bounds of every triangle; degenerate triangles get an empty box, which the builders
+// leave out. In parallel: on its own this pass would hold the other threads idle before the build
+// (as the leaf blocks after it).
+std::vector<Box> triangleBounds(const TriangleMesh& m) {
   std::vector<Box> bounds(m.triangleCount());
   forChunks(m.triangleCount(), kTrianglesPerTask, [&](std::size_t first, std::size_t last) {
     for (std::size_t i = first; i < last; ++i) {
@@ -122,6 +221,35 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
       bounds[i] = b;
     }
   });
+  return bounds;
+}
+
+}  // namespace
+
+std::string_view toString(MeshStructure s) { return s == MeshStructure::Bvh ? "bvh" : "kdtree"; }
+
+MeshStructure parseMeshStructure(std::string_view name) {
+  if (name == "bvh") return MeshStructure::Bvh;
+  if (name == "kdtree") return MeshStructure::KdTree;
+  throw InvalidArgument("unknown mesh structure '" + std::string(name) + "' (expected bvh or kdtree)");
+}
+
+MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const MeshBuildConfig& config)
+    : Object(mesh ? mesh->name() : std::string()), mesh_(std::move(mesh)), structure_(config.structure) {
+  if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
+  if (structure_ == MeshStructure::Bvh) buildBvh(config.bvh);
+  else buildKd(config.kd);
+}
+
+MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config)
+    : MeshObject(std::move(mesh), MeshBuildConfig{MeshStructure::KdTree, {}, config}) {}
+
+MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const BvhBuildConfig& config)
+    : MeshObject(std::move(mesh), MeshBuildConfig{MeshStructure::Bvh, config, {}}) {}
+
+void MeshObject::buildKd(const KdBuildConfig& config) {
+  const TriangleMesh& m = *mesh_;
+  const std::vector<Box> bounds = triangleBounds(m);
   try {
     tree_ = buildKdTree(
         bounds,
@@ -138,8 +266,42 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
   buildLeafBlocks();
 }
 
+void MeshObject::buildBvh(const BvhBuildConfig& config) {
+  const TriangleMesh& m = *mesh_;
+  const std::vector<Box> bounds = triangleBounds(m);
+  try {
+    bvh_ = buildWideBvh(bounds, config,
+                        [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
+                          const auto v = m.vertices(prim);
+                          splitTriangleInBox(v[0], v[1], v[2], box, axis, pos, lower, upper);
+                        });
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument("mesh '" + m.name() + "': " + e.what());
+  }
+  buildBvhBlocks();
+}
+
+void MeshObject::buildBvhBlocks() {
+  const TriangleMesh& m = *mesh_;
+  const std::vector<glm::vec3>& positions = m.positions();
+  const std::vector<std::uint32_t>& refs = bvh_.prim_indices;
+  blocks_.resize(refs.size() / 4);
+  forChunks(blocks_.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
+    for (std::size_t b = first; b < last; ++b) {
+      // Lane 0 always holds a triangle (leaf ranges start at blocks); padding lanes repeat the
+      // block's last triangle (masked off by the leaf's count).
+      std::uint32_t prim = refs[4 * b];
+      for (std::uint32_t k = 0; k < 4; ++k) {
+        if (refs[4 * b + k] != WideBvh::kPadding) prim = refs[4 * b + k];
+        const TriangleMesh::Triangle& t = m.triangles()[prim];
+        blocks_[b].set(static_cast<int>(k), positions[t[0]], positions[t[1]], positions[t[2]], prim);
+      }
+    }
+  });
+}
+
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag)
-    : Object(mesh->name()), mesh_(std::move(mesh)), tree_(std::move(tree)) {
+    : Object(mesh->name()), mesh_(std::move(mesh)), structure_(MeshStructure::KdTree), tree_(std::move(tree)) {
   buildLeafBlocks();
 }
 
@@ -147,6 +309,17 @@ std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const Tr
   if (!mesh) throw InvalidArgument("MeshObject::fromParts: null mesh");
   checkTreeAgainstMesh(tree, *mesh);
   return std::shared_ptr<const MeshObject>(new MeshObject(std::move(mesh), std::move(tree), PartsTag{}));
+}
+
+MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh, PartsTag)
+    : Object(mesh->name()), mesh_(std::move(mesh)), structure_(MeshStructure::Bvh), bvh_(std::move(bvh)) {
+  buildBvhBlocks();
+}
+
+std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh) {
+  if (!mesh) throw InvalidArgument("MeshObject::fromParts: null mesh");
+  checkBvhAgainstMesh(bvh, *mesh);
+  return std::shared_ptr<const MeshObject>(new MeshObject(std::move(mesh), std::move(bvh), PartsTag{}));
 }
 
 MeshObject::~MeshObject() = default;
@@ -184,108 +357,92 @@ void MeshObject::buildLeafBlocks() {
   });
 }
 
+namespace {
+
+detail::MeshBvhView bvhView(const WideBvh& bvh, const std::vector<detail::TriangleBlock4>& blocks) {
+  return {bvh.nodes.data(), bvh.root, bvh.bounds, blocks.data()};
+}
+
+// The all-hits query's leaf step: every triangle of the leaf, tested one by one.
+struct AllHitsLeaf {
+  const WatertightRay& wray;
+  const detail::TriangleBlock4* blocks;
+  float t_max;
+  std::vector<Hit>& hits;
+
+  template <int KX, int KY, int KZ>
+  void test(std::uint32_t first_block, std::uint32_t count) const {
+    const detail::TriangleBlock4* block = blocks + first_block;
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const detail::TriangleBlock4& b = block[i / 4];
+      const int k = static_cast<int>(i % 4);
+      const glm::vec3 v0 = b.vertex(k, 0), v1 = b.vertex(k, 1), v2 = b.vertex(k, 2);
+      float t, u, v;
+      if (!intersectWatertight<KX, KY, KZ>(wray, v0, v1, v2, t_max, t, u, v)) continue;
+      Hit h;
+      h.t = t;
+      h.u = u;
+      h.v = v;
+      h.prim_id = b.prim[k];
+      h.ng = glm::cross(v1 - v0, v2 - v0);
+      hits.push_back(h);
+    }
+  }
+};
+
+}  // namespace
+
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
+  if (structure_ == MeshStructure::Bvh) return detail::meshBvhKernels().intersect(bvhView(bvh_, blocks_), ray_os, hit);
   detail::MeshRay ray;
   float tmin, tmax;
   if (!detail::setupMeshRay(ray_os, block_tree_.bounds, ray, tmin, tmax)) return false;
   float t_best = std::min(hit.t, ray_os.tfar);
-  const detail::TriangleBlock4* best_block = nullptr;
-  int best_lane = 0;
-  float best_u = 0.0f, best_v = 0.0f;
+  detail::ClosestHit best;
   const detail::TriangleBlock4* blocks = blocks_.data();
   // The axis permutation of the triangle test is a run-time value (no dispatch per ray: the six
   // choices are a coin flip on random rays, and six copies of the traversal cost code size).
-  traverseKdTreeClipped<false>(
-      block_tree_, ray.kd, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-        bool found = false;
-        // Four triangles per block; lanes are resolved in order with the scalar interval test so
-        // that the result equals testing them one by one.
-        const detail::TriangleBlock4* block = blocks + begin;
-        for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
-          const detail::Watertight4 r =
-              detail::intersectWatertight4(ray.wray4, *block, kLaneMask[std::min(left, 4)], t_max);
-          for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
-            const int k = std::countr_zero(static_cast<unsigned>(lanes));
-            float t, u, v;
-            if (r.exact >> k & 1) {
-              if (!intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max,
-                                       t, u, v))
-                continue;
-            } else {
-              if (r.sT[k] > t_max * r.abs_det[k]) continue;
-              const float inv = 1.0f / r.det[k];  // the scalar test's final step
-              t = r.T[k] * inv;
-              u = r.V[k] * inv;
-              v = r.W[k] * inv;
-            }
-            t_max = t;
-            best_block = block;
-            best_lane = k;
-            best_u = u;
-            best_v = v;
-            found = true;
-          }
-        }
-        return found;
-      });
-  if (best_block == nullptr) return false;
-  const glm::vec3 v0 = best_block->vertex(best_lane, 0);
-  hit.t = t_best;
-  hit.u = best_u;
-  hit.v = best_v;
-  hit.prim_id = best_block->prim[best_lane];
-  hit.ng = glm::cross(best_block->vertex(best_lane, 1) - v0, best_block->vertex(best_lane, 2) - v0);
+  traverseKdTreeClipped<false>(block_tree_, ray.kd, tmin, tmax, t_best,
+                               [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+                                 return detail::closestInLeaf(ray, blocks + begin, count, t_max, best);
+                               });
+  if (best.block == nullptr) return false;
+  detail::fillHit(best, t_best, hit);
   return true;
 }
 
 bool MeshObject::occluded(const Ray& ray_os) const {
+  if (structure_ == MeshStructure::Bvh) return detail::meshBvhKernels().occluded(bvhView(bvh_, blocks_), ray_os);
   detail::MeshRay ray;
   float tmin, tmax;
   if (!detail::setupMeshRay(ray_os, block_tree_.bounds, ray, tmin, tmax)) return false;
   float t_best = ray_os.tfar;
   const detail::TriangleBlock4* blocks = blocks_.data();
-  return traverseKdTreeClipped<true>(
-      block_tree_, ray.kd, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-        const detail::TriangleBlock4* block = blocks + begin;
-        for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
-          const detail::Watertight4 r =
-              detail::intersectWatertight4(ray.wray4, *block, kLaneMask[std::min(left, 4)], t_max);
-          if (r.fast) return true;
-          for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
-            const int k = std::countr_zero(static_cast<unsigned>(lanes));
-            float t, u, v;
-            if (intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t,
-                                    u, v))
-              return true;
-          }
-        }
-        return false;
-      });
+  return traverseKdTreeClipped<true>(block_tree_, ray.kd, tmin, tmax, t_best,
+                                     [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
+                                       return detail::anyInLeaf(ray, blocks + begin, count, t_max);
+                                     });
 }
 
 void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
   if (!isQueryable(ray_os)) return;
-  const KdRay kray(ray_os);
   const WatertightRay wray(ray_os);
-  float t_best = ray_os.tfar;  // never lowered: every leaf along the ray is visited
   const std::size_t first = hits.size();
   dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
-      const detail::TriangleBlock4* block = blocks_.data() + begin;
-      for (std::uint32_t i = 0; i < count; ++i) {
-        const detail::TriangleBlock4& b = block[i / 4];
-        const int k = static_cast<int>(i % 4);
-        const glm::vec3 v0 = b.vertex(k, 0), v1 = b.vertex(k, 1), v2 = b.vertex(k, 2);
-        float t, u, v;
-        if (!intersectWatertight<KX, KY, KZ>(wray, v0, v1, v2, t_max, t, u, v)) continue;
-        Hit h;
-        h.t = t;
-        h.u = u;
-        h.v = v;
-        h.prim_id = b.prim[k];
-        h.ng = glm::cross(v1 - v0, v2 - v0);
-        hits.push_back(h);
-      }
+    const AllHitsLeaf leaf{wray, blocks_.data(), ray_os.tfar, hits};
+    if (structure_ == MeshStructure::Bvh) {
+      detail::meshBvhKernels().forEachLeaf(
+          bvhView(bvh_, blocks_), ray_os,
+          [](void* context, std::uint32_t block, std::uint32_t count) {
+            static_cast<const AllHitsLeaf*>(context)->template test<KX, KY, KZ>(block, count);
+          },
+          const_cast<AllHitsLeaf*>(&leaf));
+      return;
+    }
+    const KdRay kray(ray_os);
+    float t_best = ray_os.tfar;  // never lowered: every leaf along the ray is visited
+    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
+      leaf.template test<KX, KY, KZ>(begin, count);
       return false;
     });
   });
@@ -310,7 +467,8 @@ bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occlu
 
 std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
-         blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode);
+         blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode) +
+         bvh_.memoryBytes();
 }
 
 std::vector<ObjectFigure> MeshObject::figures() const {

@@ -1,14 +1,18 @@
 #pragma once
 /// \file MeshObject.h
-/// The triangle-mesh object type: a TriangleMesh with its SAH kd-tree.
+/// The triangle-mesh object type: a TriangleMesh with its bottom-level structure, a wide BVH (the
+/// default) or an SAH kd-tree.
 
+#include "duplex/accel/BvhBuildConfig.h"
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/KdTree.h"
 #include "duplex/accel/Object.h"
+#include "duplex/accel/WideBvh.h"
 #include "duplex/objects/TriangleMesh.h"
 
 #include <cstdint>
 #include <memory>
+#include <string_view>
 #include <vector>
 
 namespace duplex {
@@ -17,15 +21,37 @@ namespace detail {
 struct TriangleBlock4;
 }
 
+/// The bottom-level structures a mesh can have.
+enum class MeshStructure {
+  Bvh,     ///< 8-wide BVH (WideBvh.h): the default, fastest to build and to trace
+  KdTree,  ///< SAH kd-tree with clipped triangles (KdTree.h)
+};
+
+/// "bvh" or "kdtree", the names of the scene files' "structure" key.
+std::string_view toString(MeshStructure s);
+/// Parses "bvh" or "kdtree"; throws InvalidArgument otherwise.
+MeshStructure parseMeshStructure(std::string_view name);
+
+/// Which structure a mesh gets and the parameters of its build.
+struct MeshBuildConfig {
+  MeshStructure structure = MeshStructure::Bvh;  ///< the structure to build
+  BvhBuildConfig bvh;                            ///< parameters when structure is Bvh
+  KdBuildConfig kd;                              ///< parameters when structure is KdTree
+};
+
 /// Immutable after construction; all queries are thread-safe.
 class MeshObject final : public Object {
  public:
   /// The registered type name.
   static constexpr std::string_view kTypeName = "mesh";
 
-  /// Builds the kd-tree over the mesh's valid triangles (object space). Throws InvalidArgument for a
-  /// null mesh or an invalid `config` (see buildKdTree).
-  explicit MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config = {});
+  /// Builds config.structure over the mesh's valid triangles (object space). Throws
+  /// InvalidArgument for a null mesh or an invalid config (naming the mesh).
+  explicit MeshObject(std::shared_ptr<const TriangleMesh> mesh, const MeshBuildConfig& config = {});
+  /// Builds a kd-tree with `config`.
+  MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildConfig& config);
+  /// Builds a BVH with `config`.
+  MeshObject(std::shared_ptr<const TriangleMesh> mesh, const BvhBuildConfig& config);
   ~MeshObject() override;
 
   /// From a kd-tree built before (e.g. read from a file by loadMeshObject) over `mesh`'s triangles:
@@ -36,6 +62,14 @@ class MeshObject final : public Object {
   /// hold the mesh's bounds. Throws InvalidArgument naming the first violation. Linear time.
   [[nodiscard]] static std::shared_ptr<const MeshObject> fromParts(std::shared_ptr<const TriangleMesh> mesh,
                                                                    KdTree tree);
+  /// From a BVH built before over `mesh`'s triangles: no build. Checked first as the kd-tree is:
+  /// every node reached exactly once from the root in depth-first order (parents before
+  /// children), depth within WideBvh::kMaxDepth, used slots before empty ones with finite boxes,
+  /// empty slots with box [+inf, -inf], leaf ranges inside prim_indices with padding after them,
+  /// every index a valid triangle of `mesh`, and bounds that hold the mesh's valid triangles.
+  /// Throws InvalidArgument naming the first violation. Linear time.
+  [[nodiscard]] static std::shared_ptr<const MeshObject> fromParts(std::shared_ptr<const TriangleMesh> mesh,
+                                                                   WideBvh bvh);
 
   [[nodiscard]] std::string_view typeName() const override { return kTypeName; }
   [[nodiscard]] Box bounds() const override { return mesh_->bounds(); }
@@ -60,18 +94,31 @@ class MeshObject final : public Object {
 
   /// The mesh, object space.
   [[nodiscard]] const TriangleMesh& mesh() const { return *mesh_; }
-  /// The kd-tree over the mesh's triangles (object space; prim_indices hold triangle ids).
+  /// Which structure the object has.
+  [[nodiscard]] MeshStructure structure() const { return structure_; }
+  /// The kd-tree over the mesh's triangles (object space; prim_indices hold triangle ids); empty
+  /// (no nodes) when the structure is the BVH.
   [[nodiscard]] const KdTree& tree() const { return tree_; }
+  /// The BVH over the mesh's triangles (object space; prim_indices hold triangle ids); empty (root
+  /// kEmpty, no nodes) when the structure is the kd-tree.
+  [[nodiscard]] const WideBvh& bvh() const { return bvh_; }
   /// Bytes of the acceleration structure (nodes, index list, per-leaf triangle blocks).
   [[nodiscard]] std::size_t accelBytes() const;
 
  private:
   struct PartsTag {};
   MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag);
+  MeshObject(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh, PartsTag);
+  void buildKd(const KdBuildConfig& config);
+  void buildBvh(const BvhBuildConfig& config);
   /// Fills blocks_ and block_tree_ from tree_ (see below).
   void buildLeafBlocks();
+  /// Fills blocks_ from bvh_: block k holds bvh_.prim_indices[4k, 4k + 4).
+  void buildBvhBlocks();
 
   std::shared_ptr<const TriangleMesh> mesh_;
+  MeshStructure structure_ = MeshStructure::Bvh;
+  WideBvh bvh_;  // leaf references index blocks_ directly (the ranges are block aligned)
   KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
   // Each non-empty leaf's triangles copied into consecutive 4-wide blocks (structure of arrays, in
   // the leaf's reference order, the last block padded), so that a leaf is a few sequential loads

@@ -1,0 +1,122 @@
+#pragma once
+/// \file WideBvh.h
+/// An 8-wide bounding volume hierarchy over primitive boxes, data-agnostic (the mesh type adds its
+/// triangle blocks and traversal), and its binned-SAH builder.
+///
+/// Layout, chosen for SIMD traversal and for a later refit that keeps the topology:
+/// - every node holds the boxes of its (up to) 8 children as structure of arrays, one row of 8
+///   floats per plane, so that one vector load gives a plane of all children;
+/// - nodes are in depth-first order, each parent before its children, so that a refit is one pass
+///   over the nodes in reverse order;
+/// - a child is an inner node's index, a leaf (a range of prim_indices), or empty (the box is
+///   [+inf, -inf], which no ray enters).
+
+#include "duplex/accel/Box.h"
+#include "duplex/accel/BvhBuildConfig.h"
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <vector>
+
+namespace duplex {
+
+/// A child reference of a wide node (or the root reference of a WideBvh).
+///
+/// Encoding: kEmpty; an inner node index (bit 31 clear); or a leaf, bit 31 set, bits 27..30 the
+/// primitive count minus one (1 to 16) and bits 0..26 the leaf's first entry in prim_indices
+/// divided by the leaf block (leaf ranges start at multiples of it).
+struct BvhRef {
+  static constexpr std::uint32_t kEmpty = 0xFFFFFFFFu;            ///< no child
+  static constexpr std::uint32_t kLeafBit = 0x80000000u;          ///< set for a leaf
+  static constexpr std::uint32_t kMaxLeafSize = 16;               ///< primitives per leaf at most
+  static constexpr std::uint32_t kMaxLeafBlock = (1u << 27) - 1;  ///< largest encodable block index
+  static constexpr std::uint32_t kMaxNodes = 0x7FFFFFFFu;         ///< inner node indices are below this
+
+  [[nodiscard]] static constexpr bool isEmpty(std::uint32_t r) { return r == kEmpty; }
+  [[nodiscard]] static constexpr bool isLeaf(std::uint32_t r) { return (r & kLeafBit) != 0 && r != kEmpty; }
+  [[nodiscard]] static constexpr bool isInner(std::uint32_t r) { return (r & kLeafBit) == 0; }
+  /// A leaf of `count` (1..16) primitives starting at block `block` (its first entry / leaf_block).
+  [[nodiscard]] static constexpr std::uint32_t leaf(std::uint32_t block, std::uint32_t count) {
+    return kLeafBit | (count - 1) << 27 | block;
+  }
+  /// The leaf's first block (first prim_indices entry / leaf_block).
+  [[nodiscard]] static constexpr std::uint32_t leafBlock(std::uint32_t r) { return r & kMaxLeafBlock; }
+  /// The leaf's primitive count (1 to 16).
+  [[nodiscard]] static constexpr std::uint32_t leafCount(std::uint32_t r) { return ((r >> 27) & 15u) + 1; }
+};
+
+/// One node: the boxes (in the space of the primitives) and references of up to 8 children. Unused
+/// slots are empty references with box [+inf, -inf] and follow the used ones.
+struct alignas(32) BvhNode8 {
+  static constexpr int kWidth = 8;  ///< children per node
+  /// lo[axis][child], hi[axis][child]: the child boxes, plane by plane.
+  float lo[3][kWidth];
+  float hi[3][kWidth];          ///< upper planes, as lo
+  std::uint32_t child[kWidth];  ///< BvhRef encoding
+
+  /// The box of child slot `k`.
+  [[nodiscard]] Box childBox(int k) const {
+    return Box({lo[0][k], lo[1][k], lo[2][k]}, {hi[0][k], hi[1][k], hi[2][k]});
+  }
+  /// Sets slot `k` to `ref` with box `b`.
+  void setChild(int k, std::uint32_t ref, const Box& b) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a][k] = b.lo[a];
+      hi[a][k] = b.hi[a];
+    }
+    child[k] = ref;
+  }
+  /// Number of used slots (the used slots come first).
+  [[nodiscard]] int childCount() const {
+    int n = 0;
+    while (n < kWidth && child[n] != BvhRef::kEmpty) ++n;
+    return n;
+  }
+};
+static_assert(sizeof(BvhNode8) == 224);
+
+/// The hierarchy. Space and units are those of the primitive boxes it was built from.
+struct WideBvh {
+  Box bounds;  ///< bounds of every referenced primitive (empty when none)
+  /// The root: inner node 0, a single leaf (few primitives), or kEmpty (no valid primitive).
+  std::uint32_t root = BvhRef::kEmpty;
+  std::vector<BvhNode8> nodes;  ///< depth-first, parents before children
+  /// Leaf ranges: a leaf's primitives are prim_indices[leaf_block * leafBlock(r) + i] for i below
+  /// leafCount(r). Each range is padded to a multiple of leaf_block with kPadding entries.
+  std::vector<std::uint32_t> prim_indices;
+  std::uint32_t leaf_block = 4;                           ///< see BvhBuildConfig::leaf_block
+  static constexpr std::uint32_t kPadding = 0xFFFFFFFFu;  ///< a padding entry of prim_indices
+  /// Inner nodes on a path from the root at most (the builder keeps within it; traversal stacks
+  /// are sized by it: 7 pending children per level).
+  static constexpr int kMaxDepth = 64;
+
+  /// The SAH cost of the tree with `config`'s costs: sum over nodes of area / root area times the
+  /// traversal cost, plus over leaves of area / root area times intersection_cost * blocks.
+  [[nodiscard]] double sahCost(const BvhBuildConfig& config) const;
+  /// Bytes of nodes and prim_indices.
+  [[nodiscard]] std::size_t memoryBytes() const {
+    return nodes.size() * sizeof(BvhNode8) + prim_indices.size() * sizeof(std::uint32_t);
+  }
+};
+
+/// Splits a primitive at an axis-aligned plane within `box`: fills the bounds of its parts below
+/// and above `pos` on `axis` (either may be empty). The spatial splits of the High preset need it;
+/// without one they are off.
+using BvhClipFunction =
+    std::function<void(std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper)>;
+
+/// Builds a BVH over `prim_bounds` (one box per primitive; empty or non-finite boxes are left out:
+/// those primitives are never referenced). With a clip function and spatial_split_alpha > 0 a
+/// primitive may be referenced by several leaves (spatial splits); otherwise by exactly one.
+/// Throws InvalidArgument for an invalid config or more primitives than the encoding holds; the
+/// build runs on TBB's threads and the result does not depend on their number.
+[[nodiscard]] WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& config = {},
+                                   const BvhClipFunction& clip = {});
+
+/// Recomputes every node's child boxes from `prim_bounds` for the same topology (a refit: the
+/// primitives moved, the tree did not change), and `bvh.bounds`. Every referenced primitive's box
+/// must be non-empty; the SAH quality decays as the primitives move away from the built layout.
+void refitWideBvh(WideBvh& bvh, std::span<const Box> prim_bounds);
+
+}  // namespace duplex
