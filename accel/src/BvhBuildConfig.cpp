@@ -109,7 +109,8 @@ BvhBuildConfig BvhBuildConfig::parse(std::string_view text) {
 
 void BvhBuildConfig::validate() const {
   auto fail = [](const std::string& what) { throw InvalidArgument("BVH build config: " + what); };
-  if (bins < 2 || bins > 256) fail("bins must be 2 to 256, got " + std::to_string(bins));
+  if (bins < 2 || bins > kMaxBins)
+    fail("bins must be 2 to " + std::to_string(kMaxBins) + ", got " + std::to_string(bins));
   if (!(traversal_cost >= 0.0f) || !std::isfinite(traversal_cost)) fail("ct (traversal cost) must be finite and >= 0");
   if (!(intersection_cost > 0.0f) || !std::isfinite(intersection_cost))
     fail("ci (intersection cost) must be finite and > 0");

@@ -56,16 +56,29 @@ struct Range {
   [[nodiscard]] std::uint32_t size() const { return end - begin; }
 };
 
-// The best split of a range: references whose centroid falls in bins [0, bin] go left, unless axis
-// is -1 (split at the middle index).
+// The best split of a range: references whose centroid falls in bins [0, bin] of `bins` bins go
+// left, unless axis is -1 (split at the middle index). The sides' bounds come from the bins.
 struct Split {
   int axis = -1;
-  std::uint32_t bin = 0;
+  std::uint32_t bins = 0, bin = 0;
   float cost = kInf;
+  Box left_box, left_centroids, right_box, right_centroids;
 };
 
+// Bins of the three axes, k per axis: bin(a, b).
 struct BinSet {
-  std::array<std::array<Bin, 256>, 3> bins;
+  std::uint32_t k = 0;
+  std::vector<Bin> bins;
+  explicit BinSet(std::uint32_t k_) : k(k_), bins(3 * std::size_t{k_}) {}
+  Bin& bin(int a, std::uint32_t b) { return bins[a * k + b]; }
+  [[nodiscard]] const Bin& bin(int a, std::uint32_t b) const { return bins[a * k + b]; }
+  void merge(const BinSet& o) {
+    for (std::size_t i = 0; i < bins.size(); ++i) {
+      bins[i].box.extend(o.bins[i].box);
+      bins[i].centroids.extend(o.bins[i].centroids);
+      bins[i].count += o.bins[i].count;
+    }
+  }
 };
 
 class Builder {
@@ -101,18 +114,24 @@ class Builder {
     return leafCost(n) <= s.cost;
   }
 
-  // Bins the centroids of [first, last) on all three axes.
-  void binRange(std::uint32_t first, std::uint32_t last, const Range& r, std::uint32_t k, BinSet& out) const {
-    glm::vec3 scale, origin = r.centroids.lo;
-    const glm::vec3 ext = r.centroids.extent();
-    for (int a = 0; a < 3; ++a) scale[a] = ext[a] > 0.0f ? static_cast<float>(k) * (1.0f - 1e-6f) / ext[a] : 0.0f;
-    for (int a = 0; a < 3; ++a) std::fill_n(out.bins[a].begin(), k, Bin{});
+  // The bin of centroid coordinate c on `axis` of range r with k bins; the partition uses the same
+  // expression, so that it sends every reference where the binning counted it.
+  static std::uint32_t binIndex(const Range& r, std::uint32_t k, int axis, float c) {
+    const float ext = r.centroids.hi[axis] - r.centroids.lo[axis];
+    const float scale = static_cast<float>(k) * (1.0f - 1e-6f) / ext;
+    return std::min(k - 1, static_cast<std::uint32_t>(std::max(0.0f, (c - r.centroids.lo[axis]) * scale)));
+  }
+
+  // Bins the centroids of [first, last) on every axis the centroids extend along.
+  void binRange(std::uint32_t first, std::uint32_t last, const Range& r, BinSet& out) const {
+    bool live[3];
+    for (int a = 0; a < 3; ++a) live[a] = r.centroids.hi[a] > r.centroids.lo[a];
     for (std::uint32_t i = first; i < last; ++i) {
       const Ref& ref = refs_[i];
       const glm::vec3 c = ref.box.center();
       for (int a = 0; a < 3; ++a) {
-        const auto b = std::min(k - 1, static_cast<std::uint32_t>(std::max(0.0f, (c[a] - origin[a]) * scale[a])));
-        Bin& bin = out.bins[a][b];
+        if (!live[a]) continue;
+        Bin& bin = out.bin(a, binIndex(r, out.k, a, c[a]));
         bin.box.extend(ref.box);
         bin.centroids.extend(c);
         ++bin.count;
@@ -120,82 +139,82 @@ class Builder {
     }
   }
 
-  [[nodiscard]] std::uint32_t binIndex(const Range& r, std::uint32_t k, int axis, float c) const {
-    const float ext = r.centroids.hi[axis] - r.centroids.lo[axis];
-    const float scale = static_cast<float>(k) * (1.0f - 1e-6f) / ext;
-    return std::min(k - 1, static_cast<std::uint32_t>(std::max(0.0f, (c - r.centroids.lo[axis]) * scale)));
-  }
-
   Split findSplit(const Range& r, int depth) const {
     Split best;
     const std::uint32_t n = r.size();
     if (n <= 1) return best;
     if (depth >= kSahDepth) return best;  // the object median (axis -1)
-    const std::uint32_t k = c_.bins;
-    BinSet bins;
+    // A node of few references needs no more bins than references.
+    const std::uint32_t k = std::min(c_.bins, std::max(2u, n));
+    BinSet bins(k);
     if (n >= kParallelBinning && c_.parallel_threshold > 0) {
       bins = tbb::parallel_reduce(
-          tbb::blocked_range<std::uint32_t>(r.begin, r.end, 8192), BinSet{},
+          tbb::blocked_range<std::uint32_t>(r.begin, r.end, 8192), BinSet(k),
           [&](const tbb::blocked_range<std::uint32_t>& sub, BinSet acc) {
-            BinSet local;
-            binRange(sub.begin(), sub.end(), r, k, local);
-            for (int a = 0; a < 3; ++a)
-              for (std::uint32_t b = 0; b < k; ++b) merge(acc.bins[a][b], local.bins[a][b]);
+            binRange(sub.begin(), sub.end(), r, acc);
             return acc;
           },
-          [k](BinSet x, const BinSet& y) {
-            for (int a = 0; a < 3; ++a)
-              for (std::uint32_t b = 0; b < k; ++b) merge(x.bins[a][b], y.bins[a][b]);
+          [](BinSet x, const BinSet& y) {
+            x.merge(y);
             return x;
           });
     } else {
-      binRange(r.begin, r.end, r, k, bins);
+      binRange(r.begin, r.end, r, bins);
     }
     const float inv_area = r.box.area() > 0.0f ? 1.0f / r.box.area() : 0.0f;
-    std::array<float, 256> right_cost;
+    std::array<float, BvhBuildConfig::kMaxBins> right_cost;
     for (int a = 0; a < 3; ++a) {
       if (!(r.centroids.hi[a] > r.centroids.lo[a])) continue;
-      const auto& ab = bins.bins[a];
       Box acc;
       std::uint32_t count = 0;
       for (std::uint32_t b = k - 1; b > 0; --b) {
-        acc.extend(ab[b].box);
-        count += ab[b].count;
+        acc.extend(bins.bin(a, b).box);
+        count += bins.bin(a, b).count;
         right_cost[b] = acc.area() * blocks(count);
       }
       acc = Box();
       count = 0;
       for (std::uint32_t b = 0; b + 1 < k; ++b) {
-        acc.extend(ab[b].box);
-        count += ab[b].count;
+        acc.extend(bins.bin(a, b).box);
+        count += bins.bin(a, b).count;
         if (count == 0 || count == n) continue;
         const float cost =
             c_.traversal_cost + c_.intersection_cost * (acc.area() * blocks(count) + right_cost[b + 1]) * inv_area;
-        if (cost < best.cost) best = {a, b, cost};
+        if (cost < best.cost) {
+          best.axis = a;
+          best.bin = b;
+          best.cost = cost;
+        }
+      }
+    }
+    if (best.axis >= 0) {
+      best.bins = k;
+      for (std::uint32_t b = 0; b < k; ++b) {
+        const Bin& bin = bins.bin(best.axis, b);
+        (b <= best.bin ? best.left_box : best.right_box).extend(bin.box);
+        (b <= best.bin ? best.left_centroids : best.right_centroids).extend(bin.centroids);
       }
     }
     return best;
-  }
-
-  static void merge(Bin& into, const Bin& b) {
-    into.box.extend(b.box);
-    into.centroids.extend(b.centroids);
-    into.count += b.count;
   }
 
   // Splits `r` by `s` into two non-empty ranges with their bounds.
   std::pair<Range, Range> partition(const Range& r, const Split& s) {
     Range left{r.begin, r.begin, Box(), Box()}, right{r.begin, r.end, Box(), Box()};
     if (s.axis >= 0) {
-      const std::uint32_t k = c_.bins;
       auto* mid = std::partition(refs_.data() + r.begin, refs_.data() + r.end, [&](const Ref& ref) {
-        return binIndex(r, k, s.axis, ref.box.center()[s.axis]) <= s.bin;
+        return binIndex(r, s.bins, s.axis, ref.box.center()[s.axis]) <= s.bin;
       });
       const auto m = static_cast<std::uint32_t>(mid - refs_.data());
       // The binned count decided the cost; the same rule of bin index on the same float makes the
       // partition agree with it, so neither side can be empty.
       DUPLEX_CHECK(m > r.begin && m < r.end);
       left.end = right.begin = m;
+      left.box = s.left_box;
+      left.centroids = s.left_centroids;
+      right.box = s.right_box;
+      right.centroids = s.right_centroids;
+      return {left, right};
     } else {
       // No axis separates the centroids (or too deep for the SAH): the middle by index, after
       // ordering by centroid on the longest axis so that the halves are spatially coherent.

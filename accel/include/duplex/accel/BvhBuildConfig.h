@@ -30,7 +30,10 @@ BvhPreset parseBvhPreset(std::string_view name);
 /// as traversal_cost + intersection_cost * (expected number of leaf blocks tested), where a leaf of
 /// n primitives costs ceil(n / leaf_block) block tests (the SIMD width of the leaf test).
 struct BvhBuildConfig {
-  /// Bins per axis of the binned SAH (2 to 256).
+  /// Most bins per axis.
+  static constexpr std::uint32_t kMaxBins = 256;
+  /// Bins per axis of the binned SAH (2 to kMaxBins; nodes of fewer references use one per
+  /// reference).
   std::uint32_t bins = 32;
   /// Cost of one wide-node step relative to one leaf-block test.
   float traversal_cost = 1.0f;
