@@ -26,6 +26,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 
 namespace duplex::detail {
 
@@ -37,36 +38,50 @@ constexpr int hiRow(int a) { return 24 + 8 * a; }
 static_assert(offsetof(BvhNode8, hi) == sizeof(float) * 24);
 }  // namespace
 
+// The ray's octant (bit a set: direction negative on axis a) selects, per axis, which row of a node
+// holds the entry planes: a template parameter, so that the rows are constant offsets and the
+// traversal keeps no per-ray offsets in registers.
+template <int kOct, int kAxis>
+constexpr int nearRow() {
+  return (kOct >> kAxis & 1) ? hiRow(kAxis) : loRow(kAxis);
+}
+template <int kOct, int kAxis>
+constexpr int farRow() {
+  return (kOct >> kAxis & 1) ? loRow(kAxis) : hiRow(kAxis);
+}
+
 namespace sse2 {
 namespace {
 
 struct BoxRay {
   __m128 o[3], inv[3], tnear;
-  int near[3], far[3];
   explicit BoxRay(const KdRay& r) : tnear(_mm_set1_ps(r.tnear)) {
     for (int a = 0; a < 3; ++a) {
       o[a] = _mm_set1_ps(r.origin[a]);
       inv[a] = _mm_set1_ps(r.inv_dir[a]);
-      near[a] = r.neg_mask[a] ? hiRow(a) : loRow(a);
-      far[a] = r.neg_mask[a] ? loRow(a) : hiRow(a);
     }
   }
 };
 
 struct Node {
+  template <int kOct, int kAxis>
+  static void slab(const float* base, const BoxRay& r, __m128& tn, __m128& tf) {
+    const __m128 n = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(base + nearRow<kOct, kAxis>()), r.o[kAxis]), r.inv[kAxis]);
+    const __m128 f = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(base + farRow<kOct, kAxis>()), r.o[kAxis]), r.inv[kAxis]);
+    tn = _mm_max_ps(n, tn);
+    tf = _mm_min_ps(f, tf);
+  }
+  template <int kOct>
   static unsigned test(const BvhNode8& node, const BoxRay& r, float t_best, float* dist) {
-    const float* base = &node.lo[0][0];
     const __m128 tb = _mm_set1_ps(t_best);
     const __m128 sign = _mm_set1_ps(-0.0f), widen = _mm_set1_ps(kBoxWiden);
     unsigned mask = 0;
     for (int h = 0; h < 8; h += 4) {
+      const float* base = &node.lo[0][0] + h;
       __m128 tn = r.tnear, tf = tb;
-      for (int a = 2; a >= 0; --a) {
-        const __m128 n = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(base + r.near[a] + h), r.o[a]), r.inv[a]);
-        const __m128 f = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(base + r.far[a] + h), r.o[a]), r.inv[a]);
-        tn = _mm_max_ps(n, tn);
-        tf = _mm_min_ps(f, tf);
-      }
+      slab<kOct, 2>(base, r, tn, tf);
+      slab<kOct, 1>(base, r, tn, tf);
+      slab<kOct, 0>(base, r, tn, tf);
       tn = _mm_sub_ps(tn, _mm_mul_ps(_mm_andnot_ps(sign, tn), widen));
       tf = _mm_add_ps(tf, _mm_mul_ps(_mm_andnot_ps(sign, tf), widen));
       mask |= static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(tn, tf))) << h;
@@ -89,36 +104,42 @@ namespace {
 
 struct BoxRay {
   __m256 o[3], inv[3], tnear;
-  int near[3], far[3];
   explicit BoxRay(const KdRay& r) : tnear(_mm256_set1_ps(r.tnear)) {
     for (int a = 0; a < 3; ++a) {
       o[a] = _mm256_set1_ps(r.origin[a]);
       inv[a] = _mm256_set1_ps(r.inv_dir[a]);
-      near[a] = r.neg_mask[a] ? hiRow(a) : loRow(a);
-      far[a] = r.neg_mask[a] ? loRow(a) : hiRow(a);
     }
   }
 };
 
+template <int kOct, int kAxis>
+inline void slab(const float* base, const BoxRay& r, __m256& tn, __m256& tf) {
+  const __m256 n =
+      _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(base + nearRow<kOct, kAxis>()), r.o[kAxis]), r.inv[kAxis]);
+  const __m256 f = _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(base + farRow<kOct, kAxis>()), r.o[kAxis]), r.inv[kAxis]);
+  tn = _mm256_max_ps(n, tn);
+  tf = _mm256_min_ps(f, tf);
+}
+
+// The widened entry distances of the 8 children; `tf` gets the widened exits.
+template <int kOct>
 inline __m256 entryAndExit(const BvhNode8& node, const BoxRay& r, float t_best, __m256& tf) {
   const float* base = &node.lo[0][0];
   const __m256 sign = _mm256_set1_ps(-0.0f), widen = _mm256_set1_ps(kBoxWiden);
   __m256 tn = r.tnear;
   tf = _mm256_set1_ps(t_best);
-  for (int a = 2; a >= 0; --a) {
-    const __m256 n = _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(base + r.near[a]), r.o[a]), r.inv[a]);
-    const __m256 f = _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(base + r.far[a]), r.o[a]), r.inv[a]);
-    tn = _mm256_max_ps(n, tn);
-    tf = _mm256_min_ps(f, tf);
-  }
+  slab<kOct, 2>(base, r, tn, tf);
+  slab<kOct, 1>(base, r, tn, tf);
+  slab<kOct, 0>(base, r, tn, tf);
   tf = _mm256_add_ps(tf, _mm256_mul_ps(_mm256_andnot_ps(sign, tf), widen));
   return _mm256_sub_ps(tn, _mm256_mul_ps(_mm256_andnot_ps(sign, tn), widen));
 }
 
 struct Node {
+  template <int kOct>
   static unsigned test(const BvhNode8& node, const BoxRay& r, float t_best, float* dist) {
     __m256 tf;
-    const __m256 tn = entryAndExit(node, r, t_best, tf);
+    const __m256 tn = entryAndExit<kOct>(node, r, t_best, tf);
     _mm256_store_ps(dist, tn);
     return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
   }
@@ -139,9 +160,10 @@ namespace {
 using avx2::BoxRay;
 
 struct Node {
+  template <int kOct>
   static unsigned test(const BvhNode8& node, const BoxRay& r, float t_best, float* dist) {
     __m256 tf;
-    const __m256 tn = avx2::entryAndExit(node, r, t_best, tf);
+    const __m256 tn = avx2::entryAndExit<kOct>(node, r, t_best, tf);
     _mm256_store_ps(dist, tn);
     return static_cast<unsigned>(_mm256_cmp_ps_mask(tn, tf, _CMP_LE_OQ));
   }

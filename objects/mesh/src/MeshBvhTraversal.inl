@@ -13,13 +13,9 @@ struct StackEntry {
 // 7 pending children per level (WideBvh::kMaxDepth levels) fit.
 constexpr int kStackSize = 7 * WideBvh::kMaxDepth + 8;
 
-inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit) {
-  if (bvh.root == BvhRef::kEmpty) return false;
-  MeshRay ray;
-  float tmin, tmax;
-  if (!setupMeshRay(ray_os, bvh.bounds, ray, tmin, tmax)) return false;
+template <int kOct>
+inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, Hit& hit) {
   float t_best = std::min(hit.t, ray_os.tfar);
-  if (tmin > t_best) return false;
   const BoxRay box_ray(ray.kd);
   ClosestHit best;
   bool found = false;
@@ -30,7 +26,7 @@ inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit)
     if (BvhRef::isInner(cur)) {
       const BvhNode8& node = bvh.nodes[cur];
       alignas(32) float dist[8];
-      unsigned mask = Node::test(node, box_ray, t_best, dist);
+      unsigned mask = Node::template test<kOct>(node, box_ray, t_best, dist);
       if (mask != 0) {
         const int a = std::countr_zero(mask);
         mask &= mask - 1;
@@ -88,11 +84,8 @@ inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit)
   }
 }
 
-inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os) {
-  if (bvh.root == BvhRef::kEmpty) return false;
-  MeshRay ray;
-  float tmin, tmax;
-  if (!setupMeshRay(ray_os, bvh.bounds, ray, tmin, tmax)) return false;
+template <int kOct>
+inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray) {
   const float t_far = ray_os.tfar;
   const BoxRay box_ray(ray.kd);
   std::uint32_t stack[kStackSize];
@@ -102,7 +95,7 @@ inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os) {
     if (BvhRef::isInner(cur)) {
       const BvhNode8& node = bvh.nodes[cur];
       alignas(32) float dist[8];
-      unsigned mask = Node::test(node, box_ray, t_far, dist);
+      unsigned mask = Node::template test<kOct>(node, box_ray, t_far, dist);
       if (mask != 0) {
         cur = node.child[std::countr_zero(mask)];
         for (mask &= mask - 1; mask != 0; mask &= mask - 1) stack[sp++] = node.child[std::countr_zero(mask)];
@@ -116,11 +109,9 @@ inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os) {
   }
 }
 
-inline void forEachLeafKernel(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhLeafVisitor visit, void* context) {
-  if (bvh.root == BvhRef::kEmpty) return;
-  MeshRay ray;
-  float tmin, tmax;
-  if (!setupMeshRay(ray_os, bvh.bounds, ray, tmin, tmax)) return;
+template <int kOct>
+inline void forEachLeafKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, MeshBvhLeafVisitor visit,
+                              void* context) {
   const BoxRay box_ray(ray.kd);
   std::uint32_t stack[kStackSize];
   int sp = 0;
@@ -129,7 +120,7 @@ inline void forEachLeafKernel(const MeshBvhView& bvh, const Ray& ray_os, MeshBvh
     if (BvhRef::isInner(cur)) {
       const BvhNode8& node = bvh.nodes[cur];
       alignas(32) float dist[8];
-      unsigned mask = Node::test(node, box_ray, ray_os.tfar, dist);
+      unsigned mask = Node::template test<kOct>(node, box_ray, ray_os.tfar, dist);
       if (mask != 0) {
         cur = node.child[std::countr_zero(mask)];
         for (mask &= mask - 1; mask != 0; mask &= mask - 1) stack[sp++] = node.child[std::countr_zero(mask)];
@@ -143,8 +134,42 @@ inline void forEachLeafKernel(const MeshBvhView& bvh, const Ray& ray_os, MeshBvh
   }
 }
 
-inline bool intersectEntry(const MeshBvhView& bvh, const Ray& ray, Hit& hit) { return intersectKernel(bvh, ray, hit); }
-inline bool occludedEntry(const MeshBvhView& bvh, const Ray& ray) { return occludedKernel(bvh, ray); }
-inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray, MeshBvhLeafVisitor visit, void* context) {
-  forEachLeafKernel(bvh, ray, visit, context);
+// The ray's octant: bit a set when its direction is negative on axis a.
+inline int octantOf(const MeshRay& ray) {
+  return static_cast<int>((ray.kd.neg_mask[0] & 1u) | (ray.kd.neg_mask[1] & 2u) | (ray.kd.neg_mask[2] & 4u));
+}
+
+template <class F>
+inline auto byOctant(int octant, F&& f) {
+  switch (octant) {
+    case 0: return f(std::integral_constant<int, 0>());
+    case 1: return f(std::integral_constant<int, 1>());
+    case 2: return f(std::integral_constant<int, 2>());
+    case 3: return f(std::integral_constant<int, 3>());
+    case 4: return f(std::integral_constant<int, 4>());
+    case 5: return f(std::integral_constant<int, 5>());
+    case 6: return f(std::integral_constant<int, 6>());
+    default: return f(std::integral_constant<int, 7>());
+  }
+}
+
+inline bool intersectEntry(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit) {
+  if (bvh.root == BvhRef::kEmpty) return false;
+  MeshRay ray;
+  if (!prepareMeshRay(ray_os, ray)) return false;
+  return byOctant(octantOf(ray), [&](auto oct) { return intersectKernel<oct.value>(bvh, ray_os, ray, hit); });
+}
+
+inline bool occludedEntry(const MeshBvhView& bvh, const Ray& ray_os) {
+  if (bvh.root == BvhRef::kEmpty) return false;
+  MeshRay ray;
+  if (!prepareMeshRay(ray_os, ray)) return false;
+  return byOctant(octantOf(ray), [&](auto oct) { return occludedKernel<oct.value>(bvh, ray_os, ray); });
+}
+
+inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhLeafVisitor visit, void* context) {
+  if (bvh.root == BvhRef::kEmpty) return;
+  MeshRay ray;
+  if (!prepareMeshRay(ray_os, ray)) return;
+  byOctant(octantOf(ray), [&](auto oct) { forEachLeafKernel<oct.value>(bvh, ray_os, ray, visit, context); });
 }

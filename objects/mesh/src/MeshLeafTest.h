@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <bit>
 #include <cstdint>
+#include <limits>
 
 namespace duplex::detail {
 
@@ -29,27 +30,38 @@ struct ClosestHit {
 };
 
 /// Tests the `count` triangles of the blocks from `block` on; a hit closer than t_max lowers t_max
-/// and is recorded in `best`. Lanes are resolved in order with the scalar interval test, so the
-/// result equals testing the triangles one by one. Returns whether anything was recorded.
+/// and is recorded in `best`. The lanes decided in float are resolved together (the closest of
+/// them, with the scalar test's final division); lanes with an edge function exactly zero go
+/// through the scalar test one by one. Returns whether anything was recorded.
 inline bool closestInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::uint32_t count, float& t_max,
                           ClosestHit& best) {
   bool found = false;
   for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
-    const Watertight4 r = intersectWatertight4(ray.wray4, *block, kLeafLaneMask[std::min(left, 4)], t_max);
-    for (int lanes = r.fast | r.exact; lanes != 0; lanes &= lanes - 1) {
+    const Watertight4v r = intersectWatertight4v(ray.wray4, *block, kLeafLaneMask[std::min(left, 4)], t_max);
+    if (r.fast != 0) {
+      const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), r.det);  // the scalar test's final step
+      const __m128 t = _mm_mul_ps(r.T, inv);
+      const __m128 fast = _mm_castsi128_ps(_mm_cmpeq_epi32(
+          _mm_and_si128(_mm_set1_epi32(r.fast), _mm_setr_epi32(1, 2, 4, 8)), _mm_setr_epi32(1, 2, 4, 8)));
+      // The smallest t of the fast lanes, broadcast; its first lane wins ties.
+      __m128 m =
+          _mm_or_ps(_mm_and_ps(fast, t), _mm_andnot_ps(fast, _mm_set1_ps(std::numeric_limits<float>::infinity())));
+      m = _mm_min_ps(m, _mm_shuffle_ps(m, m, _MM_SHUFFLE(2, 3, 0, 1)));
+      m = _mm_min_ps(m, _mm_shuffle_ps(m, m, _MM_SHUFFLE(1, 0, 3, 2)));
+      const int k = std::countr_zero(static_cast<unsigned>(_mm_movemask_ps(_mm_and_ps(fast, _mm_cmpeq_ps(t, m)))));
+      alignas(16) float tv[4], uv[4], vv[4];
+      _mm_store_ps(tv, t);
+      _mm_store_ps(uv, _mm_mul_ps(r.V, inv));
+      _mm_store_ps(vv, _mm_mul_ps(r.W, inv));
+      t_max = tv[k];
+      best = {block, k, uv[k], vv[k]};
+      found = true;
+    }
+    for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
       const int k = std::countr_zero(static_cast<unsigned>(lanes));
       float t, u, v;
-      if (r.exact >> k & 1) {
-        if (!intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t, u,
-                                 v))
-          continue;
-      } else {
-        if (r.sT[k] > t_max * r.abs_det[k]) continue;
-        const float inv = 1.0f / r.det[k];  // the scalar test's final step
-        t = r.T[k] * inv;
-        u = r.V[k] * inv;
-        v = r.W[k] * inv;
-      }
+      if (!intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t, u, v))
+        continue;
       t_max = t;
       best = {block, k, u, v};
       found = true;
@@ -61,7 +73,7 @@ inline bool closestInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::
 /// Whether any of the `count` triangles of the blocks from `block` on is hit within t_max.
 inline bool anyInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::uint32_t count, float t_max) {
   for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
-    const Watertight4 r = intersectWatertight4(ray.wray4, *block, kLeafLaneMask[std::min(left, 4)], t_max);
+    const Watertight4v r = intersectWatertight4v(ray.wray4, *block, kLeafLaneMask[std::min(left, 4)], t_max);
     if (r.fast) return true;
     for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
       const int k = std::countr_zero(static_cast<unsigned>(lanes));

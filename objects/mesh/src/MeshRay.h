@@ -32,10 +32,9 @@ struct MeshRay {
   WatertightRay4 wray4;  // the same, broadcast and permuted for the 4-wide test
 };
 
-/// Fills `r` from `ray` (object space) and clips it to `box`: returns false when the ray is not
-/// queryable (isQueryable in Ray.h) or misses the box, else the interval [tmin, tmax] as
-/// clipRayToBox computes it.
-inline bool setupMeshRay(const Ray& ray, const Box& box, MeshRay& r, float& tmin, float& tmax) {
+/// Fills `r` from `ray` (object space): returns false when the ray is not queryable (isQueryable in
+/// Ray.h). The BVH traversal needs no more (its root's box test clips the ray).
+inline bool prepareMeshRay(const Ray& ray, MeshRay& r) {
   // Ray is {ox, oy, oz, tnear, dx, dy, dz, tfar}: two unaligned loads.
   const __m128 o = _mm_loadu_ps(&ray.origin.x);
   const __m128 d = _mm_loadu_ps(&ray.dir.x);
@@ -103,6 +102,20 @@ inline bool setupMeshRay(const Ray& ray, const Box& box, MeshRay& r, float& tmin
   w.sz = q[3];
   r.wray4 = WatertightRay4(w);
 
+  return true;
+}
+
+/// Fills `r` from `ray` (object space) and clips it to `box`: returns false when the ray is not
+/// queryable (isQueryable in Ray.h) or misses the box, else the interval [tmin, tmax] as
+/// clipRayToBox computes it.
+inline bool setupMeshRay(const Ray& ray, const Box& box, MeshRay& r, float& tmin, float& tmax) {
+  if (!prepareMeshRay(ray, r)) return false;
+  const __m128 o = _mm_loadu_ps(&ray.origin.x);
+  const __m128 d = _mm_loadu_ps(&ray.dir.x);
+  const __m128 sign_bit = _mm_set1_ps(-0.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 inv = _mm_setr_ps(r.kd.inv_dir[0], r.kd.inv_dir[1], r.kd.inv_dir[2], 0.0f);
+  const __m128 zero_dir = _mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf);
   // Clip to the box, three slabs at once, with clipIntervalToBox's rules and results: per axis the
   // entry and exit are widened, and a widened value that is NaN (an infinite distance) is ignored,
   // as std::max / std::min ignore it there; SSE's max / min return their second operand when either

@@ -53,9 +53,16 @@ struct WatertightRay4 {
         kz(ray.kz) {}
 };
 
+/// Watertight4 in registers (what the leaf step reads, without a round trip through memory).
+struct Watertight4v {
+  int fast = 0;
+  int exact = 0;
+  __m128 sT, abs_det, T, det, V, W;
+};
+
 /// Tests the lanes in `lanes` (bit i: lane i holds one of the leaf's triangles) of `block`.
-inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const TriangleBlock4& block, int lanes,
-                                        float t_max) {
+inline Watertight4v intersectWatertight4v(const WatertightRay4& ray, const TriangleBlock4& block, int lanes,
+                                          float t_max) {
   // Rows of coordinate kx / ky / kz of vertex 0; vertex k's rows follow 12 k floats further
   // (block.v[3 k + axis]), so each row is one pointer plus a constant offset: three live pointers
   // instead of nine row addresses, which the compiler kept on the stack.
@@ -73,34 +80,48 @@ inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const Triangl
   const __m128 Cz = _mm_sub_ps(_mm_load_ps(rz + 24), ray.o[2]);
   const __m128 cx = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(rx + 24), ray.o[0]), _mm_mul_ps(sx, Cz));
   const __m128 cy = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(ry + 24), ray.o[1]), _mm_mul_ps(sy, Cz));
+  Watertight4v r;
+  r.V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+  r.W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
   const __m128 U = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
-  const __m128 V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
-  const __m128 W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+  const __m128 V = r.V, W = r.W;
   const __m128 zero = _mm_setzero_ps();
 
-  Watertight4 r;
   const __m128 any_zero = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(U, zero), _mm_cmpeq_ps(V, zero)), _mm_cmpeq_ps(W, zero));
   r.exact = _mm_movemask_ps(any_zero) & lanes;
   // Same-sign test and det != 0, as in the scalar code.
   const __m128 mixed = _mm_and_ps(_mm_cmplt_ps(_mm_min_ps(U, _mm_min_ps(V, W)), zero),
                                   _mm_cmpgt_ps(_mm_max_ps(U, _mm_max_ps(V, W)), zero));
-  const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
-  int candidates = ~_mm_movemask_ps(_mm_or_ps(mixed, _mm_cmpeq_ps(det, zero))) & lanes & ~r.exact;
-  if (candidates == 0) return r;
-  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, Az)), _mm_mul_ps(V, _mm_mul_ps(sz, Bz))),
-                              _mm_mul_ps(W, _mm_mul_ps(sz, Cz)));
-  const __m128 sign = _mm_and_ps(det, _mm_set1_ps(-0.0f));
-  const __m128 abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), det);
-  const __m128 sT = _mm_xor_ps(T, sign);
-  const __m128 outside = _mm_or_ps(_mm_cmplt_ps(sT, _mm_mul_ps(ray.tnear, abs_det)),
-                                   _mm_cmpgt_ps(sT, _mm_mul_ps(_mm_set1_ps(t_max), abs_det)));
+  r.det = _mm_add_ps(_mm_add_ps(U, V), W);
+  const int candidates = ~_mm_movemask_ps(_mm_or_ps(mixed, _mm_cmpeq_ps(r.det, zero))) & lanes & ~r.exact;
+  if (candidates == 0) {
+    r.T = r.sT = r.abs_det = zero;  // not read: no lane is decided in float
+    return r;
+  }
+  r.T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, _mm_mul_ps(sz, Az)), _mm_mul_ps(V, _mm_mul_ps(sz, Bz))),
+                   _mm_mul_ps(W, _mm_mul_ps(sz, Cz)));
+  const __m128 sign = _mm_and_ps(r.det, _mm_set1_ps(-0.0f));
+  r.abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), r.det);
+  r.sT = _mm_xor_ps(r.T, sign);
+  const __m128 outside = _mm_or_ps(_mm_cmplt_ps(r.sT, _mm_mul_ps(ray.tnear, r.abs_det)),
+                                   _mm_cmpgt_ps(r.sT, _mm_mul_ps(_mm_set1_ps(t_max), r.abs_det)));
   r.fast = candidates & ~_mm_movemask_ps(outside);
-  _mm_store_ps(r.sT, sT);
-  _mm_store_ps(r.abs_det, abs_det);
-  _mm_store_ps(r.T, T);
-  _mm_store_ps(r.det, det);
-  _mm_store_ps(r.V, V);
-  _mm_store_ps(r.W, W);
+  return r;
+}
+
+/// The same test with its values stored per lane (for code that reads them lane by lane).
+inline Watertight4 intersectWatertight4(const WatertightRay4& ray, const TriangleBlock4& block, int lanes,
+                                        float t_max) {
+  const Watertight4v v = intersectWatertight4v(ray, block, lanes, t_max);
+  Watertight4 r;
+  r.fast = v.fast;
+  r.exact = v.exact;
+  _mm_store_ps(r.sT, v.sT);
+  _mm_store_ps(r.abs_det, v.abs_det);
+  _mm_store_ps(r.T, v.T);
+  _mm_store_ps(r.det, v.det);
+  _mm_store_ps(r.V, v.V);
+  _mm_store_ps(r.W, v.W);
   return r;
 }
 
