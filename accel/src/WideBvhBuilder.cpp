@@ -7,6 +7,11 @@
 // as TBB tasks when they are large. Nodes are written to a temporary pool in completion order and
 // then laid out depth-first in one serial pass, so that the result does not depend on the thread
 // count or the scheduling.
+//
+// With spatial splits (Stich et al. 2009) a range owns free room after its references (its
+// "extended" end): a spatial split writes the references it duplicates there, and every split
+// shares the room left between the two sides in proportion to their sizes, so that the total
+// duplication stays within the budget and no range ever grows into another's.
 
 #include "duplex/accel/WideBvh.h"
 
@@ -15,15 +20,22 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/concurrent_vector.h>
-#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <memory>
 #include <string>
 #include <utility>
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#define DUPLEX_WIDE_BVH_SSE 1
+#include <emmintrin.h>
+#endif
 
 namespace duplex {
 
@@ -35,62 +47,184 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // splitting off one primitive at a time) nodes split at the object median, which bounds the depth
 // the traversal stack must hold.
 constexpr int kSahDepth = 40;
-// Ranges of at least this many references are binned in parallel chunks.
+// Ranges of at least this many references are binned in parallel chunks of kBinChunk.
 constexpr std::uint32_t kParallelBinning = 1u << 15;
+constexpr std::uint32_t kBinChunk = 1u << 13;
 
-struct Ref {
-  Box box;
+// Four floats, one SSE register where there is SSE2 (x86-64 always has it).
+#if defined(DUPLEX_WIDE_BVH_SSE)
+struct V4 {
+  __m128 v;
+};
+inline V4 load4(const float* p) { return {_mm_load_ps(p)}; }
+inline void store4(float* p, V4 a) { _mm_store_ps(p, a.v); }
+inline V4 splat4(float x) { return {_mm_set1_ps(x)}; }
+inline V4 set4(float x, float y, float z, float w) { return {_mm_setr_ps(x, y, z, w)}; }
+inline V4 min4(V4 a, V4 b) { return {_mm_min_ps(a.v, b.v)}; }
+inline V4 max4(V4 a, V4 b) { return {_mm_max_ps(a.v, b.v)}; }
+inline V4 add4(V4 a, V4 b) { return {_mm_add_ps(a.v, b.v)}; }
+inline V4 sub4(V4 a, V4 b) { return {_mm_sub_ps(a.v, b.v)}; }
+inline V4 mul4(V4 a, V4 b) { return {_mm_mul_ps(a.v, b.v)}; }
+// Truncates lanes to integers (the lanes are in [0, 2^24)).
+inline void truncate4(V4 a, std::int32_t* out) {
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(a.v));
+}
+#else
+struct V4 {
+  float f[4];
+};
+inline V4 load4(const float* p) { return {{p[0], p[1], p[2], p[3]}}; }
+inline void store4(float* p, V4 a) { std::memcpy(p, a.f, sizeof a.f); }
+inline V4 splat4(float x) { return {{x, x, x, x}}; }
+inline V4 set4(float x, float y, float z, float w) { return {{x, y, z, w}}; }
+template <class F>
+inline V4 map4(V4 a, V4 b, F f) {
+  return {{f(a.f[0], b.f[0]), f(a.f[1], b.f[1]), f(a.f[2], b.f[2]), f(a.f[3], b.f[3])}};
+}
+// As minps/maxps: the second operand when the comparison is false (NaN included).
+inline V4 min4(V4 a, V4 b) {
+  return map4(a, b, [](float x, float y) { return x < y ? x : y; });
+}
+inline V4 max4(V4 a, V4 b) {
+  return map4(a, b, [](float x, float y) { return x > y ? x : y; });
+}
+inline V4 add4(V4 a, V4 b) {
+  return map4(a, b, [](float x, float y) { return x + y; });
+}
+inline V4 sub4(V4 a, V4 b) {
+  return map4(a, b, [](float x, float y) { return x - y; });
+}
+inline V4 mul4(V4 a, V4 b) {
+  return map4(a, b, [](float x, float y) { return x * y; });
+}
+inline void truncate4(V4 a, std::int32_t* out) {
+  for (int i = 0; i < 4; ++i) out[i] = static_cast<std::int32_t>(a.f[i]);
+}
+#endif
+
+// A reference: a primitive's box (or, with spatial splits, the box of a part of it), 32 bytes so
+// that each corner is one aligned vector load (lane 3 of lo holds the primitive's bits, ignored).
+struct alignas(32) Ref {
+  float lo[3];
   std::uint32_t prim;
+  float hi[3];
+  float pad;
+
+  [[nodiscard]] V4 vlo() const { return load4(lo); }
+  [[nodiscard]] V4 vhi() const { return load4(hi); }
+  // Twice the centroid: the binning works on lo + hi, which saves a multiply and rounds the same.
+  [[nodiscard]] V4 centroid2() const { return add4(vlo(), vhi()); }
+  [[nodiscard]] Box box() const { return Box({lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}); }
+  static Ref make(const Box& b, std::uint32_t prim) {
+    return Ref{{b.lo.x, b.lo.y, b.lo.z}, prim, {b.hi.x, b.hi.y, b.hi.z}, 0.0f};
+  }
+};
+static_assert(sizeof(Ref) == 32);
+
+// Bounds accumulated in vectors (lane 3 unused).
+struct VBox {
+  V4 lo = splat4(kInf), hi = splat4(-kInf);
+  void extend(V4 l, V4 h) {
+    lo = min4(lo, l);
+    hi = max4(hi, h);
+  }
+  void extend(const VBox& b) { extend(b.lo, b.hi); }
+  void extendPoint(V4 p) { extend(p, p); }
+  [[nodiscard]] Box box() const {
+    alignas(16) float l[4], h[4];
+    store4(l, lo);
+    store4(h, hi);
+    return Box({l[0], l[1], l[2]}, {h[0], h[1], h[2]});
+  }
+  // Box::area() of box(), without the conversion.
+  [[nodiscard]] float area() const {
+    alignas(16) float e[4];
+    store4(e, sub4(hi, lo));
+    if (!(e[0] >= 0.0f && e[1] >= 0.0f && e[2] >= 0.0f)) return 0.0f;
+    return 2.0f * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
+  }
 };
 
-struct Bin {
-  Box box;
-  Box centroids;
-  std::uint32_t count = 0;
-};
+VBox toVBox(const Box& b) { return {set4(b.lo.x, b.lo.y, b.lo.z, 0.0f), set4(b.hi.x, b.hi.y, b.hi.z, 0.0f)}; }
 
-// A range of the reference array with its bounds and centroid bounds.
+// A range of the reference array with its bounds and the bounds of its doubled centroids; [end,
+// ext) is free room for duplicated references (empty without spatial splits).
 struct Range {
-  std::uint32_t begin = 0, end = 0;
-  Box box, centroids;
+  std::uint32_t begin = 0, end = 0, ext = 0;
+  Box box, centroids2;
   [[nodiscard]] std::uint32_t size() const { return end - begin; }
+  [[nodiscard]] std::uint32_t room() const { return ext - end; }
 };
 
-// The best split of a range: references whose centroid falls in bins [0, bin] of `bins` bins go
-// left, unless axis is -1 (split at the middle index). The sides' bounds come from the bins.
-struct Split {
-  int axis = -1;
-  std::uint32_t bins = 0, bin = 0;
-  float cost = kInf;
-  Box left_box, left_centroids, right_box, right_centroids;
+// The bin of a doubled centroid per axis, k bins over the range's centroid bounds. The binning and
+// the partition both use it, so that the partition sends every reference where the binning counted
+// it.
+struct Binner {
+  V4 lo, scale, top;
+  Binner(const Range& r, std::uint32_t k) : lo(toVBox(r.centroids2).lo), top(splat4(static_cast<float>(k - 1))) {
+    float s[3];
+    for (int a = 0; a < 3; ++a) {
+      const float ext = r.centroids2.hi[a] - r.centroids2.lo[a];
+      // A flat axis bins everything into bin 0 (and is not split along).
+      s[a] = ext > 0.0f ? static_cast<float>(k) * (1.0f - 1e-6f) / ext : 0.0f;
+    }
+    scale = set4(s[0], s[1], s[2], 0.0f);
+  }
+  void bins(const Ref& ref, std::int32_t* out) const {
+    // max4 returns 0 for a NaN lane (the ignored lane 3), min4 keeps it inside the bins.
+    truncate4(min4(max4(mul4(sub4(ref.centroid2(), lo), scale), splat4(0.0f)), top), out);
+  }
 };
 
-// Bins of the three axes, k per axis: bin(a, b).
-struct BinSet {
+// Bins of the three axes, k per axis (only the first k of each row are initialised).
+struct Bins {
   std::uint32_t k = 0;
-  std::vector<Bin> bins;
-  explicit BinSet(std::uint32_t k_) : k(k_), bins(3 * std::size_t{k_}) {}
-  Bin& bin(int a, std::uint32_t b) { return bins[a * k + b]; }
-  [[nodiscard]] const Bin& bin(int a, std::uint32_t b) const { return bins[a * k + b]; }
-  void merge(const BinSet& o) {
-    for (std::size_t i = 0; i < bins.size(); ++i) {
-      bins[i].box.extend(o.bins[i].box);
-      bins[i].centroids.extend(o.bins[i].centroids);
-      bins[i].count += o.bins[i].count;
+  V4 lo[3][BvhBuildConfig::kMaxBins], hi[3][BvhBuildConfig::kMaxBins];
+  std::uint32_t count[3][BvhBuildConfig::kMaxBins];
+  explicit Bins(std::uint32_t k_) : k(k_) {
+    for (int a = 0; a < 3; ++a) {
+      std::fill_n(lo[a], k, splat4(kInf));
+      std::fill_n(hi[a], k, splat4(-kInf));
+      std::fill_n(count[a], k, 0u);
+    }
+  }
+  [[nodiscard]] VBox box(int a, std::uint32_t b) const { return {lo[a][b], hi[a][b]}; }
+  void merge(const Bins& o) {
+    for (int a = 0; a < 3; ++a) {
+      for (std::uint32_t b = 0; b < k; ++b) {
+        lo[a][b] = min4(lo[a][b], o.lo[a][b]);
+        hi[a][b] = max4(hi[a][b], o.hi[a][b]);
+        count[a][b] += o.count[a][b];
+      }
     }
   }
 };
 
+// The best split of a range. An object split (spatial false) sends references whose centroid falls
+// in bins [0, bin] of `bins` bins left, or, with axis -1, splits at the middle index; the sides'
+// bounds come from the bins. A spatial split cuts at plane `pos` on `axis`, duplicating the
+// references it crosses.
+struct Split {
+  int axis = -1;
+  bool spatial = false;
+  std::uint32_t bins = 0, bin = 0;
+  float pos = 0.0f;
+  float cost = kInf;
+  Box left_box, right_box;
+};
+
 class Builder {
  public:
-  Builder(std::vector<Ref>& refs, const BvhBuildConfig& config) : refs_(refs), c_(config) {}
+  Builder(std::vector<Ref>& refs, const BvhBuildConfig& config, const BvhClipFunction& clip)
+      : refs_(refs), c_(config), clip_(clip) {}
 
-  WideBvh run(const Box& bounds, const Box& centroids) {
+  WideBvh run(const Range& root) {
     WideBvh out;
     out.leaf_block = c_.leaf_block;
-    out.bounds = bounds;
-    if (refs_.empty()) return out;
-    Range root{0, static_cast<std::uint32_t>(refs_.size()), bounds, centroids};
+    out.bounds = root.box;
+    if (root.size() == 0) return out;
+    spatial_ = clip_ && c_.spatial_split_alpha > 0.0f && root.room() > 0;
+    min_overlap_ = c_.spatial_split_alpha * root.box.area();
     const Split split = findSplit(root, 0);
     std::uint32_t temp_root;
     if (wantsLeaf(root, split)) temp_root = makeLeaf(root);
@@ -114,70 +248,42 @@ class Builder {
     return leafCost(n) <= s.cost;
   }
 
-  // The bin of centroid coordinate c on `axis` of range r with k bins; the partition uses the same
-  // expression, so that it sends every reference where the binning counted it.
-  static std::uint32_t binIndex(const Range& r, std::uint32_t k, int axis, float c) {
-    const float ext = r.centroids.hi[axis] - r.centroids.lo[axis];
-    const float scale = static_cast<float>(k) * (1.0f - 1e-6f) / ext;
-    return std::min(k - 1, static_cast<std::uint32_t>(std::max(0.0f, (c - r.centroids.lo[axis]) * scale)));
-  }
-
-  // Bins the centroids of [first, last) on every axis the centroids extend along.
-  void binRange(std::uint32_t first, std::uint32_t last, const Range& r, BinSet& out) const {
-    bool live[3];
-    for (int a = 0; a < 3; ++a) live[a] = r.centroids.hi[a] > r.centroids.lo[a];
+  void binRange(std::uint32_t first, std::uint32_t last, const Binner& binner, Bins& out) const {
+    const Ref* refs = refs_.data();
     for (std::uint32_t i = first; i < last; ++i) {
-      const Ref& ref = refs_[i];
-      const glm::vec3 c = ref.box.center();
+      const Ref& ref = refs[i];
+      alignas(16) std::int32_t b[4];
+      binner.bins(ref, b);
+      const V4 lo = ref.vlo(), hi = ref.vhi();
       for (int a = 0; a < 3; ++a) {
-        if (!live[a]) continue;
-        Bin& bin = out.bin(a, binIndex(r, out.k, a, c[a]));
-        bin.box.extend(ref.box);
-        bin.centroids.extend(c);
-        ++bin.count;
+        out.lo[a][b[a]] = min4(out.lo[a][b[a]], lo);
+        out.hi[a][b[a]] = max4(out.hi[a][b[a]], hi);
+        ++out.count[a][b[a]];
       }
     }
   }
 
-  Split findSplit(const Range& r, int depth) const {
-    Split best;
-    const std::uint32_t n = r.size();
-    if (n <= 1) return best;
-    if (depth >= kSahDepth) return best;  // the object median (axis -1)
-    // A node of few references needs no more bins than references.
-    const std::uint32_t k = std::min(c_.bins, std::max(2u, n));
-    BinSet bins(k);
-    if (n >= kParallelBinning && c_.parallel_threshold > 0) {
-      bins = tbb::parallel_reduce(
-          tbb::blocked_range<std::uint32_t>(r.begin, r.end, 8192), BinSet(k),
-          [&](const tbb::blocked_range<std::uint32_t>& sub, BinSet acc) {
-            binRange(sub.begin(), sub.end(), r, acc);
-            return acc;
-          },
-          [](BinSet x, const BinSet& y) {
-            x.merge(y);
-            return x;
-          });
-    } else {
-      binRange(r.begin, r.end, r, bins);
-    }
-    const float inv_area = r.box.area() > 0.0f ? 1.0f / r.box.area() : 0.0f;
+  // The cheapest split over the bins of axes `live` (each a k-bin sweep); `best` keeps its value
+  // where nothing is cheaper. Left bins [0, b], right bins [b + 1, k).
+  template <class Left, class Right, class Box3>
+  void sweep(std::uint32_t k, std::uint32_t n, float inv_area, const bool* live, const Box3& box,
+             const Left& left_count, const Right& right_count, Split& best) const {
     std::array<float, BvhBuildConfig::kMaxBins> right_cost;
     for (int a = 0; a < 3; ++a) {
-      if (!(r.centroids.hi[a] > r.centroids.lo[a])) continue;
-      Box acc;
+      if (!live[a]) continue;
+      VBox acc;
       std::uint32_t count = 0;
       for (std::uint32_t b = k - 1; b > 0; --b) {
-        acc.extend(bins.bin(a, b).box);
-        count += bins.bin(a, b).count;
-        right_cost[b] = acc.area() * blocks(count);
+        acc.extend(box(a, b));
+        count += right_count(a, b);
+        right_cost[b] = count == 0 ? -1.0f : acc.area() * blocks(count);
       }
-      acc = Box();
+      acc = VBox();
       count = 0;
       for (std::uint32_t b = 0; b + 1 < k; ++b) {
-        acc.extend(bins.bin(a, b).box);
-        count += bins.bin(a, b).count;
-        if (count == 0 || count == n) continue;
+        acc.extend(box(a, b));
+        count += left_count(a, b);
+        if (count == 0 || count >= n || right_cost[b + 1] < 0.0f) continue;
         const float cost =
             c_.traversal_cost + c_.intersection_cost * (acc.area() * blocks(count) + right_cost[b + 1]) * inv_area;
         if (cost < best.cost) {
@@ -187,52 +293,200 @@ class Builder {
         }
       }
     }
+  }
+
+  Split findSplit(const Range& r, int depth, bool allow_spatial = true) const {
+    Split best;
+    const std::uint32_t n = r.size();
+    if (n <= 1) return best;
+    if (depth >= kSahDepth) return best;  // the object median (axis -1)
+    // A node of few references needs no more bins than references.
+    const std::uint32_t k = std::min(c_.bins, std::max(2u, n));
+    const Binner binner(r, k);
+    std::unique_ptr<Bins> bins = std::make_unique<Bins>(k);
+    if (n >= kParallelBinning && c_.parallel_threshold > 0) {
+      // Fixed chunks merged in order: the same bins whatever the thread count.
+      const std::uint32_t chunks = (n + kBinChunk - 1) / kBinChunk;
+      std::vector<std::unique_ptr<Bins>> part(chunks);
+      tbb::parallel_for(std::uint32_t{0}, chunks, [&](std::uint32_t c) {
+        part[c] = std::make_unique<Bins>(k);
+        const std::uint32_t first = r.begin + c * kBinChunk;
+        binRange(first, std::min(r.end, first + kBinChunk), binner, *part[c]);
+      });
+      for (const auto& p : part) bins->merge(*p);
+    } else {
+      binRange(r.begin, r.end, binner, *bins);
+    }
+    const float inv_area = r.box.area() > 0.0f ? 1.0f / r.box.area() : 0.0f;
+    bool live[3];
+    for (int a = 0; a < 3; ++a) live[a] = r.centroids2.hi[a] > r.centroids2.lo[a];
+    const Bins& bs = *bins;
+    auto count = [&bs](int a, std::uint32_t b) { return bs.count[a][b]; };
+    sweep(
+        k, n + 1, inv_area, live, [&bs](int a, std::uint32_t b) { return bs.box(a, b); }, count, count, best);
     if (best.axis >= 0) {
       best.bins = k;
-      for (std::uint32_t b = 0; b < k; ++b) {
-        const Bin& bin = bins.bin(best.axis, b);
-        (b <= best.bin ? best.left_box : best.right_box).extend(bin.box);
-        (b <= best.bin ? best.left_centroids : best.right_centroids).extend(bin.centroids);
-      }
+      VBox left, right;
+      for (std::uint32_t b = 0; b < k; ++b) (b <= best.bin ? left : right).extend(bs.box(best.axis, b));
+      best.left_box = left.box();
+      best.right_box = right.box();
+      if (allow_spatial && spatial_ && r.room() > 0 &&
+          intersection(best.left_box, best.right_box).area() > min_overlap_)
+        findSpatialSplit(r, inv_area, best);
     }
     return best;
   }
 
-  // Splits `r` by `s` into two non-empty ranges with their bounds.
-  std::pair<Range, Range> partition(const Range& r, const Split& s) {
-    Range left{r.begin, r.begin, Box(), Box()}, right{r.begin, r.end, Box(), Box()};
-    if (s.axis >= 0) {
-      auto* mid = std::partition(refs_.data() + r.begin, refs_.data() + r.end, [&](const Ref& ref) {
-        return binIndex(r, s.bins, s.axis, ref.box.center()[s.axis]) <= s.bin;
-      });
-      const auto m = static_cast<std::uint32_t>(mid - refs_.data());
-      // The binned count decided the cost; the same rule of bin index on the same float makes the
-      // partition agree with it, so neither side can be empty.
-      DUPLEX_CHECK(m > r.begin && m < r.end);
-      left.end = right.begin = m;
-      left.box = s.left_box;
-      left.centroids = s.left_centroids;
-      right.box = s.right_box;
-      right.centroids = s.right_centroids;
-      return {left, right};
-    } else {
-      // No axis separates the centroids (or too deep for the SAH): the middle by index, after
-      // ordering by centroid on the longest axis so that the halves are spatially coherent.
-      const std::uint32_t m = r.begin + r.size() / 2;
-      const int axis = r.centroids.longestAxis();
-      std::nth_element(refs_.data() + r.begin, refs_.data() + m, refs_.data() + r.end,
-                       [axis](const Ref& a, const Ref& b) {
-                         return a.box.lo[axis] + a.box.hi[axis] < b.box.lo[axis] + b.box.hi[axis];
-                       });
-      left.end = right.begin = m;
-    }
-    for (Range* side : {&left, &right}) {
-      for (std::uint32_t i = side->begin; i < side->end; ++i) {
-        side->box.extend(refs_[i].box);
-        side->centroids.extend(refs_[i].box.center());
+  // Spatial split bins along the range's box, k per axis: references clipped into every bin they
+  // cross, counted where they enter and where they leave. Replaces `best` when cheaper within the
+  // range's room for duplicates.
+  void findSpatialSplit(const Range& r, float inv_area, Split& best) const {
+    const std::uint32_t k = c_.bins, n = r.size();
+    std::vector<VBox> box(3 * std::size_t{k});
+    std::vector<std::uint32_t> entry(3 * std::size_t{k}, 0u), exit(3 * std::size_t{k}, 0u);
+    bool live[3];
+    for (int a = 0; a < 3; ++a) {
+      live[a] = r.box.hi[a] > r.box.lo[a];
+      if (!live[a]) continue;
+      const float lo = r.box.lo[a], scale = static_cast<float>(k) / (r.box.hi[a] - r.box.lo[a]);
+      auto binOf = [&](float x) {
+        return std::min(k - 1, static_cast<std::uint32_t>(std::max(0.0f, (x - lo) * scale)));
+      };
+      for (std::uint32_t i = r.begin; i < r.end; ++i) {
+        const Ref& ref = refs_[i];
+        const std::uint32_t first = binOf(ref.lo[a]), last = std::max(first, binOf(ref.hi[a]));
+        ++entry[a * k + first];
+        ++exit[a * k + last];
+        Box rest = ref.box();
+        for (std::uint32_t b = first; b < last && !rest.empty(); ++b) {
+          Box lower, upper;
+          clip_(ref.prim, rest, a, planePos(r.box, a, k, b + 1), lower, upper);
+          box[a * k + b].extend(toVBox(lower).lo, toVBox(lower).hi);
+          rest = upper;
+        }
+        if (!rest.empty()) box[a * k + last].extend(toVBox(rest).lo, toVBox(rest).hi);
       }
     }
+    Split s = best;
+    s.cost = best.cost;
+    s.axis = -1;
+    sweep(
+        k, n, inv_area, live, [&](int a, std::uint32_t b) -> const VBox& { return box[a * k + b]; },
+        [&](int a, std::uint32_t b) { return entry[a * k + b]; },
+        [&](int a, std::uint32_t b) { return exit[a * k + b]; }, s);
+    if (s.axis < 0) return;
+    std::uint32_t left = 0, right = 0;
+    for (std::uint32_t b = 0; b <= s.bin; ++b) left += entry[s.axis * k + b];
+    for (std::uint32_t b = s.bin + 1; b < k; ++b) right += exit[s.axis * k + b];
+    // Each side must shrink (or the recursion would not end) and the duplicates must fit.
+    if (left >= n || right >= n || left + right - n > r.room()) return;
+    s.spatial = true;
+    s.bins = k;
+    s.pos = planePos(r.box, s.axis, k, s.bin + 1);
+    best = s;
+  }
+
+  static float planePos(const Box& box, int axis, std::uint32_t k, std::uint32_t b) {
+    return box.lo[axis] + (box.hi[axis] - box.lo[axis]) * (static_cast<float>(b) / static_cast<float>(k));
+  }
+
+  // Bounds and doubled-centroid bounds of refs_[first, last).
+  void bound(Range& side) const {
+    VBox box, cent;
+    for (std::uint32_t i = side.begin; i < side.end; ++i) {
+      const Ref& ref = refs_[i];
+      box.extend(ref.vlo(), ref.vhi());
+      cent.extendPoint(ref.centroid2());
+    }
+    side.box = box.box();
+    side.centroids2 = cent.box();
+  }
+
+  // Shares the room of `r` between the sides [r.begin, m) and [m, end_right) in proportion to their
+  // sizes, moving the right side up by the left side's share.
+  std::pair<Range, Range> shareRoom(const Range& r, std::uint32_t m, std::uint32_t end_right) {
+    const std::uint32_t nl = m - r.begin, nr = end_right - m, room = r.ext - end_right;
+    const auto left_room = static_cast<std::uint32_t>(std::uint64_t{room} * nl / (nl + nr));
+    if (left_room > 0)
+      std::copy_backward(refs_.data() + m, refs_.data() + end_right, refs_.data() + end_right + left_room);
+    Range left{r.begin, m, m + left_room, Box(), Box()};
+    Range right{m + left_room, end_right + left_room, r.ext, Box(), Box()};
     return {left, right};
+  }
+
+  // Splits `r` by `s` into two non-empty ranges with their bounds. Returns false (and changes
+  // nothing) when a spatial split turns out to leave a side empty or unchanged.
+  bool partition(const Range& r, const Split& s, std::pair<Range, Range>& out) {
+    if (s.spatial) return partitionSpatial(r, s, out);
+    if (s.axis >= 0) {
+      const Binner binner(r, s.bins);
+      const int axis = s.axis;
+      const auto bin = static_cast<std::int32_t>(s.bin);
+      auto goesLeft = [&](const Ref& ref) {
+        alignas(16) std::int32_t b[4];
+        binner.bins(ref, b);
+        return b[axis] <= bin;
+      };
+      VBox lc, rc;
+      Ref* lo = refs_.data() + r.begin;
+      Ref* hi = refs_.data() + r.end;
+      for (;;) {
+        while (lo < hi && goesLeft(*lo)) lc.extendPoint((lo++)->centroid2());
+        while (lo < hi && !goesLeft(hi[-1])) rc.extendPoint((--hi)->centroid2());
+        if (lo >= hi) break;
+        std::swap(*lo, hi[-1]);
+      }
+      const auto m = static_cast<std::uint32_t>(lo - refs_.data());
+      // The binned count decided the cost; the same bin rule on the same floats makes the
+      // partition agree with it, so neither side can be empty.
+      DUPLEX_CHECK(m > r.begin && m < r.end);
+      out = r.room() > 0 ? shareRoom(r, m, r.end)
+                         : std::pair{Range{r.begin, m, m, {}, {}}, Range{m, r.end, r.end, {}, {}}};
+      out.first.box = s.left_box;
+      out.first.centroids2 = lc.box();
+      out.second.box = s.right_box;
+      out.second.centroids2 = rc.box();
+      return true;
+    }
+    // No axis separates the centroids (or too deep for the SAH): the middle by index, after
+    // ordering by centroid on the longest axis so that the halves are spatially coherent.
+    const std::uint32_t m = r.begin + r.size() / 2;
+    const int axis = r.centroids2.longestAxis();
+    std::nth_element(refs_.data() + r.begin, refs_.data() + m, refs_.data() + r.end,
+                     [axis](const Ref& a, const Ref& b) { return a.lo[axis] + a.hi[axis] < b.lo[axis] + b.hi[axis]; });
+    out =
+        r.room() > 0 ? shareRoom(r, m, r.end) : std::pair{Range{r.begin, m, m, {}, {}}, Range{m, r.end, r.end, {}, {}}};
+    bound(out.first);
+    bound(out.second);
+    return true;
+  }
+
+  bool partitionSpatial(const Range& r, const Split& s, std::pair<Range, Range>& out) {
+    std::vector<Ref> left, right;
+    left.reserve(r.size());
+    right.reserve(r.size());
+    const int a = s.axis;
+    for (std::uint32_t i = r.begin; i < r.end; ++i) {
+      const Ref& ref = refs_[i];
+      if (ref.hi[a] <= s.pos) {
+        left.push_back(ref);
+      } else if (ref.lo[a] >= s.pos) {
+        right.push_back(ref);
+      } else {
+        Box lower, upper;
+        clip_(ref.prim, ref.box(), a, s.pos, lower, upper);
+        if (!lower.empty()) left.push_back(Ref::make(lower, ref.prim));
+        if (!upper.empty()) right.push_back(Ref::make(upper, ref.prim));
+      }
+    }
+    const auto nl = static_cast<std::uint32_t>(left.size()), nr = static_cast<std::uint32_t>(right.size());
+    if (nl == 0 || nr == 0 || nl >= r.size() || nr >= r.size() || nl + nr > r.ext - r.begin) return false;
+    std::copy(left.begin(), left.end(), refs_.data() + r.begin);
+    std::copy(right.begin(), right.end(), refs_.data() + r.begin + nl);
+    out = shareRoom(Range{r.begin, r.begin + nl + nr, r.ext, {}, {}}, r.begin + nl, r.begin + nl + nr);
+    bound(out.first);
+    bound(out.second);
+    return true;
   }
 
   std::uint32_t makeLeaf(const Range& r) {
@@ -262,7 +516,15 @@ class Builder {
         }
       }
       if (pick < 0) break;
-      auto [lo, hi] = partition(children[pick].range, children[pick].split);
+      std::pair<Range, Range> sides;
+      if (!partition(children[pick].range, children[pick].split, sides)) {
+        // The spatial split did not separate the references: the object split instead.
+        Child& ch = children[pick];
+        ch.split = findSplit(ch.range, depth + 1, false);
+        ch.leaf = wantsLeaf(ch.range, ch.split);
+        continue;
+      }
+      const auto& [lo, hi] = sides;
       const Split ls = findSplit(lo, depth + 1), hs = findSplit(hi, depth + 1);
       children[pick] = {lo, ls, wantsLeaf(lo, ls)};
       children[count++] = {hi, hs, wantsLeaf(hi, hs)};
@@ -328,6 +590,9 @@ class Builder {
 
   std::vector<Ref>& refs_;
   const BvhBuildConfig& c_;
+  const BvhClipFunction& clip_;
+  bool spatial_ = false;
+  float min_overlap_ = 0.0f;
   tbb::concurrent_vector<BvhNode8> nodes_;
   tbb::concurrent_vector<std::pair<std::uint32_t, std::uint32_t>> leaves_;
 };
@@ -339,21 +604,24 @@ WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& con
   if (prim_bounds.size() > std::size_t{BvhRef::kMaxLeafBlock})
     throw InvalidArgument("BVH: " + std::to_string(prim_bounds.size()) + " primitives, more than the encoding holds (" +
                           std::to_string(BvhRef::kMaxLeafBlock) + ")");
-  (void)clip;  // spatial splits: see below
-  if (config.spatial_split_alpha > 0.0f)
-    throw InvalidArgument("BVH: spatial splits (alpha > 0, the high preset) are not available in this build");
   std::vector<Ref> refs;
   refs.reserve(prim_bounds.size());
-  Box bounds, centroids;
+  VBox bounds, centroids;
   for (std::size_t i = 0; i < prim_bounds.size(); ++i) {
     const Box& b = prim_bounds[i];
     if (b.empty() || !b.finite()) continue;
-    refs.push_back({b, static_cast<std::uint32_t>(i)});
-    bounds.extend(b);
-    centroids.extend(b.center());
+    refs.push_back(Ref::make(b, static_cast<std::uint32_t>(i)));
+    bounds.extend(refs.back().vlo(), refs.back().vhi());
+    centroids.extendPoint(refs.back().centroid2());
   }
-  Builder builder(refs, config);
-  return builder.run(bounds, centroids);
+  const auto n = static_cast<std::uint32_t>(refs.size());
+  std::uint32_t room = 0;
+  if (clip && config.spatial_split_alpha > 0.0f)
+    room = static_cast<std::uint32_t>(
+        std::min<double>(std::floor(double{config.spatial_split_budget} * n), double{BvhRef::kMaxLeafBlock} - n));
+  refs.resize(std::size_t{n} + room);
+  Builder builder(refs, config, clip);
+  return builder.run(Range{0, n, n + room, bounds.box(), centroids.box()});
 }
 
 double WideBvh::sahCost(const BvhBuildConfig& config) const {
