@@ -65,6 +65,13 @@ inline V4 max4(V4 a, V4 b) { return {_mm_max_ps(a.v, b.v)}; }
 inline V4 add4(V4 a, V4 b) { return {_mm_add_ps(a.v, b.v)}; }
 inline V4 sub4(V4 a, V4 b) { return {_mm_sub_ps(a.v, b.v)}; }
 inline V4 mul4(V4 a, V4 b) { return {_mm_mul_ps(a.v, b.v)}; }
+// Bit i set when lane i of a is below lane i of b.
+inline int lessMask4(V4 a, V4 b) { return _mm_movemask_ps(_mm_cmplt_ps(a.v, b.v)); }
+// s ? a : b without a branch.
+inline V4 select4(bool s, V4 a, V4 b) {
+  const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(-static_cast<int>(s)));
+  return {_mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v))};
+}
 // Truncates lanes to integers (the lanes are in [0, 2^24)).
 inline void truncate4(V4 a, std::int32_t* out) {
   _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(a.v));
@@ -97,6 +104,12 @@ inline V4 sub4(V4 a, V4 b) {
 inline V4 mul4(V4 a, V4 b) {
   return map4(a, b, [](float x, float y) { return x * y; });
 }
+inline int lessMask4(V4 a, V4 b) {
+  int m = 0;
+  for (int i = 0; i < 4; ++i) m |= (a.f[i] < b.f[i] ? 1 : 0) << i;
+  return m;
+}
+inline V4 select4(bool s, V4 a, V4 b) { return s ? a : b; }
 inline void truncate4(V4 a, std::int32_t* out) {
   for (int i = 0; i < 4; ++i) out[i] = static_cast<std::int32_t>(a.f[i]);
 }
@@ -144,6 +157,15 @@ struct VBox {
     return 2.0f * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
   }
 };
+
+// Box::area() of three boxes in lanes 0..2 (lane 3 undefined).
+V4 areas3(const VBox* box) {
+  alignas(16) float e[3][4];
+  for (int a = 0; a < 3; ++a) store4(e[a], sub4(box[a].hi, box[a].lo));
+  const V4 x = set4(e[0][0], e[1][0], e[2][0], 0.0f), y = set4(e[0][1], e[1][1], e[2][1], 0.0f),
+           z = set4(e[0][2], e[1][2], e[2][2], 0.0f);
+  return mul4(splat4(2.0f), add4(add4(mul4(x, y), mul4(y, z)), mul4(z, x)));
+}
 
 VBox toVBox(const Box& b) { return {set4(b.lo.x, b.lo.y, b.lo.z, 0.0f), set4(b.hi.x, b.hi.y, b.hi.z, 0.0f)}; }
 
@@ -213,6 +235,47 @@ struct Split {
   Box left_box, right_box;
 };
 
+// Partitions [lo, hi) so that the references for which goesLeft holds come first; leaves `lo` at
+// the first of the others. Blocks of predicates are evaluated into offset lists before any swap
+// (Edelkamp and Weiss's BlockQuicksort partition), so that the predicate's outcome is never a
+// branch in the scan.
+template <class Pred>
+void blockPartition(Ref*& lo, Ref*& hi, Pred& goesLeft) {
+  constexpr int kBlock = 64;
+  std::uint8_t off_l[kBlock], off_r[kBlock];
+  int num_l = 0, num_r = 0, start_l = 0, start_r = 0;
+  while (hi - lo > 2 * kBlock) {
+    if (num_l == 0) {
+      start_l = 0;
+      for (int i = 0; i < kBlock; ++i) {
+        off_l[num_l] = static_cast<std::uint8_t>(i);
+        num_l += goesLeft(lo[i]) ? 0 : 1;
+      }
+    }
+    if (num_r == 0) {
+      start_r = 0;
+      for (int i = 0; i < kBlock; ++i) {
+        off_r[num_r] = static_cast<std::uint8_t>(i);
+        num_r += goesLeft(hi[-1 - i]) ? 1 : 0;
+      }
+    }
+    const int num = std::min(num_l, num_r);
+    for (int j = 0; j < num; ++j) std::swap(lo[off_l[start_l + j]], hi[-1 - off_r[start_r + j]]);
+    num_l -= num;
+    num_r -= num;
+    start_l += num;
+    start_r += num;
+    if (num_l == 0) lo += kBlock;
+    if (num_r == 0) hi -= kBlock;
+  }
+  for (;;) {
+    while (lo < hi && goesLeft(*lo)) ++lo;
+    while (lo < hi && !goesLeft(hi[-1])) --hi;
+    if (lo >= hi) break;
+    std::swap(*lo, hi[-1]);
+  }
+}
+
 class Builder {
  public:
   Builder(std::vector<Ref>& refs, const BvhBuildConfig& config, const BvhClipFunction& clip)
@@ -220,6 +283,7 @@ class Builder {
 
   WideBvh run(const Range& root) {
     WideBvh out;
+    DUPLEX_CHECK(c_.leaf_block == kLeafBlock);
     out.leaf_block = c_.leaf_block;
     out.bounds = root.box;
     if (root.size() == 0) return out;
@@ -235,10 +299,11 @@ class Builder {
 
  private:
   static constexpr std::uint32_t kTempLeaf = 0x80000000u;
+  // The only leaf block validate() accepts: a constant, so that the SAH sweeps shift instead of
+  // divide.
+  static constexpr std::uint32_t kLeafBlock = 4;
 
-  [[nodiscard]] float blocks(std::uint32_t n) const {
-    return static_cast<float>((n + c_.leaf_block - 1) / c_.leaf_block);
-  }
+  [[nodiscard]] float blocks(std::uint32_t n) const { return static_cast<float>((n + kLeafBlock - 1) / kLeafBlock); }
   [[nodiscard]] float leafCost(std::uint32_t n) const { return c_.intersection_cost * blocks(n); }
 
   [[nodiscard]] bool wantsLeaf(const Range& r, const Split& s) const {
@@ -263,36 +328,52 @@ class Builder {
     }
   }
 
-  // The cheapest split over the bins of axes `live` (each a k-bin sweep); `best` keeps its value
-  // where nothing is cheaper. Left bins [0, b], right bins [b + 1, k).
-  template <class Left, class Right, class Box3>
-  void sweep(std::uint32_t k, std::uint32_t n, float inv_area, const bool* live, const Box3& box,
-             const Left& left_count, const Right& right_count, Split& best) const {
-    std::array<float, BvhBuildConfig::kMaxBins> right_cost;
-    for (int a = 0; a < 3; ++a) {
-      if (!live[a]) continue;
-      VBox acc;
-      std::uint32_t count = 0;
-      for (std::uint32_t b = k - 1; b > 0; --b) {
-        acc.extend(box(a, b));
-        count += right_count(a, b);
-        right_cost[b] = count == 0 ? -1.0f : acc.area() * blocks(count);
+  // The cheapest split over the bins of axes `live`, the three axes in the lanes of one sweep;
+  // `best` keeps its value where nothing is cheaper. Left of bin b are bins [0, b] with counts
+  // `left`, right bins [b + 1, k) with counts `right`; a left side of `max_left` or more
+  // references is not a split. Ties go to the lower axis, then the lower bin.
+  void sweep(const Bins& bins, const std::uint32_t (&left)[3][BvhBuildConfig::kMaxBins],
+             const std::uint32_t (&right)[3][BvhBuildConfig::kMaxBins], std::uint32_t max_left, float inv_area,
+             const bool* live, Split& best) const {
+    const std::uint32_t k = bins.k;
+    alignas(16) float right_cost[BvhBuildConfig::kMaxBins][4];
+    std::uint32_t right_count[BvhBuildConfig::kMaxBins][3];
+    VBox acc[3];
+    std::uint32_t count[3] = {0, 0, 0};
+    for (std::uint32_t b = k - 1; b > 0; --b) {
+      for (int a = 0; a < 3; ++a) {
+        acc[a].extend(bins.lo[a][b], bins.hi[a][b]);
+        count[a] += right[a][b];
+        right_count[b][a] = count[a];
       }
-      acc = VBox();
-      count = 0;
-      for (std::uint32_t b = 0; b + 1 < k; ++b) {
-        acc.extend(box(a, b));
-        count += left_count(a, b);
-        if (count == 0 || count >= n || right_cost[b + 1] < 0.0f) continue;
-        const float cost =
-            c_.traversal_cost + c_.intersection_cost * (acc.area() * blocks(count) + right_cost[b + 1]) * inv_area;
-        if (cost < best.cost) {
+      store4(right_cost[b], mul4(areas3(acc), blocks3(count)));
+    }
+    for (VBox& box : acc) box = VBox();
+    std::fill_n(count, 3, 0u);
+    const V4 ct = splat4(c_.traversal_cost), ci = splat4(c_.intersection_cost), inv = splat4(inv_area);
+    for (std::uint32_t b = 0; b + 1 < k; ++b) {
+      for (int a = 0; a < 3; ++a) {
+        acc[a].extend(bins.lo[a][b], bins.hi[a][b]);
+        count[a] += left[a][b];
+      }
+      alignas(16) float cost[4];
+      store4(cost, add4(ct, mul4(ci, mul4(add4(mul4(areas3(acc), blocks3(count)), load4(right_cost[b + 1])), inv))));
+      for (int a = 0; a < 3; ++a) {
+        if (!live[a] || count[a] == 0 || count[a] >= max_left || right_count[b + 1][a] == 0) continue;
+        if (cost[a] < best.cost || (cost[a] == best.cost && a < best.axis)) {
           best.axis = a;
           best.bin = b;
-          best.cost = cost;
+          best.cost = cost[a];
         }
       }
     }
+  }
+
+  // ceil(count[a] / kLeafBlock) in lane a.
+  static V4 blocks3(const std::uint32_t* count) {
+    return set4(static_cast<float>((count[0] + kLeafBlock - 1) / kLeafBlock),
+                static_cast<float>((count[1] + kLeafBlock - 1) / kLeafBlock),
+                static_cast<float>((count[2] + kLeafBlock - 1) / kLeafBlock), 0.0f);
   }
 
   Split findSplit(const Range& r, int depth, bool allow_spatial = true) const {
@@ -303,7 +384,7 @@ class Builder {
     // A node of few references needs no more bins than references.
     const std::uint32_t k = std::min(c_.bins, std::max(2u, n));
     const Binner binner(r, k);
-    std::unique_ptr<Bins> bins = std::make_unique<Bins>(k);
+    Bins bins(k);
     if (n >= kParallelBinning && c_.parallel_threshold > 0) {
       // Fixed chunks merged in order: the same bins whatever the thread count.
       const std::uint32_t chunks = (n + kBinChunk - 1) / kBinChunk;
@@ -313,17 +394,15 @@ class Builder {
         const std::uint32_t first = r.begin + c * kBinChunk;
         binRange(first, std::min(r.end, first + kBinChunk), binner, *part[c]);
       });
-      for (const auto& p : part) bins->merge(*p);
+      for (const auto& p : part) bins.merge(*p);
     } else {
-      binRange(r.begin, r.end, binner, *bins);
+      binRange(r.begin, r.end, binner, bins);
     }
     const float inv_area = r.box.area() > 0.0f ? 1.0f / r.box.area() : 0.0f;
     bool live[3];
     for (int a = 0; a < 3; ++a) live[a] = r.centroids2.hi[a] > r.centroids2.lo[a];
-    const Bins& bs = *bins;
-    auto count = [&bs](int a, std::uint32_t b) { return bs.count[a][b]; };
-    sweep(
-        k, n + 1, inv_area, live, [&bs](int a, std::uint32_t b) { return bs.box(a, b); }, count, count, best);
+    const Bins& bs = bins;
+    sweep(bins, bins.count, bins.count, n + 1, inv_area, live, best);
     if (best.axis >= 0) {
       best.bins = k;
       VBox left, right;
@@ -342,8 +421,9 @@ class Builder {
   // range's room for duplicates.
   void findSpatialSplit(const Range& r, float inv_area, Split& best) const {
     const std::uint32_t k = c_.bins, n = r.size();
-    std::vector<VBox> box(3 * std::size_t{k});
-    std::vector<std::uint32_t> entry(3 * std::size_t{k}, 0u), exit(3 * std::size_t{k}, 0u);
+    Bins bins(k);
+    std::uint32_t exit[3][BvhBuildConfig::kMaxBins];
+    for (auto& row : exit) std::fill_n(row, k, 0u);
     bool live[3];
     for (int a = 0; a < 3; ++a) {
       live[a] = r.box.hi[a] > r.box.lo[a];
@@ -352,32 +432,33 @@ class Builder {
       auto binOf = [&](float x) {
         return std::min(k - 1, static_cast<std::uint32_t>(std::max(0.0f, (x - lo) * scale)));
       };
+      auto add = [&](std::uint32_t b, const Box& part) {
+        const VBox v = toVBox(part);
+        bins.lo[a][b] = min4(bins.lo[a][b], v.lo);
+        bins.hi[a][b] = max4(bins.hi[a][b], v.hi);
+      };
       for (std::uint32_t i = r.begin; i < r.end; ++i) {
         const Ref& ref = refs_[i];
         const std::uint32_t first = binOf(ref.lo[a]), last = std::max(first, binOf(ref.hi[a]));
-        ++entry[a * k + first];
-        ++exit[a * k + last];
+        ++bins.count[a][first];
+        ++exit[a][last];
         Box rest = ref.box();
         for (std::uint32_t b = first; b < last && !rest.empty(); ++b) {
           Box lower, upper;
           clip_(ref.prim, rest, a, planePos(r.box, a, k, b + 1), lower, upper);
-          box[a * k + b].extend(toVBox(lower).lo, toVBox(lower).hi);
+          add(b, lower);
           rest = upper;
         }
-        if (!rest.empty()) box[a * k + last].extend(toVBox(rest).lo, toVBox(rest).hi);
+        if (!rest.empty()) add(last, rest);
       }
     }
     Split s = best;
-    s.cost = best.cost;
     s.axis = -1;
-    sweep(
-        k, n, inv_area, live, [&](int a, std::uint32_t b) -> const VBox& { return box[a * k + b]; },
-        [&](int a, std::uint32_t b) { return entry[a * k + b]; },
-        [&](int a, std::uint32_t b) { return exit[a * k + b]; }, s);
+    sweep(bins, bins.count, exit, n, inv_area, live, s);
     if (s.axis < 0) return;
     std::uint32_t left = 0, right = 0;
-    for (std::uint32_t b = 0; b <= s.bin; ++b) left += entry[s.axis * k + b];
-    for (std::uint32_t b = s.bin + 1; b < k; ++b) right += exit[s.axis * k + b];
+    for (std::uint32_t b = 0; b <= s.bin; ++b) left += bins.count[s.axis][b];
+    for (std::uint32_t b = s.bin + 1; b < k; ++b) right += exit[s.axis][b];
     // Each side must shrink (or the recursion would not end) and the duplicates must fit.
     if (left >= n || right >= n || left + right - n > r.room()) return;
     s.spatial = true;
@@ -420,22 +501,24 @@ class Builder {
     if (s.spatial) return partitionSpatial(r, s, out);
     if (s.axis >= 0) {
       const Binner binner(r, s.bins);
+      // Bin index <= s.bin exactly when the unclamped bin coordinate is below s.bin + 1 (the
+      // coordinate is not NaN on an axis the centroids extend along).
+      const V4 limit = splat4(static_cast<float>(s.bin + 1));
       const int axis = s.axis;
-      const auto bin = static_cast<std::int32_t>(s.bin);
-      auto goesLeft = [&](const Ref& ref) {
-        alignas(16) std::int32_t b[4];
-        binner.bins(ref, b);
-        return b[axis] <= bin;
-      };
       VBox lc, rc;
+      // Which side a reference goes to; every evaluation also grows that side's centroid bounds
+      // (min and max do not mind a reference evaluated twice).
+      auto goesLeft = [&](const Ref& ref) {
+        const V4 c = ref.centroid2();
+        const bool left = ((lessMask4(mul4(sub4(c, binner.lo), binner.scale), limit) >> axis) & 1) != 0;
+        const V4 cl = select4(left, c, lc.lo), cr = select4(left, rc.lo, c);
+        lc.extend(cl, select4(left, c, lc.hi));
+        rc.extend(cr, select4(left, rc.hi, c));
+        return left;
+      };
       Ref* lo = refs_.data() + r.begin;
       Ref* hi = refs_.data() + r.end;
-      for (;;) {
-        while (lo < hi && goesLeft(*lo)) lc.extendPoint((lo++)->centroid2());
-        while (lo < hi && !goesLeft(hi[-1])) rc.extendPoint((--hi)->centroid2());
-        if (lo >= hi) break;
-        std::swap(*lo, hi[-1]);
-      }
+      blockPartition(lo, hi, goesLeft);
       const auto m = static_cast<std::uint32_t>(lo - refs_.data());
       // The binned count decided the cost; the same bin rule on the same floats makes the
       // partition agree with it, so neither side can be empty.
