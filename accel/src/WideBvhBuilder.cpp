@@ -72,6 +72,26 @@ inline V4 select4(bool s, V4 a, V4 b) {
   const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(-static_cast<int>(s)));
   return {_mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v))};
 }
+// Rows to columns.
+inline void transpose4(V4& a, V4& b, V4& c, V4& d) { _MM_TRANSPOSE4_PS(a.v, b.v, c.v, d.v); }
+// Lanes of `mask` set: a; others: b.
+inline V4 select4(int mask, V4 a, V4 b) {
+  const __m128i bits = _mm_setr_epi32(1, 2, 4, 8);
+  const __m128 m = _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(mask), bits), bits));
+  return {_mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v))};
+}
+// Four 32-bit integers.
+struct I4 {
+  __m128i v;
+};
+inline I4 zero4i() { return {_mm_setzero_si128()}; }
+inline I4 splat4i(std::int32_t x) { return {_mm_set1_epi32(x)}; }
+inline I4 load4i(const std::uint32_t* p) { return {_mm_load_si128(reinterpret_cast<const __m128i*>(p))}; }
+inline I4 add4i(I4 a, I4 b) { return {_mm_add_epi32(a.v, b.v)}; }
+inline int positiveMask4i(I4 a) { return _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(a.v, _mm_setzero_si128()))); }
+inline int lessMask4i(I4 a, I4 b) { return _mm_movemask_ps(_mm_castsi128_ps(_mm_cmplt_epi32(a.v, b.v))); }
+// ceil(lane / 4) as floats (the leaf blocks of a count).
+inline V4 blocks4(I4 a) { return {_mm_cvtepi32_ps(_mm_srli_epi32(_mm_add_epi32(a.v, _mm_set1_epi32(3)), 2))}; }
 // Truncates lanes to integers (the lanes are in [0, 2^24)).
 inline void truncate4(V4 a, std::int32_t* out) {
   _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(a.v));
@@ -110,6 +130,42 @@ inline int lessMask4(V4 a, V4 b) {
   return m;
 }
 inline V4 select4(bool s, V4 a, V4 b) { return s ? a : b; }
+inline void transpose4(V4& a, V4& b, V4& c, V4& d) {
+  V4* rows[4] = {&a, &b, &c, &d};
+  float m[4][4];
+  for (int i = 0; i < 4; ++i) store4(m[i], *rows[i]);
+  for (int i = 0; i < 4; ++i) *rows[i] = set4(m[0][i], m[1][i], m[2][i], m[3][i]);
+}
+inline V4 select4(int mask, V4 a, V4 b) {
+  V4 out;
+  for (int i = 0; i < 4; ++i) out.f[i] = (mask >> i) & 1 ? a.f[i] : b.f[i];
+  return out;
+}
+struct I4 {
+  std::int32_t i[4];
+};
+inline I4 zero4i() { return {{0, 0, 0, 0}}; }
+inline I4 splat4i(std::int32_t x) { return {{x, x, x, x}}; }
+inline I4 load4i(const std::uint32_t* p) {
+  return {{static_cast<std::int32_t>(p[0]), static_cast<std::int32_t>(p[1]), static_cast<std::int32_t>(p[2]),
+           static_cast<std::int32_t>(p[3])}};
+}
+inline I4 add4i(I4 a, I4 b) { return {{a.i[0] + b.i[0], a.i[1] + b.i[1], a.i[2] + b.i[2], a.i[3] + b.i[3]}}; }
+inline int positiveMask4i(I4 a) {
+  int m = 0;
+  for (int k = 0; k < 4; ++k) m |= (a.i[k] > 0 ? 1 : 0) << k;
+  return m;
+}
+inline int lessMask4i(I4 a, I4 b) {
+  int m = 0;
+  for (int k = 0; k < 4; ++k) m |= (a.i[k] < b.i[k] ? 1 : 0) << k;
+  return m;
+}
+inline V4 blocks4(I4 a) {
+  V4 out;
+  for (int k = 0; k < 4; ++k) out.f[k] = static_cast<float>((a.i[k] + 3) >> 2);
+  return out;
+}
 inline void truncate4(V4 a, std::int32_t* out) {
   for (int i = 0; i < 4; ++i) out[i] = static_cast<std::int32_t>(a.f[i]);
 }
@@ -158,12 +214,10 @@ struct VBox {
   }
 };
 
-// Box::area() of three boxes in lanes 0..2 (lane 3 undefined).
+// Box::area() of three non-empty boxes in lanes 0..2 (lane 3 undefined).
 V4 areas3(const VBox* box) {
-  alignas(16) float e[3][4];
-  for (int a = 0; a < 3; ++a) store4(e[a], sub4(box[a].hi, box[a].lo));
-  const V4 x = set4(e[0][0], e[1][0], e[2][0], 0.0f), y = set4(e[0][1], e[1][1], e[2][1], 0.0f),
-           z = set4(e[0][2], e[1][2], e[2][2], 0.0f);
+  V4 x = sub4(box[0].hi, box[0].lo), y = sub4(box[1].hi, box[1].lo), z = sub4(box[2].hi, box[2].lo), w = splat4(0.0f);
+  transpose4(x, y, z, w);
   return mul4(splat4(2.0f), add4(add4(mul4(x, y), mul4(y, z)), mul4(z, x)));
 }
 
@@ -198,25 +252,34 @@ struct Binner {
   }
 };
 
-// Bins of the three axes, k per axis (only the first k of each row are initialised).
+// Per-bin counts of the three axes, count[bin][axis] (lane 3 unused): one vector load per bin in
+// the sweep.
+struct alignas(16) Counts {
+  std::uint32_t count[BvhBuildConfig::kMaxBins][4];
+  void clear(std::uint32_t k) { std::memset(count, 0, sizeof(count[0]) * k); }
+};
+
+// Bins of the three axes, k per axis, box lo[bin][axis], hi[bin][axis] (only the first k bins are
+// initialised).
 struct Bins {
   std::uint32_t k = 0;
-  V4 lo[3][BvhBuildConfig::kMaxBins], hi[3][BvhBuildConfig::kMaxBins];
-  std::uint32_t count[3][BvhBuildConfig::kMaxBins];
+  V4 lo[BvhBuildConfig::kMaxBins][3], hi[BvhBuildConfig::kMaxBins][3];
+  Counts counts;
   explicit Bins(std::uint32_t k_) : k(k_) {
-    for (int a = 0; a < 3; ++a) {
-      std::fill_n(lo[a], k, splat4(kInf));
-      std::fill_n(hi[a], k, splat4(-kInf));
-      std::fill_n(count[a], k, 0u);
-    }
+    std::fill_n(&lo[0][0], 3 * k, splat4(kInf));
+    std::fill_n(&hi[0][0], 3 * k, splat4(-kInf));
+    counts.clear(k);
   }
-  [[nodiscard]] VBox box(int a, std::uint32_t b) const { return {lo[a][b], hi[a][b]}; }
+  [[nodiscard]] VBox box(int a, std::uint32_t b) const { return {lo[b][a], hi[b][a]}; }
+  void extend(int a, std::uint32_t b, V4 l, V4 h) {
+    lo[b][a] = min4(lo[b][a], l);
+    hi[b][a] = max4(hi[b][a], h);
+  }
   void merge(const Bins& o) {
-    for (int a = 0; a < 3; ++a) {
-      for (std::uint32_t b = 0; b < k; ++b) {
-        lo[a][b] = min4(lo[a][b], o.lo[a][b]);
-        hi[a][b] = max4(hi[a][b], o.hi[a][b]);
-        count[a][b] += o.count[a][b];
+    for (std::uint32_t b = 0; b < k; ++b) {
+      for (int a = 0; a < 3; ++a) {
+        extend(a, b, o.lo[b][a], o.hi[b][a]);
+        counts.count[b][a] += o.counts.count[b][a];
       }
     }
   }
@@ -321,9 +384,8 @@ class Builder {
       binner.bins(ref, b);
       const V4 lo = ref.vlo(), hi = ref.vhi();
       for (int a = 0; a < 3; ++a) {
-        out.lo[a][b[a]] = min4(out.lo[a][b[a]], lo);
-        out.hi[a][b[a]] = max4(out.hi[a][b[a]], hi);
-        ++out.count[a][b[a]];
+        out.extend(a, static_cast<std::uint32_t>(b[a]), lo, hi);
+        ++out.counts.count[b[a]][a];
       }
     }
   }
@@ -332,48 +394,46 @@ class Builder {
   // `best` keeps its value where nothing is cheaper. Left of bin b are bins [0, b] with counts
   // `left`, right bins [b + 1, k) with counts `right`; a left side of `max_left` or more
   // references is not a split. Ties go to the lower axis, then the lower bin.
-  void sweep(const Bins& bins, const std::uint32_t (&left)[3][BvhBuildConfig::kMaxBins],
-             const std::uint32_t (&right)[3][BvhBuildConfig::kMaxBins], std::uint32_t max_left, float inv_area,
+  void sweep(const Bins& bins, const Counts& left, const Counts& right, std::uint32_t max_left, float inv_area,
              const bool* live, Split& best) const {
     const std::uint32_t k = bins.k;
     alignas(16) float right_cost[BvhBuildConfig::kMaxBins][4];
-    std::uint32_t right_count[BvhBuildConfig::kMaxBins][3];
+    I4 right_count[BvhBuildConfig::kMaxBins];
     VBox acc[3];
-    std::uint32_t count[3] = {0, 0, 0};
+    I4 count = zero4i();
     for (std::uint32_t b = k - 1; b > 0; --b) {
-      for (int a = 0; a < 3; ++a) {
-        acc[a].extend(bins.lo[a][b], bins.hi[a][b]);
-        count[a] += right[a][b];
-        right_count[b][a] = count[a];
-      }
-      store4(right_cost[b], mul4(areas3(acc), blocks3(count)));
+      for (int a = 0; a < 3; ++a) acc[a].extend(bins.lo[b][a], bins.hi[b][a]);
+      count = add4i(count, load4i(right.count[b]));
+      right_count[b] = count;
+      store4(right_cost[b], mul4(areas3(acc), blocks4(count)));
     }
     for (VBox& box : acc) box = VBox();
-    std::fill_n(count, 3, 0u);
+    count = zero4i();
     const V4 ct = splat4(c_.traversal_cost), ci = splat4(c_.intersection_cost), inv = splat4(inv_area);
+    const int live_mask = (live[0] ? 1 : 0) | (live[1] ? 2 : 0) | (live[2] ? 4 : 0);
+    const I4 limit = splat4i(static_cast<std::int32_t>(std::min<std::uint32_t>(max_left, 0x7FFFFFFF)));
+    // Per axis (lane) the cheapest cost so far and its bin; strict comparisons keep the lowest bin.
+    V4 lane_cost = splat4(best.cost);
+    std::int32_t lane_bin[3] = {-1, -1, -1};
     for (std::uint32_t b = 0; b + 1 < k; ++b) {
-      for (int a = 0; a < 3; ++a) {
-        acc[a].extend(bins.lo[a][b], bins.hi[a][b]);
-        count[a] += left[a][b];
-      }
-      alignas(16) float cost[4];
-      store4(cost, add4(ct, mul4(ci, mul4(add4(mul4(areas3(acc), blocks3(count)), load4(right_cost[b + 1])), inv))));
-      for (int a = 0; a < 3; ++a) {
-        if (!live[a] || count[a] == 0 || count[a] >= max_left || right_count[b + 1][a] == 0) continue;
-        if (cost[a] < best.cost || (cost[a] == best.cost && a < best.axis)) {
-          best.axis = a;
-          best.bin = b;
-          best.cost = cost[a];
-        }
-      }
+      for (int a = 0; a < 3; ++a) acc[a].extend(bins.lo[b][a], bins.hi[b][a]);
+      count = add4i(count, load4i(left.count[b]));
+      const V4 cost = add4(ct, mul4(ci, mul4(add4(mul4(areas3(acc), blocks4(count)), load4(right_cost[b + 1])), inv)));
+      const int valid = positiveMask4i(count) & positiveMask4i(right_count[b + 1]) & lessMask4i(count, limit);
+      const int better = valid & live_mask & lessMask4(cost, lane_cost);
+      if (better == 0) continue;
+      lane_cost = select4(better, cost, lane_cost);
+      for (int a = 0; a < 3; ++a)
+        if (better & (1 << a)) lane_bin[a] = static_cast<std::int32_t>(b);
     }
-  }
-
-  // ceil(count[a] / kLeafBlock) in lane a.
-  static V4 blocks3(const std::uint32_t* count) {
-    return set4(static_cast<float>((count[0] + kLeafBlock - 1) / kLeafBlock),
-                static_cast<float>((count[1] + kLeafBlock - 1) / kLeafBlock),
-                static_cast<float>((count[2] + kLeafBlock - 1) / kLeafBlock), 0.0f);
+    alignas(16) float costs[4];
+    store4(costs, lane_cost);
+    for (int a = 0; a < 3; ++a) {
+      if (lane_bin[a] < 0 || !(costs[a] < best.cost || (costs[a] == best.cost && a < best.axis))) continue;
+      best.axis = a;
+      best.bin = static_cast<std::uint32_t>(lane_bin[a]);
+      best.cost = costs[a];
+    }
   }
 
   Split findSplit(const Range& r, int depth, bool allow_spatial = true) const {
@@ -402,7 +462,7 @@ class Builder {
     bool live[3];
     for (int a = 0; a < 3; ++a) live[a] = r.centroids2.hi[a] > r.centroids2.lo[a];
     const Bins& bs = bins;
-    sweep(bins, bins.count, bins.count, n + 1, inv_area, live, best);
+    sweep(bins, bins.counts, bins.counts, n + 1, inv_area, live, best);
     if (best.axis >= 0) {
       best.bins = k;
       VBox left, right;
@@ -422,8 +482,8 @@ class Builder {
   void findSpatialSplit(const Range& r, float inv_area, Split& best) const {
     const std::uint32_t k = c_.bins, n = r.size();
     Bins bins(k);
-    std::uint32_t exit[3][BvhBuildConfig::kMaxBins];
-    for (auto& row : exit) std::fill_n(row, k, 0u);
+    Counts exit;
+    exit.clear(k);
     bool live[3];
     for (int a = 0; a < 3; ++a) {
       live[a] = r.box.hi[a] > r.box.lo[a];
@@ -434,14 +494,13 @@ class Builder {
       };
       auto add = [&](std::uint32_t b, const Box& part) {
         const VBox v = toVBox(part);
-        bins.lo[a][b] = min4(bins.lo[a][b], v.lo);
-        bins.hi[a][b] = max4(bins.hi[a][b], v.hi);
+        bins.extend(a, b, v.lo, v.hi);
       };
       for (std::uint32_t i = r.begin; i < r.end; ++i) {
         const Ref& ref = refs_[i];
         const std::uint32_t first = binOf(ref.lo[a]), last = std::max(first, binOf(ref.hi[a]));
-        ++bins.count[a][first];
-        ++exit[a][last];
+        ++bins.counts.count[first][a];
+        ++exit.count[last][a];
         Box rest = ref.box();
         for (std::uint32_t b = first; b < last && !rest.empty(); ++b) {
           Box lower, upper;
@@ -454,11 +513,11 @@ class Builder {
     }
     Split s = best;
     s.axis = -1;
-    sweep(bins, bins.count, exit, n, inv_area, live, s);
+    sweep(bins, bins.counts, exit, n, inv_area, live, s);
     if (s.axis < 0) return;
     std::uint32_t left = 0, right = 0;
-    for (std::uint32_t b = 0; b <= s.bin; ++b) left += bins.count[s.axis][b];
-    for (std::uint32_t b = s.bin + 1; b < k; ++b) right += exit[s.axis][b];
+    for (std::uint32_t b = 0; b <= s.bin; ++b) left += bins.counts.count[b][s.axis];
+    for (std::uint32_t b = s.bin + 1; b < k; ++b) right += exit.count[b][s.axis];
     // Each side must shrink (or the recursion would not end) and the duplicates must fit.
     if (left >= n || right >= n || left + right - n > r.room()) return;
     s.spatial = true;
