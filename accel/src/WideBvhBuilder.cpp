@@ -50,6 +50,11 @@ constexpr int kSahDepth = 40;
 // Ranges of at least this many references are binned in parallel chunks of kBinChunk.
 constexpr std::uint32_t kParallelBinning = 1u << 15;
 constexpr std::uint32_t kBinChunk = 1u << 13;
+// Spatial splits are tried in ranges of at least this many references: in smaller ones most
+// references cross several bins (a clip each) for little gain.
+constexpr std::uint32_t kSpatialMinRefs = 64;
+// Bins per axis of a spatial split at most.
+constexpr std::uint32_t kSpatialBins = 16;
 
 // Four floats, one SSE register where there is SSE2 (x86-64 always has it).
 #if defined(DUPLEX_WIDE_BVH_SSE)
@@ -469,7 +474,7 @@ class Builder {
       for (std::uint32_t b = 0; b < k; ++b) (b <= best.bin ? left : right).extend(bs.box(best.axis, b));
       best.left_box = left.box();
       best.right_box = right.box();
-      if (allow_spatial && spatial_ && r.room() > 0 &&
+      if (allow_spatial && spatial_ && n >= kSpatialMinRefs && r.room() > 0 &&
           intersection(best.left_box, best.right_box).area() > min_overlap_)
         findSpatialSplit(r, inv_area, best);
     }
@@ -480,7 +485,8 @@ class Builder {
   // cross, counted where they enter and where they leave. Replaces `best` when cheaper within the
   // range's room for duplicates.
   void findSpatialSplit(const Range& r, float inv_area, Split& best) const {
-    const std::uint32_t k = c_.bins, n = r.size();
+    // Fewer bins than the object split's: each bin a reference crosses costs a clip.
+    const std::uint32_t k = std::min(c_.bins, kSpatialBins), n = r.size();
     Bins bins(k);
     Counts exit;
     exit.clear(k);
