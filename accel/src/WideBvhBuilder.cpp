@@ -21,6 +21,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/concurrent_vector.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
@@ -53,6 +54,8 @@ constexpr std::uint32_t kBinChunk = 1u << 13;
 // Spatial splits are tried in ranges of at least this many references: in smaller ones most
 // references cross several bins (a clip each) for little gain.
 constexpr std::uint32_t kSpatialMinRefs = 64;
+// Primitive boxes per task of the pass that makes the references.
+constexpr std::size_t kRefChunk = 1u << 15;
 // Bins per axis of a spatial split at most.
 constexpr std::uint32_t kSpatialBins = 16;
 
@@ -673,7 +676,14 @@ class Builder {
         continue;
       }
       const auto& [lo, hi] = sides;
-      const Split ls = findSplit(lo, depth + 1), hs = findSplit(hi, depth + 1);
+      Split ls, hs;
+      if (c_.parallel_threshold > 0 && std::min(lo.size(), hi.size()) >= c_.parallel_threshold) {
+        // The splits inside a large node are its subtrees' critical path: bin both sides at once.
+        tbb::parallel_invoke([&] { ls = findSplit(lo, depth + 1); }, [&] { hs = findSplit(hi, depth + 1); });
+      } else {
+        ls = findSplit(lo, depth + 1);
+        hs = findSplit(hi, depth + 1);
+      }
       children[pick] = {lo, ls, wantsLeaf(lo, ls)};
       children[count++] = {hi, hs, wantsLeaf(hi, hs)};
     }
@@ -752,22 +762,50 @@ WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& con
   if (prim_bounds.size() > std::size_t{BvhRef::kMaxLeafBlock})
     throw InvalidArgument("BVH: " + std::to_string(prim_bounds.size()) + " primitives, more than the encoding holds (" +
                           std::to_string(BvhRef::kMaxLeafBlock) + ")");
-  std::vector<Ref> refs;
-  refs.reserve(prim_bounds.size());
-  VBox bounds, centroids;
-  for (std::size_t i = 0; i < prim_bounds.size(); ++i) {
-    const Box& b = prim_bounds[i];
-    if (b.empty() || !b.finite()) continue;
-    refs.push_back(Ref::make(b, static_cast<std::uint32_t>(i)));
-    bounds.extend(refs.back().vlo(), refs.back().vhi());
-    centroids.extendPoint(refs.back().centroid2());
-  }
-  const auto n = static_cast<std::uint32_t>(refs.size());
+  // The valid boxes as references, in input order: chunks counted, then filled, in parallel; the
+  // chunks' bounds merged in order.
+  const std::size_t count = prim_bounds.size();
+  const std::size_t chunks = (count + kRefChunk - 1) / kRefChunk;
+  std::vector<std::uint32_t> first(chunks + 1, 0u);
+  std::vector<VBox> chunk_bounds(chunks), chunk_centroids(chunks);
+  auto valid = [&](std::size_t i) { return !prim_bounds[i].empty() && prim_bounds[i].finite(); };
+  auto forChunks = [&](const auto& body) {
+    if (chunks <= 1 || config.parallel_threshold == 0) {
+      for (std::size_t c = 0; c < chunks; ++c) body(c);
+    } else {
+      tbb::parallel_for(std::size_t{0}, chunks, body);
+    }
+  };
+  forChunks([&](std::size_t c) {
+    std::uint32_t n = 0;
+    for (std::size_t i = c * kRefChunk, e = std::min(count, i + kRefChunk); i < e; ++i) n += valid(i) ? 1 : 0;
+    first[c + 1] = n;
+  });
+  for (std::size_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
+  const std::uint32_t n = first[chunks];
   std::uint32_t room = 0;
   if (clip && config.spatial_split_alpha > 0.0f)
     room = static_cast<std::uint32_t>(
         std::min<double>(std::floor(double{config.spatial_split_budget} * n), double{BvhRef::kMaxLeafBlock} - n));
-  refs.resize(std::size_t{n} + room);
+  std::vector<Ref> refs(std::size_t{n} + room);
+  forChunks([&](std::size_t c) {
+    Ref* out = refs.data() + first[c];
+    VBox box, cent;
+    for (std::size_t i = c * kRefChunk, e = std::min(count, i + kRefChunk); i < e; ++i) {
+      if (!valid(i)) continue;
+      *out = Ref::make(prim_bounds[i], static_cast<std::uint32_t>(i));
+      box.extend(out->vlo(), out->vhi());
+      cent.extendPoint(out->centroid2());
+      ++out;
+    }
+    chunk_bounds[c] = box;
+    chunk_centroids[c] = cent;
+  });
+  VBox bounds, centroids;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    bounds.extend(chunk_bounds[c]);
+    centroids.extend(chunk_centroids[c]);
+  }
   Builder builder(refs, config, clip);
   return builder.run(Range{0, n, n + room, bounds.box(), centroids.box()});
 }
