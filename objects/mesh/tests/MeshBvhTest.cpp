@@ -30,7 +30,7 @@ void runBvhDifferential(const TriangleMesh& source, std::size_t random_count, st
   auto mesh = std::make_shared<const TriangleMesh>(source);
   const RefScene ref(refTriangles(*mesh));
   const auto rays = mixedRays(mesh->bounds(), random_count, primary_side, 4321);
-  for (const BvhPreset preset : {BvhPreset::Fast, BvhPreset::Medium}) {
+  for (const BvhPreset preset : {BvhPreset::Fast, BvhPreset::Medium, BvhPreset::High}) {
     SCOPED_TRACE(std::string("preset ") + std::string(toString(preset)));
     const MeshObject object(mesh, BvhBuildConfig::preset(preset));
     ASSERT_EQ(object.structure(), MeshStructure::Bvh);

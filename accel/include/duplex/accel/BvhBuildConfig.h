@@ -44,9 +44,10 @@ struct BvhBuildConfig {
   /// Primitives per leaf block: the leaf test's SIMD width (4). Leaf ranges in prim_indices start
   /// at multiples of it and are padded to it, so that block k holds prim_indices[4k, 4k + 4).
   std::uint32_t leaf_block = 4;
-  /// Spatial splits (the High preset): 0 disables them; otherwise a spatial split is tried in
-  /// nodes whose best object split leaves children overlapping by more than this fraction of the
-  /// root's surface area (Stich et al.'s alpha).
+  /// Spatial splits (the High preset, with a clip function): 0 disables them; otherwise a spatial
+  /// split is tried in ranges of 64 or more references whose best object split leaves children
+  /// overlapping by more than this fraction of the root's surface area (Stich et al.'s alpha), and
+  /// taken where its SAH cost is lower.
   float spatial_split_alpha = 0.0f;
   /// Spatial splits may add at most this many references per input primitive (0.5: 50% more).
   float spatial_split_budget = 0.5f;
