@@ -58,43 +58,34 @@ struct Header {
   float bounds[6] = {};
 };
 
-void put(unsigned char* out, std::size_t at, const void* value, std::size_t n) { std::memcpy(out + at, value, n); }
-void get(const unsigned char* in, std::size_t at, void* value, std::size_t n) { std::memcpy(value, in + at, n); }
+// Calls io(offset, field, bytes) for every header field after the magic, at its offset (H is
+// Header or const Header: one list of offsets for writing and reading).
+template <class H, class Io>
+void headerFields(const Format& f, H& h, Io&& io) {
+  io(8, &h.version, 4);
+  io(12, &h.header_bytes, 4);
+  io(16, &h.mesh_checksum, 8);
+  io(24, &h.vertices, 4);
+  io(28, &h.triangles, 4);
+  io(32, &h.nodes, 4);
+  io(36, &h.prim_indices, 4);
+  if (&f == &kKdFormat) {
+    io(40, h.bounds, 24);
+  } else {
+    io(40, &h.root, 4);
+    io(44, &h.leaf_block, 4);
+    io(48, h.bounds, 24);
+  }
+}
 
 void putHeader(unsigned char* out, const Format& f, const Header& h) {
-  put(out, 0, f.magic.data(), 8);
-  put(out, 8, &h.version, 4);
-  put(out, 12, &h.header_bytes, 4);
-  put(out, 16, &h.mesh_checksum, 8);
-  put(out, 24, &h.vertices, 4);
-  put(out, 28, &h.triangles, 4);
-  put(out, 32, &h.nodes, 4);
-  put(out, 36, &h.prim_indices, 4);
-  if (&f == &kKdFormat) {
-    put(out, 40, h.bounds, 24);
-  } else {
-    put(out, 40, &h.root, 4);
-    put(out, 44, &h.leaf_block, 4);
-    put(out, 48, h.bounds, 24);
-  }
+  std::memcpy(out, f.magic.data(), f.magic.size());
+  headerFields(f, h, [out](std::size_t at, const void* field, std::size_t n) { std::memcpy(out + at, field, n); });
 }
 
 Header getHeader(const unsigned char* in, const Format& f) {
   Header h;
-  get(in, 8, &h.version, 4);
-  get(in, 12, &h.header_bytes, 4);
-  get(in, 16, &h.mesh_checksum, 8);
-  get(in, 24, &h.vertices, 4);
-  get(in, 28, &h.triangles, 4);
-  get(in, 32, &h.nodes, 4);
-  get(in, 36, &h.prim_indices, 4);
-  if (&f == &kKdFormat) {
-    get(in, 40, h.bounds, 24);
-  } else {
-    get(in, 40, &h.root, 4);
-    get(in, 44, &h.leaf_block, 4);
-    get(in, 48, h.bounds, 24);
-  }
+  headerFields(f, h, [in](std::size_t at, void* field, std::size_t n) { std::memcpy(field, in + at, n); });
   return h;
 }
 
