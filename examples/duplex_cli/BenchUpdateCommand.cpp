@@ -9,6 +9,7 @@
 #include <duplex/accel/RayGenerator.h>
 #include <duplex/objects/MeshObject.h>
 #include <duplex/objects/MeshObjectFile.h>
+#include <duplex/objects/MeshTypes.h>
 #include <duplex/scenegraph/SceneDocument.h>
 #include <duplex/scenegraph/SceneGraph.h>
 #include <duplex/scenegraph/SceneTracer.h>
@@ -312,7 +313,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   const int threads = workers.count;
 
   std::optional<SceneDocument> doc;
-  arena.execute([&] { doc.emplace(loadDocumentNamed(options.scene)); });
+  arena.execute([&] { doc.emplace(loadDocumentNamed(options.scene, documentOptions(options.structure))); });
   const SceneGraph& graph = *doc->graph;
   const ObjectLibrary& library = graph.library();
 
@@ -397,7 +398,7 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
     std::vector<std::filesystem::path> files(mesh_objects.size());
     std::uintmax_t bytes = 0;
     for (std::size_t k = 0; k < mesh_objects.size(); ++k) {
-      files[k] = dir / (std::to_string(k) + ".dkdt");
+      files[k] = dir / (std::to_string(k) + std::string(mesh_objects[k]->preparedExtension()));
       saveMeshObject(*mesh_objects[k], files[k]);
       bytes += std::filesystem::file_size(files[k]);
     }
@@ -418,8 +419,14 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
       arena.execute([&] { fresh = ours->freshTracer(); });
       return std::pair{watch.ms(), bottom_ms};
     };
-    const auto warm = [](std::size_t, std::shared_ptr<const TriangleMesh> mesh) {
-      return std::make_shared<const MeshObject>(std::move(mesh));
+    // Each object rebuilt as the structure it has, with --structure's parameters (entries that
+    // chose their own BVH parameters are rebuilt with these).
+    const MeshBuildConfig rebuild =
+        options.structure.empty() ? MeshBuildConfig{} : parseMeshStructureChoice(options.structure);
+    const auto warm = [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) {
+      MeshBuildConfig config = rebuild;
+      config.structure = mesh_objects[k]->structure();
+      return std::make_shared<const MeshObject>(std::move(mesh), config);
     };
     const auto prepared = [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) {
       return loadMeshObject(files[k], std::move(mesh));

@@ -39,6 +39,9 @@ namespace duplex::cli {
 
 struct BenchUpdateOptions {
   std::filesystem::path scene;
+  /// --structure: the structure choice of the entries that choose none (SceneDocumentOptions::structure),
+  /// also the build of the warm full-build rounds; empty: each type's default.
+  std::string structure;
   /// Instances moved per commit: a count ("1") or a percentage of the instances ("1%", at least 1).
   std::string moves = "1";
   int repeat = 50;              ///< commits per measurement (medians reported)

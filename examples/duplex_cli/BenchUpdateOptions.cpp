@@ -1,6 +1,7 @@
 #include "BenchUpdateCommand.h"
 
 #include "DecimalOption.h"
+#include "StructureOption.h"
 
 #include <CLI/CLI.hpp>
 
@@ -9,6 +10,7 @@ namespace duplex::cli {
 void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options) {
   cmd.footer("The seeded edit plan is described in examples/duplex_cli/BenchUpdateCommand.h.");
   cmd.add_option("--scene", options.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  addStructureOption(cmd, options.structure);
   cmd.add_option("--moves", options.moves,
                  "Instances moved per commit: a count or a percentage such as 1% (default 1)");
   cmd.add_option("--repeat", options.repeat, "Commits per measurement, medians reported (default 50)")

@@ -2,12 +2,14 @@
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/Hit.h>
+#include <duplex/objects/MeshObject.h>
 #include <duplex/sensors/SensorTypes.h>
 
 #include <algorithm>
 #include <exception>
 #include <new>
 #include <string>
+#include <unordered_set>
 
 namespace duplex::cli {
 
@@ -38,6 +40,19 @@ Box visibleWorldBounds(const SceneDocument& doc) {
     if (graph.isVisibleInstance(node))
       bounds.extend(graph.worldTransform(node).apply(graph.library().get(graph.node(node).object)->bounds()));
   return bounds;
+}
+
+std::map<std::string, std::size_t> meshStructureCounts(const SceneDocument& doc) {
+  const ObjectLibrary& library = doc.graph->library();
+  std::map<std::string, std::size_t> counts;
+  std::unordered_set<const Object*> seen;
+  for (ObjectId id = 0; id < library.size(); ++id) {
+    const auto object = library.get(id);
+    if (!seen.insert(object.get()).second) continue;
+    if (const auto* mesh = dynamic_cast<const MeshObject*>(object.get()))
+      ++counts[std::string(toString(mesh->structure()))];
+  }
+  return counts;
 }
 
 std::size_t instancedTriangles(const SceneDocument& doc) {

@@ -10,6 +10,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <map>
+#include <string>
 #include <vector>
 
 namespace duplex::cli {
@@ -20,6 +22,16 @@ namespace duplex::cli {
 /// FileError("<file>: <what>") so that the tool's message always names the file.
 [[nodiscard]] SceneDocument loadDocumentNamed(const std::filesystem::path& path,
                                               const SceneDocumentOptions& options = {});
+
+/// The options of a command's load with --structure `structure` (empty: the types' defaults).
+[[nodiscard]] inline SceneDocumentOptions documentOptions(const std::string& structure) {
+  SceneDocumentOptions options;
+  options.structure = structure;
+  return options;
+}
+
+/// Distinct mesh objects of doc's library per structure ("bvh", "kdtree"; prepared ones included).
+[[nodiscard]] std::map<std::string, std::size_t> meshStructureCounts(const SceneDocument& doc);
 
 /// The hit file's instance ids of a document's instance nodes. The id of an instance is its
 /// position in SceneDocument::instances: for scene-json-v1 the position in "instances" (the

@@ -110,7 +110,7 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
 
   // Load (and so check) the scene the way `duplex trace` does; prepared entries are rebuilt, so a
   // stale structure named by the source is replaced rather than copied.
-  SceneDocumentOptions load_options;
+  SceneDocumentOptions load_options = documentOptions(options.structure);
   load_options.use_structures = false;
   std::optional<SceneDocument> doc;
   arena.execute([&] { doc.emplace(loadDocumentNamed(options.scene, load_options)); });
@@ -174,6 +174,7 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
   report["build_ms"] = doc->figures.build_ms;
   report["save_ms"] = save_ms;
   report["threads"] = threads;
+  report["mesh_structures"] = meshStructureCounts(*doc);
   return report;
 }
 

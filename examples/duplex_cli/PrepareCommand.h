@@ -8,19 +8,24 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <string>
 
 namespace duplex::cli {
 
 struct PrepareOptions {
   std::filesystem::path scene;  ///< scene-json-v1 or duplex-scene-v1 file
   /// Output folder (created if needed): "<scene stem>.json" (duplex-scene-v1) and one
-  /// "<object id>_<name>.dkdt" per mesh object.
+  /// "<object id>_<name>.dbvh" (or ".dkdt" for a kd-tree) per mesh object.
   std::filesystem::path out;
   int threads = 0;  ///< threads for the load and the builds; 0 means all hardware threads
+  /// --structure: the structure choice of the entries that choose none (SceneDocumentOptions::structure);
+  /// empty: each type's default.
+  std::string structure;
 };
 
 /// Runs the command and returns {"scene": the written scene file, "format_in", "objects",
-/// "mesh_objects", "structures" (files written), "load_ms", "build_ms", "save_ms", "threads"}.
+/// "mesh_objects", "structures" (files written), "load_ms", "build_ms", "save_ms", "threads",
+/// "mesh_structures" (mesh objects per structure: {"bvh": n, "kdtree": m})}.
 ///
 /// The copy keeps everything the source says, so that it loads into the same graph with the same
 /// instance order (hence the same hit-file instance ids):

@@ -15,7 +15,7 @@ nlohmann::ordered_json runRays(const RaysOptions& options) {
   if (primary == options.random_count.has_value())
     throw InvalidArgument("give exactly one of --primary W H and --random N --seed X");
 
-  const SceneDocument doc = loadDocumentNamed(options.scene);
+  const SceneDocument doc = loadDocumentNamed(options.scene, documentOptions(options.structure));
   const Box world_bounds = visibleWorldBounds(doc);
   if (world_bounds.empty())
     throw InvalidArgument(options.scene.string() +

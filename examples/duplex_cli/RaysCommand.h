@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <optional>
 
 namespace duplex::cli {
@@ -15,6 +16,9 @@ struct RaysOptions {
   /// instances' world boxes) are used
   std::filesystem::path scene;
   std::filesystem::path out;  ///< ray file to write
+  /// --structure: the structure choice of the entries that choose none (SceneDocumentOptions::structure);
+  /// empty: each type's default.
+  std::string structure;
   /// Exactly one of the two sets: primary rays of a width x height image (duplex::primaryRays) or
   /// `random_count` random rays from `seed` (duplex::randomRays).
   std::optional<std::uint32_t> width, height;

@@ -1,5 +1,6 @@
 #include "SensorCommand.h"
 
+#include "LoadScene.h"
 #include "SensorExr.h"
 #include "SensorImage.h"
 #include "WorkerThreads.h"
@@ -228,7 +229,8 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   if (!(o.roulette >= 0.0 && o.roulette < 1.0))
     throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
   WorkerThreads workers(o.threads);
-  const SensorScene scene = workers.arena.execute([&] { return SensorScene::load(o.scene); });
+  const SensorScene scene =
+      workers.arena.execute([&] { return SensorScene::load(o.scene, documentOptions(o.structure)); });
   if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
   if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
   checkOutputNames(scene, o.scene);

@@ -26,6 +26,9 @@ namespace duplex::cli {
 
 struct SensorOptions {
   std::filesystem::path scene;
+  /// --structure: the structure choice of the entries that choose none (SceneDocumentOptions::structure);
+  /// empty: each type's default.
+  std::string structure;
   std::uint64_t rays = 0;  ///< total emitted rays of the run (with --resume: including the saved ones)
   int threads = 0;         ///< 0: all hardware threads
   std::uint64_t seed = 1;

@@ -55,7 +55,7 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   std::unique_ptr<SceneTracer> tracer;
   double top_build_ms = 0.0;
   arena.execute([&] {
-    doc.emplace(loadDocumentNamed(options.scene));
+    doc.emplace(loadDocumentNamed(options.scene, documentOptions(options.structure)));
     const auto t0 = Clock::now();
     tracer = std::make_unique<SceneTracer>(*doc->graph);
     top_build_ms = msSince(t0);
@@ -125,6 +125,7 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   report["format"] = doc->format;
   report["structures_loaded"] = figures.structures_loaded;
   report["graph_ms"] = figures.graph_ms;
+  report["mesh_structures"] = meshStructureCounts(*doc);
   if (want_transmittance) {
     report["transmittance"] = true;
     report["mean_transmittance"] = rays.empty() ? 0.0 : transmittance_sum / static_cast<double>(rays.size());

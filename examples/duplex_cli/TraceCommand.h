@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <string>
 
 namespace duplex::cli {
 
@@ -16,6 +17,9 @@ struct TraceOptions {
   /// are not applied: the scene is traced as loaded).
   std::filesystem::path scene;
   std::filesystem::path rays;  ///< ray file (32-byte records)
+  /// --structure: the structure choice of the entries that choose none (SceneDocumentOptions::structure);
+  /// empty: each type's default.
+  std::string structure;
   std::filesystem::path hits;  ///< hit file to write (20-byte records, one per ray, same order)
   /// Worker threads for loading, building and tracing; 0 means all hardware threads.
   int threads = 0;

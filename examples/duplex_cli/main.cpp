@@ -1,6 +1,7 @@
 // The `duplex` command-line tool: the interchange contract used by tools outside the project.
 //   duplex trace --scene S.json --rays R.bin (--hits H.bin | --transmittance T.bin) [--threads N] [--any-hit]
 //                [--repeat R]
+// Every command that loads a scene takes [--structure bvh|kdtree|bvh:<parameters>].
 //   duplex rays  --scene S.json (--primary W H | --random N --seed X) --out R.bin
 //   duplex scene split     --mesh M --objects K [--loop N] --out S.json
 //   duplex scene instances --mesh M --count N --seed X --out S.json
@@ -23,6 +24,7 @@
 #include "SceneRobotCommand.h"
 #include "SceneSplitCommand.h"
 #include "SensorCommand.h"
+#include "StructureOption.h"
 #include "TraceCommand.h"
 
 #include <duplex/accel/Error.h>
@@ -62,6 +64,7 @@ int main(int argc, char** argv) {
   TraceOptions trace;
   CLI::App* trace_cmd = app.add_subcommand("trace", "Trace a ray file against a scene and write a hit file");
   trace_cmd->add_option("--scene", trace.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  duplex::cli::addStructureOption(*trace_cmd, trace.structure);
   trace_cmd->add_option("--rays", trace.rays, "Ray file: 32-byte records ox oy oz tnear dx dy dz tfar")->required();
   CLI::Option* hits_opt =
       trace_cmd->add_option("--hits", trace.hits, "Hit file to write: 20-byte records t u v instance_id prim_id");
@@ -93,6 +96,7 @@ int main(int argc, char** argv) {
                    "scene-json-v1 or duplex-scene-v1 file (the world bounds of its visible instances place the rays)")
       ->required();
   rays_cmd->add_option("--out", rays.out, "Ray file to write")->required();
+  duplex::cli::addStructureOption(*rays_cmd, rays.structure);
   CLI::Option* primary_opt =
       rays_cmd->add_option("--primary", primary, "W H: primary rays of a W x H image, row-major from the top left")
           ->expected(2)
@@ -169,8 +173,9 @@ int main(int argc, char** argv) {
   CLI::App* prepare_cmd = app.add_subcommand(
       "prepare", "Save the bottom-level structure of every mesh object and a duplex-scene-v1 copy that names them");
   prepare_cmd->add_option("--scene", prepare.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
-  prepare_cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dkdt structure files")
+  prepare_cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dbvh / .dkdt structure files")
       ->required();
+  duplex::cli::addStructureOption(*prepare_cmd, prepare.structure);
   prepare_cmd->add_option("--threads", prepare.threads, "Worker threads (default: all hardware threads)")
       ->check(kDecimal)
       ->check(CLI::Range(1, 4096));
@@ -192,6 +197,7 @@ int main(int argc, char** argv) {
   sensor_cmd
       ->add_option("--scene", sensor.scene, "scene-json-v1 or duplex-scene-v1 file with \"lights\" and \"sensors\"")
       ->required();
+  duplex::cli::addStructureOption(*sensor_cmd, sensor.structure);
   sensor_cmd->add_option("--rays", sensor.rays, "Total emitted rays (with --resume: including the saved ones)")
       ->required()
       ->check(kDecimal)

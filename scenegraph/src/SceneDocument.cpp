@@ -11,7 +11,9 @@
 #include <fstream>
 #include <numbers>
 #include <sstream>
+#include <string>
 #include <unordered_set>
+#include <utility>
 
 namespace duplex {
 
@@ -228,6 +230,17 @@ class DocumentReader {
   SceneGraph& graph_;
 };
 
+/// A structure choice split at its first ':' into name and parameters.
+std::pair<std::string, std::string> splitChoice(const std::string& text) {
+  const std::size_t colon = text.find(':');
+  if (colon == std::string::npos) return {text, ""};
+  return {text.substr(0, colon), text.substr(colon + 1)};
+}
+
+bool offers(const ObjectTypeInfo& type, const std::string& name) {
+  return std::find(type.structure_names.begin(), type.structure_names.end(), name) != type.structure_names.end();
+}
+
 [[noreturn]] void failAt(const std::filesystem::path& file, const std::string& pointer, const std::string& problem) {
   throw FileError(file.string() + ": " + (pointer.empty() ? "/" : pointer) + ": " + problem);
 }
@@ -303,6 +316,18 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   const std::vector<std::string> type_names = registry.names();
   std::vector<std::string_view> entry_keys = {"name", "structure", "material"};  // allowed in an entry (own format)
   entry_keys.insert(entry_keys.end(), type_names.begin(), type_names.end());
+  // Structure names some type offers: such a "structure" value is a choice, not a path.
+  std::vector<std::string> choice_names;
+  for (const std::string& t : type_names)
+    for (const std::string& n : registry.find(t)->structure_names)
+      if (std::find(choice_names.begin(), choice_names.end(), n) == choice_names.end()) choice_names.push_back(n);
+  const auto isChoice = [&](const std::string& name) {
+    return std::find(choice_names.begin(), choice_names.end(), name) != choice_names.end();
+  };
+  const auto [default_name, default_params] = splitChoice(options.structure);
+  if (!options.structure.empty() && !isChoice(default_name))
+    throw FileError(path.string() + ": default structure \"" + options.structure +
+                    "\": no object type offers a structure named \"" + default_name + "\"");
   for (std::size_t i = 0; i < objects.size(); ++i) {
     const std::string p = at("/objects", i);
     const json& entry = objects[i];
@@ -329,10 +354,32 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
     object_ctx.pointer = at(p, type->name);
     object_ctx.entry_pointer = p;
     object_ctx.object_name = name;
-    if (entry.contains("structure") && options.use_structures) {
-      if (!type->accepts_structure)
-        ctx.fail(at(p, "structure"), "objects of type \"" + type->name + "\" have no prepared structure");
-      object_ctx.structure = ctx.resolve(ctx.string(entry["structure"], at(p, "structure")));
+    bool chosen = false;
+    if (entry.contains("structure")) {
+      const std::string sp = at(p, "structure");
+      const std::string text = ctx.string(entry["structure"], sp);
+      auto [choice, params] = splitChoice(text);
+      if (isChoice(choice)) {
+        if (!offers(*type, choice)) {
+          std::string offered;
+          for (const std::string& n : type->structure_names) offered += (offered.empty() ? "\"" : ", \"") + n + "\"";
+          ctx.fail(sp, "objects of type \"" + type->name + "\" offer no structure \"" + choice + "\"" +
+                           (offered.empty() ? std::string(" (they have no structure choice)")
+                                            : " (they offer " + offered + ")"));
+        }
+        object_ctx.structure_name = std::move(choice);
+        object_ctx.structure_params = std::move(params);
+        object_ctx.structure_pointer = sp;
+        chosen = true;
+      } else if (options.use_structures) {
+        if (!type->accepts_structure) ctx.fail(sp, "objects of type \"" + type->name + "\" have no prepared structure");
+        object_ctx.structure = ctx.resolve(text);
+      }
+    }
+    if (!chosen && !object_ctx.structure && !options.structure.empty() && offers(*type, default_name)) {
+      object_ctx.structure_name = default_name;
+      object_ctx.structure_params = default_params;
+      object_ctx.structure_pointer = p;
     }
     ObjectSpecResult result = type->reader(entry[type->name], object_ctx);
     try {

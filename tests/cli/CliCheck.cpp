@@ -466,6 +466,77 @@ int checkPrepare(const std::string& duplex, const fs::path& fixtures) {
   return 0;
 }
 
+// --structure: the default structure of the entries that choose none, on every command that loads
+// a scene. The BVH (default, and a preset with parameters) and the kd-tree give the same hits (the
+// same watertight triangle test behind either structure); the JSON reports the structures built;
+// `duplex prepare` writes each structure's own files, and a prepared file decides over --structure.
+int checkStructure(const std::string& duplex, const fs::path& fixtures) {
+  const fs::path dir = fixtures / "structure";
+  writeDocumentFixtures(dir);
+  const fs::path tree = dir / "doc_tree.json", rays = dir / "st_rays.bin";
+  runOk({duplex, "rays", "--scene", tree.string(), "--random", "4000", "--seed", "3", "--out", rays.string()}, dir);
+  const fs::path rays_kd = dir / "st_rays_kd.bin";
+  runOk({duplex, "rays", "--scene", tree.string(), "--random", "4000", "--seed", "3", "--out", rays_kd.string(),
+         "--structure", "kdtree"},
+        dir);
+  expectSameFile(rays, rays_kd);
+  const std::vector<std::pair<std::string, std::string>> choices = {
+      {"", "bvh"}, {"bvh", "bvh"}, {"kdtree", "kdtree"}, {"bvh:fast,leaf=2", "bvh"}};
+  for (const bool any_hit : {false, true}) {
+    fs::path first;
+    for (std::size_t k = 0; k < choices.size(); ++k) {
+      const auto& [choice, structure] = choices[k];
+      std::vector<std::string> extra;
+      if (!choice.empty()) extra = {"--structure", choice};
+      if (any_hit) extra.push_back("--any-hit");
+      const fs::path hits = dir / ("st_hits_" + std::to_string(k) + (any_hit ? "_any" : "") + ".bin");
+      const nlohmann::json j = traceJson(duplex, dir, tree, rays, hits, extra);
+      // doc_tree.json has three mesh objects (two entries share the tet's file).
+      expect(j.contains("mesh_structures") && j["mesh_structures"] == nlohmann::json{{structure, 3}},
+             "--structure '" + choice + "': mesh_structures is not {\"" + structure + "\": 3}: " + j.dump());
+      expect(number(j, "hits") > 0.0, "no hits: " + j.dump());
+      if (first.empty()) {
+        first = hits;
+      } else {
+        expectSameFile(first, hits);
+      }
+    }
+  }
+  std::cout << "structure: bvh, kdtree and bvh:fast,leaf=2 give identical hit files\n";
+
+  // prepare: the files of the structure built; the copy loads them whatever --structure says.
+  for (const auto& [choice, ext] : {std::pair<std::string, std::string>{"", ".dbvh"}, {"kdtree", ".dkdt"}}) {
+    const fs::path out = dir / ("prepared_" + (choice.empty() ? std::string("default") : choice));
+    fs::remove_all(out);
+    std::vector<std::string> a = {duplex, "prepare", "--scene", tree.string(), "--out", out.string()};
+    if (!choice.empty()) a.insert(a.end(), {"--structure", choice});
+    const nlohmann::json p = parseOneLine(runOk(a, dir).out);
+    const std::string structure = ext == ".dbvh" ? "bvh" : "kdtree";
+    expect(p["mesh_structures"] == nlohmann::json{{structure, 3}}, "prepare report: " + p.dump());
+    const nlohmann::json copy = nlohmann::json::parse(fileBytes(out / "doc_tree.json"));
+    for (const nlohmann::json& object : copy["objects"])
+      expect(fs::path(object["structure"].get<std::string>()).extension() == ext,
+             "prepared with --structure '" + choice + "': " + object.dump() + " is not a " + ext + " file");
+    const std::string other = structure == "bvh" ? "kdtree" : "bvh";
+    const nlohmann::json loaded = traceJson(duplex, dir, out / "doc_tree.json", rays,
+                                            dir / ("st_prepared_" + structure + ".bin"), {"--structure", other});
+    expect(number(loaded, "structures_loaded") == 3.0 && loaded["mesh_structures"] == nlohmann::json{{structure, 3}},
+           "the prepared " + ext + " files did not decide the structure: " + loaded.dump());
+    expectSameFile(dir / "st_hits_0.bin", dir / ("st_prepared_" + structure + ".bin"));
+  }
+
+  // The other commands that load scenes take it too.
+  const nlohmann::json b =
+      parseOneLine(runOk({duplex, "bench", "update", "--scene", tree.string(), "--moves", "1", "--repeat", "2",
+                          "--build-repeat", "1", "--primary", "16", "--structure", "kdtree"},
+                         dir)
+                       .out);
+  expect(number(b, "update_ms_median") > 0.0, "bench update --structure kdtree: " + b.dump());
+  const RunResult help = run({duplex, "sensor", "--help"}, dir.string());
+  expect(help.out.find("--structure") != std::string::npos, "duplex sensor --help has no --structure");
+  return 0;
+}
+
 // The paper's first scene: koala split into 19 objects, prepared; load + build of both.
 int checkPrepareKoala(const std::string& duplex, const fs::path& dir, const fs::path& data) {
   const fs::path koala = data / "meshes" / "koala.obj";
@@ -541,7 +612,8 @@ int checkBenchUpdate(const std::vector<std::string>& command, const fs::path& fi
 int usage() {
   std::cerr << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
                "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR |\n"
-               "       document DUPLEX DIR | prepare DUPLEX DIR | prepare-koala DUPLEX DIR DATA_DIR |\n"
+               "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
+               "       prepare-koala DUPLEX DIR DATA_DIR |\n"
                "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR\n";
   return 2;
 }
@@ -565,6 +637,7 @@ int main(int argc, char** argv) {
     if (args.size() == 4 && args[0] == "shared-data") return checkSharedData(args[1], args[2], args[3]);
     if (args.size() == 3 && args[0] == "document") return checkDocument(args[1], args[2]);
     if (args.size() == 3 && args[0] == "prepare") return checkPrepare(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "structure") return checkStructure(args[1], args[2]);
     if (args.size() == 4 && args[0] == "prepare-koala") return checkPrepareKoala(args[1], args[2], args[3]);
     if (args.size() == 3 && args[0] == "bench-update")
       return checkBenchUpdate({args[1], "bench", "update"}, args[2], false);

@@ -75,13 +75,19 @@ inline void expectDocError(const SceneDir& d, const std::string& json, const std
 inline const char* kTetraInline =
     R"({"positions": [0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1], "indices": [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3]})";
 
-/// Loads a scene file and runs the tree checker on every mesh object of its "objects" list.
+/// Loads a scene file and checks every mesh object of its "objects" list: a kd-tree with the tree
+/// checker, a BVH with the checker MeshObject::fromParts runs.
 inline SceneDocument loadChecked(const std::filesystem::path& path, const SceneDocumentOptions& options = {}) {
   SceneDocument doc = loadSceneDocument(path, builtinObjectTypes(), options);
   const ObjectLibrary& lib = doc.graph->library();
   for (const ObjectId id : doc.objects) {
     if (const auto* m = dynamic_cast<const MeshObject*>(lib.get(id).get())) {
-      EXPECT_TRUE(checkMeshTree(*m, options.build.max_depth)) << "object '" << lib.name(id) << "'";
+      if (m->structure() == MeshStructure::KdTree) {
+        EXPECT_TRUE(checkMeshTree(*m, options.build.max_depth)) << "object '" << lib.name(id) << "'";
+      } else {
+        const std::shared_ptr<const TriangleMesh> mesh(std::shared_ptr<const TriangleMesh>{}, &m->mesh());
+        EXPECT_NO_THROW((void)MeshObject::fromParts(mesh, m->bvh())) << "object '" << lib.name(id) << "'";
+      }
     }
   }
   return doc;

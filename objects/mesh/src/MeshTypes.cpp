@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -28,9 +29,36 @@ std::shared_ptr<const TriangleMesh> readMeshFile(const std::filesystem::path& fi
   return mesh;
 }
 
-// A mesh object over `mesh`, from the prepared structure when the entry names one.
-std::shared_ptr<const Object> meshObjectFor(std::shared_ptr<const TriangleMesh> mesh, const ObjectSpecContext& ctx) {
-  if (!ctx.structure) return std::make_shared<const MeshObject>(std::move(mesh), ctx.build);
+MeshBuildConfig parseChoice(std::string_view name, std::string_view params, const KdBuildConfig& kd) {
+  MeshBuildConfig config;
+  config.kd = kd;
+  config.structure = parseMeshStructure(name);
+  if (config.structure == MeshStructure::KdTree) {
+    if (!params.empty())
+      throw InvalidArgument("the kd-tree takes no parameters (\"kdtree:" + std::string(params) + "\")");
+  } else if (!params.empty()) {
+    config.bvh = BvhBuildConfig::parse(params);
+  }
+  return config;
+}
+
+// The structure an entry builds: its choice, the load's default, or the BVH.
+MeshBuildConfig buildConfigOf(const ObjectSpecContext& ctx) {
+  if (ctx.structure_name.empty()) return parseChoice("bvh", "", ctx.build);
+  try {
+    return parseChoice(ctx.structure_name, ctx.structure_params, ctx.build);
+  } catch (const InvalidArgument& e) {
+    const bool is_default = ctx.structure_pointer == ctx.entry_pointer;
+    std::string choice = ctx.structure_name + (ctx.structure_params.empty() ? "" : ":" + ctx.structure_params);
+    ctx.fail(ctx.structure_pointer,
+             (is_default ? "default structure \"" : "structure \"") + choice + "\": " + e.what());
+  }
+}
+
+// A mesh object over `mesh`, from the prepared structure when the entry names one, else built.
+std::shared_ptr<const Object> meshObjectFor(std::shared_ptr<const TriangleMesh> mesh, const ObjectSpecContext& ctx,
+                                            const MeshBuildConfig& config) {
+  if (!ctx.structure) return std::make_shared<const MeshObject>(std::move(mesh), config);
   std::shared_ptr<const MeshObject> object;
   try {
     object = loadMeshObject(*ctx.structure, std::move(mesh));
@@ -44,17 +72,27 @@ std::shared_ptr<const Object> meshObjectFor(std::shared_ptr<const TriangleMesh> 
 ObjectSpecResult readMesh(const json& spec, const ObjectSpecContext& ctx) {
   const std::string& p = ctx.pointer;
   if (!spec.is_object()) ctx.fail(p, "expected an object");
+  const MeshBuildConfig config = buildConfigOf(ctx);
   if (spec.contains("file")) {
     // scene-json-v1: "file" wins over inline arrays; the own format refuses both at once.
     ctx.onlyKeys(spec, p, {"file"});
     const std::filesystem::path file = ctx.resolve(ctx.string(spec["file"], p + "/file"));
     ctx.cache->requestFile<TriangleMesh>(kMeshFileKind, file, readMeshFile);
-    // Entries naming the same file (and the same structure) share one object.
+    // Entries naming the same file and the same structure (prepared file, or structure and build
+    // parameters) share one object.
     std::string share_key = "mesh:" + SceneLoadCache::fileKey(file).string();
-    if (ctx.structure) share_key += "|structure:" + SceneLoadCache::fileKey(*ctx.structure).string();
-    return ObjectLibrary::Factory([ctx, file, share_key] {
-      return ctx.cache->shared(share_key,
-                               [&] { return meshObjectFor(ctx.cache->file<TriangleMesh>(kMeshFileKind, file), ctx); });
+    if (ctx.structure) {
+      share_key += "|structure:" + SceneLoadCache::fileKey(*ctx.structure).string();
+    } else if (config.structure == MeshStructure::KdTree) {
+      std::ostringstream kd;
+      kd << config.kd;
+      share_key += "|kdtree:" + kd.str();
+    } else {
+      share_key += "|" + toString(config);
+    }
+    return ObjectLibrary::Factory([ctx, file, share_key, config] {
+      return ctx.cache->shared(
+          share_key, [&] { return meshObjectFor(ctx.cache->file<TriangleMesh>(kMeshFileKind, file), ctx, config); });
     });
   }
   if (!spec.contains("positions") && !spec.contains("indices"))
@@ -83,16 +121,29 @@ ObjectSpecResult readMesh(const json& spec, const ObjectSpecContext& ctx) {
     indices.push_back(static_cast<std::uint32_t>(d));
   }
   // The mesh is validated in the factory, in parallel with the other objects' builds.
-  return ObjectLibrary::Factory([ctx, positions = std::move(positions), indices = std::move(indices)] {
+  return ObjectLibrary::Factory([ctx, config, positions = std::move(positions), indices = std::move(indices)] {
     return meshObjectFor(
-        std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, ctx.object_name)), ctx);
+        std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(positions, indices, ctx.object_name)), ctx,
+        config);
   });
 }
 
 }  // namespace
 
+MeshBuildConfig parseMeshStructureChoice(std::string_view text, const KdBuildConfig& kd) {
+  const std::size_t colon = text.find(':');
+  if (colon == std::string_view::npos) return parseChoice(text, "", kd);
+  return parseChoice(text.substr(0, colon), text.substr(colon + 1), kd);
+}
+
+std::string toString(const MeshBuildConfig& config) {
+  if (config.structure == MeshStructure::KdTree) return "kdtree";
+  return "bvh:" + config.bvh.toString();
+}
+
 void registerMeshTypes(ObjectTypeRegistry& registry) {
-  registry.add({std::string(MeshObject::kTypeName), readMesh, /*in_scene_json_v1=*/true, /*accepts_structure=*/true});
+  registry.add({std::string(MeshObject::kTypeName), readMesh, /*in_scene_json_v1=*/true, /*accepts_structure=*/true,
+                /*structure_names=*/{"bvh", "kdtree"}});
 }
 
 }  // namespace duplex

@@ -1,6 +1,7 @@
-// Saved bottom-level structures (MeshObjectFile.h): a round trip answers every query bit for bit
-// like the built object; damaged, truncated, foreign or forged files are refused with a FileError
-// naming the file (MeshObject::fromParts for trees that are well framed but wrong), never a crash.
+// Saved bottom-level structures (MeshObjectFile.h), kd-trees (.dkdt) and BVHs (.dbvh): a round trip
+// answers every query bit for bit like the built object; damaged, truncated, foreign or forged
+// files are refused with a FileError naming the file (MeshObject::fromParts for structures that are
+// well framed but wrong), never a crash.
 
 #include "KdTreeChecks.h"
 #include "MeshChecks.h"
@@ -9,6 +10,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/RayGenerator.h"
+#include "duplex/accel/Xxh64.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/MeshObjectFile.h"
 
@@ -16,6 +18,7 @@
 
 #include <bit>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -26,7 +29,8 @@ namespace {
 bool sameBits(float a, float b) { return std::bit_cast<std::uint32_t>(a) == std::bit_cast<std::uint32_t>(b); }
 
 /// Every ray: same closest hit (t, u, v, prim_id, ng to the bit) and same occlusion.
-void expectIdenticalQueries(const MeshObject& a, const MeshObject& b, std::span<const Ray> rays) {
+void expectIdenticalQueries(const MeshObject& a, const MeshObject& b, std::span<const Ray> rays,
+                            bool require_hits = true) {
   std::size_t hits = 0, failures = 0;
   for (const Ray& ray : rays) {
     Hit ha, hb;
@@ -38,7 +42,9 @@ void expectIdenticalQueries(const MeshObject& a, const MeshObject& b, std::span<
     if (!same && ++failures <= 5) ADD_FAILURE() << ray << ": built " << ha << ", loaded " << hb;
   }
   EXPECT_EQ(failures, 0u);
-  EXPECT_GT(hits, rays.size() / 10) << "too few hits for the comparison to mean much";
+  if (require_hits) {
+    EXPECT_GT(hits, rays.size() / 10) << "too few hits for the comparison to mean much";
+  }
 }
 
 std::vector<Ray> testRays(const Box& bounds, std::size_t count) {
@@ -100,23 +106,127 @@ TEST(MeshObjectFile, RoundTripKoala) {
   expectIdenticalQueries(*built, *loaded, testRays(mesh->bounds(), 1500));
 }
 
+// ---- BVH files ----
+
+/// A BVH object built with `config`, its BVH checked by the same checker a loaded one goes through.
+std::shared_ptr<const MeshObject> bvhChecked(std::shared_ptr<const TriangleMesh> mesh, const BvhBuildConfig& config) {
+  auto object = std::make_shared<const MeshObject>(mesh, config);
+  EXPECT_EQ(object->structure(), MeshStructure::Bvh);
+  EXPECT_NO_THROW((void)MeshObject::fromParts(mesh, object->bvh())) << "mesh '" << mesh->name() << "', " << config;
+  return object;
+}
+
+void bvhRoundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays, const BvhBuildConfig& config,
+                  bool require_hits = true) {
+  const TempDir dir;
+  const auto built = bvhChecked(mesh, config);
+  EXPECT_EQ(built->preparedExtension(), ".dbvh");
+  const auto path = dir / ("object" + std::string(built->preparedExtension()));
+  saveMeshObject(*built, path);
+  const auto loaded = loadMeshObject(path, mesh);
+  ASSERT_TRUE(loaded);
+  EXPECT_EQ(loaded->structure(), MeshStructure::Bvh);
+  EXPECT_EQ(loaded->name(), built->name());
+  const WideBvh &a = built->bvh(), &b = loaded->bvh();
+  EXPECT_EQ(b.root, a.root);
+  EXPECT_EQ(b.leaf_block, a.leaf_block);
+  EXPECT_EQ(std::memcmp(&b.bounds, &a.bounds, sizeof(Box)), 0) << b.bounds << " vs " << a.bounds;
+  ASSERT_EQ(b.nodes.size(), a.nodes.size());
+  EXPECT_EQ(std::memcmp(b.nodes.data(), a.nodes.data(), a.nodes.size() * sizeof(BvhNode8)), 0);
+  EXPECT_EQ(b.prim_indices, a.prim_indices);
+  EXPECT_TRUE(loaded->tree().nodes.empty());
+  EXPECT_EQ(loaded->accelBytes(), built->accelBytes());
+  expectIdenticalQueries(*built, *loaded, testRays(mesh->bounds(), rays), require_hits);
+}
+
+TEST(MeshObjectFileBvh, RoundTripPresets) {
+  auto mesh = std::make_shared<const TriangleMesh>(icosphere(4));
+  for (const BvhPreset preset : {BvhPreset::Fast, BvhPreset::Medium}) {
+    SCOPED_TRACE(toString(preset));
+    bvhRoundTrip(mesh, 3000, BvhBuildConfig::preset(preset));
+  }
+  // Leaves of at most 4 and 16 triangles: other leaf ranges, the same format.
+  bvhRoundTrip(mesh, 1000, BvhBuildConfig::parse("medium,leaf=4"));
+  bvhRoundTrip(mesh, 1000, BvhBuildConfig::parse("fast,leaf=16"));
+}
+
+// Spatial splits reference a triangle from several leaves, each box holding only its part.
+TEST(MeshObjectFileBvh, RoundTripHighPreset) {
+  auto mesh = std::make_shared<const TriangleMesh>(triangleSoup(3000, 11));
+  try {
+    (void)MeshObject(mesh, BvhBuildConfig::preset(BvhPreset::High));
+  } catch (const InvalidArgument& e) {
+    if (std::string(e.what()).find("not available") != std::string::npos) GTEST_SKIP() << e.what();
+    throw;
+  }
+  bvhRoundTrip(mesh, 3000, BvhBuildConfig::preset(BvhPreset::High));
+}
+
+TEST(MeshObjectFileBvh, RoundTripTriangleSoupWithDegenerates) {
+  bvhRoundTrip(std::make_shared<const TriangleMesh>(triangleSoup(3000, 7)), 4000, {});
+}
+
+// A root that is a single leaf (one triangle). (An empty root needs a mesh without a valid
+// triangle, which TriangleMesh refuses.)
+TEST(MeshObjectFileBvh, RoundTripLeafRoot) {
+  auto one = std::make_shared<const TriangleMesh>(TriangleMesh::fromArrays(
+      std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}, std::vector<std::uint32_t>{0, 1, 2}, "one"));
+  ASSERT_TRUE(BvhRef::isLeaf(MeshObject(one, BvhBuildConfig{}).bvh().root));
+  bvhRoundTrip(one, 400, {}, /*require_hits=*/false);
+}
+
+TEST(MeshObjectFileBvh, RoundTripKoala) {
+  DUPLEX_SHARED_MESH_OR_SKIP(mesh, "koala.obj");
+  bvhRoundTrip(mesh, 1500, {});
+}
+
+// One mesh, both structures: each file loads back as the structure it holds, whatever its name.
+TEST(MeshObjectFileBvh, TheMagicTellsTheStructure) {
+  const TempDir dir;
+  auto mesh = std::make_shared<const TriangleMesh>(icosphere(2));
+  const MeshObject kd(mesh, KdBuildConfig{}), bvh(mesh);
+  EXPECT_EQ(kd.preparedExtension(), ".dkdt");
+  EXPECT_EQ(bvh.preparedExtension(), ".dbvh");
+  saveMeshObject(kd, dir / "kd.bin");
+  saveMeshObject(bvh, dir / "bvh.bin");
+  EXPECT_EQ(loadMeshObject(dir / "kd.bin", mesh)->structure(), MeshStructure::KdTree);
+  EXPECT_EQ(loadMeshObject(dir / "bvh.bin", mesh)->structure(), MeshStructure::Bvh);
+  EXPECT_EQ(readBinaryFile(dir / "kd.bin").size(),
+            64 + 8 * kd.tree().nodes.size() + 4 * kd.tree().prim_indices.size() + 8);
+  EXPECT_EQ(readBinaryFile(dir / "bvh.bin").size(),
+            72 + 224 * bvh.bvh().nodes.size() + 4 * bvh.bvh().prim_indices.size() + 8);
+}
+
 // ---- refused files ----
 
-class MeshObjectFileTamper : public ::testing::Test {
+/// The tamper tests, for a kd-tree file and a BVH file.
+class MeshObjectFileTamper : public ::testing::TestWithParam<MeshStructure> {
  protected:
   void SetUp() override {
     mesh_ = std::make_shared<const TriangleMesh>(icosphere(3));
-    object_ = buildChecked(mesh_);
+    if (GetParam() == MeshStructure::KdTree) {
+      object_ = buildChecked(mesh_);
+      header_ = 64;
+      node_bytes_ = sizeof(KdNode);
+      nodes_ = object_->tree().nodes.size();
+      prims_ = object_->tree().prim_indices.size();
+    } else {
+      object_ = bvhChecked(mesh_, {});
+      header_ = 72;
+      node_bytes_ = sizeof(BvhNode8);
+      nodes_ = object_->bvh().nodes.size();
+      prims_ = object_->bvh().prim_indices.size();
+      ASSERT_GT(nodes_, 1u) << "the fixture needs inner nodes below the root";
+    }
+    good_ = dir_ / ("good" + std::string(object_->preparedExtension()));
     saveMeshObject(*object_, good_);
     bytes_ = readBinaryFile(good_);
-    nodes_ = object_->tree().nodes.size();
-    prims_ = object_->tree().prim_indices.size();
-    ASSERT_EQ(bytes_.size(), 64 + 8 * nodes_ + 4 * prims_ + 8);
+    ASSERT_EQ(bytes_.size(), header_ + node_bytes_ * nodes_ + 4 * prims_ + 8);
   }
   /// Writes `bytes` to a file and expects loading it to throw a FileError naming it and `problem`.
   void expectRefused(const std::vector<char>& bytes, const std::string& problem, const std::string& what) {
     SCOPED_TRACE(what);
-    const auto path = dir_ / "tampered.dkdt";
+    const auto path = dir_ / "tampered.bin";
     writeBinaryFile(path, bytes);
     try {
       auto loaded = loadMeshObject(path, mesh_);
@@ -127,31 +237,55 @@ class MeshObjectFileTamper : public ::testing::Test {
       EXPECT_NE(msg.find(problem), std::string::npos) << msg;
     }
   }
+  /// `bytes` with the file checksum recomputed: a forged file, which only the checks behind the
+  /// checksum can refuse.
+  static std::vector<char> resealed(std::vector<char> bytes) {
+    const std::size_t body = bytes.size() - 8;
+    const std::uint64_t checksum = xxh64({reinterpret_cast<const unsigned char*>(bytes.data()), body}, 0);
+    std::memcpy(bytes.data() + body, &checksum, 8);
+    return bytes;
+  }
+  /// The good file with `value` written at `offset`, resealed.
+  template <class T>
+  std::vector<char> forged(std::size_t offset, T value) const {
+    std::vector<char> bad = bytes_;
+    std::memcpy(bad.data() + offset, &value, sizeof(T));
+    return resealed(std::move(bad));
+  }
+  template <class T>
+  [[nodiscard]] T field(std::size_t offset) const {
+    T value;
+    std::memcpy(&value, bytes_.data() + offset, sizeof(T));
+    return value;
+  }
 
   TempDir dir_;
-  std::filesystem::path good_ = dir_ / "good.dkdt";
+  std::filesystem::path good_;
   std::shared_ptr<const TriangleMesh> mesh_;
   std::shared_ptr<const MeshObject> object_;
   std::vector<char> bytes_;
-  std::size_t nodes_ = 0, prims_ = 0;
+  std::size_t header_ = 0, node_bytes_ = 0, nodes_ = 0, prims_ = 0;
 };
 
-TEST_F(MeshObjectFileTamper, EveryFlippedByteIsRefused) {
+INSTANTIATE_TEST_SUITE_P(Structures, MeshObjectFileTamper, ::testing::Values(MeshStructure::KdTree, MeshStructure::Bvh),
+                         [](const auto& info) { return std::string(toString(info.param)); });
+
+TEST_P(MeshObjectFileTamper, EveryFlippedByteIsRefused) {
   // Every header byte, and a spread of bytes in the nodes, the indices and the checksum itself.
   std::vector<std::size_t> offsets;
-  for (std::size_t i = 0; i < 64; ++i) offsets.push_back(i);
-  for (std::size_t i = 64; i < bytes_.size(); i += 37) offsets.push_back(i);
-  offsets.push_back(64 + 8 * nodes_);    // first index
-  offsets.push_back(bytes_.size() - 9);  // last index byte
-  offsets.push_back(bytes_.size() - 1);  // checksum
+  for (std::size_t i = 0; i < header_; ++i) offsets.push_back(i);
+  for (std::size_t i = header_; i < bytes_.size(); i += 37) offsets.push_back(i);
+  offsets.push_back(header_ + node_bytes_ * nodes_);  // first index
+  offsets.push_back(bytes_.size() - 9);               // last index byte
+  offsets.push_back(bytes_.size() - 1);               // checksum
   for (const std::size_t at : offsets) {
     for (const unsigned char mask : {0x01, 0x80}) {
       std::vector<char> bad = bytes_;
       bad[at] = static_cast<char>(bad[at] ^ mask);
-      const std::string region = at < 64                  ? "header"
-                                 : at < 64 + 8 * nodes_   ? "nodes"
-                                 : at < bytes_.size() - 8 ? "indices"
-                                                          : "checksum";
+      const std::string region = at < header_                          ? "header"
+                                 : at < header_ + node_bytes_ * nodes_ ? "nodes"
+                                 : at < bytes_.size() - 8              ? "indices"
+                                                                       : "checksum";
       // Magic, version and sizes have their own messages; anything else is caught by the checksum.
       std::string problem = at < 8                ? "bad magic"
                             : at < 12             ? "version"
@@ -163,18 +297,18 @@ TEST_F(MeshObjectFileTamper, EveryFlippedByteIsRefused) {
   }
 }
 
-TEST_F(MeshObjectFileTamper, TruncatedOrExtendedIsRefused) {
-  for (const std::size_t keep : {std::size_t(0), std::size_t(10), std::size_t(64), std::size_t(71), bytes_.size() / 2,
-                                 bytes_.size() - 8, bytes_.size() - 1}) {
+TEST_P(MeshObjectFileTamper, TruncatedOrExtendedIsRefused) {
+  for (const std::size_t keep : {std::size_t(0), std::size_t(10), std::size_t(47), header_, header_ + 7,
+                                 bytes_.size() / 2, bytes_.size() - 8, bytes_.size() - 1}) {
     expectRefused(std::vector<char>(bytes_.begin(), bytes_.begin() + static_cast<std::ptrdiff_t>(keep)),
-                  keep < 72 ? "too short" : "truncated", "kept " + std::to_string(keep) + " bytes");
+                  keep < header_ + 8 ? "too short" : "truncated", "kept " + std::to_string(keep) + " bytes");
   }
   std::vector<char> longer = bytes_;
   longer.push_back(0);
   expectRefused(longer, "truncated or damaged", "one byte appended");
 }
 
-TEST_F(MeshObjectFileTamper, WrongMeshIsRefused) {
+TEST_P(MeshObjectFileTamper, WrongMeshIsRefused) {
   // Same counts, one vertex moved: only the checksum tells.
   std::vector<glm::vec3> positions = mesh_->positions();
   positions[5].x += 1e-3f;
@@ -197,10 +331,79 @@ TEST_F(MeshObjectFileTamper, WrongMeshIsRefused) {
   expectErrorNaming<FileError>([&] { (void)loadMeshObject(good_, other); }, "triangles");
 }
 
-TEST_F(MeshObjectFileTamper, MissingFileAndNullMesh) {
-  expectErrorNaming<FileError>([&] { (void)loadMeshObject(dir_ / "absent.dkdt", mesh_); }, "absent.dkdt");
+// Every header field changed and the file resealed (checksum recomputed): the framing, the mesh
+// check or MeshObject::fromParts still refuses it, each with its own message.
+TEST_P(MeshObjectFileTamper, ForgedHeaderFieldsAreRefused) {
+  expectRefused(forged<std::uint32_t>(8, 2), "version", "version 2");
+  expectRefused(forged<std::uint32_t>(12, static_cast<std::uint32_t>(header_ + 8)), "header size", "header size");
+  expectRefused(forged<std::uint64_t>(16, field<std::uint64_t>(16) ^ 1), "another mesh", "mesh checksum");
+  expectRefused(forged<std::uint32_t>(24, field<std::uint32_t>(24) + 1), "saved for a mesh of", "vertex count");
+  expectRefused(forged<std::uint32_t>(28, field<std::uint32_t>(28) - 1), "saved for a mesh of", "triangle count");
+  for (const std::uint32_t delta : {1u, 0xFFFFFFFFu}) {
+    expectRefused(forged<std::uint32_t>(32, field<std::uint32_t>(32) + delta), "truncated or damaged", "node count");
+    expectRefused(forged<std::uint32_t>(36, field<std::uint32_t>(36) + delta), "truncated or damaged", "index count");
+  }
+  const std::size_t bounds = GetParam() == MeshStructure::KdTree ? 40 : 48;
+  expectRefused(forged<float>(bounds + 12, field<float>(bounds)), "bounds", "bounds hi.x = lo.x");
+  expectRefused(forged<float>(bounds + 4, -std::numeric_limits<float>::infinity()), "bounds", "bounds lo.y = -inf");
+  expectRefused(forged<float>(bounds + 20, std::numeric_limits<float>::quiet_NaN()), "bounds", "bounds hi.z NaN");
+  if (GetParam() == MeshStructure::Bvh) {
+    expectRefused(forged<std::uint32_t>(40, 1), "root", "root node 1");
+    expectRefused(forged<std::uint32_t>(40, BvhRef::kEmpty), "root", "root empty");
+    expectRefused(forged<std::uint32_t>(40, BvhRef::leaf(0, 4)), "root", "root a leaf");
+    expectRefused(forged<std::uint32_t>(44, 8), "leaf block", "leaf block 8");
+  }
+}
+
+// Random bit flips anywhere before the checksum, resealed: refused with a FileError, or (when the
+// bits happen to describe a valid structure) queries run without reading out of bounds (ASan in the
+// sanitizer build). A BVH that passes has every triangle inside its leaf's box and every box inside
+// its parent's, so it answers exactly as the saved one: the same closest distance and occlusion.
+TEST_P(MeshObjectFileTamper, RandomForgedFlipsAreRefusedOrHarmless) {
+  const auto rays = randomRays(mesh_->bounds(), 100, 5);
+  const auto path = dir_ / "forged.bin";
+  std::mt19937_64 rng(77);
+  std::size_t refused = 0, accepted = 0;
+  for (int trial = 0; trial < 600; ++trial) {
+    std::vector<char> bad = bytes_;
+    const int flips = 1 + static_cast<int>(rng() % 3);
+    for (int f = 0; f < flips; ++f) {
+      // Mostly the nodes: the part the checksum alone would otherwise guard.
+      const std::size_t at = rng() % 4 != 0 ? header_ + rng() % (node_bytes_ * nodes_) : rng() % (bytes_.size() - 8);
+      bad[at] = static_cast<char>(bad[at] ^ (1 << (rng() % 8)));
+    }
+    writeBinaryFile(path, resealed(std::move(bad)));
+    std::shared_ptr<const MeshObject> o;
+    try {
+      o = loadMeshObject(path, mesh_);
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+      ++refused;
+      continue;
+    }
+    ++accepted;
+    for (const Ray& r : rays) {
+      Hit h, expected;
+      const bool hit = o->intersect(r, h);
+      const bool occluded = o->occluded(r);
+      if (GetParam() != MeshStructure::Bvh) continue;
+      const bool expected_hit = object_->intersect(r, expected);
+      EXPECT_EQ(hit, expected_hit) << r;
+      if (hit && expected_hit) {
+        EXPECT_TRUE(sameBits(h.t, expected.t)) << r << ": " << h << " vs " << expected;
+      }
+      EXPECT_EQ(occluded, object_->occluded(r)) << r;
+    }
+  }
+  EXPECT_GT(refused, 0u);
+  std::printf("%s forged flips: %zu refused, %zu accepted\n", std::string(toString(GetParam())).c_str(), refused,
+              accepted);
+}
+
+TEST_P(MeshObjectFileTamper, MissingFileAndNullMesh) {
+  expectErrorNaming<FileError>([&] { (void)loadMeshObject(dir_ / "absent.dbvh", mesh_); }, "absent.dbvh");
   expectErrorNaming<InvalidArgument>([&] { (void)loadMeshObject(good_, nullptr); }, "null mesh");
-  expectErrorNaming<FileError>([&] { saveMeshObject(*object_, dir_ / "no" / "such" / "dir" / "x.dkdt"); }, "x.dkdt");
+  expectErrorNaming<FileError>([&] { saveMeshObject(*object_, dir_ / "no" / "such" / "dir" / "x.dbvh"); }, "x.dbvh");
 }
 
 // ---- forged trees: well framed, checksum right, contents wrong (MeshObject::fromParts) ----
@@ -213,7 +416,7 @@ void expectRejected(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, const
 
 TEST(MeshObjectFromParts, RejectsEveryKindOfBrokenTree) {
   auto mesh = std::make_shared<const TriangleMesh>(icosphere(3));
-  const MeshObject built(mesh);
+  const MeshObject built(mesh, KdBuildConfig{});
   const KdTree good = treeOf(built);
   ASSERT_GT(good.nodes.size(), 3u);
   ASSERT_FALSE(good.nodes[0].isLeaf());
@@ -301,7 +504,7 @@ TEST(MeshObjectFromParts, RejectsEveryKindOfBrokenTree) {
 // tree) queries run without reading out of bounds (checked by ASan in the sanitizer build).
 TEST(MeshObjectFromParts, RandomCorruptionIsRefusedOrHarmless) {
   auto mesh = std::make_shared<const TriangleMesh>(icosphere(2));
-  const MeshObject built(mesh);
+  const MeshObject built(mesh, KdBuildConfig{});
   const auto rays = randomRays(mesh->bounds(), 200, 5);
   std::mt19937_64 rng(2024);
   std::size_t refused = 0, accepted = 0;

@@ -1,7 +1,8 @@
 #pragma once
 /// \file ObjectTypeRegistry.h
 /// Object types by the name a scene file uses for them. An object entry of a scene file is
-/// `{"name": N, "<type>": SPEC, "structure": PATH?}`; the reader finds the type by which registered
+/// `{"name": N, "<type>": SPEC, "structure": S?}`, S a prepared structure's PATH or, for types that
+/// offer several structures, a choice "<name>" or "<name>:<parameters>"; the reader finds the type by which registered
 /// key the entry has (exactly one) and hands SPEC to that type's reader, which returns the object
 /// built, or a factory that ObjectLibrary calls later (in parallel, ObjectLibrary::buildAll).
 ///
@@ -121,6 +122,16 @@ struct ObjectSpecContext {
   /// A prepared bottom-level structure (resolved path) to load instead of building, when the entry
   /// names one ("structure") and the type accepts it.
   std::optional<std::filesystem::path> structure;
+  /// The bottom-level structure to build, one of the type's ObjectTypeInfo::structure_names: the
+  /// entry's choice ("structure": "<name>[:<parameters>]"), else the load's default
+  /// (SceneDocumentOptions::structure) when the type offers that name; empty: the type's own default.
+  std::string structure_name;
+  /// The text after "<name>:" (empty without one), for the type to parse (its errors go through
+  /// fail(structure_pointer, ...)).
+  std::string structure_params;
+  /// Where the choice came from, for messages: "/objects/3/structure", or the entry's pointer when
+  /// it is the load's default.
+  std::string structure_pointer;
   /// Own format: unknown keys are errors. scene-json-v1: unknown keys are ignored.
   bool strict = false;
   std::shared_ptr<SceneLoadCache> cache;  ///< never null
@@ -163,6 +174,11 @@ struct ObjectTypeInfo {
   /// The type loads prepared bottom-level structures ("structure" in the entry); for other types
   /// the key is an error.
   bool accepts_structure = false;
+  /// The structures an entry may choose by name ("structure": "<name>" or "<name>:<parameters>",
+  /// handed to the reader as ObjectSpecContext::structure_name and structure_params), e.g. {"bvh",
+  /// "kdtree"}. A name some registered type offers is a choice, never a path: an entry of a type
+  /// that does not offer it is an error. Empty: the type has no choice.
+  std::vector<std::string> structure_names = {};
 };
 
 /// A set of object types. Start from duplex::builtinObjectTypes() (or an empty registry) and add()

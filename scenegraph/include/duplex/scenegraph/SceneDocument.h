@@ -85,9 +85,15 @@ struct SceneLoadFigures {
 
 /// Options of loadSceneDocument().
 struct SceneDocumentOptions {
-  KdBuildConfig build;  ///< bottom-level build parameters
-  /// Honour "structure" keys (prepared bottom-level structures); false builds every object.
+  KdBuildConfig build;  ///< kd-tree build parameters of the types that build kd-trees
+  /// Honour "structure" keys that name prepared bottom-level structures; false builds every object
+  /// (structure choices such as "kdtree" still apply).
   bool use_structures = true;
+  /// The structure choice for the entries that make none, in the syntax of the "structure" key
+  /// ("bvh", "kdtree", "bvh:fast", "bvh:medium,leaf=4"): used by every type that offers the name
+  /// (ObjectTypeInfo::structure_names), ignored by the others. Empty: each type's own default. A
+  /// name no registered type offers is refused (FileError naming the scene file).
+  std::string structure;
 };
 
 /// A loaded scene file: the graph (committed once, so a SceneTracer sees every instance), with its

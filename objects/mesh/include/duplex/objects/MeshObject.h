@@ -82,8 +82,10 @@ class MeshObject final : public Object {
   [[nodiscard]] std::uint64_t contentHash() const override;
   /// "triangles" and "degenerate_triangles" of the mesh.
   [[nodiscard]] std::vector<ObjectFigure> figures() const override;
-  /// ".dkdt": the kd-tree files of MeshObjectFile.h.
-  [[nodiscard]] std::string_view preparedExtension() const override { return ".dkdt"; }
+  /// The prepared-structure files of MeshObjectFile.h: ".dbvh" for a BVH, ".dkdt" for a kd-tree.
+  [[nodiscard]] std::string_view preparedExtension() const override {
+    return structure_ == MeshStructure::Bvh ? ".dbvh" : ".dkdt";
+  }
   /// saveMeshObject(*this, path) (MeshObjectFile.h).
   void savePrepared(const std::filesystem::path& path) const override;
 
