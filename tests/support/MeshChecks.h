@@ -16,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <memory>
 #include <span>
 #include <string>
@@ -106,6 +107,14 @@ inline std::string unavailableReason(const MeshBuildConfig& config) {
   do {                                                                                             \
     const std::string duplex_reason_ = ::duplex::test::unavailableReason((structure_case).config); \
     if (!duplex_reason_.empty()) GTEST_SKIP() << (structure_case).name << ": " << duplex_reason_;  \
+  } while (false)
+
+/// GTEST_SKIP()s the current test for the kd-tree in the runs with DUPLEX_ISA set (ctest's ISA
+/// variants): its queries have no run-time chosen kernels, so the default run covers them.
+#define DUPLEX_SKIP_ISA_INDEPENDENT(structure_case)                                                         \
+  do {                                                                                                      \
+    if ((structure_case).config.structure == ::duplex::MeshStructure::KdTree && std::getenv("DUPLEX_ISA"))  \
+      GTEST_SKIP() << (structure_case).name << " does not depend on DUPLEX_ISA: tested in the default run"; \
   } while (false)
 
 /// A one-triangle mesh object named `name` (cheap to build), its tree checked.

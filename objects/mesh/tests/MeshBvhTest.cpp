@@ -61,7 +61,10 @@ DiffStats runDifferential(const std::shared_ptr<const TriangleMesh>& mesh, const
 
 class MeshStructureDifferential : public ::testing::TestWithParam<StructureCase> {
  protected:
-  void SetUp() override { DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(GetParam()); }
+  void SetUp() override {
+    DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(GetParam());
+    DUPLEX_SKIP_ISA_INDEPENDENT(GetParam());
+  }
 };
 
 TEST_P(MeshStructureDifferential, Icosphere) {
@@ -141,6 +144,7 @@ class MeshStructureShared : public ::testing::TestWithParam<std::tuple<Structure
 TEST_P(MeshStructureShared, AgreesWithTheReference) {
   const auto& [structure, c] = GetParam();
   DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(structure);
+  DUPLEX_SKIP_ISA_INDEPENDENT(structure);
   DUPLEX_SHARED_MESH_OR_SKIP(mesh, c.file);
   runDifferential(mesh, structure, c.rays, c.grid, false);
 }
