@@ -2,10 +2,13 @@
 /// \file MeshChecks.h
 /// Differential checks of MeshObject queries against the double-precision brute force.
 
+#include "BvhChecks.h"
 #include "KdTreeChecks.h"
 #include "Reference.h"
 #include "TestSupport.h"
 
+#include "duplex/accel/BvhBuildConfig.h"
+#include "duplex/accel/Error.h"
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/QueryContext.h"
 #include "duplex/accel/Ray.h"
@@ -13,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <memory>
 #include <span>
 #include <string>
@@ -32,6 +36,86 @@ inline std::shared_ptr<const MeshObject> buildChecked(std::shared_ptr<const Tria
 inline std::shared_ptr<const MeshObject> buildChecked(TriangleMesh mesh, const KdBuildConfig& config = {}) {
   return buildChecked(std::make_shared<const TriangleMesh>(std::move(mesh)), config);
 }
+
+/// Builds a MeshObject with a BVH and checks it with the BVH invariant checker.
+inline std::shared_ptr<const MeshObject> buildChecked(std::shared_ptr<const TriangleMesh> mesh,
+                                                      const BvhBuildConfig& config) {
+  auto object = std::make_shared<const MeshObject>(mesh, config);
+  EXPECT_TRUE(checkMeshBvh(*object, BvhCheckOptions::of(config))) << "mesh '" << mesh->name() << "', " << config;
+  return object;
+}
+
+inline std::shared_ptr<const MeshObject> buildChecked(TriangleMesh mesh, const BvhBuildConfig& config) {
+  return buildChecked(std::make_shared<const TriangleMesh>(std::move(mesh)), config);
+}
+
+/// Builds config.structure with its parameters, checked by that structure's checker.
+inline std::shared_ptr<const MeshObject> buildChecked(std::shared_ptr<const TriangleMesh> mesh,
+                                                      const MeshBuildConfig& config) {
+  if (config.structure == MeshStructure::Bvh) return buildChecked(std::move(mesh), config.bvh);
+  return buildChecked(std::move(mesh), config.kd);
+}
+
+/// A mesh structure with its build parameters, for tests parameterised over both structures.
+struct StructureCase {
+  std::string name;  ///< gtest name: "kdtree", "bvh_fast", ...
+  MeshBuildConfig config;
+};
+
+/// Test names print the case's name.
+inline void PrintTo(const StructureCase& c, std::ostream* os) { *os << c.name; }
+
+/// The kd-tree (default parameters) and the BVH with each preset.
+inline std::vector<StructureCase> structureCases() {
+  std::vector<StructureCase> cases;
+  MeshBuildConfig kd;
+  kd.structure = MeshStructure::KdTree;
+  cases.push_back({"kdtree", kd});
+  for (const BvhPreset p : {BvhPreset::Fast, BvhPreset::Medium, BvhPreset::High}) {
+    MeshBuildConfig c;
+    c.structure = MeshStructure::Bvh;
+    c.bvh = BvhBuildConfig::preset(p);
+    cases.push_back({"bvh_" + std::string(toString(p)), c});
+  }
+  return cases;
+}
+
+/// The kd-tree and the default BVH (the suites too slow to run for every preset).
+inline std::vector<StructureCase> defaultStructureCases() {
+  std::vector<StructureCase> cases;
+  for (const StructureCase& c : structureCases())
+    if (c.name == "kdtree" || c.name == "bvh_medium") cases.push_back(c);
+  return cases;
+}
+
+/// Empty when `config` builds in this library; otherwise why not. Spatial splits (the BVH's high
+/// preset) may be missing: the builder then refuses them saying they are "not available".
+inline std::string unavailableReason(const MeshBuildConfig& config) {
+  auto mesh = std::make_shared<const TriangleMesh>(
+      TriangleMesh::fromTriangles({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 1}}, {{0, 1, 2}, {1, 3, 2}}, "probe"));
+  try {
+    (void)MeshObject(mesh, config);
+  } catch (const InvalidArgument& e) {
+    if (std::string(e.what()).find("not available") != std::string::npos) return e.what();
+    throw;
+  }
+  return {};
+}
+
+/// GTEST_SKIP()s the current test when the case's structure is not available in this build.
+#define DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(structure_case)                                          \
+  do {                                                                                             \
+    const std::string duplex_reason_ = ::duplex::test::unavailableReason((structure_case).config); \
+    if (!duplex_reason_.empty()) GTEST_SKIP() << (structure_case).name << ": " << duplex_reason_;  \
+  } while (false)
+
+/// GTEST_SKIP()s the current test for the kd-tree in the runs with DUPLEX_ISA set (ctest's ISA
+/// variants): its queries have no run-time chosen kernels, so the default run covers them.
+#define DUPLEX_SKIP_ISA_INDEPENDENT(structure_case)                                                         \
+  do {                                                                                                      \
+    if ((structure_case).config.structure == ::duplex::MeshStructure::KdTree && std::getenv("DUPLEX_ISA"))  \
+      GTEST_SKIP() << (structure_case).name << " does not depend on DUPLEX_ISA: tested in the default run"; \
+  } while (false)
 
 /// A one-triangle mesh object named `name` (cheap to build), its tree checked.
 inline std::shared_ptr<const MeshObject> tinyMeshObject(const std::string& name) {

@@ -1,7 +1,8 @@
-// Edge cases of MeshObject and TriangleMesh: axis-parallel rays (with +0/-0 components), rays lying
+// Edge cases of MeshObject and TriangleMesh, for each structure (the kd-tree and the BVH presets)
+// unless a case is the kd-tree's own: axis-parallel rays (with +0/-0 components), rays lying
 // exactly in split planes of the built tree, rays starting inside, [tnear, tfar] limits, flat
 // axis-aligned meshes, one-triangle meshes, empty and degenerate meshes, out-of-range indices,
-// rays with zero or NaN directions. Hits are compared with the double-precision brute force.
+// rays with zero or NaN directions, all hits (intersectAll). Hits are compared with the double-precision brute force.
 
 #include "KdTreeChecks.h"
 #include "MeshChecks.h"
@@ -15,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -57,13 +59,32 @@ bool sameBits(const Hit& a, const Hit& b) {
          std::memcmp(&a.ng, &b.ng, sizeof(a.ng)) == 0;
 }
 
+/// The sorted distinct triangles the object's structure references.
+std::vector<std::uint32_t> referencedTriangles(const MeshObject& object) {
+  std::vector<std::uint32_t> ids =
+      object.structure() == MeshStructure::Bvh ? object.bvh().prim_indices : object.tree().prim_indices;
+  ids.erase(std::remove(ids.begin(), ids.end(), WideBvh::kPadding), ids.end());
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  return ids;
+}
+
+/// The edge cases run for every structure (the kd-tree and each BVH preset).
+class MeshEdgeCases : public ::testing::TestWithParam<StructureCase> {
+ protected:
+  void SetUp() override {
+    DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(GetParam());
+    DUPLEX_SKIP_ISA_INDEPENDENT(GetParam());
+  }
+};
+
 // ---------------------------------------------------------------------------------------------
 
-TEST(MeshObjectEdgeCases, AxisParallelRaysWithSignedZeros) {
+TEST_P(MeshEdgeCases, AxisParallelRaysWithSignedZeros) {
   std::mt19937_64 rng(21);
   for (const auto& mesh : edgeCaseMeshes()) {
     SCOPED_TRACE(mesh->name());
-    const auto object = buildChecked(mesh);
+    const auto object = buildChecked(mesh, GetParam().config);
     const RefScene ref(refTriangles(*mesh));
     const Box box = around(*mesh);
     std::uniform_real_distribution<float> ux(box.lo.x, box.hi.x), uy(box.lo.y, box.hi.y), uz(box.lo.z, box.hi.z);
@@ -125,12 +146,12 @@ TEST(MeshObjectEdgeCases, RaysInSplitPlanes) {
   }
 }
 
-TEST(MeshObjectEdgeCases, RaysStartingInsideClosedMeshesAlwaysHit) {
+TEST_P(MeshEdgeCases, RaysStartingInsideClosedMeshesAlwaysHit) {
   auto sphere = std::make_shared<const TriangleMesh>(icosphere(3, 2.0, glm::dvec3(1.0, -1.0, 0.5)));
   auto box = std::make_shared<const TriangleMesh>(boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f, 2.0f, 3.0f)));
   for (const auto& mesh : {sphere, box}) {
     SCOPED_TRACE(mesh->name());
-    const auto object = buildChecked(mesh);
+    const auto object = buildChecked(mesh, GetParam().config);
     const RefScene ref(refTriangles(*mesh));
     // Origins well inside (the box of the inner half): every direction must leave through the surface.
     Box inner = mesh->bounds();
@@ -142,12 +163,12 @@ TEST(MeshObjectEdgeCases, RaysStartingInsideClosedMeshesAlwaysHit) {
   }
 }
 
-TEST(MeshObjectEdgeCases, TnearTfarLimits) {
+TEST_P(MeshEdgeCases, TnearTfarLimits) {
   std::mt19937_64 rng(24);
   std::uniform_real_distribution<double> u01(0.0, 1.0);
   for (const auto& mesh : edgeCaseMeshes()) {
     SCOPED_TRACE(mesh->name());
-    const auto object = buildChecked(mesh);
+    const auto object = buildChecked(mesh, GetParam().config);
     const RefScene ref(refTriangles(*mesh));
     const auto base = randomRays(around(*mesh, 0.3f), 1500, 25);
     std::vector<Ray> rays;
@@ -183,10 +204,10 @@ TEST(MeshObjectEdgeCases, TnearTfarLimits) {
   }
 }
 
-TEST(MeshObjectEdgeCases, IntersectOnlyAcceptsCloserHits) {
+TEST_P(MeshEdgeCases, IntersectOnlyAcceptsCloserHits) {
   // Object::intersect searches [tnear, hit.t]: an existing closer hit is kept and false returned.
   auto mesh = std::make_shared<const TriangleMesh>(icosphere(3));
-  const auto object = buildChecked(mesh);
+  const auto object = buildChecked(mesh, GetParam().config);
   const RefScene ref(refTriangles(*mesh));
   std::size_t checked = 0;
   for (const Ray& r : randomRays(around(*mesh, 0.5f), 1000, 26)) {
@@ -209,13 +230,13 @@ TEST(MeshObjectEdgeCases, IntersectOnlyAcceptsCloserHits) {
   EXPECT_GT(checked, 100u);
 }
 
-TEST(MeshObjectEdgeCases, FlatAxisAlignedMeshesIncludingInPlaneRays) {
+TEST_P(MeshEdgeCases, FlatAxisAlignedMeshesIncludingInPlaneRays) {
   std::mt19937_64 rng(27);
   std::uniform_real_distribution<float> u(-0.5f, 2.5f);
   for (int axis = 0; axis < 3; ++axis) {
     SCOPED_TRACE(::testing::Message() << "normal axis " << axis);
     auto mesh = std::make_shared<const TriangleMesh>(flatGrid(16, axis, -0.75f, 0.125f));
-    const auto object = buildChecked(mesh);
+    const auto object = buildChecked(mesh, GetParam().config);
     const RefScene ref(refTriangles(*mesh));
     std::vector<Ray> rays;
     for (int i = 0; i < 1500; ++i) {
@@ -239,7 +260,7 @@ TEST(MeshObjectEdgeCases, FlatAxisAlignedMeshesIncludingInPlaneRays) {
   }
 }
 
-TEST(MeshObjectEdgeCases, OneTriangleMeshes) {
+TEST_P(MeshEdgeCases, OneTriangleMeshes) {
   std::mt19937_64 rng(28);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   for (int m = 0; m < 20; ++m) {
@@ -249,8 +270,8 @@ TEST(MeshObjectEdgeCases, OneTriangleMeshes) {
       for (auto& q : p) q.y = 0.5f;  // axis-aligned
     auto mesh = std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(p, {{0, 1, 2}}, "one"));
     ASSERT_EQ(mesh->triangleCount(), 1u);
-    const auto object = buildChecked(mesh);
-    EXPECT_EQ(object->tree().prim_indices.size(), 1u);
+    const auto object = buildChecked(mesh, GetParam().config);
+    EXPECT_EQ(referencedTriangles(*object), std::vector<std::uint32_t>{0});
     const RefScene ref(refTriangles(*mesh));
     std::vector<Ray> rays = randomRays(around(*mesh, 1.0f), 300, 29 + m);
     // Rays aimed at the centroid from random points must hit it at t = 1 (up to rounding).
@@ -338,7 +359,7 @@ TEST(TriangleMeshErrors, FromArraysKeepsLayout) {
   EXPECT_EQ(m.name(), "layout");
 }
 
-TEST(TriangleMeshDegenerate, CountedNeverHitAndLeftOutOfTheTree) {
+TEST_P(MeshEdgeCases, CountedNeverHitAndLeftOutOfTheTree) {
   // 0: valid; 1: zero area (collinear, distinct vertices); 2: repeated index; 3: NaN vertex;
   // 4: infinite vertex; 5: valid; 6: all three the same point.
   std::vector<glm::vec3> p = {
@@ -354,8 +375,9 @@ TEST(TriangleMeshDegenerate, CountedNeverHitAndLeftOutOfTheTree) {
   for (std::size_t i = 0; i < t.size(); ++i) EXPECT_EQ(mesh->isValid(i), i == 0 || i == 5) << "triangle " << i;
   // Bounds cover only the valid triangles (no NaN, no inf, not the collinear points at x = 2..4).
   EXPECT_EQ(mesh->bounds(), Box(glm::vec3(0.0f), glm::vec3(1.0f, 1.0f, 1.0f)));
-  const auto object = buildChecked(mesh);  // the checker also rejects references to degenerate triangles
-  for (const std::uint32_t id : object->tree().prim_indices) EXPECT_TRUE(id == 0 || id == 5) << id;
+  const auto object =
+      buildChecked(mesh, GetParam().config);  // the checker also rejects references to degenerate triangles
+  EXPECT_EQ(referencedTriangles(*object), (std::vector<std::uint32_t>{0, 5}));
   // Rays along and across the degenerate ones: never reported.
   const RefScene ref(refTriangles(*mesh));
   std::vector<Ray> rays;
@@ -397,9 +419,9 @@ TEST(TriangleMeshDegenerate, OnlyDegenerateTrianglesThrows) {
       "all-degenerate");
 }
 
-TEST(MeshObjectEdgeCases, ZeroAndNaNDirectionsAndBadRaysMiss) {
+TEST_P(MeshEdgeCases, ZeroAndNaNDirectionsAndBadRaysMiss) {
   auto mesh = std::make_shared<const TriangleMesh>(icosphere(2));
-  const auto object = buildChecked(mesh);
+  const auto object = buildChecked(mesh, GetParam().config);
   // Each ray would hit the sphere if its bad component were sane.
   Ray good;
   good.origin = glm::vec3(0.1f, 0.05f, -3.0f);
@@ -443,10 +465,10 @@ TEST(MeshObjectEdgeCases, ZeroAndNaNDirectionsAndBadRaysMiss) {
   }
 }
 
-TEST(MeshObjectEdgeCases, TinyDirectionComponents) {
+TEST_P(MeshEdgeCases, TinyDirectionComponents) {
   // Components so small that 1/d overflows (the traversal then treats them as zero) or is huge.
   auto mesh = std::make_shared<const TriangleMesh>(icosphere(3));
-  const auto object = buildChecked(mesh);
+  const auto object = buildChecked(mesh, GetParam().config);
   const RefScene ref(refTriangles(*mesh));
   std::mt19937_64 rng(31);
   std::uniform_real_distribution<float> u(-1.5f, 1.5f);
@@ -463,6 +485,147 @@ TEST(MeshObjectEdgeCases, TinyDirectionComponents) {
   const auto s = expectAgreesWithReference(*object, ref, rays, "tiny components");
   EXPECT_GT(s.hits, s.rays / 4);
 }
+
+TEST_P(MeshEdgeCases, RaysInChildBoxPlanes) {
+  // The BVH's counterpart of rays in split planes: rays lying in (and starting on) the planes of
+  // child boxes, where the conservative box test decides alone whether a child is entered.
+  if (GetParam().config.structure != MeshStructure::Bvh) GTEST_SKIP() << "BVH only (RaysInSplitPlanes: kd-tree)";
+  std::mt19937_64 rng(32);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  for (const auto& mesh : edgeCaseMeshes()) {
+    SCOPED_TRACE(mesh->name());
+    const auto object = buildChecked(mesh, GetParam().config);
+    const RefScene ref(refTriangles(*mesh));
+    const Box box = around(*mesh);
+    std::vector<Ray> rays;
+    const auto& nodes = object->bvh().nodes;
+    for (std::size_t n = 0; n < nodes.size() && rays.size() < 1500; n += 1 + nodes.size() / 200)
+      for (int k = 0; k < nodes[n].childCount(); ++k) {
+        const int axis = static_cast<int>(rng() % 3);
+        Ray r;
+        for (int a = 0; a < 3; ++a) r.origin[a] = box.lo[a] + u01(rng) * (box.hi[a] - box.lo[a]);
+        r.origin[axis] = rng() % 2 ? nodes[n].lo[axis][k] : nodes[n].hi[axis][k];
+        r.dir = glm::normalize(glm::vec3(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f));
+        if (k % 3 != 2) r.dir[axis] = k % 2 ? -0.0f : 0.0f;  // inside the plane; else starts on it
+        if (r.dir == glm::vec3(0.0f)) r.dir[(axis + 1) % 3] = 1.0f;
+        rays.push_back(r);
+      }
+    if (rays.empty()) continue;  // a single-leaf BVH
+    const auto s = expectAgreesWithReference(*object, ref, rays, mesh->name() + " child box planes");
+    EXPECT_GT(s.hits, 0u);
+  }
+}
+
+/// Every hit of the line within [tnear, tfar] in the reference, sorted by t.
+std::vector<RefHit> refAllHits(const RefScene& ref, const Ray& r) {
+  std::vector<RefHit> out;
+  if (!refQueryable(r)) return out;
+  const glm::dvec3 o(r.origin), d(r.dir);
+  for (const RefTriangle& tri : ref.triangles()) {
+    const double t = refIntersect(o, d, tri);
+    if (t >= r.tnear && t <= r.tfar) out.push_back({t, tri.prim, kInvalidId});
+  }
+  std::sort(out.begin(), out.end(), [](const RefHit& a, const RefHit& b) { return a.t < b.t; });
+  return out;
+}
+
+/// intersectAll against the reference: every reported hit is a reference hit (up to the tie
+/// tolerance), and every reference crossing (hits within the tolerance form one: the library merges
+/// the triangles around a shared edge or vertex) is reported, except within rounding of tnear/tfar.
+::testing::AssertionResult allHitsAgree(const std::vector<Hit>& hits, const std::vector<RefHit>& expected, const Ray& r,
+                                        const HitTolerance& tol) {
+  for (std::size_t i = 1; i < hits.size(); ++i)
+    if (!(hits[i - 1].t <= hits[i].t)) return ::testing::AssertionFailure() << r << ": hits not sorted by t";
+  for (const Hit& h : hits) {
+    if (!(h.t >= r.tnear && h.t <= r.tfar))
+      return ::testing::AssertionFailure() << r << ": " << h << " outside [tnear, tfar]";
+    const bool known = std::any_of(expected.begin(), expected.end(), [&](const RefHit& e) {
+      return std::abs(double(h.t) - e.t) <= tSlack(e.t, r, tol) + (e.prim == h.prim_id ? 1e-4 * e.t : 0.0);
+    });
+    if (!known) return ::testing::AssertionFailure() << r << ": " << h << " is no reference hit";
+  }
+  for (std::size_t i = 0; i < expected.size();) {
+    std::size_t j = i + 1;
+    while (j < expected.size() && expected[j].t - expected[j - 1].t <= tSlack(expected[j].t, r, tol)) ++j;
+    const double lo = expected[i].t, hi = expected[j - 1].t, slack = tSlack(hi, r, tol);
+    const bool reported = std::any_of(hits.begin(), hits.end(), [&](const Hit& h) {
+      return double(h.t) >= lo - slack - 1e-4 * lo && double(h.t) <= hi + slack + 1e-4 * hi;
+    });
+    const bool at_end = lo - double(r.tnear) <= slack || double(r.tfar) - hi <= slack;
+    if (!reported && !at_end)
+      return ::testing::AssertionFailure() << r << ": reference crossing at t=" << lo << " (prim " << expected[i].prim
+                                           << ") not reported; " << hits.size() << " hits";
+    i = j;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+TEST_P(MeshEdgeCases, IntersectAllAgreesWithTheReferenceAndTheKdTree) {
+  QueryContext ctx;
+  for (const auto& mesh : edgeCaseMeshes()) {
+    SCOPED_TRACE(mesh->name());
+    const auto object = buildChecked(mesh, GetParam().config);
+    const auto kd = buildChecked(mesh, KdBuildConfig{});
+    const RefScene ref(refTriangles(*mesh));
+    HitTolerance tol;
+    tol.abs_scale = 1e-6 * coordinateScale(mesh->bounds());
+    std::vector<Ray> rays = randomRays(around(*mesh), 600, 33);
+    // Half of them aimed through the mesh's bounds, so that most cross several surfaces.
+    const auto targets = randomRays(mesh->bounds().empty() ? around(*mesh) : around(*mesh, 0.0f), 300, 34);
+    for (std::size_t i = 0; i < targets.size(); ++i) {
+      rays[2 * i].dir = targets[i].origin - rays[2 * i].origin;
+      if (rays[2 * i].dir == glm::vec3(0.0f)) rays[2 * i].dir = targets[i].dir;
+    }
+    // Limited intervals too: only the hits inside count.
+    for (std::size_t i = 0; i < rays.size(); i += 3) rays[i].tfar = 0.5f;
+    for (std::size_t i = 1; i < rays.size(); i += 5) rays[i].tnear = 0.3f;
+    std::size_t failures = 0, total = 0;
+    for (const Ray& r : rays) {
+      std::vector<Hit> hits, kd_hits;
+      hits.push_back(Hit{});  // intersectAll appends: earlier entries stay
+      object->intersectAll(r, hits, ctx);
+      ASSERT_FALSE(hits.front().valid()) << "an earlier entry was modified";
+      hits.erase(hits.begin());
+      total += hits.size();
+      const auto match = allHitsAgree(hits, refAllHits(ref, r), r, tol);
+      if (!match && failures++ < 5) ADD_FAILURE() << match.message();
+      kd->intersectAll(r, kd_hits, ctx);
+      // Same triangle test in the leaves: the structures report the same crossings.
+      bool same = kd_hits.size() == hits.size();
+      for (std::size_t k = 0; same && k < hits.size(); ++k) same = kd_hits[k].t == hits[k].t;
+      if (!same && failures++ < 5)
+        ADD_FAILURE() << r << ": " << hits.size() << " hits, the kd-tree's " << kd_hits.size();
+      // The closest of them is intersect()'s hit.
+      Hit closest;
+      if (object->intersect(r, closest)) {
+        if (hits.empty() || !(hits.front().t == closest.t))
+          if (failures++ < 5) ADD_FAILURE() << r << ": intersect " << closest << " is not the first of intersectAll";
+      }
+    }
+    EXPECT_EQ(failures, 0u);
+    EXPECT_GT(total, rays.size() / 5) << "the aimed rays cross the surfaces";
+  }
+}
+
+TEST_P(MeshEdgeCases, NullMeshAndRefusedConfigurationsThrow) {
+  expectErrorNaming<InvalidArgument>([&] { (void)MeshObject(nullptr, GetParam().config); }, "mesh");
+  auto mesh = std::make_shared<const TriangleMesh>(
+      TriangleMesh::fromTriangles({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}, "config-mesh-4"));
+  MeshBuildConfig bad = GetParam().config;
+  bad.kd.intersection_cost = -1.0f;
+  bad.bvh.bins = 1;
+  expectErrorNaming<InvalidArgument>([&] { (void)MeshObject(mesh, bad); }, "config-mesh-4");
+  expectErrorNaming<InvalidArgument>([&] { (void)MeshObject(mesh, bad); },
+                                     GetParam().config.structure == MeshStructure::Bvh ? "bins" : "intersection_cost");
+  // The other structure's parameters are not this one's concern.
+  MeshBuildConfig other = GetParam().config;
+  if (other.structure == MeshStructure::Bvh) other.kd.intersection_cost = -1.0f;
+  else other.bvh.bins = 1;
+  EXPECT_EQ(buildChecked(mesh, other)->structure(), other.structure);
+}
+
+INSTANTIATE_TEST_SUITE_P(Structures, MeshEdgeCases, ::testing::ValuesIn(structureCases()),
+                         [](const auto& info) { return info.param.name; });
 
 }  // namespace
 }  // namespace duplex::test

@@ -1,7 +1,7 @@
 // Watertightness of MeshObject on closed meshes: rays aimed exactly at shared vertices and edges
 // from outside, each from a direction that faces every triangle around its target, must hit, and
-// never beyond the target. More than 10^6 rays over the generated spheres alone (plus spot when
-// the shared data is present).
+// never beyond the target, for the kd-tree and the BVH. 10^6 rays over the generated spheres alone
+// (plus spot when the shared data is present).
 //
 // Near the origin the ray is built in double and rounded (origin, then direction = target - origin),
 // so it passes within a computed distance delta of the target; the allowed t is widened by
@@ -181,10 +181,10 @@ void traceOne(const MeshObject& object, const Ray& ray, double t_allowed, bool t
 [[gnu::noinline]] glm::vec3 roundToFloat(const glm::dvec3& v) { return glm::vec3(v); }
 
 /// Near the origin: rays built in double and rounded, tolerance from the computed miss distance.
-void shootNearOrigin(std::shared_ptr<const TriangleMesh> mesh, std::size_t budget, std::uint64_t seed,
-                     const std::string& label) {
+void shootNearOrigin(std::shared_ptr<const TriangleMesh> mesh, const StructureCase& structure, std::size_t budget,
+                     std::uint64_t seed, const std::string& label) {
   ASSERT_NE(signedVolume(*mesh), 0.0) << label << " encloses no volume";
-  const auto object = buildChecked(mesh);
+  const auto object = buildChecked(mesh, structure.config);
   const auto normals = outwardNormals(*mesh);
   std::size_t non_manifold = 0;
   std::vector<Target> targets = surfaceTargets(*mesh, 3, non_manifold);
@@ -234,14 +234,15 @@ TriangleMesh farFromOrigin(const TriangleMesh& m) {
 }
 
 /// Far from the origin: exact rays through the target at t = 1.
-void shootFarExact(const TriangleMesh& original, std::size_t budget, std::uint64_t seed, const std::string& label) {
+void shootFarExact(const TriangleMesh& original, const StructureCase& structure, std::size_t budget, std::uint64_t seed,
+                   const std::string& label) {
   auto mesh = std::make_shared<const TriangleMesh>(farFromOrigin(original));
   ASSERT_EQ(mesh->degenerateCount(), original.degenerateCount()) << "snapping made triangles degenerate";
   for (int k = 0; k < 3; ++k) {
     ASSERT_GE(mesh->bounds().lo[k], 65536.0f);
     ASSERT_LT(mesh->bounds().hi[k], 131072.0f);
   }
-  const auto object = buildChecked(mesh);
+  const auto object = buildChecked(mesh, structure.config);
   const auto normals = outwardNormals(*mesh);
   std::size_t non_manifold = 0;
   std::vector<Target> targets = surfaceTargets(*mesh, 7, non_manifold);
@@ -300,33 +301,51 @@ TEST(Generators, ClosedMeshesAreConsistentlyOutwardOriented) {
   }
 }
 
-// 300k + 300k + 200k + 200k = 10^6 rays on the generated spheres; spot adds 4 * 10^5.
+// Per structure 150k + 150k + 100k + 100k rays on the generated spheres: 10^6 over the kd-tree and
+// the BVH (whose box test is what differs; its presets share it); spot adds 2 * 10^5 per structure.
+// Each SIMD path of the BVH runs its own 5 * 10^5 (ctest's ISA variants).
 
-TEST(Watertight, UvSphereNearOrigin) {
+class Watertight : public ::testing::TestWithParam<StructureCase> {
+ protected:
+  void SetUp() override {
+    DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(GetParam());
+    DUPLEX_SKIP_ISA_INDEPENDENT(GetParam());
+  }
+  [[nodiscard]] std::string label(const std::string& what) const { return what + " / " + GetParam().name; }
+};
+
+TEST_P(Watertight, UvSphereNearOrigin) {
   auto mesh = std::make_shared<const TriangleMesh>(uvSphere(64, 32));
   ASSERT_GT(signedVolume(*mesh), 0.0);
-  shootNearOrigin(mesh, 300000, 1, "uv sphere");
+  shootNearOrigin(mesh, GetParam(), 150000, 1, label("uv sphere"));
 }
 
-TEST(Watertight, UvSphereFarFromOriginExact) { shootFarExact(uvSphere(64, 32), 300000, 2, "uv sphere far"); }
+TEST_P(Watertight, UvSphereFarFromOriginExact) {
+  shootFarExact(uvSphere(64, 32), GetParam(), 150000, 2, label("uv sphere far"));
+}
 
-TEST(Watertight, IcosphereNearOrigin) {
+TEST_P(Watertight, IcosphereNearOrigin) {
   auto mesh = std::make_shared<const TriangleMesh>(icosphere(4, 1.0, glm::dvec3(0.3, -0.2, 0.1)));
   ASSERT_GT(signedVolume(*mesh), 0.0);
-  shootNearOrigin(mesh, 200000, 3, "icosphere");
+  shootNearOrigin(mesh, GetParam(), 100000, 3, label("icosphere"));
 }
 
-TEST(Watertight, IcosphereFarFromOriginExact) { shootFarExact(icosphere(4), 200000, 4, "icosphere far"); }
+TEST_P(Watertight, IcosphereFarFromOriginExact) {
+  shootFarExact(icosphere(4), GetParam(), 100000, 4, label("icosphere far"));
+}
 
-TEST(Watertight, SpotNearOrigin) {
+TEST_P(Watertight, SpotNearOrigin) {
   DUPLEX_SHARED_MESH_OR_SKIP(mesh, "spot.obj");
-  shootNearOrigin(mesh, 200000, 5, "spot");
+  shootNearOrigin(mesh, GetParam(), 100000, 5, label("spot"));
 }
 
-TEST(Watertight, SpotFarFromOriginExact) {
+TEST_P(Watertight, SpotFarFromOriginExact) {
   DUPLEX_SHARED_MESH_OR_SKIP(mesh, "spot.obj");
-  shootFarExact(*mesh, 200000, 6, "spot far");
+  shootFarExact(*mesh, GetParam(), 100000, 6, label("spot far"));
 }
+
+INSTANTIATE_TEST_SUITE_P(Structures, Watertight, ::testing::ValuesIn(defaultStructureCases()),
+                         [](const auto& info) { return info.param.name; });
 
 }  // namespace
 }  // namespace duplex::test
