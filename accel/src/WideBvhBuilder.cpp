@@ -24,6 +24,8 @@
 #include <tbb/parallel_invoke.h>
 #include <tbb/task_group.h>
 
+#include <glm/vec3.hpp>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -811,8 +813,14 @@ WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& con
 }
 
 double WideBvh::sahCost(const BvhBuildConfig& config) const {
-  if (root == BvhRef::kEmpty || bounds.area() <= 0.0f) return 0.0;
-  const double inv_root = 1.0 / bounds.area();
+  if (root == BvhRef::kEmpty || bounds.empty()) return 0.0;
+  // In double: float areas of boxes wider than about 1.8e19 overflow to inf (and inf / inf is NaN).
+  auto area = [](const Box& b) {
+    const glm::dvec3 e = glm::dvec3(b.hi) - glm::dvec3(b.lo);
+    return 2.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
+  };
+  if (!(area(bounds) > 0.0)) return 0.0;
+  const double inv_root = 1.0 / area(bounds);
   auto blocks = [&](std::uint32_t n) { return static_cast<double>((n + leaf_block - 1) / leaf_block); };
   if (BvhRef::isLeaf(root)) return config.intersection_cost * blocks(BvhRef::leafCount(root));
   double cost = config.traversal_cost;  // the root, entered by every ray that hits the bounds
@@ -820,7 +828,7 @@ double WideBvh::sahCost(const BvhBuildConfig& config) const {
     for (int k = 0; k < BvhNode8::kWidth; ++k) {
       const std::uint32_t c = node.child[k];
       if (c == BvhRef::kEmpty) continue;
-      const double p = node.childBox(k).area() * inv_root;
+      const double p = area(node.childBox(k)) * inv_root;
       cost +=
           BvhRef::isLeaf(c) ? p * config.intersection_cost * blocks(BvhRef::leafCount(c)) : p * config.traversal_cost;
     }

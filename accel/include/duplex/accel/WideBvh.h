@@ -33,8 +33,11 @@ struct BvhRef {
   static constexpr std::uint32_t kMaxLeafBlock = (1u << 27) - 1;  ///< largest encodable block index
   static constexpr std::uint32_t kMaxNodes = 0x7FFFFFFFu;         ///< inner node indices are below this
 
+  /// Whether `r` is no child.
   [[nodiscard]] static constexpr bool isEmpty(std::uint32_t r) { return r == kEmpty; }
+  /// Whether `r` is a leaf.
   [[nodiscard]] static constexpr bool isLeaf(std::uint32_t r) { return (r & kLeafBit) != 0 && r != kEmpty; }
+  /// Whether `r` is an inner node index.
   [[nodiscard]] static constexpr bool isInner(std::uint32_t r) { return (r & kLeafBit) == 0; }
   /// A leaf of `count` (1..16) primitives starting at block `block` (its first entry / leaf_block).
   [[nodiscard]] static constexpr std::uint32_t leaf(std::uint32_t block, std::uint32_t count) {
