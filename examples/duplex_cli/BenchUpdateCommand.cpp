@@ -27,6 +27,7 @@
 #include <exception>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <numeric>
 #include <optional>
@@ -366,6 +367,14 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
                             library.typeName(i) + ": bench update measures scenes of mesh objects only");
     mesh_objects.push_back(m);
   }
+  // Which bottom-level structure the scene's mesh objects have (the scene file may choose per
+  // object): "bvh", "kdtree" or "mixed", with the count of each.
+  {
+    std::map<std::string, std::size_t> counts;
+    for (const MeshObject* m : mesh_objects) ++counts[std::string(toString(m->structure()))];
+    out["bottom_structure"] = counts.size() == 1 ? counts.begin()->first : counts.empty() ? "none" : "mixed";
+    out["bottom_structure_counts"] = counts;
+  }
 #if DUPLEX_BENCH_HAVE_EMBREE
   // Embree's side: the same meshes and instances, one device for the whole run.
   std::vector<const TriangleMesh*> meshes;
@@ -418,8 +427,11 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
       arena.execute([&] { fresh = ours->freshTracer(); });
       return std::pair{watch.ms(), bottom_ms};
     };
-    const auto warm = [](std::size_t, std::shared_ptr<const TriangleMesh> mesh) {
-      return std::make_shared<const MeshObject>(std::move(mesh));
+    // Each object rebuilt as the structure it was loaded with (default parameters of that structure).
+    const auto warm = [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) {
+      MeshBuildConfig config;
+      config.structure = mesh_objects[k]->structure();
+      return std::make_shared<const MeshObject>(std::move(mesh), config);
     };
     const auto prepared = [&](std::size_t k, std::shared_ptr<const TriangleMesh> mesh) {
       return loadMeshObject(files[k], std::move(mesh));
