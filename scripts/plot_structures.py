@@ -160,7 +160,7 @@ def plot(doc, table, outdir):
                                                    m.get("embree_version") or "-", m.get("date_utc", "?")[:16]),
                  fontsize=9, y=0.995)
     legend_h = 0.12 / nrows
-    fig.tight_layout(rect=(0, legend_h, 1, 1 - 0.1 / nrows))
+    fig.tight_layout(rect=(0, legend_h, 1, 1 - 0.07 / nrows))
     path = os.path.join(outdir, "structures_build_vs_trace.png")
     fig.savefig(path, dpi=110)
     plt.close(fig)
