@@ -314,7 +314,7 @@ void MeshBench::build(const LoadedMesh& loaded, nlohmann::json& out) {
 
   nlohmann::json builds = nlohmann::json::array();
   std::cerr << "  build ms    " << pad("threads", 9);
-  for (const TracerDef& d : defs_) std::cerr << lpad(d.key, 15);
+  for (const TracerDef& d : defs_) std::cerr << " " << lpad(d.key, 14);
   std::cerr << "\n";
   for (const int t : threads_) {
     std::vector<double> med(n, kNaN), cpu(n, kNaN);

@@ -89,7 +89,7 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
   }
   std::cerr << "  traces: " << fmt(phase.ms() / 1e3, 1) << " s\n";
   std::cerr << "  Mrays/s     " << pad("rays", 9) << pad("query", 8) << pad("T", 3);
-  for (const int k : tracers) std::cerr << lpad(defs_[k].key, 15);
+  for (const int k : tracers) std::cerr << " " << lpad(defs_[k].key, 14);
   std::cerr << "\n";
   const int ref = find(kReferenceKey);
   nlohmann::json records = nlohmann::json::array();
