@@ -189,7 +189,13 @@ void printSummary(const nlohmann::json& meshes, const std::vector<int>& threads,
       return m.contains("ratios") && m["ratios"].contains(d.key + "_vs_embree_medium");
     });
     if (!measured) {
-      std::cerr << "\n== " << d.key << ": not measured (see meshes[].structures." << d.key << ".note)\n";
+      const bool built = std::any_of(meshes.begin(), meshes.end(), [&](const nlohmann::json& m) {
+        return m["structures"].contains(d.key) && m["structures"][d.key].value("available", false);
+      });
+      std::cerr << "\n== " << d.key
+                << (built ? ": no ratios (no Embree reference in this run)"
+                          : ": not measured (see meshes[].structures." + d.key + ".note)")
+                << "\n";
       continue;
     }
     for (const bool cpu : {false, true}) {
