@@ -43,6 +43,12 @@ struct Options {
   std::string out;
   std::string embree_config;  ///< extra rtcNewDevice configuration, e.g. "isa=avx2"
   bool with_embree = true;
+  /// Our structures: "bvh:PRESET[/KEY=VALUE...]" (BvhBuildConfig::parse with '/' for ',') or "kdtree".
+  std::vector<std::string> structures{"bvh:fast", "bvh:medium", "bvh:high", "kdtree"};
+  /// Embree's builds besides the medium one (always measured when Embree is): medium, high, robust.
+  std::vector<std::string> embree_builds{"medium", "high", "robust"};
+  /// Rays aimed at shared vertices and edges per closed mesh (0: no watertightness count).
+  std::size_t watertight_rays = 200'000;
   // --sweep
   std::vector<std::string> sweep_meshes;
   std::size_t sweep_random_rays = 250'000;
@@ -52,6 +58,7 @@ struct Options {
   std::string callgrind_mesh;
   std::size_t callgrind_rays = 20'000;
   std::vector<std::string> callgrind_what{"ours", "embree"};
+  std::string callgrind_structure = "bvh:medium";  ///< what "ours" is in the callgrind workload
 };
 
 /// Wall-clock milliseconds since construction.

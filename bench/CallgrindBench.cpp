@@ -15,6 +15,7 @@
 #include <valgrind/callgrind.h>
 #endif
 
+#include "duplex/accel/Error.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/objects/MeshObject.h"
 
@@ -83,14 +84,34 @@ nlohmann::json runCallgrind(const Options& options) {
 #endif
   Arenas arenas;
   if (wants("ours")) {
+    // "ours" is one structure (--callgrind-structure), so that the dump names stay fixed.
+    const std::string& spec = options.callgrind_structure;
+    const bool kd = spec == "kdtree";
+    if (!kd && spec != "bvh" && spec.rfind("bvh:", 0) != 0)
+      throw InvalidArgument("--callgrind-structure: '" + spec + "' is not kdtree, bvh or bvh:PRESET[/KEY=VALUE...]");
+    std::string text = kd || spec == "bvh" ? "medium" : spec.substr(4);
+    std::replace(text.begin(), text.end(), '/', ',');
+    const BvhBuildConfig bvh_config = BvhBuildConfig::parse(text);
     std::unique_ptr<MeshObject> object;
-    arenas.get(1).execute([&] { object = std::make_unique<MeshObject>(loaded.mesh, KdBuildConfig{}); });
-    const KdTreeStats stats = object->tree().stats(KdBuildConfig{}.traversal_cost, KdBuildConfig{}.intersection_cost);
-    doc["ours"]["nodes"] = stats.nodes;
-    doc["ours"]["sah_cost"] = stats.sah_cost;
+    arenas.get(1).execute([&] {
+      object = kd ? std::make_unique<MeshObject>(loaded.mesh, KdBuildConfig{})
+                  : std::make_unique<MeshObject>(loaded.mesh, bvh_config);
+    });
+    doc["ours"]["structure"] = kd ? "kdtree" : "bvh";
+    doc["ours"]["structure_spec"] = spec;
+    if (kd) {
+      const KdTreeStats stats = object->tree().stats(KdBuildConfig{}.traversal_cost, KdBuildConfig{}.intersection_cost);
+      doc["ours"]["nodes"] = stats.nodes;
+      doc["ours"]["sah_cost"] = stats.sah_cost;
+    } else {
+      doc["ours"]["config"] = bvh_config.toString();
+      doc["ours"]["nodes"] = object->bvh().nodes.size();
+      doc["ours"]["sah_cost"] = object->bvh().sahCost(bvh_config);
+    }
     doc["ours"]["closest_hits"] = callgrindLoop("ours-closest", *object, rays, Query::Closest);
     doc["ours"]["any_hits"] = callgrindLoop("ours-any", *object, rays, Query::Any);
-    doc["ours"]["traversal"] = countTraversal(arenas.get(1), *object, rays).toJson();
+    // The counters replicate the kd-tree's query only.
+    if (kd) doc["ours"]["traversal"] = countTraversal(arenas.get(1), *object, rays).toJson();
   }
 #if DUPLEX_BENCH_HAVE_EMBREE
   if (wants("embree") && options.with_embree) {

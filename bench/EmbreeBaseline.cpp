@@ -69,10 +69,11 @@ void attachTriangleMesh(EmbreeDevice& device, RTCScene scene, const TriangleMesh
   rtcReleaseGeometry(geometry);
 }
 
-EmbreeMesh::EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality) {
+EmbreeMesh::EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality, RTCSceneFlags flags) {
   const std::int64_t bytes_before = device.allocatedBytes();
   scene_ = rtcNewScene(device.get());
   rtcSetSceneBuildQuality(scene_, quality);
+  rtcSetSceneFlags(scene_, flags);
   attachTriangleMesh(device, scene_, mesh, quality);
   const auto& positions = mesh.positions();
   const auto& triangles = mesh.triangles();

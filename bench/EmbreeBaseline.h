@@ -77,9 +77,11 @@ void attachTriangleMesh(EmbreeDevice& device, RTCScene scene, const TriangleMesh
 
 class EmbreeMesh {
  public:
-  /// Copies the mesh into Embree buffers and commits with `quality` (the timed "build" is this
-  /// constructor: geometry setup plus rtcCommitScene).
-  EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality);
+  /// Copies the mesh into Embree buffers and commits with `quality` and scene `flags` (the timed
+  /// "build" is this constructor: geometry setup plus rtcCommitScene). RTC_SCENE_FLAG_ROBUST makes
+  /// Embree's traversal and triangle test watertight at some speed.
+  EmbreeMesh(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality,
+             RTCSceneFlags flags = RTC_SCENE_FLAG_NONE);
   ~EmbreeMesh();
   EmbreeMesh(const EmbreeMesh&) = delete;
   EmbreeMesh& operator=(const EmbreeMesh&) = delete;

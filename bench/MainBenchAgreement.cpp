@@ -6,99 +6,105 @@
 
 #include <algorithm>
 #include <iostream>
-#include <map>
-#include <sstream>
-#include <tuple>
 
 namespace duplex::bench::main_detail {
 
 void MeshBench::checkAgreement(const TriangleMesh& mesh, const std::vector<RaySet>& sets, nlohmann::json& out) {
-  nlohmann::json agreement;
-  if (!haveEmbree()) {
+  const int ref = find(kReferenceKey);
+  if (ref < 0) {
     out["agreement"] = nullptr;
     return;
   }
-#if DUPLEX_BENCH_HAVE_EMBREE
+  nlohmann::json agreement;
   tbb::task_arena& arena = arenas_.get(threads_.back());
   const float inf = std::numeric_limits<float>::infinity();
+  const std::vector<int> tracers = live();
+  const double scale = glm::length(mesh.bounds().extent());
   for (const RaySet& set : sets) {
     const std::size_t n = set.rays.size();
-    std::vector<float> t[kTracers];
-    std::vector<std::uint8_t> occluded_ours(n), occluded_medium(n);
-    for (auto& v : t) v.assign(n, inf);
+    std::vector<std::vector<float>> t(defs_.size());
+    std::vector<std::vector<std::uint8_t>> occ(defs_.size());
+    for (const int k : tracers) {
+      t[k].assign(n, inf);
+      occ[k].assign(n, 0);
+    }
     parallelFor(arena, n, [&](std::size_t i) {
       const Ray& r = set.rays[i];
-      Hit h[kTracers];
-      if (ours_->intersect(r, h[kOurs])) t[kOurs][i] = h[kOurs].t;
-      if (embree_.scenes[kEmbreeMedium]->intersect(r, h[kEmbreeMedium])) t[kEmbreeMedium][i] = h[kEmbreeMedium].t;
-      if (embree_.scenes[kEmbreeHigh]->intersect(r, h[kEmbreeHigh])) t[kEmbreeHigh][i] = h[kEmbreeHigh].t;
-      occluded_ours[i] = ours_->occluded(r);
-      occluded_medium[i] = embree_.scenes[kEmbreeMedium]->occluded(r);
+      for (const int k : tracers) {
+        Hit h;
+        if (intersect(k, r, h)) t[k][i] = h.t;
+        occ[k][i] = occluded(k, r);
+      }
     });
-    std::uint64_t hits[kTracers] = {}, hitmiss_medium = 0, hitmiss_high = 0, t_mismatch = 0, any_disagree = 0,
-                  ours_any_vs_closest = 0;
+    // Per tracer against Embree's medium build; rays where any of ours disagree on hit or miss go
+    // to the referee.
+    nlohmann::json by_tracer;
     std::vector<std::size_t> disputed;
-    const double scale = glm::length(mesh.bounds().extent());
     for (std::size_t i = 0; i < n; ++i) {
-      const bool ho = t[kOurs][i] < inf, hm = t[kEmbreeMedium][i] < inf, hh = t[kEmbreeHigh][i] < inf;
-      hits[kOurs] += ho;
-      hits[kEmbreeMedium] += hm;
-      hits[kEmbreeHigh] += hh;
-      if (ho != hm) {
-        ++hitmiss_medium;
+      const bool hr = t[ref][i] < inf;
+      if (std::any_of(tracers.begin(), tracers.end(), [&](int k) { return defs_[k].ours() && (t[k][i] < inf) != hr; }))
         disputed.push_back(i);
-      }
-      hitmiss_high += ho != hh;
-      if (ho && hm) {
-        const double dt = std::abs(static_cast<double>(t[kOurs][i]) - t[kEmbreeMedium][i]);
-        if (dt > 1e-4 * std::max<double>(t[kOurs][i], t[kEmbreeMedium][i]) + 1e-6 * scale) ++t_mismatch;
-      }
-      any_disagree += occluded_ours[i] != occluded_medium[i];
-      ours_any_vs_closest += (occluded_ours[i] != 0) != ho;
     }
+    std::cerr << "  agreement   " << pad(set.name, 8) << "hit/miss vs embree_medium:";
+    for (const int k : tracers) {
+      if (k == ref) continue;
+      std::uint64_t hits = 0, hitmiss = 0, t_mismatch = 0, any_disagree = 0, any_vs_closest = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const bool hk = t[k][i] < inf, hr = t[ref][i] < inf;
+        hits += hk;
+        hitmiss += hk != hr;
+        if (hk && hr) {
+          const double dt = std::abs(static_cast<double>(t[k][i]) - t[ref][i]);
+          if (dt > 1e-4 * std::max<double>(t[k][i], t[ref][i]) + 1e-6 * scale) ++t_mismatch;
+        }
+        any_disagree += occ[k][i] != occ[ref][i];
+        any_vs_closest += (occ[k][i] != 0) != hk;
+      }
+      by_tracer[defs_[k].key] = {{"hits", hits},
+                                 {"hitmiss_disagree_vs_embree_medium", hitmiss},
+                                 {"t_mismatch_vs_embree_medium", t_mismatch},
+                                 {"anyhit_disagree_vs_embree_medium", any_disagree},
+                                 {"anyhit_vs_closest_disagree", any_vs_closest}};
+      std::cerr << " " << defs_[k].key << " " << thousands(hitmiss);
+      if (any_vs_closest != 0 && defs_[k].ours())
+        std::cerr << "\n  WARNING: occluded() and intersect() of " << defs_[k].key << " disagree on " << any_vs_closest
+                  << " rays\n";
+    }
+    std::uint64_t ref_hits = 0;
+    for (std::size_t i = 0; i < n; ++i) ref_hits += t[ref][i] < inf;
+    by_tracer[kReferenceKey] = {{"hits", ref_hits}};
+
     // A double-precision brute force decides a sample of the disputed rays.
     constexpr std::size_t kRefereeSample = 48;
-    std::uint64_t referee_ours = 0, referee_embree = 0;
     const std::size_t examined = std::min(disputed.size(), kRefereeSample);
-    nlohmann::json wrong_ours = nlohmann::json::array();  // rays to reproduce where the referee says we are wrong
-    for (std::size_t k = 0; k < examined; ++k) {
-      const std::size_t i = disputed[k * disputed.size() / examined];
+    std::vector<std::uint64_t> right(defs_.size(), 0);
+    nlohmann::json wrong = nlohmann::json::array();  // rays to reproduce where the referee says one of ours is wrong
+    for (std::size_t e = 0; e < examined; ++e) {
+      const std::size_t i = disputed[e * disputed.size() / examined];
       const Ray& r = set.rays[i];
       const bool truth = refereeHits(arena, mesh, r);
-      if (truth == (t[kOurs][i] < inf)) {
-        ++referee_ours;
-      } else if (wrong_ours.size() < 5) {
-        wrong_ours.push_back({{"index", i},
-                              {"origin", {r.origin.x, r.origin.y, r.origin.z}},
-                              {"dir", {r.dir.x, r.dir.y, r.dir.z}},
-                              {"tnear", r.tnear},
-                              {"ours_t", num(t[kOurs][i])},
-                              {"embree_medium_t", num(t[kEmbreeMedium][i])},
-                              {"referee_hits", truth}});
+      for (const int k : tracers) {
+        if ((t[k][i] < inf) == truth) {
+          ++right[k];
+        } else if (defs_[k].ours() && wrong.size() < 5) {
+          wrong.push_back({{"index", i},
+                           {"structure", defs_[k].key},
+                           {"origin", {r.origin.x, r.origin.y, r.origin.z}},
+                           {"dir", {r.dir.x, r.dir.y, r.dir.z}},
+                           {"tnear", r.tnear},
+                           {"t", num(t[k][i])},
+                           {"embree_medium_t", num(t[ref][i])},
+                           {"referee_hits", truth}});
+        }
       }
-      if (truth == (t[kEmbreeMedium][i] < inf)) ++referee_embree;
     }
-    agreement[set.name] = {{"rays", n},
-                           {"hits_ours", hits[kOurs]},
-                           {"hits_embree_medium", hits[kEmbreeMedium]},
-                           {"hits_embree_high", hits[kEmbreeHigh]},
-                           {"hitmiss_disagree_vs_medium", hitmiss_medium},
-                           {"hitmiss_disagree_vs_high", hitmiss_high},
-                           {"t_mismatch_vs_medium", t_mismatch},
-                           {"anyhit_disagree_vs_medium", any_disagree},
-                           {"ours_anyhit_vs_closest_disagree", ours_any_vs_closest},
-                           {"referee_examined", examined},
-                           {"referee_sides_with_ours", referee_ours},
-                           {"referee_sides_with_embree", referee_embree},
-                           {"rays_referee_says_ours_wrong", wrong_ours}};
-    std::cerr << "  agreement   " << pad(set.name, 8) << thousands(hitmiss_medium) << " hit/miss (vs high "
-              << thousands(hitmiss_high) << "), " << thousands(any_disagree) << " any-hit, " << thousands(t_mismatch)
-              << " t differ, of " << thousands(n) << "; referee on " << examined << ": ours right " << referee_ours
-              << ", Embree right " << referee_embree << "\n";
-    if (ours_any_vs_closest != 0)
-      std::cerr << "  WARNING: our occluded() and intersect() disagree on " << ours_any_vs_closest << " rays\n";
+    nlohmann::json referee{{"disputed", disputed.size()}, {"examined", examined}};
+    for (const int k : tracers) referee["right"][defs_[k].key] = right[k];
+    referee["rays_referee_says_ours_wrong"] = wrong;
+    agreement[set.name] = {{"rays", n}, {"by_structure", by_tracer}, {"referee", referee}};
+    std::cerr << " (of " << thousands(n) << "); referee on " << examined << " of " << thousands(disputed.size())
+              << " disputed\n";
   }
-#endif
   out["agreement"] = agreement;
 }
 

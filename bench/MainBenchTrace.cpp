@@ -64,9 +64,10 @@ namespace {
 
 void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
   using Key = std::tuple<std::size_t, Query, int>;  // ray set, query, threads
-  std::map<Key, std::vector<double>> ms[kTracers], cpu_ms[kTracers];
-  std::map<Key, std::uint64_t> hits[kTracers];
-  const int tracers = haveEmbree() ? kTracers : 1;
+  const std::size_t n = defs_.size();
+  std::vector<std::map<Key, std::vector<double>>> ms(n), cpu_ms(n);
+  std::vector<std::map<Key, std::uint64_t>> hits(n);
+  const std::vector<int> tracers = live();
   const Stopwatch phase;
   for (int rep = 0; rep < options_.repeat; ++rep) {
     for (const int t : threads_) {
@@ -74,42 +75,36 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
       for (std::size_t s = 0; s < sets.size(); ++s) {
         for (const Query q : {Query::Closest, Query::Any}) {
           const Key key{s, q, t};
-          for (int k = 0; k < tracers; ++k) {
+          for (std::size_t i = 0; i < tracers.size(); ++i) {
             // Interleave ours and Embree's, alternating the order between repetitions.
-            const int tracer = rep % 2 == 0 ? k : tracers - 1 - k;
-            TraceTiming timing;
-            if (tracer == kOurs) {
-              timing = timeQuery(arena, sets[s].rays, *ours_, q);
-            } else {
-#if DUPLEX_BENCH_HAVE_EMBREE
-              timing = timeQuery(arena, sets[s].rays, *embree_.scenes[tracer], q);
-#endif
-            }
-            ms[tracer][key].push_back(timing.time.wall_ms);
-            cpu_ms[tracer][key].push_back(timing.time.cpu_ms);
-            hits[tracer][key] = timing.hits;
+            const int k = tracers[rep % 2 == 0 ? i : tracers.size() - 1 - i];
+            const TraceTiming timing = timeTracer(k, arena, sets[s].rays, q);
+            ms[k][key].push_back(timing.time.wall_ms);
+            cpu_ms[k][key].push_back(timing.time.cpu_ms);
+            hits[k][key] = timing.hits;
           }
         }
       }
     }
   }
   std::cerr << "  traces: " << fmt(phase.ms() / 1e3, 1) << " s\n";
-  std::cerr << "  Mrays/s     " << pad("rays", 9) << pad("query", 8) << pad("T", 3) << lpad("ours", 8)
-            << lpad("emb-med", 9) << lpad("emb-high", 9) << lpad("/med", 8) << lpad("/high", 8) << lpad("/med cpu", 10)
-            << "\n";
+  std::cerr << "  Mrays/s     " << pad("rays", 9) << pad("query", 8) << pad("T", 3);
+  for (const int k : tracers) std::cerr << " " << lpad(defs_[k].key, 14);
+  std::cerr << "\n";
+  const int ref = find(kReferenceKey);
   nlohmann::json records = nlohmann::json::array();
   for (const int t : threads_) {
     for (std::size_t s = 0; s < sets.size(); ++s) {
       for (const Query q : {Query::Closest, Query::Any}) {
         const Key key{s, q, t};
-        const std::size_t n = sets[s].rays.size();
-        nlohmann::json rec{{"rays", sets[s].name}, {"query", toString(q)}, {"threads", t}, {"ray_count", n}};
-        double mrays[kTracers] = {kNaN, kNaN, kNaN}, mrays_cpu[kTracers] = {kNaN, kNaN, kNaN};
-        for (int k = 0; k < tracers; ++k) {
+        const std::size_t count = sets[s].rays.size();
+        nlohmann::json rec{{"rays", sets[s].name}, {"query", toString(q)}, {"threads", t}, {"ray_count", count}};
+        std::vector<double> mrays(n, kNaN), mrays_cpu(n, kNaN);
+        for (const int k : tracers) {
           const double med = median(ms[k][key]), cpu = median(cpu_ms[k][key]);
-          mrays[k] = n / (med * 1e3);
-          mrays_cpu[k] = n / (cpu * 1e3);
-          const std::string name = kTracerKey[k];
+          mrays[k] = static_cast<double>(count) / (med * 1e3);
+          mrays_cpu[k] = static_cast<double>(count) / (cpu * 1e3);
+          const std::string& name = defs_[k].key;
           rec[name + "_ms"] = med;
           rec[name + "_ms_samples"] = ms[k][key];
           rec[name + "_mrays"] = mrays[k];
@@ -118,36 +113,43 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
           rec[name + "_mrays_cpu"] = mrays_cpu[k];
           rec[name + "_hits"] = hits[k][key];
         }
-        rec["ratio_vs_embree_medium"] = num(ratio(mrays[kOurs], mrays[kEmbreeMedium]));
-        rec["ratio_vs_embree_high"] = num(ratio(mrays[kOurs], mrays[kEmbreeHigh]));
-        rec["ratio_cpu_vs_embree_medium"] = num(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeMedium]));
-        rec["ratio_cpu_vs_embree_high"] = num(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeHigh]));
-        const std::string label = sets[s].name + " " + toString(q) + " " + std::to_string(t) + "T";
-        for (const char* which : {"vs_embree_medium", "vs_embree_high"}) {
-          out["ratios"][which]["trace"][label] = rec[std::string("ratio_") + which];
-          out["ratios"][which]["trace_cpu"][label] = rec[std::string("ratio_cpu_") + which];
+        for (const int k : tracers) {
+          if (ref < 0 || k == ref) continue;
+          const std::string& name = defs_[k].key;
+          rec["ratio_" + name + "_vs_embree_medium"] = num(ratio(mrays[k], mrays[ref]));
+          rec["ratio_cpu_" + name + "_vs_embree_medium"] = num(ratio(mrays_cpu[k], mrays_cpu[ref]));
+          if (defs_[k].is_default) {
+            rec["ratio_vs_embree_medium"] = rec["ratio_" + name + "_vs_embree_medium"];
+            rec["ratio_cpu_vs_embree_medium"] = rec["ratio_cpu_" + name + "_vs_embree_medium"];
+          }
         }
+        const std::string label = sets[s].name + " " + toString(q) + " " + std::to_string(t) + "T";
+        addRatios(out, "trace", label, mrays);
+        addRatios(out, "trace_cpu", label, mrays_cpu);
         records.push_back(rec);
-        std::cerr << "              " << pad(sets[s].name, 9) << pad(toString(q), 8) << pad(std::to_string(t), 3)
-                  << lpad(fmt(mrays[kOurs]), 8) << lpad(fmt(mrays[kEmbreeMedium]), 9)
-                  << lpad(fmt(mrays[kEmbreeHigh]), 9) << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeMedium])) + "x", 8)
-                  << lpad(fmt(ratio(mrays[kOurs], mrays[kEmbreeHigh])) + "x", 8)
-                  << lpad(fmt(ratio(mrays_cpu[kOurs], mrays_cpu[kEmbreeMedium])) + "x", 10) << "\n";
+        std::cerr << "              " << pad(sets[s].name, 9) << pad(toString(q), 8) << pad(std::to_string(t), 3);
+        for (const int k : tracers) {
+          std::string cell = fmt(mrays[k]);
+          if (ref >= 0 && k != ref) cell += " (" + fmt(ratio(mrays[k], mrays[ref])) + ")";
+          std::cerr << lpad(cell, 15);
+        }
+        std::cerr << "\n";
       }
     }
   }
   out["trace"] = records;
 }
 
-// Where the time of a random closest-hit ray goes, one thread, CPU time, medians of the repetitions
-// with the order alternating: the cumulative parts above, our full query and Embree's (medium).
+// Where the time of a random closest-hit ray of the kd-tree goes (when it is measured), one thread, CPU time, medians
+// of the repetitions with the order alternating: the cumulative parts above, our full query and Embree's (medium).
 // Differences of the medians give harness, setup, traversal and triangle tests (docs/kdtree.md,
 // "Where the time goes").
 void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
   const std::span<const Ray> rays = random.rays;
-  if (rays.empty()) return;
+  const int kd = find("kdtree"), embree = find(kReferenceKey);
+  if (rays.empty() || kd < 0) return;
   tbb::task_arena& arena = arenas_.get(1);
-  const MeshObject& object = *ours_;
+  const MeshObject& object = *built_[static_cast<std::size_t>(kd)].object;
   std::vector<float> t_final(rays.size());
   parallelFor(arenas_.get(threads_.back()), rays.size(), [&](std::size_t i) {
     Hit hit;
@@ -157,7 +159,7 @@ void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
   auto at = [&](const Ray& r) { return t_final[static_cast<std::size_t>(&r - rays.data())]; };
   enum Part { kHarness, kSetup, kTraversal, kFull, kEmbreeHarness, kEmbreeFull, kParts };
   constexpr const char* kKey[kParts] = {"harness", "setup", "traversal", "ours", "embree_harness", "embree_medium"};
-  const int parts = haveEmbree() ? kParts : kEmbreeHarness;
+  const int parts = embree >= 0 ? kParts : kEmbreeHarness;
   // Each part gets a fresh Hit per ray, as timeQuery gives the full query.
   auto timePart = [&](const auto& part) {
     return timeTrace(arena, rays, [&](const Ray& r) {
@@ -181,7 +183,7 @@ void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
         case kEmbreeHarness:
           timing = timePart([](const Ray& r, Hit& hit) { return splitEmbreeHarness(r, hit); });
           break;
-        case kEmbreeFull: timing = timeQuery(arena, rays, *embree_.scenes[kEmbreeMedium], Query::Closest); break;
+        case kEmbreeFull: timing = timeTracer(embree, arena, rays, Query::Closest); break;
 #endif
         default: break;
       }
@@ -189,7 +191,7 @@ void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
     }
   }
   double ns[kParts];
-  nlohmann::json split{{"rays", random.name}, {"ray_count", rays.size()}, {"threads", 1}};
+  nlohmann::json split{{"structure", "kdtree"}, {"rays", random.name}, {"ray_count", rays.size()}, {"threads", 1}};
   for (int k = 0; k < kParts; ++k) {
     ns[k] = k < parts ? median(cpu_ms[k]) * 1e6 / static_cast<double>(rays.size()) : kNaN;
     split[std::string(kKey[k]) + "_ns"] = num(ns[k]);

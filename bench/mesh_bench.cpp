@@ -1,4 +1,5 @@
-// duplex_bench_mesh: build and trace figures of our kd-tree against Embree 3 on single meshes, the
+// duplex_bench_mesh: build and trace figures of our structures (BVH presets, kd-tree) against Embree 3
+// on single meshes, the
 // heuristic/cost sweep (--sweep) and a fixed workload for callgrind (--callgrind). Writes one JSON
 // document (--out) and prints a compact table to stderr. Not a timed test: it measures, it does not
 // judge (the JSON's "goals" section states the targets next to the figures).
@@ -16,11 +17,22 @@ int main(int argc, char** argv) {
   setFtzDaz();
   Options options;
   options.data_dir = DUPLEX_BENCH_DATA_DIR;
-  options.meshes = {"plane.obj", "hammer.obj", "koala.obj", "koala.obj:1", "koala.obj:2"};
+  // The robot's largest CAD parts (binary STL) beside the scanned and subdivided meshes.
+  options.meshes = {"spot.obj",
+                    "plane.obj",
+                    "hammer.obj",
+                    "koala.obj",
+                    "koala.obj:1",
+                    "koala.obj:2",
+                    "abb_irb6640/link_3.stl",
+                    "abb_irb6640/link_1.stl",
+                    "abb_irb6640/link_2.stl",
+                    "abb_irb6640/base_link.stl"};
   options.sweep_meshes = {"koala.obj", "hammer.obj"};
   options.callgrind_mesh = "koala.obj";
 
-  CLI::App app{"duplex_bench_mesh: our kd-tree against Embree 3 on single meshes (JSON out, table on stderr)"};
+  CLI::App app{
+      "duplex_bench_mesh: our BVH presets and kd-tree against Embree 3 on single meshes (JSON out, table on stderr)"};
   app.add_option("--data", options.data_dir, "data folder holding meshes/")->capture_default_str();
   app.add_option("--meshes", options.meshes,
                  "mesh specs, comma separated: FILE or FILE:K for K steps of Loop subdivision (koala.obj:2 ~1.6M "
@@ -51,7 +63,21 @@ int main(int argc, char** argv) {
   app.add_option("--out", options.out, "JSON output file (default: none, table only)");
   app.add_option("--embree-config", options.embree_config, "extra rtcNewDevice configuration, e.g. isa=avx2");
   bool no_embree = false;
-  app.add_flag("--no-embree", no_embree, "measure only our kd-tree");
+  app.add_flag("--no-embree", no_embree, "measure only our structures");
+  app.add_option("--structures", options.structures,
+                 "our structures, comma separated: kdtree, bvh:fast, bvh:medium, bvh:high, or bvh:PRESET/KEY=VALUE... "
+                 "(BvhBuildConfig overrides joined by '/', e.g. bvh:medium/leaf=4); one that cannot be built is "
+                 "listed with the reason")
+      ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--embree-builds", options.embree_builds,
+                 "Embree's builds: medium (always, the reference of the ratios), high, robust (medium quality, "
+                 "RTC_SCENE_FLAG_ROBUST)")
+      ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--watertight-rays", options.watertight_rays,
+                 "rays aimed at shared vertices and edges per closed mesh, traced by every structure (0: none)")
+      ->capture_default_str();
 
   bool sweep = false;
   app.add_flag("--sweep", sweep, "heuristic/cost sweep: build ms vs trace ms (1 thread) over KdBuildConfig settings");
@@ -68,6 +94,9 @@ int main(int argc, char** argv) {
   app.add_option("--callgrind-mesh", options.callgrind_mesh, "mesh of the callgrind workload")->capture_default_str();
   app.add_option("--callgrind-rays", options.callgrind_rays, "random rays of the callgrind workload")
       ->capture_default_str();
+  app.add_option("--callgrind-structure", options.callgrind_structure,
+                 "our structure in the callgrind workload (dumps ours-*): kdtree or bvh:PRESET[/KEY=VALUE...]")
+      ->capture_default_str();
   app.add_option("--callgrind-what", options.callgrind_what, "tracers: ours, embree")
       ->delimiter(',')
       ->capture_default_str();
@@ -80,13 +109,14 @@ int main(int argc, char** argv) {
   }
   if (options.quick) {
     // Small enough for a smoke test, large enough to exercise every code path.
-    if (app.count("--meshes") == 0) options.meshes = {"plane.obj", "koala.obj"};
+    if (app.count("--meshes") == 0) options.meshes = {"spot.obj", "plane.obj", "abb_irb6640/link_6.stl"};
     if (app.count("--sweep-meshes") == 0) options.sweep_meshes = {"hammer.obj"};
     if (app.count("--random") == 0) options.random_rays = 100'000;
     if (app.count("--primary") == 0) options.primary_width = options.primary_height = 256;
     if (app.count("--sweep-random") == 0) options.sweep_random_rays = 50'000;
     if (app.count("--sweep-primary") == 0) options.sweep_primary_width = options.sweep_primary_height = 192;
     if (app.count("--repeat") == 0) options.repeat = 1;
+    if (app.count("--watertight-rays") == 0) options.watertight_rays = 20'000;
   }
 
   try {

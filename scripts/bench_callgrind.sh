@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Instructions per ray of our kd-tree and of Embree 3 (medium quality) on a fixed workload, counted by
+# Instructions per ray of one of our structures (STRUCTURE: the BVH medium preset by default, or kdtree)
+# and of Embree 3 (medium quality) on a fixed workload, counted by
 # callgrind: repeatable on the shared, noisy machine where wall-clock times are not.
 #
 # Builds duplex_bench_mesh in its own build dir with -O3 plus -g (same code as Release, but with line
@@ -9,6 +10,7 @@
 # both plus where ours go.
 #
 # Environment: BUILD_DIR (default build-callgrind), MESH (koala.obj), RAYS (20000),
+#              STRUCTURE (bvh:medium; kdtree, bvh:fast, bvh:medium/leaf=4, ...),
 #              WHAT (tracers: ours,embree),
 #              OUT (docs/bench/callgrind.json; empty: do not write), KEEP (1: keep the dumps).
 set -euo pipefail
@@ -18,6 +20,7 @@ BUILD_DIR=${BUILD_DIR:-$ROOT/build-callgrind}
 MESH=${MESH:-koala.obj}
 RAYS=${RAYS:-20000}
 WHAT=${WHAT:-ours,embree}
+STRUCTURE=${STRUCTURE:-bvh:medium}
 OUT=${OUT-$ROOT/docs/bench/callgrind.json}
 JOBS=${JOBS:-2}
 
@@ -40,6 +43,7 @@ trap cleanup EXIT
 echo "running the workload under callgrind (a minute or two: the build runs uninstrumented but still under valgrind)" >&2
 valgrind --tool=callgrind --instr-atstart=no --branch-sim=yes --callgrind-out-file="$DUMPS/callgrind.out" \
   "$BIN" --callgrind --callgrind-mesh "$MESH" --callgrind-rays "$RAYS" --callgrind-what "$WHAT" \
+  --callgrind-structure "$STRUCTURE" \
   --out "$DUMPS/workload.json" \
   >"$DUMPS/valgrind.log" 2>&1 || { tail -30 "$DUMPS/valgrind.log" >&2; exit 1; }
 

@@ -118,12 +118,12 @@ def short_fn(name, width=90):
 
 
 # Where our instructions go, by the file the (inlined) code is written in. A heuristic mapping, kept
-# next to the raw per-file list: traversal = the kd-tree walk, triangle = the triangle tests (SIMD
+# next to the raw per-file list: traversal = the kd-tree or BVH walk, triangle = the triangle tests (SIMD
 # intrinsics headers count here: the traversal is scalar; the per-ray setup of objects/mesh/src/MeshRay.h
 # uses intrinsics too, a few dozen instructions per ray that land here), everything else = per-ray
 # setup and the bench loop.
 def category(file_name):
-    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h"):
+    if file_name in ("KdTraversal.h", "KdNode.h", "KdTree.h", "Box.h", "MeshBvhTraversal.inl", "WideBvh.h"):
         return "traversal"
     if "Triangle" in file_name or file_name.endswith("intrin.h"):
         return "triangle tests"
@@ -160,8 +160,9 @@ def main():
                 "x86-64 (SSE2) unless DUPLEX_NATIVE is on",
         "queries": {},
     }
-    print("callgrind: %s (%s triangles), %d random rays, single thread, instructions of the trace loop only"
-          % (workload["mesh"], format(workload["triangles"], ","), rays))
+    print("callgrind: %s (%s triangles), %d random rays, single thread, instructions of the trace loop only; "
+          "ours = %s" % (workload["mesh"], format(workload["triangles"], ","), rays,
+                         workload.get("ours", {}).get("structure_spec", "kdtree")))
     print("%-10s %14s %14s %10s %10s %10s" % ("query", "ours Ir/ray", "Embree Ir/ray", "ours/Embree", "ours mispr",
                                               "Embree mispr"))
     def mispredicts(part):
@@ -205,6 +206,8 @@ def main():
 
     if "ours" in workload:
         result["ours_tree"] = {k: workload["ours"][k] for k in ("nodes", "sah_cost") if k in workload["ours"]}
+        # Which of our structures "ours" is (older workloads: the kd-tree).
+        result["ours_structure"] = workload["ours"].get("structure_spec", "kdtree")
     trav = workload.get("ours", {}).get("traversal")
     if trav:
         result["ours_traversal"] = trav

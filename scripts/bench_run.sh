@@ -2,8 +2,10 @@
 # Builds duplex_bench_mesh (Release) and runs the whole benchmark:
 #   main bench  -> docs/bench/mesh_bench.json (+ .txt: the table printed on stderr)
 #   sweep       -> docs/bench/sweep.json      (+ .txt)
-#   charts      -> docs/bench/build_vs_trace.png, docs/bench/throughput_vs_embree.png
-# About 10 minutes on the shared 2-core machine; the 1.6M-triangle mesh is the slow part.
+#   charts      -> docs/bench/build_vs_trace.png, docs/bench/throughput_vs_embree.png,
+#                  docs/bench/structures_build_vs_trace.png, structures_watertight.png, structures.txt/.csv
+# Every structure (BVH presets, kd-tree, Embree medium/high/robust) on every default mesh: allow an
+# hour on the shared 2-core machine; the 1.6M-triangle mesh is the slow part.
 #
 # Environment:
 #   BUILD_DIR   build directory (default: build-bench)
@@ -53,6 +55,9 @@ if [ "${SKIP_SWEEP:-0}" != 1 ]; then
   "$BIN" --sweep $QUICK_ARG ${SWEEP_ARGS:-} --out "$OUTDIR/sweep.json" 2>&1 | tee "$OUTDIR/sweep.txt" >&2
 fi
 "$PYTHON" "$ROOT/scripts/plot_bench.py" --main "$OUTDIR/mesh_bench.json" --sweep "$OUTDIR/sweep.json" --outdir "$OUTDIR"
+if [ -f "$OUTDIR/mesh_bench.json" ]; then
+  "$PYTHON" "$ROOT/scripts/plot_structures.py" --main "$OUTDIR/mesh_bench.json" --outdir "$OUTDIR"
+fi
 if [ "${CALLGRIND:-0}" = 1 ]; then
   # bench_callgrind.sh needs its own -g build, not the BUILD_DIR of this script.
   BUILD_DIR="${CALLGRIND_BUILD_DIR:-$ROOT/build-callgrind}" OUT="$OUTDIR/callgrind.json" "$ROOT/scripts/bench_callgrind.sh" | tee "$OUTDIR/callgrind.txt"

@@ -28,6 +28,7 @@
 #include <exception>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <numeric>
 #include <optional>
@@ -366,6 +367,14 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
       throw InvalidArgument(options.scene.string() + ": object '" + library.name(i) + "' is of type " +
                             library.typeName(i) + ": bench update measures scenes of mesh objects only");
     mesh_objects.push_back(m);
+  }
+  // Which bottom-level structure the scene's mesh objects have (the scene file may choose per
+  // object): "bvh", "kdtree" or "mixed", with the count of each.
+  {
+    std::map<std::string, std::size_t> counts;
+    for (const MeshObject* m : mesh_objects) ++counts[std::string(toString(m->structure()))];
+    out["bottom_structure"] = counts.size() == 1 ? counts.begin()->first : counts.empty() ? "none" : "mixed";
+    out["bottom_structure_counts"] = counts;
   }
 #if DUPLEX_BENCH_HAVE_EMBREE
   // Embree's side: the same meshes and instances, one device for the whole run.
