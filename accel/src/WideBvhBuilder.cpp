@@ -251,8 +251,11 @@ struct Binner {
     float s[3];
     for (int a = 0; a < 3; ++a) {
       const float ext = r.centroids2.hi[a] - r.centroids2.lo[a];
-      // A flat axis bins everything into bin 0 (and is not split along).
-      s[a] = ext > 0.0f ? static_cast<float>(k) * (1.0f - 1e-6f) / ext : 0.0f;
+      // A flat axis bins everything into bin 0 (and is not split along). So does an extent so small
+      // (subnormal) that the scale overflows: 0 * inf would be NaN, which the binning clamps to bin 0
+      // but the partition's comparison sends right, and the two must agree.
+      const float scale = ext > 0.0f ? static_cast<float>(k) * (1.0f - 1e-6f) / ext : 0.0f;
+      s[a] = std::isfinite(scale) ? scale : 0.0f;
     }
     scale = set4(s[0], s[1], s[2], 0.0f);
   }

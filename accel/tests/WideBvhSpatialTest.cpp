@@ -180,7 +180,9 @@ TEST(WideBvhSpatial, TreeDoesNotDependOnThreadsOrTheParallelThreshold) {
     const WideBvh dflt = buildWideBvh(boxes, BvhBuildConfig::preset(preset), clip);
     expectSameTree(one, two);
     expectSameTree(one, dflt);
-    if (preset == BvhPreset::High) EXPECT_GT(leafEntries(one), segs.size()) << "no spatial split was exercised";
+    if (preset == BvhPreset::High) {
+      EXPECT_GT(leafEntries(one), segs.size()) << "no spatial split was exercised";
+    }
   }
 }
 

@@ -80,6 +80,14 @@ inline std::vector<StructureCase> structureCases() {
   return cases;
 }
 
+/// The BVH with each preset (the cases about the BVH's own parameters and geometry).
+inline std::vector<StructureCase> bvhStructureCases() {
+  std::vector<StructureCase> cases;
+  for (const StructureCase& c : structureCases())
+    if (c.config.structure == MeshStructure::Bvh) cases.push_back(c);
+  return cases;
+}
+
 /// The kd-tree and the default BVH (the suites too slow to run for every preset).
 inline std::vector<StructureCase> defaultStructureCases() {
   std::vector<StructureCase> cases;
@@ -87,35 +95,6 @@ inline std::vector<StructureCase> defaultStructureCases() {
     if (c.name == "kdtree" || c.name == "bvh_medium") cases.push_back(c);
   return cases;
 }
-
-/// Empty when `config` builds in this library; otherwise why not. Spatial splits (the BVH's high
-/// preset) may be missing: the builder then refuses them saying they are "not available".
-inline std::string unavailableReason(const MeshBuildConfig& config) {
-  auto mesh = std::make_shared<const TriangleMesh>(
-      TriangleMesh::fromTriangles({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 1}}, {{0, 1, 2}, {1, 3, 2}}, "probe"));
-  try {
-    (void)MeshObject(mesh, config);
-  } catch (const InvalidArgument& e) {
-    if (std::string(e.what()).find("not available") != std::string::npos) return e.what();
-    throw;
-  }
-  return {};
-}
-
-/// GTEST_SKIP()s the current test when the case's structure is not available in this build.
-#define DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(structure_case)                                          \
-  do {                                                                                             \
-    const std::string duplex_reason_ = ::duplex::test::unavailableReason((structure_case).config); \
-    if (!duplex_reason_.empty()) GTEST_SKIP() << (structure_case).name << ": " << duplex_reason_;  \
-  } while (false)
-
-/// GTEST_SKIP()s the current test for the kd-tree in the runs with DUPLEX_ISA set (ctest's ISA
-/// variants): its queries have no run-time chosen kernels, so the default run covers them.
-#define DUPLEX_SKIP_ISA_INDEPENDENT(structure_case)                                                         \
-  do {                                                                                                      \
-    if ((structure_case).config.structure == ::duplex::MeshStructure::KdTree && std::getenv("DUPLEX_ISA"))  \
-      GTEST_SKIP() << (structure_case).name << " does not depend on DUPLEX_ISA: tested in the default run"; \
-  } while (false)
 
 /// A one-triangle mesh object named `name` (cheap to build), its tree checked.
 inline std::shared_ptr<const MeshObject> tinyMeshObject(const std::string& name) {

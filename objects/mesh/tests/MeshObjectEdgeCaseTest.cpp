@@ -70,13 +70,7 @@ std::vector<std::uint32_t> referencedTriangles(const MeshObject& object) {
 }
 
 /// The edge cases run for every structure (the kd-tree and each BVH preset).
-class MeshEdgeCases : public ::testing::TestWithParam<StructureCase> {
- protected:
-  void SetUp() override {
-    DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(GetParam());
-    DUPLEX_SKIP_ISA_INDEPENDENT(GetParam());
-  }
-};
+class MeshEdgeCases : public ::testing::TestWithParam<StructureCase> {};
 
 // ---------------------------------------------------------------------------------------------
 
@@ -486,10 +480,13 @@ TEST_P(MeshEdgeCases, TinyDirectionComponents) {
   EXPECT_GT(s.hits, s.rays / 4);
 }
 
-TEST_P(MeshEdgeCases, RaysInChildBoxPlanes) {
-  // The BVH's counterpart of rays in split planes: rays lying in (and starting on) the planes of
-  // child boxes, where the conservative box test decides alone whether a child is entered.
-  if (GetParam().config.structure != MeshStructure::Bvh) GTEST_SKIP() << "BVH only (RaysInSplitPlanes: kd-tree)";
+/// The cases about the BVH's own geometry: run for each BVH preset only.
+class MeshBvhEdgeCases : public MeshEdgeCases {};
+
+TEST_P(MeshBvhEdgeCases, RaysInChildBoxPlanes) {
+  // The BVH's counterpart of rays in split planes (RaysInSplitPlanes, the kd-tree's): rays lying
+  // in (and starting on) the planes of child boxes, where the conservative box test decides alone
+  // whether a child is entered.
   std::mt19937_64 rng(32);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
   for (const auto& mesh : edgeCaseMeshes()) {
@@ -625,6 +622,8 @@ TEST_P(MeshEdgeCases, NullMeshAndRefusedConfigurationsThrow) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Structures, MeshEdgeCases, ::testing::ValuesIn(structureCases()),
+                         [](const auto& info) { return info.param.name; });
+INSTANTIATE_TEST_SUITE_P(Structures, MeshBvhEdgeCases, ::testing::ValuesIn(bvhStructureCases()),
                          [](const auto& info) { return info.param.name; });
 
 }  // namespace

@@ -307,10 +307,6 @@ TEST(Generators, ClosedMeshesAreConsistentlyOutwardOriented) {
 
 class Watertight : public ::testing::TestWithParam<StructureCase> {
  protected:
-  void SetUp() override {
-    DUPLEX_SKIP_UNAVAILABLE_STRUCTURE(GetParam());
-    DUPLEX_SKIP_ISA_INDEPENDENT(GetParam());
-  }
   [[nodiscard]] std::string label(const std::string& what) const { return what + " / " + GetParam().name; }
 };
 
