@@ -91,6 +91,21 @@ struct Node {
   }
 };
 
+// The leaf step: one 4-wide test per block (MeshLeafTest.h).
+struct Leaf {
+  struct RayConstants {
+    explicit RayConstants(const MeshRay&) {}
+  };
+  static bool closest(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks, std::uint32_t count,
+                      float& t_max, ClosestHit& best) {
+    return closestInLeaf(ray, blocks, count, t_max, best);
+  }
+  static bool any(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks, std::uint32_t count,
+                  float t_max) {
+    return anyInLeaf(ray, blocks, count, t_max);
+  }
+};
+
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
@@ -145,6 +160,141 @@ struct Node {
   }
 };
 
+// The leaf step on two blocks at once: intersectWatertight4v (WatertightTriangle4.h) with 8 lanes,
+// lane for lane the same operations (no fused multiply-add), so every lane decides as the 4-wide
+// and the scalar tests do. Lanes 0..3 are the first block, 4..7 the second.
+struct Watertight8v {
+  int fast = 0;
+  int exact = 0;
+  __m256 T, det, V, W;
+};
+
+inline __m256 broadcast2(__m128 x) { return _mm256_insertf128_ps(_mm256_castps128_ps256(x), x, 1); }
+// Row `row` of two blocks (lo: lanes 0..3, hi: lanes 4..7).
+inline __m256 rows2(const float* lo, const float* hi) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(lo)), _mm_load_ps(hi), 1);
+}
+
+struct Leaf {
+  /// WatertightRay4's constants on 8 lanes, once per ray.
+  struct RayConstants {
+    __m256 o[3], sx, sy, sz, tnear;
+    explicit RayConstants(const MeshRay& ray)
+        : o{broadcast2(ray.wray4.o[0]), broadcast2(ray.wray4.o[1]), broadcast2(ray.wray4.o[2])},
+          sx(broadcast2(ray.wray4.sx)),
+          sy(broadcast2(ray.wray4.sy)),
+          sz(broadcast2(ray.wray4.sz)),
+          tnear(broadcast2(ray.wray4.tnear)) {}
+  };
+
+  static Watertight8v test8(const MeshRay& ray, const RayConstants& c, const TriangleBlock4& b0,
+                            const TriangleBlock4& b1, int lanes, float t_max) {
+    const int kx = ray.wray4.kx, ky = ray.wray4.ky, kz = ray.wray4.kz;
+    const float *rx0 = b0.v[kx], *ry0 = b0.v[ky], *rz0 = b0.v[kz];
+    const float *rx1 = b1.v[kx], *ry1 = b1.v[ky], *rz1 = b1.v[kz];
+    const __m256 Az = _mm256_sub_ps(rows2(rz0, rz1), c.o[2]);
+    const __m256 ax = _mm256_sub_ps(_mm256_sub_ps(rows2(rx0, rx1), c.o[0]), _mm256_mul_ps(c.sx, Az));
+    const __m256 ay = _mm256_sub_ps(_mm256_sub_ps(rows2(ry0, ry1), c.o[1]), _mm256_mul_ps(c.sy, Az));
+    const __m256 Bz = _mm256_sub_ps(rows2(rz0 + 12, rz1 + 12), c.o[2]);
+    const __m256 bx = _mm256_sub_ps(_mm256_sub_ps(rows2(rx0 + 12, rx1 + 12), c.o[0]), _mm256_mul_ps(c.sx, Bz));
+    const __m256 by = _mm256_sub_ps(_mm256_sub_ps(rows2(ry0 + 12, ry1 + 12), c.o[1]), _mm256_mul_ps(c.sy, Bz));
+    const __m256 Cz = _mm256_sub_ps(rows2(rz0 + 24, rz1 + 24), c.o[2]);
+    const __m256 cx = _mm256_sub_ps(_mm256_sub_ps(rows2(rx0 + 24, rx1 + 24), c.o[0]), _mm256_mul_ps(c.sx, Cz));
+    const __m256 cy = _mm256_sub_ps(_mm256_sub_ps(rows2(ry0 + 24, ry1 + 24), c.o[1]), _mm256_mul_ps(c.sy, Cz));
+    Watertight8v r;
+    r.V = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+    r.W = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+    const __m256 U = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+    const __m256 V = r.V, W = r.W;
+    const __m256 zero = _mm256_setzero_ps();
+    const __m256 any_zero =
+        _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(U, zero, _CMP_EQ_OQ), _mm256_cmp_ps(V, zero, _CMP_EQ_OQ)),
+                     _mm256_cmp_ps(W, zero, _CMP_EQ_OQ));
+    r.exact = _mm256_movemask_ps(any_zero) & lanes;
+    const __m256 mixed = _mm256_and_ps(_mm256_cmp_ps(_mm256_min_ps(U, _mm256_min_ps(V, W)), zero, _CMP_LT_OQ),
+                                       _mm256_cmp_ps(_mm256_max_ps(U, _mm256_max_ps(V, W)), zero, _CMP_GT_OQ));
+    r.det = _mm256_add_ps(_mm256_add_ps(U, V), W);
+    const int candidates =
+        ~_mm256_movemask_ps(_mm256_or_ps(mixed, _mm256_cmp_ps(r.det, zero, _CMP_EQ_OQ))) & lanes & ~r.exact;
+    if (candidates == 0) {
+      r.T = zero;
+      return r;
+    }
+    r.T = _mm256_add_ps(
+        _mm256_add_ps(_mm256_mul_ps(U, _mm256_mul_ps(c.sz, Az)), _mm256_mul_ps(V, _mm256_mul_ps(c.sz, Bz))),
+        _mm256_mul_ps(W, _mm256_mul_ps(c.sz, Cz)));
+    const __m256 sign_bit = _mm256_set1_ps(-0.0f);
+    const __m256 abs_det = _mm256_andnot_ps(sign_bit, r.det);
+    const __m256 sT = _mm256_xor_ps(r.T, _mm256_and_ps(r.det, sign_bit));
+    const __m256 outside = _mm256_or_ps(_mm256_cmp_ps(sT, _mm256_mul_ps(c.tnear, abs_det), _CMP_LT_OQ),
+                                        _mm256_cmp_ps(sT, _mm256_mul_ps(_mm256_set1_ps(t_max), abs_det), _CMP_GT_OQ));
+    r.fast = candidates & ~_mm256_movemask_ps(outside);
+    return r;
+  }
+
+  /// closestInLeaf (MeshLeafTest.h) two blocks at a time; a last lone block takes the 4-wide test.
+  static bool closest(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
+                      float& t_max, ClosestHit& best) {
+    bool found = false;
+    int left = static_cast<int>(count);
+    for (; left > 4; left -= 8, block += 2) {
+      const int lanes = left >= 8 ? 0xFF : (1 << left) - 1;
+      const Watertight8v r = test8(ray, c, block[0], block[1], lanes, t_max);
+      if (r.fast != 0) {
+        const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), r.det);  // the scalar test's final step
+        const __m256 t = _mm256_mul_ps(r.T, inv);
+        const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        const __m256 fast =
+            _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(r.fast), bits), bits));
+        // The smallest t of the fast lanes, broadcast; its first lane wins ties.
+        __m256 m = _mm256_blendv_ps(_mm256_set1_ps(std::numeric_limits<float>::infinity()), t, fast);
+        m = _mm256_min_ps(m, _mm256_permute_ps(m, _MM_SHUFFLE(2, 3, 0, 1)));
+        m = _mm256_min_ps(m, _mm256_permute_ps(m, _MM_SHUFFLE(1, 0, 3, 2)));
+        m = _mm256_min_ps(m, _mm256_permute2f128_ps(m, m, 1));
+        const int k = std::countr_zero(
+            static_cast<unsigned>(_mm256_movemask_ps(_mm256_and_ps(fast, _mm256_cmp_ps(t, m, _CMP_EQ_OQ)))));
+        alignas(32) float tv[8], uv[8], vv[8];
+        _mm256_store_ps(tv, t);
+        _mm256_store_ps(uv, _mm256_mul_ps(r.V, inv));
+        _mm256_store_ps(vv, _mm256_mul_ps(r.W, inv));
+        t_max = tv[k];
+        best = {block + (k >> 2), k & 3, uv[k], vv[k]};
+        found = true;
+      }
+      for (int lanes_left = r.exact; lanes_left != 0; lanes_left &= lanes_left - 1) {
+        const int k = std::countr_zero(static_cast<unsigned>(lanes_left));
+        const TriangleBlock4& b = block[k >> 2];
+        float t, u, v;
+        if (!intersectWatertight(ray.wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), t_max, t, u, v))
+          continue;
+        t_max = t;
+        best = {&b, k & 3, u, v};
+        found = true;
+      }
+    }
+    if (left > 0 && closestInLeaf(ray, block, static_cast<std::uint32_t>(left), t_max, best)) found = true;
+    return found;
+  }
+
+  /// anyInLeaf (MeshLeafTest.h) two blocks at a time.
+  static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
+                  float t_max) {
+    int left = static_cast<int>(count);
+    for (; left > 4; left -= 8, block += 2) {
+      const Watertight8v r = test8(ray, c, block[0], block[1], left >= 8 ? 0xFF : (1 << left) - 1, t_max);
+      if (r.fast != 0) return true;
+      for (int lanes_left = r.exact; lanes_left != 0; lanes_left &= lanes_left - 1) {
+        const int k = std::countr_zero(static_cast<unsigned>(lanes_left));
+        const TriangleBlock4& b = block[k >> 2];
+        float t, u, v;
+        if (intersectWatertight(ray.wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), t_max, t, u, v))
+          return true;
+      }
+    }
+    return left > 0 && anyInLeaf(ray, block, static_cast<std::uint32_t>(left), t_max);
+  }
+};
+
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
@@ -158,6 +308,7 @@ namespace avx512 {
 namespace {
 
 using avx2::BoxRay;
+using avx2::Leaf;
 
 struct Node {
   template <int kOct>

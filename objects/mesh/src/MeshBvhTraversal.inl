@@ -1,6 +1,7 @@
 // The mesh BVH traversal, included by MeshBvh.cpp once per instruction set inside a namespace and
-// a `#pragma GCC target` region that define `BoxRay` and `Node::test` (the node's 8 child boxes
-// against the ray). No include guard: it is meant to be compiled several times.
+// a `#pragma GCC target` region that define `BoxRay`, `Node::test` (the node's 8 child boxes
+// against the ray) and `Leaf` (the triangles of a leaf, with per-ray constants
+// Leaf::RayConstants). No include guard: it is meant to be compiled several times.
 //
 // Closest hit: the children whose boxes the ray meets within [tnear, t_best] are visited nearest
 // first; the others wait on a stack with their entry distance and are dropped when popped behind
@@ -17,6 +18,7 @@ template <int kOct>
 inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, Hit& hit) {
   float t_best = std::min(hit.t, ray_os.tfar);
   const BoxRay box_ray(ray.kd);
+  const Leaf::RayConstants leaf_ray(ray);
   ClosestHit best;
   bool found = false;
   StackEntry stack[kStackSize];
@@ -68,7 +70,8 @@ inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mes
         continue;
       }
     } else {
-      if (closestInLeaf(ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_best, best)) found = true;
+      if (Leaf::closest(ray, leaf_ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_best, best))
+        found = true;
     }
     // Pop the next child not behind the closest hit.
     while (true) {
@@ -88,6 +91,7 @@ template <int kOct>
 inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray) {
   const float t_far = ray_os.tfar;
   const BoxRay box_ray(ray.kd);
+  const Leaf::RayConstants leaf_ray(ray);
   std::uint32_t stack[kStackSize];
   int sp = 0;
   std::uint32_t cur = bvh.root;
@@ -101,7 +105,7 @@ inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mesh
         for (mask &= mask - 1; mask != 0; mask &= mask - 1) stack[sp++] = node.child[std::countr_zero(mask)];
         continue;
       }
-    } else if (anyInLeaf(ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_far)) {
+    } else if (Leaf::any(ray, leaf_ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_far)) {
       return true;
     }
     if (sp == 0) return false;

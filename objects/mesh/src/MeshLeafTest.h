@@ -86,7 +86,7 @@ inline bool anyInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::uint
 }
 
 /// Fills `hit` (object space) from the recorded closest hit at distance t.
-inline void fillHit(const ClosestHit& best, float t, Hit& hit) {
+[[gnu::always_inline]] inline void fillHit(const ClosestHit& best, float t, Hit& hit) {
   const glm::vec3 v0 = best.block->vertex(best.lane, 0);
   hit.t = t;
   hit.u = best.u;

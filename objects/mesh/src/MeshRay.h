@@ -34,7 +34,7 @@ struct MeshRay {
 
 /// Fills `r` from `ray` (object space): returns false when the ray is not queryable (isQueryable in
 /// Ray.h). The BVH traversal needs no more (its root's box test clips the ray).
-inline bool prepareMeshRay(const Ray& ray, MeshRay& r) {
+[[gnu::always_inline]] inline bool prepareMeshRay(const Ray& ray, MeshRay& r) {
   // Ray is {ox, oy, oz, tnear, dx, dy, dz, tfar}: two unaligned loads.
   const __m128 o = _mm_loadu_ps(&ray.origin.x);
   const __m128 d = _mm_loadu_ps(&ray.dir.x);
