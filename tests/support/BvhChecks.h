@@ -399,14 +399,8 @@ inline ::testing::AssertionResult checkTriangleBvh(const WideBvh& bvh, std::span
 inline ::testing::AssertionResult checkMeshBvh(const MeshObject& object, const BvhCheckOptions& opt) {
   if (object.structure() != MeshStructure::Bvh)
     return ::testing::AssertionFailure() << "mesh '" << object.mesh().name() << "' has no BVH";
-  const TriangleMesh& m = object.mesh();
-  std::vector<std::array<glm::vec3, 3>> tris(m.triangleCount());
-  std::vector<char> usable(m.triangleCount());
-  for (std::size_t i = 0; i < m.triangleCount(); ++i) {
-    tris[i] = m.vertices(i);
-    usable[i] = m.isValid(i);
-  }
-  return checkTriangleBvh(object.bvh(), tris, usable, opt);
+  const CheckedTriangles t(object.mesh());
+  return checkTriangleBvh(object.bvh(), t.tris, t.usable, opt);
 }
 
 }  // namespace duplex::test

@@ -452,16 +452,23 @@ inline ::testing::AssertionResult checkBoxKdTree(const KdTree& tree, std::span<c
   return f.result("kd-tree box coverage");
 }
 
+/// A mesh's triangles (object space) and whether each is valid (non-degenerate, finite): what the
+/// structure checkers take.
+struct CheckedTriangles {
+  std::vector<std::array<glm::vec3, 3>> tris;
+  std::vector<char> usable;
+  explicit CheckedTriangles(const TriangleMesh& m) : tris(m.triangleCount()), usable(m.triangleCount()) {
+    for (std::size_t i = 0; i < m.triangleCount(); ++i) {
+      tris[i] = m.vertices(i);
+      usable[i] = m.isValid(i);
+    }
+  }
+};
+
 /// The tree of a mesh object, over its triangles (degenerate ones must not be referenced).
 inline ::testing::AssertionResult checkMeshTree(const MeshObject& object, int max_depth = 0) {
-  const TriangleMesh& m = object.mesh();
-  std::vector<std::array<glm::vec3, 3>> tris(m.triangleCount());
-  std::vector<char> usable(m.triangleCount());
-  for (std::size_t i = 0; i < m.triangleCount(); ++i) {
-    tris[i] = m.vertices(i);
-    usable[i] = m.isValid(i);
-  }
-  return checkTriangleKdTree(object.tree(), tris, usable, max_depth);
+  const CheckedTriangles t(object.mesh());
+  return checkTriangleKdTree(object.tree(), t.tris, t.usable, max_depth);
 }
 
 /// A named build configuration for parameterised tests.
