@@ -710,6 +710,7 @@ class Builder {
     }
     if (spawned) tasks.wait();
     for (int i = 0; i < count; ++i) node.setChild(i, refs[i], children[i].range.box);
+    node.computeOrder();
     const auto it = nodes_.push_back(node);
     return static_cast<std::uint32_t>(it - nodes_.begin());
   }
@@ -815,6 +816,40 @@ WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& con
   return builder.run(Range{0, n, n + room, bounds.box(), centroids.box()});
 }
 
+void BvhNode8::computeOrder() {
+  std::fill(std::begin(order), std::end(order), 0u);
+  for (int octant = 0; octant < 8; ++octant) {
+    // Twice the centre's coordinate along the octant's diagonal; in double, so that boxes up to
+    // float's range neither overflow nor tie by rounding.
+    std::array<double, kWidth> key{};
+    std::array<int, kWidth> slot{};
+    for (int k = 0; k < kWidth; ++k) {
+      slot[k] = k;
+      if (child[k] == BvhRef::kEmpty) {
+        key[k] = std::numeric_limits<double>::infinity();
+        continue;
+      }
+      for (int a = 0; a < 3; ++a) {
+        const double c = double{lo[a][k]} + double{hi[a][k]};
+        key[k] += (octant >> a & 1) ? -c : c;
+      }
+    }
+    std::stable_sort(slot.begin(), slot.end(), [&](int x, int y) { return key[x] > key[y]; });
+    for (int rank = 0; rank < kWidth; ++rank) order[rank] |= static_cast<std::uint32_t>(slot[rank]) << (3 * octant);
+  }
+}
+
+bool BvhNode8::orderValid() const {
+  for (int rank = 0; rank < kWidth; ++rank)
+    if (order[rank] >> 24 != 0) return false;
+  for (int octant = 0; octant < 8; ++octant) {
+    unsigned seen = 0;
+    for (int rank = 0; rank < kWidth; ++rank) seen |= 1u << orderedSlot(octant, rank);
+    if (seen != 0xFFu) return false;
+  }
+  return true;
+}
+
 double WideBvh::sahCost(const BvhBuildConfig& config) const {
   if (root == BvhRef::kEmpty || bounds.empty()) return 0.0;
   // In double: float areas of boxes wider than about 1.8e19 overflow to inf (and inf / inf is NaN).
@@ -867,6 +902,7 @@ void refitWideBvh(WideBvh& bvh, std::span<const Box> prim_bounds) {
       node.setChild(k, c, b);
       all.extend(b);
     }
+    node.computeOrder();
     node_box[n] = all;
   }
   bvh.bounds = node_box[0];

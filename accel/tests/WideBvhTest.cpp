@@ -11,6 +11,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/WideBvh.h"
 
+#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -339,6 +340,12 @@ TEST(WideBvhChecker, RefusesBrokenTrees) {
         if (c == x) c = y;
         else if (c == y) c = x;
   });
+  expectRefused("child order not a permutation", "child order is not a permutation",
+                [](WideBvh& b) { b.nodes[0].order[3] = b.nodes[0].order[2]; });
+  expectRefused("child order with high bits", "child order is not a permutation",
+                [](WideBvh& b) { b.nodes[0].order[0] |= 1u << 30; });
+  expectRefused("child order not the boxes'", "differs from the boxes'",
+                [](WideBvh& b) { std::swap(b.nodes[0].order[0], b.nodes[0].order[7]); });
   expectRefused("unreachable node", "reached", [](WideBvh& b) { b.nodes.push_back(b.nodes.back()); });
   expectRefused("bounds too large", "union of usable bounds", [](WideBvh& b) { b.bounds.hi.x += 1.0f; });
   std::vector<Box> with_nan = boxes;
@@ -346,6 +353,44 @@ TEST(WideBvhChecker, RefusesBrokenTrees) {
   const auto r = checkBoxBvh(good, with_nan);
   EXPECT_FALSE(r) << "a NaN box referenced";
   EXPECT_NE(std::string(r.message()).find("not usable"), std::string::npos) << r.message();
+}
+
+// The per-octant child orders (BvhNode8::order): for rays of every octant, ranks go from the
+// farthest box centre along the octant's diagonal to the nearest, empty slots first.
+TEST(WideBvhNode, ChildOrderRunsFarToNearAlongEachOctant) {
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<float> u(-100.0f, 100.0f);
+  for (int used = 2; used <= BvhNode8::kWidth; ++used) {
+    BvhNode8 node;
+    for (int k = 0; k < BvhNode8::kWidth; ++k) node.setChild(k, BvhRef::kEmpty, Box());
+    for (int k = 0; k < used; ++k) {
+      const glm::vec3 c(u(rng), u(rng), u(rng));
+      node.setChild(k, static_cast<std::uint32_t>(k + 1), Box(c - glm::vec3(1.0f), c + glm::vec3(2.0f)));
+    }
+    node.computeOrder();
+    ASSERT_TRUE(node.orderValid());
+    for (int octant = 0; octant < 8; ++octant) {
+      const glm::dvec3 dir((octant & 1) ? -1.0 : 1.0, (octant & 2) ? -1.0 : 1.0, (octant & 4) ? -1.0 : 1.0);
+      auto along = [&](int slot) {
+        const Box b = node.childBox(slot);
+        return glm::dot(glm::dvec3(b.lo) + glm::dvec3(b.hi), dir);
+      };
+      for (int rank = 0; rank < BvhNode8::kWidth; ++rank) {
+        const int slot = node.orderedSlot(octant, rank);
+        if (rank < BvhNode8::kWidth - used) {
+          EXPECT_EQ(node.child[slot], BvhRef::kEmpty) << "octant " << octant << " rank " << rank;
+        } else if (rank > BvhNode8::kWidth - used) {
+          EXPECT_GE(along(node.orderedSlot(octant, rank - 1)), along(slot)) << "octant " << octant << " rank " << rank;
+        }
+      }
+    }
+  }
+  BvhNode8 bad;
+  for (int k = 0; k < BvhNode8::kWidth; ++k) bad.setChild(k, BvhRef::kEmpty, Box());
+  bad.computeOrder();
+  EXPECT_TRUE(bad.orderValid());
+  bad.order[5] = bad.order[4];
+  EXPECT_FALSE(bad.orderValid());
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -259,6 +259,14 @@ inline ::testing::AssertionResult checkBvhStructure(const WideBvh& bvh, std::spa
       int used = 0;
       while (used < BvhNode8::kWidth && node.child[used] != BvhRef::kEmpty) ++used;
       if (used < 2) f.add([&](auto& os) { os << at << " has " << used << " children (at least 2)"; });
+      if (!node.orderValid()) {
+        f.add([&](auto& os) { os << at << ": child order is not a permutation of the slots per octant"; });
+      } else if (opt.tight) {
+        BvhNode8 sorted = node;
+        sorted.computeOrder();
+        if (!std::equal(std::begin(node.order), std::end(node.order), std::begin(sorted.order)))
+          f.add([&](auto& os) { os << at << ": child order differs from the boxes' (computeOrder)"; });
+      }
       Box all;
       for (int k = 0; k < BvhNode8::kWidth; ++k) {
         const Box b = node.childBox(k);

@@ -22,6 +22,7 @@
 #include <immintrin.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
@@ -49,6 +50,19 @@ template <int kOct, int kAxis>
 constexpr int farRow() {
   return (kOct >> kAxis & 1) ? loRow(kAxis) : hiRow(kAxis);
 }
+
+// kCompact[mask]: the lanes of the set bits of `mask`, lowest first, 3 bits each (lane j of the
+// result in bits 3j..3j+2): compacts the entered children of a node to the front of a vector.
+constexpr std::array<std::uint32_t, 256> makeCompactTable() {
+  std::array<std::uint32_t, 256> t{};
+  for (unsigned m = 0; m < 256; ++m) {
+    unsigned j = 0;
+    for (unsigned k = 0; k < 8; ++k)
+      if (m >> k & 1u) t[m] |= k << (3 * j++);
+  }
+  return t;
+}
+constexpr std::array<std::uint32_t, 256> kCompact = makeCompactTable();
 
 namespace sse2 {
 namespace {
@@ -88,6 +102,21 @@ struct Node {
       _mm_store_ps(dist + h, tn);
     }
     return mask;
+  }
+  // The entered children in the node's order for kOct, farthest first, at refs / dists; returns
+  // their count. Writes 8 entries whatever the count (the stack has room).
+  template <int kOct>
+  static int push(const BvhNode8& node, const BoxRay& r, float t_best, std::uint32_t* refs, float* dists) {
+    alignas(16) float dist[8];
+    const unsigned mask = test<kOct>(node, r, t_best, dist);
+    int n = 0;
+    for (int rank = 0; rank < 8; ++rank) {
+      const int k = node.orderedSlot(kOct, rank);
+      refs[n] = node.child[k];
+      dists[n] = dist[k];
+      n += static_cast<int>(mask >> k & 1u);
+    }
+    return n;
   }
 };
 
@@ -150,13 +179,31 @@ inline __m256 entryAndExit(const BvhNode8& node, const BoxRay& r, float t_best, 
   return _mm256_sub_ps(tn, _mm256_mul_ps(_mm256_andnot_ps(sign, tn), widen));
 }
 
+// The node's child order for kOct: lane i holds the slot at rank i (0: farthest).
+template <int kOct>
+inline __m256i childOrder(const BvhNode8& node) {
+  const __m256i packed = _mm256_load_si256(reinterpret_cast<const __m256i*>(node.order));
+  return _mm256_and_si256(_mm256_srli_epi32(packed, 3 * kOct), _mm256_set1_epi32(7));
+}
+
 struct Node {
+  // As sse2::Node::push: the entered children ordered, then compacted to the front through
+  // kCompact, and stored with one 8-lane write each for references and distances.
   template <int kOct>
-  static unsigned test(const BvhNode8& node, const BoxRay& r, float t_best, float* dist) {
+  static int push(const BvhNode8& node, const BoxRay& r, float t_best, std::uint32_t* refs, float* dists) {
     __m256 tf;
     const __m256 tn = entryAndExit<kOct>(node, r, t_best, tf);
-    _mm256_store_ps(dist, tn);
-    return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
+    const __m256i order = childOrder<kOct>(node);
+    const auto mask =
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_permutevar8x32_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ), order)));
+    const __m256i lanes = _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(static_cast<int>(kCompact[mask])),
+                                                             _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21)),
+                                           _mm256_set1_epi32(7));
+    const __m256i idx = _mm256_permutevar8x32_epi32(order, lanes);
+    const __m256i child = _mm256_load_si256(reinterpret_cast<const __m256i*>(node.child));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(refs), _mm256_permutevar8x32_epi32(child, idx));
+    _mm256_storeu_ps(dists, _mm256_permutevar8x32_ps(tn, idx));
+    return std::popcount(mask);
   }
 };
 
@@ -311,12 +358,19 @@ using avx2::BoxRay;
 using avx2::Leaf;
 
 struct Node {
+  // As avx2::Node::push, with the compaction in registers (vpcompressd / vcompressps).
   template <int kOct>
-  static unsigned test(const BvhNode8& node, const BoxRay& r, float t_best, float* dist) {
+  static int push(const BvhNode8& node, const BoxRay& r, float t_best, std::uint32_t* refs, float* dists) {
     __m256 tf;
     const __m256 tn = avx2::entryAndExit<kOct>(node, r, t_best, tf);
-    _mm256_store_ps(dist, tn);
-    return static_cast<unsigned>(_mm256_cmp_ps_mask(tn, tf, _CMP_LE_OQ));
+    const __m256i order = avx2::childOrder<kOct>(node);
+    const __m256 tn_ordered = _mm256_permutevar8x32_ps(tn, order);
+    const __mmask8 mask = _mm256_cmp_ps_mask(tn_ordered, _mm256_permutevar8x32_ps(tf, order), _CMP_LE_OQ);
+    const __m256i child = _mm256_load_si256(reinterpret_cast<const __m256i*>(node.child));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(refs),
+                        _mm256_maskz_compress_epi32(mask, _mm256_permutevar8x32_epi32(child, order)));
+    _mm256_storeu_ps(dists, _mm256_maskz_compress_ps(mask, tn_ordered));
+    return std::popcount(static_cast<unsigned>(mask));
   }
 };
 

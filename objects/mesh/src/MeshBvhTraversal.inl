@@ -1,17 +1,15 @@
 // The mesh BVH traversal, included by MeshBvh.cpp once per instruction set inside a namespace and
-// a `#pragma GCC target` region that define `BoxRay`, `Node::test` (the node's 8 child boxes
-// against the ray) and `Leaf` (the triangles of a leaf, with per-ray constants
-// Leaf::RayConstants). No include guard: it is meant to be compiled several times.
+// a `#pragma GCC target` region that define `BoxRay`, `Node::push` (the node's 8 child boxes
+// against the ray; the children entered are pushed on the stack) and `Leaf` (the triangles of a
+// leaf, with per-ray constants Leaf::RayConstants). No include guard: it is meant to be compiled
+// several times.
 //
-// Closest hit: the children whose boxes the ray meets within [tnear, t_best] are visited nearest
-// first; the others wait on a stack with their entry distance and are dropped when popped behind
-// the closest hit found by then. Any hit: the same without ordering, stopping at the first hit.
+// Every child the ray enters goes on the stack in the node's order for the ray's octant, nearest
+// on top (BvhNode8::order): no sort per ray, and one pop gives the next node. Closest hit: a popped
+// entry behind the closest hit found by then is dropped. Any hit and all leaves: no culling.
 
-struct StackEntry {
-  std::uint32_t ref;
-  float dist;
-};
-// 7 pending children per level (WideBvh::kMaxDepth levels) fit.
+// Node::push writes 8 lanes at the stack top whatever the count: 7 pending children per level
+// (WideBvh::kMaxDepth levels) plus one 8-lane write fit.
 constexpr int kStackSize = 7 * WideBvh::kMaxDepth + 8;
 
 template <int kOct>
@@ -21,69 +19,27 @@ inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mes
   const Leaf::RayConstants leaf_ray(ray);
   ClosestHit best;
   bool found = false;
-  StackEntry stack[kStackSize];
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
   int sp = 0;
   std::uint32_t cur = bvh.root;
   while (true) {
     if (BvhRef::isInner(cur)) {
-      const BvhNode8& node = bvh.nodes[cur];
-      alignas(32) float dist[8];
-      unsigned mask = Node::template test<kOct>(node, box_ray, t_best, dist);
-      if (mask != 0) {
-        const int a = std::countr_zero(mask);
-        mask &= mask - 1;
-        if (mask == 0) {
-          cur = node.child[a];
-          continue;
-        }
-        const int b = std::countr_zero(mask);
-        mask &= mask - 1;
-        if (mask == 0) {
-          // Two children, the common case below the top levels.
-          if (dist[a] <= dist[b]) {
-            stack[sp++] = {node.child[b], dist[b]};
-            cur = node.child[a];
-          } else {
-            stack[sp++] = {node.child[a], dist[a]};
-            cur = node.child[b];
-          }
-          continue;
-        }
-        // Three or more: sorted farthest first onto the stack (insertion sort of at most 8), the
-        // nearest is visited now.
-        StackEntry e[8];
-        int n = 0;
-        e[n++] = {node.child[a], dist[a]};
-        e[n++] = {node.child[b], dist[b]};
-        for (; mask != 0; mask &= mask - 1) {
-          const int k = std::countr_zero(mask);
-          e[n++] = {node.child[k], dist[k]};
-        }
-        for (int i = 1; i < n; ++i) {
-          const StackEntry x = e[i];
-          int j = i;
-          for (; j > 0 && e[j - 1].dist < x.dist; --j) e[j] = e[j - 1];
-          e[j] = x;
-        }
-        for (int i = 0; i + 1 < n; ++i) stack[sp++] = e[i];
-        cur = e[n - 1].ref;
-        continue;
-      }
-    } else {
-      if (Leaf::closest(ray, leaf_ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_best, best))
-        found = true;
+      sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_best, refs + sp, dists + sp);
+    } else if (Leaf::closest(ray, leaf_ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_best,
+                             best)) {
+      found = true;
     }
     // Pop the next child not behind the closest hit.
-    while (true) {
+    do {
       if (sp == 0) {
         if (!found) return false;
         fillHit(best, t_best, hit);
         return true;
       }
       --sp;
-      if (stack[sp].dist <= t_best) break;
-    }
-    cur = stack[sp].ref;
+    } while (dists[sp] > t_best);
+    cur = refs[sp];
   }
 }
 
@@ -92,24 +48,18 @@ inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mesh
   const float t_far = ray_os.tfar;
   const BoxRay box_ray(ray.kd);
   const Leaf::RayConstants leaf_ray(ray);
-  std::uint32_t stack[kStackSize];
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
   int sp = 0;
   std::uint32_t cur = bvh.root;
   while (true) {
     if (BvhRef::isInner(cur)) {
-      const BvhNode8& node = bvh.nodes[cur];
-      alignas(32) float dist[8];
-      unsigned mask = Node::template test<kOct>(node, box_ray, t_far, dist);
-      if (mask != 0) {
-        cur = node.child[std::countr_zero(mask)];
-        for (mask &= mask - 1; mask != 0; mask &= mask - 1) stack[sp++] = node.child[std::countr_zero(mask)];
-        continue;
-      }
+      sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_far, refs + sp, dists + sp);
     } else if (Leaf::any(ray, leaf_ray, bvh.blocks + BvhRef::leafBlock(cur), BvhRef::leafCount(cur), t_far)) {
       return true;
     }
     if (sp == 0) return false;
-    cur = stack[--sp];
+    cur = refs[--sp];
   }
 }
 
@@ -117,24 +67,18 @@ template <int kOct>
 inline void forEachLeafKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, MeshBvhLeafVisitor visit,
                               void* context) {
   const BoxRay box_ray(ray.kd);
-  std::uint32_t stack[kStackSize];
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
   int sp = 0;
   std::uint32_t cur = bvh.root;
   while (true) {
     if (BvhRef::isInner(cur)) {
-      const BvhNode8& node = bvh.nodes[cur];
-      alignas(32) float dist[8];
-      unsigned mask = Node::template test<kOct>(node, box_ray, ray_os.tfar, dist);
-      if (mask != 0) {
-        cur = node.child[std::countr_zero(mask)];
-        for (mask &= mask - 1; mask != 0; mask &= mask - 1) stack[sp++] = node.child[std::countr_zero(mask)];
-        continue;
-      }
+      sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, ray_os.tfar, refs + sp, dists + sp);
     } else {
       visit(context, BvhRef::leafBlock(cur), BvhRef::leafCount(cur));
     }
     if (sp == 0) return;
-    cur = stack[--sp];
+    cur = refs[--sp];
   }
 }
 

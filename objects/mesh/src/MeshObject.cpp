@@ -194,6 +194,7 @@ void checkBvhAgainstMesh(const WideBvh& bvh, const TriangleMesh& mesh) {
         else if (c <= p.node || c >= bvh.nodes.size()) fail(slot + ": child " + std::to_string(c) + " out of range");
       }
       if (used < 2) fail(at + ": fewer than two children");
+      if (!node.orderValid()) fail(at + ": child order is not a permutation of the slots");
       for (int k = used - 1; k >= 0; --k)
         if (BvhRef::isInner(node.child[k])) stack.push_back({node.child[k], p.depth + 1, node.childBox(k)});
     }

@@ -20,7 +20,7 @@ static_assert(std::endian::native == std::endian::little,
               "the structure file is written in native (little endian) order");
 static_assert(std::is_trivially_copyable_v<KdNode> && sizeof(KdNode) == 8);
 // No padding inside a BVH node: its bytes in the file are exactly its fields.
-static_assert(std::is_trivially_copyable_v<BvhNode8> && sizeof(BvhNode8) == 6 * 8 * 4 + 8 * 4);
+static_assert(std::is_trivially_copyable_v<BvhNode8> && sizeof(BvhNode8) == 6 * 8 * 4 + 2 * 8 * 4);
 static_assert(sizeof(glm::vec3) == 12 && sizeof(TriangleMesh::Triangle) == 12);
 
 namespace {

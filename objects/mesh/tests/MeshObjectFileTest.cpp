@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -191,7 +192,7 @@ TEST(MeshObjectFileBvh, TheMagicTellsTheStructure) {
   EXPECT_EQ(readBinaryFile(dir / "kd.bin").size(),
             64 + 8 * kd.tree().nodes.size() + 4 * kd.tree().prim_indices.size() + 8);
   EXPECT_EQ(readBinaryFile(dir / "bvh.bin").size(),
-            72 + 224 * bvh.bvh().nodes.size() + 4 * bvh.bvh().prim_indices.size() + 8);
+            72 + 256 * bvh.bvh().nodes.size() + 4 * bvh.bvh().prim_indices.size() + 8);
 }
 
 // ---- refused files ----
@@ -331,7 +332,7 @@ TEST_P(MeshObjectFileTamper, WrongMeshIsRefused) {
 // Every header field changed and the file resealed (checksum recomputed): the framing, the mesh
 // check or MeshObject::fromParts still refuses it, each with its own message.
 TEST_P(MeshObjectFileTamper, ForgedHeaderFieldsAreRefused) {
-  expectRefused(forged<std::uint32_t>(8, 2), "version", "version 2");
+  expectRefused(forged<std::uint32_t>(8, field<std::uint32_t>(8) + 1), "version", "a later version");
   expectRefused(forged<std::uint32_t>(12, static_cast<std::uint32_t>(header_ + 8)), "header size", "header size");
   expectRefused(forged<std::uint64_t>(16, field<std::uint64_t>(16) ^ 1), "another mesh", "mesh checksum");
   expectRefused(forged<std::uint32_t>(24, field<std::uint32_t>(24) + 1), "saved for a mesh of", "vertex count");
@@ -349,6 +350,12 @@ TEST_P(MeshObjectFileTamper, ForgedHeaderFieldsAreRefused) {
     expectRefused(forged<std::uint32_t>(40, BvhRef::kEmpty), "root", "root empty");
     expectRefused(forged<std::uint32_t>(40, BvhRef::leaf(0, 4)), "root", "root a leaf");
     expectRefused(forged<std::uint32_t>(44, 8), "leaf block", "leaf block 8");
+    // Version 1 had 224-byte nodes without the child orders.
+    expectRefused(forged<std::uint32_t>(8, 1), "version", "version 1");
+    // Node 0's order[3] made equal to order[2]: no longer a permutation of the slots.
+    constexpr std::size_t order0 = 72 + offsetof(BvhNode8, order);
+    expectRefused(forged<std::uint32_t>(order0 + 12, field<std::uint32_t>(order0 + 8)), "child order",
+                  "node 0's child order");
   }
 }
 

@@ -49,20 +49,29 @@ struct BvhRef {
   [[nodiscard]] static constexpr std::uint32_t leafCount(std::uint32_t r) { return ((r >> 27) & 15u) + 1; }
 };
 
-/// One node: the boxes (in the space of the primitives) and references of up to 8 children. Unused
-/// slots are empty references with box [+inf, -inf] and follow the used ones.
-struct alignas(32) BvhNode8 {
+/// One node: the boxes (in the space of the primitives) and references of up to 8 children, and
+/// for each ray octant an order of the children. Unused slots are empty references with box
+/// [+inf, -inf] and follow the used ones. 256 bytes, four cache lines.
+///
+/// The orders let a traversal visit children front to back without sorting them per ray: a ray
+/// whose direction has signs `octant` (bit a set: negative on axis a) meets the children roughly in
+/// the order of their box centres along that octant's diagonal. `(order[i] >> 3 * octant) & 7` is
+/// the slot at rank i, rank 0 the farthest, so that pushing ranks 0..7 on a stack leaves the nearest
+/// on top. Every octant's 8 entries are a permutation of the slots (then any order is correct; this
+/// one is a heuristic for speed); bits 24..31 are zero.
+struct alignas(64) BvhNode8 {
   static constexpr int kWidth = 8;  ///< children per node
   /// lo[axis][child], hi[axis][child]: the child boxes, plane by plane.
   float lo[3][kWidth];
   float hi[3][kWidth];          ///< upper planes, as lo
   std::uint32_t child[kWidth];  ///< BvhRef encoding
+  std::uint32_t order[kWidth];  ///< per-octant child order, 3 bits per octant (see above)
 
   /// The box of child slot `k`.
   [[nodiscard]] Box childBox(int k) const {
     return Box({lo[0][k], lo[1][k], lo[2][k]}, {hi[0][k], hi[1][k], hi[2][k]});
   }
-  /// Sets slot `k` to `ref` with box `b`.
+  /// Sets slot `k` to `ref` with box `b` (the orders are not updated: call computeOrder()).
   void setChild(int k, std::uint32_t ref, const Box& b) {
     for (int a = 0; a < 3; ++a) {
       lo[a][k] = b.lo[a];
@@ -76,8 +85,17 @@ struct alignas(32) BvhNode8 {
     while (n < kWidth && child[n] != BvhRef::kEmpty) ++n;
     return n;
   }
+  /// Sets `order` from the current child boxes: per octant, used slots by decreasing centre
+  /// coordinate along the octant's diagonal (ties by slot), empty slots first.
+  void computeOrder();
+  /// Whether `order` is a valid encoding: per octant a permutation of the 8 slots, high bits zero.
+  [[nodiscard]] bool orderValid() const;
+  /// The slot at rank `rank` (0: farthest) for rays of `octant`.
+  [[nodiscard]] int orderedSlot(int octant, int rank) const {
+    return static_cast<int>((order[rank] >> (3 * octant)) & 7u);
+  }
 };
-static_assert(sizeof(BvhNode8) == 224);
+static_assert(sizeof(BvhNode8) == 256);
 
 /// The hierarchy. Space and units are those of the primitive boxes it was built from.
 struct WideBvh {

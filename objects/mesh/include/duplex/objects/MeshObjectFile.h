@@ -22,11 +22,12 @@
 ///   64+8N    4 P  leaf primitive index list (u32 triangle ids of the mesh)
 ///  64+8N+4P    8  u64 checksum (XXH64) of every byte before it
 ///
-/// Wide BVH (".dbvh", version 1):
+/// Wide BVH (".dbvh", version 2; version 1 had 224-byte nodes without the child orders and is
+/// refused: prepare it again):
 ///
 ///   offset    size  field
 ///        0       8  magic "DPLXBVH\0"
-///        8       4  u32 version (1)
+///        8       4  u32 version (2)
 ///       12       4  u32 header bytes (72)
 ///       16       8  u64 mesh checksum (meshChecksum())
 ///       24       4  u32 mesh vertex count
@@ -36,10 +37,10 @@
 ///       40       4  u32 root reference (BvhRef encoding: node 0, a leaf, or empty)
 ///       44       4  u32 leaf block (primitives per leaf block: 4)
 ///       48      24  float bounds lo.x lo.y lo.z hi.x hi.y hi.z (object space)
-///       72   224 N  nodes (BvhNode8: child boxes lo[3][8], hi[3][8] as floats, then child[8] u32;
-///                   depth-first, parents before children)
-///  72+224N     4 P  prim_indices (u32 triangle ids of the mesh; 0xFFFFFFFF pads a leaf's last block)
-///  72+224N+4P    8  u64 checksum (XXH64) of every byte before it
+///       72   256 N  nodes (BvhNode8: child boxes lo[3][8], hi[3][8] as floats, child[8] u32, then
+///                   order[8] u32, the per-octant child orders; depth-first, parents before children)
+///  72+256N     4 P  prim_indices (u32 triangle ids of the mesh; 0xFFFFFFFF pads a leaf's last block)
+///  72+256N+4P    8  u64 checksum (XXH64) of every byte before it
 ///
 /// MeshObject's derived arrays (the leaf blocks of precomputed triangle data) are not stored: they
 /// are a function of the structure and the mesh, derived in one linear pass on load, so they cannot
@@ -57,7 +58,7 @@ namespace duplex {
 /// Kd-tree file version written by saveMeshObject and the only one loadMeshObject reads.
 inline constexpr std::uint32_t kMeshObjectFileVersion = 1;
 /// BVH file version written by saveMeshObject and the only one loadMeshObject reads.
-inline constexpr std::uint32_t kMeshBvhFileVersion = 1;
+inline constexpr std::uint32_t kMeshBvhFileVersion = 2;
 
 /// 64-bit checksum (XXH64 of the raw bytes) of the mesh's positions followed by its triangle index
 /// triples; what a saved structure is tied to. Not a cryptographic hash: it detects a different or
