@@ -33,7 +33,7 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS=-g \
         -DDUPLEX_BUILD_TESTS=OFF -DDUPLEX_BUILD_EXAMPLES=OFF -DDUPLEX_BUILD_BENCH=ON >/dev/null
 fi
-make -C "$BUILD_DIR" -j"$JOBS" duplex_bench_mesh >/dev/null
+cmake --build "$BUILD_DIR" -j"$JOBS" --target duplex_bench_mesh >/dev/null
 BIN="$BUILD_DIR/bench/duplex_bench_mesh"
 
 DUMPS=$(mktemp -d /tmp/duplex_callgrind.XXXXXX)

@@ -16,7 +16,7 @@
 #   SKIP_MAIN=1 / SKIP_SWEEP=1   run only the other part (the charts are drawn from whatever JSON exists)
 #   CALLGRIND=1 also run scripts/bench_callgrind.sh (instructions per ray; a few more minutes), in its
 #               own -g build dir CALLGRIND_BUILD_DIR (default build-callgrind)
-#   JOBS        make -j (default 2: the machine is shared)
+#   JOBS        parallel build jobs (default 2: the machine is shared)
 #   PYTHON      interpreter with matplotlib (default: /usr/bin/python3, Debian's python3-matplotlib)
 set -euo pipefail
 
@@ -40,7 +40,7 @@ mkdir -p "$OUTDIR"
 # Tests and examples stay off here: the bench must build while others edit those folders.
 cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DDUPLEX_BUILD_BENCH=ON \
       -DDUPLEX_BUILD_TESTS=OFF -DDUPLEX_BUILD_EXAMPLES=OFF >/dev/null
-make -C "$BUILD_DIR" -j"$JOBS" duplex_bench_mesh >/dev/null
+cmake --build "$BUILD_DIR" -j"$JOBS" --target duplex_bench_mesh >/dev/null
 BIN="$BUILD_DIR/bench/duplex_bench_mesh"
 
 start=$(date +%s)

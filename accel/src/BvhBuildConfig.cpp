@@ -98,7 +98,8 @@ BvhBuildConfig BvhBuildConfig::parse(std::string_view text) {
       else if (key == "alpha") c.spatial_split_alpha = parseNumber<float>(text, part, value);
       else if (key == "budget") c.spatial_split_budget = parseNumber<float>(text, part, value);
       else if (key == "parallel") c.parallel_threshold = parseNumber<std::uint32_t>(text, part, value);
-      else badPart(text, part, "has an unknown key (bins, ct, ci, leaf, alpha, budget, parallel)");
+      else if (key == "refit") c.refit_limit = parseNumber<float>(text, part, value);
+      else badPart(text, part, "has an unknown key (bins, ct, ci, leaf, alpha, budget, parallel, refit)");
     }
     first = false;
     if (comma == text.size()) break;
@@ -118,13 +119,16 @@ void BvhBuildConfig::validate() const {
   if (leaf_block != 4) fail("leaf_block must be 4 (the leaf test's width), got " + std::to_string(leaf_block));
   if (!(spatial_split_alpha >= 0.0f) || !std::isfinite(spatial_split_alpha)) fail("alpha must be finite and >= 0");
   if (!(spatial_split_budget >= 0.0f) || !(spatial_split_budget <= 4.0f)) fail("budget must be 0 to 4");
+  if (!(refit_limit >= 1.0f) || !std::isfinite(refit_limit))
+    fail("refit (SAH limit of refits) must be finite and >= 1");
 }
 
 std::string BvhBuildConfig::toString() const {
   std::ostringstream os;
   os.precision(9);
   os << "bins=" << bins << ",ct=" << traversal_cost << ",ci=" << intersection_cost << ",leaf=" << max_leaf_size
-     << ",alpha=" << spatial_split_alpha << ",budget=" << spatial_split_budget << ",parallel=" << parallel_threshold;
+     << ",alpha=" << spatial_split_alpha << ",budget=" << spatial_split_budget << ",parallel=" << parallel_threshold
+     << ",refit=" << refit_limit;
   return os.str();
 }
 

@@ -818,24 +818,43 @@ WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& con
 
 void BvhNode8::computeOrder() {
   std::fill(std::begin(order), std::end(order), 0u);
-  for (int octant = 0; octant < 8; ++octant) {
-    // Twice the centre's coordinate along the octant's diagonal; in double, so that boxes up to
-    // float's range neither overflow nor tie by rounding.
-    std::array<double, kWidth> key{};
-    std::array<int, kWidth> slot{};
+  // Twice each centre's coordinates; in double, so that boxes up to float's range neither
+  // overflow nor tie by rounding.
+  double centre[kWidth][3];
+  int used = 0;
+  for (int k = 0; k < kWidth; ++k) {
+    used += child[k] != BvhRef::kEmpty;
+    for (int a = 0; a < 3; ++a) centre[k][a] = double{lo[a][k]} + double{hi[a][k]};
+  }
+  auto store = [this](int octant, int rank, int slot) {
+    order[rank] |= static_cast<std::uint32_t>(slot) << (3 * octant);
+  };
+  // Octant o and its opposite 7 - o project the centres on opposite diagonals: the used slots
+  // in reverse order (ties too), after the empty ones, which come first in every order.
+  for (int octant = 0; octant < 4; ++octant) {
+    // Descending key along the octant's diagonal, empty slots first (key +inf): an insertion
+    // sort, stable (equal keys keep slot order); refits call this for every node.
+    double key[kWidth];
+    int slot[kWidth];
     for (int k = 0; k < kWidth; ++k) {
-      slot[k] = k;
-      if (child[k] == BvhRef::kEmpty) {
-        key[k] = std::numeric_limits<double>::infinity();
-        continue;
+      double v = std::numeric_limits<double>::infinity();
+      if (child[k] != BvhRef::kEmpty) {
+        v = 0.0;
+        for (int a = 0; a < 3; ++a) v += (octant >> a & 1) ? -centre[k][a] : centre[k][a];
       }
-      for (int a = 0; a < 3; ++a) {
-        const double c = double{lo[a][k]} + double{hi[a][k]};
-        key[k] += (octant >> a & 1) ? -c : c;
+      int i = k;
+      for (; i > 0 && key[i - 1] < v; --i) {
+        key[i] = key[i - 1];
+        slot[i] = slot[i - 1];
       }
+      key[i] = v;
+      slot[i] = k;
     }
-    std::stable_sort(slot.begin(), slot.end(), [&](int x, int y) { return key[x] > key[y]; });
-    for (int rank = 0; rank < kWidth; ++rank) order[rank] |= static_cast<std::uint32_t>(slot[rank]) << (3 * octant);
+    const int empty = kWidth - used;
+    for (int rank = 0; rank < kWidth; ++rank) {
+      store(octant, rank, slot[rank]);
+      store(7 - octant, rank, rank < empty ? slot[rank] : slot[empty + kWidth - 1 - rank]);
+    }
   }
 }
 
@@ -874,38 +893,17 @@ double WideBvh::sahCost(const BvhBuildConfig& config) const {
   return cost;
 }
 
+namespace detail {
+void bvhParallelFor(int count, void* context, void (*fn)(void* context, int i)) {
+  tbb::parallel_for(0, count, [&](int i) { fn(context, i); });
+}
+}  // namespace detail
+
 void refitWideBvh(WideBvh& bvh, std::span<const Box> prim_bounds) {
-  auto leafBox = [&](std::uint32_t ref) {
-    Box b;
-    const std::size_t first = std::size_t{bvh.leaf_block} * BvhRef::leafBlock(ref);
-    for (std::uint32_t i = 0; i < BvhRef::leafCount(ref); ++i) {
-      const std::uint32_t prim = bvh.prim_indices[first + i];
-      if (prim >= prim_bounds.size()) throw InvalidArgument("refitWideBvh: primitive index beyond the boxes given");
-      b.extend(prim_bounds[prim]);
-    }
-    return b;
-  };
-  if (bvh.root == BvhRef::kEmpty) return;
-  if (BvhRef::isLeaf(bvh.root)) {
-    bvh.bounds = leafBox(bvh.root);
-    return;
-  }
-  // Children come after their parents: in reverse order every child box is final when read.
-  std::vector<Box> node_box(bvh.nodes.size());
-  for (std::size_t n = bvh.nodes.size(); n-- > 0;) {
-    BvhNode8& node = bvh.nodes[n];
-    Box all;
-    for (int k = 0; k < BvhNode8::kWidth; ++k) {
-      const std::uint32_t c = node.child[k];
-      if (c == BvhRef::kEmpty) continue;
-      const Box b = BvhRef::isLeaf(c) ? leafBox(c) : node_box[c];
-      node.setChild(k, c, b);
-      all.extend(b);
-    }
-    node.computeOrder();
-    node_box[n] = all;
-  }
-  bvh.bounds = node_box[0];
+  refitWideBvhWith(bvh, [&](std::uint32_t prim) {
+    if (prim >= prim_bounds.size()) throw InvalidArgument("refitWideBvh: primitive index beyond the boxes given");
+    return prim_bounds[prim];
+  });
 }
 
 }  // namespace duplex

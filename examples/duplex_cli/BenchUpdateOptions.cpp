@@ -17,12 +17,8 @@ void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options) {
       ->check(kDecimal)
       ->check(CLI::Range(1, 1000000));
   cmd.add_option("--seed", options.seed, "Seed of the edit plan (default 1)")->check(kDecimal);
-  cmd.add_option("--threads", options.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 4096));
-  cmd.add_option("--primary", options.primary, "Primary rays of a W x W image (default 512)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1u, 8192u));
+  addThreadsOption(cmd, options.threads);
+  addPrimaryOption(cmd, options.primary);
   cmd.add_option("--baseline-repeat", options.baseline_repeat,
                  "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
       ->check(kDecimal)

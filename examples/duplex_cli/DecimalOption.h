@@ -1,10 +1,12 @@
 #pragma once
 /// \file DecimalOption.h
-/// kDecimal: the check of every integer option of the tool's commands.
+/// kDecimal: the check of every integer option of the tool's commands; the options several
+/// commands share (--threads, --primary).
 
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cstdint>
 #include <string>
 
 namespace duplex::cli {
@@ -20,5 +22,19 @@ inline const CLI::Validator kDecimal(
       return std::string();
     },
     "UINT");
+
+/// --threads N: worker threads, 1 to 4096 (the option's default, 0, means all hardware threads).
+inline CLI::Option* addThreadsOption(CLI::App& cmd, int& threads) {
+  return cmd.add_option("--threads", threads, "Worker threads (default: all hardware threads)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1, 4096));
+}
+
+/// --primary W: primary rays of a W x W image (the camera of `duplex rays`), 1 to 8192.
+inline CLI::Option* addPrimaryOption(CLI::App& cmd, std::uint32_t& width) {
+  return cmd.add_option("--primary", width, "Primary rays of a W x W image (default 512)")
+      ->check(kDecimal)
+      ->check(CLI::Range(1u, 8192u));
+}
 
 }  // namespace duplex::cli

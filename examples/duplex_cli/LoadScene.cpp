@@ -47,6 +47,7 @@ std::map<std::string, std::size_t> meshStructureCounts(const SceneDocument& doc)
   std::map<std::string, std::size_t> counts;
   std::unordered_set<const Object*> seen;
   for (ObjectId id = 0; id < library.size(); ++id) {
+    if (!library.contains(id)) continue;  // removed
     const auto object = library.get(id);
     if (!seen.insert(object.get()).second) continue;
     if (const auto* mesh = dynamic_cast<const MeshObject*>(object.get()))

@@ -9,6 +9,8 @@
 //   duplex prepare --scene S.json --out DIR [--threads N]
 //   duplex bench update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]
 //                       [--primary W] [--build-repeat B] [--baseline-repeat B]
+//   duplex bench deform --scene S.json --object NAME [--steps K] [--seed X] [--amplitude A] [--threads N]
+//                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
 //                 [--roulette R] [--progress MODE] [--checkpoint SECONDS]
@@ -16,6 +18,7 @@
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
 
+#include "BenchDeformCommand.h"
 #include "BenchUpdateCommand.h"
 #include "DecimalOption.h"
 #include "PrepareCommand.h"
@@ -73,9 +76,7 @@ int main(int argc, char** argv) {
       "Instead of hits: one float32 per ray, the transmittance along [tnear, tfar] through all fog volumes "
       "(0 where a surface blocks the ray)");
   hits_opt->excludes(transmittance_opt);
-  trace_cmd->add_option("--threads", trace.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 4096));
+  duplex::cli::addThreadsOption(*trace_cmd, trace.threads);
   trace_cmd->add_flag("--any-hit", trace.any_hit,
                       "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
@@ -176,12 +177,10 @@ int main(int argc, char** argv) {
   prepare_cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dbvh / .dkdt structure files")
       ->required();
   duplex::cli::addStructureOption(*prepare_cmd, prepare.structure);
-  prepare_cmd->add_option("--threads", prepare.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 4096));
+  duplex::cli::addThreadsOption(*prepare_cmd, prepare.threads);
 
   // duplex bench update
-  CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update)");
+  CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update, deform)");
   bench_cmd->require_subcommand(1);
   duplex::cli::BenchUpdateOptions bench_update;
   CLI::App* update_cmd = bench_cmd->add_subcommand(
@@ -189,6 +188,12 @@ int main(int argc, char** argv) {
       "Time commits of moved, added and removed instances (ours incremental, ours full rebuild; the Embree "
       "baseline is in the benchmark duplex_bench_update)");
   duplex::cli::addBenchUpdateOptions(*update_cmd, bench_update);
+  // duplex bench deform
+  duplex::cli::BenchDeformOptions bench_deform;
+  CLI::App* deform_cmd = bench_cmd->add_subcommand(
+      "deform",
+      "Deform a mesh object step by step: refit against rebuild, trace after the refits against a fresh build");
+  duplex::cli::addBenchDeformOptions(*deform_cmd, bench_deform);
 
   // duplex sensor
   duplex::cli::SensorOptions sensor;
@@ -202,9 +207,7 @@ int main(int argc, char** argv) {
       ->required()
       ->check(kDecimal)
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
-  sensor_cmd->add_option("--threads", sensor.threads, "Worker threads (default: all hardware threads)")
-      ->check(kDecimal)
-      ->check(CLI::Range(1, 4096));
+  duplex::cli::addThreadsOption(*sensor_cmd, sensor.threads);
   sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")
       ->check(kDecimal);
   sensor_cmd->add_option(
@@ -251,6 +254,7 @@ int main(int argc, char** argv) {
                         : *robot_cmd     ? "duplex scene robot"
                         : *sensor_cmd    ? "duplex sensor"
                         : *prepare_cmd   ? "duplex prepare"
+                        : *deform_cmd    ? "duplex bench deform"
                                          : "duplex bench update";
   try {
     nlohmann::ordered_json result;
@@ -266,6 +270,8 @@ int main(int argc, char** argv) {
       result = duplex::cli::runPrepare(prepare);
     } else if (*update_cmd) {
       result = duplex::cli::runBenchUpdate(bench_update);
+    } else if (*deform_cmd) {
+      result = duplex::cli::runBenchDeform(bench_deform);
     } else if (*robot_cmd) {
       if (*spacing_opt) robot.spacing = spacing;
       result = duplex::cli::runSceneRobot(robot);

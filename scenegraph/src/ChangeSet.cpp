@@ -20,6 +20,7 @@ std::ostream& operator<<(std::ostream& os, const ChangeSet& c) {
   printList(os, "moved", c.moved);
   printList(os, "object_changed", c.object_changed);
   printList(os, "mask_changed", c.mask_changed);
+  if (!c.objects_changed.empty()) printList(os, "objects_changed", c.objects_changed);
   return os << '}';
 }
 

@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 
 #include <exception>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -62,12 +63,57 @@ const ObjectLibrary::Entry& ObjectLibrary::entry(ObjectId id) const {
   return entries_[id];
 }
 
+const ObjectLibrary::Entry& ObjectLibrary::liveEntry(ObjectId id, const char* call) const {
+  const Entry& e = entry(id);
+  if (e.removed)
+    throw InvalidArgument(std::string("ObjectLibrary::") + call + ": object '" + e.name + "' (id " +
+                          std::to_string(id) + ") was removed");
+  return e;
+}
+
 const std::string& ObjectLibrary::name(ObjectId id) const { return entry(id).name; }
 const std::string& ObjectLibrary::typeName(ObjectId id) const { return entry(id).type_name; }
-bool ObjectLibrary::isBuilt(ObjectId id) const { return entry(id).built.load(std::memory_order_acquire); }
+bool ObjectLibrary::isBuilt(ObjectId id) const {
+  return liveEntry(id, "isBuilt").built.load(std::memory_order_acquire);
+}
+
+void ObjectLibrary::replace(ObjectId id, std::shared_ptr<const Object> object) {
+  const Entry& c = liveEntry(id, "replace");
+  if (!object) throw InvalidArgument("ObjectLibrary::replace: null object for '" + c.name + "'");
+  Entry& e = entries_[id];
+  std::string type_name(object->typeName());  // may throw: before anything changes
+  std::lock_guard lock(e.mutex);
+  e.type_name = std::move(type_name);
+  e.object = std::move(object);
+  e.factory = nullptr;
+  e.built.store(true, std::memory_order_release);
+}
+
+void ObjectLibrary::remove(ObjectId id) {
+  (void)liveEntry(id, "remove");
+  Entry& e = entries_[id];
+  std::lock_guard lock(e.mutex);
+  by_name_.erase(e.name);
+  e.object.reset();
+  e.factory = nullptr;
+  e.removed = true;
+  ++removed_;
+}
+
+std::size_t ObjectLibrary::memoryBytes(ObjectId id) const {
+  const Entry& e = liveEntry(id, "memoryBytes");
+  return e.built.load(std::memory_order_acquire) ? e.object->memoryBytes() : 0;
+}
+
+std::size_t ObjectLibrary::memoryBytes() const {
+  std::size_t total = 0;
+  for (const Entry& e : entries_)
+    if (!e.removed && e.built.load(std::memory_order_acquire)) total += e.object->memoryBytes();
+  return total;
+}
 
 std::shared_ptr<const Object> ObjectLibrary::get(ObjectId id) const {
-  const Entry& e = entry(id);
+  const Entry& e = liveEntry(id, "get");
   // Fast path: once built, `object` is never written again.
   if (e.built.load(std::memory_order_acquire)) return e.object;
   std::lock_guard lock(e.mutex);
@@ -90,7 +136,7 @@ std::shared_ptr<const Object> ObjectLibrary::get(ObjectId id) const {
 }
 
 void ObjectLibrary::buildAll(std::span<const ObjectId> ids) const {
-  for (const ObjectId id : ids) (void)entry(id);  // unknown ids throw before any build
+  for (const ObjectId id : ids) (void)liveEntry(id, "buildAll");  // bad ids throw before any build
   // One slot per listed id, so "the first failure" is the first in list order, whatever the timing.
   std::vector<std::exception_ptr> failures(ids.size());
   tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
@@ -107,7 +153,8 @@ void ObjectLibrary::buildAll(std::span<const ObjectId> ids) const {
 void ObjectLibrary::buildAll() const {
   std::vector<ObjectId> pending;
   for (std::size_t i = 0; i < entries_.size(); ++i)
-    if (!entries_[i].built.load(std::memory_order_acquire)) pending.push_back(static_cast<ObjectId>(i));
+    if (!entries_[i].removed && !entries_[i].built.load(std::memory_order_acquire))
+      pending.push_back(static_cast<ObjectId>(i));
   buildAll(pending);
 }
 

@@ -44,7 +44,8 @@ Affine rotation(glm::dvec3 axis, double radians) {
 /// helpers; every error goes through ctx.fail (file + pointer).
 class DocumentReader {
  public:
-  DocumentReader(const ObjectSpecContext& ctx, SceneGraph& graph) : ctx_(ctx), graph_(graph) {}
+  DocumentReader(const ObjectSpecContext& ctx, SceneGraph& graph, const ObjectTypeRegistry& registry)
+      : ctx_(ctx), graph_(graph), registry_(registry) {}
 
   std::array<double, 12> twelveNumbers(const json& v, const std::string& p) const {
     if (!v.is_array()) ctx_.fail(p, "expected an array");
@@ -167,19 +168,22 @@ class DocumentReader {
     return spec;
   }
 
-  SceneEdit edit(const json& v, const std::string& p) const {
+  /// An edit; `added_object` is the library id of an "add_object" edit's entry (read before).
+  SceneEdit edit(const json& v, const std::string& p, ObjectId added_object) const {
     if (!v.is_object()) ctx_.fail(p, "expected an edit (an object)");
     SceneEdit e;
     e.pointer = p;
     e.time = ctx_.number(ctx_.member(v, p, "time"), at(p, "time"));
     if (e.time < 0.0) ctx_.fail(at(p, "time"), "expected a time >= 0 (seconds)");
-    static constexpr std::array<std::pair<const char*, SceneEditKind>, 6> kinds = {{
+    static constexpr std::array<std::pair<const char*, SceneEditKind>, 8> kinds = {{
         {"set_transform", SceneEditKind::SetTransform},
         {"add", SceneEditKind::Add},
         {"remove", SceneEditKind::Remove},
         {"visible", SceneEditKind::SetVisible},
         {"object", SceneEditKind::SetObject},
         {"mask", SceneEditKind::SetMask},
+        {"deform", SceneEditKind::Deform},
+        {"add_object", SceneEditKind::AddObject},
     }};
     const char* key = nullptr;
     for (const auto& [k, kind] : kinds) {
@@ -188,7 +192,10 @@ class DocumentReader {
       key = k;
       e.kind = kind;
     }
-    if (!key) ctx_.fail(p, "expected one of \"set_transform\", \"add\", \"remove\", \"visible\", \"object\", \"mask\"");
+    if (!key)
+      ctx_.fail(p,
+                "expected one of \"set_transform\", \"add\", \"remove\", \"visible\", \"object\", \"mask\", "
+                "\"deform\", \"add_object\"");
     const std::string kp = at(p, key);
     auto target = [&] { return ctx_.string(ctx_.member(v, p, "node"), at(p, "node")); };
     switch (e.kind) {
@@ -221,13 +228,45 @@ class DocumentReader {
         e.node = target();
         e.mask = mask(v[key], kp);
         break;
+      case SceneEditKind::Deform: deform(v, p, e); break;
+      case SceneEditKind::AddObject:
+        ctx_.onlyKeys(v, p, {"time", "add_object"});
+        e.object = added_object;
+        break;
     }
     return e;
+  }
+
+  /// A "deform" edit: the object, and "positions" (inline, x y z per vertex) or "file" (read by
+  /// the object's type when the edit is applied).
+  void deform(const json& v, const std::string& p, SceneEdit& e) const {
+    ctx_.onlyKeys(v, p, {"time", "deform", "positions", "file"});
+    e.object = object(v["deform"], at(p, "deform"));
+    if (v.contains("positions") == v.contains("file"))
+      ctx_.fail(p, "a \"deform\" edit takes exactly one of \"positions\" and \"file\"");
+    if (v.contains("positions")) {
+      const std::string pp = at(p, "positions");
+      const json& list = v["positions"];
+      if (!list.is_array() || list.empty() || list.size() % 3 != 0)
+        ctx_.fail(pp, "expected x, y, z numbers for each vertex (a non-empty array of 3n numbers)");
+      auto positions = std::make_shared<std::vector<glm::vec3>>(list.size() / 3);
+      for (std::size_t i = 0; i < list.size(); ++i)
+        (*positions)[i / 3][static_cast<int>(i % 3)] = static_cast<float>(ctx_.number(list[i], at(pp, i)));
+      e.positions = [positions](const Object&) { return *positions; };
+      return;
+    }
+    const std::string& type_name = graph_.library().typeName(e.object);
+    const ObjectTypeInfo* type = registry_.find(type_name);
+    if (!type || !type->deform_file_reader)
+      ctx_.fail(at(p, "file"), "objects of type \"" + type_name + "\" cannot be deformed from a file");
+    const std::filesystem::path file = ctx_.resolve(ctx_.string(v["file"], at(p, "file")));
+    e.positions = [reader = type->deform_file_reader, file](const Object& current) { return reader(file, current); };
   }
 
  private:
   const ObjectSpecContext& ctx_;
   SceneGraph& graph_;
+  const ObjectTypeRegistry& registry_;
 };
 
 /// A structure choice split at its first ':' into name and parameters.
@@ -307,7 +346,7 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   // "lights", "sensors", "bands" (and an object's "material") belong to duplex::sensors, which reads them
   // from doc.parsed.
   ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors", "bands"});
-  DocumentReader reader(ctx, graph);
+  DocumentReader reader(ctx, graph, registry);
 
   // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).
   const json& objects = ctx.member(root, "", "objects");
@@ -324,13 +363,14 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   const auto isChoice = [&](const std::string& name) {
     return std::find(choice_names.begin(), choice_names.end(), name) != choice_names.end();
   };
-  const auto [default_name, default_params] = splitChoice(options.structure);
+  const std::pair<std::string, std::string> default_choice = splitChoice(options.structure);
+  const std::string& default_name = default_choice.first;
+  const std::string& default_params = default_choice.second;
   if (!options.structure.empty() && !isChoice(default_name))
     throw FileError(path.string() + ": default structure \"" + options.structure +
                     "\": no object type offers a structure named \"" + default_name + "\"");
-  for (std::size_t i = 0; i < objects.size(); ++i) {
-    const std::string p = at("/objects", i);
-    const json& entry = objects[i];
+  // One object entry (of "objects" or of an "add_object" edit) read into the library.
+  const auto addEntry = [&](const json& entry, const std::string& p) -> ObjectId {
     if (!entry.is_object()) ctx.fail(p, "expected an object");
     const std::string name = ctx.string(ctx.member(entry, p, "name"), at(p, "name"));
     if (library.find(name)) ctx.fail(at(p, "name"), "duplicate object name \"" + name + "\"");
@@ -385,8 +425,7 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
     try {
       if (auto* built = std::get_if<std::shared_ptr<const Object>>(&result)) {
         if (!*built) ctx.fail(object_ctx.pointer, "type \"" + type->name + "\" returned no object");
-        doc.objects.push_back(library.add(name, *built));
-        continue;
+        return library.add(name, *built);
       }
       auto factory = std::get<ObjectLibrary::Factory>(std::move(result));
       if (!factory) ctx.fail(object_ctx.pointer, "type \"" + type->name + "\" returned no object");
@@ -394,21 +433,22 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
       build_errors.push_back(error);
       // Errors of the build name the file and the entry; the first in file order is reported.
       const std::string prefix = path.string() + ": ";
-      doc.objects.push_back(library.addDeferred(
-          name, type->name, [factory = std::move(factory), error, prefix, pointer = object_ctx.pointer] {
-            try {
-              return factory();
-            } catch (const std::exception& e) {
-              std::string message = e.what();
-              if (message.rfind(prefix, 0) != 0) message = prefix + pointer + ": " + message;
-              *error = message;
-              throw FileError(message);
-            }
-          }));
+      return library.addDeferred(name, type->name,
+                                 [factory = std::move(factory), error, prefix, pointer = object_ctx.pointer] {
+                                   try {
+                                     return factory();
+                                   } catch (const std::exception& e) {
+                                     std::string message = e.what();
+                                     if (message.rfind(prefix, 0) != 0) message = prefix + pointer + ": " + message;
+                                     *error = message;
+                                     throw FileError(message);
+                                   }
+                                 });
     } catch (const InvalidArgument& e) {
       ctx.fail(at(p, "name"), e.what());
     }
-  }
+  };
+  for (std::size_t i = 0; i < objects.size(); ++i) doc.objects.push_back(addEntry(objects[i], at("/objects", i)));
   ctx.cache->readRequested();
   doc.figures.load_ms = msSince(t_load);
 
@@ -452,7 +492,14 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
     if (root.contains("edits")) {
       const json& edits = root["edits"];
       if (!edits.is_array()) ctx.fail("/edits", "expected an array of edits");
-      for (std::size_t i = 0; i < edits.size(); ++i) doc.edits.push_back(reader.edit(edits[i], at("/edits", i)));
+      // Objects of "add_object" edits first, so that any edit can name them. They join the library
+      // deferred: read (or built) when the edit is applied or an instance first uses them.
+      std::vector<ObjectId> added_objects(edits.size(), kInvalidObject);
+      for (std::size_t i = 0; i < edits.size(); ++i)
+        if (edits[i].is_object() && edits[i].contains("add_object"))
+          added_objects[i] = addEntry(edits[i]["add_object"], at(at("/edits", i), "add_object"));
+      for (std::size_t i = 0; i < edits.size(); ++i)
+        doc.edits.push_back(reader.edit(edits[i], at("/edits", i), added_objects[i]));
       std::stable_sort(doc.edits.begin(), doc.edits.end(),
                        [](const SceneEdit& a, const SceneEdit& b) { return a.time < b.time; });
     }
@@ -461,10 +508,11 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   doc.figures.graph_ms = msSince(t_graph);
 
   SceneLoadFigures& f = doc.figures;
-  f.objects = library.size();
+  f.objects = doc.objects.size();
   f.structures_loaded = ctx.cache->structures_loaded.load();
   std::unordered_set<const Object*> seen;
   for (ObjectId id = 0; id < library.size(); ++id) {
+    if (!library.isBuilt(id)) continue;  // an "add_object" edit's, read when it is applied
     const auto object = library.get(id);
     if (!seen.insert(object.get()).second) continue;
     for (const ObjectFigure& figure : object->figures()) ctx.cache->addCount(figure.name, figure.value);
@@ -477,6 +525,16 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
 
 std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit) {
   SceneGraph& graph = *doc.graph;
+  if (edit.kind == SceneEditKind::Deform || edit.kind == SceneEditKind::AddObject) {
+    try {
+      if (edit.kind == SceneEditKind::Deform)
+        graph.deformObject(edit.object, edit.positions(*graph.pendingObject(edit.object)));
+      else (void)graph.library().get(edit.object);
+    } catch (const Error& e) {
+      failAt(doc.file, edit.pointer, e.what());
+    }
+    return {};
+  }
   const auto target = graph.find(edit.node);
   if (!target) failAt(doc.file, edit.pointer, "no node at path \"" + edit.node + "\"");
   std::vector<NodeId> added;
@@ -487,6 +545,8 @@ std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit) {
       case SceneEditKind::SetVisible: graph.setVisible(*target, edit.visible); break;
       case SceneEditKind::SetObject: graph.setObject(*target, edit.object); break;
       case SceneEditKind::SetMask: graph.setMask(*target, edit.mask); break;
+      case SceneEditKind::Deform:
+      case SceneEditKind::AddObject: break;  // handled above
       case SceneEditKind::Add:
         if (!edit.added) failAt(doc.file, edit.pointer, "no node to add");
         try {
@@ -510,6 +570,7 @@ std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, cons
   if (ec) throw FileError(dir.string() + ": cannot create directory (" + ec.message() + ")");
   std::vector<std::filesystem::path> written(library.size());
   for (ObjectId id = 0; id < library.size(); ++id) {
+    if (!library.contains(id)) continue;  // removed
     const auto object = library.get(id);
     const std::string_view extension = object->preparedExtension();
     if (extension.empty()) continue;

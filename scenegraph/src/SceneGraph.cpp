@@ -64,7 +64,7 @@ struct Touched {
   bool moved;  ///< set by commit() when the recomputed world transform differs
 };
 
-enum class UndoKind : std::uint8_t { Added, Removed, Reparented, Renamed, Transform, Object, Visible, Mask };
+enum class UndoKind : std::uint8_t { Added, Removed, Reparented, Renamed, Transform, Object, Visible, Mask, Replaced };
 
 /// One edit, with what rollback() needs to restore the state before it. Old transforms and names
 /// go to their own stacks (Impl::undo_locals, undo_names), popped in the same reverse order, so that
@@ -128,6 +128,9 @@ struct SceneGraph::Impl {
   std::vector<Undo> undo;
   std::vector<Affine> undo_locals;      // Transform records' old locals, in edit order
   std::vector<std::string> undo_names;  // Renamed records' old names, in edit order
+  // Pending object replacements in edit order (one per Replaced record; a later one of the same
+  // object wins; removeObject() nulls the replacement and keeps the record).
+  std::vector<std::pair<ObjectId, std::shared_ptr<const Object>>> replaced;
   std::vector<NodeId> dirty_roots;
   std::vector<Touched> touched;
   std::vector<NodeId> stack;  // scratch for subtree walks (edits and commit only)
@@ -241,6 +244,14 @@ struct SceneGraph::Impl {
     undo.clear();
     undo_locals.clear();
     undo_names.clear();
+    replaced.clear();
+  }
+
+  /// The latest pending replacement of `object`, or null.
+  [[nodiscard]] std::shared_ptr<const Object> pendingReplacement(ObjectId object) const {
+    for (auto it = replaced.rbegin(); it != replaced.rend(); ++it)
+      if (it->first == object) return it->second;
+    return nullptr;
   }
 
   // ---- validation (before any mutation) ----
@@ -276,7 +287,7 @@ struct SceneGraph::Impl {
   /// Recomputes world transforms and effective visibility of `root`'s subtree from its parent's.
   void checkWorlds(NodeId root) const;
   void propagate(NodeId root);
-  ChangeSet collectChanges();
+  ChangeSet collectChanges(ObjectLibrary& library);
 };
 
 SceneGraph::SceneGraph(std::shared_ptr<ObjectLibrary> library)
@@ -439,6 +450,62 @@ void SceneGraph::setMask(NodeId instance, std::uint32_t mask) {
   m.nodes[instance].mask = mask;
 }
 
+// ---- object edits ----
+
+void SceneGraph::replaceObject(ObjectId object, std::shared_ptr<const Object> replacement) {
+  Impl& m = *impl_;
+  if (!library_->contains(object))
+    throw InvalidArgument("SceneGraph::replaceObject: unknown or removed object id " + std::to_string(object));
+  if (!replacement)
+    throw InvalidArgument("SceneGraph::replaceObject: null replacement for object '" + library_->name(object) + "'");
+  reserveOneMore(m.replaced);
+  reserveOneMore(m.undo);
+  m.replaced.emplace_back(object, std::move(replacement));
+  m.undo.push_back({UndoKind::Replaced, kRootNode, kInvalidNode, kInvalidNode, object});
+}
+
+std::shared_ptr<const Object> SceneGraph::pendingObject(ObjectId object) const {
+  if (auto pending = impl_->pendingReplacement(object)) return pending;
+  return library_->get(object);
+}
+
+void SceneGraph::deformObject(ObjectId object, std::span<const glm::vec3> positions_os) {
+  if (!library_->contains(object))
+    throw InvalidArgument("SceneGraph::deformObject: unknown or removed object id " + std::to_string(object));
+  std::shared_ptr<const Object> next;
+  try {
+    next = pendingObject(object)->deformed(positions_os);
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument("SceneGraph::deformObject: object '" + library_->name(object) + "': " + e.what());
+  }
+  replaceObject(object, std::move(next));
+}
+
+void SceneGraph::removeObject(ObjectId object) {
+  Impl& m = *impl_;
+  if (!library_->contains(object))
+    throw InvalidArgument("SceneGraph::removeObject: unknown or removed object id " + std::to_string(object));
+  // Users: instances that refer to it now, and instances of the batch whose committed object it is.
+  std::vector<NodeId> users;
+  m.nodes.forEach([&](NodeId id, const Node& n) {
+    if (n.kind == NodeKind::Instance && (n.flags & kAlive) && n.object == object) users.push_back(id);
+  });
+  for (const Touched& t : m.touched)
+    if (t.object == object && std::find(users.begin(), users.end(), t.id) == users.end()) users.push_back(t.id);
+  if (!users.empty()) {
+    std::sort(users.begin(), users.end());
+    std::string list;
+    for (std::size_t i = 0; i < users.size() && i < 5; ++i) list += (i ? ", " : "") + m.path(users[i]);
+    if (users.size() > 5) list += ", ...";
+    throw InvalidArgument("SceneGraph::removeObject: object '" + library_->name(object) + "' is used by " +
+                          std::to_string(users.size()) + " instance" + (users.size() == 1 ? "" : "s") + " (" + list +
+                          "), committed or pending; remove them or give them another object first");
+  }
+  library_->remove(object);
+  for (auto& r : m.replaced)
+    if (r.first == object) r.second.reset();
+}
+
 // ---- commit and rollback ----
 
 bool SceneGraph::hasPendingEdits() const { return !impl_->undo.empty(); }
@@ -489,7 +556,7 @@ void SceneGraph::Impl::checkWorlds(NodeId root) const {
   }
 }
 
-ChangeSet SceneGraph::Impl::collectChanges() {
+ChangeSet SceneGraph::Impl::collectChanges(ObjectLibrary& library) {
   // Recompute below the outermost dirty roots only (a root with a dirty ancestor is covered by it).
   std::vector<NodeId> roots;
   for (const NodeId r : dirty_roots) {
@@ -501,6 +568,31 @@ ChangeSet SceneGraph::Impl::collectChanges() {
   }
   // Validate every new world transform first, so that a commit that throws changes nothing.
   for (const NodeId r : roots) checkWorlds(r);
+  // The replacements that take effect (the latest per object), checked before anything changes.
+  std::vector<std::pair<ObjectId, std::shared_ptr<const Object>>> replacements;
+  for (auto it = replaced.rbegin(); it != replaced.rend(); ++it) {
+    if (!it->second) continue;  // its object was removed
+    bool later = false;
+    for (const auto& r : replacements) later = later || r.first == it->first;
+    if (later) continue;
+    if (!library.contains(it->first))
+      throw InvalidArgument("SceneGraph::commit: object id " + std::to_string(it->first) +
+                            " was removed from the library while its replacement was pending; nothing was committed");
+    replacements.emplace_back(it->first, it->second);
+  }
+  std::sort(replacements.begin(), replacements.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  auto isReplaced = [&replacements](ObjectId id) {
+    return std::binary_search(replacements.begin(), replacements.end(),
+                              std::make_pair(id, std::shared_ptr<const Object>()),
+                              [](const auto& a, const auto& b) { return a.first < b.first; });
+  };
+  if (!replacements.empty()) {
+    // Every instance of a replaced object takes part in the comparison below (it changes object).
+    nodes.forEach([&](NodeId id, const Node& n) {
+      if (n.kind == NodeKind::Instance && (n.flags & kAlive) && isReplaced(n.object)) touch(id);
+    });
+    for (auto& [id, object] : replacements) library.replace(id, std::move(object));
+  }
   for (const NodeId r : roots) propagate(r);
   // Compare every touched instance with its committed state.
   ChangeSet cs;
@@ -512,12 +604,13 @@ ChangeSet SceneGraph::Impl::collectChanges() {
       (now ? cs.appeared : cs.disappeared).push_back(t.id);
     } else if (now) {
       if (t.moved) cs.moved.push_back(t.id);
-      if (t.object != n.object) cs.object_changed.push_back(t.id);
+      if (t.object != n.object || isReplaced(n.object)) cs.object_changed.push_back(t.id);
       if (t.mask != n.mask) cs.mask_changed.push_back(t.id);
     }
   }
   for (auto* list : {&cs.appeared, &cs.disappeared, &cs.moved, &cs.object_changed, &cs.mask_changed})
     std::sort(list->begin(), list->end());
+  for (const auto& r : replacements) cs.objects_changed.push_back(r.first);
   // The nodes removed in this batch are gone for good now: release their records (their ids stay
   // dead). After clearBatch(), which still reads the touched records.
   std::vector<NodeId> dead;
@@ -535,15 +628,17 @@ ChangeSet SceneGraph::commit() {
     cs.commit = m.commits;
     return cs;
   }
-  cs = m.collectChanges();
+  cs = m.collectChanges(*library_);
   if (cs.empty()) {
     cs.commit = m.commits;
     return cs;
   }
   cs.commit = ++m.commits;
-  logger()->debug("scene graph commit {}: {} appeared, {} disappeared, {} moved, {} object changed, {} mask changed",
-                  cs.commit, cs.appeared.size(), cs.disappeared.size(), cs.moved.size(), cs.object_changed.size(),
-                  cs.mask_changed.size());
+  logger()->debug(
+      "scene graph commit {}: {} appeared, {} disappeared, {} moved, {} object changed, {} mask changed, {} objects "
+      "replaced",
+      cs.commit, cs.appeared.size(), cs.disappeared.size(), cs.moved.size(), cs.object_changed.size(),
+      cs.mask_changed.size(), cs.objects_changed.size());
   // Observers run on a copy of the list, so that one may subscribe or unsubscribe while called.
   const auto observers = m.observers;
   std::exception_ptr first_failure;
@@ -559,6 +654,10 @@ ChangeSet SceneGraph::commit() {
 }
 
 void SceneGraph::Impl::undoOne(const Undo& u) {
+  if (u.kind == UndoKind::Replaced) {  // records pair with `replaced` in edit order
+    replaced.pop_back();
+    return;
+  }
   Node& n = nodes[u.node];
   switch (u.kind) {
     case UndoKind::Added:
@@ -596,6 +695,7 @@ void SceneGraph::Impl::undoOne(const Undo& u) {
     case UndoKind::Visible:
       n.flags = u.value ? (n.flags | kVisible) : (n.flags & static_cast<std::uint8_t>(~kVisible));
       break;
+    case UndoKind::Replaced: break;  // handled above
   }
 }
 

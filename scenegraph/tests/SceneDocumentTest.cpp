@@ -465,6 +465,87 @@ TEST(SceneDocumentOwn, EditsThatTheGraphRefusesNameTheEditAndChangeNothing) {
   EXPECT_FALSE(doc.graph->find("/h"));
 }
 
+TEST(SceneDocumentOwn, DeformAndAddObjectEditsReachTheLibraryWhenApplied) {
+  SceneDir d;
+  // The cube fixture twice as large (same faces), and a prepared structure of the tetrahedron.
+  std::ifstream in(d.scenes / "meshes" / "quad_cube.obj");
+  std::ostringstream big;
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("v ", 0) == 0) {
+      std::istringstream v(line.substr(2));
+      double x, y, z;
+      v >> x >> y >> z;
+      big << "v " << 2 * x << ' ' << 2 * y << ' ' << 2 * z << '\n';
+    } else {
+      big << line << '\n';
+    }
+  }
+  writeTextFile(d.scenes / "meshes" / "big_cube.obj", big.str());
+  const auto prepared =
+      saveStructures(loadSceneDocument(d.write(own(kTetra, "")), builtinObjectTypes()), d.scenes / "prepared");
+  const std::string edits = R"(
+    {"time": 1, "deform": "cube", "file": "meshes/big_cube.obj"},
+    {"time": 2, "deform": "tetra", "positions": [0, 0, 0, 2, 0, 0, 0, 2, 0, 0, 0, 2]},
+    {"time": 3, "add_object": {"name": "late", "mesh": )" +
+                            std::string(kTetraInline) + R"(, "structure": "prepared/)" +
+                            prepared[0].filename().string() + R"("}},
+    {"time": 4, "add": {"instance": "l", "object": "late"}},
+    {"time": 5, "deform": "tetra", "file": "meshes/big_cube.obj"},
+    {"time": 5, "deform": "cube", "positions": [0, 0, 0]})";
+  const auto path = d.write(
+      own(kCube + "," + kTetra, R"({"instance": "c", "object": "cube"}, {"instance": "t", "object": "tetra"})", edits));
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
+  SceneGraph& g = *doc.graph;
+  ObjectLibrary& lib = g.library();
+  const ObjectId cube = doc.objects[0], tetra = doc.objects[1];
+  ASSERT_EQ(doc.edits.size(), 6u);
+  const auto late = lib.find("late");
+  ASSERT_TRUE(late);
+  EXPECT_EQ(doc.objects.size(), 2u);  // not an "objects" entry
+  EXPECT_FALSE(lib.isBuilt(*late));   // not read before its edit
+  const Box cube_box = lib.get(cube)->bounds();
+
+  (void)applyEdit(doc, doc.edits[0]);
+  ChangeSet cs = g.commit();
+  EXPECT_EQ(cs.objects_changed, (std::vector<ObjectId>{cube}));
+  EXPECT_EQ(cs.object_changed, (std::vector<NodeId>{doc.instances[0]}));
+  EXPECT_EQ(lib.get(cube)->bounds().hi, 2.0f * cube_box.hi);
+  EXPECT_EQ(lib.get(cube)->bounds().lo, 2.0f * cube_box.lo);
+  (void)applyEdit(doc, doc.edits[1]);
+  (void)g.commit();
+  EXPECT_EQ(lib.get(tetra)->bounds().hi, glm::vec3(2.0f));
+
+  (void)applyEdit(doc, doc.edits[2]);
+  EXPECT_TRUE(lib.isBuilt(*late));
+  const auto added = applyEdit(doc, doc.edits[3]);
+  (void)g.commit();
+  ASSERT_EQ(added.size(), 1u);
+  EXPECT_EQ(g.node(added[0]).object, *late);
+  EXPECT_TRUE(g.isVisibleInstance(added[0]));
+
+  // Refused when applied, naming the edit; nothing changes.
+  const auto before = lib.get(tetra);
+  expectError([&] { (void)applyEdit(doc, doc.edits[4]); }, path, "/edits/4", "topology");
+  expectError([&] { (void)applyEdit(doc, doc.edits[5]); }, path, "/edits/5", "vertices");
+  EXPECT_FALSE(g.hasPendingEdits());
+  EXPECT_EQ(lib.get(tetra), before);
+
+  // Refused when read.
+  const std::string objs = kCube + "," + kTetra;
+  const std::string tree = R"({"instance": "c", "object": "cube"})";
+  expectDocError(d, own(objs, tree, R"({"time": 1, "deform": "nothing", "positions": [0, 0, 0]})"), "/edits/0/deform");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "deform": "cube"})"), "/edits/0", "exactly one");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "deform": "cube", "positions": [0, 0, 0], "file": "x.obj"})"),
+                 "/edits/0", "exactly one");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "deform": "cube", "positions": [0, 0]})"), "/edits/0/positions");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "deform": "cube", "positions": [0, 0, "a"]})"),
+                 "/edits/0/positions/2");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "add_object": {"name": "cube", "box": {}}})"),
+                 "/edits/0/add_object/name", "duplicate");
+  expectDocError(d, own(objs, tree, R"({"time": 1, "add_object": {"name": "b", "box": {}}, "node": "/c"})"),
+                 "/edits/0/node", "unknown key");
+}
+
 // ---- prepared structures ----
 
 // ---- the registry ----

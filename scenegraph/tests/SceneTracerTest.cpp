@@ -1,8 +1,8 @@
 // SceneTracer over a SceneGraph: 10,000 random graph edits (add, remove, move, re-parent, replace,
-// hide, mask) in random batches, each commit checked against a brute force over the visible
-// instances and the top-level invariants; picking (nearest, all, per instance) with node paths,
-// sensors in picks, precision 10^6 units from the origin, rectangle selection, batch queries (intersectAll
-// too) on 1 and 2 threads, lazy builds, and what queries see before a commit.
+// hide, mask, deform or replace a library object under all its instances) in random batches, each commit checked
+// against a brute force over the visible instances and the top-level invariants; picking (nearest, all, per instance)
+// with node paths, sensors in picks, precision 10^6 units from the origin, rectangle selection, batch queries
+// (intersectAll too) on 1 and 2 threads, lazy builds, and what queries see before a commit.
 
 #include "MeshChecks.h"
 #include "TestSupport.h"
@@ -75,6 +75,9 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   config.rebuild_ratio = 1.5;  // few quality rebuilds, so that most commits stay incremental
   SceneTracer tracer(g, config);
   const Box world(glm::vec3(-9.0f), glm::vec3(9.0f));
+  // The sphere's rest positions: deformations wobble around them, so that it keeps its size.
+  const std::vector<glm::vec3> rest = dynamic_cast<const MeshObject&>(*f.library->get(f.objects[0])).mesh().positions();
+  std::size_t object_edits = 0;
 
   std::size_t edits = 0, commits = 0, rejected = 0, rays_checked = 0, hits = 0;
   while (edits < 10000) {
@@ -86,7 +89,7 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
       for (NodeId p : parents)
         if (g.contains(p)) containers.push_back(p);
       parents = containers;
-      const int kind = static_cast<int>(rng() % 12);
+      const int kind = static_cast<int>(rng() % 13);
       try {
         if (kind < 2 || inst.size() < 10) {
           g.addInstance(containers[rng() % containers.size()], f.objects[rng() % 4], randomPlacement(rng, 8.0), {},
@@ -119,9 +122,21 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
           const bool node = rng() % 3 == 0 && containers.size() > 1;
           const NodeId target = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];
           g.setVisible(target, !g.node(target).visible);
-        } else {
+        } else if (kind < 12) {
           const NodeId target = inst[rng() % inst.size()];
           g.setMask(target, g.node(target).mask == 2u ? 0xFFFFFFFFu : 2u);
+        } else if (rng() % 3 != 0) {  // deform the sphere under all its instances (refit or rebuild)
+          std::vector<glm::vec3> p = rest;
+          std::uniform_real_distribution<float> u(-0.15f, 0.15f);
+          const glm::vec3 wobble(u(rng), u(rng), u(rng));
+          for (glm::vec3& v : p)
+            v += wobble * glm::vec3(std::sin(3.0f * v.y), std::sin(3.0f * v.z), std::sin(3.0f * v.x));
+          if (rng() % 20 == 0) p.pop_back();  // must be rejected
+          g.deformObject(f.objects[0], p);
+          ++object_edits;
+        } else {  // the soup gets another topology
+          g.replaceObject(f.objects[3], buildChecked(triangleSoup(60 + static_cast<std::size_t>(rng() % 120), rng())));
+          ++object_edits;
         }
       } catch (const InvalidArgument&) {
         ++rejected;
@@ -146,6 +161,7 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
     }
   }
   EXPECT_GE(commits, 800u);
+  EXPECT_GT(object_edits, 400u);
   EXPECT_GT(rejected, 20u);  // NaN transforms and cycles were tried, and refused
   EXPECT_GT(hits, 7500u);    // enough rays met geometry for the comparison to mean something
   const TopLevelStats st = tracer.stats();

@@ -14,6 +14,7 @@
 //   duplex_cli_check prepare-koala DUPLEX DIR DATA_DIR koala in 19 objects, prepared (skipped without data)
 //   duplex_cli_check bench-update DUPLEX DIR           `duplex bench update` keys and figures on tiny scenes
 //   duplex_cli_check bench-update-embree BENCH DIR     the same by duplex_bench_update, with Embree's keys
+//   duplex_cli_check bench-deform DUPLEX DIR           `duplex bench deform` keys and figures on the quad scene
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
@@ -609,12 +610,40 @@ int checkBenchUpdate(const std::vector<std::string>& command, const fs::path& fi
   return 0;
 }
 
+// `duplex bench deform` on the quad scene: the documented keys, positive times, every step either
+// a refit or a counted rebuild, and the refitted object tracing the same hits as a fresh one.
+int checkBenchDeform(const std::string& duplex, const fs::path& fixtures) {
+  const nlohmann::json j =
+      parseOneLine(runOk({duplex, "bench", "deform", "--scene", (fixtures / "quad.json").string(), "--object", "quad",
+                          "--steps", "6", "--seed", "3", "--primary", "40", "--trace-rounds", "2", "--threads", "2"},
+                         fixtures)
+                       .out);
+  expect(number(j, "steps") == 6.0 && number(j, "triangles") == 2.0, "steps/triangles not as expected: " + j.dump());
+  for (const char* key : {"rebuild_ms_median", "commit_ms_median", "mrays_per_s_refitted", "mrays_per_s_fresh",
+                          "sah_cost_fresh", "sah_cost_refitted"})
+    expect(number(j, key) > 0.0, std::string("\"") + key + "\" is not positive: " + j.dump());
+  const double rebuilds = number(j, "rebuilds");
+  expect(rebuilds >= 0.0 && rebuilds <= 6.0 && rebuilds == std::floor(rebuilds), "bad \"rebuilds\": " + j.dump());
+  // Refitted steps have a time and a speedup; the guard's rebuilds have theirs.
+  expect((rebuilds == 6.0) == j["refit_ms_median"].is_null(), "refit_ms_median and rebuilds disagree: " + j.dump());
+  expect((rebuilds == 0.0) == j["guard_rebuild_ms_median"].is_null(),
+         "guard_rebuild_ms_median and rebuilds disagree: " + j.dump());
+  if (rebuilds < 6.0) expect(number(j, "refit_speedup") > 0.0, "\"refit_speedup\" is not positive: " + j.dump());
+  expect(j.contains("trace_slowdown_after_refits") && j["trace_slowdown_after_refits"].is_number(),
+         "no trace_slowdown_after_refits: " + j.dump());
+  expect(number(j, "agreement_refit_vs_fresh") >= 0.99, "refitted and fresh trees disagree: " + j.dump());
+  expect(number(j, "primary_rays") == 1600.0, "primary_rays is not 40 x 40: " + j.dump());
+  std::cout << "bench deform: " << j.dump() << "\n";
+  return 0;
+}
+
 int usage() {
-  std::cerr << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
-               "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR |\n"
-               "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
-               "       prepare-koala DUPLEX DIR DATA_DIR |\n"
-               "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR\n";
+  std::cerr
+      << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
+         "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR |\n"
+         "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
+         "       prepare-koala DUPLEX DIR DATA_DIR |\n"
+         "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR\n";
   return 2;
 }
 
@@ -642,6 +671,7 @@ int main(int argc, char** argv) {
     if (args.size() == 3 && args[0] == "bench-update")
       return checkBenchUpdate({args[1], "bench", "update"}, args[2], false);
     if (args.size() == 3 && args[0] == "bench-update-embree") return checkBenchUpdate({args[1]}, args[2], true);
+    if (args.size() == 3 && args[0] == "bench-deform") return checkBenchDeform(args[1], args[2]);
     return usage();
   });
 }

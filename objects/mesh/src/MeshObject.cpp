@@ -238,7 +238,10 @@ MeshStructure parseMeshStructure(std::string_view name) {
 }
 
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const MeshBuildConfig& config)
-    : Object(mesh ? mesh->name() : std::string()), mesh_(std::move(mesh)), structure_(config.structure) {
+    : Object(mesh ? mesh->name() : std::string()),
+      mesh_(std::move(mesh)),
+      structure_(config.structure),
+      config_(config) {
   if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
   if (structure_ == MeshStructure::Bvh) buildBvh(config.bvh);
   else buildKd(config.kd);
@@ -281,6 +284,7 @@ void MeshObject::buildBvh(const BvhBuildConfig& config) {
   } catch (const InvalidArgument& e) {
     throw InvalidArgument("mesh '" + m.name() + "': " + e.what());
   }
+  built_sah_ = bvh_.sahCost(config);
   buildBvhBlocks();
 }
 
@@ -305,6 +309,7 @@ void MeshObject::buildBvhBlocks() {
 
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag)
     : Object(mesh->name()), mesh_(std::move(mesh)), structure_(MeshStructure::KdTree), tree_(std::move(tree)) {
+  config_.structure = MeshStructure::KdTree;
   buildLeafBlocks();
 }
 
@@ -322,10 +327,56 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh, Pa
 std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh) {
   if (!mesh) throw InvalidArgument("MeshObject::fromParts: null mesh");
   checkBvhAgainstMesh(bvh, *mesh);
-  return std::shared_ptr<const MeshObject>(new MeshObject(std::move(mesh), std::move(bvh), PartsTag{}));
+  std::unique_ptr<MeshObject> object(new MeshObject(std::move(mesh), std::move(bvh), PartsTag{}));
+  object->built_sah_ = object->bvh_.sahCost(object->config_.bvh);
+  return object;
 }
 
 MeshObject::~MeshObject() = default;
+
+double MeshObject::sahCost() const { return structure_ == MeshStructure::Bvh ? bvh_.sahCost(config_.bvh) : 0.0; }
+
+std::shared_ptr<const Object> MeshObject::deformed(std::span<const glm::vec3> positions_os) const {
+  return deformedMesh(positions_os);
+}
+
+std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::vec3> positions_os) const {
+  const TriangleMesh& old = *mesh_;
+  if (positions_os.size() != old.positions().size())
+    throw InvalidArgument("mesh '" + name() + "': deformed with " + std::to_string(positions_os.size()) +
+                          " positions, but it has " + std::to_string(old.positions().size()) + " vertices");
+  for (std::size_t i = 0; i < positions_os.size(); ++i) {
+    const glm::vec3& p = positions_os[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      throw InvalidArgument("mesh '" + name() + "': deformed position of vertex " + std::to_string(i) +
+                            " is not finite");
+  }
+  auto mesh = std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(
+      std::vector<glm::vec3>(positions_os.begin(), positions_os.end()), old.triangles(), old.name()));
+  bool same_valid = structure_ == MeshStructure::Bvh;
+  for (std::size_t t = 0; t < old.triangleCount() && same_valid; ++t) same_valid = old.isValid(t) == mesh->isValid(t);
+  // A triangle that became valid is in no leaf, one that became degenerate would fail the
+  // structure's invariants: both need a build, as a kd-tree always does.
+  if (!same_valid) return std::make_shared<const MeshObject>(std::move(mesh), config_);
+  WideBvh bvh = bvh_;
+  const std::vector<glm::vec3>& p = mesh->positions();
+  const std::vector<TriangleMesh::Triangle>& tris = mesh->triangles();
+  refitWideBvhWith(bvh, [&](std::uint32_t prim) {  // indices were checked when bvh_ was made
+    const TriangleMesh::Triangle& t = tris[prim];
+    Box b;
+    b.extend(p[t[0]]);
+    b.extend(p[t[1]]);
+    b.extend(p[t[2]]);
+    return b;
+  });
+  if (!(bvh.sahCost(config_.bvh) <= static_cast<double>(config_.bvh.refit_limit) * built_sah_))
+    return std::make_shared<const MeshObject>(std::move(mesh), config_);
+  std::unique_ptr<MeshObject> out(new MeshObject(std::move(mesh), std::move(bvh), PartsTag{}));
+  out->config_ = config_;
+  out->built_sah_ = built_sah_;
+  out->refitted_ = true;
+  return out;
+}
 
 void MeshObject::buildLeafBlocks() {
   const TriangleMesh& m = *mesh_;

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <cstdint>
 #include <sstream>
 #include <string>
@@ -27,6 +28,25 @@ std::shared_ptr<const TriangleMesh> readMeshFile(const std::filesystem::path& fi
   auto mesh = std::make_shared<const TriangleMesh>(loadMesh(file, &report));
   cache.addCount("complex_edge_warnings", report.complex_edge_warnings);
   return mesh;
+}
+
+// A "deform" edit's file: a mesh of the same triangles as `current`; its positions.
+std::vector<glm::vec3> readDeformTarget(const std::filesystem::path& file, const Object& current) {
+  const auto* object = dynamic_cast<const MeshObject*>(&current);
+  if (!object) throw FileError(file.string() + ": object '" + current.name() + "' is not a mesh");
+  const TriangleMesh target = loadMesh(file);
+  const TriangleMesh& now = object->mesh();
+  std::ostringstream why;
+  if (target.positions().size() != now.positions().size() || target.triangleCount() != now.triangleCount()) {
+    why << target.positions().size() << " vertices and " << target.triangleCount() << " triangles, expected "
+        << now.positions().size() << " and " << now.triangleCount();
+  } else {
+    for (std::size_t t = 0; t < now.triangleCount() && why.tellp() == 0; ++t)
+      if (target.triangles()[t] != now.triangles()[t]) why << "triangle " << t << " has other vertices";
+  }
+  if (why.tellp() != 0)
+    throw FileError(file.string() + ": not the topology of mesh '" + current.name() + "' (" + why.str() + ")");
+  return target.positions();
 }
 
 MeshBuildConfig parseChoice(std::string_view name, std::string_view params, const KdBuildConfig& kd) {
@@ -143,7 +163,7 @@ std::string toString(const MeshBuildConfig& config) {
 
 void registerMeshTypes(ObjectTypeRegistry& registry) {
   registry.add({std::string(MeshObject::kTypeName), readMesh, /*in_scene_json_v1=*/true, /*accepts_structure=*/true,
-                /*structure_names=*/{"bvh", "kdtree"}});
+                /*structure_names=*/{"bvh", "kdtree"}, readDeformTarget});
 }
 
 }  // namespace duplex

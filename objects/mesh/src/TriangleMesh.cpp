@@ -4,8 +4,11 @@
 #include "duplex/accel/Log.h"
 
 #include <glm/geometric.hpp>
+#include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <string>
 
 namespace duplex {
@@ -37,33 +40,60 @@ TriangleMesh TriangleMesh::fromTriangles(std::vector<glm::vec3> positions, std::
 
 void TriangleMesh::validate() {
   if (triangles_.empty()) throw InvalidArgument("mesh '" + name_ + "': has no triangles");
-  valid_.assign(triangles_.size(), 0);
+  const std::size_t nv = positions_.size(), nt = triangles_.size();
+  // Finiteness once per vertex rather than once per corner; then the triangles in parallel chunks,
+  // merged in chunk order (the result does not depend on the thread count).
+  std::vector<std::uint8_t> finite(nv);
+  for (std::size_t i = 0; i < nv; ++i) {
+    const glm::vec3& p = positions_[i];
+    finite[i] = std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+  }
+  valid_.assign(nt, 0);
+  constexpr std::size_t kChunk = 16384;
+  struct Part {
+    Box bounds;
+    std::size_t degenerate = 0;
+    std::size_t bad = SIZE_MAX;  // first triangle with an index out of range
+  };
+  std::vector<Part> parts((nt + kChunk - 1) / kChunk);
+  tbb::parallel_for(std::size_t{0}, parts.size(), [&](std::size_t c) {
+    Part& part = parts[c];
+    const std::size_t end = std::min(nt, (c + 1) * kChunk);
+    for (std::size_t i = c * kChunk; i < end; ++i) {
+      const Triangle& t = triangles_[i];
+      if (t[0] >= nv || t[1] >= nv || t[2] >= nv) {
+        part.bad = std::min(part.bad, i);
+        continue;
+      }
+      bool ok = t[0] != t[1] && t[1] != t[2] && t[0] != t[2] && finite[t[0]] && finite[t[1]] && finite[t[2]];
+      const glm::vec3 a = positions_[t[0]], b = positions_[t[1]], c3 = positions_[t[2]];
+      if (ok) {
+        // Exactly zero area in double: such a triangle has no interior and the watertight test
+        // would report det == 0 anyway; keeping it out of the tree saves work.
+        const glm::dvec3 n = glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c3) - glm::dvec3(a));
+        ok = n != glm::dvec3(0.0);
+      }
+      if (!ok) {
+        ++part.degenerate;
+        continue;
+      }
+      valid_[i] = 1;
+      part.bounds.extend(a);
+      part.bounds.extend(b);
+      part.bounds.extend(c3);
+    }
+  });
   degenerate_count_ = 0;
   bounds_ = Box();
-  for (std::size_t i = 0; i < triangles_.size(); ++i) {
-    const Triangle& t = triangles_[i];
-    for (int k = 0; k < 3; ++k)
-      if (t[k] >= positions_.size())
-        throw InvalidArgument("mesh '" + name_ + "': triangle " + std::to_string(i) + " refers to vertex " +
-                              std::to_string(t[k]) + " but there are " + std::to_string(positions_.size()) +
-                              " vertices");
-    const glm::vec3 a = positions_[t[0]], b = positions_[t[1]], c = positions_[t[2]];
-    bool ok = t[0] != t[1] && t[1] != t[2] && t[0] != t[2];
-    for (int k = 0; k < 3 && ok; ++k) ok = std::isfinite(a[k]) && std::isfinite(b[k]) && std::isfinite(c[k]);
-    if (ok) {
-      // Exactly zero area in double: such a triangle has no interior and the watertight test
-      // would report det == 0 anyway; keeping it out of the tree saves work.
-      const glm::dvec3 n = glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a));
-      ok = n != glm::dvec3(0.0);
+  for (const Part& part : parts) {
+    if (part.bad != SIZE_MAX) {
+      const Triangle& t = triangles_[part.bad];
+      const std::uint32_t k = t[0] >= nv ? t[0] : t[1] >= nv ? t[1] : t[2];
+      throw InvalidArgument("mesh '" + name_ + "': triangle " + std::to_string(part.bad) + " refers to vertex " +
+                            std::to_string(k) + " but there are " + std::to_string(nv) + " vertices");
     }
-    if (!ok) {
-      ++degenerate_count_;
-      continue;
-    }
-    valid_[i] = 1;
-    bounds_.extend(a);
-    bounds_.extend(b);
-    bounds_.extend(c);
+    degenerate_count_ += part.degenerate;
+    bounds_.extend(part.bounds);
   }
   if (degenerate_count_ == triangles_.size())
     throw InvalidArgument("mesh '" + name_ + "': none of its " + std::to_string(triangles_.size()) +

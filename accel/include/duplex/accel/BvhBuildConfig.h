@@ -54,12 +54,17 @@ struct BvhBuildConfig {
   /// Build subtrees as TBB tasks when they hold at least this many references (0: serial). The
   /// tree does not depend on it.
   std::uint32_t parallel_threshold = 4096;
+  /// Refits (new positions, same triangles: MeshObject::deformed) keep the tree while its SAH cost
+  /// stays at most this multiple of the cost it had when it was last built; beyond it the object
+  /// is rebuilt. 1 rebuilds on any loss, a large value never rebuilds. The default keeps the trace
+  /// time of smoothly deforming meshes within about ten percent of a fresh build (docs/bvh.md).
+  float refit_limit = 1.15f;
 
   /// The parameters of a preset.
   static BvhBuildConfig preset(BvhPreset p);
   /// Parses a preset name optionally followed by overrides, comma separated:
   /// "medium", "fast,leaf=4", "high,alpha=1e-4,budget=0.3", "bins=16". Keys: bins, ct, ci, leaf,
-  /// alpha, budget, parallel. Throws InvalidArgument naming the bad part; the result is validated.
+  /// alpha, budget, parallel, refit. Throws InvalidArgument naming the bad part; the result is validated.
   static BvhBuildConfig parse(std::string_view text);
   /// Throws InvalidArgument naming the first parameter out of range.
   void validate() const;

@@ -12,7 +12,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -109,6 +111,15 @@ class Object {
   /// the file when it cannot be written; InvalidArgument naming the object when its type has no
   /// prepared format (preparedExtension() empty, the default).
   virtual void savePrepared(const std::filesystem::path& path) const;
+
+  /// How many object-space vertices deformed() takes; 0 (the default) when the type has none.
+  [[nodiscard]] virtual std::size_t deformableVertexCount() const { return 0; }
+  /// A new object: this one with its vertices moved to `positions_os` (object space, the object's
+  /// own units, deformableVertexCount() of them in the object's vertex order), everything else kept.
+  /// The type reuses what it can of its structure (meshes refit their BVH while its quality holds).
+  /// This object is not changed. Throws InvalidArgument naming the object for a wrong count, a
+  /// non-finite position, or a type that cannot be deformed (the default).
+  [[nodiscard]] virtual std::shared_ptr<const Object> deformed(std::span<const glm::vec3> positions_os) const;
 
  protected:
   /// For the types: the user-visible `name` and the object's `role`.

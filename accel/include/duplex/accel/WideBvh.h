@@ -140,4 +140,55 @@ using BvhClipFunction =
 /// must be non-empty; the SAH quality decays as the primitives move away from the built layout.
 void refitWideBvh(WideBvh& bvh, std::span<const Box> prim_bounds);
 
+namespace detail {
+/// Runs fn(context, i) for i in [0, count), in parallel on TBB's threads (refit's top levels).
+void bvhParallelFor(int count, void* context, void (*fn)(void* context, int i));
+}  // namespace detail
+
+/// refitWideBvh with each referenced primitive's box from `prim_box(prim)` (a callable inlined
+/// into the pass, so that no array of boxes is needed: a mesh computes them from its vertices).
+/// The subtrees below the root's children are refitted in parallel (TBB); the result does not
+/// depend on the thread count.
+template <class PrimBox>
+void refitWideBvhWith(WideBvh& bvh, const PrimBox& prim_box) {
+  struct Refit {
+    WideBvh& bvh;
+    const PrimBox& prim_box;
+    Box leaf(std::uint32_t ref) const {
+      Box b;
+      const std::size_t first = std::size_t{bvh.leaf_block} * BvhRef::leafBlock(ref);
+      for (std::uint32_t i = 0; i < BvhRef::leafCount(ref); ++i) b.extend(prim_box(bvh.prim_indices[first + i]));
+      return b;
+    }
+    // Node n's children first, then its own slots and orders; returns its box.
+    Box node(std::uint32_t n, int depth) const {
+      BvhNode8& node = bvh.nodes[n];
+      Box child_box[BvhNode8::kWidth];
+      auto one = [&](int k) {
+        const std::uint32_t c = node.child[k];
+        if (c != BvhRef::kEmpty) child_box[k] = BvhRef::isLeaf(c) ? leaf(c) : this->node(c, depth + 1);
+      };
+      if (depth < 2) {
+        struct Context {
+          decltype(one)* f;
+        } context{&one};
+        detail::bvhParallelFor(BvhNode8::kWidth, &context, [](void* c, int k) { (*static_cast<Context*>(c)->f)(k); });
+      } else {
+        for (int k = 0; k < BvhNode8::kWidth; ++k) one(k);
+      }
+      Box all;
+      for (int k = 0; k < BvhNode8::kWidth; ++k) {
+        if (node.child[k] == BvhRef::kEmpty) continue;
+        node.setChild(k, node.child[k], child_box[k]);
+        all.extend(child_box[k]);
+      }
+      node.computeOrder();
+      return all;
+    }
+  };
+  const Refit refit{bvh, prim_box};
+  if (bvh.root == BvhRef::kEmpty) return;
+  bvh.bounds = BvhRef::isLeaf(bvh.root) ? refit.leaf(bvh.root) : refit.node(bvh.root, 0);
+}
+
 }  // namespace duplex

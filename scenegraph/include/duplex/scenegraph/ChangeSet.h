@@ -17,7 +17,8 @@ namespace duplex {
 ///   moved under a visible parent from a hidden one);
 /// - disappeared: instances visible at the last commit that are not now (removed or hidden);
 /// - moved: visible before and after, world transform changed (its own, an ancestor's, re-parented);
-/// - object_changed: visible before and after, object replaced (may also have moved);
+/// - object_changed: visible before and after, given another object or its object was replaced
+///   in the library (SceneGraph::replaceObject, deformObject; may also have moved);
 /// - mask_changed: visible before and after, mask changed (may also have moved or changed object).
 /// An instance that moved and was given another object is listed in both moved and object_changed.
 /// An instance added and removed within one batch appears nowhere.
@@ -28,10 +29,14 @@ struct ChangeSet {
   std::vector<NodeId> moved;           ///< visible before and after, world transform changed
   std::vector<NodeId> object_changed;  ///< visible before and after, object replaced
   std::vector<NodeId> mask_changed;    ///< visible before and after, mask changed
+  /// Library objects replaced by this commit (new geometry: deformed, re-meshed), sorted; their
+  /// visible instances are in object_changed.
+  std::vector<ObjectId> objects_changed;
 
-  /// Whether no instance changed (commit still carries the number of the last commit that did).
+  /// Whether nothing changed (commit still carries the number of the last commit that did).
   [[nodiscard]] bool empty() const {
-    return appeared.empty() && disappeared.empty() && moved.empty() && object_changed.empty() && mask_changed.empty();
+    return appeared.empty() && disappeared.empty() && moved.empty() && object_changed.empty() && mask_changed.empty() &&
+           objects_changed.empty();
   }
 };
 

@@ -179,6 +179,13 @@ struct ObjectTypeInfo {
   /// "kdtree"}. A name some registered type offers is a choice, never a path: an entry of a type
   /// that does not offer it is an error. Empty: the type has no choice.
   std::vector<std::string> structure_names = {};
+  /// Reads the target geometry of a timed "deform" edit's "file": a file of the type's format with
+  /// the topology of `current` (the object as it is when the edit is applied). Returns its
+  /// object-space positions, current.deformableVertexCount() of them. Throws FileError naming the
+  /// file when it cannot be read or its topology differs. Null (the default): objects of the type
+  /// cannot be deformed from a file (inline "positions" still work for deformable ones).
+  std::function<std::vector<glm::vec3>(const std::filesystem::path& file, const Object& current)> deform_file_reader =
+      {};
 };
 
 /// A set of object types. Start from duplex::builtinObjectTypes() (or an empty registry) and add()

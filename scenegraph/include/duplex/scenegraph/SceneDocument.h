@@ -45,7 +45,9 @@ enum class SceneEditKind : std::uint8_t {
   Remove,        ///< "remove": remove the node and its subtree
   SetVisible,    ///< "visible": hide or show the node
   SetObject,     ///< "object": give the instance another library object
-  SetMask        ///< "mask": set the instance's mask
+  SetMask,       ///< "mask": set the instance's mask
+  Deform,        ///< "deform": move a library object's vertices (SceneGraph::deformObject)
+  AddObject      ///< "add_object": load an object not declared in "objects" (read now, built then)
 };
 
 /// One timed edit of the file's "edits" list; applied (by the demo, a player) with applyEdit().
@@ -55,10 +57,13 @@ struct SceneEdit {
   std::string node;                                  ///< path of the edited node; for Add, of the parent ("/" = root)
   Affine transform;                                  ///< SetTransform: the node's new local transform
   bool visible = true;                               ///< SetVisible
-  ObjectId object = kInvalidObject;                  ///< SetObject
+  ObjectId object = kInvalidObject;                  ///< SetObject; Deform, AddObject: the library object
   std::uint32_t mask = 0xFFFFFFFFu;                  ///< SetMask
   std::shared_ptr<const SceneNodeSpec> added;        ///< Add: the subtree to add
-  std::string pointer;                               ///< "/edits/3", for messages
+  /// Deform (with `object`, the library object deformed): the new object-space positions, given
+  /// the object as it is when the edit is applied (inline "positions", or read from "file").
+  std::function<std::vector<glm::vec3>(const Object& current)> positions;
+  std::string pointer;  ///< "/edits/3", for messages
 };
 
 /// Figures of a load (milliseconds of wall time).
@@ -129,11 +134,11 @@ struct SceneDocument {
 std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit);
 
 /// Writes the prepared bottom-level structure of every object of doc's library whose type has a
-/// prepared format (Object::preparedExtension(); meshes: ".dkdt"), built now if deferred, to `dir`
+/// prepared format (Object::preparedExtension(); meshes: ".dbvh" or ".dkdt"), built now if deferred, to `dir`
 /// (created if needed) as "<object id>_<name><extension>" (characters other than [A-Za-z0-9._-]
 /// replaced by '_'), for use as "structure" in a scene file. Returns the path per library object id
-/// (empty for objects of types without one). An object shared by several entries is written once
-/// per entry. Throws FileError naming the folder or file that cannot be created or written.
+/// (empty for objects of types without one and for removed objects). An object shared by several entries is written
+/// once per entry. Throws FileError naming the folder or file that cannot be created or written.
 std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, const std::filesystem::path& dir);
 
 }  // namespace duplex

@@ -101,6 +101,29 @@ class SceneGraph {
   /// Instances only.
   void setMask(NodeId instance, std::uint32_t mask);
 
+  // ---- object edits (pending until commit, like node edits) ----
+  /// Replaces library object `object` with `replacement` (a new mesh, another topology, another
+  /// type) at the next commit: the library then holds `replacement` under the same id and name,
+  /// every visible instance of it in this graph is listed in object_changed, and the object in
+  /// objects_changed. A later replacement of the same object in the batch wins; rollback() drops
+  /// them. Other graphs sharing the library see the new object only where their own edits touch its
+  /// instances. Throws for an unknown or removed id or a null replacement.
+  void replaceObject(ObjectId object, std::shared_ptr<const Object> replacement);
+  /// replaceObject(object, current->deformed(positions_os)), where `current` is the object as this
+  /// batch leaves it (its pending replacement, if any, so that steps of a deformation chain their
+  /// refits). positions_os: object space, Object::deformableVertexCount() of them. The new object
+  /// is computed now; an error (wrong count, non-finite positions, a type that cannot be deformed)
+  /// throws naming the object and changes nothing.
+  void deformObject(ObjectId object, std::span<const glm::vec3> positions_os);
+  /// The object as this batch leaves it: a pending replacement, or the library's.
+  [[nodiscard]] std::shared_ptr<const Object> pendingObject(ObjectId object) const;
+  /// Removes library object `object` now (ObjectLibrary::remove), when no instance of this graph
+  /// refers to it, neither as committed nor as pending; its pending replacement is dropped. Not an
+  /// edit: rollback() does not bring it back. Throws InvalidArgument naming up to five of the
+  /// instances that use it (or an unknown or removed id); nothing changes then.
+  /// Cost: one pass over the node table.
+  void removeObject(ObjectId object);
+
   /// Whether there are edits since the last commit.
   [[nodiscard]] bool hasPendingEdits() const;
   /// Brings world transforms up to date (only below edited nodes), builds the ChangeSet of the batch,
@@ -112,7 +135,8 @@ class SceneGraph {
   /// Throws InvalidArgument, naming the node, when a new world transform (a product of valid local
   /// transforms) overflows or becomes singular; nothing is committed then and the edits stay
   /// pending, to be fixed or rolled back.
-  /// Cost: O(edits + nodes below the edited ones + depth per edited node); no scan of the graph.
+  /// Cost: O(edits + nodes below the edited ones + depth per edited node); no scan of the graph,
+  /// except one pass over the node table when the batch replaced objects (to find their instances).
   ChangeSet commit();
   /// Undoes every edit since the last commit (children order included). Ids handed out by rolled-back
   /// additions are not reused.

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string_view>
 #include <vector>
 
@@ -88,6 +89,30 @@ class MeshObject final : public Object {
   }
   /// saveMeshObject(*this, path) (MeshObjectFile.h).
   void savePrepared(const std::filesystem::path& path) const override;
+  /// The mesh's vertex count (positions().size(), degenerate triangles' vertices included).
+  [[nodiscard]] std::size_t deformableVertexCount() const override { return mesh_->positions().size(); }
+  /// deformedMesh(positions_os).
+  [[nodiscard]] std::shared_ptr<const Object> deformed(std::span<const glm::vec3> positions_os) const override;
+
+  /// A new mesh object with the same triangles and name, its vertices at `positions_os` (object
+  /// space, one per vertex of mesh(), in order). A BVH is refitted (the topology kept, the boxes
+  /// recomputed, linear time) unless the refitted tree's SAH cost exceeds
+  /// buildConfig().bvh.refit_limit times builtSahCost(), or a triangle changed between degenerate
+  /// and valid; then, and for a kd-tree (its clipped splits cannot be refitted), the structure is
+  /// built anew with buildConfig(). wasRefitted() of the result says which happened. Throws
+  /// InvalidArgument naming the mesh for a wrong count or a non-finite position, or when no
+  /// triangle stays valid; this object is unchanged either way.
+  [[nodiscard]] std::shared_ptr<const MeshObject> deformedMesh(std::span<const glm::vec3> positions_os) const;
+  /// Whether the structure is a refit of an earlier object's (deformedMesh) rather than a build.
+  [[nodiscard]] bool wasRefitted() const { return refitted_; }
+  /// The parameters the structure was built with (for objects from fromParts: the defaults of
+  /// their structure); deformedMesh() rebuilds with them.
+  [[nodiscard]] const MeshBuildConfig& buildConfig() const { return config_; }
+  /// BVH: the SAH cost (WideBvh::sahCost with buildConfig().bvh's costs) of the tree as it was
+  /// last built, before any refit; 0 for a kd-tree.
+  [[nodiscard]] double builtSahCost() const { return built_sah_; }
+  /// BVH: the SAH cost of the tree as it is now (after refits); 0 for a kd-tree.
+  [[nodiscard]] double sahCost() const;
 
   /// The same queries without the virtual call and context (for benchmarks and the bottom level).
   bool intersect(const Ray& ray_os, Hit& hit) const;
@@ -120,6 +145,9 @@ class MeshObject final : public Object {
 
   std::shared_ptr<const TriangleMesh> mesh_;
   MeshStructure structure_ = MeshStructure::Bvh;
+  MeshBuildConfig config_;
+  double built_sah_ = 0.0;  // BVH: SAH cost at the last build (refits compare against it)
+  bool refitted_ = false;
   WideBvh bvh_;  // leaf references index blocks_ directly (the ranges are block aligned)
   KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
   // Each non-empty leaf's triangles copied into consecutive 4-wide blocks (structure of arrays, in
