@@ -341,20 +341,9 @@ std::shared_ptr<const Object> MeshObject::deformed(std::span<const glm::vec3> po
 }
 
 std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::vec3> positions_os) const {
-  const TriangleMesh& old = *mesh_;
-  if (positions_os.size() != old.positions().size())
-    throw InvalidArgument("mesh '" + name() + "': deformed with " + std::to_string(positions_os.size()) +
-                          " positions, but it has " + std::to_string(old.positions().size()) + " vertices");
-  for (std::size_t i = 0; i < positions_os.size(); ++i) {
-    const glm::vec3& p = positions_os[i];
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-      throw InvalidArgument("mesh '" + name() + "': deformed position of vertex " + std::to_string(i) +
-                            " is not finite");
-  }
-  auto mesh = std::make_shared<const TriangleMesh>(TriangleMesh::fromTriangles(
-      std::vector<glm::vec3>(positions_os.begin(), positions_os.end()), old.triangles(), old.name()));
-  bool same_valid = structure_ == MeshStructure::Bvh;
-  for (std::size_t t = 0; t < old.triangleCount() && same_valid; ++t) same_valid = old.isValid(t) == mesh->isValid(t);
+  auto mesh = std::make_shared<const TriangleMesh>(
+      mesh_->withPositions(std::vector<glm::vec3>(positions_os.begin(), positions_os.end())));
+  const bool same_valid = structure_ == MeshStructure::Bvh && mesh->sameValidity(*mesh_);
   // A triangle that became valid is in no leaf, one that became degenerate would fail the
   // structure's invariants: both need a build, as a kd-tree always does.
   if (!same_valid) return std::make_shared<const MeshObject>(std::move(mesh), config_);

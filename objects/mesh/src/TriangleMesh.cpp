@@ -33,14 +33,32 @@ TriangleMesh TriangleMesh::fromTriangles(std::vector<glm::vec3> positions, std::
   TriangleMesh m;
   m.name_ = std::move(name);
   m.positions_ = std::move(positions);
-  m.triangles_ = std::move(triangles);
+  m.triangles_ = std::make_shared<const std::vector<Triangle>>(std::move(triangles));
   m.validate();
   return m;
 }
 
-void TriangleMesh::validate() {
-  if (triangles_.empty()) throw InvalidArgument("mesh '" + name_ + "': has no triangles");
-  const std::size_t nv = positions_.size(), nt = triangles_.size();
+TriangleMesh TriangleMesh::withPositions(std::vector<glm::vec3> positions) const {
+  if (positions.size() != positions_.size())
+    throw InvalidArgument("mesh '" + name_ + "': given " + std::to_string(positions.size()) +
+                          " positions, but it has " + std::to_string(positions_.size()) + " vertices");
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const glm::vec3& p = positions[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      throw InvalidArgument("mesh '" + name_ + "': position of vertex " + std::to_string(i) + " is not finite");
+  }
+  TriangleMesh m;
+  m.name_ = name_;
+  m.positions_ = std::move(positions);
+  m.triangles_ = triangles_;
+  m.validate(/*check_indices=*/false);  // the same vertex count: the indices were checked here
+  return m;
+}
+
+void TriangleMesh::validate(bool check_indices) {
+  const std::vector<Triangle>& triangles = *triangles_;
+  if (triangles.empty()) throw InvalidArgument("mesh '" + name_ + "': has no triangles");
+  const std::size_t nv = positions_.size(), nt = triangles.size();
   // Finiteness once per vertex rather than once per corner; then the triangles in parallel chunks,
   // merged in chunk order (the result does not depend on the thread count).
   std::vector<std::uint8_t> finite(nv);
@@ -60,8 +78,8 @@ void TriangleMesh::validate() {
     Part& part = parts[c];
     const std::size_t end = std::min(nt, (c + 1) * kChunk);
     for (std::size_t i = c * kChunk; i < end; ++i) {
-      const Triangle& t = triangles_[i];
-      if (t[0] >= nv || t[1] >= nv || t[2] >= nv) {
+      const Triangle& t = triangles[i];
+      if (check_indices && (t[0] >= nv || t[1] >= nv || t[2] >= nv)) {
         part.bad = std::min(part.bad, i);
         continue;
       }
@@ -87,7 +105,7 @@ void TriangleMesh::validate() {
   bounds_ = Box();
   for (const Part& part : parts) {
     if (part.bad != SIZE_MAX) {
-      const Triangle& t = triangles_[part.bad];
+      const Triangle& t = triangles[part.bad];
       const std::uint32_t k = t[0] >= nv ? t[0] : t[1] >= nv ? t[1] : t[2];
       throw InvalidArgument("mesh '" + name_ + "': triangle " + std::to_string(part.bad) + " refers to vertex " +
                             std::to_string(k) + " but there are " + std::to_string(nv) + " vertices");
@@ -95,12 +113,12 @@ void TriangleMesh::validate() {
     degenerate_count_ += part.degenerate;
     bounds_.extend(part.bounds);
   }
-  if (degenerate_count_ == triangles_.size())
-    throw InvalidArgument("mesh '" + name_ + "': none of its " + std::to_string(triangles_.size()) +
+  if (degenerate_count_ == triangles.size())
+    throw InvalidArgument("mesh '" + name_ + "': none of its " + std::to_string(triangles.size()) +
                           " triangles is valid (all degenerate)");
   if (degenerate_count_ > 0)
     logger()->warn("mesh '{}': {} of {} triangles are degenerate and will never be hit", name_, degenerate_count_,
-                   triangles_.size());
+                   triangles.size());
 }
 
 }  // namespace duplex

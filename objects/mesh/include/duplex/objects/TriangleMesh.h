@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -32,14 +33,22 @@ class TriangleMesh {
   static TriangleMesh fromTriangles(std::vector<glm::vec3> positions, std::vector<Triangle> triangles,
                                     std::string name);
 
+  /// This mesh's triangles and name with other vertex positions (object space, as many as
+  /// positions() has, all finite): a deformation step. The triangle list is shared, not copied;
+  /// validity and bounds are computed for the new positions. Throws InvalidArgument naming the mesh
+  /// for another count, a non-finite position, or no valid triangle.
+  [[nodiscard]] TriangleMesh withPositions(std::vector<glm::vec3> positions) const;
+  /// Whether the same triangles are valid in both meshes (same triangle count, same flags).
+  [[nodiscard]] bool sameValidity(const TriangleMesh& other) const { return valid_ == other.valid_; }
+
   /// The name given at construction (used in error messages).
   [[nodiscard]] const std::string& name() const { return name_; }
   /// Vertex positions, object space.
   [[nodiscard]] const std::vector<glm::vec3>& positions() const { return positions_; }
   /// Triangles as index triples, degenerate ones included; the index is the primitive id.
-  [[nodiscard]] const std::vector<Triangle>& triangles() const { return triangles_; }
+  [[nodiscard]] const std::vector<Triangle>& triangles() const { return *triangles_; }
   /// Number of triangles, degenerate ones included.
-  [[nodiscard]] std::size_t triangleCount() const { return triangles_.size(); }
+  [[nodiscard]] std::size_t triangleCount() const { return triangles_->size(); }
   /// Whether triangle `i` can be hit (not degenerate). Precondition here and in vertices():
   /// i < triangleCount() (not checked: per-triangle loops).
   [[nodiscard]] bool isValid(std::size_t i) const { return valid_[i] != 0; }
@@ -49,17 +58,19 @@ class TriangleMesh {
   [[nodiscard]] const Box& bounds() const { return bounds_; }
   /// The three object-space vertices of triangle `i`.
   [[nodiscard]] std::array<glm::vec3, 3> vertices(std::size_t i) const {
-    const Triangle& t = triangles_[i];
+    const Triangle& t = (*triangles_)[i];
     return {positions_[t[0]], positions_[t[1]], positions_[t[2]]};
   }
 
  private:
   TriangleMesh() = default;
-  void validate();
+  /// Checks every index (when `check_indices`) and computes validity, bounds and the degenerate count.
+  void validate(bool check_indices = true);
 
   std::string name_;
   std::vector<glm::vec3> positions_;
-  std::vector<Triangle> triangles_;
+  // Shared by the meshes withPositions() makes from this one (a deformation keeps the triangles).
+  std::shared_ptr<const std::vector<Triangle>> triangles_;
   std::vector<std::uint8_t> valid_;
   std::size_t degenerate_count_ = 0;
   Box bounds_;
