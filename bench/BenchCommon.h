@@ -54,6 +54,8 @@ struct Options {
   std::size_t sweep_random_rays = 250'000;
   std::uint32_t sweep_primary_width = 512;
   std::uint32_t sweep_primary_height = 512;
+  // --closest
+  std::size_t closest_points = 100'000;  ///< points per mesh and kind (near, far)
   // --callgrind
   std::string callgrind_mesh;
   std::size_t callgrind_rays = 20'000;

@@ -15,6 +15,9 @@ namespace duplex::bench {
 /// Build time against trace time over heuristics and cost settings (1 thread), Embree as reference.
 [[nodiscard]] nlohmann::json runSweep(const Options& options);
 
+/// Closest-point queries per mesh, ours against Embree's rtcPointQuery (ClosestBench.cpp).
+[[nodiscard]] nlohmann::json runClosestBench(const Options& options);
+
 /// A fixed small workload whose trace loops alone are instrumented under callgrind.
 [[nodiscard]] nlohmann::json runCallgrind(const Options& options);
 

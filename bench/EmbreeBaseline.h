@@ -122,6 +122,9 @@ class EmbreeMesh {
     return r.tfar < 0.0f;  // Embree sets tfar to -inf on an occlusion
   }
 
+  /// The committed scene, for queries the wrapper does not offer (rtcPointQuery).
+  [[nodiscard]] RTCScene scene() const { return scene_; }
+
   /// Bytes Embree allocated for the scene (memory monitor), minus our vertex and index buffers:
   /// the BVH with its leaf triangle data, comparable to MeshObject::accelBytes().
   [[nodiscard]] std::size_t accelBytes() const { return accel_bytes_; }

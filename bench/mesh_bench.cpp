@@ -1,6 +1,6 @@
 // duplex_bench_mesh: build and trace figures of our structures (BVH presets, kd-tree) against Embree 3
-// on single meshes, the
-// heuristic/cost sweep (--sweep) and a fixed workload for callgrind (--callgrind). Writes one JSON
+// on single meshes, the heuristic/cost sweep (--sweep), closest-point queries against Embree's
+// rtcPointQuery (--closest) and a fixed workload for callgrind (--callgrind). Writes one JSON
 // document (--out) and prints a compact table to stderr. Not a timed test: it measures, it does not
 // judge (the JSON's "goals" section states the targets next to the figures).
 
@@ -86,6 +86,11 @@ int main(int argc, char** argv) {
   addSizeOption("--sweep-primary", options.sweep_primary_width, options.sweep_primary_height,
                 "primary rays of the sweep: W H (default 512 512)");
 
+  bool closest = false;
+  app.add_flag("--closest", closest,
+               "closest-point queries: ours (BVH) against Embree's rtcPointQuery, near and far points, 1 thread");
+  app.add_option("--closest-points", options.closest_points, "points per mesh and kind")->capture_default_str();
+
   bool callgrind = false;
   app.add_flag(
       "--callgrind", callgrind,
@@ -103,8 +108,8 @@ int main(int argc, char** argv) {
 
   CLI11_PARSE(app, argc, argv);
   options.with_embree = !no_embree;
-  if (sweep && callgrind) {
-    std::cerr << "--sweep and --callgrind are separate runs\n";
+  if (int{sweep} + int{callgrind} + int{closest} > 1) {
+    std::cerr << "--sweep, --callgrind and --closest are separate runs\n";
     return 2;
   }
   if (options.quick) {
@@ -120,7 +125,10 @@ int main(int argc, char** argv) {
   }
 
   try {
-    nlohmann::json doc = sweep ? runSweep(options) : callgrind ? runCallgrind(options) : runMainBench(options);
+    nlohmann::json doc = sweep       ? runSweep(options)
+                         : callgrind ? runCallgrind(options)
+                         : closest   ? runClosestBench(options)
+                                     : runMainBench(options);
     doc["machine"]["loadavg_at_end"] = loadAverage();
     if (!options.out.empty()) {
       writeJson(options.out, doc);

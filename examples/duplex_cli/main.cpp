@@ -2,6 +2,7 @@
 //   duplex trace --scene S.json --rays R.bin (--hits H.bin | --transmittance T.bin) [--threads N] [--any-hit]
 //                [--repeat R]
 // Every command that loads a scene takes [--structure bvh|kdtree|bvh:<parameters>].
+//   duplex closest --scene S.json --points P.bin --out C.bin [--threads N]
 //   duplex rays  --scene S.json (--primary W H | --random N --seed X) --out R.bin
 //   duplex scene split     --mesh M --objects K [--loop N] --out S.json
 //   duplex scene instances --mesh M --count N --seed X --out S.json
@@ -19,6 +20,7 @@
 // message naming the file and the problem and a non-zero exit status.
 
 #include "BenchDeformCommand.h"
+#include "ClosestCommand.h"
 #include "BenchUpdateCommand.h"
 #include "DecimalOption.h"
 #include "PrepareCommand.h"
@@ -179,6 +181,19 @@ int main(int argc, char** argv) {
   duplex::cli::addStructureOption(*prepare_cmd, prepare.structure);
   duplex::cli::addThreadsOption(*prepare_cmd, prepare.threads);
 
+  // duplex closest
+  duplex::cli::ClosestOptions closest;
+  CLI::App* closest_cmd = app.add_subcommand(
+      "closest", "Nearest surface point to each point of a point file (16-byte records in, 24-byte records out)");
+  closest_cmd->add_option("--scene", closest.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  closest_cmd->add_option("--points", closest.points, "Point file: float x, y, z, max_distance per record")->required();
+  closest_cmd
+      ->add_option("--out", closest.out,
+                   "Closest file to write: float x, y, z, distance; uint32 instance_id, prim_id per point")
+      ->required();
+  duplex::cli::addStructureOption(*closest_cmd, closest.structure);
+  duplex::cli::addThreadsOption(*closest_cmd, closest.threads);
+
   // duplex bench update
   CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update, deform)");
   bench_cmd->require_subcommand(1);
@@ -254,6 +269,7 @@ int main(int argc, char** argv) {
                         : *robot_cmd     ? "duplex scene robot"
                         : *sensor_cmd    ? "duplex sensor"
                         : *prepare_cmd   ? "duplex prepare"
+                        : *closest_cmd   ? "duplex closest"
                         : *deform_cmd    ? "duplex bench deform"
                                          : "duplex bench update";
   try {
@@ -268,6 +284,8 @@ int main(int argc, char** argv) {
       result = duplex::cli::runSensor(sensor);
     } else if (*prepare_cmd) {
       result = duplex::cli::runPrepare(prepare);
+    } else if (*closest_cmd) {
+      result = duplex::cli::runClosest(closest);
     } else if (*update_cmd) {
       result = duplex::cli::runBenchUpdate(bench_update);
     } else if (*deform_cmd) {

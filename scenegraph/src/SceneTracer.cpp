@@ -14,6 +14,7 @@
 #include <mutex>
 #include <shared_mutex>
 #include <string>
+#include <type_traits>
 
 namespace duplex {
 
@@ -140,11 +141,13 @@ SceneHit SceneTracer::intersectDetailed(const RayD& ray_ws, QueryContext& ctx, s
 
 namespace {
 
-// Runs query(ray, ctx) over `rays` in parallel (one QueryContext per chunk) into `out`.
-template <class Out, class Query>
-void forEachRay(const char* what, std::span<const Ray> rays, std::span<Out> out, Query&& query) {
+// Runs query(ray, ctx) over `rays` (or other requests) in parallel (one QueryContext per chunk)
+// into `out`.
+template <class In, class Out, class Query>
+void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, Query&& query) {
   if (out.size() != rays.size())
-    throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) + " rays but room for " +
+    throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) +
+                          (std::is_same_v<In, Ray> ? " rays" : " requests") + " but room for " +
                           std::to_string(out.size()) + " results");
   // Isolated: the caller holds the shared lock while it waits here, and a thread that waits in a
   // TBB loop may otherwise pick up an unrelated outer task, which could be another batch query
@@ -159,6 +162,27 @@ void forEachRay(const char* what, std::span<const Ray> rays, std::span<Out> out,
 }
 
 }  // namespace
+
+SceneClosestPoint SceneTracer::closestPoint(const glm::dvec3& point_ws, double max_distance, std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  QueryContext ctx;
+  SceneClosestPoint out;
+  out.point = impl_->top.closestPoint(point_ws, max_distance, ctx, mask);
+  if (out.valid()) {
+    out.instance = out.point.instance_id;
+    out.path = graph_.committedPathIds(out.instance);
+  }
+  return out;
+}
+
+void SceneTracer::closestPoints(std::span<const ClosestPointRequest> requests, std::span<ClosestPoint> out,
+                                std::uint32_t mask) const {
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  forEachRay("SceneTracer::closestPoints", requests, out, [&](const ClosestPointRequest& r, QueryContext& ctx) {
+    return top.closestPoint(r.point_ws, r.max_distance, ctx, mask);
+  });
+}
 
 void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask) const {
   std::shared_lock lock(impl_->mutex);

@@ -15,6 +15,7 @@
 //   duplex_cli_check bench-update DUPLEX DIR           `duplex bench update` keys and figures on tiny scenes
 //   duplex_cli_check bench-update-embree BENCH DIR     the same by duplex_bench_update, with Embree's keys
 //   duplex_cli_check bench-deform DUPLEX DIR           `duplex bench deform` keys and figures on the quad scene
+//   duplex_cli_check closest DUPLEX DIR                `duplex closest` records on the quad scene, the JSON line
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
@@ -637,13 +638,64 @@ int checkBenchDeform(const std::string& duplex, const fs::path& fixtures) {
   return 0;
 }
 
+// `duplex closest` on the quad scene (QuadScene.cpp): each point's nearest instance, triangle,
+// point and distance worked out by hand; nothing within a short max_distance or for a NaN point.
+int checkClosest(const std::string& duplex, const fs::path& dir) {
+  using PointIn = PointRecord;
+  using ClosestOut = ClosestRecord;
+  const float inf = std::numeric_limits<float>::infinity();
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const std::vector<PointIn> points{
+      {0.75f, 0.25f, 0.5f, inf},    // above instance 0, triangle 0 (x > y)
+      {0.25f, 0.75f, 2.0f, inf},    // above instance 0, triangle 1
+      {4.5f, 0.5f, -0.5f, inf},     // above the scaled instance 1 (z = -1), object point (0.75, 0.25)
+      {0.75f, 0.25f, 0.5f, 0.25f},  // the quad is 0.5 away: nothing within 0.25
+      {6.75f, 2.0f, 0.25f, inf},    // in front of the standing instance 3 (y = 0), object point (0.75, 0.25)
+      {nan, 0.0f, 0.0f, inf},       // not a point
+      {0.5f, 0.25f, 0.0f, inf},     // on instance 0
+  };
+  const std::vector<ClosestOut> want{{0.75f, 0.25f, 0.0f, 0.5f, 0, 0}, {0.25f, 0.75f, 0.0f, 2.0f, 0, 1},
+                                     {4.5f, 0.5f, -1.0f, 0.5f, 1, 0},  {0.0f, 0.0f, 0.0f, inf, kNone, kNone},
+                                     {6.75f, 0.0f, 0.25f, 2.0f, 3, 0}, {0.0f, 0.0f, 0.0f, inf, kNone, kNone},
+                                     {0.5f, 0.25f, 0.0f, 0.0f, 0, 0}};
+  const fs::path in = dir / "closest_points.bin", out = dir / "closest_out.bin";
+  writeRecords(in, points);
+  for (const char* threads : {"1", "2"}) {
+    const nlohmann::json j = parseOneLine(runOk({duplex, "closest", "--scene", (dir / "quad.json").string(), "--points",
+                                                 in.string(), "--out", out.string(), "--threads", threads},
+                                                dir)
+                                              .out);
+    expect(number(j, "points") == 7.0 && number(j, "found") == 5.0, "points/found wrong: " + j.dump());
+    expect(number(j, "threads") == std::stod(threads), "threads not as given: " + j.dump());
+    for (const char* key : {"load_ms", "build_ms", "query_ms"})
+      expect(number(j, key) >= 0.0, std::string("\"") + key + "\" is negative: " + j.dump());
+    const auto got = readRecords<ClosestOut>(out);
+    expect(got.size() == want.size(), "closest file has " + std::to_string(got.size()) + " records");
+    for (std::size_t i = 0; i < want.size(); ++i) {
+      const ClosestOut& g = got[i];
+      const ClosestOut& w = want[i];
+      const bool same_point =
+          std::abs(g.x - w.x) <= 1e-6f && std::abs(g.y - w.y) <= 1e-6f && std::abs(g.z - w.z) <= 1e-6f;
+      const bool same_distance =
+          std::isinf(w.distance) ? g.distance == w.distance : std::abs(g.distance - w.distance) <= 1e-6f;
+      expect(same_point && same_distance && g.instance_id == w.instance_id && g.prim_id == w.prim_id,
+             "point " + std::to_string(i) + ": got (" + std::to_string(g.x) + ", " + std::to_string(g.y) + ", " +
+                 std::to_string(g.z) + ") at " + std::to_string(g.distance) + ", instance " +
+                 std::to_string(g.instance_id) + ", prim " + std::to_string(g.prim_id));
+    }
+  }
+  std::cout << "closest: 7 points, records as worked out\n";
+  return 0;
+}
+
 int usage() {
   std::cerr
       << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
          "       fails DIR NEEDLE -- PROGRAM ARGS... | demo DEMO DIR | shared-data DUPLEX DIR DATA_DIR |\n"
          "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
          "       prepare-koala DUPLEX DIR DATA_DIR |\n"
-         "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR\n";
+         "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR |\n"
+         "       closest DUPLEX DIR\n";
   return 2;
 }
 
@@ -672,6 +724,7 @@ int main(int argc, char** argv) {
       return checkBenchUpdate({args[1], "bench", "update"}, args[2], false);
     if (args.size() == 3 && args[0] == "bench-update-embree") return checkBenchUpdate({args[1]}, args[2], true);
     if (args.size() == 3 && args[0] == "bench-deform") return checkBenchDeform(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "closest") return checkClosest(args[1], args[2]);
     return usage();
   });
 }

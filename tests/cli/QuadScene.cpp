@@ -104,6 +104,8 @@ template void writeRecords(const std::filesystem::path&, const std::vector<RayRe
 template void writeRecords(const std::filesystem::path&, const std::vector<HitRecord>&);
 template std::vector<RayRecord> readRecords(const std::filesystem::path&);
 template std::vector<HitRecord> readRecords(const std::filesystem::path&);
+template void writeRecords(const std::filesystem::path&, const std::vector<PointRecord>&);
+template std::vector<ClosestRecord> readRecords(const std::filesystem::path&);
 
 void writeFixtures(const std::filesystem::path& dir) {
   std::filesystem::create_directories(dir);

@@ -24,6 +24,19 @@ struct HitRecord {
 };
 static_assert(sizeof(HitRecord) == 20);
 
+/// Point-file record of `duplex closest`: float x, y, z, max_distance (16 bytes, little endian).
+struct PointRecord {
+  float x, y, z, max_distance;
+};
+static_assert(sizeof(PointRecord) == 16);
+
+/// Closest-file record: float x, y, z, distance; uint32 instance_id, prim_id (24 bytes).
+struct ClosestRecord {
+  float x, y, z, distance;
+  std::uint32_t instance_id, prim_id;
+};
+static_assert(sizeof(ClosestRecord) == 24);
+
 inline constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 
 /// Rays and the records `duplex trace` must write for them, closest hit and --any-hit.

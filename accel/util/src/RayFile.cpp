@@ -16,6 +16,10 @@ HitRecord HitRecord::from(const Hit& h) {
   return {h.t, h.u, h.v, h.instance_id, h.prim_id};
 }
 
+ClosestRecord ClosestRecord::none() {
+  return {0.0f, 0.0f, 0.0f, std::numeric_limits<float>::infinity(), kInvalidId, kInvalidId};
+}
+
 HitRecord HitRecord::miss() { return {std::numeric_limits<float>::infinity(), 0.0f, 0.0f, kInvalidId, kInvalidId}; }
 
 namespace {
@@ -51,6 +55,15 @@ void writeRayFile(const std::filesystem::path& path, std::span<const Ray> rays) 
 std::vector<HitRecord> readHitFile(const std::filesystem::path& path) { return readRecords<HitRecord>(path, "hit"); }
 void writeHitFile(const std::filesystem::path& path, std::span<const HitRecord> hits) {
   writeRecords(path, hits, "hit");
+}
+std::vector<PointRecord> readPointFile(const std::filesystem::path& path) {
+  return readRecords<PointRecord>(path, "point");
+}
+void writeClosestFile(const std::filesystem::path& path, std::span<const ClosestRecord> records) {
+  writeRecords(path, records, "closest");
+}
+std::vector<ClosestRecord> readClosestFile(const std::filesystem::path& path) {
+  return readRecords<ClosestRecord>(path, "closest");
 }
 void writeTransmittanceFile(const std::filesystem::path& path, std::span<const float> transmittance) {
   writeRecords(path, transmittance, "transmittance");

@@ -506,6 +506,106 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
 }
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit, QueryContext&) const { return intersect(ray_os, hit); }
+
+bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryContext&) const {
+  bool improved = false;
+  // Every triangle of a leaf's blocks, mapped to world space: the distance is a world distance
+  // whatever the instance's scale.
+  auto testLeaf = [&](std::uint32_t first_block, std::uint32_t count) {
+    const detail::TriangleBlock4* block = blocks_.data() + first_block;
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const detail::TriangleBlock4& b = block[i / 4];
+      const int k = static_cast<int>(i % 4);
+      const glm::dvec3 a = q.world_from_object.point(glm::dvec3(b.vertex(k, 0)));
+      const glm::dvec3 v1 = q.world_from_object.point(glm::dvec3(b.vertex(k, 1)));
+      const glm::dvec3 v2 = q.world_from_object.point(glm::dvec3(b.vertex(k, 2)));
+      const glm::dvec3 c = closestPointOnTriangle(q.point_ws, a, v1, v2);
+      const double d = glm::length(c - q.point_ws);
+      if (!(d < best.distance)) continue;
+      best.distance = d;
+      best.point_ws = c;
+      const glm::dvec3 n = glm::cross(v1 - a, v2 - a);
+      const double len = glm::length(n);
+      best.normal_ws = len > 0.0 ? n / len : glm::dvec3(0.0);
+      best.prim_id = b.prim[k];
+      improved = true;
+    }
+  };
+  // Squared object-space distance from the query point to a box: the visiting order only.
+  auto boxKey = [&](const Box& b) {
+    double s = 0.0;
+    for (int a = 0; a < 3; ++a) {
+      const double e = std::max({double{b.lo[a]} - q.point_os[a], 0.0, q.point_os[a] - double{b.hi[a]}});
+      s += e * e;
+    }
+    return s;
+  };
+  struct Entry {
+    std::uint32_t node;  // BVH: a reference; kd-tree: a node index
+    Box box;             // BVH: the child's box; kd-tree: the node's cell
+  };
+  // Bounded: a BVH path holds at most 7 pending siblings per level, a kd-tree path one per level.
+  constexpr std::size_t kCapacity =
+      1 + (BvhNode8::kWidth - 1) * std::max<std::size_t>(WideBvh::kMaxDepth, kKdStackSize);
+  struct Stack {
+    Entry items[kCapacity];
+    std::size_t size = 0;
+    [[nodiscard]] bool empty() const { return size == 0; }
+    void push_back(const Entry& e) { items[size++] = e; }
+    Entry back() const { return items[size - 1]; }
+    void pop_back() { --size; }
+  } stack;
+  if (structure_ == MeshStructure::Bvh) {
+    if (bvh_.root == BvhRef::kEmpty) return false;
+    stack.push_back({bvh_.root, bvh_.bounds});
+    while (!stack.empty()) {
+      const Entry e = stack.back();
+      stack.pop_back();
+      if (!q.mayReach(e.box, best.distance)) continue;
+      if (BvhRef::isLeaf(e.node)) {
+        testLeaf(BvhRef::leafBlock(e.node), BvhRef::leafCount(e.node));
+        continue;
+      }
+      const BvhNode8& node = bvh_.nodes[e.node];
+      // The children that may reach, pushed farthest first so that the nearest is visited next.
+      std::pair<double, int> order[BvhNode8::kWidth];
+      int n = 0;
+      for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k) {
+        const Box b = node.childBox(k);
+        if (q.mayReach(b, best.distance)) order[n++] = {boxKey(b), k};
+      }
+      for (int i = 1; i < n; ++i)  // descending by key: at most 8, an insertion sort
+        for (int j = i; j > 0 && order[j - 1].first < order[j].first; --j) std::swap(order[j - 1], order[j]);
+      for (int i = 0; i < n; ++i) stack.push_back({node.child[order[i].second], node.childBox(order[i].second)});
+    }
+    return improved;
+  }
+  stack.push_back({0, block_tree_.bounds});
+  while (!stack.empty()) {
+    const Entry e = stack.back();
+    stack.pop_back();
+    if (!q.mayReach(e.box, best.distance)) continue;
+    const KdNode& node = block_tree_.nodes[e.node];
+    if (node.isLeaf()) {
+      if (node.primCount() > 0) testLeaf(node.primOffset(), node.primCount());
+      continue;
+    }
+    const int axis = node.axis();
+    Box lower = e.box, upper = e.box;
+    lower.hi[axis] = std::min(node.split(), e.box.hi[axis]);
+    upper.lo[axis] = std::max(node.split(), e.box.lo[axis]);
+    const bool below = q.point_os[axis] < double{node.split()};
+    // The side holding the point last, so that it is visited first.
+    if (below) {
+      stack.push_back({node.upperChild(), upper});
+      stack.push_back({e.node + 1, lower});
+    } else {
+      stack.push_back({e.node + 1, lower});
+      stack.push_back({node.upperChild(), upper});
+    }
+  }
+  return improved;
+}
 bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occluded(ray_os); }
 
 std::size_t MeshObject::accelBytes() const {

@@ -159,6 +159,11 @@ class InstanceTree {
   /// See TopLevel::transmittance (this tree's instances only). InstanceTreeTransmittance.cpp.
   [[nodiscard]] float transmittance(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
 
+  /// Improves `best` (world space, see TopLevel::closestPoint) with the Surface instances whose mask
+  /// meets `mask`; best.instance_id is set to the instance of a better point. InstanceTreeClosest.cpp.
+  void closestPoint(const glm::dvec3& point_ws, ClosestPoint& best, QueryContext& ctx,
+                    std::uint32_t mask = 0xFFFFFFFFu) const;
+
   /// object_from_world of instance `id` (last commit); nullptr for an id this tree does not hold.
   [[nodiscard]] const Affine* findObjectFromWorld(std::uint32_t id) const;
   /// World box of instance `id` (last commit); nullptr for an id this tree does not hold.

@@ -6,6 +6,7 @@
 
 #include "duplex/accel/Box.h"
 #include "duplex/accel/Hit.h"
+#include "duplex/accel/PointQuery.h"
 #include "duplex/accel/QueryContext.h"
 #include "duplex/accel/Ray.h"
 
@@ -94,6 +95,18 @@ class Object {
   /// occluded, else 1; media override it.
   [[nodiscard]] virtual float transmittance(const Ray& ray_os, QueryContext& ctx) const {
     return role_ == ObjectRole::Surface && occluded(ray_os, ctx) ? 0.0f : 1.0f;
+  }
+
+  /// Optional closest-point query: when a point of the object lies closer to query.point_ws than
+  /// best.distance (world units, measured through query.world_from_object), overwrites
+  /// best.distance, point_ws, normal_ws and prim_id with the nearest such point and returns true;
+  /// otherwise leaves `best` alone and returns false. Default: the type answers none (closest-point
+  /// queries ignore it).
+  virtual bool closestPoint(const PointQuery& query, ClosestPoint& best, QueryContext& ctx) const {
+    (void)query;
+    (void)best;
+    (void)ctx;
+    return false;
   }
 
   /// Bytes held by the object's geometry and acceleration structure.

@@ -144,6 +144,15 @@ class TopLevel {
   [[nodiscard]] std::vector<std::uint32_t> instancesInRegion(std::span<const glm::dvec4> planes,
                                                              std::uint32_t mask = 0xFFFFFFFFu) const;
 
+  /// The point of the Surface instances (mask meeting `mask`) nearest to world point `point_ws`
+  /// within world distance `max_distance` (inclusive; +inf for no limit), in double precision:
+  /// distance, point, unit normal (world space), prim_id and instance_id. Types without a
+  /// closest-point query (Object::closestPoint: volumes, sensors) are ignored. Nothing within
+  /// reach, a non-finite point or a NaN or negative max_distance: distance +inf and ids kInvalidId.
+  /// Defined in InstanceTreeClosest.cpp.
+  [[nodiscard]] ClosestPoint closestPoint(const glm::dvec3& point_ws, double max_distance, QueryContext& ctx,
+                                          std::uint32_t mask = 0xFFFFFFFFu) const;
+
   /// object_from_world of instance `id` (last commit), double precision. Throws for an unknown id.
   [[nodiscard]] const Affine& objectFromWorld(std::uint32_t id) const;
   /// World box of instance `id` as the tree holds it (last commit). Throws for an unknown id.

@@ -86,7 +86,8 @@ struct alignas(64) BvhNode8 {
     return n;
   }
   /// Sets `order` from the current child boxes: per octant, used slots by decreasing centre
-  /// coordinate along the octant's diagonal (ties by slot), empty slots first.
+  /// coordinate along the octant's diagonal (ties by slot in octants 0-3, reversed in their
+  /// opposites 7-0 .. 4, which are computed as the reverse), empty slots first.
   void computeOrder();
   /// Whether `order` is a valid encoding: per octant a permutation of the 8 slots, high bits zero.
   [[nodiscard]] bool orderValid() const;

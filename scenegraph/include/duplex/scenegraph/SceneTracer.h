@@ -19,6 +19,7 @@
 #include <glm/vec3.hpp>
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <vector>
@@ -35,6 +36,25 @@ struct SceneHit {
 
   /// Whether the ray hit something.
   [[nodiscard]] bool valid() const { return hit.valid(); }
+};
+
+/// The nearest surface point to a world point, with the instance node and its path (see
+/// SceneTracer::closestPoint).
+struct SceneClosestPoint {
+  /// distance (world units; +inf when nothing is within reach), point_ws, normal_ws (unit),
+  /// prim_id, instance_id (= the instance node id)
+  ClosestPoint point;
+  NodeId instance = kInvalidNode;  ///< the instance node (kInvalidNode when nothing was found)
+  std::vector<NodeId> path;        ///< node ids from below the root down to the instance, as of the last commit
+
+  /// Whether a point was found.
+  [[nodiscard]] bool valid() const { return point.valid(); }
+};
+
+/// One request of a batch of closest-point queries.
+struct ClosestPointRequest {
+  glm::dvec3 point_ws{0.0};                                       ///< the query point, world space
+  double max_distance = std::numeric_limits<double>::infinity();  ///< world units, inclusive; +inf: no limit
 };
 
 /// Which hits pick() returns.
@@ -89,6 +109,21 @@ class SceneTracer {
   /// its own while tracing, then copied).
   void intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
                     std::uint32_t mask = 0xFFFFFFFFu) const;
+
+  /// The point of the visible surface instances (mask meeting `mask`) nearest to `point_ws`
+  /// within `max_distance` (world units, inclusive; +inf for no limit), in double precision, with
+  /// the instance's node path: meshes answer with their triangles (distance measured in world
+  /// space through the instance's transform, any scale); types without a closest-point query
+  /// (volumes, sensors) are ignored. Nothing within reach, a non-finite point or a NaN or negative
+  /// max_distance give an invalid result (distance +inf).
+  [[nodiscard]] SceneClosestPoint closestPoint(const glm::dvec3& point_ws,
+                                               double max_distance = std::numeric_limits<double>::infinity(),
+                                               std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Batch closestPoint() without the paths, in parallel with TBB: out[i] answers requests[i]
+  /// (instance_id = the instance node id). `out` must have the size of `requests` (else
+  /// InvalidArgument, nothing written).
+  void closestPoints(std::span<const ClosestPointRequest> requests, std::span<ClosestPoint> out,
+                     std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// Picking through pixel (px, py) (continuous pixel coordinates, (0, 0) the top-left corner,
   /// (w, h) the bottom-right) of a width x height image seen by `camera` (world space). Throws

@@ -3,7 +3,10 @@
 /// The raw ray and hit files of the interchange contract (little endian, no header):
 ///   ray record: float ox, oy, oz, tnear, dx, dy, dz, tfar              (32 bytes)
 ///   hit record: float t, u, v; uint32 instance_id, prim_id             (20 bytes)
-/// A miss has instance_id 0xFFFFFFFF and t = +inf.
+/// A miss has instance_id 0xFFFFFFFF and t = +inf. The closest-point files (`duplex closest`):
+///   point record:   float x, y, z, max_distance                        (16 bytes)
+///   closest record: float x, y, z, distance; uint32 instance_id, prim_id (24 bytes)
+/// Nothing within max_distance: distance +inf, both ids 0xFFFFFFFF, point (0, 0, 0).
 
 #include "duplex/accel/Hit.h"
 #include "duplex/accel/Ray.h"
@@ -36,6 +39,38 @@ struct HitRecord {
   static HitRecord miss();
 };
 static_assert(sizeof(HitRecord) == 20, "HitRecord must match the 20-byte hit-file record");
+
+/// One point-file record: a world-space query point and the largest distance of interest
+/// (world units; +inf for no limit).
+struct PointRecord {
+  float x;             ///< world x of the query point
+  float y;             ///< world y
+  float z;             ///< world z
+  float max_distance;  ///< largest distance of interest, world units, inclusive; +inf: no limit
+};
+static_assert(sizeof(PointRecord) == 16, "PointRecord must match the 16-byte point-file record");
+
+/// One closest-file record: the nearest point (world space) and its distance, instance and
+/// triangle; none() when nothing was within reach.
+struct ClosestRecord {
+  float x;                    ///< world x of the nearest point (0 when none)
+  float y;                    ///< world y
+  float z;                    ///< world z
+  float distance;             ///< world distance to it; +inf when none
+  std::uint32_t instance_id;  ///< the instance's position in the scene; kInvalidId when none
+  std::uint32_t prim_id;      ///< the triangle; kInvalidId when none
+  /// The record of nothing found: point 0, distance +inf, both ids kInvalidId.
+  static ClosestRecord none();
+};
+static_assert(sizeof(ClosestRecord) == 24, "ClosestRecord must match the 24-byte closest-file record");
+
+/// Reads a point file; throws FileError naming the file when it cannot be read or its size is not
+/// a multiple of 16 bytes.
+[[nodiscard]] std::vector<PointRecord> readPointFile(const std::filesystem::path& path);
+/// Writes 24-byte closest records; throws FileError naming the file when it cannot be written.
+void writeClosestFile(const std::filesystem::path& path, std::span<const ClosestRecord> records);
+/// Reads a closest file (for tests and tools); FileError as readPointFile.
+[[nodiscard]] std::vector<ClosestRecord> readClosestFile(const std::filesystem::path& path);
 
 /// Reads a ray file; throws FileError naming the file when it cannot be read or its size is not
 /// a multiple of 32 bytes.

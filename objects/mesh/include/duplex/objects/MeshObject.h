@@ -77,6 +77,10 @@ class MeshObject final : public Object {
   bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
   [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
   void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
+  /// The nearest point of the mesh's valid triangles to query.point_ws, measured in world space
+  /// (each candidate triangle mapped by query.world_from_object, in double), found through the BVH
+  /// or the kd-tree with the boxes pruned by the best distance so far. See Object::closestPoint.
+  bool closestPoint(const PointQuery& query, ClosestPoint& best, QueryContext& ctx) const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
   /// meshChecksum() of the mesh (XXH64 of positions and triangle indices, as prepared structure
   /// files check it).
