@@ -10,6 +10,8 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <atomic>
 #include <exception>
 #include <string>
 #include <utility>
@@ -112,12 +114,7 @@ std::size_t ObjectLibrary::memoryBytes() const {
   return total;
 }
 
-std::shared_ptr<const Object> ObjectLibrary::get(ObjectId id) const {
-  const Entry& e = liveEntry(id, "get");
-  // Fast path: once built, `object` is never written again.
-  if (e.built.load(std::memory_order_acquire)) return e.object;
-  std::lock_guard lock(e.mutex);
-  if (e.built.load(std::memory_order_relaxed)) return e.object;
+std::shared_ptr<const Object> ObjectLibrary::runFactory(const Entry& e) const {
   std::shared_ptr<const Object> object;
   try {
     object = e.factory();
@@ -127,35 +124,75 @@ std::shared_ptr<const Object> ObjectLibrary::get(ObjectId id) const {
     throw InvalidArgument("object '" + e.name + "' (type " + e.type_name + "): build failed (unknown error)");
   }
   if (!object) throw InvalidArgument("object '" + e.name + "' (type " + e.type_name + "): factory returned null");
+  return object;
+}
+
+void ObjectLibrary::install(const Entry& e, std::shared_ptr<const Object> object) const {
   e.object = std::move(object);
   e.factory = nullptr;  // release what the factory captured (source meshes, file names)
   e.built.store(true, std::memory_order_release);
   build_count_.fetch_add(1);
   logger()->debug("object '{}' built ({} bytes)", e.name, e.object->memoryBytes());
+}
+
+std::shared_ptr<const Object> ObjectLibrary::get(ObjectId id) const {
+  const Entry& e = liveEntry(id, "get");
+  // Fast path: once built, `object` is only written again by replace() (which must not overlap).
+  if (e.built.load(std::memory_order_acquire)) return e.object;
+  std::lock_guard lock(e.mutex);
+  if (e.built.load(std::memory_order_relaxed)) return e.object;
+  install(e, runFactory(e));
   return e.object;
 }
 
-void ObjectLibrary::buildAll(std::span<const ObjectId> ids) const {
+void ObjectLibrary::buildAll(std::span<const ObjectId> ids, const WorkControl& control) const {
   for (const ObjectId id : ids) (void)liveEntry(id, "buildAll");  // bad ids throw before any build
-  // One slot per listed id, so "the first failure" is the first in list order, whatever the timing.
+  // Built into `made` first and installed only when every build ran, so that a cancelled call
+  // leaves the library as it was. One slot per listed id, so that "the first failure" is the
+  // first in list order, whatever the timing.
+  std::vector<std::shared_ptr<const Object>> made(ids.size());
   std::vector<std::exception_ptr> failures(ids.size());
+  ProgressCounter counter(control, ids.size());
+  std::atomic<bool> stopped{false};
   tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
-    try {
-      (void)get(ids[i]);
-    } catch (...) {
-      failures[i] = std::current_exception();
+    if (stopped.load(std::memory_order_relaxed) || control.cancelled()) {
+      stopped.store(true, std::memory_order_relaxed);
+      return;
     }
+    const Entry& e = entries_[ids[i]];
+    if (!e.built.load(std::memory_order_acquire)) {
+      std::lock_guard lock(e.mutex);  // one factory call at a time per object, as get() makes it
+      if (!e.built.load(std::memory_order_relaxed)) {
+        try {
+          made[i] = runFactory(e);
+        } catch (...) {
+          failures[i] = std::current_exception();
+        }
+      }
+    }
+    counter.add(1);
   });
+  if (stopped.load() || control.cancelled())
+    throw Cancelled(
+        "ObjectLibrary::buildAll: cancelled after " +
+        std::to_string(std::count_if(made.begin(), made.end(), [](const auto& m) { return m != nullptr; })) + " of " +
+        std::to_string(ids.size()) + " builds; none was kept");
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    if (!made[i]) continue;
+    const Entry& e = entries_[ids[i]];
+    std::lock_guard lock(e.mutex);
+    if (!e.built.load(std::memory_order_relaxed)) install(e, std::move(made[i]));
+  }
   for (const auto& f : failures)
     if (f) std::rethrow_exception(f);
 }
 
-void ObjectLibrary::buildAll() const {
+void ObjectLibrary::buildAll(const WorkControl& control) const {
   std::vector<ObjectId> pending;
   for (std::size_t i = 0; i < entries_.size(); ++i)
     if (!entries_[i].removed && !entries_[i].built.load(std::memory_order_acquire))
       pending.push_back(static_cast<ObjectId>(i));
-  buildAll(pending);
+  buildAll(pending, control);
 }
 
 }  // namespace duplex

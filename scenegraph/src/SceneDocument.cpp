@@ -454,8 +454,11 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
 
   // Bottom-level structures, all in parallel, before any instance is added.
   const auto t_build = Clock::now();
+  if (options.control.cancelled()) throw Cancelled(path.string() + ": load cancelled before the builds");
   try {
-    library.buildAll();
+    library.buildAll(options.control);
+  } catch (const Cancelled&) {
+    throw;  // nothing of the load is kept: the document is never returned
   } catch (const std::exception& e) {
     for (const auto& error : build_errors)
       if (!error->empty()) throw FileError(*error);

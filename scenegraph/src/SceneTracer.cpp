@@ -9,6 +9,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <mutex>
@@ -144,7 +145,8 @@ namespace {
 // Runs query(ray, ctx) over `rays` (or other requests) in parallel (one QueryContext per chunk)
 // into `out`.
 template <class In, class Out, class Query>
-void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, Query&& query) {
+void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, const WorkControl& control,
+                Query&& query) {
   if (out.size() != rays.size())
     throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) +
                           (std::is_same_v<In, Ray> ? " rays" : " requests") + " but room for " +
@@ -153,12 +155,20 @@ void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, 
   // TBB loop may otherwise pick up an unrelated outer task, which could be another batch query
   // taking the same lock again on this thread (undefined for std::shared_mutex; a deadlock when a
   // commit waits between the two).
+  ProgressCounter counter(control, rays.size());
+  std::atomic<bool> stopped{false};
   tbb::this_task_arena::isolate([&] {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
+      if (stopped.load(std::memory_order_relaxed) || control.cancelled()) {
+        stopped.store(true, std::memory_order_relaxed);
+        return;
+      }
       QueryContext ctx;
       for (std::size_t i = range.begin(); i != range.end(); ++i) out[i] = query(rays[i], ctx);
+      counter.add(range.size());
     });
   });
+  if (stopped.load()) throw Cancelled(std::string(what) + ": cancelled; the results are incomplete");
 }
 
 }  // namespace
@@ -176,44 +186,48 @@ SceneClosestPoint SceneTracer::closestPoint(const glm::dvec3& point_ws, double m
 }
 
 void SceneTracer::closestPoints(std::span<const ClosestPointRequest> requests, std::span<ClosestPoint> out,
-                                std::uint32_t mask) const {
+                                std::uint32_t mask, const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::closestPoints", requests, out, [&](const ClosestPointRequest& r, QueryContext& ctx) {
-    return top.closestPoint(r.point_ws, r.max_distance, ctx, mask);
-  });
+  forEachRay("SceneTracer::closestPoints", requests, out, control,
+             [&](const ClosestPointRequest& r, QueryContext& ctx) {
+               return top.closestPoint(r.point_ws, r.max_distance, ctx, mask);
+             });
 }
 
-void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask) const {
+void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask,
+                            const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::intersect", rays, hits,
+  forEachRay("SceneTracer::intersect", rays, hits, control,
              [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
 }
 
-void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask) const {
+void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask,
+                           const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::occluded", rays, occluded, [&](const Ray& r, QueryContext& ctx) {
+  forEachRay("SceneTracer::occluded", rays, occluded, control, [&](const Ray& r, QueryContext& ctx) {
     return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0);
   });
 }
 
-void SceneTracer::transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask) const {
+void SceneTracer::transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask,
+                                const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::transmittance", rays, transmittance,
+  forEachRay("SceneTracer::transmittance", rays, transmittance, control,
              [&](const Ray& r, QueryContext& ctx) { return top.transmittance(r, ctx, mask); });
 }
 
 void SceneTracer::intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
-                               std::uint32_t mask) const {
+                               std::uint32_t mask, const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
   // Each ray's hits in its own list first (their counts are unknown until traced), then one
   // prefix sum and a parallel copy into the flat result.
   std::vector<std::vector<Hit>> per_ray(rays.size());
-  forEachRay("SceneTracer::intersectAll", rays, std::span<std::vector<Hit>>(per_ray),
+  forEachRay("SceneTracer::intersectAll", rays, std::span<std::vector<Hit>>(per_ray), control,
              [&](const Ray& r, QueryContext& ctx) {
                std::vector<Hit> layer;
                top.intersectAll(r, layer, ctx, mask);

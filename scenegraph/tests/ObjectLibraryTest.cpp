@@ -174,5 +174,45 @@ TEST(ObjectLibrary, BuildAllReportsTheFirstFailureAfterBuildingTheRest) {
   EXPECT_FALSE(lib.isBuilt(later));
 }
 
+TEST(ObjectLibrary, ACancelledBuildAllKeepsNothingAndProgressCountsEveryObject) {
+  ObjectLibrary lib;
+  std::vector<ObjectId> ids;
+  for (int i = 0; i < 12; ++i) {
+    std::string name = std::to_string(i);
+    name.insert(0, "o");
+    ids.push_back(lib.addDeferred(name, "mesh", [name] { return tinyMeshObject(name); }));
+  }
+  CancelToken token;
+  std::vector<std::pair<std::size_t, std::size_t>> reports;
+  WorkControl control;
+  control.cancel = &token;
+  control.progress = [&](std::size_t done, std::size_t total) {
+    reports.emplace_back(done, total);
+    if (done == 3) token.cancel();
+  };
+  EXPECT_THROW(lib.buildAll(control), Cancelled);
+  for (const ObjectId id : ids) EXPECT_FALSE(lib.isBuilt(id)) << lib.name(id);
+  EXPECT_EQ(lib.buildCount(), 0u);
+  ASSERT_GE(reports.size(), 3u);
+  for (std::size_t i = 0; i < reports.size(); ++i) {
+    EXPECT_EQ(reports[i].first, i + 1);
+    EXPECT_EQ(reports[i].second, 12u);
+  }
+  // The same call again, not cancelled: everything is built, and the count reaches the total.
+  token.reset();
+  reports.clear();
+  control.progress = [&](std::size_t done, std::size_t total) { reports.emplace_back(done, total); };
+  lib.buildAll(control);
+  for (const ObjectId id : ids) EXPECT_TRUE(lib.isBuilt(id));
+  EXPECT_EQ(lib.buildCount(), 12u);
+  ASSERT_EQ(reports.size(), 12u);
+  EXPECT_EQ(reports.back(), (std::pair<std::size_t, std::size_t>{12, 12}));
+  // A token cancelled before the call: nothing starts.
+  const ObjectId late = lib.addDeferred("late", "mesh", [] { return tinyMeshObject("late"); });
+  token.cancel();
+  EXPECT_THROW(lib.buildAll(control), Cancelled);
+  EXPECT_FALSE(lib.isBuilt(late));
+}
+
 }  // namespace
 }  // namespace duplex

@@ -546,6 +546,27 @@ TEST(SceneDocumentOwn, DeformAndAddObjectEditsReachTheLibraryWhenApplied) {
                  "/edits/0/node", "unknown key");
 }
 
+TEST(SceneDocumentOwn, LoadsReportProgressAndACancelledLoadReturnsNothing) {
+  SceneDir d;
+  const auto path = d.write(own(kCube + "," + kTetra + R"(, {"name": "ball", "sphere": {"subdivisions": 4}})",
+                                R"({"instance": "c", "object": "cube"})"));
+  SceneDocumentOptions options;
+  std::vector<std::pair<std::size_t, std::size_t>> reports;
+  options.control.progress = [&](std::size_t done, std::size_t total) { reports.emplace_back(done, total); };
+  const SceneDocument doc = loadSceneDocument(path, builtinObjectTypes(), options);
+  ASSERT_FALSE(reports.empty());
+  EXPECT_EQ(reports.back().first, reports.back().second);
+  EXPECT_LE(reports.back().second, 3u);
+  CancelToken token;
+  token.cancel();
+  options.control.cancel = &token;
+  EXPECT_THROW((void)loadSceneDocument(path, builtinObjectTypes(), options), Cancelled);
+  // Cancelled during the builds, from the progress callback.
+  token.reset();
+  options.control.progress = [&](std::size_t, std::size_t) { token.cancel(); };
+  EXPECT_THROW((void)loadSceneDocument(path, builtinObjectTypes(), options), Cancelled);
+}
+
 // ---- prepared structures ----
 
 // ---- the registry ----

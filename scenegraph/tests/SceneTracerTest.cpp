@@ -479,6 +479,43 @@ TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
   }
 }
 
+TEST(SceneTracer, BatchQueriesReportProgressAndStopWhenCancelled) {
+  Fixture f;
+  scatterInstances(f, 100, 20.0, 5);
+  SceneTracer tracer(f.graph);
+  const std::vector<Ray> rays = randomRays(tracer.bounds(), 50000, 6);
+  std::vector<Hit> hits(rays.size()), reference(rays.size());
+  tracer.intersect(rays, reference);
+  std::vector<std::size_t> done;
+  CancelToken token;
+  WorkControl control;
+  control.cancel = &token;
+  control.progress = [&](std::size_t d, std::size_t total) {
+    EXPECT_EQ(total, rays.size());
+    done.push_back(d);
+  };
+  tracer.intersect(rays, hits, 0xFFFFFFFFu, control);
+  ASSERT_FALSE(done.empty());
+  EXPECT_EQ(done.back(), rays.size());
+  EXPECT_TRUE(std::is_sorted(done.begin(), done.end()));
+  for (std::size_t i = 0; i < rays.size(); ++i) ASSERT_TRUE(sameHit(hits[i], reference[i])) << i;
+  // Cancelled after the first chunk: no further chunk starts, Cancelled is thrown.
+  done.clear();
+  control.progress = [&](std::size_t d, std::size_t) {
+    done.push_back(d);
+    token.cancel();
+  };
+  std::vector<std::uint8_t> blocked(rays.size());
+  EXPECT_THROW(tracer.occluded(rays, blocked, 0xFFFFFFFFu, control), Cancelled);
+  ASSERT_FALSE(done.empty());
+  EXPECT_LT(done.back(), rays.size());
+  std::vector<ClosestPoint> near(8);
+  EXPECT_THROW(tracer.closestPoints(std::vector<ClosestPointRequest>(8), near, 0xFFFFFFFFu, control), Cancelled);
+  token.reset();
+  tracer.closestPoints(std::vector<ClosestPointRequest>(8), near, 0xFFFFFFFFu, control);
+  EXPECT_TRUE(near[0].valid());
+}
+
 TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
   Fixture f;
   scatterInstances(f, 200, 20.0, 12);

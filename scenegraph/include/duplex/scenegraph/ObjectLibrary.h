@@ -5,6 +5,7 @@
 /// instances refer to it.
 
 #include "duplex/accel/Object.h"
+#include "duplex/accel/WorkControl.h"
 #include "duplex/scenegraph/NodeId.h"
 
 #include <atomic>
@@ -69,10 +70,13 @@ class ObjectLibrary {
   /// InvalidArgument naming the object (the next get() tries again). Throws for an unknown id.
   [[nodiscard]] std::shared_ptr<const Object> get(ObjectId id) const;
   /// Builds every listed deferred object, in parallel (TBB). Throws the first failure as get() does,
-  /// after the others finished.
-  void buildAll(std::span<const ObjectId> ids) const;
-  /// Builds all deferred objects.
-  void buildAll() const;
+  /// after the others finished (the objects that built are kept). control.progress gets (objects
+  /// done, ids.size()); once control.cancel is set no further build starts and Cancelled is
+  /// thrown after the running ones finished, none of this call's builds kept: the library is as
+  /// it was.
+  void buildAll(std::span<const ObjectId> ids, const WorkControl& control = {}) const;
+  /// Builds all deferred objects (see above).
+  void buildAll(const WorkControl& control = {}) const;
 
   /// Bytes held by the object's geometry and structure (Object::memoryBytes; 0 while deferred).
   /// Throws InvalidArgument for an unknown or removed id.
@@ -96,6 +100,10 @@ class ObjectLibrary {
   };
   ObjectId push(std::string name, std::string type_name, Factory factory, std::shared_ptr<const Object> object);
   const Entry& entry(ObjectId id) const;
+  /// The entry's factory called, its errors turned into InvalidArgument naming the object.
+  std::shared_ptr<const Object> runFactory(const Entry& e) const;
+  /// Stores a built object in its entry (the caller holds the entry's mutex).
+  void install(const Entry& e, std::shared_ptr<const Object> object) const;
   /// entry(), also refusing a removed id; `call` names the method in the message.
   const Entry& liveEntry(ObjectId id, const char* call) const;
   std::deque<Entry> entries_;  // deque: entries hold a mutex and never move

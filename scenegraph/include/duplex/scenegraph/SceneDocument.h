@@ -10,6 +10,7 @@
 
 #include "duplex/accel/Affine.h"
 #include "duplex/accel/KdBuildConfig.h"
+#include "duplex/accel/WorkControl.h"
 #include "duplex/scenegraph/NodeId.h"
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
 #include "duplex/scenegraph/SceneGraph.h"
@@ -91,6 +92,10 @@ struct SceneLoadFigures {
 /// Options of loadSceneDocument().
 struct SceneDocumentOptions {
   KdBuildConfig build;  ///< kd-tree build parameters of the types that build kd-trees
+  /// Progress of the bottom-level builds (objects built or read from prepared structures, out of
+  /// the "objects" entries to build) and cancellation: a cancelled load throws Cancelled and
+  /// returns nothing (the caller's scene, if any, is untouched).
+  WorkControl control;
   /// Honour "structure" keys that name prepared bottom-level structures; false builds every object
   /// (structure choices such as "kdtree" still apply).
   bool use_structures = true;

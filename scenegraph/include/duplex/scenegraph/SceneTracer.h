@@ -14,6 +14,7 @@
 #include "duplex/accel/Ray.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/accel/TopLevel.h"
+#include "duplex/accel/WorkControl.h"
 #include "duplex/scenegraph/SceneGraph.h"
 
 #include <glm/vec3.hpp>
@@ -95,20 +96,26 @@ class SceneTracer {
 
   /// Batch versions, in parallel over the rays with TBB (one QueryContext per task). `hits` /
   /// `occluded` / `transmittance` must have the size of `rays` (else InvalidArgument, nothing
-  /// written).
-  void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// written). control.progress gets (rays done, rays.size()) after each chunk of rays; once
+  /// control.cancel is set no further chunk starts and Cancelled is thrown (the output is then
+  /// incomplete).
+  void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu,
+                 const WorkControl& control = {}) const;
   /// Batch occluded(): occluded[i] is 1 when rays[i] is blocked, else 0.
-  void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu) const;
+  void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask = 0xFFFFFFFFu,
+                const WorkControl& control = {}) const;
   /// Batch transmittance(): transmittance[i] in [0, 1] for rays[i].
-  void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu) const;
+  void transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask = 0xFFFFFFFFu,
+                     const WorkControl& control = {}) const;
   /// Batch intersectAll (picking through layers, many rays): on return `offsets` holds rays.size()
   /// + 1 entries and the hits of rays[i] are hits[offsets[i], offsets[i + 1]), sorted by t as
   /// intersectAll(ray) returns them (world t, world normal; sensors when the mask selects them).
   /// Both vectors are replaced (an empty span gives offsets {0} and no hits). Flat rather than a
   /// vector per ray, so the result is one allocation (each ray's hits are gathered in a list of
   /// its own while tracing, then copied).
+  /// Progress and cancellation as the batch queries above (the vectors are then unchanged).
   void intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
-                    std::uint32_t mask = 0xFFFFFFFFu) const;
+                    std::uint32_t mask = 0xFFFFFFFFu, const WorkControl& control = {}) const;
 
   /// The point of the visible surface instances (mask meeting `mask`) nearest to `point_ws`
   /// within `max_distance` (world units, inclusive; +inf for no limit), in double precision, with
@@ -121,9 +128,9 @@ class SceneTracer {
                                                std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Batch closestPoint() without the paths, in parallel with TBB: out[i] answers requests[i]
   /// (instance_id = the instance node id). `out` must have the size of `requests` (else
-  /// InvalidArgument, nothing written).
+  /// InvalidArgument, nothing written). Progress and cancellation as the batch ray queries.
   void closestPoints(std::span<const ClosestPointRequest> requests, std::span<ClosestPoint> out,
-                     std::uint32_t mask = 0xFFFFFFFFu) const;
+                     std::uint32_t mask = 0xFFFFFFFFu, const WorkControl& control = {}) const;
 
   /// Picking through pixel (px, py) (continuous pixel coordinates, (0, 0) the top-left corner,
   /// (w, h) the bottom-right) of a width x height image seen by `camera` (world space). Throws
