@@ -637,46 +637,6 @@ void InstanceTree::intersectAllImpl(const Ray& ray_ws, const RayD* ray_d, std::v
   sortHits(hits);
 }
 
-void InstanceTree::appendInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask,
-                                  std::vector<std::uint32_t>& out) const {
-  if (tree_.empty()) return;
-  // A box is outside when its corner furthest along a plane's normal is still outside it.
-  auto outside = [&](const Box& b) {
-    for (const glm::dvec4& p : planes) {
-      const glm::dvec3 corner(p.x >= 0 ? b.lo.x : b.hi.x, p.y >= 0 ? b.lo.y : b.hi.y, p.z >= 0 ? b.lo.z : b.hi.z);
-      if (p.x * corner.x + p.y * corner.y + p.z * corner.z > p.w) return true;
-    }
-    return false;
-  };
-  std::vector<std::uint32_t> slots;
-  std::vector<std::pair<std::uint32_t, Box>> stack{{0u, tree_.bounds}};
-  while (!stack.empty()) {
-    const auto [i, cell] = stack.back();
-    stack.pop_back();
-    if (outside(cell)) continue;
-    const KdNode& n = tree_.nodes[i];
-    if (n.isJump()) {
-      stack.emplace_back(n.jumpTarget(), cell);
-      continue;
-    }
-    if (n.isLeaf()) {
-      for (std::uint32_t k = 0; k < n.primCount(); ++k) slots.push_back(tree_.prim_indices[n.primOffset() + k]);
-      continue;
-    }
-    Box lower = cell, upper = cell;
-    lower.hi[n.axis()] = std::min(n.split(), cell.hi[n.axis()]);
-    upper.lo[n.axis()] = std::max(n.split(), cell.lo[n.axis()]);
-    stack.emplace_back(n.upperChild(), upper);
-    stack.emplace_back(i + 1, lower);
-  }
-  std::sort(slots.begin(), slots.end());
-  slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
-  for (const std::uint32_t slot : slots) {
-    const Record& rec = state_->records[slot];
-    if ((rec.mask & mask) != 0 && !outside(state_->boxes[slot])) out.push_back(rec.id);
-  }
-}
-
 const Affine* InstanceTree::findObjectFromWorld(std::uint32_t id) const {
   if (!state_) return nullptr;
   const auto it = state_->slot_of_id.find(id);

@@ -20,14 +20,7 @@ using namespace toplevel_detail;
 namespace {
 
 // Distance from p to box b (0 inside), world space, in double.
-double boxDistance(const glm::dvec3& p, const Box& b) {
-  double s = 0.0;
-  for (int a = 0; a < 3; ++a) {
-    const double e = std::max({double{b.lo[a]} - p[a], 0.0, p[a] - double{b.hi[a]}});
-    s += e * e;
-  }
-  return std::sqrt(s);
-}
+double boxDistance(const glm::dvec3& p, const Box& b) { return std::sqrt(distanceSquared(b, p)); }
 
 // The instance slots asked by the current query (kept in the QueryContext: no allocation after
 // the first query of a thread).
@@ -74,9 +67,7 @@ void InstanceTree::closestPoint(const glm::dvec3& point_ws, ClosestPoint& best, 
       continue;
     }
     const int axis = n.axis();
-    Box lower = e.cell, upper = e.cell;
-    lower.hi[axis] = std::min(n.split(), e.cell.hi[axis]);
-    upper.lo[axis] = std::max(n.split(), e.cell.lo[axis]);
+    const auto [lower, upper] = childCells(n, e.cell);
     // The side holding the point on top, so that it is searched first.
     if (point_ws[axis] < double{n.split()}) {
       stack.push_back({n.upperChild(), upper});

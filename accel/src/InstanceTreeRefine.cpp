@@ -88,9 +88,7 @@ SubtreeScan scanSubtree(const KdTree& tree, std::uint32_t root, const Box& cell,
       continue;
     }
     out.area_cost += boxArea(box) * cfg.traversal_cost;
-    Box lower = box, upper = box;
-    lower.hi[n.axis()] = std::min(n.split(), box.hi[n.axis()]);
-    upper.lo[n.axis()] = std::max(n.split(), box.lo[n.axis()]);
+    const auto [lower, upper] = childCells(n, box);
     stack.emplace_back(n.upperChild(), upper);
     stack.emplace_back(i + 1, lower);
   }

@@ -38,16 +38,6 @@ inline std::string describeInstance(const InstanceDesc& d) {
 // Throws InvalidArgument for a configuration out of range (InstanceTree.cpp).
 void validateConfig(const TopLevelConfig& c);
 
-// Throws InvalidArgument for a region plane with a non-finite or zero normal or a non-finite
-// offset: a NaN plane is never "outside", so it would select everything.
-inline void checkRegionPlanes(std::span<const glm::dvec4> planes) {
-  for (const glm::dvec4& p : planes)
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(p.w) ||
-        !(p.x != 0.0 || p.y != 0.0 || p.z != 0.0))
-      throw InvalidArgument(
-          "TopLevel::instancesInRegion: a plane has a non-finite or zero normal, or a non-finite offset");
-}
-
 // Sorts hits by t, ties by instance id, then primitive id (the order intersectAll reports).
 inline void sortHits(std::vector<Hit>& hits) {
   std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {

@@ -31,10 +31,7 @@ KdTreeStats KdTree::stats(float traversal_cost, float intersection_cost) const {
     }
     ++s.inner_nodes;
     s.sah_cost += p * traversal_cost;
-    // Clamped: in an incrementally updated tree whose root shrank, a plane may lie outside its node.
-    Box lower = box, upper = box;
-    lower.hi[n.axis()] = std::min(n.split(), box.hi[n.axis()]);
-    upper.lo[n.axis()] = std::max(n.split(), box.lo[n.axis()]);
+    const auto [lower, upper] = childCells(n, box);
     walk(i + 1, lower, depth + 1);
     walk(n.upperChild(), upper, depth + 1);
   };
@@ -58,9 +55,7 @@ Box KdTree::nodeBox(std::uint32_t index) const {
       continue;
     }
     if (n.isLeaf()) continue;
-    Box lower = box, upper = box;
-    lower.hi[n.axis()] = std::min(n.split(), box.hi[n.axis()]);
-    upper.lo[n.axis()] = std::max(n.split(), box.lo[n.axis()]);
+    const auto [lower, upper] = childCells(n, box);
     stack.emplace_back(n.upperChild(), upper);
     stack.emplace_back(i + 1, lower);
   }

@@ -135,15 +135,6 @@ void TopLevel::intersectAll(const RayD& ray_ws, std::vector<Hit>& hits, QueryCon
   blocking_.intersectAllImpl(fromDouble(ray_ws).f, &ray_ws, hits, ctx, mask, crossing_.get());
 }
 
-std::vector<std::uint32_t> TopLevel::instancesInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask) const {
-  checkRegionPlanes(planes);
-  std::vector<std::uint32_t> out;
-  if (crossing_) crossing_->appendInRegion(planes, mask, out);
-  blocking_.appendInRegion(planes, mask, out);
-  std::sort(out.begin(), out.end());
-  return out;
-}
-
 const Affine& TopLevel::objectFromWorld(std::uint32_t id) const {
   if (const Affine* a = blocking_.findObjectFromWorld(id)) return *a;
   if (crossing_)

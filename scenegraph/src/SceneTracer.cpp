@@ -4,6 +4,8 @@
 #include "duplex/accel/Log.h"
 
 #include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
+#include <glm/vec2.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -13,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <numbers>
 #include <shared_mutex>
 #include <string>
 #include <type_traits>
@@ -271,6 +274,110 @@ void requireCamera(const char* what, const PinholeCamera& c) {
 
 }  // namespace
 
+namespace {
+
+// The nearest thing under a picking ray. Sensors never block, so intersect() looks through them;
+// a pick whose mask selects sensors wants the nearest thing under the cursor, sensor or surface
+// (a tie goes to the surface). The caller holds the tracer's lock.
+Hit nearestUnderCursor(const TopLevel& top, const RayD& ray, QueryContext& ctx, std::uint32_t mask) {
+  Hit nearest = top.intersect(ray, ctx, mask);
+  if (const InstanceTree* sensors = top.crossingLevel()) {
+    RayD up_to = ray;
+    if (nearest.valid()) up_to.tfar = nearest.t;
+    std::vector<Hit> crossings;
+    sensors->intersectAll(up_to, crossings, ctx, mask);
+    if (!crossings.empty() && (!nearest.valid() || crossings.front().t < nearest.t)) nearest = crossings.front();
+  }
+  return nearest;
+}
+
+// The side planes of the frustum through the pixel rectangle [x0, x1] x [y0, y1] (x0 <= x1,
+// y0 <= y1) and the plane through the eye facing forward (nothing behind the camera), world space.
+std::vector<glm::dvec4> frustumPlanes(const PinholeCamera& camera, double x0, double y0, double x1, double y1,
+                                      std::uint32_t width, std::uint32_t height) {
+  // Corner directions in the order top-left, top-right, bottom-right, bottom-left (clockwise on
+  // screen); each side plane contains the eye and two neighbouring corner rays, normal outward.
+  const glm::dvec3 c[4] = {camera.directionAt(x0, y0, width, height), camera.directionAt(x1, y0, width, height),
+                           camera.directionAt(x1, y1, width, height), camera.directionAt(x0, y1, width, height)};
+  std::vector<glm::dvec4> planes;
+  const glm::dvec3 inside = glm::normalize(c[0] + c[1] + c[2] + c[3]);
+  for (int k = 0; k < 4; ++k) {
+    glm::dvec3 n = glm::cross(c[k], c[(k + 1) % 4]);
+    const double len = glm::length(n);
+    if (!(len > 0.0)) continue;  // a zero-width rectangle: its side planes coincide; keep the others
+    n /= len;
+    if (glm::dot(n, inside) > 0.0) n = -n;
+    planes.emplace_back(n, glm::dot(n, camera.eye));
+  }
+  planes.emplace_back(-camera.forward, -glm::dot(camera.forward, camera.eye));
+  return planes;
+}
+
+// World points to continuous pixel coordinates: the inverse of PinholeCamera::directionAt for any
+// independent camera axes (the offset from the eye is solved in the camera's own basis).
+class ScreenProjection {
+ public:
+  ScreenProjection(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height)
+      : eye_(camera.eye), width_(width), height_(height) {
+    const glm::dmat3 basis(camera.forward, camera.right, camera.up);
+    if (!(std::abs(glm::determinant(basis)) > 0.0))
+      throw InvalidArgument("SceneTracer::pickElement: camera forward lies in the plane of right and up");
+    to_camera_ = glm::inverse(basis);
+    half_h_ = std::tan(0.5 * camera.vertical_fov_deg * std::numbers::pi / 180.0);
+    half_w_ = half_h_ * static_cast<double>(width) / static_cast<double>(height);
+  }
+  // Depth along forward (in units of forward's length); > 0 in front of the eye.
+  [[nodiscard]] double depth(const glm::dvec3& p) const { return (to_camera_ * (p - eye_)).x; }
+  // Pixel coordinates of a point in front of the eye.
+  [[nodiscard]] glm::dvec2 pixel(const glm::dvec3& p) const {
+    const glm::dvec3 c = to_camera_ * (p - eye_);
+    return {(c.y / c.x / half_w_ + 1.0) * 0.5 * width_, (1.0 - c.z / c.x / half_h_) * 0.5 * height_};
+  }
+
+ private:
+  glm::dvec3 eye_;
+  glm::dmat3 to_camera_{1.0};
+  double half_w_ = 1.0, half_h_ = 1.0;
+  double width_, height_;
+};
+
+// A vertex or an edge near the cursor, before its visibility is known.
+struct ElementCandidate {
+  std::uint32_t instance = kInvalidId;
+  std::uint32_t prim_id = kInvalidId;
+  std::array<std::uint32_t, 2> vertices{kInvalidId, kInvalidId};  // a vertex: [0] only
+  glm::dvec3 point_ws{0.0};
+  double distance_px = 0.0;
+  double depth = 0.0;  // distance from the eye, world units
+};
+
+bool closerOnScreen(const ElementCandidate& a, const ElementCandidate& b) {
+  if (a.distance_px != b.distance_px) return a.distance_px < b.distance_px;
+  if (a.depth != b.depth) return a.depth < b.depth;
+  if (a.instance != b.instance) return a.instance < b.instance;
+  return a.vertices < b.vertices;
+}
+
+// An edge of the candidate triangles: the two vertex indices ascending, the triangles around it.
+struct EdgeUse {
+  std::uint32_t instance;
+  std::array<std::uint32_t, 2> vertices;
+  std::uint32_t triangle;  // index into the candidate triangles
+  bool operator<(const EdgeUse& o) const {
+    return instance != o.instance ? instance < o.instance
+                                  : (vertices != o.vertices ? vertices < o.vertices : triangle < o.triangle);
+  }
+  [[nodiscard]] bool sameEdge(const EdgeUse& o) const { return instance == o.instance && vertices == o.vertices; }
+};
+
+glm::dvec3 unitNormal(const InstanceTriangle& t) {
+  const glm::dvec3 n = glm::cross(t.position_ws[1] - t.position_ws[0], t.position_ws[2] - t.position_ws[0]);
+  const double len = glm::length(n);
+  return len > 0.0 ? n / len : n;
+}
+
+}  // namespace
+
 std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, double py, std::uint32_t width,
                                         std::uint32_t height, PickMode mode, std::uint32_t mask) const {
   requireImage("SceneTracer::pick", width, height);
@@ -284,17 +391,7 @@ std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, 
   std::shared_lock lock(impl_->mutex);
   std::vector<SceneHit> out;
   if (mode == PickMode::Nearest) {
-    Hit nearest = impl_->top.intersect(ray, ctx, mask);
-    // Sensors never block, so intersect() looks through them; a pick whose mask selects sensors
-    // wants the nearest thing under the cursor, sensor or surface (a tie goes to the surface).
-    if (const InstanceTree* sensors = impl_->top.crossingLevel()) {
-      RayD up_to = ray;
-      if (nearest.valid()) up_to.tfar = nearest.t;
-      std::vector<Hit> crossings;
-      sensors->intersectAll(up_to, crossings, ctx, mask);
-      if (!crossings.empty() && (!nearest.valid() || crossings.front().t < nearest.t)) nearest = crossings.front();
-    }
-    SceneHit h = detail(graph_, impl_->top, ray, nearest);
+    SceneHit h = detail(graph_, impl_->top, ray, nearestUnderCursor(impl_->top, ray, ctx, mask));
     if (h.valid()) out.push_back(std::move(h));
     return out;
   }
@@ -311,33 +408,158 @@ std::vector<SceneHit> SceneTracer::pick(const PinholeCamera& camera, double px, 
   return out;
 }
 
+ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, double py, std::uint32_t width,
+                                     std::uint32_t height, const PickOptions& options) const {
+  requireImage("SceneTracer::pickElement", width, height);
+  requireCamera("SceneTracer::pickElement", camera);
+  if (!std::isfinite(px) || !std::isfinite(py))
+    throw InvalidArgument("SceneTracer::pickElement: pixel coordinates must be finite");
+  if (!(options.radius_px >= 0.0) || !std::isfinite(options.radius_px))
+    throw InvalidArgument("SceneTracer::pickElement: radius_px " + std::to_string(options.radius_px) +
+                          " (must be finite and >= 0)");
+  if (!(options.feature_angle_deg >= 0.0 && options.feature_angle_deg < 180.0))
+    throw InvalidArgument("SceneTracer::pickElement: feature_angle_deg " + std::to_string(options.feature_angle_deg) +
+                          " (must lie in [0, 180))");
+  const ScreenProjection screen(camera, width, height);
+  const glm::dvec2 cursor(px, py);
+  const double r = options.radius_px;
+  QueryContext ctx;
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  // Nothing that the mask selects lies on the segment from the eye to p (its own faces, met at the
+  // far end, do not count).
+  const auto visible = [&](const glm::dvec3& p) {
+    RayD ray;
+    ray.origin = camera.eye;
+    ray.dir = p - camera.eye;
+    ray.tfar = 1.0 - 1e-4;
+    return !top.intersect(ray, ctx, options.mask).valid();
+  };
+  const auto finish = [&](PickElement kind, const ElementCandidate& c) {
+    ElementPick pick;
+    pick.kind = kind;
+    pick.instance = c.instance;
+    pick.path = graph_.committedPathIds(c.instance);
+    pick.prim_id = c.prim_id;
+    if (kind == PickElement::Vertex) pick.vertex = c.vertices[0];
+    if (kind == PickElement::Edge) pick.edge = c.vertices;
+    pick.point_ws = c.point_ws;
+    pick.distance_px = c.distance_px;
+    pick.depth = c.depth;
+    return pick;
+  };
+
+  if (r > 0.0 && (options.vertices || options.edges)) {
+    const std::vector<InstanceTriangle> tris =
+        top.trianglesInRegion(frustumPlanes(camera, px - r, py - r, px + r, py + r, width, height), options.mask);
+    // Every edge of the candidate triangles with the triangles around it: a triangle that has an
+    // edge meeting the pick frustum meets it too, so an edge's neighbours are all here.
+    std::vector<EdgeUse> uses;
+    uses.reserve(3 * tris.size());
+    for (std::uint32_t i = 0; i < tris.size(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t a = tris[i].vertex[k], b = tris[i].vertex[(k + 1) % 3];
+        uses.push_back({tris[i].instance_id, {std::min(a, b), std::max(a, b)}, i});
+      }
+    std::sort(uses.begin(), uses.end());
+    const double cos_feature = std::cos(options.feature_angle_deg * std::numbers::pi / 180.0);
+    std::vector<EdgeUse> edges;  // one use per edge that passes the feature filter
+    for (std::size_t i = 0; i < uses.size();) {
+      std::size_t j = i + 1;
+      while (j < uses.size() && uses[j].sameEdge(uses[i])) ++j;
+      bool feature = options.feature_angle_deg == 0.0 || j - i != 2;
+      if (!feature)
+        feature = glm::dot(unitNormal(tris[uses[i].triangle]), unitNormal(tris[uses[i + 1].triangle])) < cos_feature;
+      if (feature) edges.push_back(uses[i]);
+      i = j;
+    }
+    const auto inFront = [&](const glm::dvec3& p) { return screen.depth(p) > 0.0; };
+
+    if (options.vertices) {
+      std::vector<ElementCandidate> found;
+      for (const EdgeUse& e : edges)
+        for (int k = 0; k < 2; ++k) {
+          const InstanceTriangle& t = tris[e.triangle];
+          const int corner = t.vertex[0] == e.vertices[k] ? 0 : (t.vertex[1] == e.vertices[k] ? 1 : 2);
+          const glm::dvec3& p = t.position_ws[corner];
+          if (!inFront(p)) continue;
+          const double d = glm::length(screen.pixel(p) - cursor);
+          if (!(d <= r)) continue;
+          found.push_back({e.instance, t.prim_id, {e.vertices[k], kInvalidId}, p, d, glm::length(p - camera.eye)});
+        }
+      std::sort(found.begin(), found.end(), closerOnScreen);
+      for (std::size_t i = 0; i < found.size(); ++i) {
+        if (i > 0 && found[i].instance == found[i - 1].instance && found[i].vertices == found[i - 1].vertices) continue;
+        if (visible(found[i].point_ws)) return finish(PickElement::Vertex, found[i]);
+      }
+    }
+
+    if (options.edges) {
+      std::vector<ElementCandidate> found;
+      for (const EdgeUse& e : edges) {
+        const InstanceTriangle& t = tris[e.triangle];
+        const auto corner = [&](std::uint32_t v) {
+          return t.position_ws[t.vertex[0] == v ? 0 : (t.vertex[1] == v ? 1 : 2)];
+        };
+        glm::dvec3 a = corner(e.vertices[0]), b = corner(e.vertices[1]);
+        // Only the part in front of the eye projects; cut a little in front of the eye plane.
+        double za = screen.depth(a), zb = screen.depth(b);
+        const double z_min = 1e-9 * std::max(std::abs(za), std::abs(zb));
+        if (za <= z_min && zb <= z_min) continue;
+        if (za < z_min) {
+          a += (z_min - za) / (zb - za) * (b - a);
+          za = z_min;
+        } else if (zb < z_min) {
+          b += (z_min - zb) / (za - zb) * (a - b);
+          zb = z_min;
+        }
+        // The screen point of the segment nearest the cursor, then the 3D point it shows
+        // (perspective: 1/depth is linear along the projected segment).
+        const glm::dvec2 sa = screen.pixel(a), sb = screen.pixel(b);
+        const glm::dvec2 ab = sb - sa;
+        const double len2 = glm::dot(ab, ab);
+        const double s = len2 > 0.0 ? std::clamp(glm::dot(cursor - sa, ab) / len2, 0.0, 1.0) : 0.0;
+        const double u = s * za / ((1.0 - s) * zb + s * za);
+        const glm::dvec3 p = a + u * (b - a);
+        const double d = glm::length(screen.pixel(p) - cursor);
+        if (!(d <= r)) continue;
+        found.push_back({e.instance, t.prim_id, e.vertices, p, d, glm::length(p - camera.eye)});
+      }
+      std::sort(found.begin(), found.end(), closerOnScreen);
+      for (const ElementCandidate& c : found) {
+        if (visible(c.point_ws)) return finish(PickElement::Edge, c);
+      }
+    }
+  }
+
+  ElementPick pick;
+  if (!options.faces) return pick;
+  RayD ray;
+  ray.origin = camera.eye;
+  ray.dir = camera.directionAt(px, py, width, height);
+  const SceneHit h = detail(graph_, top, ray, nearestUnderCursor(top, ray, ctx, options.mask));
+  if (!h.valid()) return pick;
+  pick.kind = PickElement::Face;
+  pick.instance = h.instance;
+  pick.path = h.path;
+  pick.prim_id = h.hit.prim_id;
+  pick.point_ws = h.position_ws;
+  pick.depth = glm::length(h.position_ws - camera.eye);
+  return pick;
+}
+
 std::vector<NodeId> SceneTracer::selectRectangle(const PinholeCamera& camera, double x0, double y0, double x1,
                                                  double y1, std::uint32_t width, std::uint32_t height,
-                                                 std::uint32_t mask) const {
+                                                 std::uint32_t mask, RegionMode mode) const {
   requireImage("SceneTracer::selectRectangle", width, height);
   requireCamera("SceneTracer::selectRectangle", camera);
   if (!std::isfinite(x0) || !std::isfinite(y0) || !std::isfinite(x1) || !std::isfinite(y1))
     throw InvalidArgument("SceneTracer::selectRectangle: rectangle coordinates must be finite");
   if (x0 > x1) std::swap(x0, x1);
   if (y0 > y1) std::swap(y0, y1);
-  // Corner directions in the order top-left, top-right, bottom-right, bottom-left (clockwise on
-  // screen); each side plane contains the eye and two neighbouring corner rays, normal outward.
-  const glm::dvec3 c[4] = {camera.directionAt(x0, y0, width, height), camera.directionAt(x1, y0, width, height),
-                           camera.directionAt(x1, y1, width, height), camera.directionAt(x0, y1, width, height)};
-  std::vector<glm::dvec4> planes;
-  const glm::dvec3 inside = glm::normalize(c[0] + c[1] + c[2] + c[3]);
-  for (int k = 0; k < 4; ++k) {
-    glm::dvec3 n = glm::cross(c[k], c[(k + 1) % 4]);
-    const double len = glm::length(n);
-    if (!(len > 0.0)) continue;  // a zero-width rectangle: its side planes coincide; keep the others
-    n /= len;
-    if (glm::dot(n, inside) > 0.0) n = -n;
-    planes.emplace_back(n, glm::dot(n, camera.eye));
-  }
-  // Nothing behind the camera.
-  planes.emplace_back(-camera.forward, -glm::dot(camera.forward, camera.eye));
+  const std::vector<glm::dvec4> planes = frustumPlanes(camera, x0, y0, x1, y1, width, height);
   std::shared_lock lock(impl_->mutex);
-  return impl_->top.instancesInRegion(planes, mask);
+  return impl_->top.instancesInRegion(planes, mask, mode);
 }
 
 Box SceneTracer::bounds() const {

@@ -451,7 +451,7 @@ TEST(SceneTracer, RectangleSelectionFindsExactlyTheBoxesInTheFrustum) {
     double x0 = ux(rng), x1 = ux(rng), y0 = uy(rng), y1 = uy(rng);
     if (x0 > x1) std::swap(x0, x1);
     if (y0 > y1) std::swap(y0, y1);
-    const std::vector<NodeId> got = tracer.selectRectangle(cam, x0, y0, x1, y1, w, h);
+    const std::vector<NodeId> got = tracer.selectRectangle(cam, x0, y0, x1, y1, w, h, 0xFFFFFFFFu, RegionMode::Boxes);
     for (const NodeId id : all) {
       const Box b = tracer.topLevel().instanceBounds(id);
       int left = 0, right = 0, top = 0, bottom = 0, behind = 0, inside = 0;

@@ -108,10 +108,7 @@ inline ::testing::AssertionResult checkIncrementalTree(const TopLevel& top, cons
       continue;
     }
     if (!n.isLeaf()) {
-      // A split may lie outside its cell once the root has shrunk: cells are clamped.
-      Box lower = cell, upper = cell;
-      lower.hi[n.axis()] = std::min(n.split(), cell.hi[n.axis()]);
-      upper.lo[n.axis()] = std::max(n.split(), cell.lo[n.axis()]);
+      const auto [lower, upper] = childCells(n, cell);
       stack.emplace_back(n.upperChild(), upper);
       stack.emplace_back(i + 1, lower);
       continue;

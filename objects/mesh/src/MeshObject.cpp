@@ -531,15 +531,6 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
       improved = true;
     }
   };
-  // Squared object-space distance from the query point to a box: the visiting order only.
-  auto boxKey = [&](const Box& b) {
-    double s = 0.0;
-    for (int a = 0; a < 3; ++a) {
-      const double e = std::max({double{b.lo[a]} - q.point_os[a], 0.0, q.point_os[a] - double{b.hi[a]}});
-      s += e * e;
-    }
-    return s;
-  };
   struct Entry {
     std::uint32_t node;  // BVH: a reference; kd-tree: a node index
     Box box;             // BVH: the child's box; kd-tree: the node's cell
@@ -572,7 +563,8 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
       int n = 0;
       for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k) {
         const Box b = node.childBox(k);
-        if (q.mayReach(b, best.distance)) order[n++] = {boxKey(b), k};
+        if (q.mayReach(b, best.distance))
+          order[n++] = {distanceSquared(b, q.point_os), k};  // object space: the order only
       }
       for (int i = 1; i < n; ++i)  // descending by key: at most 8, an insertion sort
         for (int j = i; j > 0 && order[j - 1].first < order[j].first; --j) std::swap(order[j - 1], order[j]);
@@ -591,9 +583,7 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
       continue;
     }
     const int axis = node.axis();
-    Box lower = e.box, upper = e.box;
-    lower.hi[axis] = std::min(node.split(), e.box.hi[axis]);
-    upper.lo[axis] = std::max(node.split(), e.box.lo[axis]);
+    const auto [lower, upper] = childCells(node, e.box);
     const bool below = q.point_os[axis] < double{node.split()};
     // The side holding the point last, so that it is visited first.
     if (below) {
@@ -606,6 +596,144 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
   }
   return improved;
 }
+
+namespace {
+
+// The leaves of a mesh structure whose boxes a region does not exclude, with what the boxes tell:
+// visit(first_block, triangle_count, box_inside) returns true to stop the walk (the result is
+// then true). BVH boxes bound their triangles' parts, so `box_inside` says those parts lie in the
+// region; kd-tree cells are only space, so it is always false there.
+template <class Visit>
+bool forEachLeafInRegion(MeshStructure structure, const WideBvh& bvh, const KdTree& block_tree,
+                         const ConvexRegion& region, Visit&& visit) {
+  struct Entry {
+    std::uint32_t node;
+    Box box;
+  };
+  std::vector<Entry> stack;
+  if (structure == MeshStructure::Bvh) {
+    if (bvh.root == BvhRef::kEmpty) return false;
+    stack.push_back({bvh.root, bvh.bounds});
+    while (!stack.empty()) {
+      const Entry e = stack.back();
+      stack.pop_back();
+      if (region.excludes(e.box)) continue;
+      if (BvhRef::isLeaf(e.node)) {
+        if (visit(BvhRef::leafBlock(e.node), BvhRef::leafCount(e.node), region.containsBox(e.box))) return true;
+        continue;
+      }
+      const BvhNode8& node = bvh.nodes[e.node];
+      for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k)
+        stack.push_back({node.child[k], node.childBox(k)});
+    }
+    return false;
+  }
+  if (block_tree.empty()) return false;
+  stack.push_back({0, block_tree.bounds});
+  while (!stack.empty()) {
+    const Entry e = stack.back();
+    stack.pop_back();
+    if (region.excludes(e.box)) continue;
+    const KdNode& node = block_tree.nodes[e.node];
+    if (node.isLeaf()) {
+      if (node.primCount() > 0 && visit(node.primOffset(), node.primCount(), false)) return true;
+      continue;
+    }
+    const auto [lower, upper] = childCells(node, e.box);
+    stack.push_back({node.upperChild(), upper});
+    stack.push_back({e.node + 1, lower});
+  }
+  return false;
+}
+
+glm::dvec3 blockVertex(const detail::TriangleBlock4& b, int lane, int k) { return glm::dvec3(b.vertex(lane, k)); }
+
+}  // namespace
+
+std::optional<bool> MeshObject::inRegion(const ConvexRegion& region, RegionMode mode) const {
+  const detail::TriangleBlock4* blocks = blocks_.data();
+  if (mode == RegionMode::Inside) {
+    if (mesh_->triangleCount() == mesh_->degenerateCount()) return false;
+    if (region.containsBox(mesh_->bounds())) return true;
+    if (structure_ == MeshStructure::Bvh) {
+      // Every part of the geometry lies in some child box: a box the region excludes, or a
+      // triangle with a corner outside, means some geometry is outside.
+      bool outside = false;
+      std::vector<std::pair<std::uint32_t, Box>> stack{{bvh_.root, bvh_.bounds}};
+      while (!stack.empty() && !outside) {
+        const auto [ref, box] = stack.back();
+        stack.pop_back();
+        if (region.containsBox(box)) continue;
+        if (region.excludes(box)) {
+          outside = true;
+          break;
+        }
+        if (BvhRef::isLeaf(ref)) {
+          for (std::uint32_t i = 0; i < BvhRef::leafCount(ref) && !outside; ++i) {
+            const detail::TriangleBlock4& b = blocks[BvhRef::leafBlock(ref) + i / 4];
+            for (int k = 0; k < 3; ++k)
+              outside = outside || !region.contains(blockVertex(b, static_cast<int>(i % 4), k));
+          }
+          continue;
+        }
+        const BvhNode8& node = bvh_.nodes[ref];
+        for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k)
+          stack.emplace_back(node.child[k], node.childBox(k));
+      }
+      return !outside;
+    }
+    // kd-tree cells are only space: every valid triangle's corners are checked.
+    const std::vector<glm::vec3>& p = mesh_->positions();
+    const std::vector<TriangleMesh::Triangle>& tris = mesh_->triangles();
+    for (std::size_t t = 0; t < tris.size(); ++t) {
+      if (!mesh_->isValid(t)) continue;
+      for (int k = 0; k < 3; ++k)
+        if (!region.contains(glm::dvec3(p[tris[t][k]]))) return false;
+    }
+    return true;
+  }
+  if (mode != RegionMode::Touching) return std::nullopt;
+  return forEachLeafInRegion(
+      structure_, bvh_, block_tree_, region, [&](std::uint32_t first, std::uint32_t count, bool box_inside) {
+        if (box_inside) return true;  // a BVH box holds part of a triangle
+        for (std::uint32_t i = 0; i < count; ++i) {
+          const detail::TriangleBlock4& b = blocks[first + i / 4];
+          const int lane = static_cast<int>(i % 4);
+          if (region.meetsTriangle(blockVertex(b, lane, 0), blockVertex(b, lane, 1), blockVertex(b, lane, 2)))
+            return true;
+        }
+        return false;
+      });
+}
+
+bool MeshObject::trianglesInRegion(const ConvexRegion& region, std::vector<RegionTriangle>& out) const {
+  const detail::TriangleBlock4* blocks = blocks_.data();
+  std::vector<std::uint32_t> prims;
+  forEachLeafInRegion(structure_, bvh_, block_tree_, region, [&](std::uint32_t first, std::uint32_t count, bool) {
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const detail::TriangleBlock4& b = blocks[first + i / 4];
+      const int lane = static_cast<int>(i % 4);
+      if (region.meetsTriangle(blockVertex(b, lane, 0), blockVertex(b, lane, 1), blockVertex(b, lane, 2)))
+        prims.push_back(b.prim[lane]);
+    }
+    return false;
+  });
+  // A triangle referenced by several leaves (kd-tree, spatial splits) is reported once.
+  std::sort(prims.begin(), prims.end());
+  prims.erase(std::unique(prims.begin(), prims.end()), prims.end());
+  const std::vector<glm::vec3>& p = mesh_->positions();
+  for (const std::uint32_t prim : prims) {
+    const TriangleMesh::Triangle& t = mesh_->triangles()[prim];
+    RegionTriangle& r = out.emplace_back();
+    r.prim_id = prim;
+    for (int k = 0; k < 3; ++k) {
+      r.vertex[k] = t[k];
+      r.position_os[k] = p[t[k]];
+    }
+  }
+  return true;
+}
+
 bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occluded(ray_os); }
 
 std::size_t MeshObject::accelBytes() const {

@@ -70,6 +70,17 @@ struct Box {
   return Box(glm::max(a.lo, b.lo), glm::min(a.hi, b.hi));
 }
 
+/// Squared distance from point `p` to the closed box `b` (0 inside), in double, in the box's space.
+[[nodiscard]] inline double distanceSquared(const Box& b, const glm::dvec3& p) {
+  double s = 0.0;
+  for (int a = 0; a < 3; ++a) {
+    const double lo = b.lo[a], hi = b.hi[a];
+    const double e = p[a] < lo ? lo - p[a] : (p[a] > hi ? p[a] - hi : 0.0);
+    s += e * e;
+  }
+  return s;
+}
+
 /// Writes both corners, for logs and test messages.
 inline std::ostream& operator<<(std::ostream& os, const Box& b) {
   return os << "Box{(" << b.lo.x << ", " << b.lo.y << ", " << b.lo.z << ") - (" << b.hi.x << ", " << b.hi.y << ", "

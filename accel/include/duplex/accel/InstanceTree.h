@@ -182,7 +182,13 @@ class InstanceTree {
   void ensureState();
   void collectAll(const toplevel_detail::WorldRay& w, std::vector<Hit>& hits, QueryContext& ctx,
                   std::uint32_t mask) const;
-  void appendInRegion(std::span<const glm::dvec4> planes, std::uint32_t mask, std::vector<std::uint32_t>& out) const;
+  // Region queries (InstanceTreeRegion.cpp): the slots whose mask meets `mask` and whose world box
+  // the region does not exclude, sorted.
+  [[nodiscard]] std::vector<std::uint32_t> slotsInRegion(const ConvexRegion& region, std::uint32_t mask) const;
+  void appendInRegion(const ConvexRegion& region, std::uint32_t mask, RegionMode mode,
+                      std::vector<std::uint32_t>& out) const;
+  void appendTrianglesInRegion(const ConvexRegion& region, std::uint32_t mask,
+                               std::vector<InstanceTriangle>& out) const;
   void fullRebuild();
   void install(KdTree&& tree);
   void refreshCrossingIndex();

@@ -6,6 +6,7 @@
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdNode.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -37,5 +38,21 @@ struct KdTree {
   /// Box of node `index` (walks from the root; for tests and tools, not for traversal).
   [[nodiscard]] Box nodeBox(std::uint32_t index) const;
 };
+
+/// The cells of an inner node's two children: `cell` cut at the node's split plane. Clamped,
+/// because in an incrementally updated tree whose root shrank a plane may lie outside its node.
+struct KdChildCells {
+  Box lower;  ///< the cell of the lower child (index + 1)
+  Box upper;  ///< the cell of the upper child (upperChild())
+};
+
+/// The children's cells of inner node `n` whose cell is `cell`.
+[[nodiscard]] inline KdChildCells childCells(const KdNode& n, const Box& cell) {
+  KdChildCells c{cell, cell};
+  const int axis = n.axis();
+  c.lower.hi[axis] = std::min(n.split(), cell.hi[axis]);
+  c.upper.lo[axis] = std::max(n.split(), cell.lo[axis]);
+  return c;
+}
 
 }  // namespace duplex

@@ -5,11 +5,13 @@
 /// (its own acceleration structure and primitive tests) is statically dispatched.
 
 #include "duplex/accel/Box.h"
+#include "duplex/accel/ConvexRegion.h"
 #include "duplex/accel/Hit.h"
 #include "duplex/accel/PointQuery.h"
 #include "duplex/accel/QueryContext.h"
 #include "duplex/accel/Ray.h"
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -42,6 +44,28 @@ struct FlatCrossings {
   float half_width = 0.0f;   ///< half extent along object-space x, object units
   float half_height = 0.0f;  ///< half extent along object-space y, object units
   bool front_only = false;   ///< only rays travelling towards -z cross
+};
+
+/// How a region query judges an instance (TopLevel::instancesInRegion, SceneTracer::selectRectangle).
+enum class RegionMode : std::uint8_t {
+  Boxes,     ///< its world box meets the region (conservative near the region's corners; the fastest)
+  Touching,  ///< some of its geometry meets the region (meshes: a triangle)
+  Inside,    ///< all of its geometry lies in the region (meshes: every vertex of every valid triangle)
+};
+
+/// A triangle an object reports to a region query (Object::trianglesInRegion), object space.
+struct RegionTriangle {
+  std::uint32_t prim_id = kInvalidId;      ///< the triangle's index in its object
+  std::array<std::uint32_t, 3> vertex{};   ///< its vertex indices in the object's vertex list
+  std::array<glm::vec3, 3> position_os{};  ///< its corners, object space, the object's units
+};
+
+/// A triangle of an instance found by a region query (TopLevel::trianglesInRegion), world space.
+struct InstanceTriangle {
+  std::uint32_t instance_id = kInvalidId;   ///< the instance's id
+  std::uint32_t prim_id = kInvalidId;       ///< the triangle's index in the instance's object
+  std::array<std::uint32_t, 3> vertex{};    ///< its vertex indices in the object's vertex list
+  std::array<glm::dvec3, 3> position_ws{};  ///< its corners, world space (double, through the instance's transform)
 };
 
 /// One named count an object reports about itself for load summaries and JSON figures, e.g.
@@ -106,6 +130,25 @@ class Object {
     (void)query;
     (void)best;
     (void)ctx;
+    return false;
+  }
+
+  /// Optional region test for selection: whether the object's geometry meets (mode Touching) or
+  /// lies entirely in (mode Inside) `region_os`, the region in this object's space. std::nullopt
+  /// (the default): the type has none, and callers judge the object by its bounds. Never asked
+  /// with mode Boxes.
+  [[nodiscard]] virtual std::optional<bool> inRegion(const ConvexRegion& region_os, RegionMode mode) const {
+    (void)region_os;
+    (void)mode;
+    return std::nullopt;
+  }
+  /// Optional, for tolerance picking: appends to `out` every triangle of the object that meets
+  /// `region_os` (object space; degenerate triangles, which are never hit, are left out) with its
+  /// vertex indices, and returns true. The default returns false: the type has no triangles to
+  /// pick vertices and edges of.
+  virtual bool trianglesInRegion(const ConvexRegion& region_os, std::vector<RegionTriangle>& out) const {
+    (void)region_os;
+    (void)out;
     return false;
   }
 

@@ -65,14 +65,7 @@ struct PointQuery {
   }
 
   /// A lower bound of the world distance from point_ws to any point of object-space box `b`.
-  [[nodiscard]] double lowerBound(const Box& b) const {
-    double s = 0.0;
-    for (int i = 0; i < 3; ++i) {
-      const double e = std::max({double{b.lo[i]} - point_os[i], 0.0, point_os[i] - double{b.hi[i]}});
-      s += e * e;
-    }
-    return std::sqrt(s) / stretch_os;
-  }
+  [[nodiscard]] double lowerBound(const Box& b) const { return std::sqrt(distanceSquared(b, point_os)) / stretch_os; }
 
   /// Whether the object-space box `b` may hold a point closer than world distance `d`
   /// (conservative: the box must meet the object-space box of the world ball and lie nearer than

@@ -137,12 +137,22 @@ class TopLevel {
   /// the hit. Defined in TopLevelCrossings.cpp.
   [[nodiscard]] SegmentEnd intersectWithCrossings(const Ray& ray_ws, std::vector<Crossing>& crossings,
                                                   QueryContext& ctx, const CrossingQuery& query = {}) const;
-  /// Ids of the instances whose world box meets the convex region {x : dot(n_i, x) <= d_i for all
-  /// planes}, planes given as (n.x, n.y, n.z, d) in world space, mask-filtered; sorted by id. The
-  /// test is conservative per box (a box is reported unless one plane has it fully outside), which
-  /// is exact for frustum picking of boxes up to the corner cases of the separating-axis test.
+  /// Ids of the instances (mask meeting `mask`, any role) selected by the convex region
+  /// {x : dot(n_i, x) <= d_i for all planes}, planes given as (n.x, n.y, n.z, d) in world space;
+  /// sorted by id. Mode Boxes: the instance's world box meets the region (conservative: a box is
+  /// reported unless one plane has it fully outside, exact for frustum picking of boxes up to the
+  /// corner cases of the separating-axis test). Touching / Inside: its geometry meets / lies in the
+  /// region (Object::inRegion in object space, after the box test; a type without a region test
+  /// counts as touching when its box meets the region and as inside when its box is inside).
+  /// Throws InvalidArgument for a plane with a non-finite or zero normal or a non-finite offset.
   [[nodiscard]] std::vector<std::uint32_t> instancesInRegion(std::span<const glm::dvec4> planes,
-                                                             std::uint32_t mask = 0xFFFFFFFFu) const;
+                                                             std::uint32_t mask = 0xFFFFFFFFu,
+                                                             RegionMode mode = RegionMode::Boxes) const;
+  /// Every triangle meeting the region (planes as instancesInRegion) of the instances whose mask
+  /// meets `mask` and whose objects report triangles (Object::trianglesInRegion: meshes), in world
+  /// space, sorted by instance id then prim id. For tolerance picking. Throws as instancesInRegion.
+  [[nodiscard]] std::vector<InstanceTriangle> trianglesInRegion(std::span<const glm::dvec4> planes,
+                                                                std::uint32_t mask = 0xFFFFFFFFu) const;
 
   /// The point of the Surface instances (mask meeting `mask`) nearest to world point `point_ws`
   /// within world distance `max_distance` (inclusive; +inf for no limit), in double precision:

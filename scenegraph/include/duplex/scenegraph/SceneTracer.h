@@ -19,6 +19,7 @@
 
 #include <glm/vec3.hpp>
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -63,6 +64,47 @@ enum class PickMode : std::uint8_t {
   Nearest,      ///< the closest hit: a surface, or a sensor when the mask selects sensors
   AllSorted,    ///< every hit along the ray, sorted by t
   PerInstance,  ///< the closest hit of each instance, sorted by t
+};
+
+/// The kind of element a tolerance pick found (SceneTracer::pickElement).
+enum class PickElement : std::uint8_t {
+  None,    ///< nothing within the pick radius
+  Vertex,  ///< a mesh vertex
+  Edge,    ///< a mesh edge (two vertices)
+  Face,    ///< the surface under the cursor (meshes: a triangle; other types: their primitive)
+};
+
+/// What SceneTracer::pickElement looks for.
+struct PickOptions {
+  /// Pick radius around the cursor, in pixels (>= 0, finite): vertices and edges whose projection
+  /// lies within it count. 0: the face under the cursor only.
+  double radius_px = 5.0;
+  bool vertices = true;  ///< look for vertices
+  bool edges = true;     ///< look for edges
+  bool faces = true;     ///< fall back to the face under the cursor
+  /// Feature filter, degrees in [0, 180): an edge counts only where its two faces' normals differ
+  /// by more than this angle, or where it bounds the mesh (one face) or is shared by more than two;
+  /// a vertex only at an end of such an edge. 0: every edge and vertex (the tessellation's own).
+  /// CAD parts read as meshes show their design edges at 20-40 degrees.
+  double feature_angle_deg = 0.0;
+  std::uint32_t mask = 0xFFFFFFFFu;  ///< instances whose mask meets it (also what can hide an element)
+};
+
+/// The element a tolerance pick found (SceneTracer::pickElement); world space, double precision.
+struct ElementPick {
+  PickElement kind = PickElement::None;  ///< what was found
+  NodeId instance = kInvalidNode;        ///< its instance node
+  std::vector<NodeId> path;              ///< node ids from below the root down to the instance (last commit)
+  std::uint32_t prim_id = kInvalidId;    ///< the face; for a vertex or an edge, a triangle that has it
+  std::uint32_t vertex = kInvalidId;     ///< Vertex: its index in the object's vertex list
+  std::array<std::uint32_t, 2> edge{kInvalidId, kInvalidId};  ///< Edge: its two vertex indices, ascending
+  /// The vertex; the point of the edge whose projection is nearest the cursor; the face's hit point.
+  glm::dvec3 point_ws{0.0};
+  double distance_px = 0.0;  ///< distance on screen from the cursor to point_ws's projection, pixels
+  double depth = 0.0;        ///< distance from the eye to point_ws, world units
+
+  /// Whether something was found.
+  [[nodiscard]] bool valid() const { return kind != PickElement::None; }
 };
 
 /// Ray queries against a SceneGraph, kept up to date by its commits (see the file comment). Rays and hits are in world
@@ -139,12 +181,28 @@ class SceneTracer {
   [[nodiscard]] std::vector<SceneHit> pick(const PinholeCamera& camera, double px, double py, std::uint32_t width,
                                            std::uint32_t height, PickMode mode = PickMode::Nearest,
                                            std::uint32_t mask = 0xFFFFFFFFu) const;
-  /// Rectangle selection: every visible instance whose world box meets the frustum through the pixel
-  /// rectangle [x0, x1] x [y0, y1] (continuous pixel coordinates), sorted by node id. Throws as
-  /// pick() does, and for non-finite rectangle coordinates.
+  /// Tolerance picking as CAD users expect it: the visible vertex, else edge, within
+  /// options.radius_px of pixel (px, py) (continuous pixel coordinates as pick()), else the face
+  /// under the cursor (pick() with PickMode::Nearest). Among vertices (and among edges) the one
+  /// nearest the cursor on screen wins, ties by depth. An element is visible when nothing that
+  /// options.mask selects blocks the segment from the eye to it (up to 1e-4 of its distance, so
+  /// that its own faces do not hide it). Elements come from the objects' triangles
+  /// (Object::trianglesInRegion, meshes); other types answer with faces only. Hidden nodes are not
+  /// in the top level and are never picked. Throws InvalidArgument as pick() does, and for a
+  /// negative or non-finite radius or a feature angle outside [0, 180).
+  [[nodiscard]] ElementPick pickElement(const PinholeCamera& camera, double px, double py, std::uint32_t width,
+                                        std::uint32_t height, const PickOptions& options = {}) const;
+  /// Rectangle selection: the visible instances (mask meeting `mask`, sensors included) selected by
+  /// the frustum through the pixel rectangle [x0, x1] x [y0, y1] (continuous pixel coordinates),
+  /// sorted by node id. RegionMode::Touching (the default): some of the instance's geometry meets
+  /// the frustum (meshes: a triangle, exactly up to rounding); Inside: all of it lies within;
+  /// Boxes: its world box meets the frustum (fastest; the first step of the other two). Types
+  /// without a geometric test are judged by their boxes. Occlusion plays no part (as a CAD
+  /// window / crossing selection). Throws as pick() does, and for non-finite rectangle coordinates.
   [[nodiscard]] std::vector<NodeId> selectRectangle(const PinholeCamera& camera, double x0, double y0, double x1,
                                                     double y1, std::uint32_t width, std::uint32_t height,
-                                                    std::uint32_t mask = 0xFFFFFFFFu) const;
+                                                    std::uint32_t mask = 0xFFFFFFFFu,
+                                                    RegionMode mode = RegionMode::Touching) const;
 
   /// World bounds of the top level (last commit): contains every visible instance. Tight after
   /// every commit for up to 256 instances; above that it may stay larger than tight for up to 32

@@ -81,6 +81,13 @@ class MeshObject final : public Object {
   /// (each candidate triangle mapped by query.world_from_object, in double), found through the BVH
   /// or the kd-tree with the boxes pruned by the best distance so far. See Object::closestPoint.
   bool closestPoint(const PointQuery& query, ClosestPoint& best, QueryContext& ctx) const override;
+  /// Whether a valid triangle meets `region_os` (Touching) or every valid triangle lies in it
+  /// (Inside), exactly up to rounding, through the structure's boxes (object space). See
+  /// Object::inRegion; a mesh without valid triangles is never selected.
+  [[nodiscard]] std::optional<bool> inRegion(const ConvexRegion& region_os, RegionMode mode) const override;
+  /// Every valid triangle meeting `region_os` (object space), each once, by prim id. See
+  /// Object::trianglesInRegion.
+  bool trianglesInRegion(const ConvexRegion& region_os, std::vector<RegionTriangle>& out) const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
   /// meshChecksum() of the mesh (XXH64 of positions and triangle indices, as prepared structure
   /// files check it).
