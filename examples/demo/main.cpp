@@ -1,10 +1,11 @@
-// duplex_demo: the dynamic demo. Loads a scene file (by default examples/scenes/car.json, a car
-// whose doors open, wipers sweep and wheels turn while it drives; any duplex-scene-v1 or
-// scene-json-v1 file), renders it through a SceneTracer before the timed edits, plays the edits
-// commit by commit (edits with equal times form one commit), traces every frame, and renders the
-// final frame. Prints build, per-commit update and per-frame trace figures, then one line of JSON.
+// duplex_demo: the dynamic demo. Loads a scene file (by default examples/scenes/robot_cell.json,
+// four CAD robots turning their joints around a conveyor; any duplex-scene-v1 or scene-json-v1
+// file, e.g. examples/scenes/car.json), renders it through a SceneTracer before the timed edits,
+// plays the edits commit by commit (edits with equal times form one commit), traces every frame,
+// picks under a fixed cursor, and renders the final frame. Prints build, per-commit update and
+// per-frame trace figures and picks, then one line of JSON.
 //   duplex_demo [--scene S.json] [--out PNG] [--before PNG] [--frames DIR] [--width W] [--height H]
-//               [--threads N] [--distance F] [--full-rebuild] [--probe NODE_PATH]...
+//               [--threads N] [--distance F] [--full-rebuild] [--cursor X,Y] [--probe NODE_PATH]...
 
 #include "DemoCamera.h"
 #include "DemoRenderer.h"
@@ -18,6 +19,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <glm/geometric.hpp>
+
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
@@ -25,6 +28,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
@@ -62,16 +66,23 @@ struct Options {
   int threads = tbb::info::default_concurrency();
   double distance = 0.7;
   std::vector<std::string> probes;
-  bool full_rebuild = false;  // rebuild the whole top level after every commit (the paper's method)
+  std::vector<double> cursor;  // x, y in continuous pixel coordinates; empty: kDefaultCursor of the image
+  bool full_rebuild = false;   // rebuild the whole top level after every commit (the paper's method)
 };
+
+// The default cursor as fractions of the image width and height: a point right of and above the
+// centre, on the middle robot of the robot cell as the demo camera frames it at any image size.
+constexpr glm::dvec2 kDefaultCursor{0.52, 0.44};
 
 // One commit of the animation: the edits of one time.
 struct CommitFigures {
   double time = 0.0;
   std::size_t edits = 0;
   std::size_t instances_changed = 0;  // moved + appeared + disappeared + object changed
-  double update_ms = 0.0;             // wall time from the first edit call until queries see the new scene
-  double tracer_ms = 0.0;             // SceneTracer::lastUpdateMs: the top-level update inside the commit
+  std::size_t moved = 0, appeared = 0, disappeared = 0, object_changed = 0;
+  std::size_t objects_changed = 0;  // library objects with new geometry (deformed)
+  double update_ms = 0.0;           // wall time from the first edit call until queries see the new scene
+  double tracer_ms = 0.0;           // SceneTracer::lastUpdateMs: the top-level update inside the commit
   bool full_rebuild = false;
 };
 
@@ -95,6 +106,37 @@ std::string pickPath(const duplex::SceneTracer& tracer, const duplex::PinholeCam
   return hits.empty() ? std::string() : tracer.graph().path(hits.front().instance);
 }
 
+// What lies under the cursor in one frame.
+struct CursorPick {
+  double time = 0.0;
+  std::string path;           // node path of the instance; "" for a miss
+  std::string element;        // "face" (a triangle); "" for a miss
+  std::uint32_t prim_id = 0;  // the element's index in the object (the triangle index for faces)
+  double distance = 0.0;      // world distance from the camera to the hit
+};
+
+// ---- The pick under the cursor: the one place that chooses how the demo picks. ----
+// Today the nearest hit through the cursor's pixel (SceneTracer::pick): always a face, prim_id the
+// triangle. A tolerance pick (the nearest vertex, edge or face within a pixel radius) slots in
+// here: fill `element` and `prim_id` from its result; printing and the JSON follow.
+CursorPick pickUnderCursor(const duplex::SceneTracer& tracer, const duplex::PinholeCamera& camera,
+                           const glm::dvec2& cursor, const duplex::demo::RenderSettings& s, double time) {
+  CursorPick pick;
+  pick.time = time;
+  const std::vector<duplex::SceneHit> hits = tracer.pick(camera, cursor.x, cursor.y, s.width, s.height);
+  if (hits.empty()) return pick;
+  pick.path = tracer.graph().path(hits.front().instance);
+  pick.element = "face";
+  pick.prim_id = hits.front().hit.prim_id;
+  pick.distance = glm::distance(hits.front().position_ws, camera.eye);
+  return pick;
+}
+
+std::string describe(const CursorPick& pick) {
+  return pick.path.empty() ? std::string("(miss)")
+                           : pick.path + " " + pick.element + " " + std::to_string(pick.prim_id);
+}
+
 Probe startProbe(const duplex::SceneGraph& graph, const std::string& path) {
   const std::optional<NodeId> id = graph.find(path);
   if (!id || graph.node(*id).kind != duplex::NodeKind::Instance)
@@ -110,6 +152,25 @@ Probe startProbe(const duplex::SceneGraph& graph, const std::string& path) {
 
 nlohmann::json pixelJson(const std::optional<glm::dvec2>& px) {
   return px ? nlohmann::json::array({round4(px->x), round4(px->y)}) : nlohmann::json(nullptr);
+}
+
+// An "add_object" edit reads its prepared structure only when it is applied, mid-run: check up front
+// that the files exist, so that a missing one stops the demo before the first frame with a hint.
+void checkPreparedStructures(const duplex::SceneDocument& doc) {
+  if (!doc.parsed || !doc.parsed->contains("edits") || !(*doc.parsed)["edits"].is_array()) return;
+  for (const nlohmann::json& edit : (*doc.parsed)["edits"]) {
+    if (!edit.is_object() || !edit.contains("add_object")) continue;
+    const nlohmann::json& entry = edit["add_object"];
+    if (!entry.is_object() || !entry.contains("structure") || !entry["structure"].is_string()) continue;
+    const fs::path structure = entry["structure"].get<std::string>();
+    const std::string extension = structure.extension().string();
+    if (extension != ".dbvh" && extension != ".dkdt") continue;  // a structure choice such as "bvh"
+    const fs::path file = structure.is_absolute() ? structure : doc.file.parent_path() / structure;
+    if (!fs::exists(file))
+      throw duplex::FileError(doc.file.string() + ": the prepared structure " + file.string() +
+                              " of an add_object edit does not exist; write it with `duplex prepare` (scripts/demo "
+                              "prepares the robot cell's spare parts)");
+  }
 }
 
 fs::path framePath(const fs::path& dir, std::size_t frame) {
@@ -145,6 +206,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--full-rebuild", opt.full_rebuild,
                "Rebuild the whole top level after every commit (baseline: update time and trace speed)");
+  app.add_option("--cursor", opt.cursor,
+                 "Pick under this image point every frame: X,Y in pixels from the top-left corner "
+                 "(default: 52% of the width, 44% of the height)")
+      ->delimiter(',')
+      ->expected(2);
   app.add_option("--probe", opt.probes, "Instance node path: pick its centre before and after the edits (repeatable)");
   CLI11_PARSE(app, argc, argv);
 
@@ -160,6 +226,7 @@ int main(int argc, char** argv) {
       // Sensor objects of duplex-scene-v1 files are read as by every `duplex` command (they never
       // block a ray, so they do not show in the frames).
       doc = duplex::loadSceneDocument(opt.scene, duplex::sensorTypeRegistry());
+      checkPreparedStructures(doc);
       const auto t0 = Clock::now();
       tracer.emplace(*doc.graph);
       top_build_ms = msSince(t0);
@@ -174,6 +241,10 @@ int main(int argc, char** argv) {
     if (opt.before.empty()) opt.before = opt.out.parent_path() / (stem + "_before.png");
 
     const duplex::PinholeCamera camera = duplex::demo::frameCamera(duplex::demo::subjectBounds(graph), opt.distance);
+    const glm::dvec2 cursor = opt.cursor.empty() ? kDefaultCursor * glm::dvec2(opt.render.width, opt.render.height)
+                                                 : glm::dvec2(opt.cursor[0], opt.cursor[1]);
+    if (!std::isfinite(cursor.x) || !std::isfinite(cursor.y))
+      throw duplex::InvalidArgument("--cursor: the coordinates must be finite numbers");
     std::vector<Probe> probes;
     for (const std::string& path : opt.probes) {
       probes.push_back(startProbe(graph, path));
@@ -189,18 +260,20 @@ int main(int argc, char** argv) {
     std::printf("  load     %8.3f ms  (scene parse + mesh files)\n", doc.figures.load_ms);
     std::printf("  build    %8.3f ms  (bottom levels %.3f ms + top level %.3f ms; graph %.3f ms)\n",
                 doc.figures.build_ms + top_build_ms, doc.figures.build_ms, top_build_ms, doc.figures.graph_ms);
-    std::printf("  render   %u x %u, %d threads, camera at %.2f diagonals\n", opt.render.width, opt.render.height,
-                opt.threads, opt.distance);
+    std::printf("  render   %u x %u, %d threads, camera at %.2f diagonals, cursor at (%.1f, %.1f)\n", opt.render.width,
+                opt.render.height, opt.threads, opt.distance, cursor.x, cursor.y);
 
     duplex::demo::DemoRenderer renderer(*tracer, camera, opt.render);
     std::vector<duplex::demo::FrameStats> frames;
     std::vector<CommitFigures> commits;
+    std::vector<CursorPick> picks;
     duplex::demo::RgbImage image;
 
-    // Traces the current frame, writes the PNGs asked for, prints its line.
+    // Traces the current frame, picks under the cursor, writes the PNGs asked for, prints its line.
     const auto traceFrame = [&](const CommitFigures* commit) {
       duplex::demo::FrameStats stats;
       arena.execute([&] { image = renderer.render(stats); });
+      picks.push_back(pickUnderCursor(*tracer, camera, cursor, opt.render, commit ? commit->time : 0.0));
       const std::size_t index = frames.size();
       frames.push_back(stats);
       if (!opt.frames.empty()) duplex::demo::writePng(framePath(opt.frames, index), image);
@@ -211,7 +284,8 @@ int main(int argc, char** argv) {
       } else {
         std::printf("  frame %3zu t= 0.00 s  as loaded %48s", index, "");
       }
-      std::printf("  trace %7.2f ms  %.2f Mrays/s\n", stats.traceMs(), mraysPerSecond(stats.rays(), stats.traceMs()));
+      std::printf("  trace %7.2f ms  %6.2f Mrays/s  pick %s\n", stats.traceMs(),
+                  mraysPerSecond(stats.rays(), stats.traceMs()), describe(picks.back()).c_str());
     };
 
     traceFrame(nullptr);
@@ -239,8 +313,12 @@ int main(int argc, char** argv) {
       c.update_ms = msSince(t0);
       c.tracer_ms = tracer->lastUpdateMs() + rebuild_ms;
       c.full_rebuild = opt.full_rebuild || tracer->stats().last_commit_full_rebuild;
-      c.instances_changed =
-          changes.moved.size() + changes.appeared.size() + changes.disappeared.size() + changes.object_changed.size();
+      c.moved = changes.moved.size();
+      c.appeared = changes.appeared.size();
+      c.disappeared = changes.disappeared.size();
+      c.object_changed = changes.object_changed.size();
+      c.objects_changed = changes.objects_changed.size();
+      c.instances_changed = c.moved + c.appeared + c.disappeared + c.object_changed;
       commits.push_back(c);
       traceFrame(&commits.back());
       i = j;
@@ -307,6 +385,26 @@ int main(int argc, char** argv) {
     j["top_update_ms_median"] = round4(median(tracer_ms));
     j["update_ms"] = nlohmann::json::array();
     for (const double ms : update_ms) j["update_ms"].push_back(round4(ms));
+    // Per commit: what changed (ChangeSet counts) and the update time.
+    j["changes"] = nlohmann::json::array();
+    for (const CommitFigures& c : commits)
+      j["changes"].push_back({{"time", c.time},
+                              {"edits", c.edits},
+                              {"moved", c.moved},
+                              {"appeared", c.appeared},
+                              {"disappeared", c.disappeared},
+                              {"object_changed", c.object_changed},
+                              {"objects_changed", c.objects_changed},
+                              {"update_ms", round4(c.update_ms)}});
+    j["cursor"] = nlohmann::json::array({round4(cursor.x), round4(cursor.y)});
+    // Per frame (the first as loaded, at time 0): the pick under the cursor; path null for a miss.
+    j["picks"] = nlohmann::json::array();
+    for (const CursorPick& p : picks)
+      j["picks"].push_back({{"time", p.time},
+                            {"path", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.path)},
+                            {"element", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.element)},
+                            {"prim_id", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.prim_id)},
+                            {"distance", round4(p.distance)}});
     j["trace_ms_median"] = round4(median(trace_ms));
     j["rays"] = rays;
     j["mrays_per_s"] = round4(mrays);

@@ -80,6 +80,22 @@ def changed_fraction(a, b):
     return changed / pixels
 
 
+def check_images(out_dir, frame_count, width, height):
+    """Checks before.png, after.png and frames/frame_NNN.png of a demo run writing to `out_dir`:
+    sizes, one frame per `frame_count`, the first and last frames equal to before and after, and
+    the edits changed the image. Returns (before, after, fraction of the pixels changed)."""
+    before, after = read_png(os.path.join(out_dir, "before.png")), read_png(os.path.join(out_dir, "after.png"))
+    for name, img in (("before", before), ("after", after)):
+        expect(img[:2] == (width, height), f"{name}.png is {img[0]} x {img[1]}, expected {width} x {height}")
+    frames = sorted(os.listdir(os.path.join(out_dir, "frames")))
+    expect(frames == [f"frame_{k:03d}.png" for k in range(frame_count)], f"frames written: {frames}")
+    expect(read_png(os.path.join(out_dir, "frames", frames[0])) == before, "frame_000.png differs from before.png")
+    expect(read_png(os.path.join(out_dir, "frames", frames[-1])) == after, "the last frame differs from after.png")
+    changed = changed_fraction(before, after)
+    expect(changed > 0.02, f"the edits changed only {changed:.1%} of the pixels")
+    return before, after, changed
+
+
 def run_demo(demo, scene, out_dir, threads, frames):
     args = [demo, "--scene", scene, "--width", str(WIDTH), "--height", str(HEIGHT), "--threads", str(threads),
             "--before", os.path.join(out_dir, "before.png"), "--out", os.path.join(out_dir, "after.png"),
@@ -127,16 +143,7 @@ def main():
     expect(s["rays"] >= s["frames"] * WIDTH * HEIGHT, f"rays {s['rays']} < one primary ray per pixel and frame")
 
     # The PNGs: sizes, the frames, and the edits changed the image.
-    t2 = os.path.join(work, "t2")
-    before, after = read_png(os.path.join(t2, "before.png")), read_png(os.path.join(t2, "after.png"))
-    for name, img in (("before", before), ("after", after)):
-        expect(img[:2] == (WIDTH, HEIGHT), f"{name}.png is {img[0]} x {img[1]}, expected {WIDTH} x {HEIGHT}")
-    frames = sorted(os.listdir(os.path.join(t2, "frames")))
-    expect(frames == [f"frame_{k:03d}.png" for k in range(s["frames"])], f"frames written: {frames}")
-    expect(read_png(os.path.join(t2, "frames", frames[0])) == before, "frame_000.png differs from before.png")
-    expect(read_png(os.path.join(t2, "frames", frames[-1])) == after, "the last frame differs from after.png")
-    changed = changed_fraction(before, after)
-    expect(changed > 0.02, f"the edits changed only {changed:.1%} of the pixels")
+    _, after, changed = check_images(os.path.join(work, "t2"), s["frames"], WIDTH, HEIGHT)
 
     # Picking: the door's centre shows the door before; after the door opened (the point moved with
     # the car) it shows another part of the car, seen through the open door.
