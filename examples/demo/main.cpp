@@ -2,10 +2,11 @@
 // four CAD robots turning their joints around a conveyor; any duplex-scene-v1 or scene-json-v1
 // file, e.g. examples/scenes/car.json), renders it through a SceneTracer before the timed edits,
 // plays the edits commit by commit (edits with equal times form one commit), traces every frame,
-// picks under a fixed cursor, and renders the final frame. Prints build, per-commit update and
+// picks the vertex, edge or face under a fixed cursor, and renders the final frame. Prints build, per-commit update and
 // per-frame trace figures and picks, then one line of JSON.
 //   duplex_demo [--scene S.json] [--out PNG] [--before PNG] [--frames DIR] [--width W] [--height H]
-//               [--threads N] [--distance F] [--full-rebuild] [--cursor X,Y] [--probe NODE_PATH]...
+//               [--threads N] [--distance F] [--full-rebuild] [--cursor X,Y] [--pick-radius PX]
+//               [--feature-angle DEG] [--probe NODE_PATH]...
 
 #include "DemoCamera.h"
 #include "DemoRenderer.h"
@@ -68,6 +69,8 @@ struct Options {
   std::vector<std::string> probes;
   std::vector<double> cursor;  // x, y in continuous pixel coordinates; empty: kDefaultCursor of the image
   bool full_rebuild = false;   // rebuild the whole top level after every commit (the paper's method)
+  duplex::PickOptions pick;    // the tolerance pick under the cursor
+  Options() { pick.feature_angle_deg = 30.0; }  // CAD parts: their design edges, not the tessellation's
 };
 
 // The default cursor as fractions of the image width and height: a point right of and above the
@@ -109,32 +112,48 @@ std::string pickPath(const duplex::SceneTracer& tracer, const duplex::PinholeCam
 // What lies under the cursor in one frame.
 struct CursorPick {
   double time = 0.0;
-  std::string path;           // node path of the instance; "" for a miss
-  std::string element;        // "face" (a triangle); "" for a miss
-  std::uint32_t prim_id = 0;  // the element's index in the object (the triangle index for faces)
-  double distance = 0.0;      // world distance from the camera to the hit
+  std::string path;                     // node path of the instance; "" for a miss
+  std::string element;                  // "vertex", "edge" or "face"; "" for a miss
+  std::uint32_t prim_id = 0;            // the triangle (a face; for a vertex or an edge, a triangle that has it)
+  std::vector<std::uint32_t> vertices;  // a vertex: its index; an edge: its two vertex indices
+  double distance_px = 0.0;             // screen distance from the cursor to the element
+  double distance = 0.0;                // world distance from the camera to the element
 };
 
-// ---- The pick under the cursor: the one place that chooses how the demo picks. ----
-// Today the nearest hit through the cursor's pixel (SceneTracer::pick): always a face, prim_id the
-// triangle. A tolerance pick (the nearest vertex, edge or face within a pixel radius) slots in
-// here: fill `element` and `prim_id` from its result; printing and the JSON follow.
+// The pick under the cursor: SceneTracer::pickElement's vertex, else edge, within the pick radius,
+// else the face under the cursor.
 CursorPick pickUnderCursor(const duplex::SceneTracer& tracer, const duplex::PinholeCamera& camera,
-                           const glm::dvec2& cursor, const duplex::demo::RenderSettings& s, double time) {
+                           const glm::dvec2& cursor, const Options& opt, double time) {
   CursorPick pick;
   pick.time = time;
-  const std::vector<duplex::SceneHit> hits = tracer.pick(camera, cursor.x, cursor.y, s.width, s.height);
-  if (hits.empty()) return pick;
-  pick.path = tracer.graph().path(hits.front().instance);
-  pick.element = "face";
-  pick.prim_id = hits.front().hit.prim_id;
-  pick.distance = glm::distance(hits.front().position_ws, camera.eye);
+  const duplex::ElementPick e =
+      tracer.pickElement(camera, cursor.x, cursor.y, opt.render.width, opt.render.height, opt.pick);
+  if (!e.valid()) return pick;
+  pick.path = tracer.graph().path(e.instance);
+  pick.prim_id = e.prim_id;
+  pick.distance_px = e.distance_px;
+  pick.distance = e.depth;
+  switch (e.kind) {
+    case duplex::PickElement::Vertex:
+      pick.element = "vertex";
+      pick.vertices = {e.vertex};
+      break;
+    case duplex::PickElement::Edge:
+      pick.element = "edge";
+      pick.vertices = {e.edge[0], e.edge[1]};
+      break;
+    default: pick.element = "face"; break;
+  }
   return pick;
 }
 
 std::string describe(const CursorPick& pick) {
-  return pick.path.empty() ? std::string("(miss)")
-                           : pick.path + " " + pick.element + " " + std::to_string(pick.prim_id);
+  if (pick.path.empty()) return "(miss)";
+  std::string out = pick.path + " " + pick.element + " ";
+  if (pick.element == "face") return out + std::to_string(pick.prim_id);
+  out += std::to_string(pick.vertices[0]);
+  if (pick.vertices.size() == 2) out.append("-").append(std::to_string(pick.vertices[1]));
+  return out;
 }
 
 Probe startProbe(const duplex::SceneGraph& graph, const std::string& path) {
@@ -211,6 +230,16 @@ int main(int argc, char** argv) {
                  "(default: 52% of the width, 44% of the height)")
       ->delimiter(',')
       ->expected(2);
+  app.add_option("--pick-radius", opt.pick.radius_px,
+                 "Pick radius around the cursor in pixels: the nearest visible vertex, else edge, within it, "
+                 "else the face under the cursor")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--feature-angle", opt.pick.feature_angle_deg,
+                 "Pick only edges whose faces meet at more than this angle (degrees; 0: every edge), and "
+                 "vertices at their ends")
+      ->check(CLI::Range(0.0, 179.9))
+      ->capture_default_str();
   app.add_option("--probe", opt.probes, "Instance node path: pick its centre before and after the edits (repeatable)");
   CLI11_PARSE(app, argc, argv);
 
@@ -260,8 +289,11 @@ int main(int argc, char** argv) {
     std::printf("  load     %8.3f ms  (scene parse + mesh files)\n", doc.figures.load_ms);
     std::printf("  build    %8.3f ms  (bottom levels %.3f ms + top level %.3f ms; graph %.3f ms)\n",
                 doc.figures.build_ms + top_build_ms, doc.figures.build_ms, top_build_ms, doc.figures.graph_ms);
-    std::printf("  render   %u x %u, %d threads, camera at %.2f diagonals, cursor at (%.1f, %.1f)\n", opt.render.width,
-                opt.render.height, opt.threads, opt.distance, cursor.x, cursor.y);
+    std::printf(
+        "  render   %u x %u, %d threads, camera at %.2f diagonals, cursor at (%.1f, %.1f), pick radius %.1f px, "
+        "feature edges above %.0f deg\n",
+        opt.render.width, opt.render.height, opt.threads, opt.distance, cursor.x, cursor.y, opt.pick.radius_px,
+        opt.pick.feature_angle_deg);
 
     duplex::demo::DemoRenderer renderer(*tracer, camera, opt.render);
     std::vector<duplex::demo::FrameStats> frames;
@@ -273,7 +305,7 @@ int main(int argc, char** argv) {
     const auto traceFrame = [&](const CommitFigures* commit) {
       duplex::demo::FrameStats stats;
       arena.execute([&] { image = renderer.render(stats); });
-      picks.push_back(pickUnderCursor(*tracer, camera, cursor, opt.render, commit ? commit->time : 0.0));
+      picks.push_back(pickUnderCursor(*tracer, camera, cursor, opt, commit ? commit->time : 0.0));
       const std::size_t index = frames.size();
       frames.push_back(stats);
       if (!opt.frames.empty()) duplex::demo::writePng(framePath(opt.frames, index), image);
@@ -404,6 +436,8 @@ int main(int argc, char** argv) {
                             {"path", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.path)},
                             {"element", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.element)},
                             {"prim_id", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.prim_id)},
+                            {"vertices", p.vertices},
+                            {"distance_px", round4(p.distance_px)},
                             {"distance", round4(p.distance)}});
     j["trace_ms_median"] = round4(median(trace_ms));
     j["rays"] = rays;

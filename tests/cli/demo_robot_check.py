@@ -139,8 +139,15 @@ def main():
     link = first["path"].rsplit("/", 1)[1]
     link_files = {o["name"]: o["mesh"]["file"] for o in scene["objects"] if "mesh" in o and "file" in o["mesh"]}
     triangles = stl_triangles(os.path.join(scene_dir, link_files[link]))
-    expect(first["element"] == "face" and 0 <= first["prim_id"] < triangles,
+    expect(first["element"] in ("vertex", "edge", "face") and 0 <= first["prim_id"] < triangles,
            f"the first pick's element: {first['element']} {first['prim_id']} (the link has {triangles} triangles)")
+    for p in s["picks"]:
+        # A vertex or an edge comes with its vertex indices (an edge's ascending) within the pick
+        # radius; a face with none, at the cursor.
+        n = {"vertex": 1, "edge": 2, "face": 0}[p["element"]]
+        expect(len(p["vertices"]) == n and p["vertices"] == sorted(p["vertices"]) and len(set(p["vertices"])) == n,
+               f"at t={p['time']}: {p['element']} with vertices {p['vertices']}")
+        expect(p["distance_px"] <= 5.0 and (n > 0 or p["distance_px"] == 0), f"at t={p['time']}: distance_px {p['distance_px']}")
     for p in s["picks"]:
         expect(p["path"] and ROBOT_LINK.match(p["path"]), f"at t={p['time']} the cursor picks {p['path']!r}")
     paths = [p["path"] for p in s["picks"]]
