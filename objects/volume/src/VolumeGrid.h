@@ -6,6 +6,7 @@
 
 #include "duplex/objects/VolumeObjectVdb.h"
 
+#include "duplex/accel/Box.h"
 #include "duplex/accel/QueryContext.h"
 #include "duplex/accel/Ray.h"
 
@@ -13,7 +14,9 @@
 #include <openvdb/math/Ray.h>
 
 #include <array>
+#include <atomic>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -44,6 +47,22 @@ inline constexpr int kLog2Size[kLevels] = {static_cast<int>(LeafT::TOTAL), stati
 
 void initializeOpenVdb();
 
+// Points on a level set's zero crossing: where the interpolated distance changes sign along an
+// edge of the voxel lattice (exactly on the trilinear surface the rays hit, at most one voxel
+// apart), in object space, ordered by the leaves of a small BVH over them.
+struct SurfacePoints {
+  struct Node {
+    Box box;                  // object space
+    std::uint32_t first = 0;  // leaf: first point; inner: the right child (the left is next)
+    std::uint32_t count = 0;  // points of a leaf; 0 for an inner node
+  };
+  std::vector<glm::vec3> points_os;
+  std::vector<Node> nodes;  // nodes[0] is the root; empty when the grid has no crossing
+  [[nodiscard]] std::size_t memoryBytes() const {
+    return points_os.size() * sizeof(glm::vec3) + nodes.size() * sizeof(Node);
+  }
+};
+
 }  // namespace volume_detail
 
 struct VolumeObject::Grid {
@@ -57,6 +76,11 @@ struct VolumeObject::Grid {
   // Fog only: density range of every leaf, lower and upper internal node (the majorants and
   // minorants of delta and ratio tracking). Built once; inactive voxels count as 0.
   std::array<volume_detail::RangeTree::Ptr, volume_detail::kLevels> ranges;
+  // Level sets: points of the zero crossing for closest-point queries, made on the first such
+  // query (most scenes never ask, and the points cost memory in proportion to the surface).
+  mutable std::once_flag surface_once;
+  mutable std::shared_ptr<const volume_detail::SurfacePoints> surface;
+  mutable std::atomic<std::size_t> surface_bytes{0};  // for memoryBytes(), which may run meanwhile
 };
 
 namespace volume_detail {

@@ -17,11 +17,15 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tree/LeafManager.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <vector>
 
@@ -383,7 +387,7 @@ std::vector<ObjectFigure> VolumeObject::figures() const {
   return {{"active_voxels", static_cast<std::size_t>(activeVoxelCount())}};
 }
 std::size_t VolumeObject::memoryBytes() const {
-  std::size_t bytes = sizeof(*this) + sizeof(Grid) + grid_->grid->memUsage();
+  std::size_t bytes = sizeof(*this) + sizeof(Grid) + grid_->grid->memUsage() + grid_->surface_bytes.load();
   for (const auto& r : grid_->ranges)
     if (r) bytes += r->memUsage();
   return bytes;
@@ -433,6 +437,259 @@ void VolumeObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, Query
     hits.push_back(crossingHit(*grid_, s.acc, ray, t));
     return false;
   });
+}
+
+// ---- Closest points on level sets ----
+
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+
+// Index-space gradient of the interpolated distance (central differences half a voxel apart), in
+// object-space units per index unit.
+vdb::Vec3d gradientIS(AccessorT& acc, const vdb::Vec3d& p) {
+  const double h = 0.5;
+  return vdb::Vec3d(sampleIS(acc, p + vdb::Vec3d(h, 0, 0)) - sampleIS(acc, p - vdb::Vec3d(h, 0, 0)),
+                    sampleIS(acc, p + vdb::Vec3d(0, h, 0)) - sampleIS(acc, p - vdb::Vec3d(0, h, 0)),
+                    sampleIS(acc, p + vdb::Vec3d(0, 0, h)) - sampleIS(acc, p - vdb::Vec3d(0, 0, h))) /
+         (2.0 * h);
+}
+
+// Index-space point p moved onto the zero crossing along the gradient (Newton steps). Outside the
+// narrow band the distance is constant and p stays where it is.
+vdb::Vec3d projectToSurface(AccessorT& acc, vdb::Vec3d p) {
+  for (int i = 0; i < 8; ++i) {
+    const double phi = sampleIS(acc, p);
+    const vdb::Vec3d g = gradientIS(acc, p);
+    const double g2 = g.lengthSqr();
+    if (!(g2 > 0.0) || !std::isfinite(g2)) break;
+    const vdb::Vec3d step = g * (phi / g2);
+    p -= step;
+    if (step.lengthSqr() < 1e-18) break;
+  }
+  return p;
+}
+
+glm::vec3 toVec3(const vdb::Vec3d& p) {
+  return glm::vec3(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
+}
+
+// Every sign change of the grid's values along an edge of the voxel lattice, at the linear zero of
+// the edge (which is where the trilinear interpolant vanishes on it): each edge once, from its
+// active end with the smaller coordinate, or from its active end when the other is inactive.
+std::vector<glm::vec3> latticeCrossings(const VolumeObject::Grid& g) {
+  const TreeT& tree = g.grid->constTree();
+  const vdb::math::Transform& xform = g.grid->transform();
+  vdb::tree::LeafManager<const TreeT> leaves(tree);
+  tbb::enumerable_thread_specific<std::vector<glm::vec3>> found;
+  tbb::parallel_for(leaves.leafRange(), [&](const vdb::tree::LeafManager<const TreeT>::LeafRange& range) {
+    AccessorT acc(tree);
+    std::vector<glm::vec3>& out = found.local();
+    for (auto leaf = range.begin(); leaf; ++leaf)
+      for (auto v = leaf->cbeginValueOn(); v; ++v) {
+        const vdb::Coord c = v.getCoord();
+        const float a = *v;
+        if (a == 0.0f) {
+          out.push_back(toVec3(xform.indexToWorld(c.asVec3d())));
+          continue;
+        }
+        for (int axis = 0; axis < 3; ++axis)
+          for (const int dir : {1, -1}) {
+            vdb::Coord n = c;
+            n[axis] += dir;
+            if (dir < 0 && acc.isValueOn(n)) continue;  // that voxel reports the edge
+            const float b = acc.getValue(n);
+            if (b == 0.0f || (a < 0.0f) == (b < 0.0f)) continue;
+            vdb::Vec3d p = c.asVec3d();
+            p[axis] += dir * static_cast<double>(a) / (static_cast<double>(a) - b);
+            out.push_back(toVec3(xform.indexToWorld(p)));
+          }
+      }
+  });
+  std::vector<glm::vec3> all;
+  for (const std::vector<glm::vec3>& part : found) all.insert(all.end(), part.begin(), part.end());
+  // The same points in the same order whatever the threads did (the BVH and ties depend on it).
+  std::sort(all.begin(), all.end(), [](const glm::vec3& x, const glm::vec3& y) {
+    return x.x != y.x ? x.x < y.x : (x.y != y.y ? x.y < y.y : x.z < y.z);
+  });
+  all.erase(std::unique(all.begin(), all.end()), all.end());
+  return all;
+}
+
+// A BVH over the points, median splits on the longest axis, leaves of up to 8 points.
+std::uint32_t buildPointNodes(SurfacePoints& sp, std::uint32_t begin, std::uint32_t end) {
+  const auto index = static_cast<std::uint32_t>(sp.nodes.size());
+  sp.nodes.emplace_back();
+  Box box;
+  for (std::uint32_t i = begin; i < end; ++i) box.extend(sp.points_os[i]);
+  if (end - begin <= 8) {
+    sp.nodes[index] = {box, begin, end - begin};
+    return index;
+  }
+  const int axis = box.longestAxis();
+  const std::uint32_t mid = begin + (end - begin) / 2;
+  std::nth_element(sp.points_os.begin() + begin, sp.points_os.begin() + mid, sp.points_os.begin() + end,
+                   [axis](const glm::vec3& x, const glm::vec3& y) { return x[axis] < y[axis]; });
+  (void)buildPointNodes(sp, begin, mid);
+  const std::uint32_t right = buildPointNodes(sp, mid, end);
+  sp.nodes[index] = {box, right, 0};
+  return index;
+}
+
+const SurfacePoints& surfacePoints(const VolumeObject::Grid& g) {
+  std::call_once(g.surface_once, [&g] {
+    auto sp = std::make_shared<SurfacePoints>();
+    sp->points_os = latticeCrossings(g);
+    if (!sp->points_os.empty()) (void)buildPointNodes(*sp, 0, static_cast<std::uint32_t>(sp->points_os.size()));
+    g.surface_bytes = sp->memoryBytes();
+    g.surface = std::move(sp);
+  });
+  return *g.surface;
+}
+
+}  // namespace
+
+bool VolumeObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryContext& ctx) const {
+  if (grid_->kind != VolumeKind::LevelSet) return false;
+  const SurfacePoints& sp = surfacePoints(*grid_);
+  if (sp.nodes.empty()) return false;
+  const vdb::math::MapBase& map = *grid_->grid->transform().baseMap();
+  const Affine& world_from_object = q.world_from_object;
+  const Affine object_from_world = world_from_object.inverse();
+  const auto toWorld = [&](const vdb::Vec3d& p_is) {
+    const vdb::Vec3d o = map.applyMap(p_is);
+    return world_from_object.point(glm::dvec3(o.x(), o.y(), o.z()));
+  };
+  const auto toIndex = [&](const glm::dvec3& p_ws) {
+    const glm::dvec3 o = object_from_world.point(p_ws);
+    return map.applyInverseMap(vdb::Vec3d(o.x, o.y, o.z));
+  };
+  // A bound of a voxel cell's world diagonal: the surface inside a cell crosses one of its edges
+  // (trilinear weights are positive), so a lattice crossing lies within it of any surface point.
+  double cell = 0.0;
+  for (int a = 0; a < 3; ++a) {
+    vdb::Vec3d e(0.0);
+    e[a] = 1.0;
+    const vdb::Vec3d j = map.applyJacobian(e);
+    cell += glm::length(world_from_object.vector(glm::dvec3(j.x(), j.y(), j.z())));
+  }
+  // The nearest lattice crossing, searched a cell beyond the best distance so far: the surface
+  // point the refinement reaches may be that much closer than its starting point.
+  double reach = best.distance + cell;
+  std::uint32_t nearest = kInvalidId;
+  std::uint32_t stack[64];
+  std::size_t size = 0;
+  stack[size++] = 0;
+  while (size > 0) {
+    const SurfacePoints::Node& node = sp.nodes[stack[--size]];
+    if (!q.mayReach(node.box, reach)) continue;
+    if (node.count > 0) {
+      for (std::uint32_t i = node.first; i < node.first + node.count; ++i) {
+        const double d = glm::length(world_from_object.point(glm::dvec3(sp.points_os[i])) - q.point_ws);
+        if (d < reach) {
+          reach = d;
+          nearest = i;
+        }
+      }
+      continue;
+    }
+    const std::uint32_t left = static_cast<std::uint32_t>(&node - sp.nodes.data()) + 1, right = node.first;
+    // The nearer child on top.
+    const bool left_first =
+        distanceSquared(sp.nodes[left].box, q.point_os) <= distanceSquared(sp.nodes[right].box, q.point_os);
+    stack[size++] = left_first ? right : left;
+    stack[size++] = left_first ? left : right;
+  }
+  if (nearest == kInvalidId) return false;
+
+  // Refine on the surface: minimise the world distance over the surface near the crossing, in
+  // coordinates (a, b) of the tangent plane (world space, so that any affine transform gets its
+  // world-nearest point), each trial point projected onto the zero crossing (Newton in index space).
+  // A quadratic model from five trial points gives a Newton step; the trial spacing shrinks with the
+  // steps. Derivative-free on purpose: the interpolant's gradient is a few degrees off, which from
+  // far away would move the foot by a good part of a voxel.
+  AccessorT& acc = threadState(this, grid_, ctx).acc;
+  const glm::vec3& start = sp.points_os[nearest];
+  const auto worldNormal = [&](const vdb::Vec3d& p_is) {
+    const vdb::Vec3d n_os = map.applyIJT(gradientIS(acc, p_is));
+    const glm::dvec3 n = glm::transpose(object_from_world.linear) * glm::dvec3(n_os.x(), n_os.y(), n_os.z());
+    const double len = glm::length(n);
+    return len > 0.0 && std::isfinite(len) ? n / len : glm::dvec3(0.0);
+  };
+  struct SurfacePoint {
+    vdb::Vec3d p_is;
+    glm::dvec3 p_ws;
+    double d = kInfinity;
+  };
+  // Outside the narrow band the projection cannot reach the surface: such trial points count as
+  // infinitely far.
+  const double on_surface = 1e-4 * voxelSize();
+  const auto project = [&](const vdb::Vec3d& p_is) {
+    SurfacePoint out;
+    out.p_is = projectToSurface(acc, p_is);
+    if (std::abs(sampleIS(acc, out.p_is)) <= on_surface) {
+      out.p_ws = toWorld(out.p_is);
+      out.d = glm::length(out.p_ws - q.point_ws);
+    }
+    return out;
+  };
+  SurfacePoint x = project(map.applyInverseMap(vdb::Vec3d(start.x, start.y, start.z)));
+  if (!(x.d < kInfinity)) {  // the crossing itself, unrefined, when Newton cannot settle there
+    x.p_is = map.applyInverseMap(vdb::Vec3d(start.x, start.y, start.z));
+    x.p_ws = toWorld(x.p_is);
+    x.d = glm::length(x.p_ws - q.point_ws);
+  }
+  double h = 0.25 * cell;
+  const double h_min = 1e-9 * cell;
+  for (int iteration = 0; iteration < 40 && h > h_min && x.d > 0.0; ++iteration) {
+    const glm::dvec3 n = worldNormal(x.p_is);
+    if (n == glm::dvec3(0.0)) break;
+    const glm::dvec3 t1 =
+        glm::normalize(std::abs(n.x) < 0.6 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
+    const glm::dvec3 t2 = glm::cross(n, t1);
+    const auto trial = [&](double a, double b) { return project(toIndex(x.p_ws + a * t1 + b * t2)); };
+    const SurfacePoint ap = trial(h, 0), am = trial(-h, 0), bp = trial(0, h), bm = trial(0, -h), ab = trial(h, h);
+    SurfacePoint next = x;
+    for (const SurfacePoint* c : {&ap, &am, &bp, &bm, &ab})
+      if (c->d < next.d) next = *c;
+    if (ap.d < kInfinity && am.d < kInfinity && bp.d < kInfinity && bm.d < kInfinity && ab.d < kInfinity) {
+      const double ga = (ap.d - am.d) / (2 * h), gb = (bp.d - bm.d) / (2 * h);
+      const double haa = (ap.d - 2 * x.d + am.d) / (h * h), hbb = (bp.d - 2 * x.d + bm.d) / (h * h);
+      const double hab = (ab.d - ap.d - bp.d + x.d) / (h * h);
+      const double det = haa * hbb - hab * hab;
+      double da, db;
+      if (haa > 0 && det > 0) {  // the model has a minimum: its Newton step
+        da = -(hbb * ga - hab * gb) / det;
+        db = -(haa * gb - hab * ga) / det;
+      } else {  // downhill by the spacing
+        const double g = std::hypot(ga, gb);
+        da = g > 0 ? -h * ga / g : 0.0;
+        db = g > 0 ? -h * gb / g : 0.0;
+      }
+      const double len = std::hypot(da, db);
+      if (len > 4 * h) {
+        da *= 4 * h / len;
+        db *= 4 * h / len;
+      }
+      const SurfacePoint newton = trial(da, db);
+      if (newton.d < next.d) next = newton;
+      if (next.d < x.d) h = std::clamp(std::hypot(da, db), 0.05 * h, 2 * h);
+    }
+    if (!(next.d < x.d)) {
+      h *= 0.25;  // nothing closer at this spacing: look nearer
+      continue;
+    }
+    x = next;
+  }
+  const glm::dvec3 n_ws = worldNormal(x.p_is);
+  const glm::dvec3 x_ws = x.p_ws;
+  const double d = x.d;
+  if (!(d < best.distance)) return false;
+  best.distance = d;
+  best.point_ws = x_ws;
+  best.normal_ws = n_ws;
+  best.prim_id = 0;
+  return true;
 }
 
 std::shared_ptr<const VolumeObject> makeVolumeObject(vdb::FloatGrid::ConstPtr grid, VolumeKind kind, std::string name,

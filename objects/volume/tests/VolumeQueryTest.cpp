@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <numbers>
 #include <limits>
 #include <optional>
 #include <random>
@@ -760,6 +761,127 @@ TEST(VolumeFailureCases, RealVolumesAnswerEveryMethod) {
   }
   std::cout << "[ figures  ] cortex_smoke.vdb: " << attenuated << " of 20 rays attenuated\n";
 }
+
+// ---- closest points on level sets ----
+
+namespace closest {
+
+using duplex::test::rotationScaleTranslation;
+
+// The interpolated distance at an object-space point (object units).
+double distanceAt(const openvdb::FloatGrid& grid, const glm::dvec3& p_os) {
+  return openvdb::tools::BoxSampler::sample(grid.tree(),
+                                            grid.transform().worldToIndex(openvdb::Vec3d(p_os.x, p_os.y, p_os.z)));
+}
+
+ClosestPoint query(const Object& object, const glm::dvec3& p_ws, const Affine& world_from_object, QueryContext& ctx,
+                   double max_distance = kInf) {
+  ClosestPoint best;
+  best.distance = max_distance;
+  (void)object.closestPoint(PointQuery::make(p_ws, world_from_object, world_from_object.inverse()), best, ctx);
+  return best;
+}
+
+TEST(LevelSetClosestPoint, SphereDistancesAreAnalyticNearFarAndInside) {
+  const float voxel = 0.02f, radius = 0.5f;
+  const auto grid = sphereLevelSet(radius, voxel);
+  const auto sphere = makeVolumeObject(grid);
+  const std::size_t bytes_before = sphere->memoryBytes();
+  QueryContext ctx;
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int k = 0; k < 400; ++k) {
+    // Points at distances from 0.05 to 4 radii from the centre: inside (far below the narrow
+    // band), on the band, far outside.
+    const glm::dvec3 dir = randomUnit(rng);
+    const double r = radius * (k % 4 == 0 ? 0.1 + 0.8 * std::abs(u(rng))
+                                          : (k % 4 == 1 ? 1.0 + 0.1 * u(rng) : 1.5 + 2.5 * std::abs(u(rng))));
+    const glm::dvec3 p = r * dir;
+    const ClosestPoint c = query(*sphere, p, Affine::identity(), ctx);
+    ASSERT_TRUE(c.valid()) << "point " << k;
+    // The trilinear surface of a sampled sphere lies within a small fraction of a voxel of it.
+    EXPECT_NEAR(c.distance, std::abs(r - radius), 0.02 * voxel) << "point " << k << " at " << r;
+    EXPECT_NEAR(glm::length(c.point_ws), radius, 0.02 * voxel);
+    // Tangentially the distance is flat to second order, and the trilinear surface departs from
+    // the sphere by a small fraction of a voxel: the nearest point of that surface may lie a part of
+    // a voxel aside from the radial foot.
+    EXPECT_LT(glm::length(c.point_ws - double{radius} * dir), voxel) << "point " << k;
+    EXPECT_NEAR(std::abs(distanceAt(*grid, c.point_ws)), 0.0, 1e-3 * voxel) << "on the zero crossing";
+    EXPECT_NEAR(glm::length(c.point_ws - p), c.distance, 1e-9);
+    EXPECT_GT(glm::dot(c.normal_ws, dir), 0.999);  // outward
+  }
+  EXPECT_GT(sphere->memoryBytes(), bytes_before) << "the surface points count once made";
+  // The maximum distance: nothing within it is nothing found, best left alone.
+  const ClosestPoint none = query(*sphere, glm::dvec3(2.0, 0, 0), Affine::identity(), ctx, 1.0);
+  EXPECT_FALSE(none.valid());
+  EXPECT_EQ(none.distance, 1.0);
+  // Fog has no surface.
+  const auto fog = makeVolumeObject(voxelBox(1.0f, 0, 7, 0.1));
+  EXPECT_FALSE(query(*fog, glm::dvec3(0.0), Affine::identity(), ctx).valid());
+}
+
+TEST(LevelSetClosestPoint, InstancesOfAnyAffineTransformGetTheWorldNearestPoint) {
+  const float voxel = 0.02f, radius = 0.5f;
+  const auto grid = sphereLevelSet(radius, voxel);
+  const auto sphere = makeVolumeObject(grid);
+  QueryContext ctx;
+  std::mt19937 rng(32);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  // A rotated sphere scaled by 2: distances double, analytically.
+  const Affine similar = Affine::fromRowMajor3x4(
+      rotationScaleTranslation(glm::dvec3(0.2, 1.0, 0.4), 0.7, glm::dvec3(2.0), glm::dvec3(3.0, -1.0, 5.0)));
+  for (int k = 0; k < 100; ++k) {
+    const glm::dvec3 p = glm::dvec3(3.0, -1.0, 5.0) + 2.5 * glm::dvec3(u(rng), u(rng), u(rng));
+    const ClosestPoint c = query(*sphere, p, similar, ctx);
+    ASSERT_TRUE(c.valid());
+    EXPECT_NEAR(c.distance, std::abs(glm::length(p - glm::dvec3(3.0, -1.0, 5.0)) - 2.0 * radius), 0.05 * voxel);
+  }
+  // An ellipsoid (scale 1, 2.5, 0.6, rotated): no closed form, so the conditions of a nearest
+  // point: on the surface, and no surface point closer (a dense sampling of the ellipsoid in world
+  // space).
+  const Affine uneven = Affine::fromRowMajor3x4(
+      rotationScaleTranslation(glm::dvec3(1.0, 0.3, -0.2), 1.1, glm::dvec3(1.0, 2.5, 0.6), glm::dvec3(-4.0, 2.0, 1.0)));
+  const Affine to_object = uneven.inverse();
+  std::vector<glm::dvec3> dense;  // world points of the object-space sphere of radius 0.5
+  for (int i = 0; i < 400; ++i)
+    for (int j = 0; j < 200; ++j) {
+      const double th = std::numbers::pi * (j + 0.5) / 200, ph = 2.0 * std::numbers::pi * i / 400;
+      dense.push_back(uneven.point(double{radius} *
+                                   glm::dvec3(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th))));
+    }
+  for (int k = 0; k < 60; ++k) {
+    const glm::dvec3 p = glm::dvec3(-4.0, 2.0, 1.0) + 2.0 * glm::dvec3(u(rng), u(rng), u(rng));
+    const ClosestPoint c = query(*sphere, p, uneven, ctx);
+    ASSERT_TRUE(c.valid());
+    EXPECT_NEAR(distanceAt(*grid, to_object.point(c.point_ws)), 0.0, 1e-3 * voxel) << "on the zero crossing";
+    // The normal (the interpolant's gradient, a few degrees off) roughly along the offset.
+    EXPECT_GT(std::abs(glm::dot(glm::normalize(p - c.point_ws), c.normal_ws)), 0.99) << "point " << k;
+    double sampled = kInf;
+    for (const glm::dvec3& s : dense) sampled = std::min(sampled, glm::length(s - p));
+    // The dense points are on the true ellipsoid, the level set within a tiny fraction of a voxel
+    // (in world units, at most 2.5 x) of it.
+    EXPECT_LE(c.distance, sampled + 0.05 * voxel) << "point " << k;
+    EXPECT_GE(c.distance, sampled - 0.05 * voxel - 0.01) << "point " << k;  // sampling spacing ~ 0.01
+  }
+}
+
+TEST(LevelSetClosestPoint, TopLevelFindsTheNearestAmongMeshesAndLevelSets) {
+  const auto sphere = makeVolumeObject(sphereLevelSet(0.5f, 0.02f));
+  TopLevel top;
+  std::vector<InstanceDesc> instances;
+  for (std::uint32_t k = 0; k < 5; ++k)
+    instances.push_back({sphere, Affine::fromRowMajor3x4({1, 0, 0, 2.0 * k, 0, 1, 0, 0, 0, 0, 1, 0}), k});
+  top.build(instances);
+  QueryContext ctx;
+  for (std::uint32_t k = 0; k < 5; ++k) {
+    const ClosestPoint c = top.closestPoint(glm::dvec3(2.0 * k + 0.1, 0.9, 0.0), kInf, ctx);
+    ASSERT_TRUE(c.valid());
+    EXPECT_EQ(c.instance_id, k);
+    EXPECT_NEAR(c.distance, std::hypot(0.1, 0.9) - 0.5, 1e-3);
+  }
+}
+
+}  // namespace closest
 
 }  // namespace
 }  // namespace duplex

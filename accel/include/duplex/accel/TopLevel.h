@@ -157,7 +157,7 @@ class TopLevel {
   /// The point of the Surface instances (mask meeting `mask`) nearest to world point `point_ws`
   /// within world distance `max_distance` (inclusive; +inf for no limit), in double precision:
   /// distance, point, unit normal (world space), prim_id and instance_id. Types without a
-  /// closest-point query (Object::closestPoint: volumes, sensors) are ignored. Nothing within
+  /// closest-point query (Object::closestPoint: fog, sensors) are ignored. Nothing within
   /// reach, a non-finite point or a NaN or negative max_distance: distance +inf and ids kInvalidId.
   /// Defined in InstanceTreeClosest.cpp.
   [[nodiscard]] ClosestPoint closestPoint(const glm::dvec3& point_ws, double max_distance, QueryContext& ctx,

@@ -162,8 +162,9 @@ class SceneTracer {
   /// The point of the visible surface instances (mask meeting `mask`) nearest to `point_ws`
   /// within `max_distance` (world units, inclusive; +inf for no limit), in double precision, with
   /// the instance's node path: meshes answer with their triangles (distance measured in world
-  /// space through the instance's transform, any scale); types without a closest-point query
-  /// (volumes, sensors) are ignored. Nothing within reach, a non-finite point or a NaN or negative
+  /// space through the instance's transform, any scale), level sets with their zero crossing
+  /// (VolumeObject::closestPoint); media (fog) and sensors, which are not surfaces, are ignored.
+  /// Nothing within reach, a non-finite point or a NaN or negative
   /// max_distance give an invalid result (distance +inf).
   [[nodiscard]] SceneClosestPoint closestPoint(const glm::dvec3& point_ws,
                                                double max_distance = std::numeric_limits<double>::infinity(),

@@ -117,6 +117,16 @@ class VolumeObject final : public Object {
   /// whole. Level sets: the first zero crossing, as intersect().
   [[nodiscard]] std::optional<float> firstDensityAbove(const Ray& ray_os, float threshold, QueryContext& ctx) const;
 
+  /// Level sets: the point of the zero crossing (the surface rays hit) nearest to the query point,
+  /// in world distance through the instance's transform. The nearest of the points where the
+  /// interpolated distance changes sign along a lattice edge (made on the first query and kept)
+  /// is refined on the surface until the offset to the query point is normal to it (Newton
+  /// projections in index space, tangential steps in world space: any affine instance transform).
+  /// prim_id 0, the normal from the distance's gradient. Fog: none (media have no surface).
+  bool closestPoint(const PointQuery& query, ClosestPoint& best, QueryContext& ctx) const override;
+
+  /// Bytes of the grid, the fog's density ranges and, once a closest-point query has made them, the
+  /// level set's surface points.
   [[nodiscard]] std::size_t memoryBytes() const override;
 
   /// LevelSet or Fog (never Auto: resolved at construction).
