@@ -62,7 +62,11 @@ void InstanceTree::appendInRegion(const ConvexRegion& region, std::uint32_t mask
 void InstanceTree::appendTrianglesInRegion(const ConvexRegion& region, std::uint32_t mask,
                                            std::vector<InstanceTriangle>& out) const {
   std::vector<RegionTriangle> tris;
-  for (const std::uint32_t slot : slotsInRegion(region, mask)) {
+  // By instance id, each instance's triangles by prim id (as the object lists them).
+  std::vector<std::uint32_t> slots = slotsInRegion(region, mask);
+  std::sort(slots.begin(), slots.end(),
+            [&](std::uint32_t x, std::uint32_t y) { return state_->records[x].id < state_->records[y].id; });
+  for (const std::uint32_t slot : slots) {
     const Record& rec = state_->records[slot];
     const Affine world_from_object = rec.object_from_world.inverse();
     tris.clear();
@@ -92,10 +96,12 @@ std::vector<InstanceTriangle> TopLevel::trianglesInRegion(std::span<const glm::d
   const ConvexRegion region(planes);
   std::vector<InstanceTriangle> out;
   if (crossing_) crossing_->appendTrianglesInRegion(region, mask, out);
+  const auto middle = static_cast<std::ptrdiff_t>(out.size());
   blocking_.appendTrianglesInRegion(region, mask, out);
-  std::sort(out.begin(), out.end(), [](const InstanceTriangle& a, const InstanceTriangle& b) {
-    return a.instance_id != b.instance_id ? a.instance_id < b.instance_id : a.prim_id < b.prim_id;
-  });
+  // Both runs are ordered; an id lives in one tree only, so merging by id keeps each instance whole.
+  std::inplace_merge(
+      out.begin(), out.begin() + middle, out.end(),
+      [](const InstanceTriangle& a, const InstanceTriangle& b) { return a.instance_id < b.instance_id; });
   return out;
 }
 

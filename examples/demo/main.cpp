@@ -118,6 +118,7 @@ struct CursorPick {
   std::vector<std::uint32_t> vertices;  // a vertex: its index; an edge: its two vertex indices
   double distance_px = 0.0;             // screen distance from the cursor to the element
   double distance = 0.0;                // world distance from the camera to the element
+  double ms = 0.0;                      // wall time of the pick
 };
 
 // The pick under the cursor: SceneTracer::pickElement's vertex, else edge, within the pick radius,
@@ -126,8 +127,10 @@ CursorPick pickUnderCursor(const duplex::SceneTracer& tracer, const duplex::Pinh
                            const glm::dvec2& cursor, const Options& opt, double time) {
   CursorPick pick;
   pick.time = time;
+  const auto t0 = Clock::now();
   const duplex::ElementPick e =
       tracer.pickElement(camera, cursor.x, cursor.y, opt.render.width, opt.render.height, opt.pick);
+  pick.ms = msSince(t0);
   if (!e.valid()) return pick;
   pick.path = tracer.graph().path(e.instance);
   pick.prim_id = e.prim_id;
@@ -316,8 +319,8 @@ int main(int argc, char** argv) {
       } else {
         std::printf("  frame %3zu t= 0.00 s  as loaded %48s", index, "");
       }
-      std::printf("  trace %7.2f ms  %6.2f Mrays/s  pick %s\n", stats.traceMs(),
-                  mraysPerSecond(stats.rays(), stats.traceMs()), describe(picks.back()).c_str());
+      std::printf("  trace %7.2f ms  %6.2f Mrays/s  pick %s (%.3f ms)\n", stats.traceMs(),
+                  mraysPerSecond(stats.rays(), stats.traceMs()), describe(picks.back()).c_str(), picks.back().ms);
     };
 
     traceFrame(nullptr);
@@ -438,6 +441,7 @@ int main(int argc, char** argv) {
                             {"prim_id", p.path.empty() ? nlohmann::json(nullptr) : nlohmann::json(p.prim_id)},
                             {"vertices", p.vertices},
                             {"distance_px", round4(p.distance_px)},
+                            {"pick_ms", round4(p.ms)},
                             {"distance", round4(p.distance)}});
     j["trace_ms_median"] = round4(median(trace_ms));
     j["rays"] = rays;

@@ -358,18 +358,6 @@ bool closerOnScreen(const ElementCandidate& a, const ElementCandidate& b) {
   return a.vertices < b.vertices;
 }
 
-// An edge of the candidate triangles: the two vertex indices ascending, the triangles around it.
-struct EdgeUse {
-  std::uint32_t instance;
-  std::array<std::uint32_t, 2> vertices;
-  std::uint32_t triangle;  // index into the candidate triangles
-  bool operator<(const EdgeUse& o) const {
-    return instance != o.instance ? instance < o.instance
-                                  : (vertices != o.vertices ? vertices < o.vertices : triangle < o.triangle);
-  }
-  [[nodiscard]] bool sameEdge(const EdgeUse& o) const { return instance == o.instance && vertices == o.vertices; }
-};
-
 glm::dvec3 unitNormal(const InstanceTriangle& t) {
   const glm::dvec3 n = glm::cross(t.position_ws[1] - t.position_ws[0], t.position_ws[2] - t.position_ws[0]);
   const double len = glm::length(n);
@@ -452,83 +440,149 @@ ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, dou
   if (r > 0.0 && (options.vertices || options.edges)) {
     const std::vector<InstanceTriangle> tris =
         top.trianglesInRegion(frustumPlanes(camera, px - r, py - r, px + r, py + r, width, height), options.mask);
-    // Every edge of the candidate triangles with the triangles around it: a triangle that has an
-    // edge meeting the pick frustum meets it too, so an edge's neighbours are all here.
-    std::vector<EdgeUse> uses;
-    uses.reserve(3 * tris.size());
-    for (std::uint32_t i = 0; i < tris.size(); ++i)
+    // Each candidate triangle's corners on screen, once (CAD parts give thousands of long slivers
+    // through a small pick frustum, each with all three edges near the cursor).
+    struct Corner {
+      glm::dvec2 px{0.0};
+      double z = 0.0;  // depth along forward; the pixel is valid only for z > 0
+    };
+    std::vector<std::array<Corner, 3>> corners(tris.size());
+    for (std::size_t i = 0; i < tris.size(); ++i)
       for (int k = 0; k < 3; ++k) {
-        const std::uint32_t a = tris[i].vertex[k], b = tris[i].vertex[(k + 1) % 3];
-        uses.push_back({tris[i].instance_id, {std::min(a, b), std::max(a, b)}, i});
+        Corner& c = corners[i][k];
+        c.z = screen.depth(tris[i].position_ws[k]);
+        if (c.z > 0.0) c.px = screen.pixel(tris[i].position_ws[k]);
       }
-    std::sort(uses.begin(), uses.end());
-    const double cos_feature = std::cos(options.feature_angle_deg * std::numbers::pi / 180.0);
-    std::vector<EdgeUse> edges;  // one use per edge that passes the feature filter
-    for (std::size_t i = 0; i < uses.size();) {
-      std::size_t j = i + 1;
-      while (j < uses.size() && uses[j].sameEdge(uses[i])) ++j;
-      bool feature = options.feature_angle_deg == 0.0 || j - i != 2;
-      if (!feature)
-        feature = glm::dot(unitNormal(tris[uses[i].triangle]), unitNormal(tris[uses[i + 1].triangle])) < cos_feature;
-      if (feature) edges.push_back(uses[i]);
-      i = j;
+    // The near edges: those whose projection comes within r of the cursor, each with its point
+    // nearest the cursor on screen. An edge is listed once per triangle around it; a triangle with
+    // an edge meeting the pick frustum meets it too, so all of an edge's triangles are here.
+    struct NearEdge {
+      std::uint64_t instance_and_low;  // instance id << 32 | the lower vertex index: the sort key
+      std::uint32_t high;              // the higher vertex index
+      std::uint32_t triangle;          // index into tris
+      double s;                        // where along the projected edge (from its lower vertex) it is nearest
+      double d;                        // the distance there, pixels
+      [[nodiscard]] bool sameEdge(const NearEdge& o) const {
+        return instance_and_low == o.instance_and_low && high == o.high;
+      }
+    };
+    // The segment of triangle t's edge from vertex `from` to vertex `to` (corner indices) that lies
+    // in front of the eye, with its depths and pixels; false when none does.
+    struct Segment {
+      glm::dvec3 a, b;
+      double za, zb;
+      glm::dvec2 sa, sb;
+    };
+    const auto segment = [&](std::uint32_t t, int from, int to, Segment& out) {
+      out = {tris[t].position_ws[from], tris[t].position_ws[to], corners[t][from].z,
+             corners[t][to].z,          corners[t][from].px,     corners[t][to].px};
+      if (out.za > 0.0 && out.zb > 0.0) return true;
+      // Only the part in front of the eye projects; cut a little in front of the eye plane.
+      const double z_min = 1e-9 * std::max(std::abs(out.za), std::abs(out.zb));
+      if (out.za <= z_min && out.zb <= z_min) return false;
+      if (out.za < z_min) {
+        out.a += (z_min - out.za) / (out.zb - out.za) * (out.b - out.a);
+        out.za = z_min;
+      } else if (out.zb < z_min) {
+        out.b += (z_min - out.zb) / (out.za - out.zb) * (out.a - out.b);
+        out.zb = z_min;
+      }
+      out.sa = screen.pixel(out.a);
+      out.sb = screen.pixel(out.b);
+      return true;
+    };
+    std::vector<NearEdge> near;
+    near.reserve(3 * tris.size());
+    for (std::uint32_t i = 0; i < tris.size(); ++i) {
+      const InstanceTriangle& t = tris[i];
+      for (int k = 0; k < 3; ++k) {
+        // Oriented from the lower vertex index, so that both triangles of an edge measure alike.
+        int from = k, to = (k + 1) % 3;
+        if (t.vertex[from] > t.vertex[to]) std::swap(from, to);
+        Segment g;
+        if (!segment(i, from, to, g)) continue;
+        const glm::dvec2 ab = g.sb - g.sa;
+        const double len2 = glm::dot(ab, ab);
+        const double s = len2 > 0.0 ? std::clamp(glm::dot(cursor - g.sa, ab) / len2, 0.0, 1.0) : 0.0;
+        const double d = glm::length(g.sa + s * ab - cursor);
+        if (!(d <= r)) continue;
+        near.push_back({(std::uint64_t{t.instance_id} << 32) | t.vertex[from], t.vertex[to], i, s, d});
+      }
     }
-    const auto inFront = [&](const glm::dvec3& p) { return screen.depth(p) > 0.0; };
+    // The 3D point a near edge shows at its nearest screen point (perspective: 1/depth is linear
+    // along the projected segment).
+    const auto edgeCandidate = [&](const NearEdge& e) {
+      const InstanceTriangle& t = tris[e.triangle];
+      const int from = t.vertex[0] == static_cast<std::uint32_t>(e.instance_and_low)   ? 0
+                       : t.vertex[1] == static_cast<std::uint32_t>(e.instance_and_low) ? 1
+                                                                                       : 2;
+      const int to = t.vertex[0] == e.high ? 0 : (t.vertex[1] == e.high ? 1 : 2);
+      Segment g;
+      (void)segment(e.triangle, from, to, g);
+      const double u = e.s * g.za / ((1.0 - e.s) * g.zb + e.s * g.za);
+      const glm::dvec3 p = g.a + u * (g.b - g.a);
+      return ElementCandidate{
+          t.instance_id, t.prim_id, {t.vertex[from], t.vertex[to]}, p, e.d, glm::length(p - camera.eye)};
+    };
+    // The feature filter: an edge's triangles side by side, one entry kept per feature edge.
+    if (options.feature_angle_deg > 0.0) {
+      std::sort(near.begin(), near.end(), [](const NearEdge& x, const NearEdge& y) {
+        if (x.instance_and_low != y.instance_and_low) return x.instance_and_low < y.instance_and_low;
+        return x.high != y.high ? x.high < y.high : x.triangle < y.triangle;
+      });
+      const double cos_feature = std::cos(options.feature_angle_deg * std::numbers::pi / 180.0);
+      std::size_t kept = 0;
+      for (std::size_t i = 0; i < near.size();) {
+        std::size_t j = i + 1;
+        while (j < near.size() && near[j].sameEdge(near[i])) ++j;
+        const bool feature = j - i != 2 || glm::dot(unitNormal(tris[near[i].triangle]),
+                                                    unitNormal(tris[near[i + 1].triangle])) < cos_feature;
+        if (feature) near[kept++] = near[i];
+        i = j;
+      }
+      near.resize(kept);
+    }
+    // Candidates in screen-distance order, built as a heap: the first visible one is usually among
+    // the first few, so a full sort of thousands would be wasted.
+    const auto later = [](const ElementCandidate& x, const ElementCandidate& y) { return closerOnScreen(y, x); };
+    const auto firstVisible = [&](std::vector<ElementCandidate>& found) -> const ElementCandidate* {
+      std::make_heap(found.begin(), found.end(), later);
+      const ElementCandidate* last = nullptr;
+      for (auto end = found.end(); end != found.begin(); --end) {
+        std::pop_heap(found.begin(), end, later);
+        const ElementCandidate& c = *(end - 1);
+        // The same element again (from another triangle around it): already tested.
+        if (last && c.instance == last->instance && c.vertices == last->vertices) continue;
+        if (visible(c.point_ws)) return &c;
+        last = &c;
+      }
+      return nullptr;
+    };
 
     if (options.vertices) {
+      // A vertex within r of the cursor makes every edge at it a near edge: the ends of the
+      // (feature) near edges are all the vertices that can count.
       std::vector<ElementCandidate> found;
-      for (const EdgeUse& e : edges)
-        for (int k = 0; k < 2; ++k) {
-          const InstanceTriangle& t = tris[e.triangle];
-          const int corner = t.vertex[0] == e.vertices[k] ? 0 : (t.vertex[1] == e.vertices[k] ? 1 : 2);
-          const glm::dvec3& p = t.position_ws[corner];
-          if (!inFront(p)) continue;
-          const double d = glm::length(screen.pixel(p) - cursor);
+      for (const NearEdge& e : near) {
+        const InstanceTriangle& t = tris[e.triangle];
+        for (int k = 0; k < 3; ++k) {
+          if (t.vertex[k] != static_cast<std::uint32_t>(e.instance_and_low) && t.vertex[k] != e.high) continue;
+          const Corner& c = corners[e.triangle][k];
+          if (!(c.z > 0.0)) continue;
+          const double d = glm::length(c.px - cursor);
           if (!(d <= r)) continue;
-          found.push_back({e.instance, t.prim_id, {e.vertices[k], kInvalidId}, p, d, glm::length(p - camera.eye)});
+          const glm::dvec3& p = t.position_ws[k];
+          found.push_back({t.instance_id, t.prim_id, {t.vertex[k], kInvalidId}, p, d, glm::length(p - camera.eye)});
         }
-      std::sort(found.begin(), found.end(), closerOnScreen);
-      for (std::size_t i = 0; i < found.size(); ++i) {
-        if (i > 0 && found[i].instance == found[i - 1].instance && found[i].vertices == found[i - 1].vertices) continue;
-        if (visible(found[i].point_ws)) return finish(PickElement::Vertex, found[i]);
       }
+      if (const ElementCandidate* c = firstVisible(found)) return finish(PickElement::Vertex, *c);
     }
 
     if (options.edges) {
       std::vector<ElementCandidate> found;
-      for (const EdgeUse& e : edges) {
-        const InstanceTriangle& t = tris[e.triangle];
-        const auto corner = [&](std::uint32_t v) {
-          return t.position_ws[t.vertex[0] == v ? 0 : (t.vertex[1] == v ? 1 : 2)];
-        };
-        glm::dvec3 a = corner(e.vertices[0]), b = corner(e.vertices[1]);
-        // Only the part in front of the eye projects; cut a little in front of the eye plane.
-        double za = screen.depth(a), zb = screen.depth(b);
-        const double z_min = 1e-9 * std::max(std::abs(za), std::abs(zb));
-        if (za <= z_min && zb <= z_min) continue;
-        if (za < z_min) {
-          a += (z_min - za) / (zb - za) * (b - a);
-          za = z_min;
-        } else if (zb < z_min) {
-          b += (z_min - zb) / (za - zb) * (a - b);
-          zb = z_min;
-        }
-        // The screen point of the segment nearest the cursor, then the 3D point it shows
-        // (perspective: 1/depth is linear along the projected segment).
-        const glm::dvec2 sa = screen.pixel(a), sb = screen.pixel(b);
-        const glm::dvec2 ab = sb - sa;
-        const double len2 = glm::dot(ab, ab);
-        const double s = len2 > 0.0 ? std::clamp(glm::dot(cursor - sa, ab) / len2, 0.0, 1.0) : 0.0;
-        const double u = s * za / ((1.0 - s) * zb + s * za);
-        const glm::dvec3 p = a + u * (b - a);
-        const double d = glm::length(screen.pixel(p) - cursor);
-        if (!(d <= r)) continue;
-        found.push_back({e.instance, t.prim_id, e.vertices, p, d, glm::length(p - camera.eye)});
-      }
-      std::sort(found.begin(), found.end(), closerOnScreen);
-      for (const ElementCandidate& c : found) {
-        if (visible(c.point_ws)) return finish(PickElement::Edge, c);
-      }
+      found.reserve(near.size());
+      for (const NearEdge& e : near) found.push_back(edgeCandidate(e));
+      if (const ElementCandidate* c = firstVisible(found)) return finish(PickElement::Edge, *c);
     }
   }
 
