@@ -71,10 +71,10 @@ bool ConvexRegion::meetsTriangle(const glm::dvec3& a, const glm::dvec3& b, const
     all_inside = all_inside && da <= 0.0 && db <= 0.0 && dc <= 0.0;
   }
   if (all_inside) return true;
-  // Sutherland-Hodgman: each plane adds at most one vertex to the convex polygon, so two buffers
-  // of 3 + planes vertices suffice; the usual frustum fits on the stack.
+  // Sutherland-Hodgman: in exact arithmetic each plane adds at most one vertex to the convex
+  // polygon; the buffers hold twice that (a picking frustum's five planes fit on the stack).
   constexpr std::size_t kStack = 16;
-  const std::size_t capacity = 3 + planes_.size();
+  const std::size_t capacity = std::max<std::size_t>(kStack, 2 * (3 + planes_.size()));
   glm::dvec3 stack_a[kStack], stack_b[kStack];
   std::vector<glm::dvec3> heap_a, heap_b;
   glm::dvec3* poly = stack_a;
@@ -95,6 +95,9 @@ bool ConvexRegion::meetsTriangle(const glm::dvec3& a, const glm::dvec3& b, const
       const glm::dvec3& u = poly[i];
       const glm::dvec3& v = poly[i + 1 == n ? 0 : i + 1];
       const double du = signedDistance(p, u), dv = signedDistance(p, v);
+      // Rounding can make a sliver's polygon change sides more often than a convex one can: when
+      // the buffer would overflow, call it a meeting (the callers' tests stay conservative).
+      if (m + 2 > capacity) return true;
       if (du <= 0.0) next[m++] = u;
       if ((du < 0.0 && dv > 0.0) || (du > 0.0 && dv < 0.0)) next[m++] = u + (du / (du - dv)) * (v - u);
     }

@@ -324,9 +324,8 @@ TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
       continue;
     }
     ASSERT_NE(got.kind, PickElement::Vertex) << "cursor " << c.x << ", " << c.y << ": no visible vertex within r";
-    // Edges: each one's point nearest the cursor on screen (found in 3D as the point of the edge
-    // nearest the cursor's ray), the nearest visible one wins.
-    const glm::dvec3 d = cam.directionAt(c.x, c.y, kW, kH);
+    // Edges: each one's point nearest the cursor on screen (the screen parameter taken back to the
+    // edge with the perspective division: 1/depth is linear on screen), the nearest visible wins.
     double want_edge = std::numeric_limits<double>::infinity();
     for (const Cand& e : ec) {
       const WorldTriangle* owner = nullptr;
@@ -341,11 +340,12 @@ TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
         if (owner->v[k] == std::get<3>(e)) a = owner->p[k];
         if (owner->v[k] == std::get<4>(e)) b = owner->p[k];
       }
-      // Closest points of the lines eye + t d and a + u (b - a).
-      const glm::dvec3 ab = b - a, w0 = cam.eye - a;
-      const double dd = glm::dot(d, d), de = glm::dot(d, ab), ee = glm::dot(ab, ab);
-      const double den = dd * ee - de * de;
-      const double u = den > 0 ? std::clamp((dd * glm::dot(ab, w0) - de * glm::dot(d, w0)) / den, 0.0, 1.0) : 0.0;
+      const Projection pa = project(cam, a), pb = project(cam, b);
+      const glm::dvec2 sab = pb.px - pa.px;
+      const double l2 = glm::dot(sab, sab);
+      const double s = l2 > 0 ? std::clamp(glm::dot(c - pa.px, sab) / l2, 0.0, 1.0) : 0.0;
+      const double u = s * pa.z / ((1.0 - s) * pb.z + s * pa.z);
+      const glm::dvec3 ab = b - a;
       if (bruteVisible(tris, cam.eye, a + u * ab)) want_edge = std::min(want_edge, std::get<0>(e));
     }
     if (want_edge <= r) {

@@ -20,6 +20,7 @@
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -482,29 +483,34 @@ std::vector<glm::vec3> latticeCrossings(const VolumeObject::Grid& g) {
   const vdb::math::Transform& xform = g.grid->transform();
   vdb::tree::LeafManager<const TreeT> leaves(tree);
   tbb::enumerable_thread_specific<std::vector<glm::vec3>> found;
-  tbb::parallel_for(leaves.leafRange(), [&](const vdb::tree::LeafManager<const TreeT>::LeafRange& range) {
-    AccessorT acc(tree);
-    std::vector<glm::vec3>& out = found.local();
-    for (auto leaf = range.begin(); leaf; ++leaf)
-      for (auto v = leaf->cbeginValueOn(); v; ++v) {
-        const vdb::Coord c = v.getCoord();
-        const float a = *v;
-        if (a == 0.0f) {
-          out.push_back(toVec3(xform.indexToWorld(c.asVec3d())));
-          continue;
-        }
-        for (int axis = 0; axis < 3; ++axis)
-          for (const int dir : {1, -1}) {
-            vdb::Coord n = c;
-            n[axis] += dir;
-            if (dir < 0 && acc.isValueOn(n)) continue;  // that voxel reports the edge
-            const float b = acc.getValue(n);
-            if (b == 0.0f || (a < 0.0f) == (b < 0.0f)) continue;
-            vdb::Vec3d p = c.asVec3d();
-            p[axis] += dir * static_cast<double>(a) / (static_cast<double>(a) - b);
-            out.push_back(toVec3(xform.indexToWorld(p)));
+  // Isolated: the first query often runs inside a parallel batch of queries, and a thread waiting
+  // for this loop must not pick up another query of the batch, which would enter the same
+  // call_once again.
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(leaves.leafRange(), [&](const vdb::tree::LeafManager<const TreeT>::LeafRange& range) {
+      AccessorT acc(tree);
+      std::vector<glm::vec3>& out = found.local();
+      for (auto leaf = range.begin(); leaf; ++leaf)
+        for (auto v = leaf->cbeginValueOn(); v; ++v) {
+          const vdb::Coord c = v.getCoord();
+          const float a = *v;
+          if (a == 0.0f) {
+            out.push_back(toVec3(xform.indexToWorld(c.asVec3d())));
+            continue;
           }
-      }
+          for (int axis = 0; axis < 3; ++axis)
+            for (const int dir : {1, -1}) {
+              vdb::Coord n = c;
+              n[axis] += dir;
+              if (dir < 0 && acc.isValueOn(n)) continue;  // that voxel reports the edge
+              const float b = acc.getValue(n);
+              if (b == 0.0f || (a < 0.0f) == (b < 0.0f)) continue;
+              vdb::Vec3d p = c.asVec3d();
+              p[axis] += dir * static_cast<double>(a) / (static_cast<double>(a) - b);
+              out.push_back(toVec3(xform.indexToWorld(p)));
+            }
+        }
+    });
   });
   std::vector<glm::vec3> all;
   for (const std::vector<glm::vec3>& part : found) all.insert(all.end(), part.begin(), part.end());
@@ -573,34 +579,61 @@ bool VolumeObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCo
     const vdb::Vec3d j = map.applyJacobian(e);
     cell += glm::length(world_from_object.vector(glm::dvec3(j.x(), j.y(), j.z())));
   }
-  // The nearest lattice crossing, searched a cell beyond the best distance so far: the surface
-  // point the refinement reaches may be that much closer than its starting point.
-  double reach = best.distance + cell;
-  std::uint32_t nearest = kInvalidId;
-  std::uint32_t stack[64];
-  std::size_t size = 0;
-  stack[size++] = 0;
-  while (size > 0) {
-    const SurfacePoints::Node& node = sp.nodes[stack[--size]];
-    if (!q.mayReach(node.box, reach)) continue;
-    if (node.count > 0) {
-      for (std::uint32_t i = node.first; i < node.first + node.count; ++i) {
-        const double d = glm::length(world_from_object.point(glm::dvec3(sp.points_os[i])) - q.point_ws);
-        if (d < reach) {
-          reach = d;
-          nearest = i;
+  // Calls visit(i, world distance) for every lattice crossing nearer than `limit` (which visit may
+  // lower), nearer subtrees first.
+  const auto forEachWithin = [&](double limit, auto&& visit) {
+    std::uint32_t stack[64];
+    std::size_t size = 0;
+    stack[size++] = 0;
+    while (size > 0) {
+      const SurfacePoints::Node& node = sp.nodes[stack[--size]];
+      if (!q.mayReach(node.box, limit)) continue;
+      if (node.count > 0) {
+        for (std::uint32_t i = node.first; i < node.first + node.count; ++i) {
+          const double d = glm::length(world_from_object.point(glm::dvec3(sp.points_os[i])) - q.point_ws);
+          if (d < limit) limit = visit(i, d, limit);
         }
+        continue;
       }
-      continue;
+      const std::uint32_t left = static_cast<std::uint32_t>(&node - sp.nodes.data()) + 1, right = node.first;
+      const bool left_first =
+          distanceSquared(sp.nodes[left].box, q.point_os) <= distanceSquared(sp.nodes[right].box, q.point_os);
+      stack[size++] = left_first ? right : left;
+      stack[size++] = left_first ? left : right;
     }
-    const std::uint32_t left = static_cast<std::uint32_t>(&node - sp.nodes.data()) + 1, right = node.first;
-    // The nearer child on top.
-    const bool left_first =
-        distanceSquared(sp.nodes[left].box, q.point_os) <= distanceSquared(sp.nodes[right].box, q.point_os);
-    stack[size++] = left_first ? right : left;
-    stack[size++] = left_first ? left : right;
-  }
+  };
+  // The nearest lattice crossing, searched a cell beyond the best distance so far (the surface
+  // point the refinement reaches may be that much closer than the crossing it starts from).
+  std::uint32_t nearest = kInvalidId;
+  double nearest_d = kInfinity;
+  forEachWithin(best.distance + cell, [&](std::uint32_t i, double d, double) {
+    nearest = i;
+    nearest_d = d;
+    return d;
+  });
   if (nearest == kInvalidId) return false;
+  // The true foot may lie on another part of the surface (a wall across a thin gap, the other
+  // side of a saddle) whose crossings are up to a cell farther than the nearest: every crossing
+  // within a cell of the nearest seeds a refinement, one per cluster (seeds two cells apart), the
+  // nearest first.
+  std::vector<std::pair<double, std::uint32_t>> within;
+  forEachWithin(std::min(nearest_d + cell, best.distance + cell), [&](std::uint32_t i, double d, double limit) {
+    within.emplace_back(d, i);
+    return limit;
+  });
+  std::sort(within.begin(), within.end());
+  constexpr std::size_t kMaxSeeds = 8;
+  std::vector<std::uint32_t> seeds;
+  std::vector<glm::dvec3> seeds_ws;
+  for (const auto& [d, i] : within) {
+    const glm::dvec3 p = world_from_object.point(glm::dvec3(sp.points_os[i]));
+    bool clustered = false;
+    for (const glm::dvec3& s : seeds_ws) clustered = clustered || glm::length(p - s) < 2.0 * cell;
+    if (clustered) continue;
+    seeds.push_back(i);
+    seeds_ws.push_back(p);
+    if (seeds.size() == kMaxSeeds) break;
+  }
 
   // Refine on the surface: minimise the world distance over the surface near the crossing, in
   // coordinates (a, b) of the tangent plane (world space, so that any affine transform gets its
@@ -609,7 +642,6 @@ bool VolumeObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCo
   // steps. Derivative-free on purpose: the interpolant's gradient is a few degrees off, which from
   // far away would move the foot by a good part of a voxel.
   AccessorT& acc = threadState(this, grid_, ctx).acc;
-  const glm::vec3& start = sp.points_os[nearest];
   const auto worldNormal = [&](const vdb::Vec3d& p_is) {
     const vdb::Vec3d n_os = map.applyIJT(gradientIS(acc, p_is));
     const glm::dvec3 n = glm::transpose(object_from_world.linear) * glm::dvec3(n_os.x(), n_os.y(), n_os.z());
@@ -633,53 +665,65 @@ bool VolumeObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCo
     }
     return out;
   };
-  SurfacePoint x = project(map.applyInverseMap(vdb::Vec3d(start.x, start.y, start.z)));
-  if (!(x.d < kInfinity)) {  // the crossing itself, unrefined, when Newton cannot settle there
-    x.p_is = map.applyInverseMap(vdb::Vec3d(start.x, start.y, start.z));
-    x.p_ws = toWorld(x.p_is);
-    x.d = glm::length(x.p_ws - q.point_ws);
-  }
-  double h = 0.25 * cell;
-  const double h_min = 1e-9 * cell;
-  for (int iteration = 0; iteration < 40 && h > h_min && x.d > 0.0; ++iteration) {
-    const glm::dvec3 n = worldNormal(x.p_is);
-    if (n == glm::dvec3(0.0)) break;
-    const glm::dvec3 t1 =
-        glm::normalize(std::abs(n.x) < 0.6 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
-    const glm::dvec3 t2 = glm::cross(n, t1);
-    const auto trial = [&](double a, double b) { return project(toIndex(x.p_ws + a * t1 + b * t2)); };
-    const SurfacePoint ap = trial(h, 0), am = trial(-h, 0), bp = trial(0, h), bm = trial(0, -h), ab = trial(h, h);
-    SurfacePoint next = x;
-    for (const SurfacePoint* c : {&ap, &am, &bp, &bm, &ab})
-      if (c->d < next.d) next = *c;
-    if (ap.d < kInfinity && am.d < kInfinity && bp.d < kInfinity && bm.d < kInfinity && ab.d < kInfinity) {
-      const double ga = (ap.d - am.d) / (2 * h), gb = (bp.d - bm.d) / (2 * h);
-      const double haa = (ap.d - 2 * x.d + am.d) / (h * h), hbb = (bp.d - 2 * x.d + bm.d) / (h * h);
-      const double hab = (ab.d - ap.d - bp.d + x.d) / (h * h);
-      const double det = haa * hbb - hab * hab;
-      double da, db;
-      if (haa > 0 && det > 0) {  // the model has a minimum: its Newton step
-        da = -(hbb * ga - hab * gb) / det;
-        db = -(haa * gb - hab * ga) / det;
-      } else {  // downhill by the spacing
-        const double g = std::hypot(ga, gb);
-        da = g > 0 ? -h * ga / g : 0.0;
-        db = g > 0 ? -h * gb / g : 0.0;
-      }
-      const double len = std::hypot(da, db);
-      if (len > 4 * h) {
-        da *= 4 * h / len;
-        db *= 4 * h / len;
-      }
-      const SurfacePoint newton = trial(da, db);
-      if (newton.d < next.d) next = newton;
-      if (next.d < x.d) h = std::clamp(std::hypot(da, db), 0.05 * h, 2 * h);
+  const auto refine = [&](std::uint32_t seed) {
+    const glm::vec3& start = sp.points_os[seed];
+    SurfacePoint x = project(map.applyInverseMap(vdb::Vec3d(start.x, start.y, start.z)));
+    if (!(x.d < kInfinity)) {  // the crossing itself, unrefined, when Newton cannot settle there
+      x.p_is = map.applyInverseMap(vdb::Vec3d(start.x, start.y, start.z));
+      x.p_ws = toWorld(x.p_is);
+      x.d = glm::length(x.p_ws - q.point_ws);
     }
-    if (!(next.d < x.d)) {
-      h *= 0.25;  // nothing closer at this spacing: look nearer
-      continue;
+    double h = 0.25 * cell;
+    const double h_min = 1e-9 * cell;
+    for (int iteration = 0; iteration < 40 && h > h_min && x.d > 0.0; ++iteration) {
+      const glm::dvec3 n = worldNormal(x.p_is);
+      if (n == glm::dvec3(0.0)) break;
+      const glm::dvec3 t1 =
+          glm::normalize(std::abs(n.x) < 0.6 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
+      const glm::dvec3 t2 = glm::cross(n, t1);
+      const auto trial = [&](double a, double b) { return project(toIndex(x.p_ws + a * t1 + b * t2)); };
+      const SurfacePoint ap = trial(h, 0), am = trial(-h, 0), bp = trial(0, h), bm = trial(0, -h), ab = trial(h, h);
+      SurfacePoint next = x;
+      for (const SurfacePoint* c : {&ap, &am, &bp, &bm, &ab})
+        if (c->d < next.d) next = *c;
+      if (ap.d < kInfinity && am.d < kInfinity && bp.d < kInfinity && bm.d < kInfinity && ab.d < kInfinity) {
+        const double ga = (ap.d - am.d) / (2 * h), gb = (bp.d - bm.d) / (2 * h);
+        const double haa = (ap.d - 2 * x.d + am.d) / (h * h), hbb = (bp.d - 2 * x.d + bm.d) / (h * h);
+        const double hab = (ab.d - ap.d - bp.d + x.d) / (h * h);
+        const double det = haa * hbb - hab * hab;
+        double da, db;
+        if (haa > 0 && det > 0) {  // the model has a minimum: its Newton step
+          da = -(hbb * ga - hab * gb) / det;
+          db = -(haa * gb - hab * ga) / det;
+        } else {  // downhill by the spacing
+          const double g = std::hypot(ga, gb);
+          da = g > 0 ? -h * ga / g : 0.0;
+          db = g > 0 ? -h * gb / g : 0.0;
+        }
+        const double len = std::hypot(da, db);
+        if (len > 4 * h) {
+          da *= 4 * h / len;
+          db *= 4 * h / len;
+        }
+        const SurfacePoint newton = trial(da, db);
+        if (newton.d < next.d) next = newton;
+        if (next.d < x.d) h = std::clamp(std::hypot(da, db), 0.05 * h, 2 * h);
+      }
+      if (!(next.d < x.d)) {
+        h *= 0.25;  // nothing closer at this spacing: look nearer
+        continue;
+      }
+      x = next;
     }
-    x = next;
+    return x;
+  };
+  // A foot nearer than the best so far has a crossing within a cell of it, whose cluster's seed is
+  // no farther: seeds beyond best + cell cannot lead there.
+  SurfacePoint x;
+  for (std::size_t k = 0; k < seeds.size(); ++k) {
+    if (!(glm::length(seeds_ws[k] - q.point_ws) < x.d + cell)) continue;
+    const SurfacePoint y = refine(seeds[k]);
+    if (y.d < x.d) x = y;
   }
   const glm::dvec3 n_ws = worldNormal(x.p_is);
   const glm::dvec3 x_ws = x.p_ws;

@@ -10,13 +10,16 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/TopLevel.h"
+#include "duplex/objects/MeshObject.h"
 #include "duplex/objects/VolumeObjectVdb.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 #include <openvdb/io/File.h>
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/Composite.h>
 #include <openvdb/tools/LevelSetSphere.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -790,7 +793,7 @@ TEST(LevelSetClosestPoint, SphereDistancesAreAnalyticNearFarAndInside) {
   QueryContext ctx;
   std::mt19937 rng(31);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (int k = 0; k < 400; ++k) {
+  for (int k = 0; k < 200; ++k) {
     // Points at distances from 0.05 to 4 radii from the centre: inside (far below the narrow
     // band), on the band, far outside.
     const glm::dvec3 dir = randomUnit(rng);
@@ -865,19 +868,100 @@ TEST(LevelSetClosestPoint, InstancesOfAnyAffineTransformGetTheWorldNearestPoint)
   }
 }
 
+TEST(LevelSetClosestPoint, AcrossAGapTheNearerWallWins) {
+  // Two spheres 0.2 (4 voxels) apart, their union, along a diagonal of the lattice: from points near
+  // the middle of the gap the nearest crossing may lie on the farther wall (crossings lie up to a
+  // cell from the foot), and refining it alone would end there.
+  openvdb::initialize();
+  const float voxel = 0.05f;
+  const glm::dvec3 axis = glm::normalize(glm::dvec3(1.0, 0.7, 0.4));
+  const glm::dvec3 ca = -0.6 * axis, cb = 0.6 * axis;
+  auto a = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+      0.5f, openvdb::Vec3f(static_cast<float>(ca.x), static_cast<float>(ca.y), static_cast<float>(ca.z)), voxel);
+  auto b = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+      0.5f, openvdb::Vec3f(static_cast<float>(cb.x), static_cast<float>(cb.y), static_cast<float>(cb.z)), voxel);
+  openvdb::tools::csgUnion(*a, *b);
+  const auto pair = makeVolumeObject(a, VolumeKind::LevelSet, "pair");
+  QueryContext ctx;
+  std::mt19937 rng(33);
+  std::uniform_real_distribution<double> ut(-0.01, 0.01), us(-0.1, 0.1);
+  const glm::dvec3 side1 = glm::normalize(glm::cross(axis, glm::dvec3(0, 0, 1))), side2 = glm::cross(axis, side1);
+  int decided = 0;
+  for (int k = 0; k < 300; ++k) {
+    const double t = ut(rng);
+    const glm::dvec3 p = t * axis + us(rng) * side1 + us(rng) * side2;
+    const double da = glm::length(p - ca) - 0.5, db = glm::length(p - cb) - 0.5;
+    const ClosestPoint c = query(*pair, p, Affine::identity(), ctx);
+    ASSERT_TRUE(c.valid());
+    // The trilinear surface of this coarse grid departs from the spheres by up to ~0.04 voxel.
+    EXPECT_NEAR(c.distance, std::min(da, db), 0.05 * voxel) << "point " << k << " at t = " << t;
+    if (std::abs(da - db) > 0.1 * voxel) {
+      ++decided;
+      EXPECT_EQ(glm::dot(c.point_ws, axis) > 0, db < da) << "point " << k << ": the foot is on the nearer sphere";
+    }
+  }
+  EXPECT_GT(decided, 100);
+}
+
 TEST(LevelSetClosestPoint, TopLevelFindsTheNearestAmongMeshesAndLevelSets) {
   const auto sphere = makeVolumeObject(sphereLevelSet(0.5f, 0.02f));
+  // A mesh box [1.8, 2.2] x [-0.2, 0.2] x [-0.2, 0.2] between the level sets at x = 0 and x = 4.
+  const auto box = std::make_shared<const MeshObject>(
+      std::make_shared<const TriangleMesh>(test::boxMesh(glm::vec3(1.8f, -0.2f, -0.2f), glm::vec3(2.2f, 0.2f, 0.2f))));
   TopLevel top;
   std::vector<InstanceDesc> instances;
-  for (std::uint32_t k = 0; k < 5; ++k)
-    instances.push_back({sphere, Affine::fromRowMajor3x4({1, 0, 0, 2.0 * k, 0, 1, 0, 0, 0, 0, 1, 0}), k});
+  for (std::uint32_t k = 0; k < 3; ++k)
+    instances.push_back({sphere, Affine::fromRowMajor3x4({1, 0, 0, 4.0 * k, 0, 1, 0, 0, 0, 0, 1, 0}), k});
+  instances.push_back({box, Affine::identity(), 10});
   top.build(instances);
   QueryContext ctx;
-  for (std::uint32_t k = 0; k < 5; ++k) {
-    const ClosestPoint c = top.closestPoint(glm::dvec3(2.0 * k + 0.1, 0.9, 0.0), kInf, ctx);
+  std::mt19937 rng(34);
+  std::uniform_real_distribution<double> ux(-0.5, 8.5), uy(-1.0, 1.0);
+  int mesh_nearest = 0, level_set_nearest = 0;
+  for (int k = 0; k < 300; ++k) {
+    const glm::dvec3 p(ux(rng), uy(rng), uy(rng));
+    double want = kInf;
+    std::uint32_t owner = kInvalidId;
+    for (std::uint32_t i = 0; i < 3; ++i) {
+      const double d = std::abs(glm::length(p - glm::dvec3(4.0 * i, 0, 0)) - 0.5);
+      if (d < want) want = d, owner = i;
+    }
+    // Outside the box: the distance to the box (the query points never fall inside it here).
+    const glm::dvec3 lo(1.8, -0.2, -0.2), hi(2.2, 0.2, 0.2);
+    const glm::dvec3 e = glm::max(glm::max(lo - p, p - hi), glm::dvec3(0.0));
+    if (glm::length(e) > 0.0 && glm::length(e) < want) want = glm::length(e), owner = 10;
+    if (glm::length(e) == 0.0) continue;
+    const ClosestPoint c = top.closestPoint(p, kInf, ctx);
     ASSERT_TRUE(c.valid());
-    EXPECT_EQ(c.instance_id, k);
-    EXPECT_NEAR(c.distance, std::hypot(0.1, 0.9) - 0.5, 1e-3);
+    EXPECT_EQ(c.instance_id, owner) << "point " << k;
+    EXPECT_NEAR(c.distance, want, 1e-3) << "point " << k;
+    (owner == 10 ? mesh_nearest : level_set_nearest) += 1;
+  }
+  EXPECT_GT(mesh_nearest, 20);
+  EXPECT_GT(level_set_nearest, 100);
+}
+
+TEST(LevelSetClosestPoint, FirstQueriesFromManyThreadsAtOnceAgree) {
+  // The surface points are made by the first query, in parallel, while other threads of the same
+  // parallel loop wait for them or ask too (a fresh object each round).
+  std::vector<glm::dvec3> points;
+  std::mt19937 rng(35);
+  std::uniform_real_distribution<double> u(-1.5, 1.5);
+  for (int k = 0; k < 150; ++k) points.emplace_back(u(rng), u(rng), u(rng));
+  std::vector<double> reference;
+  {
+    const auto sphere = makeVolumeObject(sphereLevelSet(0.5f, 0.02f));
+    QueryContext ctx;
+    for (const glm::dvec3& p : points) reference.push_back(query(*sphere, p, Affine::identity(), ctx).distance);
+  }
+  for (int round = 0; round < 2; ++round) {
+    const auto sphere = makeVolumeObject(sphereLevelSet(0.5f, 0.02f));
+    std::vector<double> got(points.size());
+    tbb::parallel_for(std::size_t{0}, points.size(), [&](std::size_t i) {
+      QueryContext ctx;
+      got[i] = query(*sphere, points[i], Affine::identity(), ctx).distance;
+    });
+    EXPECT_EQ(got, reference) << "round " << round;
   }
 }
 
