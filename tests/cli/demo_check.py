@@ -96,10 +96,11 @@ def check_images(out_dir, frame_count, width, height):
     return before, after, changed
 
 
-def run_demo(demo, scene, out_dir, threads, frames):
-    args = [demo, "--scene", scene, "--width", str(WIDTH), "--height", str(HEIGHT), "--threads", str(threads),
+def run_demo(demo, scene, out_dir, threads, frames, width=WIDTH, height=HEIGHT, probe=DOOR):
+    """Runs the demo on `scene` into `out_dir`; returns its stdout and its JSON summary (the last line)."""
+    args = [demo, "--scene", scene, "--width", str(width), "--height", str(height), "--threads", str(threads),
             "--before", os.path.join(out_dir, "before.png"), "--out", os.path.join(out_dir, "after.png"),
-            "--probe", DOOR]
+            "--probe", probe]
     if frames:
         args += ["--frames", os.path.join(out_dir, "frames")]
     r = subprocess.run(args, capture_output=True, text=True, timeout=120)

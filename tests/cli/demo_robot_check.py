@@ -18,22 +18,15 @@ import math
 import os
 import re
 import shutil
-import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from demo_check import check_images, expect, fail  # noqa: E402
+from demo_check import check_images, expect, run_demo  # noqa: E402
 
 WIDTH, HEIGHT = 160, 100
 CURSOR = [0.52 * WIDTH, 0.44 * HEIGHT]  # the demo's default cursor
 PALLET = "/cell/pallet"
 ROBOT_LINK = re.compile(r"^/cell/robot_2/(joint_\w+/)*(base_link|link_\w+)$")
-
-
-def run(args, timeout=120):
-    r = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
-    expect(r.returncode == 0, f"{' '.join(args)} exited with {r.returncode}; stderr:\n{r.stderr}")
-    return r.stdout
 
 
 def instance_objects(nodes, prefix=""):
@@ -93,15 +86,9 @@ def main():
                "spare-parts library first (robot_cell_parts.json)")
 
     out_dir = os.path.join(work, "out")
-    out = run([demo, "--scene", scene_path, "--width", str(WIDTH), "--height", str(HEIGHT), "--threads", "2",
-               "--before", os.path.join(out_dir, "before.png"), "--out", os.path.join(out_dir, "after.png"),
-               "--frames", os.path.join(out_dir, "frames"), "--probe", PALLET])
+    out, s = run_demo(demo, scene_path, out_dir, threads=2, frames=True, width=WIDTH, height=HEIGHT, probe=PALLET)
     print(out)
     lines = out.strip().splitlines()
-    try:
-        s = json.loads(lines[-1])
-    except (json.JSONDecodeError, IndexError) as e:
-        fail(f"the last line of the demo's output is not JSON ({e})")
 
     # Commits, frames and the summary's keys.
     times = sorted({e["time"] for e in scene["edits"]})

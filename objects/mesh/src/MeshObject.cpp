@@ -653,7 +653,6 @@ glm::dvec3 blockVertex(const detail::TriangleBlock4& b, int lane, int k) { retur
 std::optional<bool> MeshObject::inRegion(const ConvexRegion& region, RegionMode mode) const {
   const detail::TriangleBlock4* blocks = blocks_.data();
   if (mode == RegionMode::Inside) {
-    if (mesh_->triangleCount() == mesh_->degenerateCount()) return false;
     if (region.containsBox(mesh_->bounds())) return true;
     if (structure_ == MeshStructure::Bvh) {
       // Every part of the geometry lies in some child box: a box the region excludes, or a

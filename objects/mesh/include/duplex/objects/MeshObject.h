@@ -83,7 +83,7 @@ class MeshObject final : public Object {
   bool closestPoint(const PointQuery& query, ClosestPoint& best, QueryContext& ctx) const override;
   /// Whether a valid triangle meets `region_os` (Touching) or every valid triangle lies in it
   /// (Inside), exactly up to rounding, through the structure's boxes (object space). See
-  /// Object::inRegion; a mesh without valid triangles is never selected.
+  /// Object::inRegion.
   [[nodiscard]] std::optional<bool> inRegion(const ConvexRegion& region_os, RegionMode mode) const override;
   /// Every valid triangle meeting `region_os` (object space), each once, by prim id. See
   /// Object::trianglesInRegion.
