@@ -38,7 +38,7 @@ function(duplex_add_unit_tests)
     endforeach()
     target_link_libraries(duplex_${test_name} PRIVATE duplex_test_support ${arg_LIBS})
     # The sanitizer build compiles the tests' own code without optimisation (the library keeps its
-    # flags): it halves their compile time, most of that build's, and the sanitizers check the same.
+    # flags): their compile time is most of that build's, and the sanitizers check the same.
     if(DUPLEX_SANITIZE)
       target_compile_options(duplex_${test_name} PRIVATE -O0)
     endif()
