@@ -1,0 +1,154 @@
+#include "PySensors.h"
+
+#include "Arrays.h"
+
+#include <duplex/accel/Error.h>
+#include <duplex/sensors/SensorRun.h>
+#include <duplex/sensors/SensorScene.h>
+
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <exception>
+#include <optional>
+
+namespace duplex::python {
+
+namespace {
+
+template <class T>
+py::array_t<T> grid(const std::vector<T>& values, py::ssize_t rows, py::ssize_t cols) {
+  py::array_t<T> a(std::vector<py::ssize_t>{rows, cols});
+  std::copy(values.begin(), values.end(), a.mutable_data());
+  return a;
+}
+
+template <class T>
+py::array_t<T> bandGrids(const std::vector<std::vector<T>>& bands, py::ssize_t rows, py::ssize_t cols) {
+  py::array_t<T> a(std::vector<py::ssize_t>{static_cast<py::ssize_t>(bands.size()), rows, cols});
+  T* p = a.mutable_data();
+  for (const std::vector<T>& b : bands) p = std::copy(b.begin(), b.end(), p);
+  return a;
+}
+
+py::object finiteOrNone(double v) { return std::isfinite(v) ? py::object(py::float_(v)) : py::object(py::none()); }
+
+const char* shapeName(SensorShape s) {
+  return s == SensorShape::Disk ? "disk" : s == SensorShape::Sphere ? "sphere" : "rectangle";
+}
+
+}  // namespace
+
+py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
+                    const py::object& progress, const SensorRunOptions& options) {
+  if (rays == 0) throw InvalidArgument("rays must be at least 1");
+  if (threads < 0) throw InvalidArgument("threads must be >= 0 (0: all hardware threads)");
+  if (!(options.target_error >= 0.0 && std::isfinite(options.target_error)))
+    throw InvalidArgument("target_error must be a finite number >= 0");
+  if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
+    throw InvalidArgument("progress must be None or a callable (done, total)");
+
+  std::optional<SensorScene> scene;
+  withThreads(threads, [&] {
+    py::gil_scoped_release nogil;
+    SceneDocumentOptions doc_options;
+    doc_options.structure = options.structure;
+    scene.emplace(SensorScene::load(scene_file, doc_options));
+  });
+  if (scene->lights().empty()) throw FileError(scene_file.string() + ": the scene has no lights (\"lights\": [...])");
+  if (scene->sensors().empty())
+    throw FileError(scene_file.string() + ": the scene has no sensors (\"sensors\": [...])");
+
+  SensorRunConfig config;
+  config.seed = seed;
+  config.threads = static_cast<unsigned>(threads);
+  config.max_depth = options.max_depth;
+  config.max_scatterings = options.max_scatterings;
+  config.roulette_threshold = options.roulette_threshold;
+  SensorRun run(*scene, config);
+  SensorStopRule stop;
+  if (options.target_error > 0.0) {
+    stop.sensor = options.target_sensor.empty() ? 0 : scene->findSensor(options.target_sensor);
+    if (stop.sensor < 0)
+      throw InvalidArgument("target_sensor: the scene has no sensor named '" + options.target_sensor + "'");
+    stop.target = options.target_error;
+    stop.min_rays = std::min<std::uint64_t>(10000, rays);
+  }
+
+  // The callback runs on this thread between batches: it takes the GIL, checks for Ctrl-C and calls
+  // `progress`; an exception from either cancels the run and is raised once the run has stopped.
+  std::optional<py::error_already_set> raised;
+  SensorRunStatus status;
+  {
+    py::gil_scoped_release nogil;
+    status = run.runUntil(
+        rays,
+        [&](const SensorProgress& p) {
+          py::gil_scoped_acquire gil;
+          try {
+            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+            if (!progress.is_none()) progress(p.rays_done, p.rays_target);
+          } catch (py::error_already_set& e) {
+            raised.emplace(std::move(e));
+            run.cancel();
+          }
+        },
+        stop);
+  }
+  if (raised) throw std::move(*raised);
+
+  const SensorRunResults r = run.results();
+  py::dict energy;
+  energy["emitted_w"] = r.energy.emitted_w;
+  energy["escaped_w"] = r.energy.escaped_w;
+  energy["absorbed_w"] = r.energy.absorbed_w;
+  energy["medium_absorbed_w"] = r.energy.medium_absorbed_w;
+  energy["depth_limited_w"] = r.energy.depth_limited_w;
+  energy["roulette_w"] = r.energy.roulette_w;
+  const char* status_name = status == SensorRunStatus::TargetReached ? "target_reached"
+                            : status == SensorRunStatus::Cancelled   ? "cancelled"
+                                                                     : "completed";
+  py::dict out;
+  for (const SensorResult& s : r.sensors) {
+    const auto ny = static_cast<py::ssize_t>(s.ny), nx = static_cast<py::ssize_t>(s.nx);
+    py::dict d;
+    d["irradiance"] = grid(s.irradiance_w_m2, ny, nx);
+    d["stderr"] = grid(s.stderr_w_m2, ny, nx);
+    d["flux"] = grid(s.flux_w, ny, nx);
+    d["flux_stderr"] = grid(s.flux_stderr_w, ny, nx);
+    d["ray_count"] = grid(s.ray_count, ny, nx);
+    d["bin_area"] = grid(s.bin_area_m2, ny, nx);
+    d["total_flux"] = s.total_flux_w;
+    d["total_flux_stderr"] = s.total_flux_stderr_w;
+    d["relative_stderr"] = finiteOrNone(s.relative_stderr);
+    d["efficiency"] = s.efficiency;
+    d["shape"] = shapeName(s.shape);
+    d["bins"] = py::make_tuple(s.nx, s.ny);
+    d["two_sided"] = s.two_sided;
+    d["node"] = s.node;
+    if (s.theta_bins != 0) {
+      const auto nphi = static_cast<py::ssize_t>(s.phi_bins), ntheta = static_cast<py::ssize_t>(s.theta_bins);
+      d["angular_flux"] = grid(s.angular_flux_w, nphi, ntheta);
+      d["angular_stderr"] = grid(s.angular_stderr_w, nphi, ntheta);
+      d["angular_solid_angle"] = grid(s.angular_solid_angle_sr, nphi, ntheta);
+      d["angular_ray_count"] = grid(s.angular_ray_count, nphi, ntheta);
+    }
+    if (!r.bands.empty()) {
+      d["bands"] = r.bands;
+      d["band_irradiance"] = bandGrids(s.band_irradiance_w_m2, ny, nx);
+      d["band_stderr"] = bandGrids(s.band_stderr_w_m2, ny, nx);
+      d["band_flux"] = bandGrids(s.band_flux_w, ny, nx);
+      d["band_total_flux"] = s.band_total_flux_w;
+      d["band_total_flux_stderr"] = s.band_total_flux_stderr_w;
+    }
+    d["rays"] = r.rays;
+    d["seed"] = r.seed;
+    d["status"] = status_name;
+    d["emitted_power"] = r.energy.emitted_w;
+    d["energy"] = energy;
+    out[py::str(s.name)] = d;
+  }
+  return out;
+}
+
+}  // namespace duplex::python

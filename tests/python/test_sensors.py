@@ -1,0 +1,78 @@
+"""duplex.run_sensors against `duplex sensor`: the same arrays for the same seed; progress and cancel."""
+import json
+
+import numpy as np
+import pytest
+
+import duplex
+from conftest import SCENES, run_cli
+
+RAYS = 40000
+
+
+@pytest.mark.parametrize("name", ["sensor_room.json", "sensor_spectral.json"])
+def test_run_equals_cli_output(cli, tmp_path, name):
+    scene_file = SCENES / name
+    report = run_cli(cli, "sensor", "--scene", scene_file, "--rays", RAYS, "--seed", 3, "--out", tmp_path,
+                     "--progress", "none", "--threads", 2)
+    result = duplex.run_sensors(str(scene_file), rays=RAYS, seed=3, threads=1)
+    assert sorted(result) == sorted(s["name"] for s in report["sensors"])
+    for entry in report["sensors"]:
+        ref = json.loads(open(entry["file"]).read())
+        got = result[entry["name"]]
+        nx, ny = ref["bins"]
+        assert got["bins"] == (nx, ny) and got["irradiance"].shape == (ny, nx)
+        for key, ref_key in (("irradiance", "irradiance_w_m2"), ("stderr", "stderr_w_m2"), ("flux", "flux_w"),
+                             ("ray_count", "ray_count"), ("bin_area", "bin_area_m2")):
+            assert np.array_equal(got[key].ravel(), np.array(ref[ref_key])), key
+        assert got["total_flux"] == ref["total_flux_w"] and got["efficiency"] == ref["efficiency"]
+        assert got["rays"] == RAYS and got["seed"] == 3 and got["status"] == "completed"
+        assert got["emitted_power"] == report["emitted_power_w"]
+        assert got["energy"]["escaped_w"] == report["energy"]["escaped_w"]
+        if "bands" in ref:
+            assert got["bands"] == ref["bands"]
+            assert np.array_equal(got["band_irradiance"].reshape(len(ref["bands"]), -1),
+                                  np.array(ref["band_irradiance_w_m2"]))
+        assert got["total_flux"] > 0
+
+
+def test_progress_and_cancel():
+    calls = []
+    scene_file = str(SCENES / "sensor_room.json")
+    duplex.run_sensors(scene_file, rays=200000, seed=1, progress=lambda done, total: calls.append((done, total)))
+    assert len(calls) >= 3
+    assert all(total == 200000 for _, total in calls)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls) and calls[-1][0] == 200000
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stop_after_two(done, total):
+        seen.append(done)
+        if len(seen) == 2:
+            raise Stop("enough")
+
+    with pytest.raises(Stop, match="enough"):
+        duplex.run_sensors(scene_file, rays=10**8, seed=1, progress=stop_after_two)
+    assert len(seen) == 2  # the run stopped at the batch after the exception
+
+
+def test_bad_runs(tmp_path):
+    with pytest.raises(OSError, match="missing.json"):
+        duplex.run_sensors(str(tmp_path / "missing.json"), rays=10)
+    with pytest.raises(ValueError, match="rays"):
+        duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=0)
+    with pytest.raises(ValueError, match="progress"):
+        duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10, progress=5)
+    with pytest.raises(ValueError, match="target_sensor"):
+        duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10, target_error=0.1, target_sensor="nobody")
+    with pytest.raises(OSError, match="no sensors|no lights"):
+        duplex.run_sensors(str(SCENES / "demo.json"), rays=10)
+
+
+def test_target_error_stops_early():
+    result = duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10**8, seed=2, target_error=0.05)
+    first = next(iter(result.values()))
+    assert first["status"] == "target_reached" and first["rays"] < 10**8
