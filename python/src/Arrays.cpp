@@ -1,5 +1,6 @@
 #include "Arrays.h"
 
+#include <limits>
 #include <sstream>
 
 namespace duplex::python {
@@ -82,20 +83,36 @@ FloatRows floatRows(const py::object& obj, std::initializer_list<py::ssize_t> wi
   return out;
 }
 
+namespace {
+
+template <class T>
+void readRaysOf(const T* data, std::size_t width, std::size_t first, std::span<Ray> out) {
+  const T* p = data + first * width;
+  for (Ray& r : out) {
+    r.origin = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+    r.dir = {static_cast<float>(p[3]), static_cast<float>(p[4]), static_cast<float>(p[5])};
+    if (width == 8) {
+      r.tnear = static_cast<float>(p[6]);
+      r.tfar = static_cast<float>(p[7]);
+    } else {
+      r.tnear = 0.0f;
+      r.tfar = std::numeric_limits<float>::infinity();
+    }
+    p += width;
+  }
+}
+
+}  // namespace
+
+void readRays(const FloatRows& rows, std::size_t first, std::span<Ray> out) {
+  if (rows.f64) readRaysOf(static_cast<const double*>(rows.data), rows.width, first, out);
+  else readRaysOf(static_cast<const float*>(rows.data), rows.width, first, out);
+}
+
 std::vector<Ray> raysFromRows(const FloatRows& rows) {
   std::vector<Ray> rays(rows.rows);
-  const bool segment = rows.width == 8;
   parallelRows(rows.rows, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      Ray& r = rays[i];
-      r.origin = {static_cast<float>(rows.at(i, 0)), static_cast<float>(rows.at(i, 1)),
-                  static_cast<float>(rows.at(i, 2))};
-      r.dir = {static_cast<float>(rows.at(i, 3)), static_cast<float>(rows.at(i, 4)), static_cast<float>(rows.at(i, 5))};
-      if (segment) {
-        r.tnear = static_cast<float>(rows.at(i, 6));
-        r.tfar = static_cast<float>(rows.at(i, 7));
-      }
-    }
+    readRays(rows, begin, std::span<Ray>(rays.data() + begin, end - begin));
   });
   return rays;
 }

@@ -16,6 +16,7 @@
 #include <tbb/task_arena.h>
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -62,8 +63,12 @@ struct FloatRows {
 /// Reads `obj` as rows of `widths` numbers (float32 or float64), e.g. rays (..., 6) or (..., 8).
 FloatRows floatRows(const py::object& obj, std::initializer_list<py::ssize_t> widths, const char* what);
 
-/// Rays from rows [ox, oy, oz, dx, dy, dz] (tnear 0, tfar +inf) or [..., tnear, tfar]: world space,
-/// rounded to float32 (the queries' precision). Runs in parallel; call without the GIL.
+/// Rays [first, first + out.size()) of `rows` ([ox, oy, oz, dx, dy, dz] with tnear 0 and tfar
+/// +inf, or [..., tnear, tfar]) into `out`: world space, rounded to float32 (the queries'
+/// precision). No Python calls: runs without the GIL, on any thread.
+void readRays(const FloatRows& rows, std::size_t first, std::span<Ray> out);
+
+/// Every ray of `rows`, read in parallel; call without the GIL.
 std::vector<Ray> raysFromRows(const FloatRows& rows);
 
 /// parent_from_local from None (identity) or a (3, 4) or (4, 4) float64-convertible matrix whose

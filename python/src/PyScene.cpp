@@ -311,27 +311,35 @@ py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t m
   std::uint32_t* pp = prim.mutable_data();
   float* uv = uvs.mutable_data();
   float* ng = normals.mutable_data();
+  // Streamed block by block: the rays are read from the array and the hits scattered into the
+  // result arrays by the worker threads, with no whole-batch copy of either.
   shared(mutex_, [&] {
     withThreads(nthreads, [&] {
-      const std::vector<Ray> world_rays = raysFromRows(rows);
-      std::vector<Hit> hits(world_rays.size());
-      tracer_->intersect(world_rays, hits, mask);
-      parallelRows(hits.size(), [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
-          const Hit& h = hits[i];
-          const bool hit = h.valid();
-          t[i] = h.t;
-          ip[i] = hit ? idOf(h.instance_id) : kInvalidId;
-          pp[i] = h.prim_id;
-          uv[2 * i] = hit ? h.u : 0.0f;
-          uv[2 * i + 1] = hit ? h.v : 0.0f;
-          const float len = std::sqrt(h.ng.x * h.ng.x + h.ng.y * h.ng.y + h.ng.z * h.ng.z);
-          const glm::vec3 n = hit && len > 0.0f ? h.ng / len : glm::vec3(0.0f);
-          ng[3 * i] = n.x;
-          ng[3 * i + 1] = n.y;
-          ng[3 * i + 2] = n.z;
-        }
-      });
+      tracer_->intersectBlocks(
+          rows.rows, [&](std::size_t first, std::span<Ray> block) { readRays(rows, first, block); },
+          [&](std::size_t first, std::span<const Hit> hits) {
+            // Misses come back as Hit{} (t = +inf, ids invalid, u = v = 0, ng = 0), so one
+            // branch-free pass serves hits and misses alike.
+            float* __restrict tt = t + first;
+            std::uint32_t* __restrict ii = ip + first;
+            std::uint32_t* __restrict pi = pp + first;
+            float* __restrict uu = uv + 2 * first;
+            float* __restrict nn = ng + 3 * first;
+            for (std::size_t k = 0; k < hits.size(); ++k) {
+              const Hit& h = hits[k];
+              tt[k] = h.t;
+              ii[k] = idOf(h.instance_id);
+              pi[k] = h.prim_id;
+              uu[2 * k] = h.u;
+              uu[2 * k + 1] = h.v;
+              const float len2 = h.ng.x * h.ng.x + h.ng.y * h.ng.y + h.ng.z * h.ng.z;
+              const float scale = len2 > 0.0f ? 1.0f / std::sqrt(len2) : 0.0f;
+              nn[3 * k] = h.ng.x * scale;
+              nn[3 * k + 1] = h.ng.y * scale;
+              nn[3 * k + 2] = h.ng.z * scale;
+            }
+          },
+          mask);
     });
   });
   py::dict d;
@@ -351,8 +359,12 @@ py::array PyScene::testOcclusions(const py::object& rays, int nthreads, std::uin
   auto* blocked = reinterpret_cast<std::uint8_t*>(out.mutable_data());
   shared(mutex_, [&] {
     withThreads(nthreads, [&] {
-      const std::vector<Ray> world_rays = raysFromRows(rows);
-      tracer_->occluded(world_rays, std::span<std::uint8_t>(blocked, world_rays.size()), mask);
+      tracer_->occludedBlocks(
+          rows.rows, [&](std::size_t first, std::span<Ray> block) { readRays(rows, first, block); },
+          [&](std::size_t first, std::span<const std::uint8_t> flags) {
+            std::copy(flags.begin(), flags.end(), blocked + first);
+          },
+          mask);
     });
   });
   return out;

@@ -11,6 +11,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -174,6 +175,36 @@ void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, 
   if (stopped.load()) throw Cancelled(std::string(what) + ": cancelled; the results are incomplete");
 }
 
+// forEachRay over rays that `load` supplies and results that `store` takes, kStreamBlock at a time.
+template <class Out, class Query>
+void forEachBlock(const char* what, std::size_t count, const SceneTracer::RayBlockLoader& load,
+                  const std::function<void(std::size_t, std::span<const Out>)>& store, const WorkControl& control,
+                  Query&& query) {
+  if (!load || !store) throw InvalidArgument(std::string(what) + ": the loader and the store must not be empty");
+  constexpr std::size_t kBlock = SceneTracer::kStreamBlock;
+  ProgressCounter counter(control, count);
+  std::atomic<bool> stopped{false};
+  tbb::this_task_arena::isolate([&] {  // isolated for the reason forEachRay gives
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, kBlock), [&](const auto& range) {
+      if (stopped.load(std::memory_order_relaxed) || control.cancelled()) {
+        stopped.store(true, std::memory_order_relaxed);
+        return;
+      }
+      QueryContext ctx;
+      std::array<Ray, kBlock> rays;
+      std::array<Out, kBlock> out;
+      for (std::size_t first = range.begin(); first < range.end(); first += kBlock) {
+        const std::size_t n = std::min(kBlock, range.end() - first);
+        load(first, std::span<Ray>(rays.data(), n));
+        for (std::size_t i = 0; i < n; ++i) out[i] = query(rays[i], ctx);
+        store(first, std::span<const Out>(out.data(), n));
+      }
+      counter.add(range.size());
+    });
+  });
+  if (stopped.load()) throw Cancelled(std::string(what) + ": cancelled; the results are incomplete");
+}
+
 }  // namespace
 
 SceneClosestPoint SceneTracer::closestPoint(const glm::dvec3& point_ws, double max_distance, std::uint32_t mask) const {
@@ -204,6 +235,23 @@ void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std:
   const TopLevel& top = impl_->top;
   forEachRay("SceneTracer::intersect", rays, hits, control,
              [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
+}
+
+void SceneTracer::intersectBlocks(std::size_t count, const RayBlockLoader& load, const HitBlockStore& store,
+                                  std::uint32_t mask, const WorkControl& control) const {
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  forEachBlock<Hit>("SceneTracer::intersectBlocks", count, load, store, control,
+                    [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
+}
+
+void SceneTracer::occludedBlocks(std::size_t count, const RayBlockLoader& load, const OccludedBlockStore& store,
+                                 std::uint32_t mask, const WorkControl& control) const {
+  std::shared_lock lock(impl_->mutex);
+  const TopLevel& top = impl_->top;
+  forEachBlock<std::uint8_t>(
+      "SceneTracer::occludedBlocks", count, load, store, control,
+      [&](const Ray& r, QueryContext& ctx) { return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0); });
 }
 
 void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask,

@@ -19,6 +19,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <random>
 #include <string>
@@ -546,6 +547,78 @@ TEST(SceneTracer, BatchQueriesGiveTheSameResultsOnOneAndTwoThreads) {
   EXPECT_GT(hits, rays.size() / 10);
   std::vector<Hit> wrong(3);
   expectErrorNaming<InvalidArgument>([&] { tracer.intersect(rays, wrong); }, "20000 rays");
+}
+
+TEST(SceneTracer, StreamedBatchesEqualTheSpanVersionsOnOneAndTwoThreads) {
+  Fixture f;
+  scatterInstances(f, 200, 20.0, 14);
+  SceneTracer tracer(f.graph);
+  // Not a multiple of the block size, so that the last block of a range is short.
+  const std::vector<Ray> rays = randomRays(tracer.bounds(), 20011, 9);
+  std::vector<Hit> reference(rays.size());
+  std::vector<std::uint8_t> reference_occ(rays.size());
+  tracer.intersect(rays, reference);
+  tracer.occluded(rays, reference_occ);
+  for (int threads = 1; threads <= 2; ++threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+    std::vector<Hit> hits(rays.size());
+    std::vector<std::uint8_t> occ(rays.size(), 7);
+    std::vector<std::atomic<int>> loaded(rays.size()), stored(rays.size());
+    const auto load = [&](std::size_t first, std::span<Ray> block) {
+      ASSERT_LE(block.size(), SceneTracer::kStreamBlock);
+      ASSERT_LE(first + block.size(), rays.size());
+      for (std::size_t k = 0; k < block.size(); ++k) {
+        block[k] = rays[first + k];
+        loaded[first + k].fetch_add(1);
+      }
+    };
+    tracer.intersectBlocks(rays.size(), load, [&](std::size_t first, std::span<const Hit> block) {
+      for (std::size_t k = 0; k < block.size(); ++k) {
+        hits[first + k] = block[k];
+        stored[first + k].fetch_add(1);
+      }
+    });
+    tracer.occludedBlocks(rays.size(), load, [&](std::size_t first, std::span<const std::uint8_t> block) {
+      std::copy(block.begin(), block.end(), occ.begin() + static_cast<std::ptrdiff_t>(first));
+    });
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      ASSERT_EQ(loaded[i].load(), 2) << i;  // each ray read once per batch, stored once
+      ASSERT_EQ(stored[i].load(), 1) << i;
+      ASSERT_TRUE(sameHit(hits[i], reference[i])) << i;
+      ASSERT_EQ(hits[i].instance_id, reference[i].instance_id) << i;
+      ASSERT_EQ(occ[i], reference_occ[i]) << i;
+    }
+  }
+  // An exception from the loader or the store reaches the caller; empty functions are refused.
+  const auto copy_rays = [&](std::size_t first, std::span<Ray> block) {
+    std::copy_n(rays.begin() + static_cast<std::ptrdiff_t>(first), block.size(), block.begin());
+  };
+  EXPECT_THROW(tracer.intersectBlocks(rays.size(), copy_rays,
+                                      [](std::size_t first, std::span<const Hit>) {
+                                        if (first > 1000) throw std::runtime_error("disk full");
+                                      }),
+               std::runtime_error);
+  expectErrorNaming<InvalidArgument>(
+      [&] { tracer.occludedBlocks(rays.size(), copy_rays, SceneTracer::OccludedBlockStore{}); }, "occludedBlocks");
+  // Cancelled once the first progress report arrives (a batch as large as the span test's).
+  const std::vector<Ray> many = randomRays(tracer.bounds(), 50000, 6);
+  const auto copy_many = [&](std::size_t first, std::span<Ray> block) {
+    std::copy_n(many.begin() + static_cast<std::ptrdiff_t>(first), block.size(), block.begin());
+  };
+  CancelToken token;
+  WorkControl control;
+  control.cancel = &token;
+  control.progress = [&](std::size_t, std::size_t) { token.cancel(); };
+  std::atomic<std::size_t> stored_count{0};
+  EXPECT_THROW(
+      tracer.intersectBlocks(
+          many.size(), copy_many, [&](std::size_t, std::span<const Hit> block) { stored_count += block.size(); },
+          0xFFFFFFFFu, control),
+      Cancelled);
+  EXPECT_LT(stored_count.load(), many.size());
+  // No rays: nothing is called.
+  tracer.intersectBlocks(
+      0, [](std::size_t, std::span<Ray>) { FAIL(); }, [](std::size_t, std::span<const Hit>) { FAIL(); });
 }
 
 TEST(SceneTracer, BatchIntersectAllEqualsOneRayAtATimeOnOneAndTwoThreads) {

@@ -1,6 +1,7 @@
 # cmake -P script of the install.consumer test: install the build into PREFIX, then configure,
 # build and run tests/cli/consumer against it. Variables: BUILD_DIR, PREFIX, WORK_DIR,
-# CONSUMER_SOURCE, CXX_COMPILER, BUILD_TYPE, SANITIZE.
+# CONSUMER_SOURCE, CXX_COMPILER, BUILD_TYPE, SANITIZE; PYTHON (the interpreter, empty when the
+# Python module is not built) and PYTHON_DIR (where the module is installed, relative to PREFIX).
 cmake_minimum_required(VERSION 3.25)
 
 # A fresh prefix each time, so that nothing from an earlier install can satisfy find_package. The
@@ -14,6 +15,17 @@ foreach(f lib/cmake/duplex/duplexConfig.cmake lib/cmake/duplex/duplexConfigVersi
     message(FATAL_ERROR "install: ${PREFIX}/${f} is missing")
   endif()
 endforeach()
+
+# The Python module, imported from the prefix alone (PYTHONPATH is the install folder, not the build's).
+if(PYTHON)
+  execute_process(COMMAND "${CMAKE_COMMAND}" -E env "PYTHONPATH=${PREFIX}/${PYTHON_DIR}" "${PYTHON}" -c
+                          "import duplex, numpy; s = duplex.Scene(); o = s.add_mesh(numpy.eye(3), [[0, 1, 2]]); s.add_instance(o); s.commit(); h = s.cast_rays([0.2, 0.2, 1, -1, -1, -1]); assert h['instance_ids'] == 0, h; print(duplex.__file__)"
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0 OR NOT out MATCHES "^${PREFIX}/${PYTHON_DIR}/duplex")
+    message(FATAL_ERROR "install: the Python module in ${PREFIX}/${PYTHON_DIR} does not import (${rc}): ${out}${err}")
+  endif()
+  message(STATUS "python module: ${out}")
+endif()
 
 # The installed targets do not carry the sanitizer flags (they are build-tree only), so a
 # sanitized build's consumer must add them itself.

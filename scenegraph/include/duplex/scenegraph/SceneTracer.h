@@ -21,6 +21,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <span>
@@ -158,6 +159,27 @@ class SceneTracer {
   /// Progress and cancellation as the batch queries above (the vectors are then unchanged).
   void intersectAll(std::span<const Ray> rays, std::vector<Hit>& hits, std::vector<std::size_t>& offsets,
                     std::uint32_t mask = 0xFFFFFFFFu, const WorkControl& control = {}) const;
+
+  /// Reads rays [first, first + rays.size()) of a streamed batch into `rays` (world space; at most
+  /// kStreamBlock of them per call).
+  using RayBlockLoader = std::function<void(std::size_t first, std::span<Ray> rays)>;
+  /// Receives the hits of rays [first, first + hits.size()) of a streamed batch.
+  using HitBlockStore = std::function<void(std::size_t first, std::span<const Hit> hits)>;
+  /// Receives the occlusion flags (1: blocked) of rays [first, first + occluded.size()).
+  using OccludedBlockStore = std::function<void(std::size_t first, std::span<const std::uint8_t> occluded)>;
+  /// Rays per call of a streamed batch's loader and store.
+  static constexpr std::size_t kStreamBlock = 256;
+  /// Batch intersect() of `count` rays that the caller supplies and collects block by block, so
+  /// that neither the rays nor the hits need a whole-batch array (rays converted from another
+  /// layout, hits scattered into several arrays or written out as they come). `load` and `store`
+  /// are called from the worker threads, concurrently for disjoint blocks, each block's store
+  /// after its load; an exception from either stops the batch and reaches the caller. Results
+  /// equal the span version's. Progress and cancellation as the batch queries above.
+  void intersectBlocks(std::size_t count, const RayBlockLoader& load, const HitBlockStore& store,
+                       std::uint32_t mask = 0xFFFFFFFFu, const WorkControl& control = {}) const;
+  /// Batch occluded() streamed as intersectBlocks().
+  void occludedBlocks(std::size_t count, const RayBlockLoader& load, const OccludedBlockStore& store,
+                      std::uint32_t mask = 0xFFFFFFFFu, const WorkControl& control = {}) const;
 
   /// The point of the visible surface instances (mask meeting `mask`) nearest to `point_ws`
   /// within `max_distance` (world units, inclusive; +inf for no limit), in double precision, with
