@@ -325,10 +325,12 @@ py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t m
             std::uint32_t* __restrict pi = pp + first;
             float* __restrict uu = uv + 2 * first;
             float* __restrict nn = ng + 3 * first;
+            const std::uint32_t* ids = id_of_node_.data();
+            const std::size_t id_count = id_of_node_.size();
             for (std::size_t k = 0; k < hits.size(); ++k) {
               const Hit& h = hits[k];
               tt[k] = h.t;
-              ii[k] = idOf(h.instance_id);
+              ii[k] = h.instance_id < id_count ? ids[h.instance_id] : kInvalidId;
               pi[k] = h.prim_id;
               uu[2 * k] = h.u;
               uu[2 * k + 1] = h.v;
