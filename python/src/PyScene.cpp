@@ -21,14 +21,14 @@ namespace {
 
 // Exclusive access for an edit, with the GIL released while waiting (see the file comment).
 template <class F>
-auto exclusive(std::shared_mutex& mutex, F&& f) {
+auto exclusive(WriterPreferringMutex& mutex, F&& f) {
   py::gil_scoped_release nogil;
   std::unique_lock lock(mutex);
   return f();
 }
 
 template <class F>
-auto shared(std::shared_mutex& mutex, F&& f) {
+auto shared(WriterPreferringMutex& mutex, F&& f) {
   py::gil_scoped_release nogil;
   std::shared_lock lock(mutex);
   return f();

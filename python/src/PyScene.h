@@ -10,11 +10,13 @@
 /// add_group() and add_instance() return, instance_node() gives).
 ///
 /// Threading: every query releases the GIL and holds a shared lock; edits and commits hold the
-/// lock exclusively (also with the GIL released, so that a waiting edit never blocks a query that
-/// finishes). Locks are taken only without the GIL, which rules out a deadlock between the two.
+/// lock exclusively, also with the GIL released, and a waiting edit keeps new queries out
+/// (WriterPreferringMutex), so that it never waits for ever. Whoever holds the lock without the
+/// GIL never asks for the GIL before releasing it, which rules out a deadlock between the two.
 
 #include "Arrays.h"
 
+#include <duplex/accel/WriterPreferringMutex.h>
 #include <duplex/objects/TriangleMesh.h>
 #include <duplex/scenegraph/SceneDocument.h>
 #include <duplex/scenegraph/SceneGraph.h>
@@ -109,7 +111,7 @@ class PyScene {
   ObjectId addMeshObject(TriangleMesh mesh, const std::optional<std::string>& name, const std::string& base,
                          const std::string& structure);
 
-  mutable std::shared_mutex mutex_;
+  mutable WriterPreferringMutex mutex_;
   std::unique_ptr<SceneGraph> graph_;
   std::unique_ptr<SceneTracer> tracer_;
   std::vector<NodeId> instances_;          // instance id -> node

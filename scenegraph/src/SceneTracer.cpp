@@ -2,6 +2,7 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/Log.h"
+#include "duplex/accel/WriterPreferringMutex.h"
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -17,7 +18,7 @@
 #include <cmath>
 #include <mutex>
 #include <numbers>
-#include <shared_mutex>
+#include <shared_mutex>  // std::shared_lock
 #include <string>
 #include <type_traits>
 
@@ -25,7 +26,8 @@ namespace duplex {
 
 struct SceneTracer::Impl {
   TopLevel top;
-  mutable std::shared_mutex mutex;  // queries share it; the commit observer takes it alone
+  // Queries share it; the commit observer takes it alone, and once it waits no new query starts.
+  mutable WriterPreferringMutex mutex;
   SceneGraph::ObserverId observer = 0;
   double last_update_ms = 0.0;
 
@@ -157,7 +159,7 @@ void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, 
                           std::to_string(out.size()) + " results");
   // Isolated: the caller holds the shared lock while it waits here, and a thread that waits in a
   // TBB loop may otherwise pick up an unrelated outer task, which could be another batch query
-  // taking the same lock again on this thread (undefined for std::shared_mutex; a deadlock when a
+  // taking the same lock again on this thread (a deadlock when a
   // commit waits between the two).
   ProgressCounter counter(control, rays.size());
   std::atomic<bool> stopped{false};

@@ -17,11 +17,14 @@
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <random>
+#include <chrono>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -619,6 +622,58 @@ TEST(SceneTracer, StreamedBatchesEqualTheSpanVersionsOnOneAndTwoThreads) {
   // No rays: nothing is called.
   tracer.intersectBlocks(
       0, [](std::size_t, std::span<Ray>) { FAIL(); }, [](std::size_t, std::span<const Hit>) { FAIL(); });
+}
+
+TEST(SceneTracer, CommitsCompleteWhileQueriesKeepOverlapping) {
+  Fixture f;
+  scatterInstances(f, 300, 20.0, 15);
+  const std::vector<NodeId> nodes = f.graph.visibleInstances();
+  SceneTracer tracer(f.graph);
+  const std::vector<Ray> rays = randomRays(tracer.bounds(), 3000, 10);
+  // Events are numbered in one sequence: a query that starts after a commit began and ends before
+  // it returned ran while the commit waited. Only queries that were already past the lock when the
+  // commit announced itself may do that: at most one per query thread and commit.
+  constexpr int kQueryThreads = 3;
+  std::atomic<std::uint64_t> clock{0};
+  std::atomic<bool> stop{false};
+  struct Span {
+    std::uint64_t begin, end;
+  };
+  std::vector<std::vector<Span>> queries(kQueryThreads);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kQueryThreads; ++t) {
+    threads.emplace_back([&, t] {
+      std::vector<std::uint8_t> blocked(rays.size());
+      tbb::task_arena one(1);  // each query thread traces alone, so that the queries overlap
+      while (!stop.load()) {
+        const std::uint64_t begin = clock.fetch_add(1);
+        one.execute([&] { tracer.occluded(rays, blocked); });
+        queries[t].push_back({begin, clock.fetch_add(1)});
+      }
+    });
+  }
+  std::mt19937 rng(3);
+  std::vector<Span> commits;
+  for (int c = 0; c < 30; ++c) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    std::mt19937_64 placement(rng());
+    f.graph.setTransform(nodes[rng() % nodes.size()], randomPlacement(placement, 20.0));
+    const std::uint64_t begin = clock.fetch_add(1);
+    f.graph.commit();
+    commits.push_back({begin, clock.fetch_add(1)});
+  }
+  stop.store(true);
+  for (std::thread& t : threads) t.join();
+  std::size_t total_queries = 0;
+  for (const Span& c : commits) {
+    int inside = 0;
+    for (const std::vector<Span>& list : queries)
+      for (const Span& q : list) inside += q.begin > c.begin && q.end < c.end ? 1 : 0;
+    EXPECT_LE(inside, kQueryThreads) << "queries that started and finished while commit [" << c.begin << ", " << c.end
+                                     << "] waited";
+  }
+  for (const std::vector<Span>& list : queries) total_queries += list.size();
+  EXPECT_GT(total_queries, 30u);  // the queries did overlap the commits
 }
 
 TEST(SceneTracer, BatchIntersectAllEqualsOneRayAtATimeOnOneAndTwoThreads) {

@@ -6,7 +6,9 @@
 ///
 /// Threading: queries (const) may run concurrently from any number of threads; a commit of the
 /// graph waits until running queries finish and blocks new ones while it updates the top level
-/// (a reader-writer lock), so a query sees either the scene before or after a commit, never a mix.
+/// (a reader-writer lock that prefers the commit: once it waits, no new query starts, so it waits
+/// only for the queries already running), so a query sees either the scene before or after a
+/// commit, never a mix.
 /// Edits that are not committed yet are invisible to queries.
 
 #include "duplex/accel/Hit.h"
