@@ -4,6 +4,7 @@
 #include "WorkerThreads.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/InputFile.h>
 #include <duplex/accel/RayFile.h>
 #include <duplex/scenegraph/SceneTracer.h>
 
@@ -24,6 +25,9 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 nlohmann::ordered_json runClosest(const ClosestOptions& options) {
   WorkerThreads workers(options.threads);
   // The point file first: a bad one fails before the (longer) scene load.
+  if (sameFile(options.points, options.out))
+    throw InvalidArgument("--out " + options.out.string() +
+                          " names the point file given as --points: it would be overwritten");
   const std::vector<PointRecord> points = readPointFile(options.points);
   std::optional<SceneDocument> doc;
   std::unique_ptr<SceneTracer> tracer;

@@ -4,6 +4,7 @@
 #include "WorkerThreads.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/InputFile.h>
 #include <duplex/scenegraph/ObjectTypeRegistry.h>
 #include <duplex/scenegraph/SceneDocument.h>
 #include <duplex/sensors/SensorTypes.h>
@@ -29,6 +30,8 @@ using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 json readJson(const fs::path& path) {
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    throw FileError(path.string() + ": cannot open: " + problem);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(path.string() + ": cannot open");
   try {

@@ -3,6 +3,7 @@
 #include "SceneWriter.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/InputFile.h>
 #include <duplex/objects/MeshLoader.h>
 
 #include <tinyxml2.h>
@@ -111,6 +112,8 @@ struct Urdf {
 // the line tinyxml2 reports and its description of the problem.
 const XMLElement& loadRobotElement(tinyxml2::XMLDocument& doc, const std::filesystem::path& path) {
   const std::string file = path.string();
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    throw FileError(file + ": cannot open the URDF file: " + problem);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(file + ": cannot open the URDF file");
   std::stringstream buffer;

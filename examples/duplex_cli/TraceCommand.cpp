@@ -4,6 +4,7 @@
 #include "WorkerThreads.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/InputFile.h>
 #include <duplex/accel/RayFile.h>
 #include <duplex/scenegraph/SceneTracer.h>
 
@@ -43,6 +44,10 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   if (want_transmittance == !options.hits.empty())
     throw InvalidArgument("give exactly one of --hits and --transmittance");
   if (want_transmittance && options.any_hit) throw InvalidArgument("--transmittance cannot be combined with --any-hit");
+  const std::filesystem::path& output = want_transmittance ? options.transmittance : options.hits;
+  if (sameFile(options.rays, output))
+    throw InvalidArgument((want_transmittance ? "--transmittance " : "--hits ") + output.string() +
+                          " names the ray file given as --rays: it would be overwritten");
   WorkerThreads workers(options.threads);
   tbb::task_arena& arena = workers.arena;
   const int threads = workers.count;

@@ -1,6 +1,7 @@
 #include "duplex/scenegraph/SceneDocument.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/InputFile.h"
 
 #include <nlohmann/json.hpp>
 
@@ -305,6 +306,8 @@ void addNode(SceneGraph& graph, const std::filesystem::path& file, NodeId parent
 }
 
 json parseFile(const std::filesystem::path& path) {
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    throw FileError(path.string() + ": cannot open scene file: " + problem);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(path.string() + ": cannot open scene file");
   std::stringstream text;

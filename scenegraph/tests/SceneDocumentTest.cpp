@@ -21,6 +21,7 @@
 #include "duplex/scenegraph/SceneTracer.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <nlohmann/json.hpp>
 
 #include <array>
@@ -214,6 +215,26 @@ TEST(SceneDocumentV1Errors, MissingSceneFileNamesIt) {
   SceneDir d;
   const auto path = d.scenes / "no_such_scene.json";
   expectError([&] { (void)loadSceneDocument(path, builtinObjectTypes()); }, path, kParserError);
+}
+
+TEST(SceneDocumentV1Errors, DirectoriesAndFifosAreRefusedNamingThem) {
+  SceneDir d;
+  // As the scene file itself, as a mesh file, and as a prepared structure.
+  expectErrorNaming<FileError>([&] { (void)loadSceneDocument(d.scenes, builtinObjectTypes()); },
+                               "scenes: cannot open scene file: a directory, not a file");
+  const auto fifo = d.scenes / "fifo.json";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  expectErrorNaming<FileError>([&] { (void)loadSceneDocument(fifo, builtinObjectTypes()); },
+                               "fifo.json: cannot open scene file: not a regular file");
+  std::filesystem::create_directories(d.scenes / "meshes" / "dir.obj");
+  const auto mesh_dir = d.write(v1(R"({"name": "m", "mesh": {"file": "meshes/dir.obj"}})", ""));
+  expectErrorNaming<FileError>([&] { (void)loadSceneDocument(mesh_dir, builtinObjectTypes()); },
+                               "dir.obj': a directory, not a file");
+  std::filesystem::create_directories(d.scenes / "prepared.dbvh");
+  const auto structure_dir =
+      d.write(own(R"({"name": "m", "mesh": {"file": "meshes/quad_cube.obj"}, "structure": "prepared.dbvh"})", ""));
+  expectErrorNaming<FileError>([&] { (void)loadSceneDocument(structure_dir, builtinObjectTypes()); },
+                               "prepared.dbvh: cannot open bottom-level structure file: a directory, not a file");
 }
 
 TEST(SceneDocumentV1Errors, Objects) {

@@ -1,4 +1,5 @@
 #include "duplex/accel/RayFile.h"
+#include "duplex/accel/InputFile.h"
 
 #include "duplex/accel/Error.h"
 
@@ -26,6 +27,8 @@ namespace {
 
 template <class Record>
 std::vector<Record> readRecords(const std::filesystem::path& path, const char* kind) {
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    throw FileError(std::string(kind) + " file '" + path.string() + "': " + problem);
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) throw FileError(std::string(kind) + " file '" + path.string() + "': cannot open");
   const std::streamoff size = in.tellg();

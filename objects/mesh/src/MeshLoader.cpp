@@ -3,6 +3,7 @@
 #include "duplex/objects/MeshLoader.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/InputFile.h"
 #include "duplex/accel/Log.h"
 
 // OpenMesh's property containers trip GCC 12's -Wmaybe-uninitialized under the sanitizers (a
@@ -149,8 +150,8 @@ std::vector<glm::vec3> vertexPositions(const OpenMeshMesh& mesh) {
 }  // namespace
 
 TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw FileError("mesh file '" + path.string() + "': no such file");
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    throw FileError("mesh file '" + path.string() + "': " + problem);
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
   if (ext != ".obj" && ext != ".ply" && ext != ".off" && ext != ".stl" && ext != ".stla" && ext != ".stlb" &&

@@ -2,6 +2,7 @@
 
 #include "duplex/accel/AtomicFile.h"
 #include "duplex/accel/Error.h"
+#include "duplex/accel/InputFile.h"
 #include "duplex/accel/KdTree.h"
 #include "duplex/accel/WideBvh.h"
 #include "duplex/accel/Xxh64.h"
@@ -167,6 +168,8 @@ std::shared_ptr<const MeshObject> loadMeshObject(const std::filesystem::path& pa
   if (!mesh) throw InvalidArgument("loadMeshObject: null mesh");
   auto fail = [&path](const std::string& problem) -> void { throw FileError(path.string() + ": " + problem); };
 
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    fail("cannot open bottom-level structure file: " + problem);
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) fail("cannot open bottom-level structure file");
   const std::streamoff size = in.tellg();

@@ -13,6 +13,7 @@
 #include "VdbFileCheck.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/InputFile.h"
 #include "duplex/accel/Xxh64.h"
 
 #include <openvdb/io/File.h>
@@ -745,8 +746,7 @@ std::shared_ptr<const VolumeObject> makeVolumeObject(vdb::FloatGrid::ConstPtr gr
 std::shared_ptr<const VolumeObject> VolumeObject::load(const std::filesystem::path& file,
                                                        const VolumeLoadOptions& options) {
   const std::string f = file.string();
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(file, ec)) throw FileError(f + ": no such file");
+  if (const std::string problem = notRegularFile(file); !problem.empty()) throw FileError(f + ": " + problem);
   initializeOpenVdb();
   // Our own walk of the file's layout first: OpenVDB must never see a grid that runs past the end.
   (void)checkVdbFileStructure(file);

@@ -6,6 +6,7 @@
 #include "duplex/sensors/IesProfile.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/InputFile.h"
 
 #include <algorithm>
 #include <cctype>
@@ -145,6 +146,8 @@ std::vector<std::pair<double, std::size_t>> unfold(const std::vector<double>& h,
 }  // namespace
 
 IesProfile IesProfile::load(const std::filesystem::path& file) {
+  if (const std::string problem = notRegularFile(file); !problem.empty())
+    throw FileError(file.string() + ": cannot open the IES file: " + problem);
   std::ifstream in(file, std::ios::binary);
   if (!in) throw FileError(file.string() + ": cannot open the IES file");
   std::ostringstream text;

@@ -5,6 +5,7 @@
 
 #include "duplex/accel/AtomicFile.h"
 #include "duplex/accel/Error.h"
+#include "duplex/accel/InputFile.h"
 #include "duplex/accel/Xxh64.h"
 
 #include <algorithm>
@@ -169,6 +170,8 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
 }
 
 void SensorRun::loadState(const std::filesystem::path& file) {
+  if (const std::string problem = notRegularFile(file); !problem.empty())
+    throw FileError(file.string() + ": cannot open the run state: " + problem);
   std::ifstream in(file, std::ios::binary | std::ios::ate);
   if (!in) throw FileError(file.string() + ": cannot open the run state");
   const std::streamoff size = in.tellg();

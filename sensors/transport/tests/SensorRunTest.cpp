@@ -470,6 +470,11 @@ TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
     EXPECT_THROW(third.loadState(file), FileError);
     EXPECT_EQ(third.raysDone(), 0u);
     std::filesystem::remove(file);
+    // A directory where the state should be is refused at once (not read as a file of absurd size).
+    std::filesystem::create_directories(file);
+    expectErrorNaming<FileError>([&] { third.loadState(file); }, "cannot open the run state: a directory, not a file");
+    EXPECT_EQ(third.raysDone(), 0u);
+    std::filesystem::remove(file);
   }
 }
 
