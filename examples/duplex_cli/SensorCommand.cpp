@@ -6,6 +6,7 @@
 #include "WorkerThreads.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/InputFile.h>
 #include <duplex/sensors/SensorRun.h>
 #include <duplex/sensors/SensorScene.h>
 
@@ -22,6 +23,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 
 namespace duplex::cli {
@@ -35,24 +37,29 @@ std::string fileName(const std::string& name) {
   return s.empty() ? "_" : s;
 }
 
-// The run a SIGINT / SIGTERM stops. Lock-free atomics only: the handler may run on any thread.
+// What a SIGINT / SIGTERM stops: the scene load (its cancel token) and then the run. Lock-free
+// atomics only: the handler may run on any thread.
 std::atomic<SensorRun*> g_running{nullptr};
+std::atomic<CancelToken*> g_loading{nullptr};
 std::atomic<int> g_stop_signal{0};
-static_assert(std::atomic<SensorRun*>::is_always_lock_free && std::atomic<int>::is_always_lock_free);
+static_assert(std::atomic<SensorRun*>::is_always_lock_free && std::atomic<CancelToken*>::is_always_lock_free &&
+              std::atomic<int>::is_always_lock_free);
 
 extern "C" void onStopSignal(int sig) {
   g_stop_signal.store(sig, std::memory_order_relaxed);
+  if (CancelToken* token = g_loading.load(std::memory_order_relaxed)) token->cancel();
   if (SensorRun* run = g_running.load(std::memory_order_relaxed)) run->cancel();
 }
 
-// While alive, SIGINT and SIGTERM stop `run` after the chunks in flight (so that the rays traced so
-// far are saved and can be resumed) instead of killing the process; a second signal kills it as
-// usual (SA_RESETHAND). The previous handlers come back at the end of the scope.
+// While alive (from the command's start), SIGINT and SIGTERM stop the scene load, or the run after
+// the chunks in flight (so that the rays traced so far are saved and can be resumed), instead of
+// killing the process; a second signal kills it as usual (SA_RESETHAND). The previous handlers
+// come back at the end of the scope.
 class StopSignals {
  public:
-  explicit StopSignals(SensorRun& run) {
+  explicit StopSignals(CancelToken& loading) {
     g_stop_signal.store(0);
-    g_running.store(&run);
+    g_loading.store(&loading);
     struct sigaction sa {};
     sa.sa_handler = onStopSignal;
     sigemptyset(&sa.sa_mask);
@@ -60,17 +67,30 @@ class StopSignals {
     ::sigaction(SIGINT, &sa, &old_int_);
     ::sigaction(SIGTERM, &sa, &old_term_);
   }
-  ~StopSignals() {
+  // From now on a signal stops `run` (the load is over); one that came in between stops it at once.
+  void running(SensorRun& run) {
+    g_loading.store(nullptr);
+    g_running.store(&run);
+    if (g_stop_signal.load() != 0) run.cancel();
+  }
+  // The previous handlers again (after the run: a signal while the results are written kills the
+  // process as usual, since the state file is already saved).
+  void release() {
+    if (released_) return;
+    released_ = true;
     ::sigaction(SIGINT, &old_int_, nullptr);
     ::sigaction(SIGTERM, &old_term_, nullptr);
     g_running.store(nullptr);
+    g_loading.store(nullptr);
   }
+  ~StopSignals() { release(); }
   StopSignals(const StopSignals&) = delete;
   StopSignals& operator=(const StopSignals&) = delete;
 
  private:
   struct sigaction old_int_ {};
   struct sigaction old_term_ {};
+  bool released_ = false;
 };
 
 // Every sensor writes DIR/<file name>.{json,csv,png,exr} and the run writes DIR/run.json: two
@@ -79,6 +99,11 @@ void checkOutputNames(const SensorScene& scene, const std::filesystem::path& sce
   std::map<std::string, std::string> owner;
   for (const SensorInstance& s : scene.sensors()) {
     const std::string base = fileName(s.name);
+    // NAME_MAX of Linux file systems, for the longest of the files written (".json", ".png", ...).
+    if (base.size() + 5 > 255)
+      throw InvalidArgument(scene_file.string() + ": sensor name '" + s.name.substr(0, 40) + "...' (" +
+                            std::to_string(s.name.size()) +
+                            " characters) is too long for its output files' names (at most 250); shorten it");
     if (base == "run")
       throw InvalidArgument(scene_file.string() + ": sensor '" + s.name +
                             "' would write run.json, the run's report; rename the sensor");
@@ -229,8 +254,20 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   if (!(o.roulette >= 0.0 && o.roulette < 1.0))
     throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
   WorkerThreads workers(o.threads);
-  const SensorScene scene =
-      workers.arena.execute([&] { return SensorScene::load(o.scene, documentOptions(o.structure)); });
+  CancelToken loading;
+  StopSignals signals(loading);
+  SceneDocumentOptions load_options = documentOptions(o.structure);
+  load_options.control.cancel = &loading;
+  std::optional<SensorScene> loaded;
+  if (o.progress != "none") std::cerr << "loading " << o.scene.string() << '\n' << std::flush;
+  try {
+    loaded.emplace(workers.arena.execute([&] { return SensorScene::load(o.scene, load_options); }));
+  } catch (const Cancelled&) {
+    if (g_stop_signal.load() == 0) throw;
+  }
+  if (g_stop_signal.load() != 0)
+    throw Interrupted(g_stop_signal.load(), "stopped while loading the scene; nothing written");
+  const SensorScene& scene = *loaded;
   if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
   if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
   checkOutputNames(scene, o.scene);
@@ -246,6 +283,9 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   std::filesystem::create_directories(o.out, ec);
   if (ec) throw FileError(o.out.string() + ": cannot create the output folder (" + ec.message() + ")");
   const std::filesystem::path state = o.out / "run_state.bin";
+  // Refused now rather than after the run, when the state is saved.
+  if (std::filesystem::exists(state) && !notRegularFile(state).empty())
+    throw FileError(state.string() + ": cannot hold the run state: " + notRegularFile(state));
   if (o.resume) run.loadState(state);
   if (run.raysDone() > o.rays)
     throw InvalidArgument(state.string() + " holds " + std::to_string(run.raysDone()) + " rays, more than --rays " +
@@ -263,7 +303,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
   SensorRunStatus status;
   {
-    const StopSignals signals(run);
+    signals.running(run);
     ProgressPrinter printer(o.progress, start);
     // Periodic saves between batches (the accumulators are whole there). A failed save is reported
     // and the run goes on: the previous state file stays intact (saveState writes and renames).
@@ -286,6 +326,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
           checkpoint(p);
         },
         stop);
+    signals.release();
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   run.saveState(state);

@@ -20,6 +20,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 
 namespace duplex::cli {
@@ -48,6 +49,19 @@ struct SensorOptions {
   /// batches of 65,536 rays, so at most this plus one batch): --resume continues from the last save
   /// and gives the files of one uninterrupted run.
   double checkpoint_s = 60.0;
+};
+
+/// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene
+/// loaded): nothing was written; the tool exits with 128 + the signal.
+class Interrupted : public std::runtime_error {
+ public:
+  /// `signal`: the signal's number; `what`: what was stopped.
+  Interrupted(int signal, const std::string& what) : std::runtime_error(what), signal_(signal) {}
+  /// The signal's number.
+  [[nodiscard]] int signal() const { return signal_; }
+
+ private:
+  int signal_;
 };
 
 /// Runs the command; returns the report (keys: rays, seed, threads, max_depth, max_scatterings,

@@ -309,6 +309,9 @@ int main(int argc, char** argv) {
     // says it was stopped, as a shell expects (128 + the signal).
     if (*sensor_cmd && result.contains("signal")) return 128 + result["signal"].get<int>();
     return 0;
+  } catch (const duplex::cli::Interrupted& e) {
+    std::cerr << command << ": " << e.what() << " (signal " << e.signal() << ")\n";
+    return 128 + e.signal();
   } catch (const duplex::Error& e) {
     std::cerr << command << ": error: " << e.what() << '\n';
     return kExitBadInput;

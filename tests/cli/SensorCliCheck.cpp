@@ -28,6 +28,7 @@
 #include <fstream>
 #include <iostream>
 #include <stdexcept>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -193,6 +194,29 @@ int check(const std::string& duplex, const fs::path& dir) {
   expect(resumed["resumed_from"] == 8000, "resume did not start from the saved rays: " + resumed.dump());
   expectSameMaps(dir / "one", dir / "resumed", "resumed run");
 
+  // SIGTERM while the scene loads (many objects, each built in turn) stops the load: exit 143,
+  // nothing on stdout, nothing written.
+  {
+    std::ostringstream objects, nodes;
+    for (int k = 0; k < 400; ++k) {
+      objects << (k ? ", " : "") << R"({"name": "s)" << k << R"(", "sphere": {"radius": )" << 1.0 + 0.001 * k
+              << R"(, "subdivisions": 6}})";
+      nodes << (k ? ", " : "") << R"({"instance": "s)" << k << R"("})";
+    }
+    const fs::path slow = dir / "slow_load.json";
+    write(slow, R"({"format": "duplex-scene-v1", "objects": [)" + objects.str() + R"(], "nodes": [)" + nodes.str() +
+                    R"(], "lights": [{"type": "point", "position": [0, 0, 5], "power": 1}],
+                        "sensors": [{"name": "s", "shape": "rectangle", "size": [1, 1], "bins": [2, 2]}]})");
+    const RunResult stopped =
+        runAndSignal(sensorArgs(duplex, slow, "1000", "1", dir / "slow"), dir.string(), SIGTERM, "loading ", 60.0);
+    expect(stopped.exited && stopped.exit_code == 143,
+           "SIGTERM while loading: expected exit 143, got " + describe(stopped) + "\n" + stopped.err);
+    expect(stopped.out.empty() && stopped.err.find("stopped while loading the scene") != std::string::npos,
+           "SIGTERM while loading: " + stopped.out + stopped.err);
+    expect(!fs::exists(dir / "slow" / "run.json") && !fs::exists(dir / "slow" / "run_state.bin"),
+           "SIGTERM while loading: files were written");
+  }
+
   // SIGINT stops a run after the chunks in flight: its rays are saved and written, the exit status
   // is 128 + 2, and resuming to N rays gives the files of one run of N rays.
   {
@@ -275,6 +299,7 @@ int check(const std::string& duplex, const fs::path& dir) {
   };
   bad.push_back({"same_file.json", twoSensors("a b", "a_b"), "would both write a_b.json"});
   bad.push_back({"run_name.json", twoSensors("x", "run"), "would write run.json"});
+  bad.push_back({"long_name.json", twoSensors("x", std::string(300, 'n')), "too long for its output files' names"});
   {
     std::vector<std::string> args = sensorArgs(duplex, scene, "100", "1", dir / "bad");
     for (const char* a : {"--target-error", "0.1", "--target-sensor", "no-such-face"}) args.push_back(a);
@@ -286,6 +311,16 @@ int check(const std::string& duplex, const fs::path& dir) {
     const RunResult rr = run(args, dir.string());
     expect(rr.exited && rr.exit_code != 0 && rr.err.find("run_state.bin") != std::string::npos,
            "--resume without a saved state: " + describe(rr) + "\n" + rr.err);
+    // A directory where the run state goes: refused before the run (with and without --resume).
+    fs::create_directories(dir / "state_dir" / "run_state.bin");
+    for (const bool resume : {false, true}) {
+      args = sensorArgs(duplex, scene, "100", "1", dir / "state_dir");
+      if (resume) args.push_back("--resume");
+      const RunResult rd = run(args, dir.string());
+      expect(rd.exited && rd.exit_code == 1 && rd.err.find("a directory, not a file") != std::string::npos &&
+                 rd.out.empty(),
+             "run_state.bin a directory: " + describe(rd) + "\n" + rd.err);
+    }
   }
   for (const Bad& b : bad) {
     write(dir / b.file, b.text);
