@@ -76,6 +76,13 @@ bool indexRay(const VolumeObject::Grid& g, const Ray& ray_os, double tmin, doubl
     t1 = std::min(t1, tb);
   }
   if (!(t0 <= t1) || !std::isfinite(t1)) return false;
+  // A voxel must take a representable step of t: when the time to cross one (1 / the largest
+  // direction component, in voxels) is below 1e-12 of t itself (an origin ~1e20 voxels away, or a
+  // direction ~1e20 voxels long), the ray's position inside the grid is not determined by its
+  // numbers, and the DDA could not advance (it would never return). Such a ray misses, as other
+  // rays that cannot be traced do.
+  const double fastest = std::max({std::abs(d[0]), std::abs(d[1]), std::abs(d[2])});
+  if (fastest * std::max(std::abs(t0), std::abs(t1)) * 1e-12 > 1.0) return false;
   out = RayI(o, d, t0, t1);
   return true;
 }

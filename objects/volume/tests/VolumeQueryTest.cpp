@@ -600,6 +600,34 @@ TEST(VolumeFailureCases, InfiniteRaysThatMissTerminateForEveryMethod) {
   }
 }
 
+TEST(VolumeFailureCases, RaysWhoseParameterCannotResolveAVoxelMissAndReturn) {
+  // An origin at -1e20 with a direction of 1e20 reaches the grid at t ~ 1, where one voxel is a
+  // step of t far below its rounding: every query answers at once, as a miss.
+  const auto sphere = makeVolumeObject(sphereLevelSet(1.0f, 0.05f));
+  const auto ramp = makeVolumeObject(rampGrid(24, 0.2f));
+  QueryContext ctx;
+  const std::vector<Ray> rays = {
+      Ray{glm::vec3(-1e20f, 0.1f, 0.1f), 0.0f, glm::vec3(1e20f, 0.0f, 0.0f), kInf},
+      Ray{glm::vec3(-1e20f, -1e20f, 0.2f), 0.0f, glm::vec3(1e20f, 1e20f, 0.0f), kInf},
+      Ray{glm::vec3(0.3f, 0.2f, -1e18f), 0.0f, glm::vec3(0.0f, 0.0f, 1.0f), kInf},  // far, slow
+  };
+  for (const Ray& ray : rays) {
+    Hit hit;
+    EXPECT_FALSE(sphere->intersect(ray, hit, ctx)) << ray;
+    EXPECT_FALSE(sphere->occluded(ray, ctx)) << ray;
+    for (const FogMethod m :
+         {FogMethod::Exact, FogMethod::RatioTracking, FogMethod::DeltaTracking, FogMethod::RayMarching})
+      EXPECT_EQ(ramp->transmittance(ray, ctx, m, 1), 1.0f) << ray;
+    EXPECT_FALSE(ramp->sampleFreeFlight(ray, ctx, 0).has_value()) << ray;
+    EXPECT_FALSE(ramp->firstDensityAbove(ray, 0.0f, ctx).has_value()) << ray;
+  }
+  // The same rays brought near (origin a few units away) are traced as usual.
+  const Ray near{glm::vec3(-5.0f, 0.1f, 0.1f), 0.0f, glm::vec3(1.0f, 0.0f, 0.0f), kInf};
+  Hit hit;
+  EXPECT_TRUE(sphere->intersect(near, hit, ctx));
+  EXPECT_LT(ramp->transmittance(near, ctx, FogMethod::Exact, 1), 1.0f);
+}
+
 TEST(VolumeFailureCases, SingleActiveVoxel) {
   openvdb::initialize();
   const double voxel = 0.1;
