@@ -858,6 +858,46 @@ void BvhNode8::computeOrder() {
   }
 }
 
+void BvhNode8::updateOrder() {
+  // The same centres and keys as computeOrder's; the order stands when, for octants 0-3, the empty
+  // slots come first in slot order and the used ones follow by strictly decreasing (key, -slot),
+  // which is the one order computeOrder's stable sort gives. Octants 4-7 are then derived as
+  // computeOrder derives them.
+  double centre[kWidth][3];
+  int used = 0;
+  for (int k = 0; k < kWidth; ++k) {
+    used += child[k] != BvhRef::kEmpty;
+    for (int a = 0; a < 3; ++a) centre[k][a] = double{lo[a][k]} + double{hi[a][k]};
+  }
+  const int empty = kWidth - used;
+  for (int octant = 0; octant < 4; ++octant) {
+    double prev_key = 0.0;
+    int prev_slot = 0;
+    for (int rank = 0; rank < kWidth; ++rank) {
+      const int k = orderedSlot(octant, rank);
+      if (rank < empty) {
+        if (k != used + rank) return computeOrder();
+        continue;
+      }
+      if (k >= used) return computeOrder();
+      double v = 0.0;
+      for (int a = 0; a < 3; ++a) v += (octant >> a & 1) ? -centre[k][a] : centre[k][a];
+      if (rank > empty && !(prev_key > v || (prev_key == v && prev_slot < k))) return computeOrder();
+      prev_key = v;
+      prev_slot = k;
+    }
+  }
+  std::uint32_t packed[kWidth] = {};
+  for (int octant = 0; octant < 4; ++octant) {
+    for (int rank = 0; rank < kWidth; ++rank) {
+      const auto k = static_cast<std::uint32_t>(orderedSlot(octant, rank));
+      packed[rank] |= k << (3 * octant);
+      packed[rank < empty ? rank : empty + kWidth - 1 - rank] |= k << (3 * (7 - octant));
+    }
+  }
+  std::copy(std::begin(packed), std::end(packed), std::begin(order));
+}
+
 bool BvhNode8::orderValid() const {
   for (int rank = 0; rank < kWidth; ++rank)
     if (order[rank] >> 24 != 0) return false;

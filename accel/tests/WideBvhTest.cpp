@@ -393,6 +393,92 @@ TEST(WideBvhNode, ChildOrderRunsFarToNearAlongEachOctant) {
   EXPECT_FALSE(bad.orderValid());
 }
 
+// The orders are those of a stable sort by descending key (what the traversal's tie-breaking
+// among equally distant hits follows): checked against an insertion sort on nodes with many equal
+// centres, negative zeros and empty slots.
+TEST(WideBvhNode, ChildOrderIsAStableSortOfTheKeys) {
+  std::mt19937 rng(47);
+  std::uniform_int_distribution<int> coarse(-2, 2);  // few distinct centres: many ties
+  std::uniform_int_distribution<int> count(2, BvhNode8::kWidth);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const int used = count(rng);
+    BvhNode8 node;
+    for (int k = 0; k < BvhNode8::kWidth; ++k) node.setChild(k, BvhRef::kEmpty, Box());
+    for (int k = 0; k < used; ++k) {
+      glm::vec3 c(static_cast<float>(coarse(rng)), static_cast<float>(coarse(rng)), static_cast<float>(coarse(rng)));
+      for (int a = 0; a < 3; ++a)
+        if (c[a] == 0.0f && (rng() & 1)) c[a] = -0.0f;
+      node.setChild(k, static_cast<std::uint32_t>(k + 1), Box(c, c));
+    }
+    node.computeOrder();
+    ASSERT_TRUE(node.orderValid());
+    for (int octant = 0; octant < 8; ++octant) {
+      // Octants 4-7 are the reverses of 3-0 among the used slots.
+      const int base = octant < 4 ? octant : 7 - octant;
+      double key[BvhNode8::kWidth];
+      int slot[BvhNode8::kWidth];
+      for (int k = 0; k < BvhNode8::kWidth; ++k) {
+        double v = std::numeric_limits<double>::infinity();
+        if (k < used) {
+          v = 0.0;
+          for (int a = 0; a < 3; ++a) {
+            const double c = double{node.lo[a][k]} + double{node.hi[a][k]};
+            v += (base >> a & 1) ? -c : c;
+          }
+        }
+        int i = k;
+        for (; i > 0 && key[i - 1] < v; --i) {
+          key[i] = key[i - 1];
+          slot[i] = slot[i - 1];
+        }
+        key[i] = v;
+        slot[i] = k;
+      }
+      const int empty = BvhNode8::kWidth - used;
+      for (int rank = 0; rank < BvhNode8::kWidth; ++rank) {
+        const int expected = octant < 4 || rank < empty ? slot[rank] : slot[empty + BvhNode8::kWidth - 1 - rank];
+        ASSERT_EQ(node.orderedSlot(octant, rank), expected) << "trial " << trial << " octant " << octant;
+      }
+    }
+  }
+}
+
+// updateOrder keeps an order only where computeOrder would give it: after small and large moves
+// of the boxes (ties included), and from orders that are any permutation or not valid at all.
+TEST(WideBvhNode, UpdatedOrderEqualsTheComputedOne) {
+  std::mt19937 rng(53);
+  std::uniform_int_distribution<int> coarse(-3, 3);
+  std::uniform_int_distribution<int> count(2, BvhNode8::kWidth);
+  std::uniform_real_distribution<float> jitter(-1.5f, 1.5f);
+  int kept = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    const int used = count(rng);
+    BvhNode8 node;
+    for (int k = 0; k < BvhNode8::kWidth; ++k) node.setChild(k, BvhRef::kEmpty, Box());
+    auto place = [&](bool move) {
+      for (int k = 0; k < used; ++k) {
+        glm::vec3 c = move ? node.childBox(k).lo : glm::vec3(coarse(rng), coarse(rng), coarse(rng));
+        if (move && trial % 3 != 0) c += glm::vec3(jitter(rng), 0.0f, jitter(rng));  // a third keeps ties
+        node.setChild(k, static_cast<std::uint32_t>(k + 1), Box(c, c + glm::vec3(1.0f)));
+      }
+    };
+    place(false);
+    node.computeOrder();
+    if (trial % 5 == 0) {  // an order of another node: any permutation, or garbage
+      std::uint32_t word = static_cast<std::uint32_t>(rng());
+      for (std::uint32_t& o : node.order) o = trial % 10 == 0 ? word++ : o ^ (word & 0x00FFFFFFu);
+    }
+    place(true);
+    BvhNode8 updated = node, computed = node;
+    updated.updateOrder();
+    computed.computeOrder();
+    ASSERT_TRUE(std::equal(std::begin(updated.order), std::end(updated.order), std::begin(computed.order)))
+        << "trial " << trial;
+    kept += std::equal(std::begin(node.order), std::end(node.order), std::begin(computed.order));
+  }
+  EXPECT_GT(kept, 300);  // the check's fast path is exercised
+}
+
 // ---------------------------------------------------------------------------------------------
 
 TEST(WideBvhRefit, UnmovedBoxesGiveTheSameTree) {

@@ -17,6 +17,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <limits>
@@ -227,6 +228,41 @@ std::vector<Box> triangleBounds(const TriangleMesh& m) {
   return bounds;
 }
 
+// Block `block` of a BVH's leaf blocks from its four prim_indices entries `refs`. Lane 0 always
+// holds a triangle (leaf ranges start at blocks); padding lanes repeat the block's last triangle
+// (masked off by the leaf's count). `visit(a, b, c)` sees the corners of each triangle lane, not of
+// the padding, so that a refit can take the leaf's box and the validity test from the same loads.
+template <class Visit>
+void fillBvhBlock(detail::TriangleBlock4& block, const std::uint32_t* refs, const TriangleMesh::Triangle* tris,
+                  const glm::vec3* positions, const Visit& visit) {
+  std::uint32_t prim = refs[0];
+  for (std::uint32_t k = 0; k < 4; ++k) {
+    const bool padding = refs[k] == WideBvh::kPadding;
+    if (!padding) prim = refs[k];
+    const TriangleMesh::Triangle& t = tris[prim];
+    const glm::vec3 &a = positions[t[0]], &b = positions[t[1]], &c = positions[t[2]];
+    if (!padding) visit(a, b, c);
+    block.set(static_cast<int>(k), a, b, c, prim);
+  }
+}
+
+// The refit visits the leaf blocks in increasing order (the depth-first layout), and each block's
+// corners are two dependent loads away (prim_indices, then the triangle, then its vertices), which
+// no hardware prefetcher follows: this fetches the triangles a few blocks ahead and the vertices of
+// the triangles fetched before.
+inline void prefetchBlockCorners(const std::uint32_t* refs, std::size_t block_count, std::size_t b,
+                                 const TriangleMesh::Triangle* tris, const glm::vec3* positions) {
+  constexpr std::size_t kTriangleDistance = 8, kVertexDistance = 4;
+  if (b + kTriangleDistance < block_count)
+    for (int k = 0; k < 4; ++k)
+      if (const std::uint32_t prim = refs[4 * (b + kTriangleDistance) + k]; prim != WideBvh::kPadding)
+        __builtin_prefetch(&tris[prim]);
+  if (b + kVertexDistance < block_count)
+    for (int k = 0; k < 4; ++k)
+      if (const std::uint32_t prim = refs[4 * (b + kVertexDistance) + k]; prim != WideBvh::kPadding)
+        for (int c = 0; c < 3; ++c) __builtin_prefetch(&positions[tris[prim][c]]);
+}
+
 }  // namespace
 
 std::string_view toString(MeshStructure s) { return s == MeshStructure::Bvh ? "bvh" : "kdtree"; }
@@ -290,20 +326,12 @@ void MeshObject::buildBvh(const BvhBuildConfig& config) {
 
 void MeshObject::buildBvhBlocks() {
   const TriangleMesh& m = *mesh_;
-  const std::vector<glm::vec3>& positions = m.positions();
   const std::vector<std::uint32_t>& refs = bvh_.prim_indices;
   blocks_.resize(refs.size() / 4);
   forChunks(blocks_.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
-    for (std::size_t b = first; b < last; ++b) {
-      // Lane 0 always holds a triangle (leaf ranges start at blocks); padding lanes repeat the
-      // block's last triangle (masked off by the leaf's count).
-      std::uint32_t prim = refs[4 * b];
-      for (std::uint32_t k = 0; k < 4; ++k) {
-        if (refs[4 * b + k] != WideBvh::kPadding) prim = refs[4 * b + k];
-        const TriangleMesh::Triangle& t = m.triangles()[prim];
-        blocks_[b].set(static_cast<int>(k), positions[t[0]], positions[t[1]], positions[t[2]], prim);
-      }
-    }
+    for (std::size_t b = first; b < last; ++b)
+      fillBvhBlock(blocks_[b], &refs[4 * b], m.triangles().data(), m.positions().data(),
+                   [](const glm::vec3&, const glm::vec3&, const glm::vec3&) {});
   });
 }
 
@@ -340,30 +368,66 @@ std::shared_ptr<const Object> MeshObject::deformed(std::span<const glm::vec3> po
   return deformedMesh(positions_os);
 }
 
+MeshObject::MeshObject(const MeshObject& from, RefitTag)
+    : Object(from.name()),
+      structure_(MeshStructure::Bvh),
+      config_(from.config_),
+      built_sah_(from.built_sah_),
+      refitted_(true) {}
+
 std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::vec3> positions_os) const {
-  auto mesh = std::make_shared<const TriangleMesh>(
-      mesh_->withPositions(std::vector<glm::vec3>(positions_os.begin(), positions_os.end())));
-  const bool same_valid = structure_ == MeshStructure::Bvh && mesh->sameValidity(*mesh_);
-  // A triangle that became valid is in no leaf, one that became degenerate would fail the
-  // structure's invariants: both need a build, as a kd-tree always does.
-  if (!same_valid) return std::make_shared<const MeshObject>(std::move(mesh), config_);
-  WideBvh bvh = bvh_;
-  const std::vector<glm::vec3>& p = mesh->positions();
-  const std::vector<TriangleMesh::Triangle>& tris = mesh->triangles();
-  refitWideBvhWith(bvh, [&](std::uint32_t prim) {  // indices were checked when bvh_ was made
-    const TriangleMesh::Triangle& t = tris[prim];
-    Box b;
-    b.extend(p[t[0]]);
-    b.extend(p[t[1]]);
-    b.extend(p[t[2]]);
-    return b;
+  mesh_->checkPositions(positions_os);
+  std::vector<glm::vec3> positions(positions_os.begin(), positions_os.end());
+  // A kd-tree's clipped splits cannot be refitted; nor can a BVH whose triangles changed between
+  // valid and degenerate (one that became valid is in no leaf, one that became degenerate would
+  // break the structure's invariants).
+  auto rebuild = [&] {
+    return std::make_shared<const MeshObject>(
+        std::make_shared<const TriangleMesh>(mesh_->withPositions(std::move(positions))), config_);
+  };
+  if (structure_ != MeshStructure::Bvh) return rebuild();
+  const std::vector<TriangleMesh::Triangle>& tris = mesh_->triangles();
+  for (std::size_t t = 0; mesh_->degenerateCount() > 0 && t < tris.size(); ++t) {
+    if (mesh_->isValid(t)) continue;
+    const TriangleMesh::Triangle& i = tris[t];
+    if (TriangleMesh::hasArea(positions[i[0]], positions[i[1]], positions[i[2]])) return rebuild();
+  }
+  // One pass over the leaves writes the new object's blocks, takes the leaf boxes from the same
+  // loads and tests that every triangle in the tree keeps an area; the nodes above are written
+  // once each, with their orders, by the refit.
+  std::unique_ptr<MeshObject> out(new MeshObject(*this, RefitTag{}));
+  WideBvh& bvh = out->bvh_;
+  bvh.root = bvh_.root;
+  bvh.leaf_block = bvh_.leaf_block;
+  bvh.prim_indices = bvh_.prim_indices;
+  bvh.nodes.resize(bvh_.nodes.size());
+  out->blocks_.resize(blocks_.size());
+  std::atomic<bool> lost_area{false};
+  const std::uint32_t* refs = bvh.prim_indices.data();
+  const std::size_t block_count = out->blocks_.size();
+  detail::TriangleBlock4* blocks = out->blocks_.data();
+  bvh.bounds = refitWideBvhNodes(bvh_, bvh.nodes, [&](std::uint32_t ref) {  // indices checked when bvh_ was made
+    const std::uint32_t first = BvhRef::leafBlock(ref), count = BvhRef::leafCount(ref);
+    Box box;
+    bool flat = false;
+    for (std::uint32_t b = first; b < first + (count + 3) / 4; ++b) {
+      prefetchBlockCorners(refs, block_count, b, tris.data(), positions.data());
+      fillBvhBlock(blocks[b], refs + std::size_t{4} * b, tris.data(), positions.data(),
+                   [&](const glm::vec3& p0, const glm::vec3& p1, const glm::vec3& p2) {
+                     box.extend(p0);
+                     box.extend(p1);
+                     box.extend(p2);
+                     flat |= !TriangleMesh::hasArea(p0, p1, p2);
+                   });
+    }
+    if (flat) lost_area.store(true, std::memory_order_relaxed);
+    return box;
   });
-  if (!(bvh.sahCost(config_.bvh) <= static_cast<double>(config_.bvh.refit_limit) * built_sah_))
-    return std::make_shared<const MeshObject>(std::move(mesh), config_);
-  std::unique_ptr<MeshObject> out(new MeshObject(std::move(mesh), std::move(bvh), PartsTag{}));
-  out->config_ = config_;
-  out->built_sah_ = built_sah_;
-  out->refitted_ = true;
+  if (lost_area.load(std::memory_order_relaxed)) return rebuild();
+  if (!(bvh.sahCost(config_.bvh) <= static_cast<double>(config_.bvh.refit_limit) * built_sah_)) return rebuild();
+  // Every valid triangle is in a leaf: the refitted bounds are the mesh's.
+  out->mesh_ =
+      std::make_shared<const TriangleMesh>(mesh_->withPositionsOfSameValidity(std::move(positions), bvh.bounds));
   return out;
 }
 
@@ -402,7 +466,8 @@ void MeshObject::buildLeafBlocks() {
 
 namespace {
 
-detail::MeshBvhView bvhView(const WideBvh& bvh, const std::vector<detail::TriangleBlock4>& blocks) {
+template <class Blocks>
+detail::MeshBvhView bvhView(const WideBvh& bvh, const Blocks& blocks) {
   return {bvh.nodes.data(), bvh.root, bvh.bounds, blocks.data()};
 }
 

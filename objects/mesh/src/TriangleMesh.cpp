@@ -38,20 +38,48 @@ TriangleMesh TriangleMesh::fromTriangles(std::vector<glm::vec3> positions, std::
   return m;
 }
 
-TriangleMesh TriangleMesh::withPositions(std::vector<glm::vec3> positions) const {
+void TriangleMesh::checkPositions(std::span<const glm::vec3> positions) const {
   if (positions.size() != positions_.size())
     throw InvalidArgument("mesh '" + name_ + "': given " + std::to_string(positions.size()) +
                           " positions, but it has " + std::to_string(positions_.size()) + " vertices");
-  for (std::size_t i = 0; i < positions.size(); ++i) {
-    const glm::vec3& p = positions[i];
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+  // In parallel chunks (a deformation step is otherwise parallel), the first bad vertex reported.
+  constexpr std::size_t kChunk = 16384;
+  std::vector<std::size_t> first_bad((positions.size() + kChunk - 1) / kChunk, SIZE_MAX);
+  tbb::parallel_for(std::size_t{0}, first_bad.size(), [&](std::size_t c) {
+    const std::size_t end = std::min(positions.size(), (c + 1) * kChunk);
+    for (std::size_t i = c * kChunk; i < end; ++i) {
+      const glm::vec3& p = positions[i];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+        first_bad[c] = i;
+        return;
+      }
+    }
+  });
+  for (const std::size_t i : first_bad)
+    if (i != SIZE_MAX)
       throw InvalidArgument("mesh '" + name_ + "': position of vertex " + std::to_string(i) + " is not finite");
-  }
+}
+
+TriangleMesh TriangleMesh::withPositions(std::vector<glm::vec3> positions) const {
+  checkPositions(positions);
   TriangleMesh m;
   m.name_ = name_;
   m.positions_ = std::move(positions);
   m.triangles_ = triangles_;
   m.validate(/*check_indices=*/false);  // the same vertex count: the indices were checked here
+  return m;
+}
+
+TriangleMesh TriangleMesh::withPositionsOfSameValidity(std::vector<glm::vec3> positions, const Box& bounds) const {
+  if (positions.size() != positions_.size())
+    throw InvalidArgument("mesh '" + name_ + "': positions of another vertex count");
+  TriangleMesh m;
+  m.name_ = name_;
+  m.positions_ = std::move(positions);
+  m.triangles_ = triangles_;
+  m.valid_ = valid_;
+  m.degenerate_count_ = degenerate_count_;
+  m.bounds_ = bounds;
   return m;
 }
 
@@ -83,14 +111,11 @@ void TriangleMesh::validate(bool check_indices) {
         part.bad = std::min(part.bad, i);
         continue;
       }
-      bool ok = t[0] != t[1] && t[1] != t[2] && t[0] != t[2] && finite[t[0]] && finite[t[1]] && finite[t[2]];
       const glm::vec3 a = positions_[t[0]], b = positions_[t[1]], c3 = positions_[t[2]];
-      if (ok) {
-        // Exactly zero area in double: such a triangle has no interior and the watertight test
-        // would report det == 0 anyway; keeping it out of the tree saves work.
-        const glm::dvec3 n = glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c3) - glm::dvec3(a));
-        ok = n != glm::dvec3(0.0);
-      }
+      // Exactly zero area in double: such a triangle has no interior and the watertight test
+      // would report det == 0 anyway; keeping it out of the tree saves work.
+      const bool ok = t[0] != t[1] && t[1] != t[2] && t[0] != t[2] && finite[t[0]] && finite[t[1]] && finite[t[2]] &&
+                      hasArea(a, b, c3);
       if (!ok) {
         ++part.degenerate;
         continue;

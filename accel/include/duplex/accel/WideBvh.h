@@ -14,8 +14,10 @@
 #include "duplex/accel/Box.h"
 #include "duplex/accel/BvhBuildConfig.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
+#include <iterator>
 #include <span>
 #include <vector>
 
@@ -89,6 +91,10 @@ struct alignas(64) BvhNode8 {
   /// coordinate along the octant's diagonal (ties by slot in octants 0-3, reversed in their
   /// opposites 7-0 .. 4, which are computed as the reverse), empty slots first.
   void computeOrder();
+  /// computeOrder() for a node whose `order` may still fit its boxes (a refit's, from the boxes
+  /// before the move): checks it against the boxes first (linear in the slots) and sorts only
+  /// when it no longer fits. The result equals computeOrder()'s whatever `order` held before.
+  void updateOrder();
   /// Whether `order` is a valid encoding: per octant a permutation of the 8 slots, high bits zero.
   [[nodiscard]] bool orderValid() const;
   /// The slot at rank `rank` (0: farthest) for rays of `octant`.
@@ -146,28 +152,30 @@ namespace detail {
 void bvhParallelFor(int count, void* context, void (*fn)(void* context, int i));
 }  // namespace detail
 
-/// refitWideBvh with each referenced primitive's box from `prim_box(prim)` (a callable inlined
-/// into the pass, so that no array of boxes is needed: a mesh computes them from its vertices).
-/// The subtrees below the root's children are refitted in parallel (TBB); the result does not
-/// depend on the thread count.
-template <class PrimBox>
-void refitWideBvhWith(WideBvh& bvh, const PrimBox& prim_box) {
+/// The refit pass itself: fills `nodes` (as many as from.nodes; every field is overwritten, so
+/// their old content does not matter, and `nodes` may be from.nodes itself) with `from`'s topology,
+/// each child box from `leaf_box(ref)` for a leaf reference `ref` (a callable inlined into the
+/// pass, called once per leaf) or from the refitted child node, and the orders those of
+/// computeOrder() for the new boxes (through updateOrder(), from `from`'s orders). Returns the new bounds
+/// (leaf_box(from.root) for a leaf root, empty for an empty one). The subtrees below the root's children are refitted
+/// in parallel (TBB), so leaf_box may run on several threads at once; the result does not depend on the thread count.
+template <class LeafBox>
+Box refitWideBvhNodes(const WideBvh& from, std::span<BvhNode8> nodes, const LeafBox& leaf_box) {
   struct Refit {
-    WideBvh& bvh;
-    const PrimBox& prim_box;
-    Box leaf(std::uint32_t ref) const {
-      Box b;
-      const std::size_t first = std::size_t{bvh.leaf_block} * BvhRef::leafBlock(ref);
-      for (std::uint32_t i = 0; i < BvhRef::leafCount(ref); ++i) b.extend(prim_box(bvh.prim_indices[first + i]));
-      return b;
-    }
+    const WideBvh& from;
+    std::span<BvhNode8> nodes;
+    const LeafBox& leaf_box;
     // Node n's children first, then its own slots and orders; returns its box.
     Box node(std::uint32_t n, int depth) const {
-      BvhNode8& node = bvh.nodes[n];
+      BvhNode8& node = nodes[n];
+      std::uint32_t child[BvhNode8::kWidth];
+      std::copy(std::begin(from.nodes[n].child), std::end(from.nodes[n].child), child);
+      if (&node != &from.nodes[n])
+        std::copy(std::begin(from.nodes[n].order), std::end(from.nodes[n].order), node.order);
       Box child_box[BvhNode8::kWidth];
       auto one = [&](int k) {
-        const std::uint32_t c = node.child[k];
-        if (c != BvhRef::kEmpty) child_box[k] = BvhRef::isLeaf(c) ? leaf(c) : this->node(c, depth + 1);
+        const std::uint32_t c = child[k];
+        if (c != BvhRef::kEmpty) child_box[k] = BvhRef::isLeaf(c) ? leaf_box(c) : this->node(c, depth + 1);
       };
       if (depth < 2) {
         struct Context {
@@ -179,17 +187,28 @@ void refitWideBvhWith(WideBvh& bvh, const PrimBox& prim_box) {
       }
       Box all;
       for (int k = 0; k < BvhNode8::kWidth; ++k) {
-        if (node.child[k] == BvhRef::kEmpty) continue;
-        node.setChild(k, node.child[k], child_box[k]);
+        node.setChild(k, child[k], child_box[k]);  // empty slots keep [+inf, -inf]
         all.extend(child_box[k]);
       }
-      node.computeOrder();
+      node.updateOrder();  // smooth motion seldom changes an order
       return all;
     }
   };
-  const Refit refit{bvh, prim_box};
-  if (bvh.root == BvhRef::kEmpty) return;
-  bvh.bounds = BvhRef::isLeaf(bvh.root) ? refit.leaf(bvh.root) : refit.node(bvh.root, 0);
+  if (from.root == BvhRef::kEmpty) return Box();
+  if (BvhRef::isLeaf(from.root)) return leaf_box(from.root);
+  return Refit{from, nodes, leaf_box}.node(from.root, 0);
+}
+
+/// refitWideBvh with each referenced primitive's box from `prim_box(prim)` (a callable inlined
+/// into the pass, so that no array of boxes is needed), in place; see refitWideBvhNodes.
+template <class PrimBox>
+void refitWideBvhWith(WideBvh& bvh, const PrimBox& prim_box) {
+  bvh.bounds = refitWideBvhNodes(bvh, bvh.nodes, [&](std::uint32_t ref) {
+    Box b;
+    const std::size_t first = std::size_t{bvh.leaf_block} * BvhRef::leafBlock(ref);
+    for (std::uint32_t i = 0; i < BvhRef::leafCount(ref); ++i) b.extend(prim_box(bvh.prim_indices[first + i]));
+    return b;
+  });
 }
 
 }  // namespace duplex

@@ -147,6 +147,10 @@ class MeshObject final : public Object {
   struct PartsTag {};
   MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag);
   MeshObject(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh, PartsTag);
+  struct RefitTag {};
+  /// An object with `from`'s name, configuration and built cost, marked refitted, and nothing
+  /// else: deformedMesh() fills its mesh, BVH and blocks.
+  MeshObject(const MeshObject& from, RefitTag);
   void buildKd(const KdBuildConfig& config);
   void buildBvh(const BvhBuildConfig& config);
   /// Fills blocks_ and block_tree_ from tree_ (see below).

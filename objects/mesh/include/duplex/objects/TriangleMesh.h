@@ -4,6 +4,7 @@
 
 #include "duplex/accel/Box.h"
 
+#include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
 
 #include <array>
@@ -38,6 +39,13 @@ class TriangleMesh {
   /// validity and bounds are computed for the new positions. Throws InvalidArgument naming the mesh
   /// for another count, a non-finite position, or no valid triangle.
   [[nodiscard]] TriangleMesh withPositions(std::vector<glm::vec3> positions) const;
+  /// Whether a triangle with the finite corners a, b, c has an area: its edges' cross product, in
+  /// double, is not exactly zero. With finite positions this is the whole validity test (a
+  /// repeated index gives a zero edge), which deformations repeat for the moved corners.
+  [[nodiscard]] static bool hasArea(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
+    const glm::dvec3 n = glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a));
+    return n != glm::dvec3(0.0);
+  }
   /// Whether the same triangles are valid in both meshes (same triangle count, same flags).
   [[nodiscard]] bool sameValidity(const TriangleMesh& other) const { return valid_ == other.valid_; }
 
@@ -63,7 +71,16 @@ class TriangleMesh {
   }
 
  private:
+  friend class MeshObject;
   TriangleMesh() = default;
+  /// Throws InvalidArgument naming the mesh unless `positions` has positions().size() entries,
+  /// all finite.
+  void checkPositions(std::span<const glm::vec3> positions) const;
+  /// withPositions() without its validity pass, for a caller that has tested every triangle
+  /// itself (MeshObject's refit, in its pass over the leaves): `positions` are checked
+  /// (checkPositions), every triangle has this mesh's validity with them (hasArea), and `bounds`
+  /// are the bounds of the valid triangles. Only the positions are checked here.
+  [[nodiscard]] TriangleMesh withPositionsOfSameValidity(std::vector<glm::vec3> positions, const Box& bounds) const;
   /// Checks every index (when `check_indices`) and computes validity, bounds and the degenerate count.
   void validate(bool check_indices = true);
 
