@@ -121,7 +121,9 @@ TEST(ConvexRegion, BoxTestsAgreeWithTheCorners) {
       corners_in +=
           region.contains(glm::dvec3(c & 1 ? b.hi.x : b.lo.x, c & 2 ? b.hi.y : b.lo.y, c & 4 ? b.hi.z : b.lo.z));
     ASSERT_EQ(region.containsBox(b), corners_in == 8) << b;
-    if (corners_in > 0) ASSERT_FALSE(region.excludes(b)) << b;
+    if (corners_in > 0) {
+      ASSERT_FALSE(region.excludes(b)) << b;
+    }
     inside += corners_in == 8;
     excluded += region.excludes(b);
   }
