@@ -816,32 +816,57 @@ WideBvh buildWideBvh(std::span<const Box> prim_bounds, const BvhBuildConfig& con
   return builder.run(Range{0, n, n + room, bounds.box(), centroids.box()});
 }
 
-void BvhNode8::computeOrder() {
-  std::fill(std::begin(order), std::end(order), 0u);
-  // Twice each centre's coordinates; in double, so that boxes up to float's range neither
-  // overflow nor tie by rounding.
-  double centre[kWidth][3];
+namespace {
+
+// What computeOrder and updateOrder both see of a node: twice each child's centre (in double, so
+// that boxes up to float's range neither overflow nor tie by rounding) and the number of used slots.
+struct NodeCentres {
+  double centre[BvhNode8::kWidth][3];
   int used = 0;
-  for (int k = 0; k < kWidth; ++k) {
-    used += child[k] != BvhRef::kEmpty;
-    for (int a = 0; a < 3; ++a) centre[k][a] = double{lo[a][k]} + double{hi[a][k]};
+
+  explicit NodeCentres(const BvhNode8& node) {
+    for (int k = 0; k < BvhNode8::kWidth; ++k) {
+      used += node.child[k] != BvhRef::kEmpty;
+      for (int a = 0; a < 3; ++a) centre[k][a] = double{node.lo[a][k]} + double{node.hi[a][k]};
+    }
   }
-  auto store = [this](int octant, int rank, int slot) {
-    order[rank] |= static_cast<std::uint32_t>(slot) << (3 * octant);
-  };
-  // Octant o and its opposite 7 - o project the centres on opposite diagonals: the used slots
-  // in reverse order (ties too), after the empty ones, which come first in every order.
+  // Slot k's coordinate along the diagonal of `octant` (0-3): the orders sort by it, descending.
+  [[nodiscard]] double key(int k, int octant) const {
+    double v = 0.0;
+    for (int a = 0; a < 3; ++a) v += (octant >> a & 1) ? -centre[k][a] : centre[k][a];
+    return v;
+  }
+};
+
+// The packed orders from the slots of octants 0-3 by rank (`slot(octant, rank)`, empty slots
+// first): octant o's opposite 7 - o projects the centres on the opposite diagonal, so it takes the
+// used slots in reverse order (ties too), after the empty ones, which come first in every order.
+template <class Slot>
+void packOrders(std::uint32_t (&order)[BvhNode8::kWidth], int empty, const Slot& slot) {
+  std::fill(std::begin(order), std::end(order), 0u);
+  constexpr int kWidth = BvhNode8::kWidth;
   for (int octant = 0; octant < 4; ++octant) {
-    // Descending key along the octant's diagonal, empty slots first (key +inf): an insertion
-    // sort, stable (equal keys keep slot order); refits call this for every node.
+    for (int rank = 0; rank < kWidth; ++rank) {
+      const auto k = static_cast<std::uint32_t>(slot(octant, rank));
+      order[rank] |= k << (3 * octant);
+      order[rank < empty ? rank : empty + kWidth - 1 - rank] |= k << (3 * (7 - octant));
+    }
+  }
+}
+
+}  // namespace
+
+void BvhNode8::computeOrder() {
+  const NodeCentres c(*this);
+  // Per octant 0-3, descending key along the octant's diagonal, empty slots first (key +inf): an
+  // insertion sort, stable (equal keys keep slot order); refits call this for nodes whose order
+  // changed.
+  int slots[4][kWidth];
+  for (int octant = 0; octant < 4; ++octant) {
     double key[kWidth];
-    int slot[kWidth];
+    int* slot = slots[octant];
     for (int k = 0; k < kWidth; ++k) {
-      double v = std::numeric_limits<double>::infinity();
-      if (child[k] != BvhRef::kEmpty) {
-        v = 0.0;
-        for (int a = 0; a < 3; ++a) v += (octant >> a & 1) ? -centre[k][a] : centre[k][a];
-      }
+      const double v = child[k] != BvhRef::kEmpty ? c.key(k, octant) : std::numeric_limits<double>::infinity();
       int i = k;
       for (; i > 0 && key[i - 1] < v; --i) {
         key[i] = key[i - 1];
@@ -850,52 +875,36 @@ void BvhNode8::computeOrder() {
       key[i] = v;
       slot[i] = k;
     }
-    const int empty = kWidth - used;
-    for (int rank = 0; rank < kWidth; ++rank) {
-      store(octant, rank, slot[rank]);
-      store(7 - octant, rank, rank < empty ? slot[rank] : slot[empty + kWidth - 1 - rank]);
-    }
   }
+  packOrders(order, kWidth - c.used, [&](int octant, int rank) { return slots[octant][rank]; });
 }
 
 void BvhNode8::updateOrder() {
-  // The same centres and keys as computeOrder's; the order stands when, for octants 0-3, the empty
-  // slots come first in slot order and the used ones follow by strictly decreasing (key, -slot),
-  // which is the one order computeOrder's stable sort gives. Octants 4-7 are then derived as
-  // computeOrder derives them.
-  double centre[kWidth][3];
-  int used = 0;
-  for (int k = 0; k < kWidth; ++k) {
-    used += child[k] != BvhRef::kEmpty;
-    for (int a = 0; a < 3; ++a) centre[k][a] = double{lo[a][k]} + double{hi[a][k]};
-  }
-  const int empty = kWidth - used;
+  // The order stands when, for octants 0-3, the empty slots come first in slot order and the used
+  // ones follow by strictly decreasing (key, -slot), which is the one order computeOrder's stable
+  // sort gives. Octants 4-7 are then derived as computeOrder derives them.
+  const NodeCentres c(*this);
+  const int empty = kWidth - c.used;
   for (int octant = 0; octant < 4; ++octant) {
     double prev_key = 0.0;
     int prev_slot = 0;
     for (int rank = 0; rank < kWidth; ++rank) {
       const int k = orderedSlot(octant, rank);
       if (rank < empty) {
-        if (k != used + rank) return computeOrder();
+        if (k != c.used + rank) return computeOrder();
         continue;
       }
-      if (k >= used) return computeOrder();
-      double v = 0.0;
-      for (int a = 0; a < 3; ++a) v += (octant >> a & 1) ? -centre[k][a] : centre[k][a];
+      if (k >= c.used) return computeOrder();
+      const double v = c.key(k, octant);
       if (rank > empty && !(prev_key > v || (prev_key == v && prev_slot < k))) return computeOrder();
       prev_key = v;
       prev_slot = k;
     }
   }
-  std::uint32_t packed[kWidth] = {};
-  for (int octant = 0; octant < 4; ++octant) {
-    for (int rank = 0; rank < kWidth; ++rank) {
-      const auto k = static_cast<std::uint32_t>(orderedSlot(octant, rank));
-      packed[rank] |= k << (3 * octant);
-      packed[rank < empty ? rank : empty + kWidth - 1 - rank] |= k << (3 * (7 - octant));
-    }
-  }
-  std::copy(std::begin(packed), std::end(packed), std::begin(order));
+  int slots[4][kWidth];
+  for (int octant = 0; octant < 4; ++octant)
+    for (int rank = 0; rank < kWidth; ++rank) slots[octant][rank] = orderedSlot(octant, rank);
+  packOrders(order, empty, [&](int octant, int rank) { return slots[octant][rank]; });
 }
 
 bool BvhNode8::orderValid() const {
