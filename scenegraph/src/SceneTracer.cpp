@@ -150,6 +150,30 @@ namespace {
 
 // Runs query(ray, ctx) over `rays` (or other requests) in parallel (one QueryContext per chunk)
 // into `out`.
+// body(range, ctx) over [0, count) in parallel chunks of at most about `grain`, one QueryContext
+// per chunk, with progress after each chunk and cancellation between chunks (then Cancelled).
+// Isolated: the caller holds the shared lock while it waits here, and a thread that waits in a TBB
+// loop may otherwise pick up an unrelated outer task, which could be another batch query taking
+// the same lock again on this thread (a deadlock when a commit waits between the two).
+template <class Body>
+void forEachChunk(const char* what, std::size_t count, std::size_t grain, const WorkControl& control, Body&& body) {
+  ProgressCounter counter(control, count);
+  std::atomic<bool> stopped{false};
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, grain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        if (stopped.load(std::memory_order_relaxed) || control.cancelled()) {
+                          stopped.store(true, std::memory_order_relaxed);
+                          return;
+                        }
+                        QueryContext ctx;
+                        body(range, ctx);
+                        counter.add(range.size());
+                      });
+  });
+  if (stopped.load()) throw Cancelled(std::string(what) + ": cancelled; the results are incomplete");
+}
+
 template <class In, class Out, class Query>
 void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, const WorkControl& control,
                 Query&& query) {
@@ -157,24 +181,10 @@ void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, 
     throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) +
                           (std::is_same_v<In, Ray> ? " rays" : " requests") + " but room for " +
                           std::to_string(out.size()) + " results");
-  // Isolated: the caller holds the shared lock while it waits here, and a thread that waits in a
-  // TBB loop may otherwise pick up an unrelated outer task, which could be another batch query
-  // taking the same lock again on this thread (a deadlock when a
-  // commit waits between the two).
-  ProgressCounter counter(control, rays.size());
-  std::atomic<bool> stopped{false};
-  tbb::this_task_arena::isolate([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kBatchGrain), [&](const auto& range) {
-      if (stopped.load(std::memory_order_relaxed) || control.cancelled()) {
-        stopped.store(true, std::memory_order_relaxed);
-        return;
-      }
-      QueryContext ctx;
-      for (std::size_t i = range.begin(); i != range.end(); ++i) out[i] = query(rays[i], ctx);
-      counter.add(range.size());
-    });
-  });
-  if (stopped.load()) throw Cancelled(std::string(what) + ": cancelled; the results are incomplete");
+  forEachChunk(what, rays.size(), kBatchGrain, control,
+               [&](const tbb::blocked_range<std::size_t>& range, QueryContext& ctx) {
+                 for (std::size_t i = range.begin(); i != range.end(); ++i) out[i] = query(rays[i], ctx);
+               });
 }
 
 // forEachRay over rays that `load` supplies and results that `store` takes, kStreamBlock at a time.
@@ -184,27 +194,16 @@ void forEachBlock(const char* what, std::size_t count, const SceneTracer::RayBlo
                   Query&& query) {
   if (!load || !store) throw InvalidArgument(std::string(what) + ": the loader and the store must not be empty");
   constexpr std::size_t kBlock = SceneTracer::kStreamBlock;
-  ProgressCounter counter(control, count);
-  std::atomic<bool> stopped{false};
-  tbb::this_task_arena::isolate([&] {  // isolated for the reason forEachRay gives
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, kBlock), [&](const auto& range) {
-      if (stopped.load(std::memory_order_relaxed) || control.cancelled()) {
-        stopped.store(true, std::memory_order_relaxed);
-        return;
-      }
-      QueryContext ctx;
-      std::array<Ray, kBlock> rays;
-      std::array<Out, kBlock> out;
-      for (std::size_t first = range.begin(); first < range.end(); first += kBlock) {
-        const std::size_t n = std::min(kBlock, range.end() - first);
-        load(first, std::span<Ray>(rays.data(), n));
-        for (std::size_t i = 0; i < n; ++i) out[i] = query(rays[i], ctx);
-        store(first, std::span<const Out>(out.data(), n));
-      }
-      counter.add(range.size());
-    });
+  forEachChunk(what, count, kBlock, control, [&](const tbb::blocked_range<std::size_t>& range, QueryContext& ctx) {
+    std::array<Ray, kBlock> rays;
+    std::array<Out, kBlock> out;
+    for (std::size_t first = range.begin(); first < range.end(); first += kBlock) {
+      const std::size_t n = std::min(kBlock, range.end() - first);
+      load(first, std::span<Ray>(rays.data(), n));
+      for (std::size_t i = 0; i < n; ++i) out[i] = query(rays[i], ctx);
+      store(first, std::span<const Out>(out.data(), n));
+    }
   });
-  if (stopped.load()) throw Cancelled(std::string(what) + ": cancelled; the results are incomplete");
 }
 
 }  // namespace
