@@ -33,14 +33,7 @@ InstanceIds::InstanceIds(const SceneDocument& doc) {
   for (std::size_t i = 0; i < doc.instances.size(); ++i) by_node_[doc.instances[i]] = static_cast<std::uint32_t>(i);
 }
 
-Box visibleWorldBounds(const SceneDocument& doc) {
-  const SceneGraph& graph = *doc.graph;
-  Box bounds;
-  for (const NodeId node : doc.instances)
-    if (graph.isVisibleInstance(node))
-      bounds.extend(graph.worldTransform(node).apply(graph.library().get(graph.node(node).object)->bounds()));
-  return bounds;
-}
+Box visibleWorldBounds(const SceneDocument& doc) { return doc.graph->worldBounds(doc.instances); }
 
 std::map<std::string, std::size_t> meshStructureCounts(const SceneDocument& doc) {
   const ObjectLibrary& library = doc.graph->library();

@@ -284,8 +284,9 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   if (ec) throw FileError(o.out.string() + ": cannot create the output folder (" + ec.message() + ")");
   const std::filesystem::path state = o.out / "run_state.bin";
   // Refused now rather than after the run, when the state is saved.
-  if (std::filesystem::exists(state) && !notRegularFile(state).empty())
-    throw FileError(state.string() + ": cannot hold the run state: " + notRegularFile(state));
+  if (std::filesystem::exists(state))
+    if (const std::string problem = notRegularFile(state); !problem.empty())
+      throw FileError(state.string() + ": cannot hold the run state: " + problem);
   if (o.resume) run.loadState(state);
   if (run.raysDone() > o.rays)
     throw InvalidArgument(state.string() + " holds " + std::to_string(run.raysDone()) + " rays, more than --rays " +

@@ -325,12 +325,10 @@ py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t m
             std::uint32_t* __restrict pi = pp + first;
             float* __restrict uu = uv + 2 * first;
             float* __restrict nn = ng + 3 * first;
-            const std::uint32_t* ids = id_of_node_.data();
-            const std::size_t id_count = id_of_node_.size();
             for (std::size_t k = 0; k < hits.size(); ++k) {
               const Hit& h = hits[k];
               tt[k] = h.t;
-              ii[k] = h.instance_id < id_count ? ids[h.instance_id] : kInvalidId;
+              ii[k] = idOf(h.instance_id);
               pi[k] = h.prim_id;
               uu[2 * k] = h.u;
               uu[2 * k + 1] = h.v;
@@ -534,17 +532,9 @@ py::array PyScene::selectRectangle(const PinholeCamera& camera, std::uint32_t wi
   return instanceIds(nodes);
 }
 
-Box PyScene::visibleBounds() const {
-  Box bounds;
-  for (const NodeId node : instances_)
-    if (graph_->contains(node) && graph_->isVisibleInstance(node))
-      bounds.extend(graph_->worldTransform(node).apply(graph_->library().get(graph_->node(node).object)->bounds()));
-  return bounds;
-}
-
 py::array PyScene::primaryRays(std::uint32_t width, std::uint32_t height) const {
   const std::vector<Ray> rays = shared(mutex_, [&] {
-    const Box bounds = visibleBounds();
+    const Box bounds = graph_->worldBounds(instances_);
     if (bounds.empty())
       throw InvalidArgument("primary_rays: the scene has no visible instances, so no bounds to aim the camera at");
     return duplex::primaryRays(bounds, width, height);
@@ -554,7 +544,7 @@ py::array PyScene::primaryRays(std::uint32_t width, std::uint32_t height) const 
 
 py::array PyScene::randomRays(std::size_t count, std::uint64_t seed) const {
   const std::vector<Ray> rays = shared(mutex_, [&] {
-    const Box bounds = visibleBounds();
+    const Box bounds = graph_->worldBounds(instances_);
     if (bounds.empty())
       throw InvalidArgument("random_rays: the scene has no visible instances, so no bounds to start rays in");
     return duplex::randomRays(bounds, count, seed);
@@ -619,7 +609,7 @@ py::dict PyScene::node(NodeId node) const {
 py::object PyScene::bounds() const {
   const Box b = [&] {
     std::shared_lock lock(mutex_);
-    return visibleBounds();
+    return graph_->worldBounds(instances_);
   }();
   if (b.empty()) return py::none();
   py::array_t<double> a(std::vector<py::ssize_t>{2, 3});

@@ -99,8 +99,6 @@ class PyScene {
  private:
   explicit PyScene(SceneDocument doc);
 
-  // World box of the visible instances as of the last commit (the tool's `visibleWorldBounds`).
-  [[nodiscard]] Box visibleBounds() const;
   [[nodiscard]] std::uint32_t idOf(std::uint32_t node) const {
     return node < id_of_node_.size() ? id_of_node_[node] : kInvalidId;
   }

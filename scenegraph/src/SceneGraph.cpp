@@ -817,6 +817,14 @@ bool SceneGraph::isVisibleInstance(NodeId id) const {
   return (impl_->live(id, "isVisibleInstance").flags & kEffVisible) != 0;
 }
 
+Box SceneGraph::worldBounds(std::span<const NodeId> instances) const {
+  Box bounds;
+  for (const NodeId node : instances)
+    if (contains(node) && isVisibleInstance(node))
+      bounds.extend(worldTransform(node).apply(library().get(this->node(node).object)->bounds()));
+  return bounds;
+}
+
 namespace {
 /// Instance nodes with `flag` set, by id (a scan of the node table: a query, not on the update path).
 std::vector<NodeId> instancesWith(const SlotTable<Node>& nodes, std::uint8_t flag) {

@@ -172,6 +172,10 @@ class SceneGraph {
   [[nodiscard]] const Affine& worldTransform(NodeId id) const;
   /// Whether an instance is visible (itself and all ancestors) as of the last commit.
   [[nodiscard]] bool isVisibleInstance(NodeId id) const;
+  /// World box (world units) of those of `instances` that are in the graph and visible as of the
+  /// last commit: each one's object bounds through its world transform. Empty when there are none.
+  /// Nodes that are not instances of this graph any more (removed) are skipped.
+  [[nodiscard]] Box worldBounds(std::span<const NodeId> instances) const;
   /// Every instance node that exists (committed or not), sorted by id.
   [[nodiscard]] std::vector<NodeId> instances() const;
   /// Visible instances as of the last commit, sorted by id (an instance removed since is listed
