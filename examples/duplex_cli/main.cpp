@@ -38,6 +38,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <csignal>
 #include <cstdint>
 #include <exception>
 #include <iostream>
@@ -56,6 +57,9 @@ using duplex::cli::kDecimal;
 int main(int argc, char** argv) {
   using duplex::cli::RaysOptions;
   using duplex::cli::TraceOptions;
+  // Past a file-size limit (ulimit -f) a write then fails with EFBIG, reported as an error naming
+  // the file, instead of the signal killing the tool with a half-written temporary file.
+  std::signal(SIGXFSZ, SIG_IGN);
 
   CLI::App app{
       "Two-level kd-tree ray tracing of scene-json-v1 and duplex-scene-v1 scenes (ray and hit files in, "
@@ -84,6 +88,12 @@ int main(int argc, char** argv) {
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
       ->check(kDecimal)
       ->check(CLI::Range(1, 1000000));
+  trace_cmd
+      ->add_option("--block-rays", trace.block_rays,
+                   "Rays read, traced and written per block (memory: about 100 bytes per ray of a block)")
+      ->check(kDecimal)
+      ->check(CLI::Range(std::int64_t{1}, std::int64_t{1} << 32))
+      ->capture_default_str();
   trace_cmd->footer(
       "A hit's instance_id is the instance's position in the scene: in \"instances\" for scene-json-v1; in\n"
       "depth-first file order of the node tree for duplex-scene-v1 (hidden instances keep their place).\n"

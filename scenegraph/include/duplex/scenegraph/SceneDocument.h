@@ -78,7 +78,8 @@ struct SceneLoadFigures {
   std::size_t nodes = 0;              ///< graph nodes, root included
   /// What the object types report, summed: each object's Object::figures() over the distinct
   /// objects ("triangles", "degenerate_triangles", ...), the counts their readers added while
-  /// reading files ("complex_edge_warnings"), and "<kind>_files", the distinct files read per kind
+  /// reading files ("repeated_corner_faces", "complex_edge_warnings"), and "<kind>_files", the distinct files read per
+  /// kind
   /// ("mesh_files").
   std::map<std::string, std::size_t, std::less<>> counts;
 
