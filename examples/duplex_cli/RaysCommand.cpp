@@ -44,6 +44,7 @@ nlohmann::ordered_json runRays(const RaysOptions& options) {
   nlohmann::ordered_json summary;
   summary["rays"] = count;
   summary["out"] = options.out.string();
+  if (!primary) summary["seed"] = options.seed.value();
   return summary;
 }
 

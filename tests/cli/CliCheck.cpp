@@ -223,6 +223,19 @@ int checkRays(const std::string& duplex, const fs::path& dir) {
   expect(bytes(r1) == bytes(r2), "--random 100 --seed 7 is not deterministic");
   raysCmd(r3, {"--random", "100", "--seed", "8"});
   expect(bytes(r1) != bytes(r3), "--seed 8 gives the same rays as --seed 7");
+  // Counts as people write them, the tool's -v after the command, and the default seed (1), which
+  // the JSON and stderr report.
+  const fs::path r4 = dir / "random4.bin", r5 = dir / "random5.bin", r6 = dir / "random6.bin";
+  expect(raysCmd(r4, {"--random", "1e2", "--seed", "7", "-v"}) == 100.0 && bytes(r4) == bytes(r1),
+         "--random 1e2 --seed 7 -v is not --random 100 --seed 7");
+  const RunResult unseeded = runOk({duplex, "rays", "--scene", scene, "--random", "0.1k", "--out", r5.string()}, dir);
+  const nlohmann::json js = parseOneLine(unseeded.out);
+  expect(js.contains("seed") && js["seed"] == 1 && number(js, "rays") == 100.0,
+         "--random 0.1k without --seed does not report 100 rays and \"seed\": 1: " + js.dump());
+  expect(unseeded.err.find("default seed 1") != std::string::npos,
+         "--random without --seed does not say on stderr which seed it used:\n" + unseeded.err);
+  raysCmd(r6, {"--random", "100", "--seed", "1"});
+  expect(bytes(r5) == bytes(r6), "--random without --seed is not --seed 1");
   for (const RayRecord& r : readRecords<RayRecord>(r1)) {
     const double o[3] = {r.ox, r.oy, r.oz};
     bool inside = true;
