@@ -418,6 +418,7 @@ ParsedMesh readPly(std::string_view bytes, const std::string& file) {
       }
     };
     for (const PlyElement& e : elements) {
+      if (e.properties.empty()) continue;  // nothing to read, however many it declares
       for (std::uint64_t item = 0; item < e.count; ++item) {
         const bool is_vertex = &e == vertex, is_face = &e == face;
         auto where = [&] {
@@ -481,6 +482,7 @@ ParsedMesh readPly(std::string_view bytes, const std::string& file) {
   const bool big = *format == PlyFormat::BinaryBig;
   std::size_t pos = data_start;
   for (const PlyElement& e : elements) {
+    if (e.properties.empty()) continue;  // nothing to read, however many it declares
     const bool is_vertex = &e == vertex, is_face = &e == face;
     for (std::uint64_t item = 0; item < e.count; ++item) {
       auto where = [&] {

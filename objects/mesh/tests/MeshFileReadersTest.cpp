@@ -285,6 +285,15 @@ TEST(MeshFileReaders, CountsAreBoundedByTheFileSize) {
        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
        "element face 1\nproperty list uint int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n"
        "4000000000 0 1 2\n"},
+      // An element without properties declared 2^62 times (no bytes to bound it by): no loop over it.
+      {Format::Ply,
+       "ply\nformat ascii 1.0\nelement nothing 4611686018427387904\nelement vertex 3\nproperty float x\n"
+       "property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+       "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n"},
+      {Format::Ply,
+       "ply\nformat binary_little_endian 1.0\nelement nothing 4611686018427387904\nelement vertex 3\n"
+       "property float x\nproperty float y\nproperty float z\nelement face 1\n"
+       "property list uchar int vertex_indices\nend_header\n"},
       {Format::Off, "OFF\n2000000000 2000000000 0\n0 0 0\n"},
       {Format::Off, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2000000000 0 1 2\n"},
       {Format::Off, std::string("OFF BINARY\n\x7f\xff\xff\xff\x7f\xff\xff\xff\0\0\0\0", 23)},
