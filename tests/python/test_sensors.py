@@ -76,3 +76,44 @@ def test_target_error_stops_early():
     result = duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10**8, seed=2, target_error=0.05)
     first = next(iter(result.values()))
     assert first["status"] == "target_reached" and first["rays"] < 10**8
+
+
+EDITED_SCENE = {
+    "format": "duplex-scene-v1",
+    "objects": [{"name": "plate", "sensor": {"size": [1, 1], "bins": [2, 2]}},
+                {"name": "floor", "plane": {"size": 4}, "material": {"type": "lambertian", "reflectance": 0.5}}],
+    "lights": [{"type": "point", "node": "/lamp", "position": [0, 0, 0], "power": 10}],
+    "sensors": [{"name": "far", "shape": "farfield", "bins": [4, 3]}],
+    "nodes": [{"instance": "floor", "object": "floor"},
+              {"group": "rig", "translate": [0, 0, 1], "children": [{"instance": "plate", "object": "plate"}]},
+              {"group": "lamp", "translate": [0, 0, 2]}],
+    "edits": [{"time": 1, "node": "/rig/plate", "set_transform": {"translate": [0.3, 0, 0], "scale": 0.5}},
+              {"time": 2, "node": "/lamp", "set_transform": {"translate": [0, 0, 3]}}],
+}
+
+
+def test_at_applies_the_timed_edits_as_the_cli_does(cli, tmp_path):
+    """run_sensors(at=T) follows the edits up to T (sensor and light): the numbers of `duplex sensor --at T`."""
+    scene_file = tmp_path / "edits.json"
+    scene_file.write_text(json.dumps(EDITED_SCENE))
+    report = run_cli(cli, "sensor", "--scene", scene_file, "--rays", 20000, "--seed", 3, "--out", tmp_path / "o",
+                     "--progress", "none", "--threads", 1, "--at", 1.5)
+    assert report["at"] == 1.5 and report["edits_applied"] == 1
+    ref = json.loads((tmp_path / "o" / "plate.json").read_text())
+    got = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=2, at=1.5)
+    assert got["plate"]["edits_applied"] == 1
+    assert np.array_equal(got["plate"]["flux"].ravel(), np.array(ref["flux_w"]))
+    assert np.array_equal(got["plate"]["bin_area"].ravel(), np.array(ref["bin_area_m2"]))
+    assert np.allclose(got["plate"]["bin_area"], 0.0625)  # the scaled sensor's bins
+    far = json.loads((tmp_path / "o" / "far.json").read_text())
+    assert got["far"]["shape"] == "farfield" and got["far"]["intensity"].shape == (4, 3)
+    assert np.array_equal(got["far"]["intensity"].ravel(), np.array(far["intensity_w_sr"]))
+    assert list(got["far"]["gamma_deg"]) == far["gamma_deg"] == [0, 90, 180]
+    unedited = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1)
+    assert unedited["plate"]["edits_applied"] == 0
+    assert np.allclose(unedited["plate"]["bin_area"], 0.25)
+    later = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1, at=5)
+    assert later["plate"]["edits_applied"] == 2
+    assert later["plate"]["total_flux"] < got["plate"]["total_flux"]  # the lamp moved up
+    with pytest.raises(ValueError, match="at"):
+        duplex.run_sensors(str(scene_file), rays=10, at=-1.0)
