@@ -295,7 +295,7 @@ the same seed gives the same numbers, for any thread count. progress: None or a 
 (or Ctrl-C) stops the run and is raised again. target_error > 0 stops once the target sensor's
 relative standard error is at most it. at: None, or a time (seconds): the scene's timed edits
 with time <= at are applied before the run (`duplex sensor --at`); the result's "edits_applied"
-counts them.
+counts them, and a UserWarning says how many edits the run leaves out.
 Returns a dict sensor name -> dict: "irradiance", "stderr" (W per square scene unit), "flux",
 "flux_stderr" (W), "ray_count", "bin_area", each (ny, nx) with bin (0, 0) at local (-w/2, -h/2);
 "total_flux", "total_flux_stderr" (W), "relative_stderr" (None before any power arrived),

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <exception>
 #include <optional>
+#include <sstream>
 #include <vector>
 
 namespace duplex::python {
@@ -67,6 +68,13 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
       py::gil_scoped_release nogil;
       if (scene->document()) edits_applied = applyEditsUntil(*scene->document(), *options.at);
     });
+  }
+  // As the tool says on stderr: edits of the scene that this run leaves out are never silent.
+  if (const std::size_t edits = scene->document() ? scene->document()->edits.size() : 0; edits_applied < edits) {
+    std::ostringstream note;
+    note << scene_file.string() << " has " << edits << " timed edit(s); " << edits - edits_applied
+         << (options.at ? " after at are not applied" : " not applied (at=T applies those with time <= T)");
+    if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
   }
   if (scene->lights().empty()) throw FileError(scene_file.string() + ": the scene has no lights (\"lights\": [...])");
   if (scene->sensors().empty())

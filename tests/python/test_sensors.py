@@ -100,7 +100,8 @@ def test_at_applies_the_timed_edits_as_the_cli_does(cli, tmp_path):
                      "--progress", "none", "--threads", 1, "--at", 1.5)
     assert report["at"] == 1.5 and report["edits_applied"] == 1
     ref = json.loads((tmp_path / "o" / "plate.json").read_text())
-    got = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=2, at=1.5)
+    with pytest.warns(UserWarning, match="1 after at are not applied"):
+        got = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=2, at=1.5)
     assert got["plate"]["edits_applied"] == 1
     assert np.array_equal(got["plate"]["flux"].ravel(), np.array(ref["flux_w"]))
     assert np.array_equal(got["plate"]["bin_area"].ravel(), np.array(ref["bin_area_m2"]))
@@ -109,7 +110,8 @@ def test_at_applies_the_timed_edits_as_the_cli_does(cli, tmp_path):
     assert got["far"]["shape"] == "farfield" and got["far"]["intensity"].shape == (4, 3)
     assert np.array_equal(got["far"]["intensity"].ravel(), np.array(far["intensity_w_sr"]))
     assert list(got["far"]["gamma_deg"]) == far["gamma_deg"] == [0, 90, 180]
-    unedited = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1)
+    with pytest.warns(UserWarning, match="2 timed edit.*not applied"):
+        unedited = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1)
     assert unedited["plate"]["edits_applied"] == 0
     assert np.allclose(unedited["plate"]["bin_area"], 0.25)
     later = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1, at=5)
