@@ -10,20 +10,25 @@ from conftest import SCENES, run_cli
 RAYS = 40000
 
 
-@pytest.mark.parametrize("name", ["sensor_room.json", "sensor_spectral.json"])
-def test_run_equals_cli_output(cli, tmp_path, name):
+@pytest.mark.parametrize("name,at", [("sensor_room.json", None), ("sensor_spectral.json", None),
+                                     ("sensor_luminaire.json", 1)])
+def test_run_equals_cli_output(cli, tmp_path, name, at):
     scene_file = SCENES / name
+    at_args = ["--at", at] if at is not None else []
     report = run_cli(cli, "sensor", "--scene", scene_file, "--rays", RAYS, "--seed", 3, "--out", tmp_path,
-                     "--progress", "none", "--threads", 2)
-    result = duplex.run_sensors(str(scene_file), rays=RAYS, seed=3, threads=1)
+                     "--progress", "none", "--threads", 2, *at_args)
+    result = duplex.run_sensors(str(scene_file), rays=RAYS, seed=3, threads=1, at=at)
     assert sorted(result) == sorted(s["name"] for s in report["sensors"])
     for entry in report["sensors"]:
         ref = json.loads(open(entry["file"]).read())
         got = result[entry["name"]]
         nx, ny = ref["bins"]
-        assert got["bins"] == (nx, ny) and got["irradiance"].shape == (ny, nx)
-        for key, ref_key in (("irradiance", "irradiance_w_m2"), ("stderr", "stderr_w_m2"), ("flux", "flux_w"),
-                             ("ray_count", "ray_count"), ("bin_area", "bin_area_m2")):
+        far = ref["shape"] == "farfield"
+        assert got["bins"] == (nx, ny) and got["flux"].shape == ((nx, ny) if far else (ny, nx))
+        keys = ((("intensity", "intensity_w_sr"), ("intensity_stderr", "intensity_stderr_w_sr"),
+                 ("solid_angle", "solid_angle_sr")) if far else
+                (("irradiance", "irradiance_w_m2"), ("stderr", "stderr_w_m2"), ("bin_area", "bin_area_m2")))
+        for key, ref_key in keys + (("flux", "flux_w"), ("ray_count", "ray_count")):
             assert np.array_equal(got[key].ravel(), np.array(ref[ref_key])), key
         assert got["total_flux"] == ref["total_flux_w"] and got["efficiency"] == ref["efficiency"]
         assert got["rays"] == RAYS and got["seed"] == 3 and got["status"] == "completed"
