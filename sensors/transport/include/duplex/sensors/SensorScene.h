@@ -121,10 +121,10 @@ class SensorScene {
   ~SensorScene();
 
   // The accessors below describe the graph as of its last commit (re-derived on the first call
-  // after a commit that applied edits, SceneGraph::revision). References they return stay valid until then. They
-  // throw InvalidArgument, naming the sensor, light or object, when the committed graph makes an
-  // invalid scene (a sphere sensor scaled unevenly, a light's node removed, ...), or has
-  // uncommitted edits while it must be derived again.
+  // after a commit that applied edits, SceneGraph::revision); the references they return stay
+  // valid until then. They throw InvalidArgument, naming the sensor, light or object, when the
+  // committed graph makes an invalid scene (a sphere sensor scaled unevenly, a light's node
+  // removed, ...), or has uncommitted edits while it must be derived again.
 
   /// The lights that shine (those at hidden nodes are off), validated; positions and directions in
   /// world space.
