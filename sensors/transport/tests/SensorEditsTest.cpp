@@ -11,10 +11,14 @@
 #include "SensorFixture.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <glm/geometric.hpp>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -269,6 +273,32 @@ TEST(SensorEdits, InvalidEditsAreRefusedNamingTheSensorOrLight) {
   EXPECT_THROW((void)pending.sensors(), InvalidArgument);
   (void)p.graph.commit();
   EXPECT_EQ(pending.sensors().size(), 1u);
+}
+
+// A scene file's timed edits through applyEditsUntil: an object declared by an "add_object" edit
+// keeps its "material" once an "add" edit instances it, and a light at a node follows a
+// "set_transform" of that node.
+TEST(SensorEdits, FileEditsBringTheirMaterialsAndMoveLightsAtNodes) {
+  const std::filesystem::path file =
+      std::filesystem::temp_directory_path() / ("sensor_edits_" + std::to_string(::getpid()) + ".json");
+  std::ofstream(file) << R"({"format": "duplex-scene-v1",
+    "objects": [{"name": "plate", "sensor": {"size": 1}}],
+    "nodes": [{"instance": "plate", "object": "plate"}, {"group": "lamp", "translate": [0, 0, 1]}],
+    "lights": [{"type": "point", "node": "/lamp", "position": [0, 0, 0.5], "power": 1}],
+    "edits": [{"time": 1, "add_object": {"name": "wall", "plane": {"size": 2},
+                                         "material": {"type": "mirror", "reflectance": 0.25}}},
+              {"time": 1, "add": {"instance": "wall", "object": "wall"}},
+              {"time": 2, "node": "/lamp", "set_transform": {"translate": [0, 0, 3]}}]})";
+  SensorScene scene = SensorScene::load(file);
+  std::filesystem::remove(file);
+  ASSERT_EQ(scene.lights().size(), 1u);
+  EXPECT_EQ(scene.lights()[0].position, glm::dvec3(0, 0, 1.5));
+  EXPECT_EQ(applyEditsUntil(*scene.document(), 2.0), 3u);
+  const std::optional<NodeId> wall = scene.graph().find("/wall");
+  ASSERT_TRUE(wall);
+  EXPECT_EQ(scene.materialOf(*wall).type, MaterialType::Mirror);
+  EXPECT_EQ(scene.materialOf(*wall).reflectance, 0.25);
+  EXPECT_EQ(scene.lights()[0].position, glm::dvec3(0, 0, 3.5));
 }
 
 }  // namespace
