@@ -342,13 +342,11 @@ int main(int argc, char** argv) {
 
     // Play the edits: one commit per distinct time, then one frame.
     for (std::size_t i = 0; i < doc.edits.size();) {
-      std::size_t j = i;
-      while (j < doc.edits.size() && doc.edits[j].time == doc.edits[i].time) ++j;
       CommitFigures c;
       c.time = doc.edits[i].time;
-      c.edits = j - i;
       const auto t0 = Clock::now();
-      for (std::size_t k = i; k < j; ++k) (void)duplex::applyEdit(doc, doc.edits[k]);
+      const std::size_t j = duplex::applyEditGroup(doc, i);
+      c.edits = j - i;
       duplex::ChangeSet changes;
       double rebuild_ms = 0.0;
       arena.execute([&] {

@@ -7,6 +7,8 @@
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/InputFile.h>
+#include <duplex/scenegraph/SceneDocument.h>
+#include <duplex/sensors/IesProfile.h>
 #include <duplex/sensors/SensorRun.h>
 #include <duplex/sensors/SensorScene.h>
 
@@ -24,7 +26,9 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <sstream>
 #include <string>
+#include <vector>
 
 namespace duplex::cli {
 
@@ -182,8 +186,78 @@ class ProgressPrinter {
   double last_ = -1e9;
 };
 
+// The keys every sensor file has after its shape: the emitted power and the sensor's totals.
+void putTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r) {
+  j["emitted_power_w"] = r.energy.emitted_w;
+  j["total_flux_w"] = s.total_flux_w;
+  j["total_flux_stderr_w"] = s.total_flux_stderr_w;
+  j["relative_stderr"] = finiteOrNull(s.relative_stderr);
+  j["efficiency"] = s.efficiency;
+}
+
+// Spectral scenes: the band names and the sensor's per-band totals, before its per-band arrays.
+void putBandTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r) {
+  j["bands"] = r.bands;
+  j["band_total_flux_w"] = s.band_total_flux_w;
+  j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
+}
+
+// A far-field sensor: DIR/<name>.json (intensity per C-gamma cell, gamma fastest), .csv and an
+// LM-63-2002 .ies file of the measured table. Without photometry the values are W/sr, which the
+// .ies file's keywords say.
+void writeFarFieldFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
+                        const SensorRunResults& r) {
+  const std::string base = fileName(s.name);
+  const SensorObject& object = *inst.object;
+  const std::uint32_t nc = s.nx, ng = s.ny;
+  std::vector<double> c_deg, gamma_deg;
+  for (std::uint32_t ic = 0; ic < nc; ++ic) c_deg.push_back(object.farFieldC(ic));
+  for (std::uint32_t ig = 0; ig < ng; ++ig) gamma_deg.push_back(object.farFieldGamma(ig));
+  nlohmann::ordered_json j;
+  j["name"] = s.name;
+  j["rays"] = r.rays;
+  j["seed"] = r.seed;
+  j["shape"] = "farfield";
+  j["bins"] = {nc, ng};
+  putTotals(j, s, r);
+  j["c_deg"] = c_deg;
+  j["gamma_deg"] = gamma_deg;
+  // The run's "irradiance" of a far-field cell is its flux per unit solid angle: the intensity.
+  j["intensity_w_sr"] = s.irradiance_w_m2;
+  j["intensity_stderr_w_sr"] = s.stderr_w_m2;
+  j["flux_w"] = s.flux_w;
+  j["ray_count"] = s.ray_count;
+  j["solid_angle_sr"] = s.bin_area_m2;
+  if (!r.bands.empty()) {
+    putBandTotals(j, s, r);
+    j["band_intensity_w_sr"] = s.band_irradiance_w_m2;
+    j["band_intensity_stderr_w_sr"] = s.band_stderr_w_m2;
+    j["band_flux_w"] = s.band_flux_w;
+  }
+  writeText(dir / (base + ".json"), j.dump() + "\n");
+
+  std::string csv = "ic,ig,c_deg,gamma_deg,flux_w,intensity_w_sr,intensity_stderr_w_sr,ray_count\n";
+  char row[256];
+  for (std::uint32_t ic = 0; ic < nc; ++ic) {
+    for (std::uint32_t ig = 0; ig < ng; ++ig) {
+      const std::size_t b = static_cast<std::size_t>(ic) * ng + ig;
+      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu\n", ic, ig, c_deg[ic], gamma_deg[ig],
+                    s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b],
+                    static_cast<unsigned long long>(s.ray_count[b]));
+      csv += row;
+    }
+  }
+  writeText(dir / (base + ".csv"), csv);
+
+  writeIes(dir / (base + ".ies"), farFieldIesTable(s, r.rays, r.seed));
+}
+
 void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
                       const SensorRunResults& r) {
+  if (s.shape == SensorShape::FarField) {
+    writeFarFieldFiles(dir, s, inst, r);
+    return;
+  }
   const std::string base = fileName(s.name);
   const SensorSpec& spec = inst.object->spec();
   nlohmann::ordered_json j;
@@ -194,11 +268,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["size"] = {spec.width, spec.height};
   j["bins"] = {s.nx, s.ny};
   j["two_sided"] = s.two_sided;
-  j["emitted_power_w"] = r.energy.emitted_w;
-  j["total_flux_w"] = s.total_flux_w;
-  j["total_flux_stderr_w"] = s.total_flux_stderr_w;
-  j["relative_stderr"] = finiteOrNull(s.relative_stderr);
-  j["efficiency"] = s.efficiency;
+  putTotals(j, s, r);
   j["irradiance_w_m2"] = s.irradiance_w_m2;
   j["stderr_w_m2"] = s.stderr_w_m2;
   j["flux_w"] = s.flux_w;
@@ -206,9 +276,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["bin_area_m2"] = s.bin_area_m2;
   // Only what the scene asked for: per-band arrays (the keys above are their sums) and angular bins.
   if (!r.bands.empty()) {
-    j["bands"] = r.bands;
-    j["band_total_flux_w"] = s.band_total_flux_w;
-    j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
+    putBandTotals(j, s, r);
     j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
     j["band_stderr_w_m2"] = s.band_stderr_w_m2;
     j["band_flux_w"] = s.band_flux_w;
@@ -267,7 +335,27 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   }
   if (g_stop_signal.load() != 0)
     throw Interrupted(g_stop_signal.load(), "stopped while loading the scene; nothing written");
-  const SensorScene& scene = *loaded;
+  SensorScene& scene = *loaded;
+  // Timed edits: those up to --at T, one commit per time as a player applies them (the scene
+  // follows the commits); the others are said on stderr, never silently left out.
+  const std::size_t edit_count = scene.document() ? scene.document()->edits.size() : 0;
+  std::size_t edits_applied = 0;
+  if (o.at) {
+    if (!(*o.at >= 0.0 && std::isfinite(*o.at))) throw InvalidArgument("--at must be a finite time >= 0 (seconds)");
+    if (edit_count != 0)
+      edits_applied = workers.arena.execute([&] { return applyEditsUntil(*scene.document(), *o.at); });
+  }
+  if (edits_applied < edit_count) {
+    const std::vector<SceneEdit>& edits = scene.document()->edits;
+    std::ostringstream note;
+    note << "duplex sensor: " << o.scene.string() << " has " << edit_count
+         << " timed edit(s) (t = " << edits.front().time << " to " << edits.back().time << " s); ";
+    if (o.at)
+      note << "--at " << *o.at << " applied " << edits_applied << ", the " << edit_count - edits_applied
+           << " after it are not applied";
+    else note << "none is applied (--at T applies those with time <= T)";
+    std::cerr << note.str() << '\n' << std::flush;
+  }
   if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
   if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
   checkOutputNames(scene, o.scene);
@@ -348,6 +436,10 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
                                                               : "completed";
   if (status == SensorRunStatus::Cancelled) report["signal"] = g_stop_signal.load();
   report["resumed_from"] = start;
+  if (o.at) {
+    report["at"] = *o.at;
+    report["edits_applied"] = edits_applied;
+  }
   report["seconds"] = seconds;
   report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;
   report["emitted_power_w"] = r.energy.emitted_w;

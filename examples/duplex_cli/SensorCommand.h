@@ -6,7 +6,9 @@
 /// total_flux_w, total_flux_stderr_w, relative_stderr, efficiency, and row-major nx * ny arrays
 /// irradiance_w_m2, stderr_w_m2, flux_w, ray_count, bin_area_m2; band_* and angular_* arrays
 /// when the scene asks for them), DIR/<name>.csv (one row per bin) and
-/// DIR/<name>.png (false-colour irradiance with a scale bar), plus DIR/run_state.bin (the exact
+/// DIR/<name>.png (false-colour irradiance with a scale bar); a far-field sensor DIR/<name>.json
+/// (c_deg, gamma_deg, intensity_w_sr, intensity_stderr_w_sr, ...), DIR/<name>.csv and
+/// DIR/<name>.ies (LM-63-2002, values in W/sr); plus DIR/run_state.bin (the exact
 /// accumulators, for --resume) and DIR/run.json (the report printed on stdout). Characters of a
 /// sensor name other than [A-Za-z0-9._-] become '_' in file names; sensors whose file names would
 /// collide (with each other, or "run" with run.json) are refused before the run.
@@ -20,6 +22,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -49,6 +52,9 @@ struct SensorOptions {
   /// batches of 65,536 rays, so at most this plus one batch): --resume continues from the last save
   /// and gives the files of one uninterrupted run.
   double checkpoint_s = 60.0;
+  /// --at T: apply the scene's timed edits with time <= T before the run (applyEditsUntil); unset:
+  /// none (stderr then says how many the scene has).
+  std::optional<double> at;
 };
 
 /// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene
@@ -70,7 +76,8 @@ class Interrupted : public std::runtime_error {
 /// the run started: 0, or the saved count with --resume), seconds, rays_per_s, emitted_power_w,
 /// energy {escaped_w, absorbed_w, medium_absorbed_w, depth_limited_w, roulette_w}, bands and
 /// band_emitted_w (spectral scenes only), scatterings (scenes whose fog scatters only), sensors
-/// [{name, file, total_flux_w, relative_stderr, efficiency}]). Throws duplex::Error for bad input.
+/// [{name, file, total_flux_w, relative_stderr, efficiency}]; with --at also at and
+/// edits_applied). Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
 
 }  // namespace duplex::cli

@@ -14,7 +14,7 @@
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
-//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS]
+//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS] [--at T]
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -42,6 +42,7 @@
 #include <cstdint>
 #include <exception>
 #include <iostream>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -268,6 +269,10 @@ int main(int argc, char** argv) {
       ->add_option("--checkpoint", sensor.checkpoint_s,
                    "Seconds between saves of DIR/run_state.bin during the run (default 60; 0: only at the end)")
       ->check(CLI::Range(0.0, 1e9));
+  sensor_cmd
+      ->add_option("--at", sensor.at,
+                   "Apply the scene's timed edits with time <= T (seconds) before the run (default: none)")
+      ->check(CLI::Range(0.0, std::numeric_limits<double>::max()));
   sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");
 
   try {

@@ -35,6 +35,7 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
     throw InvalidArgument("SensorRun: threads above 4096 (" + std::to_string(config_.threads) + ")");
   if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
+  revision_ = scene_.revision();  // the scene as of the graph's last commit (derived now if it changed)
   double acc = 0.0;
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
   // Spatial bins, then the angular bins, in one index space.
@@ -53,6 +54,7 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
   bins_.assign(all_bins, BinSums{});
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& si = scene_.sensors()[k];
+    if (si.node == kInvalidNode) continue;  // far field: deposits on escape, not at crossings
     if (si.node >= deposit_targets_.size()) deposit_targets_.resize(std::size_t{si.node} + 1);
     deposit_targets_[si.node] = {si.first_bin, static_cast<std::int32_t>(k), si.object->spec().theta_bins != 0};
   }
@@ -64,6 +66,13 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
     band_sensor_sum_.assign(sensor_sums_.size() * nb, 0.0);
     band_sensor_sum2_.assign(sensor_sums_.size() * nb, 0.0);
   }
+}
+
+void SensorRun::checkScene() const {
+  if (scene_.graph().revision() != revision_)
+    throw InvalidArgument(
+        "SensorRun: the scene graph was committed since the run was made (its sensors, lights and paths may "
+        "differ): make a new run");
 }
 
 // How many deposits ahead the reduction prefetches their accumulators.
@@ -118,6 +127,7 @@ void SensorRun::reduce(const Chunk& chunk) {
 SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays,
                                     const std::function<void(const SensorProgress&)>& progress,
                                     const SensorStopRule& stop) {
+  checkScene();
   if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
   if (stop.sensor >= static_cast<int>(scene_.sensors().size()))
     throw InvalidArgument("SensorRun: stop rule names sensor " + std::to_string(stop.sensor) + ", the scene has " +
@@ -179,6 +189,7 @@ void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, doubl
 }  // namespace
 
 double SensorRun::relativeStderr(int sensor) const {
+  checkScene();
   if (sensor < 0 || static_cast<std::size_t>(sensor) >= sensor_sums_.size())
     throw InvalidArgument("SensorRun::relativeStderr: sensor " + std::to_string(sensor) + " (the scene has " +
                           std::to_string(sensor_sums_.size()) + ")");
@@ -189,6 +200,7 @@ double SensorRun::relativeStderr(int sensor) const {
 }
 
 SensorRunResults SensorRun::results() const {
+  checkScene();
   SensorRunResults r;
   r.rays = rays_done_;
   r.seed = config_.seed;

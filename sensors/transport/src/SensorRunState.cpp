@@ -85,6 +85,7 @@ std::uint64_t SensorRun::computeFingerprint() const {
   }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();
+    if (spec.shape == SensorShape::FarField) addAffine(s.world_from_object);  // not an instance of the graph
     add(&spec.shape, sizeof spec.shape);
     for (const double x : {spec.width, spec.height}) addDouble(x);
     const std::uint32_t grid[3] = {spec.nx, spec.ny, spec.two_sided ? 1u : 0u};
@@ -137,6 +138,7 @@ void append(std::vector<char>& out, const T* data, std::size_t count) {
 }  // namespace
 
 void SensorRun::saveState(const std::filesystem::path& file) const {
+  checkScene();
   std::vector<char> bytes;
   const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bins_.size(), sensor_sums_.size()};
   append(bytes, kStateMagic, sizeof kStateMagic);
@@ -170,6 +172,7 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
 }
 
 void SensorRun::loadState(const std::filesystem::path& file) {
+  checkScene();
   if (const std::string problem = notRegularFile(file); !problem.empty())
     throw FileError(file.string() + ": cannot open the run state: " + problem);
   std::ifstream in(file, std::ios::binary | std::ios::ate);
