@@ -5,6 +5,7 @@
 #include "SensorImage.h"
 #include "WorkerThreads.h"
 
+#include <duplex/accel/AtomicFile.h>
 #include <duplex/accel/Error.h>
 #include <duplex/accel/InputFile.h>
 #include <duplex/scenegraph/SceneDocument.h>
@@ -124,10 +125,10 @@ nlohmann::ordered_json finiteOrNull(double v) {
   return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr);
 }
 
+// Every result file appears whole or not at all (a full disk is an error naming it, and an earlier
+// run's file of the same name stays as it was).
 void writeText(const std::filesystem::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  if (!out) throw FileError(path.string() + ": cannot write");
+  writeFileAtomically(path, {reinterpret_cast<const unsigned char*>(text.data()), text.size()}, "sensor result", false);
 }
 
 std::string duration(double s) {
