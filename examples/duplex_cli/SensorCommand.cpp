@@ -27,6 +27,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <span>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -253,8 +254,33 @@ void writeFarFieldFiles(const std::filesystem::path& dir, const SensorResult& s,
   writeIes(dir / (base + ".ies"), farFieldIesTable(s, r.rays, r.seed));
 }
 
+// A NumPy .npy file (format 1.0) of one array of the given `shape` ("ny, nx"), row-major, little
+// endian: what numpy.load reads, written at disk speed. `descr` is the NumPy type of T ("<f8", "<u8").
+template <class T>
+void writeNpy(const std::filesystem::path& path, std::span<const T> values, const std::string& shape,
+              const char* descr) {
+  std::ostringstream dict;
+  dict << "{'descr': '" << descr << "', 'fortran_order': False, 'shape': (" << shape << "), }";
+  std::string header = dict.str();
+  // Magic, version, header length, header: the data start at a multiple of 64 bytes.
+  const std::size_t unpadded = 10 + header.size() + 1;
+  header.append((64 - unpadded % 64) % 64, ' ');
+  header += '\n';
+  std::string bytes = "\x93NUMPY";
+  bytes += '\x01';
+  bytes += '\x00';
+  const auto len = static_cast<std::uint16_t>(header.size());
+  bytes += static_cast<char>(len & 0xff);
+  bytes += static_cast<char>(len >> 8);
+  bytes += header;
+  AtomicFileWriter out(path, "sensor map");
+  out.write({reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()});
+  out.write({reinterpret_cast<const unsigned char*>(values.data()), values.size_bytes()});
+  out.commit();
+}
+
 void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
-                      const SensorRunResults& r) {
+                      const SensorRunResults& r, std::uint64_t text_map_limit) {
   if (s.shape == SensorShape::FarField) {
     writeFarFieldFiles(dir, s, inst, r);
     return;
@@ -270,17 +296,51 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["bins"] = {s.nx, s.ny};
   j["two_sided"] = s.two_sided;
   putTotals(j, s, r);
-  j["irradiance_w_m2"] = s.irradiance_w_m2;
-  j["stderr_w_m2"] = s.stderr_w_m2;
-  j["flux_w"] = s.flux_w;
-  j["ray_count"] = s.ray_count;
-  j["bin_area_m2"] = s.bin_area_m2;
+  // Large maps: binary files instead of JSON arrays and CSV rows (--text-map-limit).
+  const bool text_maps = static_cast<std::uint64_t>(s.nx) * s.ny <= text_map_limit;
+  if (text_maps) {
+    j["irradiance_w_m2"] = s.irradiance_w_m2;
+    j["stderr_w_m2"] = s.stderr_w_m2;
+    j["flux_w"] = s.flux_w;
+    j["ray_count"] = s.ray_count;
+    j["bin_area_m2"] = s.bin_area_m2;
+  } else {
+    nlohmann::ordered_json files;
+    std::ostringstream shape;
+    shape << s.ny << ", " << s.nx;
+    auto map = [&](const char* key, const auto& values, const char* descr, const std::string& dims) {
+      const std::string file = base + "." + key + ".npy";
+      writeNpy(dir / file, std::span(values.data(), values.size()), dims, descr);
+      files[key] = file;
+    };
+    map("irradiance_w_m2", s.irradiance_w_m2, "<f8", shape.str());
+    map("stderr_w_m2", s.stderr_w_m2, "<f8", shape.str());
+    map("flux_w", s.flux_w, "<f8", shape.str());
+    map("ray_count", s.ray_count, "<u8", shape.str());
+    map("bin_area_m2", s.bin_area_m2, "<f8", shape.str());
+    if (!r.bands.empty()) {  // [band][row][column]
+      std::ostringstream dims_text;
+      dims_text << r.bands.size() << ", " << shape.str();
+      const std::string dims = dims_text.str();
+      auto flat = [](const std::vector<std::vector<double>>& per_band) {
+        std::vector<double> all;
+        for (const auto& b : per_band) all.insert(all.end(), b.begin(), b.end());
+        return all;
+      };
+      map("band_irradiance_w_m2", flat(s.band_irradiance_w_m2), "<f8", dims);
+      map("band_stderr_w_m2", flat(s.band_stderr_w_m2), "<f8", dims);
+      map("band_flux_w", flat(s.band_flux_w), "<f8", dims);
+    }
+    j["map_files"] = files;
+  }
   // Only what the scene asked for: per-band arrays (the keys above are their sums) and angular bins.
   if (!r.bands.empty()) {
     putBandTotals(j, s, r);
-    j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
-    j["band_stderr_w_m2"] = s.band_stderr_w_m2;
-    j["band_flux_w"] = s.band_flux_w;
+    if (text_maps) {
+      j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
+      j["band_stderr_w_m2"] = s.band_stderr_w_m2;
+      j["band_flux_w"] = s.band_flux_w;
+    }
   }
   if (s.theta_bins != 0) {
     j["angular_bins"] = {s.theta_bins, s.phi_bins};
@@ -293,6 +353,12 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
   // CSV: one row per bin with its centre in sensor-local coordinates (a sphere: its direction).
+  if (!text_maps) {
+    demo::writePng(dir / (base + ".png"), falseColourImage(s.irradiance_w_m2, s.nx, s.ny));
+    if (sensorExrAvailable())
+      writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
+    return;
+  }
   std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count\n";
   char row[256];
   for (std::uint32_t iy = 0; iy < s.ny; ++iy) {
@@ -457,7 +523,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];
-    writeSensorFiles(o.out, s, scene.sensors()[k], r);
+    writeSensorFiles(o.out, s, scene.sensors()[k], r, o.text_map_limit);
     sensors.push_back({{"name", s.name},
                        {"file", (o.out / (fileName(s.name) + ".json")).string()},
                        {"total_flux_w", s.total_flux_w},

@@ -55,6 +55,11 @@ struct SensorOptions {
   /// --at T: apply the scene's timed edits with time <= T before the run (applyEditsUntil); unset:
   /// none (stderr then says how many the scene has).
   std::optional<double> at;
+  /// --text-map-limit N: a flat or spherical sensor of more than N bins keeps its per-bin maps out
+  /// of the JSON and writes no CSV: they go to NumPy files DIR/<name>.<map>.npy (and the PNG/EXR
+  /// images as always), named in the JSON's "map_files". Text for 10^7 bins takes minutes and
+  /// gigabytes; the binary files are written at disk speed.
+  std::uint64_t text_map_limit = std::uint64_t{1} << 20;
 };
 
 /// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene

@@ -270,6 +270,10 @@ int main(int argc, char** argv) {
                    "Seconds between saves of DIR/run_state.bin during the run (default 60; 0: only at the end)")
       ->check(CLI::Range(0.0, 1e9));
   sensor_cmd
+      ->add_option("--text-map-limit", sensor.text_map_limit,
+                   "Bins above which a sensor's maps go to .npy files instead of the JSON and CSV (default 1048576)")
+      ->transform(kDecimal);
+  sensor_cmd
       ->add_option("--at", sensor.at,
                    "Apply the scene's timed edits with time <= T (seconds) before the run (default: none)")
       ->check(CLI::Range(0.0, std::numeric_limits<double>::max()));

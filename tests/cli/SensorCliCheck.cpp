@@ -23,6 +23,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <cstdlib>
 #include <csignal>
 #include <filesystem>
@@ -188,6 +189,37 @@ int check(const std::string& duplex, const fs::path& dir) {
   // Bit-identical for 2 threads; --resume from 8,000 rays equals the 20,000-ray run.
   (void)runJson(sensorArgs(duplex, scene, "20000", "2", dir / "two"), dir);
   expectSameMaps(dir / "one", dir / "two", "1 vs 2 threads");
+
+  // Maps above --text-map-limit bins: NumPy files named in "map_files" instead of JSON arrays and
+  // CSV rows, holding the same values bit for bit.
+  {
+    std::vector<std::string> args = sensorArgs(duplex, scene, "20000", "1", dir / "npy");
+    args.insert(args.end(), {"--text-map-limit", "11"});
+    (void)runJson(args, dir);
+    for (int k = 0; k < 6; ++k) {
+      const std::string name = "face" + std::to_string(k);
+      const nlohmann::json text = readJson(dir / "one" / (name + ".json"));
+      const nlohmann::json j = readJson(dir / "npy" / (name + ".json"));
+      expect(!j.contains("irradiance_w_m2") && j.contains("map_files") && j["total_flux_w"] == text["total_flux_w"],
+             name + ".json above the limit: expected map_files, no arrays, the same totals: " + j.dump());
+      expect(!fs::exists(dir / "npy" / (name + ".csv")), name + ".csv written above the limit");
+      for (const char* key : {"irradiance_w_m2", "stderr_w_m2", "flux_w", "bin_area_m2"}) {
+        const fs::path file = dir / "npy" / j["map_files"][key].get<std::string>();
+        std::ifstream in(file, std::ios::binary);
+        const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        expect(bytes.size() > 10 && bytes.compare(0, 6, "\x93NUMPY") == 0, file.string() + " is not a .npy file");
+        const std::size_t header =
+            10 + static_cast<unsigned char>(bytes[8]) + 256u * static_cast<unsigned char>(bytes[9]);
+        const std::string dict = bytes.substr(10, header - 10);
+        expect(header % 64 == 0 && dict.find("'descr': '<f8'") != std::string::npos &&
+                   dict.find("'shape': (3, 4)") != std::string::npos && bytes.size() == header + 12 * 8,
+               file.string() + ": header " + dict);
+        const std::vector<double> expected = text[key].get<std::vector<double>>();
+        expect(std::memcmp(bytes.data() + header, expected.data(), 12 * 8) == 0,
+               file.string() + " differs from the JSON array of the same run");
+      }
+    }
+  }
   (void)runJson(sensorArgs(duplex, scene, "8000", "2", dir / "resumed"), dir);
   std::vector<std::string> resume = sensorArgs(duplex, scene, "20000", "1", dir / "resumed");
   resume.push_back("--resume");
