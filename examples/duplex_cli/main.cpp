@@ -304,7 +304,8 @@ int main(int argc, char** argv) {
       }
       result = duplex::cli::runRays(rays);
     }
-    std::cout << result.dump() << std::endl;
+    // A shared sensor run reports on rank 0 only; the other ranks return null.
+    if (!result.is_null()) std::cout << result.dump() << std::endl;
     // A run stopped by SIGINT / SIGTERM saved its state and wrote its files; the exit status still
     // says it was stopped, as a shell expects (128 + the signal).
     if (*sensor_cmd && result.contains("signal")) return 128 + result["signal"].get<int>();
