@@ -285,6 +285,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     cfg.max_depth = o.max_depth;
     cfg.max_scatterings = o.max_scatterings;
     cfg.roulette_threshold = o.roulette;
+    cfg.batch_rays = o.batch_rays;
     running.emplace(scene, cfg);
     if (!files) return;
     std::error_code ec;
@@ -355,6 +356,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   report["max_depth"] = o.max_depth;
   report["max_scatterings"] = o.max_scatterings;
   report["roulette_threshold"] = o.roulette;
+  report["batch_rays"] = o.batch_rays;
   report["status"] = status == SensorRunStatus::TargetReached ? "target_reached"
                      : status == SensorRunStatus::Cancelled   ? "interrupted"
                                                               : "completed";

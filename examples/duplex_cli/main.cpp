@@ -14,6 +14,7 @@
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
+//                 [--batch-rays B]; under `mpirun -np N` the ranks share the batches
 //                 [--roulette R] [--progress MODE] [--checkpoint SECONDS]
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
@@ -253,7 +254,15 @@ int main(int argc, char** argv) {
       ->add_option("--checkpoint", sensor.checkpoint_s,
                    "Seconds between saves of DIR/run_state.bin during the run (default 60; 0: only at the end)")
       ->check(CLI::Range(0.0, 1e9));
-  sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");
+  sensor_cmd
+      ->add_option("--batch-rays", sensor.batch_rays,
+                   "Rays per batch: the unit of the ordered sums, of work dealt to MPI ranks, of checkpoints and "
+                   "--target-error checks (default 65536; results depend on it, not on --threads or ranks)")
+      ->check(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+  sensor_cmd->footer(
+      "Files are described in docs/sensors.md; the run is bit-identical for any --threads, and for any number of "
+      "ranks under mpirun (docs/distributed.md).");
 
   try {
     app.parse(argc, argv);
