@@ -6,7 +6,8 @@ One run interleaves, per repetition (the order rotating), on each scene:
   2r1t  mpirun -np 2, one thread per rank
   1p1t  one process, one thread (for the speed-up of either over one core)
 and records the run's own time (run.json "seconds": tracing and reduction, without the scene load
-and MPI's start-up), the command's wall time, and the MPI report of the 2-rank runs (tally bytes
+and MPI's start-up), the command's wall time and CPU time (all its processes: load, run, files),
+and the MPI report of the 2-rank runs (tally bytes
 per batch, rank 0's time in MPI calls and in adding batches). Every run's result files are compared
 with the first 1p2t run's (they must be identical).
 
@@ -19,6 +20,7 @@ ceiling ("room_fine", 263,168 bins), so that the tallies are 100x larger.
 import argparse
 import json
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -56,13 +58,16 @@ def files_of(out):
 def run_one(cmd, out):
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.perf_counter()
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     p = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True, env=mpi_env())
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     wall = time.perf_counter() - t0
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
     if p.returncode != 0:
         sys.exit("bench_mpi: %s failed (exit %d):\n%s" % (" ".join(cmd), p.returncode, p.stderr))
     with open(os.path.join(out, "run.json")) as f:
         report = json.load(f)
-    return wall, report
+    return wall, cpu, report
 
 
 def main():
@@ -106,18 +111,20 @@ def main():
             order = configs[rep % 3:] + configs[:rep % 3]
             for config in order:
                 out = os.path.join(work, "%s_%s" % (name, config))
-                wall, report = run_one(command(config, scene, out), out)
+                wall, cpu, report = run_one(command(config, scene, out), out)
                 files = files_of(out)
                 if reference is None:
                     reference = files
                 if files != reference:
                     sys.exit("bench_mpi: %s on %s: result files differ from the first run's" % (config, name))
-                samples[config].append({"wall_s": wall, "run_s": report["seconds"], "rays_per_s": report["rays_per_s"],
+                samples[config].append({"wall_s": wall, "cpu_s": cpu, "run_s": report["seconds"],
+                                        "rays_per_s": report["rays_per_s"],
                                         "mpi": report.get("mpi")})
                 print("%s %s rep %d: run %.3f s, wall %.3f s" % (name, config, rep, report["seconds"], wall),
                       file=sys.stderr)
         med = {c: statistics.median(s["rays_per_s"] for s in samples[c]) for c in configs}
         wall = {c: statistics.median(s["wall_s"] for s in samples[c]) for c in configs}
+        cpu = {c: statistics.median(s["cpu_s"] for s in samples[c]) for c in configs}
         mpi = [s["mpi"] for s in samples["2r1t"]]
         # Rank 1's batches are the ones sent; rank 0 traces every other batch of a round itself.
         sent = [m["batches"] - m["rounds"] for m in mpi]
@@ -131,6 +138,8 @@ def main():
             "bins": bins,
             "median_rays_per_s": med,
             "median_wall_s": wall,
+            "median_cpu_s": cpu,
+            "cpu_ratio_2r1t_vs_1p2t": cpu["2r1t"] / cpu["1p2t"],
             "ratio_2r1t_vs_1p2t": med["2r1t"] / med["1p2t"],
             "speedup_2r1t_vs_1p1t": med["2r1t"] / med["1p1t"],
             "speedup_1p2t_vs_1p1t": med["1p2t"] / med["1p1t"],

@@ -275,8 +275,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
       throw Interrupted(g_stop_signal.load(), "stopped while loading the scene; nothing written");
     const SensorScene& scene = *loaded;
     if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
-    if (scene.sensors().empty())
-      throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
+    if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
     checkOutputNames(scene, o.scene);
 
     SensorRunConfig cfg;

@@ -68,16 +68,16 @@ class Interrupted : public std::runtime_error {
 };
 
 /// Runs the command; returns the report (keys: rays, seed, threads, ranks (processes sharing the
-/// run: 1, or the MPI ranks), max_depth, max_scatterings, roulette_threshold, batch_rays, status ("completed", "target_reached", "interrupted" with the signal's
-/// number in `signal`), resumed_from (rays already done when
-/// the run started: 0, or the saved count with --resume), seconds, rays_per_s, emitted_power_w,
-/// energy {escaped_w, absorbed_w, medium_absorbed_w, depth_limited_w, roulette_w}, bands and
-/// band_emitted_w (spectral scenes only), scatterings (scenes whose fog scatters only), sensors
-/// [{name, file, total_flux_w, relative_stderr, efficiency}], and for a run under mpirun mpi
-/// {ranks, rounds, batches, tally_bytes_received, tally_bytes_max, rank0_trace_seconds,
-/// rank0_comm_seconds, rank0_reduce_seconds, max_trace_seconds}). Under mpirun every rank runs
-/// it; rank 0 reads and writes the files and returns the report, the others return null. Throws
-/// duplex::Error for bad input.
+/// run: 1, or the MPI ranks), max_depth, max_scatterings, roulette_threshold, batch_rays, status
+/// ("completed", "target_reached", "interrupted" with the signal's number in `signal`),
+/// resumed_from (rays already done when the run started: 0, or the saved count with --resume),
+/// seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w, medium_absorbed_w,
+/// depth_limited_w, roulette_w}, bands and band_emitted_w (spectral scenes only), scatterings
+/// (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr,
+/// efficiency}], and for a run under mpirun mpi {ranks, rounds, batches, tally_bytes_received,
+/// tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
+/// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
+/// returns the report, the others return null. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
 
 }  // namespace duplex::cli

@@ -51,11 +51,16 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
   out.rays = traced;
   out.complete = traced == end - first;
   const std::size_t nb = t.band_bin_sum.empty() ? 0 : scene_.bandCount();
-  const std::uint64_t head[10] = {fingerprint(),        first,
-                                  traced,               t.bins.size(),
-                                  t.sensors.size(),     nb,
-                                  t.touched.size(),     t.counters.segments,
-                                  t.counters.crossings, t.counters.scatterings};
+  const std::uint64_t head[10] = {fingerprint(),
+                                  first,
+                                  traced,
+                                  t.bins.size(),
+                                  t.sensors.size(),
+                                  nb,
+                                  t.touched.size(),
+                                  t.counters.segments,
+                                  t.counters.crossings,
+                                  t.counters.scatterings};
   std::vector<std::byte>& b = out.bytes;
   b.reserve(kBatchHead + t.touched.size() * (4 + 24 + 16 * nb) + t.sensors.size() * 16 * (1 + nb) + 40);
   put(b, kBatchMagic, sizeof kBatchMagic);
@@ -146,7 +151,8 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
     for (const double x : t.band_sensor_sum2) value(x);
     double energy[5];
     get(energy, sizeof energy);
-    for (const double x : energy) value(x);
+    for (int k = 0; k < 4; ++k) value(energy[k]);
+    ok = ok && std::isfinite(energy[4]);  // the roulette's net term may be negative
     t.energy = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
     t.counters = {h[7], h[8], h[9]};
     t.rays = rays;

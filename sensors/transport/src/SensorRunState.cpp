@@ -200,8 +200,10 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
     return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
   };
   const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= rays; });
+  // The roulette's net term (what it killed minus what it added) may be negative; the others not.
+  const bool energy_ok = valid(std::span<const double>(energy).first(4)) && std::isfinite(energy[4]);
   if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(t.band_bin_sum) || !valid(t.band_bin_sum2) ||
-      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !valid(energy) || !counts_ok)
+      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !energy_ok || !counts_ok)
     return false;
   t.touched.clear();
   for (std::size_t i = 0; i < nb; ++i) {

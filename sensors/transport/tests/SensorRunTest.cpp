@@ -332,19 +332,35 @@ TEST(SensorRun, FogAttenuatesAndTheBalanceCloses) {
   EXPECT_EQ(r.energy.roulette_w, 0.0);
 }
 
-TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
-  // The fog slab between a point source and a Lambertian ceiling: paths reach the ceiling with
-  // e^-(0.4 / cos) of their power, below a roulette threshold of 0.9 of it. Per path the roulette
-  // term is what it killed minus what it added, so the five terms still sum to the emitted power
-  // exactly, and the box's flux agrees with the run without roulette.
-  Fixture f;
+// The bytes of a run's saved state: equal states are equal accumulators, bit for bit.
+std::string stateBytes(const SensorRun& run, const std::string& tag) {
+  const auto file = std::filesystem::temp_directory_path() /
+                    ("duplex_sensor_state_" + tag + "_" + std::to_string(::getpid()) + ".bin");
+  run.saveState(file);
+  std::ifstream in(file, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::remove(file);
+  return bytes;
+}
+
+// A fog slab between a point source of 2 W and a Lambertian ceiling, in a closed box of sensors.
+SensorScene fogUnderCeiling(Fixture& f) {
   Box slab;
   slab.lo = glm::vec3(-0.9f, -0.9f, 0.25f);
   slab.hi = glm::vec3(0.9f, 0.9f, 0.75f);
   f.add(std::make_shared<const test::SlabMedium>(0.8, slab), Affine::identity(), "fog");
   f.add(quad(0.8, "ceiling"), translate(0, 0, 0.9), "ceiling", Material{MaterialType::Lambertian, 0.9});
   closeBox(f);
-  SensorScene scene = f.scene({pointLight({0, 0, 0}, 2.0)});
+  return f.scene({pointLight({0, 0, 0}, 2.0)});
+}
+
+TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
+  // The fog slab between a point source and a Lambertian ceiling: paths reach the ceiling with
+  // e^-(0.4 / cos) of their power, below a roulette threshold of 0.9 of it. Per path the roulette
+  // term is what it killed minus what it added, so the five terms still sum to the emitted power
+  // exactly, and the box's flux agrees with the run without roulette.
+  Fixture f;
+  const SensorScene scene = fogUnderCeiling(f);
   auto run = [&](double threshold) {
     SensorRunConfig cfg;
     cfg.roulette_threshold = threshold;
@@ -365,6 +381,36 @@ TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
     EXPECT_LT(std::abs(a.total_flux_w - b.total_flux_w), 4.5 * se)
         << a.name << ": " << a.total_flux_w << " vs " << b.total_flux_w;
   }
+}
+
+TEST(SensorRun, BatchesWhoseRouletteTermIsNegativeAddAndResume) {
+  // The roulette's net term of a batch (what it killed minus what it added) has either sign: such
+  // batches travel between runs and states like any other.
+  Fixture f;
+  const SensorScene scene = fogUnderCeiling(f);
+  SensorRunConfig cfg;
+  cfg.roulette_threshold = 0.9;
+  cfg.seed = 3;
+  cfg.batch_rays = 2000;
+  SensorRun whole(scene, cfg);
+  int negative = 0;
+  double before = 0.0;
+  (void)whole.runUntil(30000, [&](const SensorProgress& p) {
+    const double sum = whole.results().energy.roulette_w * static_cast<double>(p.rays_done);
+    negative += sum < before ? 1 : 0;
+    before = sum;
+  });
+  EXPECT_GT(negative, 0);
+  SensorRun worker(scene, cfg), sum(scene, cfg);
+  for (std::uint64_t b = 0; b < 15; ++b) sum.addBatch(worker.traceBatch(b, 30000).bytes);
+  EXPECT_EQ(stateBytes(whole, "roulette_whole"), stateBytes(sum, "roulette_sum"));
+  const auto file =
+      std::filesystem::temp_directory_path() / ("duplex_sensor_roulette_" + std::to_string(::getpid()) + ".bin");
+  sum.saveState(file);
+  SensorRun resumed(scene, cfg);
+  resumed.loadState(file);
+  std::filesystem::remove(file);
+  EXPECT_EQ(stateBytes(resumed, "roulette_resumed"), stateBytes(whole, "roulette_whole2"));
 }
 
 TEST(SensorRun, ClosedBoxOfSensorsRecordsAllEmittedPower) {
@@ -483,17 +529,6 @@ TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
     EXPECT_EQ(third.raysDone(), 0u);
     std::filesystem::remove(file);
   }
-}
-
-// The bytes of a run's saved state: equal states are equal accumulators, bit for bit.
-std::string stateBytes(const SensorRun& run, const std::string& tag) {
-  const auto file = std::filesystem::temp_directory_path() /
-                    ("duplex_sensor_state_" + tag + "_" + std::to_string(::getpid()) + ".bin");
-  run.saveState(file);
-  std::ifstream in(file, std::ios::binary);
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::filesystem::remove(file);
-  return bytes;
 }
 
 TEST(SensorRun, BatchesTracedElsewhereAndAddedInOrderEqualOneRun) {

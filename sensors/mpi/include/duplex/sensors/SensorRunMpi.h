@@ -35,10 +35,10 @@ class MpiError : public Error {
 
 /// What one rank did in runUntilMpi (for benchmarks and reports).
 struct SensorMpiStats {
-  int rank = 0;                        ///< this process's rank in the communicator
-  int ranks = 1;                       ///< ranks in the communicator
-  std::uint64_t batches_traced = 0;    ///< batches this rank traced
-  std::uint64_t rounds = 0;            ///< rounds of the run (one batch per rank each)
+  int rank = 0;                            ///< this process's rank in the communicator
+  int ranks = 1;                           ///< ranks in the communicator
+  std::uint64_t batches_traced = 0;        ///< batches this rank traced
+  std::uint64_t rounds = 0;                ///< rounds of the run (one batch per rank each)
   std::uint64_t tally_bytes_sent = 0;      ///< bytes of batch tallies this rank sent (0 on rank 0)
   std::uint64_t tally_bytes_received = 0;  ///< bytes of batch tallies rank 0 received (0 elsewhere)
   std::uint64_t tally_bytes_max = 0;       ///< the largest batch tally this rank made, bytes
