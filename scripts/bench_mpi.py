@@ -123,11 +123,13 @@ def main():
                 print("%s %s rep %d: run %.3f s, wall %.3f s" % (name, config, rep, report["seconds"], wall),
                       file=sys.stderr)
         med = {c: statistics.median(s["rays_per_s"] for s in samples[c]) for c in configs}
+        # The fastest repetition of each: on a shared machine the least disturbed one.
+        best = {c: max(s["rays_per_s"] for s in samples[c]) for c in configs}
         wall = {c: statistics.median(s["wall_s"] for s in samples[c]) for c in configs}
         cpu = {c: statistics.median(s["cpu_s"] for s in samples[c]) for c in configs}
         mpi = [s["mpi"] for s in samples["2r1t"]]
-        # Rank 1's batches are the ones sent; rank 0 traces every other batch of a round itself.
-        sent = [m["batches"] - m["rounds"] for m in mpi]
+        # The batches rank 1 traced are the ones sent; rank 0 traces the others itself.
+        sent = [m["batches"] - m["rank0_batches"] for m in mpi]
         bytes_per_batch = [m["tally_bytes_received"] / max(1, b) for m, b in zip(mpi, sent)]
         with open(scene) as f:
             sc = json.load(f)
@@ -140,16 +142,21 @@ def main():
             "median_wall_s": wall,
             "median_cpu_s": cpu,
             "cpu_ratio_2r1t_vs_1p2t": cpu["2r1t"] / cpu["1p2t"],
+            "best_rays_per_s": best,
             "ratio_2r1t_vs_1p2t": med["2r1t"] / med["1p2t"],
+            "best_ratio_2r1t_vs_1p2t": best["2r1t"] / best["1p2t"],
+            "best_strong_scaling_efficiency_2r1t": best["2r1t"] / (2 * best["1p1t"]),
             "speedup_2r1t_vs_1p1t": med["2r1t"] / med["1p1t"],
             "speedup_1p2t_vs_1p1t": med["1p2t"] / med["1p1t"],
             "strong_scaling_efficiency_2r1t": med["2r1t"] / (2 * med["1p1t"]),
             "batch_tally_bytes_median": statistics.median(bytes_per_batch),
             "batch_tally_bytes_max": max(m["tally_bytes_max"] for m in mpi),
             "dense_tally_bytes": bins * 24,
-            "rank0_comm_s_per_round_median": statistics.median(m["rank0_comm_seconds"] / m["rounds"] for m in mpi),
+            "rank1_batch_share_median": statistics.median(b / m["batches"] for m, b in zip(mpi, sent)),
+            "rank0_comm_s_per_batch_median": statistics.median(m["rank0_comm_seconds"] / m["batches"] for m in mpi),
             "rank0_reduce_s_per_batch_median": statistics.median(m["rank0_reduce_seconds"] / m["batches"] for m in mpi),
-            "trace_s_per_batch_median": statistics.median(m["rank0_trace_seconds"] / max(1, m["rounds"]) for m in mpi),
+            "trace_s_per_batch_median": statistics.median(m["rank0_trace_seconds"] / max(1, m["rank0_batches"])
+                                                          for m in mpi),
             "identical_files": True,
             "samples": samples,
         }
@@ -159,10 +166,11 @@ def main():
         json.dump(result, f, indent=1)
         f.write("\n")
     for name, s in result["scenes"].items():
-        print("%s: 2 ranks x 1 thread / 1 process x 2 threads = %.3f (goal >= 0.9); strong-scaling efficiency %.3f; "
-              "%.0f bytes and %.2f ms of rank 0's MPI time per batch (tracing %.1f ms)"
-              % (name, s["ratio_2r1t_vs_1p2t"], s["strong_scaling_efficiency_2r1t"], s["batch_tally_bytes_median"],
-                 1e3 * s["rank0_comm_s_per_round_median"], 1e3 * s["trace_s_per_batch_median"]))
+        print("%s: 2 ranks x 1 thread / 1 process x 2 threads = %.3f median, %.3f best (goal >= 0.9); strong-scaling "
+              "efficiency %.3f median, %.3f best; %.0f bytes and %.2f ms of rank 0's MPI time per batch (tracing %.1f ms)"
+              % (name, s["ratio_2r1t_vs_1p2t"], s["best_ratio_2r1t_vs_1p2t"], s["strong_scaling_efficiency_2r1t"],
+                 s["best_strong_scaling_efficiency_2r1t"], s["batch_tally_bytes_median"],
+                 1e3 * s["rank0_comm_s_per_batch_median"], 1e3 * s["trace_s_per_batch_median"]))
 
 
 if __name__ == "__main__":

@@ -84,8 +84,8 @@ SensorRunStatus SensorRanks::runUntil(SensorRun& run, std::uint64_t total_rays,
   MPI_Reduce(&mine[1], &max_trace, 1, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
   if (rank_ == 0) {
     report_ = {{"ranks", size_},
-               {"rounds", stats.rounds},
                {"batches", static_cast<std::uint64_t>(all_batches)},
+               {"rank0_batches", stats.batches_traced},
                {"tally_bytes_received", stats.tally_bytes_received},
                {"tally_bytes_max", stats.tally_bytes_max},
                {"rank0_trace_seconds", stats.trace_seconds},

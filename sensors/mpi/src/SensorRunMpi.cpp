@@ -1,11 +1,7 @@
-// A sensor run shared by the ranks of an MPI communicator: rounds of one batch per rank, the
-// tallies sent to rank 0 and added there in batch order (SensorRunMpi.h).
-//
-// A round: rank 0 broadcasts whether to go on and the round's first batch; every rank traces its
-// batch; each other rank sends rank 0 a header (tally bytes, whether the batch is complete,
-// whether its run was cancelled) and the tally; rank 0 adds its own, then rank 1's, ... in batch
-// order, checking the stop rule after each as runUntil does. Rounds keep every rank in step, so a
-// stop (target reached, a signal on any rank) ends all of them after the same batch.
+// A sensor run shared by the ranks of an MPI communicator: rank 0 deals the batches on demand,
+// the other ranks trace them and send the tallies back, rank 0 adds every batch in batch order
+// (SensorRunMpi.h). Point-to-point messages only, so that no rank waits for a slower one except
+// for the batch that is next to be added.
 
 #include "duplex/sensors/SensorRunMpi.h"
 
@@ -14,6 +10,9 @@
 #include <bit>
 #include <chrono>
 #include <climits>
+#include <deque>
+#include <map>
+#include <thread>
 #include <cstring>
 #include <sstream>
 #include <vector>
@@ -58,10 +57,259 @@ class Comm {
 
 // What a rank tells rank 0 about its batch of a round.
 enum TallyState : std::uint64_t { kNoBatch = 0, kComplete = 1, kIncomplete = 2 };
-constexpr int kTagHeader = 1, kTagTally = 2;
+constexpr int kTagHeader = 1, kTagTally = 2, kTagAssign = 3;
 
 double since(std::chrono::steady_clock::time_point t) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+// ---- dealing: rank 0 hands out batch numbers, the others trace them and send the tallies back ----
+//
+// Each other rank keeps kLookahead batches assigned, so that it starts its next batch at once
+// while its tally travels; rank 0 traces batches too, between its services, never more than
+// kWindow batches ahead of the next one to add (the tallies that arrive out of order wait in
+// memory). A faster rank thus asks for more batches: ranks of different speeds share the work as
+// they can, and the result does not change, since rank 0 adds the batches in batch order.
+
+constexpr int kLookahead = 2;
+constexpr std::uint64_t kStop = ~std::uint64_t{0};  // the assignment that ends a rank's loop
+
+// What a rank sends before a tally: batch, tally bytes, TallyState, cancelled (0 / 1).
+using TallyHeader = std::array<std::uint64_t, 4>;
+
+void work(SensorRun& run, const Comm& comm, std::uint64_t total_rays, SensorMpiStats& stats) {
+  std::deque<std::uint64_t> queue;  // batches assigned, not yet traced
+  std::uint64_t incoming = 0;
+  MPI_Request assignment = MPI_REQUEST_NULL;
+  check(MPI_Irecv(&incoming, 1, MPI_UINT64_T, 0, kTagAssign, comm.get(), &assignment), "MPI_Irecv");
+  bool stopped = false;
+  // Tallies on their way: their buffers live until the sends complete.
+  struct Outgoing {
+    TallyHeader header{};
+    std::vector<std::byte> bytes;
+    std::array<MPI_Request, 2> requests{MPI_REQUEST_NULL, MPI_REQUEST_NULL};
+  };
+  std::deque<Outgoing> outgoing;
+  const auto send = [&](std::uint64_t batch, std::vector<std::byte> bytes, TallyState state) {
+    Outgoing& o = outgoing.emplace_back();
+    o.header = {batch, bytes.size(), state, run.cancelled() ? 1u : 0u};
+    o.bytes = std::move(bytes);
+    if (o.bytes.size() > static_cast<std::size_t>(INT_MAX))
+      throw MpiError("a batch tally of " + std::to_string(o.bytes.size()) +
+                     " bytes, more than one MPI message holds: use smaller batches");
+    check(MPI_Isend(o.header.data(), 4, MPI_UINT64_T, 0, kTagHeader, comm.get(), &o.requests[0]), "MPI_Isend");
+    if (!o.bytes.empty())
+      check(MPI_Isend(o.bytes.data(), static_cast<int>(o.bytes.size()), MPI_BYTE, 0, kTagTally, comm.get(),
+                      &o.requests[1]),
+            "MPI_Isend");
+    stats.tally_bytes_sent += o.bytes.size();
+    // Forget the sends that completed (in order: the oldest first).
+    while (!outgoing.empty()) {
+      int done = 0;
+      check(MPI_Testall(2, outgoing.front().requests.data(), &done, MPI_STATUSES_IGNORE), "MPI_Testall");
+      if (!done) break;
+      outgoing.pop_front();
+    }
+  };
+  for (;;) {
+    // Take the assignments that arrived; wait for one when there is nothing to trace.
+    while (!stopped) {
+      int arrived = 0;
+      const auto tw = std::chrono::steady_clock::now();
+      if (queue.empty()) {
+        check(MPI_Wait(&assignment, MPI_STATUS_IGNORE), "MPI_Wait");
+        arrived = 1;
+      } else {
+        check(MPI_Test(&assignment, &arrived, MPI_STATUS_IGNORE), "MPI_Test");
+      }
+      stats.comm_seconds += since(tw);
+      if (!arrived) break;
+      if (incoming == kStop) {
+        stopped = true;
+        break;
+      }
+      queue.push_back(incoming);
+      check(MPI_Irecv(&incoming, 1, MPI_UINT64_T, 0, kTagAssign, comm.get(), &assignment), "MPI_Irecv");
+    }
+    if (stopped) break;
+    const std::uint64_t batch = queue.front();
+    queue.pop_front();
+    if (run.cancelled()) {
+      send(batch, {}, kIncomplete);  // a signal here: nothing more is traced
+      continue;
+    }
+    const auto tt = std::chrono::steady_clock::now();
+    SensorBatchTally tally = run.traceBatch(batch, total_rays);
+    stats.trace_seconds += since(tt);
+    ++stats.batches_traced;
+    stats.tally_bytes_max = std::max<std::uint64_t>(stats.tally_bytes_max, tally.bytes.size());
+    send(batch, std::move(tally.bytes), tally.complete ? kComplete : kIncomplete);
+  }
+  // Stopped: the batches still assigned are answered untraced, and every send completes.
+  for (const std::uint64_t batch : queue) send(batch, {}, kNoBatch);
+  const auto tw = std::chrono::steady_clock::now();
+  for (Outgoing& o : outgoing) check(MPI_Waitall(2, o.requests.data(), MPI_STATUSES_IGNORE), "MPI_Waitall");
+  stats.comm_seconds += since(tw);
+}
+
+SensorRunStatus coordinate(SensorRun& run, const Comm& comm, std::uint64_t total_rays,
+                           const std::function<void(const SensorProgress&)>& progress, const SensorStopRule& stop,
+                           std::uint64_t start, std::chrono::steady_clock::time_point t0, SensorMpiStats& stats) {
+  const int ranks = comm.size();
+  const std::uint64_t batch_rays = run.config().batch_rays;
+  const std::uint64_t batches = (total_rays + batch_rays - 1) / batch_rays;
+  const std::uint64_t window = 2 * static_cast<std::uint64_t>(ranks) + 2;
+  const auto targetReached = [&] {
+    return stop.sensor >= 0 && run.raysDone() >= stop.min_rays && run.relativeStderr(stop.sensor) <= stop.target;
+  };
+  const auto report = [&] {
+    if (!progress) return;
+    SensorProgress p;
+    p.rays_done = run.raysDone();
+    p.rays_target = total_rays;
+    p.rays_this_call = run.raysDone() - start;
+    p.seconds = since(t0);
+    progress(p);
+  };
+
+  SensorRunStatus status = SensorRunStatus::Completed;
+  bool stopping = false;
+  if (start % batch_rays != 0 && start < total_rays) {
+    // A saved state that ends inside a batch: rank 0 finishes it alone, as runUntil would.
+    status = run.runUntil(std::min(total_rays, (start / batch_rays + 1) * batch_rays), progress, stop);
+    stopping = status != SensorRunStatus::Completed;
+  }
+  if (!stopping && run.raysDone() < total_rays && targetReached()) {
+    stopping = true;
+    status = SensorRunStatus::TargetReached;
+  }
+  std::uint64_t next = run.raysDone() / batch_rays;  // the next batch to deal
+  std::vector<int> outstanding(static_cast<std::size_t>(ranks), 0);
+  std::vector<bool> told_to_stop(static_cast<std::size_t>(ranks), false);
+  struct Arrived {
+    TallyState state;
+    std::vector<std::byte> bytes;
+  };
+  std::map<std::uint64_t, Arrived> arrived;  // by batch, until its turn to be added
+  const auto assign = [&](int r) {
+    if (stopping || next >= batches) return false;
+    check(MPI_Send(&next, 1, MPI_UINT64_T, r, kTagAssign, comm.get()), "MPI_Send");
+    ++next;
+    ++outstanding[static_cast<std::size_t>(r)];
+    return true;
+  };
+  for (int r = 1; r < ranks; ++r)
+    for (int k = 0; k < kLookahead; ++k) (void)assign(r);
+  // Tallies whose bytes are still arriving: received without waiting, so that rank 0 keeps tracing
+  // while a rank that sent a large tally is busy tracing its next batch (and moves the message
+  // on only at its next MPI call).
+  struct Receiving {
+    std::uint64_t batch;
+    Arrived tally;
+    MPI_Request request = MPI_REQUEST_NULL;
+  };
+  std::deque<Receiving> receiving;
+  // Takes what has arrived: finished tallies, and headers of new ones (each answered at once with
+  // the sender's next batch). Returns whether anything happened.
+  const auto poll = [&] {
+    const auto tw = std::chrono::steady_clock::now();
+    bool any = false;
+    for (auto it = receiving.begin(); it != receiving.end();) {
+      int done = 0;
+      check(MPI_Test(&it->request, &done, MPI_STATUS_IGNORE), "MPI_Test");
+      if (!done) {
+        ++it;
+        continue;
+      }
+      arrived.emplace(it->batch, std::move(it->tally));
+      it = receiving.erase(it);
+      any = true;
+    }
+    for (;;) {
+      MPI_Status st;
+      int flag = 0;
+      check(MPI_Iprobe(MPI_ANY_SOURCE, kTagHeader, comm.get(), &flag, &st), "MPI_Iprobe");
+      if (!flag) break;
+      any = true;
+      const int from = st.MPI_SOURCE;
+      TallyHeader h{};
+      check(MPI_Recv(h.data(), 4, MPI_UINT64_T, from, kTagHeader, comm.get(), MPI_STATUS_IGNORE), "MPI_Recv");
+      --outstanding[static_cast<std::size_t>(from)];
+      stats.tally_bytes_received += h[1];
+      if (h[3] != 0 && !stopping) {  // a signal on that rank: stop after what is finished
+        stopping = true;
+        status = SensorRunStatus::Cancelled;
+      }
+      (void)assign(from);
+      Receiving r{h[0], Arrived{static_cast<TallyState>(h[2]), std::vector<std::byte>(h[1])}};
+      if (r.tally.state == kNoBatch) continue;
+      ++stats.batches_received;
+      if (h[1] == 0) {
+        arrived.emplace(h[0], std::move(r.tally));
+        continue;
+      }
+      check(MPI_Irecv(r.tally.bytes.data(), static_cast<int>(h[1]), MPI_BYTE, from, kTagTally, comm.get(), &r.request),
+            "MPI_Irecv");
+      receiving.push_back(std::move(r));
+    }
+    stats.comm_seconds += since(tw);
+    return any;
+  };
+  // Waits until something arrives (MPI's own waits spin as well).
+  const auto waitForAny = [&] {
+    while (!poll()) std::this_thread::yield();
+  };
+  for (;;) {
+    // Add, in batch order, what is there.
+    for (auto it = arrived.find(run.raysDone() / batch_rays);
+         !stopping && run.raysDone() < total_rays && it != arrived.end();
+         it = arrived.find(run.raysDone() / batch_rays)) {
+      if (it->second.state != kComplete) {
+        stopping = true;
+        status = SensorRunStatus::Cancelled;
+        break;
+      }
+      const auto ta = std::chrono::steady_clock::now();
+      run.addBatch(it->second.bytes);
+      stats.reduce_seconds += since(ta);
+      arrived.erase(it);
+      report();
+      if (targetReached()) {
+        stopping = true;
+        status = SensorRunStatus::TargetReached;
+      }
+    }
+    if (!stopping && run.cancelled()) {
+      stopping = true;
+      status = SensorRunStatus::Cancelled;
+    }
+    if (!stopping && run.raysDone() >= total_rays) stopping = true;  // status: Completed
+    if (stopping) {
+      for (int r = 1; r < ranks; ++r)
+        if (!told_to_stop[static_cast<std::size_t>(r)]) {
+          check(MPI_Send(&kStop, 1, MPI_UINT64_T, r, kTagAssign, comm.get()), "MPI_Send");
+          told_to_stop[static_cast<std::size_t>(r)] = true;
+        }
+      if (receiving.empty() && std::all_of(outstanding.begin(), outstanding.end(), [](int n) { return n == 0; })) break;
+      waitForAny();
+      continue;
+    }
+    // Serve the other ranks first, then trace a batch here, if not too far ahead of the adding.
+    (void)poll();
+    const std::uint64_t adding = run.raysDone() / batch_rays;
+    if (next < batches && next - adding < window && !arrived.count(adding)) {
+      const std::uint64_t batch = next++;
+      const auto tt = std::chrono::steady_clock::now();
+      SensorBatchTally tally = run.traceBatch(batch, total_rays);
+      stats.trace_seconds += since(tt);
+      ++stats.batches_traced;
+      stats.tally_bytes_max = std::max<std::uint64_t>(stats.tally_bytes_max, tally.bytes.size());
+      arrived.emplace(batch, Arrived{tally.complete ? kComplete : kIncomplete, std::move(tally.bytes)});
+    } else if (!arrived.count(adding)) {
+      waitForAny();  // the next batch to add is on another rank
+    }
+  }
+  return status;
 }
 
 }  // namespace
@@ -127,121 +375,18 @@ SensorRunStatus runUntilMpi(SensorRun& run, MPI_Comm parent, std::uint64_t total
   const auto t0 = std::chrono::steady_clock::now();
   std::uint64_t start = run.raysDone();
   check(MPI_Bcast(&start, 1, MPI_UINT64_T, 0, comm.get()), "MPI_Bcast");
-  const auto targetReached = [&] {
-    return stop.sensor >= 0 && run.raysDone() >= stop.min_rays && run.relativeStderr(stop.sensor) <= stop.target;
-  };
-  const auto report = [&] {
-    if (!progress) return;
-    SensorProgress p;
-    p.rays_done = run.raysDone();
-    p.rays_target = total_rays;
-    p.rays_this_call = run.raysDone() - start;
-    p.seconds = since(t0);
-    progress(p);
-  };
-
-  // Rank 0's decision before each round: go on (0), or stop with a status.
-  std::uint64_t ctl[3] = {0, 0, 0};  // stop, status, next batch
   SensorRunStatus status = SensorRunStatus::Completed;
-  bool stopping = false;
-  if (rank == 0 && start % batch_rays != 0 && start < total_rays) {
-    // A saved state that ends inside a batch: rank 0 finishes it alone, as runUntil would.
-    status = run.runUntil(std::min(total_rays, (start / batch_rays + 1) * batch_rays), progress, stop);
-    stopping = status != SensorRunStatus::Completed;
+  if (rank == 0) {
+    status = coordinate(run, comm, total_rays, progress, stop, start, t0, stats);
+  } else {
+    work(run, comm, total_rays, stats);
   }
-  std::vector<std::byte> received;
-  double callback_seconds = 0.0;
-  for (;;) {
-    if (rank == 0) {
-      if (!stopping && run.raysDone() >= total_rays) {
-        stopping = true;
-        status = targetReached() ? SensorRunStatus::TargetReached : SensorRunStatus::Completed;
-      } else if (!stopping && targetReached()) {
-        stopping = true;
-        status = SensorRunStatus::TargetReached;
-      }
-      ctl[0] = stopping ? 1 : 0;
-      ctl[1] = static_cast<std::uint64_t>(status);
-      ctl[2] = run.raysDone() / batch_rays;
-    }
-    auto tc = std::chrono::steady_clock::now();
-    check(MPI_Bcast(ctl, 3, MPI_UINT64_T, 0, comm.get()), "MPI_Bcast");
-    stats.comm_seconds += since(tc);
-    if (ctl[0] != 0) {
-      status = static_cast<SensorRunStatus>(ctl[1]);
-      break;
-    }
-    ++stats.rounds;
-    const std::uint64_t batches = (total_rays + batch_rays - 1) / batch_rays;
-    const std::uint64_t mine = ctl[2] + static_cast<std::uint64_t>(rank);
-    SensorBatchTally tally;
-    std::uint64_t header[3] = {0, kNoBatch, 0};  // bytes, state, cancelled
-    if (mine < batches && !run.cancelled()) {
-      const auto tt = std::chrono::steady_clock::now();
-      tally = run.traceBatch(mine, total_rays);
-      stats.trace_seconds += since(tt);
-      ++stats.batches_traced;
-      stats.tally_bytes_max = std::max<std::uint64_t>(stats.tally_bytes_max, tally.bytes.size());
-      header[0] = tally.bytes.size();
-      header[1] = tally.complete ? kComplete : kIncomplete;
-    } else if (mine < batches) {
-      header[1] = kIncomplete;
-    }
-    header[2] = run.cancelled() ? 1 : 0;
-    if (header[0] > static_cast<std::uint64_t>(INT_MAX))
-      throw MpiError("a batch tally of " + std::to_string(header[0]) +
-                     " bytes, more than one MPI message holds: use smaller batches");
-    tc = std::chrono::steady_clock::now();
-    if (rank != 0) {
-      check(MPI_Send(header, 3, MPI_UINT64_T, 0, kTagHeader, comm.get()), "MPI_Send");
-      if (header[0] != 0)
-        check(MPI_Send(tally.bytes.data(), static_cast<int>(header[0]), MPI_BYTE, 0, kTagTally, comm.get()),
-              "MPI_Send");
-      stats.tally_bytes_sent += header[0];
-    } else {
-      // Rank 0 adds the round's batches in order; after a stop it still receives the rest.
-      for (int r = 0; r < ranks; ++r) {
-        std::uint64_t h[3];
-        const std::vector<std::byte>* bytes = &tally.bytes;
-        if (r == 0) {
-          std::copy(header, header + 3, h);
-        } else {
-          check(MPI_Recv(h, 3, MPI_UINT64_T, r, kTagHeader, comm.get(), MPI_STATUS_IGNORE), "MPI_Recv");
-          received.resize(h[0]);
-          if (h[0] != 0)
-            check(MPI_Recv(received.data(), static_cast<int>(h[0]), MPI_BYTE, r, kTagTally, comm.get(),
-                           MPI_STATUS_IGNORE),
-                  "MPI_Recv");
-          bytes = &received;
-          stats.tally_bytes_received += h[0];
-        }
-        if (h[2] != 0 && !stopping) status = SensorRunStatus::Cancelled;  // stop after this round
-        if (stopping || h[1] == kNoBatch) continue;
-        if (h[1] == kIncomplete) {
-          stopping = true;
-          status = SensorRunStatus::Cancelled;
-          continue;
-        }
-        const auto ta = std::chrono::steady_clock::now();
-        run.addBatch(*bytes);
-        stats.reduce_seconds += since(ta);
-        const auto tp = std::chrono::steady_clock::now();
-        report();
-        callback_seconds += since(tp);
-        if (targetReached()) {
-          stopping = true;
-          status = SensorRunStatus::TargetReached;
-        }
-      }
-      if (status == SensorRunStatus::Cancelled) stopping = true;
-    }
-    stats.comm_seconds += since(tc);
-  }
-  // The additions and the progress callbacks (checkpoints) were timed inside the rounds' MPI time.
-  stats.comm_seconds -= stats.reduce_seconds + callback_seconds;
+  // Every rank returns rank 0's status.
+  std::uint64_t code = static_cast<std::uint64_t>(status);
+  check(MPI_Bcast(&code, 1, MPI_UINT64_T, 0, comm.get()), "MPI_Bcast");
   comm.free();
   if (stats_out) *stats_out = stats;
-  return status;
+  return static_cast<SensorRunStatus>(code);
 }
 
 }  // namespace duplex

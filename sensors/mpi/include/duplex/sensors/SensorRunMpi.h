@@ -5,9 +5,11 @@
 ///
 /// Every rank holds a SensorRun over the same scene and configuration (checked: the runs'
 /// fingerprints, the total and the stop rule must agree). Batches (SensorRunConfig::batch_rays,
-/// which does not depend on the number of ranks) are dealt in rounds: in a round, rank r traces
-/// batch next + r with its own threads (SensorRun::traceBatch); rank 0 gathers the round's tallies
-/// and adds them in batch order (SensorRun::addBatch). Rank 0's run therefore ends with the
+/// which does not depend on the number of ranks) are dealt by rank 0 on demand: every other rank
+/// keeps two batches assigned, traces them with its own threads (SensorRun::traceBatch) and sends
+/// each tally to rank 0, which is given its next batch at once; rank 0 traces batches too, and adds
+/// all of them in batch order (SensorRun::addBatch). Faster ranks trace more batches. Rank 0's run
+/// therefore ends with the
 /// accumulators, results and run state of a one-process run of the same seed and total, bit for
 /// bit, for any number of ranks and threads per rank; the other ranks' runs only trace.
 ///
@@ -38,13 +40,12 @@ struct SensorMpiStats {
   int rank = 0;                            ///< this process's rank in the communicator
   int ranks = 1;                           ///< ranks in the communicator
   std::uint64_t batches_traced = 0;        ///< batches this rank traced
-  std::uint64_t rounds = 0;                ///< rounds of the run (one batch per rank each)
+  std::uint64_t batches_received = 0;      ///< rank 0: tallies of batches the other ranks traced
   std::uint64_t tally_bytes_sent = 0;      ///< bytes of batch tallies this rank sent (0 on rank 0)
   std::uint64_t tally_bytes_received = 0;  ///< bytes of batch tallies rank 0 received (0 elsewhere)
   std::uint64_t tally_bytes_max = 0;       ///< the largest batch tally this rank made, bytes
   double trace_seconds = 0.0;              ///< wall time in traceBatch
-  /// Wall time in MPI calls: the broadcasts, sends and receives of the rounds, waiting for slower
-  /// ranks included.
+  /// Wall time in MPI calls (sends, receives, and waiting for batches or tallies of other ranks).
   double comm_seconds = 0.0;
   double reduce_seconds = 0.0;  ///< rank 0: wall time adding the batches (SensorRun::addBatch)
 };
@@ -60,9 +61,10 @@ void agreeOnRanks(MPI_Comm comm, const std::string& problem);
 /// raysDone() (a loaded state may end inside a batch: rank 0 finishes that batch alone first), and
 /// ends with them; the other ranks' runs are left as they were. `progress` is called on rank 0
 /// after each batch it adds (its checkpoints see whole batches), `stop` is checked on rank 0 after
-/// each batch, as runUntil does, so every rank count stops at the same batch. A cancel() of any
-/// rank's run (a signal handler) stops every rank after the batches of that round that were
-/// finished, in batch order. Returns the same status on every rank. Throws MpiError (ranks whose
+/// each batch, as runUntil does, so every rank count stops at the same batch (batches traced past
+/// it are dropped). A cancel() of any rank's run (a signal handler) stops every rank: rank 0 keeps
+/// the finished batches that follow the run's end without a gap. Returns the same status on every
+/// rank. Throws MpiError (ranks whose
 /// runs, totals or stop rules differ, a failed MPI call) and what runUntil throws (no light).
 SensorRunStatus runUntilMpi(SensorRun& run, MPI_Comm comm, std::uint64_t total_rays,
                             const std::function<void(const SensorProgress&)>& progress = {},
