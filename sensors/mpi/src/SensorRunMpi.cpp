@@ -198,8 +198,9 @@ SensorRunStatus coordinate(SensorRun& run, const Comm& comm, std::uint64_t total
     ++outstanding[static_cast<std::size_t>(r)];
     return true;
   };
-  for (int r = 1; r < ranks; ++r)
-    for (int k = 0; k < kLookahead; ++k) (void)assign(r);
+  // One batch to every rank, then a second (a short run still reaches every rank).
+  for (int k = 0; k < kLookahead; ++k)
+    for (int r = 1; r < ranks; ++r) (void)assign(r);
   // Tallies whose bytes are still arriving: received without waiting, so that rank 0 keeps tracing
   // while a rank that sent a large tally is busy tracing its next batch (and moves the message
   // on only at its next MPI call).
