@@ -67,8 +67,8 @@ double since(std::chrono::steady_clock::time_point t) {
 //
 // Each other rank keeps kLookahead batches assigned, so that it starts its next batch at once
 // while its tally travels; rank 0 traces batches too, between its services, never more than
-// kWindow batches ahead of the next one to add (the tallies that arrive out of order wait in
-// memory). A faster rank thus asks for more batches: ranks of different speeds share the work as
+// 2 N + 2 batches ahead of the next one to add (N ranks; the tallies that arrive out of order
+// wait in memory). A faster rank thus asks for more batches: ranks of different speeds share the work as
 // they can, and the result does not change, since rank 0 adds the batches in batch order.
 
 constexpr int kLookahead = 2;
