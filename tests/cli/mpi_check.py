@@ -120,6 +120,11 @@ def check_ranks(duplex, mpi, d, scene):
             expect(r["ranks"] == ranks and r["mpi"]["batches"] == 5 and r["mpi"]["ranks"] == ranks,
                    "%d ranks: report %s" % (ranks, r))
             compare(one, out, "%d ranks x %d threads vs one process" % (ranks, threads))
+    # Ranks of different speeds (2, 1 and 1 threads): they trace different shares, same files.
+    out = os.path.join(d, "mixed")
+    run([mpi, "--oversubscribe", "-np", "1"] + sensor_args(duplex, scene, 300000, 2, out) +
+        [":", "-np", "2"] + sensor_args(duplex, scene, 300000, 1, out))
+    compare(one, out, "3 ranks with 2, 1 and 1 threads vs one process")
     # Another batch size: another grouping of the sums, the same for any rank count.
     one_b = os.path.join(d, "one_b")
     run(sensor_args(duplex, scene, 300000, 1, one_b, "--batch-rays", "40000"))
@@ -127,8 +132,8 @@ def check_ranks(duplex, mpi, d, scene):
     run(mpirun(mpi, 3) + sensor_args(duplex, scene, 300000, 2, out, "--batch-rays", "40000"))
     expect(report(out)["mpi"]["batches"] == 8 and report(out)["batch_rays"] == 40000, "--batch-rays: %s" % report(out))
     compare(one_b, out, "--batch-rays 40000, 3 ranks vs one process")
-    print("1, 2, 3 ranks x 1, 2 threads, and --batch-rays 40000 with 3 ranks: every file identical to the "
-          "one-process run: ok")
+    print("1, 2, 3 ranks x 1, 2 threads, ranks of 2, 1 and 1 threads, and --batch-rays 40000 with 3 ranks: every "
+          "file identical to the one-process run: ok")
 
 
 def check_target(duplex, mpi, d, scene):
