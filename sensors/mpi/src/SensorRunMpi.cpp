@@ -11,6 +11,7 @@
 #include <chrono>
 #include <climits>
 #include <deque>
+#include <future>
 #include <map>
 #include <thread>
 #include <cstring>
@@ -256,11 +257,20 @@ SensorRunStatus coordinate(SensorRun& run, const Comm& comm, std::uint64_t total
     stats.comm_seconds += since(tw);
     return any;
   };
-  // Waits until something arrives (MPI's own waits spin as well).
-  const auto waitForAny = [&] {
-    while (!poll()) std::this_thread::yield();
+  // Rank 0's own batch is traced on a thread of its own (it never calls MPI), so that this thread
+  // answers the other ranks at once instead of after each of its batches: a rank that waited for
+  // its next batch until rank 0 finished one would trace no faster than rank 0.
+  std::future<SensorBatchTally> tracing;
+  const auto collectTrace = [&] {
+    if (!tracing.valid() || tracing.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
+    SensorBatchTally tally = tracing.get();
+    ++stats.batches_traced;
+    stats.tally_bytes_max = std::max<std::uint64_t>(stats.tally_bytes_max, tally.bytes.size());
+    arrived.emplace(tally.batch, Arrived{tally.complete ? kComplete : kIncomplete, std::move(tally.bytes)});
+    return true;
   };
   for (;;) {
+    const bool traced = collectTrace();
     // Add, in batch order, what is there.
     for (auto it = arrived.find(run.raysDone() / batch_rays);
          !stopping && run.raysDone() < total_rays && it != arrived.end();
@@ -291,24 +301,19 @@ SensorRunStatus coordinate(SensorRun& run, const Comm& comm, std::uint64_t total
           check(MPI_Send(&kStop, 1, MPI_UINT64_T, r, kTagAssign, comm.get()), "MPI_Send");
           told_to_stop[static_cast<std::size_t>(r)] = true;
         }
-      if (receiving.empty() && std::all_of(outstanding.begin(), outstanding.end(), [](int n) { return n == 0; })) break;
-      waitForAny();
-      continue;
-    }
-    // Serve the other ranks first, then trace a batch here, if not too far ahead of the adding.
-    (void)poll();
-    const std::uint64_t adding = run.raysDone() / batch_rays;
-    if (next < batches && next - adding < window && !arrived.count(adding)) {
+      if (!tracing.valid() && receiving.empty() &&
+          std::all_of(outstanding.begin(), outstanding.end(), [](int n) { return n == 0; }))
+        break;
+    } else if (!tracing.valid() && next < batches && next - run.raysDone() / batch_rays < window) {
       const std::uint64_t batch = next++;
-      const auto tt = std::chrono::steady_clock::now();
-      SensorBatchTally tally = run.traceBatch(batch, total_rays);
-      stats.trace_seconds += since(tt);
-      ++stats.batches_traced;
-      stats.tally_bytes_max = std::max<std::uint64_t>(stats.tally_bytes_max, tally.bytes.size());
-      arrived.emplace(batch, Arrived{tally.complete ? kComplete : kIncomplete, std::move(tally.bytes)});
-    } else if (!arrived.count(adding)) {
-      waitForAny();  // the next batch to add is on another rank
+      tracing = std::async(std::launch::async, [&run, &stats, batch, total_rays] {
+        const auto tt = std::chrono::steady_clock::now();
+        SensorBatchTally tally = run.traceBatch(batch, total_rays);
+        stats.trace_seconds += since(tt);  // read by this thread only after get()
+        return tally;
+      });
     }
+    if (!poll() && !traced) std::this_thread::sleep_for(std::chrono::microseconds(100));
   }
   return status;
 }

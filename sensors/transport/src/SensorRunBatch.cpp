@@ -105,8 +105,8 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
   if (tally.size() != expected)
     refuse("batch tally of " + std::to_string(tally.size()) + " bytes, expected " + std::to_string(expected));
   // Read into the spare tallies and check them: a refused batch leaves the run as it was.
-  if (!scratch_) scratch_ = makeTally();
-  Tally& t = *scratch_;
+  if (!incoming_) incoming_ = makeTally();
+  Tally& t = *incoming_;
   std::size_t at = kBatchHead;
   const auto get = [&](void* dst, std::size_t bytes) {
     if (bytes) std::memcpy(dst, tally.data() + at, bytes);
@@ -167,11 +167,11 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
   rays_done_ += rays;
   if (rays == config_.batch_rays) {
     // A full batch: added to the finished ones, as closeBatch does.
-    std::swap(open_, scratch_);
+    std::swap(open_, incoming_);
     closeBatch();
-    std::swap(open_, scratch_);
+    std::swap(open_, incoming_);
   } else {
-    std::swap(open_, scratch_);  // the run's last batch, shorter: open, as runUntil leaves it
+    std::swap(open_, incoming_);  // the run's last batch, shorter: open, as runUntil leaves it
   }
 }
 

@@ -146,7 +146,8 @@ class SensorRun {
   /// exactly as runUntil would have. Batches must come in order: the tally must start at raysDone(),
   /// which must be the start of a batch. Throws InvalidArgument for a tally of another scene,
   /// seed or batch size (fingerprint), out of order, or damaged (sizes, indices); the run is then
-  /// unchanged.
+  /// unchanged. traceBatch and addBatch share no state: one thread may trace a batch while another
+  /// adds batches (and reads results or saves the state), never two traces or two additions at once.
   void addBatch(std::span<const std::byte> tally);
   /// Hash of what the accumulators' meaning depends on (the sensors, bins, lights, instances,
   /// materials, contents of meshes and grids, seed, path limits and batch size): equal in two
@@ -224,8 +225,9 @@ class SensorRun {
   std::vector<DepositTarget> deposit_targets_;
   // closed_: the sums of the finished batches, added in batch order; open_: the batch under way
   // (empty at batch boundaries), its rays added in ray order. Results are closed_ + open_.
-  // scratch_: traceBatch's tallies (allocated on its first call).
-  std::unique_ptr<Tally> closed_, open_, scratch_;
+  // scratch_: traceBatch's tallies, incoming_: addBatch's (each allocated on its first call; two,
+  // so that one thread may trace a batch while another adds one).
+  std::unique_ptr<Tally> closed_, open_, scratch_, incoming_;
   std::unique_ptr<Workers> workers_;  // the task arena and the chunks of a batch
 };
 
