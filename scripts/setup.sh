@@ -26,7 +26,7 @@ ensure_packages() {
 build_packages=(build-essential cmake ninja-build libopenmesh-dev libopenvdb-dev libboost-iostreams-dev libglm-dev
                 libspdlog-dev libtbb-dev libgtest-dev nlohmann-json3-dev libcli11-dev libstb-dev libpng-dev
                 python3-matplotlib libembree-dev libopenexr-dev libxxhash-dev libtinyxml2-dev
-                pybind11-dev python3-dev python3-numpy python3-pytest)
+                pybind11-dev python3-dev python3-numpy python3-pytest libopenmpi-dev openmpi-bin)
 
 # generator_args DIR: prints "-G Ninja" for a new build directory when ninja is installed (it starts
 # a target's compiles before its dependencies have linked, which keeps both cores busy), nothing for

@@ -3,6 +3,7 @@
 #include "LoadScene.h"
 #include "SensorExr.h"
 #include "SensorImage.h"
+#include "SensorRanks.h"
 #include "WorkerThreads.h"
 
 #include <duplex/accel/AtomicFile.h>
@@ -378,9 +379,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   if (sensorExrAvailable()) writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
 }
 
-}  // namespace
-
-nlohmann::ordered_json runSensor(const SensorOptions& o) {
+nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   if (o.rays == 0) throw InvalidArgument("--rays must be at least 1");
   if (o.target_error < 0.0 || !std::isfinite(o.target_error))
     throw InvalidArgument("--target-error must be a finite number >= 0");
@@ -388,64 +387,75 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
     throw InvalidArgument("--checkpoint must be a finite number of seconds >= 0 (0: save only at the end)");
   if (!(o.roulette >= 0.0 && o.roulette < 1.0))
     throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
+  // Shared runs: rank 0 reads and writes the files and reports progress; every rank traces.
+  const bool files = ranks.rank() == 0;
+  const std::string progress = files ? o.progress : "none";
   WorkerThreads workers(o.threads);
   CancelToken loading;
   StopSignals signals(loading);
   SceneDocumentOptions load_options = documentOptions(o.structure);
   load_options.control.cancel = &loading;
   std::optional<SensorScene> loaded;
-  if (o.progress != "none") std::cerr << "loading " << o.scene.string() << '\n' << std::flush;
-  try {
-    loaded.emplace(workers.arena.execute([&] { return SensorScene::load(o.scene, load_options); }));
-  } catch (const Cancelled&) {
-    if (g_stop_signal.load() == 0) throw;
-  }
-  if (g_stop_signal.load() != 0)
-    throw Interrupted(g_stop_signal.load(), "stopped while loading the scene; nothing written");
-  SensorScene& scene = *loaded;
-  // Timed edits: those up to --at T, one commit per time as a player applies them (the scene
-  // follows the commits); the others are said on stderr, never silently left out.
-  const std::size_t edit_count = scene.document() ? scene.document()->edits.size() : 0;
-  std::size_t edits_applied = 0;
-  if (o.at) {
-    if (!(*o.at >= 0.0 && std::isfinite(*o.at))) throw InvalidArgument("--at must be a finite time >= 0 (seconds)");
-    if (edit_count != 0)
-      edits_applied = workers.arena.execute([&] { return applyEditsUntil(*scene.document(), *o.at); });
-  }
-  if (edits_applied < edit_count) {
-    const std::vector<SceneEdit>& edits = scene.document()->edits;
-    std::ostringstream note;
-    note << "duplex sensor: " << o.scene.string() << " has " << edit_count
-         << " timed edit(s) (t = " << edits.front().time << " to " << edits.back().time << " s); ";
-    if (o.at)
-      note << "--at " << *o.at << " applied " << edits_applied << ", the " << edit_count - edits_applied
-           << " after it are not applied";
-    else note << "none is applied (--at T applies those with time <= T)";
-    std::cerr << note.str() << '\n' << std::flush;
-  }
-  if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
-  if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
-  checkOutputNames(scene, o.scene);
-
-  SensorRunConfig cfg;
-  cfg.seed = o.seed;
-  cfg.threads = static_cast<unsigned>(workers.count);
-  cfg.max_depth = o.max_depth;
-  cfg.max_scatterings = o.max_scatterings;
-  cfg.roulette_threshold = o.roulette;
-  SensorRun run(scene, cfg);
-  std::error_code ec;
-  std::filesystem::create_directories(o.out, ec);
-  if (ec) throw FileError(o.out.string() + ": cannot create the output folder (" + ec.message() + ")");
+  std::optional<SensorRun> running;
+  std::size_t edit_count = 0, edits_applied = 0;
   const std::filesystem::path state = o.out / "run_state.bin";
-  // Refused now rather than after the run, when the state is saved.
-  if (std::filesystem::exists(state))
-    if (const std::string problem = notRegularFile(state); !problem.empty())
-      throw FileError(state.string() + ": cannot hold the run state: " + problem);
-  if (o.resume) run.loadState(state);
-  if (run.raysDone() > o.rays)
-    throw InvalidArgument(state.string() + " holds " + std::to_string(run.raysDone()) + " rays, more than --rays " +
-                          std::to_string(o.rays));
+  // What may fail on one rank only (its scene, rank 0's state file) fails on every rank together.
+  ranks.together([&] {
+    if (progress != "none") std::cerr << "loading " << o.scene.string() << '\n' << std::flush;
+    try {
+      loaded.emplace(workers.arena.execute([&] { return SensorScene::load(o.scene, load_options); }));
+    } catch (const Cancelled&) {
+      if (g_stop_signal.load() == 0) throw;
+    }
+    if (g_stop_signal.load() != 0)
+      throw Interrupted(g_stop_signal.load(), "stopped while loading the scene; nothing written");
+    SensorScene& scene = *loaded;
+    // Timed edits: those up to --at T, one commit per time as a player applies them (the scene
+    // follows the commits); the others are said on stderr, never silently left out.
+    edit_count = scene.document() ? scene.document()->edits.size() : 0;
+    if (o.at) {
+      if (!(*o.at >= 0.0 && std::isfinite(*o.at))) throw InvalidArgument("--at must be a finite time >= 0 (seconds)");
+      if (edit_count != 0)
+        edits_applied = workers.arena.execute([&] { return applyEditsUntil(*scene.document(), *o.at); });
+    }
+    if (edits_applied < edit_count && files) {
+      const std::vector<SceneEdit>& edits = scene.document()->edits;
+      std::ostringstream note;
+      note << "duplex sensor: " << o.scene.string() << " has " << edit_count
+           << " timed edit(s) (t = " << edits.front().time << " to " << edits.back().time << " s); ";
+      if (o.at)
+        note << "--at " << *o.at << " applied " << edits_applied << ", the " << edit_count - edits_applied
+             << " after it are not applied";
+      else note << "none is applied (--at T applies those with time <= T)";
+      std::cerr << note.str() << '\n' << std::flush;
+    }
+    if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
+    if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
+    checkOutputNames(scene, o.scene);
+
+    SensorRunConfig cfg;
+    cfg.seed = o.seed;
+    cfg.threads = static_cast<unsigned>(workers.count);
+    cfg.max_depth = o.max_depth;
+    cfg.max_scatterings = o.max_scatterings;
+    cfg.roulette_threshold = o.roulette;
+    cfg.batch_rays = o.batch_rays;
+    running.emplace(scene, cfg);
+    if (!files) return;
+    std::error_code ec;
+    std::filesystem::create_directories(o.out, ec);
+    if (ec) throw FileError(o.out.string() + ": cannot create the output folder (" + ec.message() + ")");
+    // Refused now rather than after the run, when the state is saved.
+    if (std::filesystem::exists(state))
+      if (const std::string problem = notRegularFile(state); !problem.empty())
+        throw FileError(state.string() + ": cannot hold the run state: " + problem);
+    if (o.resume) running->loadState(state);
+    if (running->raysDone() > o.rays)
+      throw InvalidArgument(state.string() + " holds " + std::to_string(running->raysDone()) +
+                            " rays, more than --rays " + std::to_string(o.rays));
+  });
+  const SensorScene& scene = *loaded;
+  SensorRun& run = *running;
 
   SensorStopRule stop;
   if (o.target_error > 0.0) {
@@ -460,7 +470,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   SensorRunStatus status;
   {
     signals.running(run);
-    ProgressPrinter printer(o.progress, start);
+    ProgressPrinter printer(progress, start);
     // Periodic saves between batches (the accumulators are whole there). A failed save is reported
     // and the run goes on: the previous state file stays intact (saveState writes and renames).
     double last_save = 0.0;
@@ -469,14 +479,14 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
       last_save = p.seconds;
       try {
         run.saveState(state);
-        if (o.progress != "none")
+        if (progress != "none")
           printer.note("checkpoint: " + std::to_string(p.rays_done) + " rays saved to " + state.string());
       } catch (const std::exception& e) {  // FileError (disk full), or bad_alloc for a huge state
         printer.note(std::string("duplex sensor: checkpoint failed (the run goes on): ") + e.what());
       }
     };
-    status = run.runUntil(
-        o.rays,
+    status = ranks.runUntil(
+        run, o.rays,
         [&](const SensorProgress& p) {
           printer(p);
           checkpoint(p);
@@ -485,6 +495,7 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
     signals.release();
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!files) return nullptr;  // rank 0 saves, writes and reports
   run.saveState(state);
   if (status == SensorRunStatus::Cancelled)
     std::cerr << "duplex sensor: stopped by signal " << g_stop_signal.load() << " after " << run.raysDone()
@@ -495,9 +506,11 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   report["rays"] = r.rays;
   report["seed"] = r.seed;
   report["threads"] = workers.count;
+  report["ranks"] = ranks.size();
   report["max_depth"] = o.max_depth;
   report["max_scatterings"] = o.max_scatterings;
   report["roulette_threshold"] = o.roulette;
+  report["batch_rays"] = o.batch_rays;
   report["status"] = status == SensorRunStatus::TargetReached ? "target_reached"
                      : status == SensorRunStatus::Cancelled   ? "interrupted"
                                                               : "completed";
@@ -531,8 +544,23 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
                        {"efficiency", s.efficiency}});
   }
   report["sensors"] = sensors;
+  if (ranks.shared()) report["mpi"] = ranks.report();
   writeText(o.out / "run.json", report.dump() + "\n");
   return report;
+}
+
+}  // namespace
+
+nlohmann::ordered_json runSensor(const SensorOptions& o) {
+  SensorRanks ranks;
+  try {
+    return runSensorOn(ranks, o);
+  } catch (const AllRanksFailed&) {
+    throw;  // every rank ends with it
+  } catch (const std::exception& e) {
+    ranks.failed(e);  // shared: a failure of this rank alone ends every rank
+    throw;
+  }
 }
 
 }  // namespace duplex::cli

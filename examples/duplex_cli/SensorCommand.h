@@ -49,7 +49,7 @@ struct SensorOptions {
   std::string progress = "auto";
   /// Seconds between saves of DIR/run_state.bin while the run goes on (0: only at the end), so that
   /// a run killed outright (SIGKILL, power loss) loses about this much work (saves happen between
-  /// batches of 65,536 rays, so at most this plus one batch): --resume continues from the last save
+  /// batches of --batch-rays rays, so at most this plus one batch): --resume continues from the last save
   /// and gives the files of one uninterrupted run.
   double checkpoint_s = 60.0;
   /// --at T: apply the scene's timed edits with time <= T before the run (applyEditsUntil); unset:
@@ -60,6 +60,9 @@ struct SensorOptions {
   /// images as always), named in the JSON's "map_files". Text for 10^7 bins takes minutes and
   /// gigabytes; the binary files are written at disk speed.
   std::uint64_t text_map_limit = std::uint64_t{1} << 20;
+  /// Rays per batch (SensorRunConfig::batch_rays): the unit of the ordered sums (results depend on
+  /// it), of the work dealt to MPI ranks, of checkpoints and of --target-error checks.
+  std::uint64_t batch_rays = SensorRunConfig{}.batch_rays;
 };
 
 /// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene
@@ -75,14 +78,17 @@ class Interrupted : public std::runtime_error {
   int signal_;
 };
 
-/// Runs the command; returns the report (keys: rays, seed, threads, max_depth, max_scatterings,
-/// roulette_threshold, status ("completed", "target_reached", "interrupted" with the signal's
-/// number in `signal`), resumed_from (rays already done when
-/// the run started: 0, or the saved count with --resume), seconds, rays_per_s, emitted_power_w,
-/// energy {escaped_w, absorbed_w, medium_absorbed_w, depth_limited_w, roulette_w}, bands and
-/// band_emitted_w (spectral scenes only), scatterings (scenes whose fog scatters only), sensors
-/// [{name, file, total_flux_w, relative_stderr, efficiency}]; with --at also at and
-/// edits_applied). Throws duplex::Error for bad input.
+/// Runs the command; returns the report (keys: rays, seed, threads, ranks (processes sharing the
+/// run: 1, or the MPI ranks), max_depth, max_scatterings, roulette_threshold, batch_rays, status
+/// ("completed", "target_reached", "interrupted" with the signal's number in `signal`),
+/// resumed_from (rays already done when the run started: 0, or the saved count with --resume),
+/// seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w, medium_absorbed_w,
+/// depth_limited_w, roulette_w}, bands and band_emitted_w (spectral scenes only), scatterings
+/// (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr,
+/// efficiency}], with --at also at and edits_applied, and for a run under mpirun mpi {ranks, batches, rank0_batches, tally_bytes_received,
+/// tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
+/// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
+/// returns the report, the others return null. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
 
 }  // namespace duplex::cli

@@ -14,7 +14,8 @@
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
-//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS] [--at T]
+//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS] [--at T] [--text-map-limit N]
+//                 [--batch-rays B]; under `mpirun -np N` the ranks share the batches
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -277,7 +278,15 @@ int main(int argc, char** argv) {
       ->add_option("--at", sensor.at,
                    "Apply the scene's timed edits with time <= T (seconds) before the run (default: none)")
       ->check(CLI::Range(0.0, std::numeric_limits<double>::max()));
-  sensor_cmd->footer("Files are described in docs/sensors.md; the run is bit-identical for any --threads.");
+  sensor_cmd
+      ->add_option("--batch-rays", sensor.batch_rays,
+                   "Rays per batch: the unit of the ordered sums, of work dealt to MPI ranks, of checkpoints and "
+                   "--target-error checks (default 65536; results depend on it, not on --threads or ranks)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+  sensor_cmd->footer(
+      "Files are described in docs/sensors.md; the run is bit-identical for any --threads, and for any number of "
+      "ranks under mpirun (docs/distributed.md).");
 
   try {
     app.parse(argc, argv);
@@ -329,7 +338,8 @@ int main(int argc, char** argv) {
       }
       result = duplex::cli::runRays(rays);
     }
-    std::cout << result.dump() << std::endl;
+    // A shared sensor run reports on rank 0 only; the other ranks return null.
+    if (!result.is_null()) std::cout << result.dump() << std::endl;
     // A run stopped by SIGINT / SIGTERM saved its state and wrote its files; the exit status still
     // says it was stopped, as a shell expects (128 + the signal).
     if (*sensor_cmd && result.contains("signal")) return 128 + result["signal"].get<int>();

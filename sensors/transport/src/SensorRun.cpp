@@ -2,8 +2,10 @@
 //
 // Work: chunks of consecutive rays, traced in parallel (SensorPaths.cpp); each chunk writes its
 // per-ray deposits and energy tallies to its own lists. After each batch the finished chunks are
-// reduced strictly in ray order, so every sum sees its terms in the same order whatever the thread
-// count. Saved run states: SensorRunState.cpp.
+// reduced strictly in ray order into the batch's tallies, which are then added to the run's in
+// batch order, so every sum sees its terms in the same order whatever the thread count and
+// whichever process traced the batch. Batch tallies for other processes: SensorRunBatch.cpp;
+// saved run states: SensorRunState.cpp.
 
 #include "duplex/sensors/SensorRun.h"
 
@@ -26,6 +28,12 @@ namespace duplex {
 using detail::BinEvent;
 using detail::SensorEvent;
 
+struct SensorRun::Workers {
+  explicit Workers(unsigned threads) : arena(static_cast<int>(threads)) {}
+  tbb::task_arena arena;
+  std::vector<Chunk> chunks;
+};
+
 SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : scene_(scene), config_(config) {
   if (config_.chunk_rays == 0 || config_.batch_rays == 0)
     throw InvalidArgument("SensorRun: chunk_rays and batch_rays must be > 0");
@@ -38,12 +46,12 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
   revision_ = scene_.revision();  // the scene as of the graph's last commit (derived now if it changed)
   double acc = 0.0;
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
-  // Spatial bins, then the angular bins, in one index space.
-  const std::size_t all_bins = static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount();
   {
+    // Spatial bins, then the angular bins, in one index space; the run's tallies and the open batch's.
+    const std::uint64_t all_bins = std::uint64_t{scene_.binCount()} + scene_.angleBinCount();
     const std::uint64_t nb = scene_.bands().empty() ? 0 : scene_.bandCount();
     const std::uint64_t cells = all_bins + scene_.sensors().size();
-    const std::uint64_t bytes = cells * (3 * sizeof(double) + 2 * sizeof(double) * nb);
+    const std::uint64_t bytes = 2 * cells * (3 * sizeof(double) + 2 * sizeof(double) * nb);
     if (bytes > config_.max_accumulator_bytes)
       throw InvalidArgument("SensorRun: the sensors' " + std::to_string(scene_.binCount()) + " bins and " +
                             std::to_string(scene_.angleBinCount()) + " angular bins" +
@@ -51,21 +59,33 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
                             std::to_string(bytes >> 20) + " MiB of accumulators, more than max_accumulator_bytes (" +
                             std::to_string(config_.max_accumulator_bytes >> 20) + " MiB)");
   }
-  bins_.assign(all_bins, BinSums{});
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& si = scene_.sensors()[k];
     if (si.node == kInvalidNode) continue;  // far field: deposits on escape, not at crossings
     if (si.node >= deposit_targets_.size()) deposit_targets_.resize(std::size_t{si.node} + 1);
     deposit_targets_[si.node] = {si.first_bin, static_cast<std::int32_t>(k), si.object->spec().theta_bins != 0};
   }
-  sensor_sums_.assign(scene_.sensors().size(), SensorSums{});
+  closed_ = makeTally();
+  open_ = makeTally();
+  const unsigned threads =
+      config_.threads ? config_.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
+  workers_ = std::make_unique<Workers>(threads);
+}
+
+SensorRun::~SensorRun() = default;
+
+std::unique_ptr<SensorRun::Tally> SensorRun::makeTally() const {
+  auto t = std::make_unique<Tally>();
+  t->bins.assign(static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount(), BinSums{});
+  t->sensors.assign(scene_.sensors().size(), SensorSums{});
   if (!scene_.bands().empty()) {
     const std::size_t nb = scene_.bandCount();
-    band_bin_sum_.assign(bins_.size() * nb, 0.0);
-    band_bin_sum2_.assign(bins_.size() * nb, 0.0);
-    band_sensor_sum_.assign(sensor_sums_.size() * nb, 0.0);
-    band_sensor_sum2_.assign(sensor_sums_.size() * nb, 0.0);
+    t->band_bin_sum.assign(t->bins.size() * nb, 0.0);
+    t->band_bin_sum2.assign(t->bins.size() * nb, 0.0);
+    t->band_sensor_sum.assign(t->sensors.size() * nb, 0.0);
+    t->band_sensor_sum2.assign(t->sensors.size() * nb, 0.0);
   }
+  return t;
 }
 
 void SensorRun::checkScene() const {
@@ -78,9 +98,9 @@ void SensorRun::checkScene() const {
 // How many deposits ahead the reduction prefetches their accumulators.
 constexpr std::size_t kReduceAhead = 16;
 
-void SensorRun::reduce(const Chunk& chunk) {
+void SensorRun::reduce(const Chunk& chunk, Tally& into) const {
   std::size_t b = 0, s = 0;
-  const bool spectral = !band_bin_sum_.empty();
+  const bool spectral = !into.band_bin_sum.empty();
   const std::size_t nb = scene_.bandCount();
   for (std::uint64_t k = 0; k < chunk.count; ++k) {
     // A ray carries one band: its deposits are also that band's samples (zeros in the others).
@@ -88,40 +108,65 @@ void SensorRun::reduce(const Chunk& chunk) {
     for (; b < chunk.bin_end[k]; ++b) {
       // The bins a chunk deposits in are scattered over the accumulators (far more than the
       // caches hold with 10,000 sensors): ask for a later deposit's line now.
-      if (b + kReduceAhead < chunk.bins.size()) __builtin_prefetch(&bins_[chunk.bins[b + kReduceAhead].bin], 1);
+      if (b + kReduceAhead < chunk.bins.size()) __builtin_prefetch(&into.bins[chunk.bins[b + kReduceAhead].bin], 1);
       const BinEvent& ev = chunk.bins[b];
-      BinSums& acc = bins_[ev.bin];
+      BinSums& acc = into.bins[ev.bin];
+      if (acc.count++ == 0) into.touched.push_back(ev.bin);
       acc.sum += ev.value;
       acc.sum2 += ev.value * ev.value;
-      ++acc.count;
       if (spectral) {
-        band_bin_sum_[ev.bin * nb + band] += ev.value;
-        band_bin_sum2_[ev.bin * nb + band] += ev.value * ev.value;
+        into.band_bin_sum[ev.bin * nb + band] += ev.value;
+        into.band_bin_sum2[ev.bin * nb + band] += ev.value * ev.value;
       }
     }
     for (; s < chunk.sensor_end[k]; ++s) {
       if (s + kReduceAhead < chunk.sensors.size())
-        __builtin_prefetch(&sensor_sums_[chunk.sensors[s + kReduceAhead].sensor], 1);
+        __builtin_prefetch(&into.sensors[chunk.sensors[s + kReduceAhead].sensor], 1);
       const SensorEvent& ev = chunk.sensors[s];
-      SensorSums& acc = sensor_sums_[ev.sensor];
+      SensorSums& acc = into.sensors[ev.sensor];
       acc.sum += ev.value;
       acc.sum2 += ev.value * ev.value;
       if (spectral) {
-        band_sensor_sum_[ev.sensor * nb + band] += ev.value;
-        band_sensor_sum2_[ev.sensor * nb + band] += ev.value * ev.value;
+        into.band_sensor_sum[ev.sensor * nb + band] += ev.value;
+        into.band_sensor_sum2[ev.sensor * nb + band] += ev.value * ev.value;
       }
     }
     const EnergyBalance& e = chunk.energy[k];
-    energy_sum_.escaped_w += e.escaped_w;
-    energy_sum_.absorbed_w += e.absorbed_w;
-    energy_sum_.medium_absorbed_w += e.medium_absorbed_w;
-    energy_sum_.depth_limited_w += e.depth_limited_w;
-    energy_sum_.roulette_w += e.roulette_w;
+    into.energy.escaped_w += e.escaped_w;
+    into.energy.absorbed_w += e.absorbed_w;
+    into.energy.medium_absorbed_w += e.medium_absorbed_w;
+    into.energy.depth_limited_w += e.depth_limited_w;
+    into.energy.roulette_w += e.roulette_w;
   }
-  rays_done_ += chunk.count;
-  counters_.segments += chunk.counters.segments;
-  counters_.crossings += chunk.counters.crossings;
-  counters_.scatterings += chunk.counters.scatterings;
+  into.rays += chunk.count;
+  into.counters.segments += chunk.counters.segments;
+  into.counters.crossings += chunk.counters.crossings;
+  into.counters.scatterings += chunk.counters.scatterings;
+}
+
+void SensorRun::closeBatch() {
+  detail::addTally(*closed_, *open_, scene_.bandCount());
+  detail::clearTally(*open_, scene_.bandCount());
+}
+
+std::uint64_t SensorRun::traceRange(std::uint64_t first, std::uint64_t end, Tally& into) {
+  std::vector<Chunk>& chunks = workers_->chunks;
+  chunks.resize((end - first + config_.chunk_rays - 1) / config_.chunk_rays);
+  for (std::size_t c = 0; c < chunks.size(); ++c) {
+    chunks[c].first = first + c * config_.chunk_rays;
+    chunks[c].count = std::min<std::uint64_t>(config_.chunk_rays, end - chunks[c].first);
+    chunks[c].done = false;
+  }
+  workers_->arena.execute(
+      [&] { tbb::parallel_for(std::size_t{0}, chunks.size(), [&](std::size_t c) { traceChunk(chunks[c]); }); });
+  // Reduce the finished prefix in ray order (after a cancel, later finished chunks are dropped).
+  std::uint64_t reduced = 0;
+  for (const Chunk& c : chunks) {
+    if (!c.done) break;
+    reduce(c, into);
+    reduced += c.count;
+  }
+  return reduced;
 }
 
 SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays,
@@ -135,29 +180,14 @@ SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays,
   cancel_.store(false, std::memory_order_relaxed);
   const auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t start = rays_done_;
-  const unsigned threads =
-      config_.threads ? config_.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
-  tbb::task_arena arena(static_cast<int>(threads));
-  std::vector<Chunk> chunks;
   while (rays_done_ < total_rays) {
     if (stop.sensor >= 0 && rays_done_ >= stop.min_rays && relativeStderr(stop.sensor) <= stop.target)
       return SensorRunStatus::TargetReached;
     // One batch: the rays up to the next multiple of batch_rays (so batches do not depend on how
-    // the run was split into calls), cut into chunks.
+    // the run was split into calls), reduced into the open batch's tallies.
     const std::uint64_t batch_end = std::min(total_rays, (rays_done_ / config_.batch_rays + 1) * config_.batch_rays);
-    chunks.resize((batch_end - rays_done_ + config_.chunk_rays - 1) / config_.chunk_rays);
-    for (std::size_t c = 0; c < chunks.size(); ++c) {
-      chunks[c].first = rays_done_ + c * config_.chunk_rays;
-      chunks[c].count = std::min<std::uint64_t>(config_.chunk_rays, batch_end - chunks[c].first);
-      chunks[c].done = false;
-    }
-    arena.execute(
-        [&] { tbb::parallel_for(std::size_t{0}, chunks.size(), [&](std::size_t c) { traceChunk(chunks[c]); }); });
-    // Reduce the finished prefix in ray order (after a cancel, later finished chunks are dropped).
-    for (const Chunk& c : chunks) {
-      if (!c.done) break;
-      reduce(c);
-    }
+    rays_done_ += traceRange(rays_done_, batch_end, *open_);
+    if (rays_done_ % config_.batch_rays == 0) closeBatch();
     if (progress) {
       SensorProgress p;
       p.rays_done = rays_done_;
@@ -171,6 +201,14 @@ SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays,
   if (stop.sensor >= 0 && rays_done_ >= stop.min_rays && relativeStderr(stop.sensor) <= stop.target)
     return SensorRunStatus::TargetReached;
   return SensorRunStatus::Completed;
+}
+
+SensorRunCounters SensorRun::counters() const {
+  SensorRunCounters c = closed_->counters;
+  c.segments += open_->counters.segments;
+  c.crossings += open_->counters.crossings;
+  c.scatterings += open_->counters.scatterings;
+  return c;
 }
 
 namespace {
@@ -190,28 +228,32 @@ void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, doubl
 
 double SensorRun::relativeStderr(int sensor) const {
   checkScene();
-  if (sensor < 0 || static_cast<std::size_t>(sensor) >= sensor_sums_.size())
+  if (sensor < 0 || static_cast<std::size_t>(sensor) >= closed_->sensors.size())
     throw InvalidArgument("SensorRun::relativeStderr: sensor " + std::to_string(sensor) + " (the scene has " +
-                          std::to_string(sensor_sums_.size()) + ")");
+                          std::to_string(scene_.sensors().size()) + ")");
   double mean, se;
-  const SensorSums& acc = sensor_sums_[static_cast<std::size_t>(sensor)];
-  meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
+  const SensorSums& c = closed_->sensors[static_cast<std::size_t>(sensor)];
+  const SensorSums& o = open_->sensors[static_cast<std::size_t>(sensor)];
+  meanAndStderr(c.sum + o.sum, c.sum2 + o.sum2, rays_done_, mean, se);
   return mean > 0.0 ? se / mean : std::numeric_limits<double>::infinity();
 }
 
 SensorRunResults SensorRun::results() const {
   checkScene();
+  // The finished batches and the open one (empty at batch boundaries: adding its zeros changes nothing).
+  Tally all = *closed_;
+  detail::addTally(all, *open_, scene_.bandCount());
   SensorRunResults r;
   r.rays = rays_done_;
   r.seed = config_.seed;
   const double n = rays_done_ ? static_cast<double>(rays_done_) : 1.0;
   r.energy.emitted_w = rays_done_ ? scene_.totalPower() : 0.0;
-  r.energy.escaped_w = energy_sum_.escaped_w / n;
-  r.energy.absorbed_w = energy_sum_.absorbed_w / n;
-  r.energy.medium_absorbed_w = energy_sum_.medium_absorbed_w / n;
-  r.energy.depth_limited_w = energy_sum_.depth_limited_w / n;
-  r.energy.roulette_w = energy_sum_.roulette_w / n;
-  const bool spectral = !band_bin_sum_.empty();
+  r.energy.escaped_w = all.energy.escaped_w / n;
+  r.energy.absorbed_w = all.energy.absorbed_w / n;
+  r.energy.medium_absorbed_w = all.energy.medium_absorbed_w / n;
+  r.energy.depth_limited_w = all.energy.depth_limited_w / n;
+  r.energy.roulette_w = all.energy.roulette_w / n;
+  const bool spectral = !all.band_bin_sum.empty();
   const std::size_t nb = scene_.bandCount();
   if (spectral) {
     r.bands = scene_.bands();
@@ -235,7 +277,7 @@ SensorRunResults SensorRun::results() const {
     const std::uint32_t bins = s.object->binCount();
     for (std::uint32_t b = 0; b < bins; ++b) {
       double mean, se;
-      const BinSums& acc = bins_[s.first_bin + b];
+      const BinSums& acc = all.bins[s.first_bin + b];
       meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
       const double area = s.binAreaWorld(b);
       out.flux_w.push_back(mean);
@@ -245,13 +287,13 @@ SensorRunResults SensorRun::results() const {
       out.stderr_w_m2.push_back(area > 0.0 ? se / area : 0.0);
       out.ray_count.push_back(acc.count);
     }
-    meanAndStderr(sensor_sums_[k].sum, sensor_sums_[k].sum2, rays_done_, out.total_flux_w, out.total_flux_stderr_w);
+    meanAndStderr(all.sensors[k].sum, all.sensors[k].sum2, rays_done_, out.total_flux_w, out.total_flux_stderr_w);
     out.theta_bins = spec.theta_bins;
     out.phi_bins = spec.theta_bins ? spec.phi_bins : 0;
     const std::size_t angle_first = static_cast<std::size_t>(scene_.binCount()) + s.first_angle_bin;
     for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a) {
       double mean, se;
-      const BinSums& acc = bins_[angle_first + a];
+      const BinSums& acc = all.bins[angle_first + a];
       meanAndStderr(acc.sum, acc.sum2, rays_done_, mean, se);
       out.angular_flux_w.push_back(mean);
       out.angular_stderr_w.push_back(se);
@@ -268,7 +310,7 @@ SensorRunResults SensorRun::results() const {
         for (std::uint32_t b = 0; b < bins; ++b) {
           const std::size_t i = (s.first_bin + b) * nb + band;
           double mean, se;
-          meanAndStderr(band_bin_sum_[i], band_bin_sum2_[i], rays_done_, mean, se);
+          meanAndStderr(all.band_bin_sum[i], all.band_bin_sum2[i], rays_done_, mean, se);
           const double area = out.bin_area_m2[b];
           out.band_flux_w[band].push_back(mean);
           out.band_irradiance_w_m2[band].push_back(area > 0.0 ? mean / area : 0.0);
@@ -276,8 +318,8 @@ SensorRunResults SensorRun::results() const {
         }
         if (spec.angleBinCount() != 0) out.band_angular_flux_w.resize(nb);
         for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a)
-          out.band_angular_flux_w[band].push_back(band_bin_sum_[(angle_first + a) * nb + band] / n);
-        meanAndStderr(band_sensor_sum_[k * nb + band], band_sensor_sum2_[k * nb + band], rays_done_,
+          out.band_angular_flux_w[band].push_back(all.band_bin_sum[(angle_first + a) * nb + band] / n);
+        meanAndStderr(all.band_sensor_sum[k * nb + band], all.band_sensor_sum2[k * nb + band], rays_done_,
                       out.band_total_flux_w[band], out.band_total_flux_stderr_w[band]);
       }
     }

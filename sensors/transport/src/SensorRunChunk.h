@@ -4,6 +4,7 @@
 
 #include "duplex/sensors/SensorRun.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -37,5 +38,77 @@ struct SensorRun::Chunk {
   std::vector<std::uint16_t> band;    // per ray, when the scene has several bands
   SensorRunCounters counters;
 };
+
+// Sums over a set of rays (a batch, or the finished batches of a run).
+struct SensorRun::Tally {
+  std::vector<BinSums> bins;        // spatial bins, then angular bins
+  std::vector<SensorSums> sensors;  // per sensor
+  // Spectral scenes only: the same per (bin, band) and (sensor, band), index * bands + band.
+  std::vector<double> band_bin_sum, band_bin_sum2, band_sensor_sum, band_sensor_sum2;
+  EnergyBalance energy;  // sums over rays (emitted_w unused)
+  SensorRunCounters counters;
+  // A batch's tallies: the bins whose count is not zero, in order of first deposit (so that adding
+  // a batch, emptying it and sending it cost what it reached, not the scene's bins).
+  std::vector<std::uint32_t> touched;
+  std::uint64_t rays = 0;
+};
+
+namespace detail {
+
+// Adds batch tallies `from` (its bins listed in from.touched: the others are zero, and adding a
+// zero changes no sum) into `to`.
+template <class Tally>
+void addTally(Tally& to, const Tally& from, std::size_t bands) {
+  const bool spectral = !from.band_bin_sum.empty();
+  for (const std::uint32_t i : from.touched) {
+    auto& t = to.bins[i];
+    const auto& f = from.bins[i];
+    t.sum += f.sum;
+    t.sum2 += f.sum2;
+    t.count += f.count;
+    for (std::size_t k = 0; spectral && k < bands; ++k) {
+      const std::size_t j = std::size_t{i} * bands + k;
+      to.band_bin_sum[j] += from.band_bin_sum[j];
+      to.band_bin_sum2[j] += from.band_bin_sum2[j];
+    }
+  }
+  for (std::size_t i = 0; i < from.sensors.size(); ++i) {
+    to.sensors[i].sum += from.sensors[i].sum;
+    to.sensors[i].sum2 += from.sensors[i].sum2;
+  }
+  for (std::size_t j = 0; j < from.band_sensor_sum.size(); ++j) {
+    to.band_sensor_sum[j] += from.band_sensor_sum[j];
+    to.band_sensor_sum2[j] += from.band_sensor_sum2[j];
+  }
+  to.energy.escaped_w += from.energy.escaped_w;
+  to.energy.absorbed_w += from.energy.absorbed_w;
+  to.energy.medium_absorbed_w += from.energy.medium_absorbed_w;
+  to.energy.depth_limited_w += from.energy.depth_limited_w;
+  to.energy.roulette_w += from.energy.roulette_w;
+  to.counters.segments += from.counters.segments;
+  to.counters.crossings += from.counters.crossings;
+  to.counters.scatterings += from.counters.scatterings;
+  to.rays += from.rays;
+}
+
+// Empties batch tallies (their bins listed in touched).
+template <class Tally>
+void clearTally(Tally& t, std::size_t bands) {
+  for (const std::uint32_t i : t.touched) {
+    t.bins[i] = {};
+    if (!t.band_bin_sum.empty())
+      for (std::size_t k = 0; k < bands; ++k)
+        t.band_bin_sum[std::size_t{i} * bands + k] = t.band_bin_sum2[std::size_t{i} * bands + k] = 0.0;
+  }
+  std::fill(t.sensors.begin(), t.sensors.end(), typename decltype(t.sensors)::value_type{});
+  std::fill(t.band_sensor_sum.begin(), t.band_sensor_sum.end(), 0.0);
+  std::fill(t.band_sensor_sum2.begin(), t.band_sensor_sum2.end(), 0.0);
+  t.touched.clear();
+  t.energy = {};
+  t.counters = {};
+  t.rays = 0;
+}
+
+}  // namespace detail
 
 }  // namespace duplex

@@ -8,6 +8,8 @@
 #include "duplex/accel/InputFile.h"
 #include "duplex/accel/Xxh64.h"
 
+#include "SensorRunChunk.h"
+
 #include <algorithm>
 #include <array>
 #include <cstring>
@@ -20,7 +22,8 @@
 
 namespace duplex {
 
-// ---- saved state: "DXSENSR4", fingerprint, seed, rays, sizes, the raw accumulators, XXH64 checksum ----
+// ---- saved state: "DXSENSR5", fingerprint, seed, rays, sizes, the raw accumulators of the finished
+// batches (and of the open batch when the rays end inside one), XXH64 checksum ----
 
 std::uint64_t SensorRun::fingerprint() const {
   std::call_once(fingerprint_once_, [this] { fingerprint_ = computeFingerprint(); });
@@ -40,6 +43,7 @@ std::uint64_t SensorRun::computeFingerprint() const {
   }
   for (const Light& l : scene_.lights()) add(&l.power_w, sizeof l.power_w);
   add(&config_.seed, sizeof config_.seed);
+  add(&config_.batch_rays, sizeof config_.batch_rays);  // the grouping of the sums
   add(&config_.max_depth, sizeof config_.max_depth);
   add(&config_.roulette_threshold, sizeof config_.roulette_threshold);
   // Bands, angular bins and free flights are added only where a scene uses them.
@@ -107,7 +111,7 @@ namespace {
 
 // The format is "DXSENSR" and one version character. A 0.x library owes no compatibility with its
 // own earlier states: any other magic or version is refused, naming both.
-constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '4'};
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '5'};
 
 // The first bytes of a file as a quoted string, non-printable bytes as \xNN.
 std::string quotedPrefix(std::span<const char> bytes) {
@@ -135,34 +139,95 @@ void append(std::vector<char>& out, const T* data, std::size_t count) {
   out.insert(out.end(), p, p + count * sizeof(T));
 }
 
-}  // namespace
-
-void SensorRun::saveState(const std::filesystem::path& file) const {
-  checkScene();
-  std::vector<char> bytes;
-  const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, bins_.size(), sensor_sums_.size()};
-  append(bytes, kStateMagic, sizeof kStateMagic);
-  append(bytes, header, 5);
-  // The file keeps one array per quantity (the layout of states saved before the accumulators
-  // became structures).
+// One tally's accumulators, one array per quantity.
+template <class Tally>
+void putTally(std::vector<char>& bytes, const Tally& t) {
   auto put = [&bytes](const auto& v) { append(bytes, v.data(), v.size()); };
   auto column = [](const auto& v, auto field) {
     std::vector<std::remove_cvref_t<decltype(v[0].*field)>> out(v.size());
     for (std::size_t i = 0; i < v.size(); ++i) out[i] = v[i].*field;
     return out;
   };
-  put(column(bins_, &BinSums::sum));
-  put(column(bins_, &BinSums::sum2));
-  put(column(bins_, &BinSums::count));
-  put(column(sensor_sums_, &SensorSums::sum));
-  put(column(sensor_sums_, &SensorSums::sum2));
-  const double energy[5] = {energy_sum_.escaped_w, energy_sum_.absorbed_w, energy_sum_.medium_absorbed_w,
-                            energy_sum_.depth_limited_w, energy_sum_.roulette_w};
+  using Bin = typename decltype(t.bins)::value_type;
+  using Sensor = typename decltype(t.sensors)::value_type;
+  put(column(t.bins, &Bin::sum));
+  put(column(t.bins, &Bin::sum2));
+  put(column(t.bins, &Bin::count));
+  put(column(t.sensors, &Sensor::sum));
+  put(column(t.sensors, &Sensor::sum2));
+  const double energy[5] = {t.energy.escaped_w, t.energy.absorbed_w, t.energy.medium_absorbed_w,
+                            t.energy.depth_limited_w, t.energy.roulette_w};
   append(bytes, energy, 5);
-  put(band_bin_sum_);  // empty unless the scene has bands
-  put(band_bin_sum2_);
-  put(band_sensor_sum_);
-  put(band_sensor_sum2_);
+  put(t.band_bin_sum);  // empty unless the scene has bands
+  put(t.band_bin_sum2);
+  put(t.band_sensor_sum);
+  put(t.band_sensor_sum2);
+}
+
+// The bytes putTally writes for a tally shaped like `t`.
+template <class Tally>
+std::size_t tallyBytes(const Tally& t) {
+  return t.bins.size() * (2 * sizeof(double) + sizeof(std::uint64_t)) + t.sensors.size() * 2 * sizeof(double) +
+         5 * sizeof(double) +
+         (t.band_bin_sum.size() + t.band_bin_sum2.size() + t.band_sensor_sum.size() + t.band_sensor_sum2.size()) *
+             sizeof(double);
+}
+
+// Reads what putTally wrote at `at` into `t` (shaped as the scene's) and advances `at`; false for
+// negative or non-finite sums or counts above `rays` (not a state this code wrote: a checksum is
+// no proof against a forged file).
+template <class Tally>
+bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::uint64_t rays) {
+  auto get = [&bytes, &at](auto& v) {
+    if (v.empty()) return;  // an empty vector's data() may be null, which memcpy must not get
+    std::memcpy(v.data(), bytes.data() + at, v.size() * sizeof(v[0]));
+    at += v.size() * sizeof(v[0]);
+  };
+  const std::size_t nb = t.bins.size(), ns = t.sensors.size();
+  std::vector<double> b1(nb), b2(nb), s1(ns), s2(ns);
+  std::vector<std::uint64_t> bc(nb);
+  get(b1);
+  get(b2);
+  get(bc);
+  get(s1);
+  get(s2);
+  std::array<double, 5> energy;
+  get(energy);
+  get(t.band_bin_sum);
+  get(t.band_bin_sum2);
+  get(t.band_sensor_sum);
+  get(t.band_sensor_sum2);
+  const auto valid = [](std::span<const double> v) {
+    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
+  };
+  const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= rays; });
+  // The roulette's net term (what it killed minus what it added) may be negative; the others not.
+  const bool energy_ok = valid(std::span<const double>(energy).first(4)) && std::isfinite(energy[4]);
+  if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(t.band_bin_sum) || !valid(t.band_bin_sum2) ||
+      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !energy_ok || !counts_ok)
+    return false;
+  t.touched.clear();
+  for (std::size_t i = 0; i < nb; ++i) {
+    t.bins[i] = {b1[i], b2[i], bc[i]};
+    if (bc[i] != 0) t.touched.push_back(static_cast<std::uint32_t>(i));
+  }
+  for (std::size_t i = 0; i < ns; ++i) t.sensors[i] = {s1[i], s2[i]};
+  t.energy = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
+  t.rays = rays;
+  return true;
+}
+
+}  // namespace
+
+void SensorRun::saveState(const std::filesystem::path& file) const {
+  checkScene();
+  std::vector<char> bytes;
+  const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, closed_->bins.size(),
+                                   closed_->sensors.size()};
+  append(bytes, kStateMagic, sizeof kStateMagic);
+  append(bytes, header, 5);
+  putTally(bytes, *closed_);
+  if (rays_done_ % config_.batch_rays != 0) putTally(bytes, *open_);
   const std::uint64_t checksum = stateChecksum(bytes);
   append(bytes, &checksum, 1);
   // Written beside the file and renamed over it: a process killed while saving leaves the previous
@@ -191,16 +256,13 @@ void SensorRun::loadState(const std::filesystem::path& file) {
     throw FileError(file.string() + ": run state of " + std::to_string(bytes.size()) + " bytes, truncated");
   std::uint64_t header[5];
   std::memcpy(header, bytes.data() + sizeof kStateMagic, sizeof header);
-  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != bins_.size() ||
-      header[4] != sensor_sums_.size())
+  if (header[0] != fingerprint() || header[1] != config_.seed || header[3] != closed_->bins.size() ||
+      header[4] != closed_->sensors.size())
     throw FileError(file.string() + ": the saved run is of another scene, seed or configuration (seed " +
                     std::to_string(header[1]) + ", " + std::to_string(header[3]) + " bins)");
-  const std::size_t nb = bins_.size(), ns = sensor_sums_.size();
-  const std::size_t expected =
-      kHead + nb * (2 * sizeof(double) + sizeof(std::uint64_t)) + ns * 2 * sizeof(double) + 5 * sizeof(double) +
-      (band_bin_sum_.size() + band_bin_sum2_.size() + band_sensor_sum_.size() + band_sensor_sum2_.size()) *
-          sizeof(double) +
-      sizeof(std::uint64_t);
+  // Rays in the open batch: its accumulators follow the finished batches'.
+  const std::uint64_t open_rays = header[2] % config_.batch_rays;
+  const std::size_t expected = kHead + tallyBytes(*closed_) * (open_rays ? 2 : 1) + sizeof(std::uint64_t);
   if (bytes.size() != expected)
     throw FileError(file.string() + ": run state of " + std::to_string(bytes.size()) + " bytes, expected " +
                     std::to_string(expected) + " (truncated or extended)");
@@ -210,41 +272,12 @@ void SensorRun::loadState(const std::filesystem::path& file) {
     throw FileError(file.string() + ": run state checksum mismatch (damaged file)");
   // Read into copies and check them: a refused file leaves this run as it was.
   std::size_t at = kHead;
-  auto get = [&bytes, &at](auto& v) {
-    if (v.empty()) return;  // an empty vector's data() may be null, which memcpy must not get
-    std::memcpy(v.data(), bytes.data() + at, v.size() * sizeof(v[0]));
-    at += v.size() * sizeof(v[0]);
-  };
-  std::vector<double> b1(nb), b2(nb), s1(ns), s2(ns);
-  std::vector<std::uint64_t> bc(nb);
-  get(b1);
-  get(b2);
-  get(bc);
-  get(s1);
-  get(s2);
-  std::array<double, 5> energy;
-  get(energy);
-  auto bb1 = band_bin_sum_, bb2 = band_bin_sum2_, bs1 = band_sensor_sum_, bs2 = band_sensor_sum2_;
-  get(bb1);
-  get(bb2);
-  get(bs1);
-  get(bs2);
-  // Powers are finite and non-negative, counts at most the rays done: anything else is not a
-  // state this code wrote (a checksum is no proof against a forged file).
-  const auto valid = [](std::span<const double> v) {
-    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
-  };
-  const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= header[2]; });
-  if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(bb1) || !valid(bb2) || !valid(bs1) ||
-      !valid(bs2) || !valid(energy) || !counts_ok)
+  std::unique_ptr<Tally> closed = makeTally(), open = makeTally();
+  if (!getTally(bytes, at, *closed, header[2] - open_rays) || (open_rays && !getTally(bytes, at, *open, open_rays)))
     throw FileError(file.string() + ": run state holds negative, non-finite or impossible values");
-  band_bin_sum_ = std::move(bb1);
-  band_bin_sum2_ = std::move(bb2);
-  band_sensor_sum_ = std::move(bs1);
-  band_sensor_sum2_ = std::move(bs2);
-  for (std::size_t i = 0; i < nb; ++i) bins_[i] = {b1[i], b2[i], bc[i]};
-  for (std::size_t i = 0; i < ns; ++i) sensor_sums_[i] = {s1[i], s2[i]};
-  energy_sum_ = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
+  closed->touched.clear();  // the run's tallies are added to, never sent or emptied
+  closed_ = std::move(closed);
+  open_ = std::move(open);
   rays_done_ = header[2];
 }
 

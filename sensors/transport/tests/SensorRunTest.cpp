@@ -17,8 +17,11 @@
 #include <glm/geometric.hpp>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <memory>
 #include <numbers>
 #include <unistd.h>
 
@@ -329,19 +332,35 @@ TEST(SensorRun, FogAttenuatesAndTheBalanceCloses) {
   EXPECT_EQ(r.energy.roulette_w, 0.0);
 }
 
-TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
-  // The fog slab between a point source and a Lambertian ceiling: paths reach the ceiling with
-  // e^-(0.4 / cos) of their power, below a roulette threshold of 0.9 of it. Per path the roulette
-  // term is what it killed minus what it added, so the five terms still sum to the emitted power
-  // exactly, and the box's flux agrees with the run without roulette.
-  Fixture f;
+// The bytes of a run's saved state: equal states are equal accumulators, bit for bit.
+std::string stateBytes(const SensorRun& run, const std::string& tag) {
+  const auto file = std::filesystem::temp_directory_path() /
+                    ("duplex_sensor_state_" + tag + "_" + std::to_string(::getpid()) + ".bin");
+  run.saveState(file);
+  std::ifstream in(file, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::remove(file);
+  return bytes;
+}
+
+// A fog slab between a point source of 2 W and a Lambertian ceiling, in a closed box of sensors.
+SensorScene fogUnderCeiling(Fixture& f) {
   Box slab;
   slab.lo = glm::vec3(-0.9f, -0.9f, 0.25f);
   slab.hi = glm::vec3(0.9f, 0.9f, 0.75f);
   f.add(std::make_shared<const test::SlabMedium>(0.8, slab), Affine::identity(), "fog");
   f.add(quad(0.8, "ceiling"), translate(0, 0, 0.9), "ceiling", Material{MaterialType::Lambertian, 0.9});
   closeBox(f);
-  SensorScene scene = f.scene({pointLight({0, 0, 0}, 2.0)});
+  return f.scene({pointLight({0, 0, 0}, 2.0)});
+}
+
+TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
+  // The fog slab between a point source and a Lambertian ceiling: paths reach the ceiling with
+  // e^-(0.4 / cos) of their power, below a roulette threshold of 0.9 of it. Per path the roulette
+  // term is what it killed minus what it added, so the five terms still sum to the emitted power
+  // exactly, and the box's flux agrees with the run without roulette.
+  Fixture f;
+  const SensorScene scene = fogUnderCeiling(f);
   auto run = [&](double threshold) {
     SensorRunConfig cfg;
     cfg.roulette_threshold = threshold;
@@ -362,6 +381,36 @@ TEST(SensorRun, RouletteKeepsTheBalanceExactAndTheFluxUnbiased) {
     EXPECT_LT(std::abs(a.total_flux_w - b.total_flux_w), 4.5 * se)
         << a.name << ": " << a.total_flux_w << " vs " << b.total_flux_w;
   }
+}
+
+TEST(SensorRun, BatchesWhoseRouletteTermIsNegativeAddAndResume) {
+  // The roulette's net term of a batch (what it killed minus what it added) has either sign: such
+  // batches travel between runs and states like any other.
+  Fixture f;
+  const SensorScene scene = fogUnderCeiling(f);
+  SensorRunConfig cfg;
+  cfg.roulette_threshold = 0.9;
+  cfg.seed = 3;
+  cfg.batch_rays = 2000;
+  SensorRun whole(scene, cfg);
+  int negative = 0;
+  double before = 0.0;
+  (void)whole.runUntil(30000, [&](const SensorProgress& p) {
+    const double sum = whole.results().energy.roulette_w * static_cast<double>(p.rays_done);
+    negative += sum < before ? 1 : 0;
+    before = sum;
+  });
+  EXPECT_GT(negative, 0);
+  SensorRun worker(scene, cfg), sum(scene, cfg);
+  for (std::uint64_t b = 0; b < 15; ++b) sum.addBatch(worker.traceBatch(b, 30000).bytes);
+  EXPECT_EQ(stateBytes(whole, "roulette_whole"), stateBytes(sum, "roulette_sum"));
+  const auto file =
+      std::filesystem::temp_directory_path() / ("duplex_sensor_roulette_" + std::to_string(::getpid()) + ".bin");
+  sum.saveState(file);
+  SensorRun resumed(scene, cfg);
+  resumed.loadState(file);
+  std::filesystem::remove(file);
+  EXPECT_EQ(stateBytes(resumed, "roulette_resumed"), stateBytes(whole, "roulette_whole2"));
 }
 
 TEST(SensorRun, ClosedBoxOfSensorsRecordsAllEmittedPower) {
@@ -394,11 +443,13 @@ TEST(SensorRun, WithAnAbsorberInsideMissingPowerEqualsAbsorbedPower) {
   EXPECT_EQ(r.energy.depth_limited_w, 0.0);
 }
 
-SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32_t chunk, std::uint64_t rays) {
+SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32_t chunk, std::uint64_t rays,
+                         std::uint64_t batch = SensorRunConfig{}.batch_rays) {
   SensorRunConfig cfg;
   cfg.seed = 99;
   cfg.threads = threads;
   cfg.chunk_rays = chunk;
+  cfg.batch_rays = batch;
   SensorRun run(scene, cfg);
   (void)run.runUntil(rays);
   return run.results();
@@ -423,7 +474,8 @@ TEST(SensorRun, BitIdenticalForAnyThreadCountAndChunkSize) {
 TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
   Fixture f;
   const SensorScene scene = reflectingBox(f);
-  const SensorRunResults whole = runWith(scene, 2, 1024, 150000);
+  // The same batches (the unit of the ordered sums) as the runs below.
+  const SensorRunResults whole = runWith(scene, 2, 1024, 150000, 20000);
   SensorRunConfig cfg;
   cfg.seed = 99;
   cfg.batch_rays = 20000;
@@ -455,12 +507,13 @@ TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
     // Saved and loaded into a fresh run (another process would do the same).
     const auto file =
         std::filesystem::temp_directory_path() / ("duplex_sensor_state_" + std::to_string(::getpid()) + ".bin");
+    // Saved inside a batch: the state holds the open batch's sums beside the finished batches'.
     SensorRun first(scene, cfg);
-    (void)first.runUntil(60000);
+    (void)first.runUntil(70000);
     first.saveState(file);
     SensorRun second(scene, cfg);
     second.loadState(file);
-    EXPECT_EQ(second.raysDone(), 60000u);
+    EXPECT_EQ(second.raysDone(), 70000u);
     (void)second.runUntil(150000);
     expectIdentical(whole, second.results());
     // Another seed refuses the state.
@@ -476,6 +529,95 @@ TEST(SensorRun, ExtendedCancelledAndResumedRunsEqualOneLongRun) {
     EXPECT_EQ(third.raysDone(), 0u);
     std::filesystem::remove(file);
   }
+}
+
+TEST(SensorRun, BatchesTracedElsewhereAndAddedInOrderEqualOneRun) {
+  Fixture f;
+  const SensorScene scene = reflectingBox(f);
+  SensorRunConfig cfg;
+  cfg.seed = 99;
+  cfg.batch_rays = 20000;
+  cfg.threads = 2;
+  constexpr std::uint64_t kRays = 110000;  // the last batch is shorter
+  SensorRun whole(scene, cfg);
+  (void)whole.runUntil(kRays);
+  // Three "ranks" with 1, 2 and 1 threads trace the batches in turn; one run adds them in order.
+  std::vector<std::unique_ptr<SensorRun>> workers;
+  for (const unsigned threads : {1u, 2u, 1u}) {
+    SensorRunConfig c = cfg;
+    c.threads = threads;
+    c.chunk_rays = 300 * threads;
+    workers.push_back(std::make_unique<SensorRun>(scene, c));
+  }
+  SensorRun sum(scene, cfg);
+  std::vector<std::uint64_t> sizes;
+  for (std::uint64_t b = 0; b * cfg.batch_rays < kRays; ++b) {
+    const SensorBatchTally t = workers[b % 3]->traceBatch(b, kRays);
+    EXPECT_TRUE(t.complete);
+    EXPECT_EQ(t.first_ray, b * cfg.batch_rays);
+    EXPECT_EQ(t.rays, std::min<std::uint64_t>(cfg.batch_rays, kRays - t.first_ray));
+    sum.addBatch(t.bytes);
+    sizes.push_back(t.bytes.size());
+  }
+  EXPECT_EQ(sum.raysDone(), kRays);
+  for (const auto& w : workers) EXPECT_EQ(w->raysDone(), 0u);  // tracing leaves a worker's sums alone
+  expectIdentical(whole.results(), sum.results());
+  EXPECT_EQ(stateBytes(whole, "whole"), stateBytes(sum, "sum"));
+  EXPECT_EQ(whole.counters().segments, sum.counters().segments);
+  // A tally holds the bins the batch reached: this scene's 6 x 4 x 4 bins at most, not more.
+  const std::size_t bins = scene.binCount() + scene.angleBinCount();
+  for (const std::uint64_t size : sizes) EXPECT_LE(size, 200 + bins * 28 + scene.sensors().size() * 16);
+  // Continuing the summed run by itself gives the longer one-process run.
+  SensorRun longer(scene, cfg);
+  (void)longer.runUntil(150000);
+  (void)sum.runUntil(150000);
+  EXPECT_EQ(stateBytes(longer, "longer"), stateBytes(sum, "sum2"));
+}
+
+TEST(SensorRun, BatchTalliesOutOfOrderOfAnotherRunOrDamagedAreRefused) {
+  Fixture f;
+  const SensorScene scene = reflectingBox(f);
+  SensorRunConfig cfg;
+  cfg.seed = 99;
+  cfg.batch_rays = 5000;
+  SensorRun worker(scene, cfg);
+  const SensorBatchTally b0 = worker.traceBatch(0, 20000), b1 = worker.traceBatch(1, 20000);
+  SensorRun run(scene, cfg);
+  const std::string empty = stateBytes(run, "empty");
+  expectErrorNaming<InvalidArgument>([&] { run.addBatch(b1.bytes); }, "added in order");
+  SensorRunConfig other = cfg;
+  other.seed = 7;
+  SensorRun stranger(scene, other);
+  expectErrorNaming<InvalidArgument>([&] { run.addBatch(stranger.traceBatch(0, 20000).bytes); },
+                                     "another scene, seed or configuration");
+  other = cfg;
+  other.batch_rays = 4000;
+  SensorRun regrouped(scene, other);
+  EXPECT_THROW(run.addBatch(regrouped.traceBatch(0, 20000).bytes), InvalidArgument);
+  std::vector<std::byte> cut(b0.bytes.begin(), b0.bytes.end() - 1);
+  expectErrorNaming<InvalidArgument>([&] { run.addBatch(cut); }, "bytes, expected");
+  // A bin index past the scene's bins, and a negative sum: refused, the run unchanged.
+  std::vector<std::byte> bad = b0.bytes;
+  const std::uint32_t far = 1u << 30;
+  std::memcpy(bad.data() + 8 + 10 * 8, &far, sizeof far);
+  expectErrorNaming<InvalidArgument>([&] { run.addBatch(bad); }, "out-of-range bins");
+  bad = b0.bytes;
+  std::uint64_t reached;
+  std::memcpy(&reached, bad.data() + 8 + 6 * 8, sizeof reached);
+  ASSERT_GT(reached, 0u);
+  const double negative = -1.0;
+  std::memcpy(bad.data() + 8 + 10 * 8 + reached * 4, &negative, sizeof negative);
+  EXPECT_THROW(run.addBatch(bad), InvalidArgument);
+  EXPECT_EQ(run.raysDone(), 0u);
+  EXPECT_EQ(stateBytes(run, "refused"), empty);
+  // The good tallies still add (in order) to what one run of 10,000 rays holds.
+  run.addBatch(b0.bytes);
+  run.addBatch(b1.bytes);
+  SensorRun straight(scene, cfg);
+  (void)straight.runUntil(10000);
+  EXPECT_EQ(stateBytes(run, "good"), stateBytes(straight, "straight"));
+  // A batch past the run's rays is no batch.
+  EXPECT_THROW((void)worker.traceBatch(4, 20000), InvalidArgument);
 }
 
 TEST(SensorRun, StopsWhenTheChosenSensorIsPreciseEnough) {

@@ -8,11 +8,15 @@
 /// whose fogs scatter (SensorScene::scatters), free flights are sampled through the fogs and rays
 /// scatter inside them by the Henyey-Greenstein phase function, or are absorbed by the albedo.
 ///
-/// Determinism: ray i draws its random numbers from a CounterRng keyed by (seed, i); work is split
-/// into chunks of consecutive rays traced in parallel (TBB, lock-free: each chunk writes its own
-/// event list), and the chunks' per-ray deposits are added to the bins strictly in ray order. The
-/// results are therefore bit-identical for any thread count and chunk size, and a run extended to
-/// N rays in several calls (or resumed from a saved state) equals one run of N rays.
+/// Determinism: ray i draws its random numbers from a CounterRng keyed by (seed, i); rays are
+/// grouped in batches of batch_rays, batch k holding rays [k * batch_rays, (k + 1) * batch_rays).
+/// A batch is split into chunks of consecutive rays traced in parallel (TBB, lock-free: each chunk
+/// writes its own event list); the chunks' per-ray deposits are added strictly in ray order into the
+/// batch's own tallies (starting from zero), and a finished batch's tallies are added to the run's
+/// in batch order. The results are therefore bit-identical for any thread count and chunk size, for
+/// any number of processes sharing the batches (traceBatch() / addBatch(): a batch's tallies do not
+/// depend on where it was traced), and a run extended to N rays in several calls (or resumed from a
+/// saved state) equals one run of N rays. They depend on the seed and batch_rays.
 ///
 /// Threading: runUntil() runs on the caller's thread (using `threads` workers); cancel() may be
 /// called from any thread, including the progress callback.
@@ -23,10 +27,13 @@
 #include "duplex/sensors/SensorScene.h"
 
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <mutex>
+#include <span>
 #include <vector>
 
 namespace duplex {
@@ -43,16 +50,19 @@ struct SensorRunConfig {
   /// media or materials) survives with probability power / threshold and is then raised to it.
   double roulette_threshold = 0.05;
   std::uint32_t chunk_rays = 1024;  ///< rays per parallel work item (results do not depend on it)
-  /// Rays between progress reports and stop-rule checks; the stop point depends on it (not on the
-  /// thread count).
+  /// Rays per batch: the unit of the ordered reduction (a batch's tallies are summed on their own,
+  /// then added to the run's), of work shared between processes, of progress reports and of
+  /// stop-rule checks. The results and the stop point depend on it (not on the thread count or the
+  /// number of processes).
   std::uint64_t batch_rays = 1u << 16;
   CrossingQuery query;  ///< which instances block, record, attenuate
   /// Benchmark baseline: trace the same paths with the plain closest-hit query, record nothing.
   /// Paths are identical when the scene has no media (sensors never change a path).
   bool closest_hit_only = false;
   /// Upper bound on the accumulators' memory (sums, squares and counts of every spatial and
-  /// angular bin, and per band in spectral scenes): a run above it is refused at construction
-  /// rather than failing to allocate (or being killed) part-way.
+  /// angular bin, and per band in spectral scenes; twice, for the run's tallies and the open
+  /// batch's): a run above it is refused at construction rather than failing to allocate (or being
+  /// killed) part-way.
   std::uint64_t max_accumulator_bytes = std::uint64_t{4} << 30;
 };
 
@@ -86,6 +96,23 @@ struct SensorRunCounters {
   std::uint64_t scatterings = 0;  ///< collisions in scattering fogs
 };
 
+/// The tallies of one batch of a run (sums over its rays only, started from zero), made by
+/// SensorRun::traceBatch in one process and added by SensorRun::addBatch in another (or the same):
+/// the unit of work of runs shared between processes (see SensorRunMpi.h for MPI).
+struct SensorBatchTally {
+  std::uint64_t batch = 0;      ///< the batch's index: its rays start at batch * batch_rays
+  std::uint64_t first_ray = 0;  ///< batch * batch_rays
+  /// Rays traced: the batch's size (batch_rays, or fewer for the last batch of a run), or fewer when
+  /// the tracing was cancelled (complete is then false).
+  std::uint64_t rays = 0;
+  bool complete = false;  ///< every ray asked of traceBatch was traced
+  /// The sums serialised (the run's fingerprint, first_ray, rays, then the bins the batch reached
+  /// and their sums, squares and counts, the sensors' sums, the energy tallies and the counters) in
+  /// this machine's byte order: what a process sends to the one that accumulates. Its size grows
+  /// with the bins the batch reached, not with the scene's bins.
+  std::vector<std::byte> bytes;
+};
+
 /// A light-tracing run over a SensorScene (see the file comment for the transport, determinism and threading).
 class SensorRun {
  public:
@@ -96,6 +123,7 @@ class SensorRun {
   /// batch_rays 0, max_depth > 1000, roulette_threshold outside [0, 1)), and as the scene's
   /// accessors for a committed graph that makes no valid scene.
   SensorRun(const SensorScene& scene, const SensorRunConfig& config = {});
+  ~SensorRun();
   SensorRun(const SensorRun&) = delete;
   SensorRun& operator=(const SensorRun&) = delete;
 
@@ -105,8 +133,30 @@ class SensorRun {
   /// when the scene has no light; resets a pending cancel() at its start.
   SensorRunStatus runUntil(std::uint64_t total_rays, const std::function<void(const SensorProgress&)>& progress = {},
                            const SensorStopRule& stop = {});
-  /// Asks a running runUntil to stop after the chunks in flight. Thread-safe.
+  /// Asks a running runUntil (or traceBatch) to stop after the chunks in flight. Thread-safe.
   void cancel() { cancel_.store(true, std::memory_order_relaxed); }
+  /// Whether cancel() was called since the last runUntil / traceBatch started (a signal handler's
+  /// cancel between two batches of a shared run is seen by the next one's caller).
+  [[nodiscard]] bool cancelled() const { return cancel_.load(std::memory_order_relaxed); }
+
+  /// Runs shared between processes, the worker's half: traces batch `batch` (its rays up to
+  /// total_rays) with this run's threads into tallies of its own and returns them serialised; this
+  /// run's accumulators and raysDone() are unchanged. A cancel() during the call stops it after the
+  /// chunks in flight (the tally is then incomplete: traced rays are a prefix of the batch). Throws
+  /// InvalidArgument when the batch starts at or after total_rays or the scene has no light.
+  [[nodiscard]] SensorBatchTally traceBatch(std::uint64_t batch, std::uint64_t total_rays);
+  /// Runs shared between processes, the accumulating half: adds a batch's tallies (from traceBatch
+  /// of a run over the same scene and configuration, in any process of this build) to this run's,
+  /// exactly as runUntil would have. Batches must come in order: the tally must start at raysDone(),
+  /// which must be the start of a batch. Throws InvalidArgument for a tally of another scene,
+  /// seed or batch size (fingerprint), out of order, or damaged (sizes, indices); the run is then
+  /// unchanged. traceBatch and addBatch share no state: one thread may trace a batch while another
+  /// adds batches (and reads results or saves the state), never two traces or two additions at once.
+  void addBatch(std::span<const std::byte> tally);
+  /// Hash of what the accumulators' meaning depends on (the sensors, bins, lights, instances,
+  /// materials, contents of meshes and grids, seed, path limits and batch size): equal in two
+  /// processes whose runs may share batches or run states. Computed once.
+  [[nodiscard]] std::uint64_t fingerprint() const;
 
   /// Emitted rays finished (resumed rays included).
   [[nodiscard]] std::uint64_t raysDone() const { return rays_done_; }
@@ -118,7 +168,7 @@ class SensorRun {
   /// Throws InvalidArgument for a sensor index outside [0, sensor count).
   [[nodiscard]] double relativeStderr(int sensor) const;
   /// Counters of the segments traced so far.
-  [[nodiscard]] SensorRunCounters counters() const { return counters_; }
+  [[nodiscard]] SensorRunCounters counters() const;
 
   /// Saves the accumulators (exact binary doubles, then a checksum) so that a later process can
   /// resume; written to "<file>.tmp" and renamed over `file`, so a process killed while saving
@@ -134,16 +184,22 @@ class SensorRun {
 
  private:
   struct Chunk;
+  struct Tally;
+  struct Workers;
   void traceChunk(Chunk& chunk) const;
-  void reduce(const Chunk& chunk);
+  void reduce(const Chunk& chunk, Tally& into) const;
+  // Traces rays [first, end) (within one batch) in chunks on the run's workers and reduces the
+  // finished prefix into `into` in ray order; returns the rays reduced (fewer after a cancel).
+  std::uint64_t traceRange(std::uint64_t first, std::uint64_t end, Tally& into);
+  // Adds the open batch's tallies to the run's (the batch is full) and empties them.
+  void closeBatch();
+  [[nodiscard]] std::unique_ptr<Tally> makeTally() const;
   /// The first collision in the scene's scattering fogs along world-space origin + t dir, t in
   /// [0, t_max] (t_max infinite: the whole ray): the medium, with t_collision, or nullptr.
   const MediumInstance* sampleCollision(const glm::dvec3& origin, const glm::dvec3& dir, float t_max, CounterRng& rng,
                                         QueryContext& ctx, double& t_collision) const;
-  /// Hash of what the accumulators' meaning depends on (computeFingerprint), computed on the first
-  /// save or load and kept: the scene is unchanged for the run's life, and hashing every mesh and
-  /// grid again at each periodic checkpoint would stall the workers.
-  [[nodiscard]] std::uint64_t fingerprint() const;
+  // fingerprint() is computed on the first call and kept: the scene is unchanged for the run's
+  // life, and hashing every mesh and grid again at each periodic checkpoint would stall the workers.
   [[nodiscard]] std::uint64_t computeFingerprint() const;
 
   // Throws InvalidArgument when the scene's graph was committed since the run was made.
@@ -157,10 +213,9 @@ class SensorRun {
   std::vector<double> light_cdf_;
   std::atomic<bool> cancel_{false};
   std::uint64_t rays_done_ = 0;
-  SensorRunCounters counters_;
-  // Accumulators, added to in ray order: per bin and per sensor sums of X and X^2, crossing counts.
-  // One structure per bin (one cache line per deposit in the reduction, where three arrays took
-  // three misses; 32 bytes so that none straddles two lines).
+  // Accumulators, per bin and per sensor sums of X and X^2, crossing counts. One structure per bin
+  // (one cache line per deposit in the reduction, where three arrays took three misses; 32 bytes so
+  // that none straddles two lines).
   struct alignas(32) BinSums {
     double sum = 0.0, sum2 = 0.0;
     std::uint64_t count = 0;
@@ -168,7 +223,6 @@ class SensorRun {
   struct SensorSums {
     double sum = 0.0, sum2 = 0.0;
   };
-  std::vector<BinSums> bins_;
   // By instance node (a crossing's instance_id): what its deposit needs, in one small record
   // (SensorScene's node-to-sensor table and the SensorInstance would be two cache misses).
   struct DepositTarget {
@@ -177,10 +231,12 @@ class SensorRun {
     bool angular = false;      // has angular bins
   };
   std::vector<DepositTarget> deposit_targets_;
-  std::vector<SensorSums> sensor_sums_;
-  // Spectral scenes only: the same per (bin, band) and (sensor, band), index * bands + band.
-  std::vector<double> band_bin_sum_, band_bin_sum2_, band_sensor_sum_, band_sensor_sum2_;
-  EnergyBalance energy_sum_;  // sums over rays (divide by rays_done_)
+  // closed_: the sums of the finished batches, added in batch order; open_: the batch under way
+  // (empty at batch boundaries), its rays added in ray order. Results are closed_ + open_.
+  // scratch_: traceBatch's tallies, incoming_: addBatch's (each allocated on its first call; two,
+  // so that one thread may trace a batch while another adds one).
+  std::unique_ptr<Tally> closed_, open_, scratch_, incoming_;
+  std::unique_ptr<Workers> workers_;  // the task arena and the chunks of a batch
 };
 
 }  // namespace duplex
