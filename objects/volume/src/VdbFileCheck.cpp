@@ -196,7 +196,9 @@ std::optional<bool> metadata(Reader& r, std::int64_t grid_bytes, const std::stri
       r.fail(entry + " of type " + type + " declares " + std::to_string(size) + " bytes, not " + std::to_string(fixed));
     if (type == "__delayedload") {
       delayedLoadMetadata(r, size, grid_bytes, entry);
-    } else if (name == "is_saved_as_half_float" && type == "bool") {
+    } else if (name == "is_saved_as_half_float") {
+      // Grid::saveFloatAsHalf is this entry's asBool(): refused unless it is the bool OpenVDB writes.
+      if (type != "bool") r.fail(entry + " has type " + type + ", not bool");
       half = r.value<char>("metadata value") != 0;
     } else {
       r.skip(size, "metadata value");  // strings and unknown types: OpenVDB reads `size` bytes
@@ -235,7 +237,9 @@ GridHeader gridHeader(Reader& r, const VdbGridExtent& e) {
   const std::string where = "grid \"" + e.unique_name + "\"";
   GridHeader h;
   h.compression = r.value<std::uint32_t>("grid compression flags");
-  h.half = metadata(r, e.end_pos - e.grid_pos, where).value_or(e.type.ends_with("_HalfFloat"));
+  // The descriptor's "_HalfFloat" suffix only sets the grid's metadata entry, which readMeta then
+  // replaces: the values are half floats exactly when the grid's own entry says so.
+  h.half = metadata(r, e.end_pos - e.grid_pos, where).value_or(false);
   h.linear = transformMap(r, where);
   return h;
 }
