@@ -103,7 +103,7 @@ class Reader {
 };
 
 // Bytes of the transform's map after its type name (the doubles each map type writes); maps not
-// listed (frustum) are not walked: VolumeObject refuses non-linear transforms anyway.
+// listed are unknown to OpenVDB too (the frustum map is walked by transformMap).
 std::int64_t mapBytes(const std::string& type) {
   static const std::map<std::string, std::int64_t> bytes = {{"UniformScaleMap", 5 * 24},
                                                             {"ScaleMap", 5 * 24},
