@@ -38,6 +38,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <optional>
 
 namespace duplex {
 
@@ -102,7 +103,7 @@ class Reader {
 };
 
 // Bytes of the transform's map after its type name (the doubles each map type writes); maps not
-// listed (frustum) are not walked: VolumeObject refuses non-linear transforms anyway.
+// listed are unknown to OpenVDB too (the frustum map is walked by transformMap).
 std::int64_t mapBytes(const std::string& type) {
   static const std::map<std::string, std::int64_t> bytes = {{"UniformScaleMap", 5 * 24},
                                                             {"ScaleMap", 5 * 24},
@@ -115,7 +116,133 @@ std::int64_t mapBytes(const std::string& type) {
   return it == bytes.end() ? -1 : it->second;
 }
 
+// Bytes of the value of each fixed-size metadata type OpenVDB registers (TypedMetadata reads
+// exactly these, whatever size the entry declares: a different size would leave the stream inside
+// the value and make every later length come from the wrong bytes).
+std::int64_t metadataValueBytes(const std::string& type) {
+  static const std::map<std::string, std::int64_t> bytes = {
+      {"bool", 1},   {"float", 4},  {"double", 8}, {"int32", 4},  {"int64", 8},  {"vec2i", 8},
+      {"vec2s", 8},  {"vec2d", 16}, {"vec3i", 12}, {"vec3s", 12}, {"vec3d", 24}, {"vec4i", 16},
+      {"vec4s", 16}, {"vec4d", 32}, {"mat4s", 64}, {"mat4d", 128}};
+  const auto it = bytes.find(type);
+  return it == bytes.end() ? -1 : it->second;
+}
+
+// A blosc chunk of `chunk` bytes at the reader's position must decompress to exactly `expected`
+// bytes: blosc's header (version, version, flags, type size, then uint32 uncompressed, block and
+// compressed sizes) is what OpenVDB hands blosc, which trusts it. `padded` allows the padding of
+// points::bloscCompress (arrays shorter than 128 bytes are compressed as 128). Leaves the reader
+// after the chunk.
+void bloscChunk(Reader& r, std::int64_t chunk, std::int64_t expected, const std::string& where, bool padded = false) {
+  if (chunk < 16) r.fail(where + ": a blosc chunk of " + std::to_string(chunk) + " bytes, too short for its header");
+  std::uint32_t header[4];
+  r.bytes(reinterpret_cast<char*>(header), 16, "blosc header");
+  const bool size_ok = header[1] == static_cast<std::uint64_t>(expected) ||
+                       (padded && expected < 128 && header[1] > expected && header[1] <= 128);
+  if (!size_ok || header[3] != static_cast<std::uint64_t>(chunk))
+    r.fail(where + ": a blosc chunk of " + std::to_string(chunk) + " bytes holds a blosc block of " +
+           std::to_string(header[1]) + " bytes in " + std::to_string(header[3]) + " (" + std::to_string(expected) +
+           " bytes expected)");
+  r.skip(chunk - 16, "blosc data");
+}
+
+// io::DelayedLoadMetadata ("__delayedload"): uint32 leaf count, then the leaves' int8 mask flags
+// and their int64 compressed buffer sizes, each array as a uint32 byte count followed by a blosc
+// chunk of that many bytes, or by the raw array when the count is 0 (the second array is absent
+// when it is 0xffffffff). OpenVDB sizes the arrays by the leaf count and by the blosc header's
+// uncompressed size before reading them: both must be the array's bytes, and every leaf stores at
+// least its 64-byte value mask in the grid, which bounds the count by the grid's bytes
+// (`grid_bytes`; the file's bytes for file-level metadata). The value must fit in its declared size
+// (OpenVDB skips what it does not read, but does not stop at the declared end).
+void delayedLoadMetadata(Reader& r, std::int64_t size, std::int64_t grid_bytes, const std::string& where) {
+  if (size == 0) return;  // OpenVDB reads nothing for an empty value
+  const std::int64_t end = r.pos() + size;
+  auto inside = [&] {
+    if (r.pos() > end)
+      r.fail(where + ": delayed-load metadata runs past the " + std::to_string(size) + " bytes it declares");
+  };
+  const auto count = r.value<std::uint32_t>("delayed-load leaf count");
+  if (std::int64_t{count} * 64 > grid_bytes)
+    r.fail(where + ": delayed-load metadata for " + std::to_string(count) + " leaves, more than its " +
+           std::to_string(grid_bytes) + " bytes can hold");
+  for (const std::int64_t item : {1, 8}) {
+    const auto bytes = r.value<std::uint32_t>("delayed-load array size");
+    if (item == 8 && bytes == 0xffffffffu) break;
+    if (bytes == 0) {
+      r.skip(count * item, "delayed-load array");
+    } else {
+      if (bytes > end - r.pos())
+        r.fail(where + ": delayed-load array of " + std::to_string(bytes) + " bytes runs past its metadata value");
+      bloscChunk(r, bytes, count * item, where + ": delayed-load array", /*padded=*/true);
+    }
+    inside();
+  }
+  inside();
+  r.skip(end - r.pos(), "delayed-load metadata");
+}
+
+// MetaMap::readMeta: uint32 count, then per entry: string name, string type, uint32 size, value.
+// Returns the value of a bool "is_saved_as_half_float" entry, if there is one.
+std::optional<bool> metadata(Reader& r, std::int64_t grid_bytes, const std::string& where) {
+  std::optional<bool> half;
+  const auto count = r.value<std::uint32_t>("metadata count");
+  for (std::uint32_t k = 0; k < count; ++k) {
+    const std::string name = r.string("metadata name");
+    const std::string type = r.string("metadata type");
+    const auto size = r.value<std::uint32_t>("metadata size");
+    const std::string entry = where + ": metadata \"" + name + "\"";
+    const std::int64_t fixed = metadataValueBytes(type);
+    if (fixed >= 0 && size != fixed)
+      r.fail(entry + " of type " + type + " declares " + std::to_string(size) + " bytes, not " + std::to_string(fixed));
+    if (type == "__delayedload") {
+      delayedLoadMetadata(r, size, grid_bytes, entry);
+    } else if (name == "is_saved_as_half_float") {
+      // Grid::saveFloatAsHalf is this entry's asBool(): refused unless it is the bool OpenVDB writes.
+      if (type != "bool") r.fail(entry + " has type " + type + ", not bool");
+      half = r.value<char>("metadata value") != 0;
+    } else {
+      r.skip(size, "metadata value");  // strings and unknown types: OpenVDB reads `size` bytes
+    }
+  }
+  return half;
+}
+
+// Transform::read: string map type, then the map. Returns false for a map type not listed
+// (OpenVDB refuses unregistered ones before reading them).
+bool transformMap(Reader& r, const std::string& where, int depth = 0) {
+  const std::string type = r.string("transform map type");
+  if (type == "NonlinearFrustumMap") {
+    // Bounding box (6 doubles), taper, depth, then a second (linear) map of its own.
+    if (depth > 0) r.fail(where + ": a frustum map inside a frustum map");
+    r.skip(8 * 8, "frustum map");
+    if (!transformMap(r, where, depth + 1)) r.fail(where + ": a frustum map over an unknown map type");
+    return true;
+  }
+  const std::int64_t map_bytes = mapBytes(type);
+  if (map_bytes < 0) return false;
+  r.skip(map_bytes, "transform");
+  return true;
+}
+
 constexpr std::uint32_t kZip = 0x1, kActiveMask = 0x2, kBlosc = 0x4;
+
+// What OpenVDB reads of every grid before its tree (io::File::readAllGridMetadata reads it of all
+// grids, instances and other value types too): uint32 compression flags, metadata, transform.
+struct GridHeader {
+  std::uint32_t compression = 0;
+  bool half = false;
+  bool linear = false;  ///< the transform was walked (a map type listed in mapBytes)
+};
+GridHeader gridHeader(Reader& r, const VdbGridExtent& e) {
+  const std::string where = "grid \"" + e.unique_name + "\"";
+  GridHeader h;
+  h.compression = r.value<std::uint32_t>("grid compression flags");
+  // The descriptor's "_HalfFloat" suffix only sets the grid's metadata entry, which readMeta then
+  // replaces: the values are half floats exactly when the grid's own entry says so.
+  h.half = metadata(r, e.end_pos - e.grid_pos, where).value_or(false);
+  h.linear = transformMap(r, where);
+  return h;
+}
 
 // Walks one float grid's tree (layout above), checking every length against the values it must
 // hold; throws through Reader::fail with the grid, the place and the problem.
@@ -125,23 +252,10 @@ class FloatTreeWalk {
 
   void run() {
     r_.seek(e_.grid_pos);
-    compression_ = r_.value<std::uint32_t>("grid compression flags");
-    const auto meta_count = r_.value<std::uint32_t>("grid metadata count");
-    half_ = e_.type.ends_with("_HalfFloat");
-    for (std::uint32_t k = 0; k < meta_count; ++k) {
-      const std::string name = r_.string("grid metadata name");
-      (void)r_.string("grid metadata type");
-      const auto size = r_.value<std::uint32_t>("grid metadata size");
-      if (name == "is_saved_as_half_float" && size == 1) {
-        half_ = r_.value<char>("grid metadata value") != 0;
-      } else {
-        r_.skip(size, "grid metadata value");
-      }
-    }
-    const std::int64_t map_bytes = mapBytes(r_.string("transform map type"));
-    if (map_bytes < 0) return;
-    r_.skip(map_bytes, "transform");
-
+    const GridHeader header = gridHeader(r_, e_);
+    if (!header.linear) return;
+    compression_ = header.compression;
+    half_ = header.half;
     const auto buffers = r_.value<std::int32_t>("tree buffer count");
     if (buffers != 1) fail("tree has " + std::to_string(buffers) + " buffers (OpenVDB reads 1)");
     (void)r_.value<float>("background value");
@@ -228,15 +342,7 @@ class FloatTreeWalk {
     }
     if (chunk > e_.end_pos - r_.pos()) bad("declares " + std::to_string(chunk) + " bytes, past the grid's end");
     if (compression_ & kBlosc) {
-      // Blosc's header: version, version, flags, type size, then uint32 uncompressed, block and
-      // compressed sizes.
-      if (chunk < 16) bad("is too short for a blosc header");
-      std::uint32_t header[4];
-      r_.bytes(reinterpret_cast<char*>(header), 16, "blosc header");
-      if (header[1] != static_cast<std::uint64_t>(bytes) || header[3] != static_cast<std::uint64_t>(chunk))
-        bad("holds a blosc block of " + std::to_string(header[1]) + " bytes in " + std::to_string(header[3]) +
-            ", its length field says " + std::to_string(chunk));
-      r_.skip(chunk - 16, "blosc data");
+      bloscChunk(r_, chunk, bytes, what_ + ": " + where + ": the chunk at byte " + std::to_string(at));
     } else {
       r_.skip(chunk, "zip data");  // zlib's inflate is bounded by both lengths
     }
@@ -273,12 +379,7 @@ std::vector<VdbGridExtent> checkVdbFileStructure(const std::filesystem::path& fi
   if (!has_offsets) r.fail("written without grid offsets (an io::Stream archive); only seekable .vdb files are read");
 
   // File-level metadata.
-  const auto meta_count = r.value<std::uint32_t>("metadata count");
-  for (std::uint32_t k = 0; k < meta_count; ++k) {
-    (void)r.string("metadata name");
-    (void)r.string("metadata type");
-    r.skip(r.value<std::uint32_t>("metadata size"), "metadata value");
-  }
+  (void)metadata(r, r.size(), "file metadata");
 
   // Grid descriptors, each followed by its grid.
   const auto grid_count = r.value<std::int32_t>("grid count");
@@ -308,10 +409,16 @@ std::vector<VdbGridExtent> checkVdbFileStructure(const std::filesystem::path& fi
     r.seek(e.end_pos);
     grids.push_back(std::move(e));
   }
-  // The trees of the float grids (the grids Duplex reads; instances share their parent's tree).
-  for (const VdbGridExtent& e : grids)
-    if (e.instance_parent.empty() && (e.type == "Tree_float_5_4_3" || e.type == "Tree_float_5_4_3_HalfFloat"))
+  // Every grid's header, and the trees of the float grids (the grids Duplex reads; instances share
+  // their parent's tree).
+  for (const VdbGridExtent& e : grids) {
+    if (e.instance_parent.empty() && (e.type == "Tree_float_5_4_3" || e.type == "Tree_float_5_4_3_HalfFloat")) {
       FloatTreeWalk(r, e).run();
+    } else {
+      r.seek(e.grid_pos);
+      (void)gridHeader(r, e);
+    }
+  }
   return grids;
 }
 
