@@ -85,8 +85,8 @@ class Interrupted : public std::runtime_error {
 /// seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w, medium_absorbed_w,
 /// depth_limited_w, roulette_w}, bands and band_emitted_w (spectral scenes only), scatterings
 /// (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr,
-/// efficiency}], with --at also at and edits_applied, and for a run under mpirun mpi {ranks, batches, rank0_batches, tally_bytes_received,
-/// tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
+/// efficiency}], with --at also at and edits_applied, and for a run under mpirun mpi {ranks, batches, rank0_batches,
+/// tally_bytes_received, tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
 /// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
 /// returns the report, the others return null. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
