@@ -10,9 +10,16 @@
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <cstring>
+#include <filesystem>
+#include <span>
 #include <limits>
 #include <random>
 #include <string>
@@ -113,6 +120,91 @@ TEST(RayFile, WrongSizesAndMissingFilesThrowNamingTheFile) {
 }
 
 // ---------------------------------------------------------------------------------------------
+
+// Blocks of any size read, write and generate exactly what the whole-file functions do.
+TEST(RayFile, BlocksReadWriteAndGenerateTheSameRecords) {
+  TempDir dir;
+  const Box box(glm::vec3(-2.0f, 0.0f, 1.0f), glm::vec3(3.0f, 4.0f, 2.0f));
+  const std::vector<Ray> whole = randomRays(box, 1000, 9);
+  RandomRayStream stream(box, 9);
+  std::vector<Ray> pieces(1000);
+  for (std::size_t first = 0, n = 1; first < pieces.size(); first += n, n = n * 3 + 1)
+    stream.next(std::span<Ray>(pieces).subspan(first, std::min(n, pieces.size() - first)));
+  EXPECT_EQ(std::memcmp(whole.data(), pieces.data(), whole.size() * sizeof(Ray)), 0);
+
+  const std::vector<Ray> primary = primaryRays(box, 37, 11);
+  std::vector<Ray> rows(primary.size());
+  for (std::size_t first = 0; first < rows.size(); first += 50)
+    primaryRays(box, 37, 11, first,
+                std::span<Ray>(rows).subspan(first, std::min<std::size_t>(50, rows.size() - first)));
+  EXPECT_EQ(std::memcmp(primary.data(), rows.data(), rows.size() * sizeof(Ray)), 0);
+  std::vector<Ray> one(1);
+  EXPECT_THROW(primaryRays(box, 37, 11, 407, one), InvalidArgument);
+
+  {
+    RecordFileWriter<Ray> out(dir / "blocks.bin", "ray");
+    for (std::size_t first = 0; first < whole.size(); first += 333)
+      out.write(std::span<const Ray>(whole).subspan(first, std::min<std::size_t>(333, whole.size() - first)));
+    EXPECT_EQ(out.count(), whole.size());
+    EXPECT_FALSE(std::filesystem::exists(dir / "blocks.bin")) << "visible before commit";
+    out.commit();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "blocks.bin.tmp"));
+  const std::vector<Ray> back = readRayFile(dir / "blocks.bin");
+  ASSERT_EQ(back.size(), whole.size());
+  EXPECT_EQ(std::memcmp(back.data(), whole.data(), whole.size() * sizeof(Ray)), 0);
+  RayFileReader reader(dir / "blocks.bin", "ray");
+  ASSERT_EQ(reader.count(), 1000u);
+  std::vector<Ray> part(10);
+  reader.read(990, part);
+  EXPECT_EQ(std::memcmp(part.data(), whole.data() + 990, 10 * sizeof(Ray)), 0);
+  EXPECT_THROW(reader.read(991, part), InvalidArgument);
+  // The file shrinking under the reader is an error naming it, not garbage.
+  std::filesystem::resize_file(dir / "blocks.bin", 32 * 995);
+  expectErrorNaming<FileError>([&] { reader.read(990, part); }, "blocks.bin");
+}
+
+// A writer dropped before commit() (an error in the middle of a trace) leaves the previous file.
+TEST(RayFile, UncommittedWriterLeavesThePreviousFile) {
+  TempDir dir;
+  writeRayFile(dir / "rays.bin", std::vector<Ray>(2));
+  {
+    RecordFileWriter<Ray> out(dir / "rays.bin", "ray");
+    out.write(std::vector<Ray>(5));
+  }
+  EXPECT_EQ(std::filesystem::file_size(dir / "rays.bin"), 64u);
+  EXPECT_FALSE(std::filesystem::exists(dir / "rays.bin.tmp"));
+  // A folder that does not exist: the error names the file.
+  expectErrorNaming<FileError>([&] { writeRayFile(dir / "no_such_folder" / "rays.bin", std::vector<Ray>(1)); },
+                               "no_such_folder");
+}
+
+// A full disk (a file-size limit, in a child process): the write fails with an error naming the
+// file, and the previous file and no temporary remain.
+TEST(RayFile, FullDiskIsAnErrorAndKeepsThePreviousFile) {
+  TempDir dir;
+  const auto path = dir / "hits.bin";
+  writeHitFile(path, std::vector<HitRecord>(3, HitRecord::miss()));
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    std::signal(SIGXFSZ, SIG_IGN);
+    const rlimit limit{4096, 4096};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    try {
+      writeHitFile(path, std::vector<HitRecord>(10000, HitRecord::miss()));
+    } catch (const FileError& e) {
+      _exit(std::string(e.what()).find("hits.bin") != std::string::npos ? 3 : 4);
+    }
+    _exit(5);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 3) << "4: the error does not name the file, 5: no error";
+  EXPECT_EQ(std::filesystem::file_size(path), 60u);
+  EXPECT_FALSE(std::filesystem::exists(dir / "hits.bin.tmp"));
+}
 
 TEST(RayGenerator, RandomRaysAreDeterministicUniformAndInside) {
   const Box b(glm::vec3(-1.0f, 2.0f, 10.0f), glm::vec3(3.0f, 2.5f, 20.0f));

@@ -58,8 +58,22 @@ double median(std::vector<double> v) {
 // Figures rounded for the JSON line (microsecond resolution is plenty for milliseconds).
 double round4(double x) { return std::round(x * 1e4) / 1e4; }
 
+// The default scene: beside an installed demo, share/duplex/examples/scenes/robot_cell.json under
+// the prefix (found from the executable's own path, so that a moved prefix still works); in the
+// build tree, the source tree's copy.
+fs::path defaultScene() {
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const fs::path installed =
+        exe.parent_path().parent_path() / "share" / "duplex" / "examples" / "scenes" / "robot_cell.json";
+    if (fs::is_regular_file(installed, ec)) return installed;
+  }
+  return DUPLEX_DEMO_SCENE;
+}
+
 struct Options {
-  fs::path scene = DUPLEX_DEMO_SCENE;
+  fs::path scene = defaultScene();
   fs::path out;     // final frame; default out/<stem>_after.png (out/<stem>.png without edits)
   fs::path before;  // first frame; default beside `out`: <stem>_before.png
   fs::path frames;  // every frame as frame_NNN.png when set
@@ -328,13 +342,11 @@ int main(int argc, char** argv) {
 
     // Play the edits: one commit per distinct time, then one frame.
     for (std::size_t i = 0; i < doc.edits.size();) {
-      std::size_t j = i;
-      while (j < doc.edits.size() && doc.edits[j].time == doc.edits[i].time) ++j;
       CommitFigures c;
       c.time = doc.edits[i].time;
-      c.edits = j - i;
       const auto t0 = Clock::now();
-      for (std::size_t k = i; k < j; ++k) (void)duplex::applyEdit(doc, doc.edits[k]);
+      const std::size_t j = duplex::applyEditGroup(doc, i);
+      c.edits = j - i;
       duplex::ChangeSet changes;
       double rebuild_ms = 0.0;
       arena.execute([&] {

@@ -69,9 +69,9 @@ void addBenchDeformOptions(CLI::App& cmd, BenchDeformOptions& options) {
   cmd.add_option("--object", options.object, "Name of the mesh object that deforms (the scene file's object name)")
       ->required();
   cmd.add_option("--steps", options.steps, "Deformation steps, one commit each (default 100)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1, 100000));
-  cmd.add_option("--seed", options.seed, "Seed of the deformation (default 1)")->check(kDecimal);
+  cmd.add_option("--seed", options.seed, "Seed of the deformation (default 1)")->transform(kDecimal);
   cmd.add_option("--amplitude", options.amplitude,
                  "Displacement per step as a fraction of the object's diagonal (default 0.002)")
       ->check(CLI::Range(0.0, 1.0));
@@ -79,7 +79,7 @@ void addBenchDeformOptions(CLI::App& cmd, BenchDeformOptions& options) {
   addPrimaryOption(cmd, options.primary);
   cmd.add_option("--trace-rounds", options.trace_rounds,
                  "Paired trace rounds, refitted and fresh alternating, after the last step (default 5)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1, 1000));
 }
 

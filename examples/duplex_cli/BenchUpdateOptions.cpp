@@ -14,18 +14,18 @@ void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options) {
   cmd.add_option("--moves", options.moves,
                  "Instances moved per commit: a count or a percentage such as 1% (default 1)");
   cmd.add_option("--repeat", options.repeat, "Commits per measurement, medians reported (default 50)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1, 1000000));
-  cmd.add_option("--seed", options.seed, "Seed of the edit plan (default 1)")->check(kDecimal);
+  cmd.add_option("--seed", options.seed, "Seed of the edit plan (default 1)")->transform(kDecimal);
   addThreadsOption(cmd, options.threads);
   addPrimaryOption(cmd, options.primary);
   cmd.add_option("--baseline-repeat", options.baseline_repeat,
                  "Commits per measurement of the baselines, a prefix of the same plan (default: --repeat)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(0, 1000000));
   cmd.add_option("--build-repeat", options.build_repeat,
                  "Rounds of full builds, ours and Embree's interleaved (default 7)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1, 100));
 }
 

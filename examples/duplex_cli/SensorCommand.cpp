@@ -6,8 +6,11 @@
 #include "SensorRanks.h"
 #include "WorkerThreads.h"
 
+#include <duplex/accel/AtomicFile.h>
 #include <duplex/accel/Error.h>
 #include <duplex/accel/InputFile.h>
+#include <duplex/scenegraph/SceneDocument.h>
+#include <duplex/sensors/IesProfile.h>
 #include <duplex/sensors/SensorRun.h>
 #include <duplex/sensors/SensorScene.h>
 
@@ -25,7 +28,10 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <span>
+#include <sstream>
 #include <string>
+#include <vector>
 
 namespace duplex::cli {
 
@@ -121,10 +127,10 @@ nlohmann::ordered_json finiteOrNull(double v) {
   return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr);
 }
 
+// Every result file appears whole or not at all (a full disk is an error naming it, and an earlier
+// run's file of the same name stays as it was).
 void writeText(const std::filesystem::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  if (!out) throw FileError(path.string() + ": cannot write");
+  writeFileAtomically(path, {reinterpret_cast<const unsigned char*>(text.data()), text.size()}, "sensor result", false);
 }
 
 std::string duration(double s) {
@@ -183,8 +189,103 @@ class ProgressPrinter {
   double last_ = -1e9;
 };
 
+// The keys every sensor file has after its shape: the emitted power and the sensor's totals.
+void putTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r) {
+  j["emitted_power_w"] = r.energy.emitted_w;
+  j["total_flux_w"] = s.total_flux_w;
+  j["total_flux_stderr_w"] = s.total_flux_stderr_w;
+  j["relative_stderr"] = finiteOrNull(s.relative_stderr);
+  j["efficiency"] = s.efficiency;
+}
+
+// Spectral scenes: the band names and the sensor's per-band totals, before its per-band arrays.
+void putBandTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r) {
+  j["bands"] = r.bands;
+  j["band_total_flux_w"] = s.band_total_flux_w;
+  j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
+}
+
+// A far-field sensor: DIR/<name>.json (intensity per C-gamma cell, gamma fastest), .csv and an
+// LM-63-2002 .ies file of the measured table. Without photometry the values are W/sr, which the
+// .ies file's keywords say.
+void writeFarFieldFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
+                        const SensorRunResults& r) {
+  const std::string base = fileName(s.name);
+  const SensorObject& object = *inst.object;
+  const std::uint32_t nc = s.nx, ng = s.ny;
+  std::vector<double> c_deg, gamma_deg;
+  for (std::uint32_t ic = 0; ic < nc; ++ic) c_deg.push_back(object.farFieldC(ic));
+  for (std::uint32_t ig = 0; ig < ng; ++ig) gamma_deg.push_back(object.farFieldGamma(ig));
+  nlohmann::ordered_json j;
+  j["name"] = s.name;
+  j["rays"] = r.rays;
+  j["seed"] = r.seed;
+  j["shape"] = "farfield";
+  j["bins"] = {nc, ng};
+  putTotals(j, s, r);
+  j["c_deg"] = c_deg;
+  j["gamma_deg"] = gamma_deg;
+  // The run's "irradiance" of a far-field cell is its flux per unit solid angle: the intensity.
+  j["intensity_w_sr"] = s.irradiance_w_m2;
+  j["intensity_stderr_w_sr"] = s.stderr_w_m2;
+  j["flux_w"] = s.flux_w;
+  j["ray_count"] = s.ray_count;
+  j["solid_angle_sr"] = s.bin_area_m2;
+  if (!r.bands.empty()) {
+    putBandTotals(j, s, r);
+    j["band_intensity_w_sr"] = s.band_irradiance_w_m2;
+    j["band_intensity_stderr_w_sr"] = s.band_stderr_w_m2;
+    j["band_flux_w"] = s.band_flux_w;
+  }
+  writeText(dir / (base + ".json"), j.dump() + "\n");
+
+  std::string csv = "ic,ig,c_deg,gamma_deg,flux_w,intensity_w_sr,intensity_stderr_w_sr,ray_count\n";
+  char row[256];
+  for (std::uint32_t ic = 0; ic < nc; ++ic) {
+    for (std::uint32_t ig = 0; ig < ng; ++ig) {
+      const std::size_t b = static_cast<std::size_t>(ic) * ng + ig;
+      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu\n", ic, ig, c_deg[ic], gamma_deg[ig],
+                    s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b],
+                    static_cast<unsigned long long>(s.ray_count[b]));
+      csv += row;
+    }
+  }
+  writeText(dir / (base + ".csv"), csv);
+
+  writeIes(dir / (base + ".ies"), farFieldIesTable(s, r.rays, r.seed));
+}
+
+// A NumPy .npy file (format 1.0) of one array of the given `shape` ("ny, nx"), row-major, little
+// endian: what numpy.load reads, written at disk speed. `descr` is the NumPy type of T ("<f8", "<u8").
+template <class T>
+void writeNpy(const std::filesystem::path& path, std::span<const T> values, const std::string& shape,
+              const char* descr) {
+  std::ostringstream dict;
+  dict << "{'descr': '" << descr << "', 'fortran_order': False, 'shape': (" << shape << "), }";
+  std::string header = dict.str();
+  // Magic, version, header length, header: the data start at a multiple of 64 bytes.
+  const std::size_t unpadded = 10 + header.size() + 1;
+  header.append((64 - unpadded % 64) % 64, ' ');
+  header += '\n';
+  std::string bytes = "\x93NUMPY";
+  bytes += '\x01';
+  bytes += '\x00';
+  const auto len = static_cast<std::uint16_t>(header.size());
+  bytes += static_cast<char>(len & 0xff);
+  bytes += static_cast<char>(len >> 8);
+  bytes += header;
+  AtomicFileWriter out(path, "sensor map");
+  out.write({reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size()});
+  out.write({reinterpret_cast<const unsigned char*>(values.data()), values.size_bytes()});
+  out.commit();
+}
+
 void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
-                      const SensorRunResults& r) {
+                      const SensorRunResults& r, std::uint64_t text_map_limit) {
+  if (s.shape == SensorShape::FarField) {
+    writeFarFieldFiles(dir, s, inst, r);
+    return;
+  }
   const std::string base = fileName(s.name);
   const SensorSpec& spec = inst.object->spec();
   nlohmann::ordered_json j;
@@ -195,24 +296,52 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["size"] = {spec.width, spec.height};
   j["bins"] = {s.nx, s.ny};
   j["two_sided"] = s.two_sided;
-  j["emitted_power_w"] = r.energy.emitted_w;
-  j["total_flux_w"] = s.total_flux_w;
-  j["total_flux_stderr_w"] = s.total_flux_stderr_w;
-  j["relative_stderr"] = finiteOrNull(s.relative_stderr);
-  j["efficiency"] = s.efficiency;
-  j["irradiance_w_m2"] = s.irradiance_w_m2;
-  j["stderr_w_m2"] = s.stderr_w_m2;
-  j["flux_w"] = s.flux_w;
-  j["ray_count"] = s.ray_count;
-  j["bin_area_m2"] = s.bin_area_m2;
+  putTotals(j, s, r);
+  // Large maps: binary files instead of JSON arrays and CSV rows (--text-map-limit).
+  const bool text_maps = static_cast<std::uint64_t>(s.nx) * s.ny <= text_map_limit;
+  if (text_maps) {
+    j["irradiance_w_m2"] = s.irradiance_w_m2;
+    j["stderr_w_m2"] = s.stderr_w_m2;
+    j["flux_w"] = s.flux_w;
+    j["ray_count"] = s.ray_count;
+    j["bin_area_m2"] = s.bin_area_m2;
+  } else {
+    nlohmann::ordered_json files;
+    std::ostringstream shape;
+    shape << s.ny << ", " << s.nx;
+    auto map = [&](const char* key, const auto& values, const char* descr, const std::string& dims) {
+      const std::string file = base + "." + key + ".npy";
+      writeNpy(dir / file, std::span(values.data(), values.size()), dims, descr);
+      files[key] = file;
+    };
+    map("irradiance_w_m2", s.irradiance_w_m2, "<f8", shape.str());
+    map("stderr_w_m2", s.stderr_w_m2, "<f8", shape.str());
+    map("flux_w", s.flux_w, "<f8", shape.str());
+    map("ray_count", s.ray_count, "<u8", shape.str());
+    map("bin_area_m2", s.bin_area_m2, "<f8", shape.str());
+    if (!r.bands.empty()) {  // [band][row][column]
+      std::ostringstream dims_text;
+      dims_text << r.bands.size() << ", " << shape.str();
+      const std::string dims = dims_text.str();
+      auto flat = [](const std::vector<std::vector<double>>& per_band) {
+        std::vector<double> all;
+        for (const auto& b : per_band) all.insert(all.end(), b.begin(), b.end());
+        return all;
+      };
+      map("band_irradiance_w_m2", flat(s.band_irradiance_w_m2), "<f8", dims);
+      map("band_stderr_w_m2", flat(s.band_stderr_w_m2), "<f8", dims);
+      map("band_flux_w", flat(s.band_flux_w), "<f8", dims);
+    }
+    j["map_files"] = files;
+  }
   // Only what the scene asked for: per-band arrays (the keys above are their sums) and angular bins.
   if (!r.bands.empty()) {
-    j["bands"] = r.bands;
-    j["band_total_flux_w"] = s.band_total_flux_w;
-    j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
-    j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
-    j["band_stderr_w_m2"] = s.band_stderr_w_m2;
-    j["band_flux_w"] = s.band_flux_w;
+    putBandTotals(j, s, r);
+    if (text_maps) {
+      j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
+      j["band_stderr_w_m2"] = s.band_stderr_w_m2;
+      j["band_flux_w"] = s.band_flux_w;
+    }
   }
   if (s.theta_bins != 0) {
     j["angular_bins"] = {s.theta_bins, s.phi_bins};
@@ -225,6 +354,12 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
   // CSV: one row per bin with its centre in sensor-local coordinates (a sphere: its direction).
+  if (!text_maps) {
+    demo::writePng(dir / (base + ".png"), falseColourImage(s.irradiance_w_m2, s.nx, s.ny));
+    if (sensorExrAvailable())
+      writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
+    return;
+  }
   std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count\n";
   char row[256];
   for (std::uint32_t iy = 0; iy < s.ny; ++iy) {
@@ -262,6 +397,9 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   load_options.control.cancel = &loading;
   std::optional<SensorScene> loaded;
   std::optional<SensorRun> running;
+  // Timed edits: those up to --at T, one commit per time as a player applies them (the scene
+  // follows the commits); the others are said on stderr, never silently left out.
+  std::size_t edits_applied = 0;
   const std::filesystem::path state = o.out / "run_state.bin";
   // What may fail on one rank only (its scene, rank 0's state file) fails on every rank together.
   ranks.together([&] {
@@ -273,7 +411,24 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     }
     if (g_stop_signal.load() != 0)
       throw Interrupted(g_stop_signal.load(), "stopped while loading the scene; nothing written");
-    const SensorScene& scene = *loaded;
+    SensorScene& scene = *loaded;
+    const std::size_t edit_count = scene.document() ? scene.document()->edits.size() : 0;
+    if (o.at) {
+      if (!(*o.at >= 0.0 && std::isfinite(*o.at))) throw InvalidArgument("--at must be a finite time >= 0 (seconds)");
+      if (edit_count != 0)
+        edits_applied = workers.arena.execute([&] { return applyEditsUntil(*scene.document(), *o.at); });
+    }
+    if (edits_applied < edit_count && files) {
+      const std::vector<SceneEdit>& edits = scene.document()->edits;
+      std::ostringstream note;
+      note << "duplex sensor: " << o.scene.string() << " has " << edit_count
+           << " timed edit(s) (t = " << edits.front().time << " to " << edits.back().time << " s); ";
+      if (o.at)
+        note << "--at " << *o.at << " applied " << edits_applied << ", the " << edit_count - edits_applied
+             << " after it are not applied";
+      else note << "none is applied (--at T applies those with time <= T)";
+      std::cerr << note.str() << '\n' << std::flush;
+    }
     if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
     if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
     checkOutputNames(scene, o.scene);
@@ -361,6 +516,10 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
                                                               : "completed";
   if (status == SensorRunStatus::Cancelled) report["signal"] = g_stop_signal.load();
   report["resumed_from"] = start;
+  if (o.at) {
+    report["at"] = *o.at;
+    report["edits_applied"] = edits_applied;
+  }
   report["seconds"] = seconds;
   report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;
   report["emitted_power_w"] = r.energy.emitted_w;
@@ -377,7 +536,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];
-    writeSensorFiles(o.out, s, scene.sensors()[k], r);
+    writeSensorFiles(o.out, s, scene.sensors()[k], r, o.text_map_limit);
     sensors.push_back({{"name", s.name},
                        {"file", (o.out / (fileName(s.name) + ".json")).string()},
                        {"total_flux_w", s.total_flux_w},

@@ -6,7 +6,9 @@
 /// total_flux_w, total_flux_stderr_w, relative_stderr, efficiency, and row-major nx * ny arrays
 /// irradiance_w_m2, stderr_w_m2, flux_w, ray_count, bin_area_m2; band_* and angular_* arrays
 /// when the scene asks for them), DIR/<name>.csv (one row per bin) and
-/// DIR/<name>.png (false-colour irradiance with a scale bar), plus DIR/run_state.bin (the exact
+/// DIR/<name>.png (false-colour irradiance with a scale bar); a far-field sensor DIR/<name>.json
+/// (c_deg, gamma_deg, intensity_w_sr, intensity_stderr_w_sr, ...), DIR/<name>.csv and
+/// DIR/<name>.ies (LM-63-2002, values in W/sr); plus DIR/run_state.bin (the exact
 /// accumulators, for --resume) and DIR/run.json (the report printed on stdout). Characters of a
 /// sensor name other than [A-Za-z0-9._-] become '_' in file names; sensors whose file names would
 /// collide (with each other, or "run" with run.json) are refused before the run.
@@ -20,6 +22,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -52,6 +55,14 @@ struct SensorOptions {
   /// Rays per batch (SensorRunConfig::batch_rays): the unit of the ordered sums (results depend on
   /// it), of the work dealt to MPI ranks, of checkpoints and of --target-error checks.
   std::uint64_t batch_rays = SensorRunConfig{}.batch_rays;
+  /// --at T: apply the scene's timed edits with time <= T before the run (applyEditsUntil); unset:
+  /// none (stderr then says how many the scene has).
+  std::optional<double> at;
+  /// --text-map-limit N: a flat or spherical sensor of more than N bins keeps its per-bin maps out
+  /// of the JSON and writes no CSV: they go to NumPy files DIR/<name>.<map>.npy (and the PNG/EXR
+  /// images as always), named in the JSON's "map_files". Text for 10^7 bins takes minutes and
+  /// gigabytes; the binary files are written at disk speed.
+  std::uint64_t text_map_limit = std::uint64_t{1} << 20;
 };
 
 /// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene
@@ -76,8 +87,8 @@ class Interrupted : public std::runtime_error {
 /// (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr,
 /// efficiency}], and for a run under mpirun mpi {ranks, batches, rank0_batches, tally_bytes_received,
 /// tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
-/// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
-/// returns the report, the others return null. Throws duplex::Error for bad input.
+/// max_trace_seconds}; with --at also at and edits_applied). Under mpirun every rank runs it; rank 0 reads and writes
+/// the files and returns the report, the others return null. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
 
 }  // namespace duplex::cli

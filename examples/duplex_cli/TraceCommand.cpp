@@ -14,6 +14,7 @@
 #include <chrono>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 namespace duplex::cli {
@@ -48,12 +49,15 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   if (sameFile(options.rays, output))
     throw InvalidArgument((want_transmittance ? "--transmittance " : "--hits ") + output.string() +
                           " names the ray file given as --rays: it would be overwritten");
+  if (options.block_rays < 1) throw InvalidArgument("--block-rays must be at least 1");
   WorkerThreads workers(options.threads);
   tbb::task_arena& arena = workers.arena;
   const int threads = workers.count;
 
-  // The ray file first: a bad one fails before the (longer) scene load.
-  const std::vector<Ray> rays = readRayFile(options.rays);
+  // The ray file first: a bad one fails before the (longer) scene load. It is read in blocks, so
+  // that memory is bounded by the scene and the block, not by the ray count.
+  RayFileReader ray_file(options.rays, "ray");
+  const std::size_t ray_count = ray_file.count();
 
   // Load (bottom levels built or read in parallel inside the arena), then the tracer's top level.
   std::optional<SceneDocument> doc;
@@ -66,34 +70,45 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
     top_build_ms = msSince(t0);
   });
 
-  // Batch queries: the tracer splits the rays into tasks of the arena, one query context each.
-  std::vector<Hit> hits(options.any_hit || want_transmittance ? 0 : rays.size());
-  std::vector<std::uint8_t> blocked(options.any_hit ? rays.size() : 0);
-  std::vector<float> transmittance(want_transmittance ? rays.size() : 0);
-  std::vector<double> trace_ms;
-  for (int run = 0; run < options.repeat; ++run) {
-    const auto t0 = Clock::now();
-    arena.execute([&] {
-      if (want_transmittance) tracer->transmittance(rays, transmittance);
-      else if (options.any_hit) tracer->occluded(rays, blocked);
-      else tracer->intersect(rays, hits);
-    });
-    trace_ms.push_back(msSince(t0));
-  }
-
+  // Block by block: read, trace `repeat` times (each run's time summed over the blocks, reading
+  // and writing excluded), store the last run's results. The output appears only when complete.
+  const std::size_t block =
+      std::min<std::size_t>(static_cast<std::size_t>(options.block_rays), std::max<std::size_t>(ray_count, 1));
+  std::vector<Ray> rays(block);
+  std::vector<Hit> hits(options.any_hit || want_transmittance ? 0 : block);
+  std::vector<std::uint8_t> blocked(options.any_hit ? block : 0);
+  std::vector<float> transmittance(want_transmittance ? block : 0);
+  std::vector<HitRecord> records(want_transmittance ? 0 : block);
+  std::optional<RecordFileWriter<float>> transmittance_file;
+  std::optional<HitFileWriter> hit_file;
+  if (want_transmittance) transmittance_file.emplace(options.transmittance, "transmittance");
+  else hit_file.emplace(options.hits, "hit");
+  const InstanceIds ids(*doc);  // the tracer names instances by node id, the hit file by position
+  std::vector<double> trace_ms(static_cast<std::size_t>(options.repeat), 0.0);
   std::size_t hit_count = 0;
   double transmittance_sum = 0.0;
-  if (want_transmittance) {
-    writeTransmittanceFile(options.transmittance, transmittance);
-    for (const float t : transmittance) {
-      hit_count += t == 0.0f ? 1u : 0u;
-      transmittance_sum += t;
+  for (std::size_t first = 0; first < ray_count; first += block) {
+    const std::size_t n = std::min(block, ray_count - first);
+    const std::span<Ray> in(rays.data(), n);
+    ray_file.read(first, in);
+    for (int run = 0; run < options.repeat; ++run) {
+      const auto t0 = Clock::now();
+      arena.execute([&] {
+        if (want_transmittance) tracer->transmittance(in, std::span<float>(transmittance.data(), n));
+        else if (options.any_hit) tracer->occluded(in, std::span<std::uint8_t>(blocked.data(), n));
+        else tracer->intersect(in, std::span<Hit>(hits.data(), n));
+      });
+      trace_ms[static_cast<std::size_t>(run)] += msSince(t0);
     }
-  } else {
-    // Hit records: the tracer names instances by node id, the hit file by position in the document.
-    const InstanceIds ids(*doc);
-    std::vector<HitRecord> records(rays.size());
-    for (std::size_t i = 0; i < rays.size(); ++i) {
+    if (want_transmittance) {
+      for (std::size_t i = 0; i < n; ++i) {
+        hit_count += transmittance[i] == 0.0f ? 1u : 0u;
+        transmittance_sum += transmittance[i];
+      }
+      transmittance_file->write(std::span<const float>(transmittance.data(), n));
+      continue;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
       if (options.any_hit) {
         records[i] = occlusionRecord(blocked[i] != 0);
       } else {
@@ -101,17 +116,19 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
         if (h.valid()) h.instance_id = ids.of(h.instance_id);
         records[i] = HitRecord::from(h);
       }
+      hit_count += records[i].instance_id != kInvalidId ? 1u : 0u;
     }
-    writeHitFile(options.hits, records);
-    hit_count = static_cast<std::size_t>(
-        std::count_if(records.begin(), records.end(), [](const HitRecord& r) { return r.instance_id != kInvalidId; }));
+    hit_file->write(std::span<const HitRecord>(records.data(), n));
   }
+  if (transmittance_file) transmittance_file->commit();
+  if (hit_file) hit_file->commit();
+
   const double trace_median = median(trace_ms);
-  const double mrays_per_s = trace_median > 0.0 ? static_cast<double>(rays.size()) / (trace_median * 1e3) : 0.0;
+  const double mrays_per_s = trace_median > 0.0 ? static_cast<double>(ray_count) / (trace_median * 1e3) : 0.0;
   const SceneLoadFigures& figures = doc->figures;
 
   nlohmann::ordered_json report;
-  report["rays"] = rays.size();
+  report["rays"] = ray_count;
   report["hits"] = hit_count;
   report["threads"] = threads;
   report["load_ms"] = figures.load_ms + figures.graph_ms;
@@ -131,9 +148,10 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   report["structures_loaded"] = figures.structures_loaded;
   report["graph_ms"] = figures.graph_ms;
   report["mesh_structures"] = meshStructureCounts(*doc);
+  report["block_rays"] = block;
   if (want_transmittance) {
     report["transmittance"] = true;
-    report["mean_transmittance"] = rays.empty() ? 0.0 : transmittance_sum / static_cast<double>(rays.size());
+    report["mean_transmittance"] = ray_count == 0 ? 0.0 : transmittance_sum / static_cast<double>(ray_count);
   }
   return report;
 }

@@ -33,15 +33,21 @@ struct TraceOptions {
   std::filesystem::path transmittance;
   /// Trace this many times (>= 1); the reported trace time is the median.
   int repeat = 1;
+  /// Rays read, traced and written per block (>= 1): memory holds one block of rays and results
+  /// (about 100 bytes per ray), whatever the file's size. Results do not depend on it.
+  std::int64_t block_rays = std::int64_t{1} << 20;
 };
 
 /// Runs the command and returns the report. Contract keys: rays, hits (rays that hit, or are
 /// blocked with any_hit), threads, load_ms (scene parse, mesh files, and adding the nodes to the
 /// graph), build_ms (bottom levels, built or read from prepared structures, plus the top level),
-/// trace_ms (median of the runs), mrays_per_s. Extra keys: repeat, any_hit, objects, instances,
+/// trace_ms (median of the runs; a run's time is its tracing summed over the blocks, reading and
+/// writing the files excluded), mrays_per_s. Extra keys: repeat, any_hit, objects, instances,
 /// triangles (in the object library), instanced_triangles (summed over instances),
 /// bottom_build_ms, top_build_ms, trace_ms_all, format, structures_loaded (prepared bottom levels
-/// read instead of built), graph_ms (part of load_ms). Times are wall-clock milliseconds.
+/// read instead of built), graph_ms (part of load_ms), block_rays (rays per block, at most the
+/// ray count). Times are wall-clock milliseconds. The output file is written atomically: it
+/// appears complete, or not at all when anything fails (a full disk included).
 /// With `transmittance`: hits counts the blocked rays (transmittance 0), and the extra keys
 /// transmittance (true) and mean_transmittance are added.
 ///

@@ -14,8 +14,8 @@
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
-//                 [--batch-rays B]; under `mpirun -np N` the ranks share the batches
-//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS]
+//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS] [--at T] [--batch-rays B];
+//                 under `mpirun -np N` the ranks share the batches
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -39,9 +39,12 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <csignal>
 #include <cstdint>
 #include <exception>
 #include <iostream>
+#include <limits>
+#include <string>
 #include <vector>
 
 namespace {
@@ -57,6 +60,9 @@ using duplex::cli::kDecimal;
 int main(int argc, char** argv) {
   using duplex::cli::RaysOptions;
   using duplex::cli::TraceOptions;
+  // Past a file-size limit (ulimit -f) a write then fails with EFBIG, reported as an error naming
+  // the file, instead of the signal killing the tool with a half-written temporary file.
+  std::signal(SIGXFSZ, SIG_IGN);
 
   CLI::App app{
       "Two-level kd-tree ray tracing of scene-json-v1 and duplex-scene-v1 scenes (ray and hit files in, "
@@ -64,7 +70,8 @@ int main(int argc, char** argv) {
       "duplex"};
   app.require_subcommand(1);
   bool verbose = false;
-  app.add_flag("-v,--verbose", verbose, "Log the library's info messages to stderr");
+  app.add_flag("-v,--verbose", verbose, "Log the library's info messages to stderr (before or after the command)");
+  app.fallthrough();  // options of the tool itself (-v) are also accepted after a command's name
 
   // duplex trace
   TraceOptions trace;
@@ -83,8 +90,14 @@ int main(int argc, char** argv) {
   trace_cmd->add_flag("--any-hit", trace.any_hit,
                       "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1, 1000000));
+  trace_cmd
+      ->add_option("--block-rays", trace.block_rays,
+                   "Rays read, traced and written per block (memory: about 100 bytes per ray of a block)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(std::int64_t{1}, std::int64_t{1} << 32))
+      ->capture_default_str();
   trace_cmd->footer(
       "A hit's instance_id is the instance's position in the scene: in \"instances\" for scene-json-v1; in\n"
       "depth-first file order of the node tree for duplex-scene-v1 (hidden instances keep their place).\n"
@@ -93,6 +106,8 @@ int main(int argc, char** argv) {
   // duplex rays
   RaysOptions rays;
   std::vector<std::uint32_t> primary;
+  // The seed of `duplex rays --random` without --seed (reported in the JSON and on stderr).
+  constexpr std::uint64_t kDefaultRaySeed = 1;
   std::uint64_t random_count = 0, seed = 0;
   CLI::App* rays_cmd = app.add_subcommand("rays", "Write primary or random rays for a scene");
   rays_cmd
@@ -104,16 +119,17 @@ int main(int argc, char** argv) {
   CLI::Option* primary_opt =
       rays_cmd->add_option("--primary", primary, "W H: primary rays of a W x H image, row-major from the top left")
           ->expected(2)
-          ->check(kDecimal)
+          ->transform(kDecimal)
           ->check(CLI::Range(1u, 65536u));
   CLI::Option* random_opt = rays_cmd->add_option("--random", random_count, "N random rays (origins in the world box)")
-                                ->check(kDecimal)
+                                ->transform(kDecimal)
                                 ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
-  CLI::Option* seed_opt =
-      rays_cmd->add_option("--seed", seed, "Seed of the random rays (0 to 2^64-1)")->check(kDecimal);
+  std::string seed_help = "Seed of the random rays (0 to 2^64-1; default ";
+  seed_help += std::to_string(kDefaultRaySeed);
+  seed_help += ")";
+  CLI::Option* seed_opt = rays_cmd->add_option("--seed", seed, seed_help)->transform(kDecimal);
   primary_opt->excludes(random_opt);
   primary_opt->excludes(seed_opt);
-  random_opt->needs(seed_opt);
   seed_opt->needs(random_opt);
 
   // duplex scene split|instances|robot
@@ -134,10 +150,10 @@ int main(int argc, char** argv) {
   split_cmd->add_option("--mesh", split.mesh, "Mesh file (OBJ, PLY, OFF, STL, OM)")->required();
   split_cmd->add_option("--objects", split.objects, "K: number of objects (1 to the triangle count)")
       ->required()
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1u, 0xFFFFFFFFu));
   split_cmd->add_option("--loop", split.loop, "Loop-subdivide the mesh N times before splitting (default 0)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(0, 6));
   split_cmd->add_option("--out", split.out, "scene-json-v1 file to write")->required();
 
@@ -148,11 +164,11 @@ int main(int argc, char** argv) {
       ->required();
   instances_cmd->add_option("--count", scatter.count, "N: number of instances")
       ->required()
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
   instances_cmd->add_option("--seed", scatter.seed, "Seed of the rotations (std::mt19937_64, 0 to 2^64-1)")
       ->required()
-      ->check(kDecimal);
+      ->transform(kDecimal);
   instances_cmd->add_option("--out", scatter.out, "scene-json-v1 file to write")->required();
 
   duplex::cli::SceneRobotOptions robot;
@@ -161,7 +177,7 @@ int main(int argc, char** argv) {
       "robot", "A URDF robot's link meshes placed by forward kinematics, in copies side by side along +y");
   robot_cmd->add_option("--urdf", robot.urdf, "URDF file (package:// mesh paths resolved near it)")->required();
   robot_cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(1, 1000000));
   robot_cmd
       ->add_option("--joints", robot.joints,
@@ -221,11 +237,11 @@ int main(int argc, char** argv) {
   duplex::cli::addStructureOption(*sensor_cmd, sensor.structure);
   sensor_cmd->add_option("--rays", sensor.rays, "Total emitted rays (with --resume: including the saved ones)")
       ->required()
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
   duplex::cli::addThreadsOption(*sensor_cmd, sensor.threads);
   sensor_cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")
-      ->check(kDecimal);
+      ->transform(kDecimal);
   sensor_cmd->add_option(
       "--out", sensor.out,
       "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
@@ -239,12 +255,12 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)")
       ->needs(target_error_opt);
   sensor_cmd->add_option("--max-depth", sensor.max_depth, "Surface interactions per path (default 32)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(0, 1000));
   sensor_cmd
       ->add_option("--max-scatterings", sensor.max_scatterings,
                    "Fog collisions per path before it is cut (default 100000; 1: single scattering)")
-      ->check(kDecimal);
+      ->transform(kDecimal);
   sensor_cmd->add_option(
       "--roulette", sensor.roulette,
       "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
@@ -255,10 +271,18 @@ int main(int argc, char** argv) {
                    "Seconds between saves of DIR/run_state.bin during the run (default 60; 0: only at the end)")
       ->check(CLI::Range(0.0, 1e9));
   sensor_cmd
+      ->add_option("--text-map-limit", sensor.text_map_limit,
+                   "Bins above which a sensor's maps go to .npy files instead of the JSON and CSV (default 1048576)")
+      ->transform(kDecimal);
+  sensor_cmd
+      ->add_option("--at", sensor.at,
+                   "Apply the scene's timed edits with time <= T (seconds) before the run (default: none)")
+      ->check(CLI::Range(0.0, std::numeric_limits<double>::max()));
+  sensor_cmd
       ->add_option("--batch-rays", sensor.batch_rays,
                    "Rays per batch: the unit of the ordered sums, of work dealt to MPI ranks, of checkpoints and "
                    "--target-error checks (default 65536; results depend on it, not on --threads or ranks)")
-      ->check(kDecimal)
+      ->transform(kDecimal)
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
   sensor_cmd->footer(
       "Files are described in docs/sensors.md; the run is bit-identical for any --threads, and for any number of "
@@ -309,7 +333,8 @@ int main(int argc, char** argv) {
       }
       if (*random_opt) {
         rays.random_count = random_count;
-        rays.seed = seed;
+        rays.seed = *seed_opt ? seed : kDefaultRaySeed;
+        if (!*seed_opt) std::cerr << "duplex rays: no --seed given; using the default seed " << kDefaultRaySeed << "\n";
       }
       result = duplex::cli::runRays(rays);
     }

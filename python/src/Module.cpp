@@ -273,8 +273,10 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
       "run_sensors",
       [](const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
          const py::object& progress, std::uint32_t max_depth, std::uint32_t max_scatterings, double roulette,
-         double target_error, const std::string& target_sensor, const std::string& structure) {
+         double target_error, const std::string& target_sensor, const std::string& structure,
+         std::optional<double> at) {
         SensorRunOptions o;
+        o.at = at;
         o.max_depth = max_depth;
         o.max_scatterings = max_scatterings;
         o.roulette_threshold = roulette;
@@ -286,12 +288,14 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
       "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0, "progress"_a = py::none(),
       "max_depth"_a = SensorRunOptions{}.max_depth, "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
       "roulette"_a = SensorRunOptions{}.roulette_threshold, "target_error"_a = 0.0, "target_sensor"_a = "",
-      "structure"_a = "",
+      "structure"_a = "", "at"_a = py::none(),
       R"doc(A light-tracing run of a scene file's lights and sensors, as `duplex sensor` runs it:
 the same seed gives the same numbers, for any thread count. progress: None or a callable
 (done, total) called from the calling thread between batches of rays; an exception raised in it
 (or Ctrl-C) stops the run and is raised again. target_error > 0 stops once the target sensor's
-relative standard error is at most it.
+relative standard error is at most it. at: None, or a time (seconds): the scene's timed edits
+with time <= at are applied before the run (`duplex sensor --at`); the result's "edits_applied"
+counts them, and a UserWarning says how many edits the run leaves out.
 Returns a dict sensor name -> dict: "irradiance", "stderr" (W per square scene unit), "flux",
 "flux_stderr" (W), "ray_count", "bin_area", each (ny, nx) with bin (0, 0) at local (-w/2, -h/2);
 "total_flux", "total_flux_stderr" (W), "relative_stderr" (None before any power arrived),
@@ -299,5 +303,8 @@ Returns a dict sensor name -> dict: "irradiance", "stderr" (W per square scene u
 "angular_stderr", "angular_solid_angle", "angular_ray_count" (phi, theta); in spectral scenes
 "bands", "band_irradiance", "band_stderr", "band_flux" (band, ny, nx), "band_total_flux",
 "band_total_flux_stderr"; and the run's "rays", "seed", "status" ("completed",
-"target_reached"), "emitted_power" (W), "energy" (where the power went, W).)doc");
+"target_reached"), "emitted_power" (W), "energy" (where the power went, W), "edits_applied".
+A far-field sensor ("shape" "farfield", "bins" (n_c, n_gamma)) has instead of the (ny, nx)
+arrays "intensity", "intensity_stderr" (W/sr), "flux", "ray_count", "solid_angle" (sr), each
+(n_c, n_gamma), and "c_deg", "gamma_deg" (the grid's angles).)doc");
 }

@@ -3,6 +3,7 @@
 #include "Arrays.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/scenegraph/SceneDocument.h>
 #include <duplex/sensors/SensorRun.h>
 #include <duplex/sensors/SensorScene.h>
 
@@ -11,6 +12,8 @@
 #include <cmath>
 #include <exception>
 #include <optional>
+#include <sstream>
+#include <vector>
 
 namespace duplex::python {
 
@@ -34,7 +37,10 @@ py::array_t<T> bandGrids(const std::vector<std::vector<T>>& bands, py::ssize_t r
 py::object finiteOrNone(double v) { return std::isfinite(v) ? py::object(py::float_(v)) : py::object(py::none()); }
 
 const char* shapeName(SensorShape s) {
-  return s == SensorShape::Disk ? "disk" : s == SensorShape::Sphere ? "sphere" : "rectangle";
+  return s == SensorShape::Disk       ? "disk"
+         : s == SensorShape::Sphere   ? "sphere"
+         : s == SensorShape::FarField ? "farfield"
+                                      : "rectangle";
 }
 
 }  // namespace
@@ -55,6 +61,21 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
     doc_options.structure = options.structure;
     scene.emplace(SensorScene::load(scene_file, doc_options));
   });
+  std::size_t edits_applied = 0;
+  if (options.at) {
+    if (!(*options.at >= 0.0 && std::isfinite(*options.at))) throw InvalidArgument("at must be a finite time >= 0");
+    withThreads(threads, [&] {
+      py::gil_scoped_release nogil;
+      if (scene->document()) edits_applied = applyEditsUntil(*scene->document(), *options.at);
+    });
+  }
+  // As the tool says on stderr: edits of the scene that this run leaves out are never silent.
+  if (const std::size_t edits = scene->document() ? scene->document()->edits.size() : 0; edits_applied < edits) {
+    std::ostringstream note;
+    note << scene_file.string() << " has " << edits << " timed edit(s); " << edits - edits_applied
+         << (options.at ? " after at are not applied" : " not applied (at=T applies those with time <= T)");
+    if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
+  }
   if (scene->lights().empty()) throw FileError(scene_file.string() + ": the scene has no lights (\"lights\": [...])");
   if (scene->sensors().empty())
     throw FileError(scene_file.string() + ": the scene has no sensors (\"sensors\": [...])");
@@ -112,12 +133,23 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   for (const SensorResult& s : r.sensors) {
     const auto ny = static_cast<py::ssize_t>(s.ny), nx = static_cast<py::ssize_t>(s.nx);
     py::dict d;
-    d["irradiance"] = grid(s.irradiance_w_m2, ny, nx);
-    d["stderr"] = grid(s.stderr_w_m2, ny, nx);
-    d["flux"] = grid(s.flux_w, ny, nx);
-    d["flux_stderr"] = grid(s.flux_stderr_w, ny, nx);
-    d["ray_count"] = grid(s.ray_count, ny, nx);
-    d["bin_area"] = grid(s.bin_area_m2, ny, nx);
+    // A far-field sensor's arrays are (n_c, n_gamma), its per-measure values intensities (W/sr).
+    const bool far = s.shape == SensorShape::FarField;
+    const py::ssize_t rows = far ? nx : ny, cols = far ? ny : nx;
+    d[far ? "intensity" : "irradiance"] = grid(s.irradiance_w_m2, rows, cols);
+    d[far ? "intensity_stderr" : "stderr"] = grid(s.stderr_w_m2, rows, cols);
+    d["flux"] = grid(s.flux_w, rows, cols);
+    d["flux_stderr"] = grid(s.flux_stderr_w, rows, cols);
+    d["ray_count"] = grid(s.ray_count, rows, cols);
+    d[far ? "solid_angle" : "bin_area"] = grid(s.bin_area_m2, rows, cols);
+    if (far) {
+      const SensorObject& object = *scene->sensors()[static_cast<std::size_t>(scene->findSensor(s.name))].object;
+      std::vector<double> c_deg, gamma_deg;
+      for (std::uint32_t ic = 0; ic < s.nx; ++ic) c_deg.push_back(object.farFieldC(ic));
+      for (std::uint32_t ig = 0; ig < s.ny; ++ig) gamma_deg.push_back(object.farFieldGamma(ig));
+      d["c_deg"] = c_deg;
+      d["gamma_deg"] = gamma_deg;
+    }
     d["total_flux"] = s.total_flux_w;
     d["total_flux_stderr"] = s.total_flux_stderr_w;
     d["relative_stderr"] = finiteOrNone(s.relative_stderr);
@@ -133,7 +165,7 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
       d["angular_solid_angle"] = grid(s.angular_solid_angle_sr, nphi, ntheta);
       d["angular_ray_count"] = grid(s.angular_ray_count, nphi, ntheta);
     }
-    if (!r.bands.empty()) {
+    if (!r.bands.empty() && s.shape != SensorShape::FarField) {
       d["bands"] = r.bands;
       d["band_irradiance"] = bandGrids(s.band_irradiance_w_m2, ny, nx);
       d["band_stderr"] = bandGrids(s.band_stderr_w_m2, ny, nx);
@@ -146,6 +178,7 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
     d["status"] = status_name;
     d["emitted_power"] = r.energy.emitted_w;
     d["energy"] = energy;
+    d["edits_applied"] = edits_applied;
     out[py::str(s.name)] = d;
   }
   return out;

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 namespace duplex::python {
@@ -24,6 +25,9 @@ struct SensorRunOptions {
   double target_error = 0.0;  ///< > 0: stop once the target sensor's relative error is at most this
   std::string target_sensor;  ///< the sensor of target_error (empty: the first)
   std::string structure;      ///< the scene's default structure choice ("bvh", "kdtree", ...)
+  /// Apply the scene's timed edits with time <= at (seconds) before the run, as `duplex sensor
+  /// --at`; unset: none.
+  std::optional<double> at;
 };
 
 /// Runs `rays` light paths of `scene_file` with `seed` on `threads` threads (0: all) and returns a

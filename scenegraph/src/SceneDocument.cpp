@@ -569,6 +569,31 @@ std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit) {
   return added;
 }
 
+std::size_t applyEditGroup(SceneDocument& doc, std::size_t first) {
+  std::size_t end = first;
+  while (end < doc.edits.size() && doc.edits[end].time == doc.edits[first].time) (void)applyEdit(doc, doc.edits[end++]);
+  return end;
+}
+
+std::size_t applyEditsUntil(SceneDocument& doc, double time) {
+  std::size_t done = 0;
+  while (done < doc.edits.size() && doc.edits[done].time <= time) {
+    try {
+      const std::size_t end = applyEditGroup(doc, done);
+      try {
+        (void)doc.graph->commit();
+      } catch (const InvalidArgument& e) {
+        failAt(doc.file, doc.edits[done].pointer, e.what());
+      }
+      done = end;
+    } catch (...) {
+      doc.graph->rollback();
+      throw;
+    }
+  }
+  return done;
+}
+
 std::vector<std::filesystem::path> saveStructures(const SceneDocument& doc, const std::filesystem::path& dir) {
   const ObjectLibrary& library = doc.graph->library();
   std::error_code ec;

@@ -137,6 +137,7 @@ struct SceneGraph::Impl {
   std::vector<std::pair<ObserverId, Observer>> observers;
   ObserverId next_observer = 1;
   std::uint64_t commits = 0;
+  std::uint64_t revision = 0;  // commits that applied edits (changed something or not)
   std::size_t alive = 0;
 
   // ---- lookups ----
@@ -629,6 +630,7 @@ ChangeSet SceneGraph::commit() {
     return cs;
   }
   cs = m.collectChanges(*library_);
+  ++m.revision;
   if (cs.empty()) {
     cs.commit = m.commits;
     return cs;
@@ -845,6 +847,8 @@ std::vector<NodeId> SceneGraph::visibleInstances() const { return instancesWith(
 std::size_t SceneGraph::nodeCount() const { return impl_->alive; }
 std::size_t SceneGraph::nodeSlots() const { return impl_->nodes.slotCount(); }
 std::uint64_t SceneGraph::commitCount() const { return impl_->commits; }
+
+std::uint64_t SceneGraph::revision() const { return impl_->revision; }
 
 std::size_t SceneGraph::bytesPerInstance() {
   // The node record, plus one entry of the (parent, name) index: a hash node (next pointer, key,

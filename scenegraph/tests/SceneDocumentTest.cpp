@@ -366,6 +366,53 @@ TEST(SceneDocumentOwn, TimedEditsAreReadSortedAndApplied) {
   expectError([&] { (void)applyEdit(doc, doc.edits[6]); }, path, "/edits/6", "/gone");
 }
 
+// applyEditsUntil plays the edits up to a time, one commit per group of equal times (a node added
+// by one group is edited by a later one); a failing edit rolls its group back, the earlier groups
+// stay committed; a time before every edit applies none.
+TEST(SceneDocumentOwn, EditsUntilATimeArePlayedGroupByGroup) {
+  SceneDir d;
+  const std::string edits = R"(
+    {"time": 0.5, "node": "/arm", "set_transform": {"translate": [0, 0, 5]}},
+    {"time": 1.0, "add": {"instance": "x", "object": "cube"}, "parent": "/arm"},
+    {"time": 1.5, "node": "/arm/x", "set_transform": {"translate": [1, 0, 0]}},
+    {"time": 2.0, "node": "/arm/tip", "visible": false},
+    {"time": 2.0, "node": "/gone", "visible": true})";
+  const auto path = d.write(
+      own(kCube + "," + kTetra,
+          R"({"group": "arm", "matrix": )" + kIdentity + R"(, "children": [{"instance": "tip", "object": "tetra"}]})",
+          edits));
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
+  SceneGraph& g = *doc.graph;
+  const NodeId tip = doc.instances[0];
+  EXPECT_EQ(applyEditsUntil(doc, 0.25), 0u);
+  EXPECT_EQ(applyEditsUntil(doc, std::nan("")), 0u);
+  EXPECT_TRUE(sameAffine(g.worldTransform(tip), Affine::identity()));
+  const std::uint64_t commits = g.commitCount();
+  EXPECT_EQ(applyEditsUntil(doc, 1.5), 3u);
+  EXPECT_EQ(g.commitCount(), commits + 3);  // one commit per time
+  EXPECT_FALSE(g.hasPendingEdits());
+  EXPECT_TRUE(
+      sameAffine(g.worldTransform(*g.find("/arm/x")), Affine::fromRowMajor3x4({1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 5})));
+  // Both edits of t = 2: the hide stays pending when the second fails.
+  expectError([&] { (void)applyEditGroup(doc, 3); }, path, "/edits/4", "/gone");
+  EXPECT_TRUE(g.hasPendingEdits());
+  g.rollback();
+  // A commit whose edits change no instance (a rename) is a revision, not a commit that changed something.
+  const std::uint64_t revision = g.revision(), changed = g.commitCount();
+  g.rename(*g.find("/arm"), "arm2");
+  (void)g.commit();
+  EXPECT_EQ(g.commitCount(), changed);
+  EXPECT_EQ(g.revision(), revision + 1);
+  (void)g.commit();  // nothing pending
+  EXPECT_EQ(g.revision(), revision + 1);
+  SceneDocument again = loadSceneDocument(path, builtinObjectTypes());
+  expectError([&] { (void)applyEditsUntil(again, 10.0); }, path, "/edits/4", "/gone");
+  // The groups before t = 2 are committed, the group of t = 2 (a valid hide, then the failure) is not.
+  EXPECT_FALSE(again.graph->hasPendingEdits());
+  EXPECT_TRUE(again.graph->find("/arm/x"));
+  EXPECT_TRUE(again.graph->isVisibleInstance(again.instances[0]));
+}
+
 // The complete example of docs/scene-format.md loads and all its edits apply (mesh files replaced by
 // a fixture, the prepared structure dropped).
 TEST(SceneDocumentOwn, TheDocumentedExampleLoadsAndPlays) {

@@ -16,6 +16,7 @@
 //   duplex_cli_check bench-update-embree BENCH DIR     the same by duplex_bench_update, with Embree's keys
 //   duplex_cli_check bench-deform DUPLEX DIR           `duplex bench deform` keys and figures on the quad scene
 //   duplex_cli_check closest DUPLEX DIR                `duplex closest` records on the quad scene, the JSON line
+//   duplex_cli_check disk-full DUPLEX DIR              record files on a full disk: an error, the old file kept
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
@@ -140,6 +141,17 @@ int checkTrace(const std::string& duplex, const fs::path& dir, bool any_hit) {
     parseOneLine(runOk(a, dir).out);
     compareRecords(again, expected, c.rays);
   }
+  // Streamed in blocks of 1, 2 and 3 rays (the last block short): the same records, the same counts.
+  for (const std::string block : {"1", "2", "3"}) {
+    const fs::path streamed = dir / ("hits_" + tag + "_block" + block + ".bin");
+    auto a = traceArgs(duplex, dir, streamed);
+    a.insert(a.end(), {"--block-rays", block, "--repeat", "2"});
+    if (any_hit) a.push_back("--any-hit");
+    const nlohmann::json jb = parseOneLine(runOk(a, dir).out);
+    expect(number(jb, "hits") == static_cast<double>(expected_hits) && number(jb, "block_rays") == std::stod(block),
+           "--block-rays " + block + ": wrong \"hits\" or \"block_rays\": " + jb.dump());
+    compareRecords(streamed, expected, c.rays);
+  }
   std::cout << "trace" << (any_hit ? " --any-hit" : "") << ": " << c.rays.size() << " records as expected; " << r.out;
   return 0;
 }
@@ -211,6 +223,19 @@ int checkRays(const std::string& duplex, const fs::path& dir) {
   expect(bytes(r1) == bytes(r2), "--random 100 --seed 7 is not deterministic");
   raysCmd(r3, {"--random", "100", "--seed", "8"});
   expect(bytes(r1) != bytes(r3), "--seed 8 gives the same rays as --seed 7");
+  // Counts as people write them, the tool's -v after the command, and the default seed (1), which
+  // the JSON and stderr report.
+  const fs::path r4 = dir / "random4.bin", r5 = dir / "random5.bin", r6 = dir / "random6.bin";
+  expect(raysCmd(r4, {"--random", "1e2", "--seed", "7", "-v"}) == 100.0 && bytes(r4) == bytes(r1),
+         "--random 1e2 --seed 7 -v is not --random 100 --seed 7");
+  const RunResult unseeded = runOk({duplex, "rays", "--scene", scene, "--random", "0.1k", "--out", r5.string()}, dir);
+  const nlohmann::json js = parseOneLine(unseeded.out);
+  expect(js.contains("seed") && js["seed"] == 1 && number(js, "rays") == 100.0,
+         "--random 0.1k without --seed does not report 100 rays and \"seed\": 1: " + js.dump());
+  expect(unseeded.err.find("default seed 1") != std::string::npos,
+         "--random without --seed does not say on stderr which seed it used:\n" + unseeded.err);
+  raysCmd(r6, {"--random", "100", "--seed", "1"});
+  expect(bytes(r5) == bytes(r6), "--random without --seed is not --seed 1");
   for (const RayRecord& r : readRecords<RayRecord>(r1)) {
     const double o[3] = {r.ox, r.oy, r.oz};
     bool inside = true;
@@ -232,6 +257,58 @@ int checkFails(const fs::path& dir, const std::string& needle, const std::vector
   expect(r.err.find(needle) != std::string::npos, "`" + cmd + "`: stderr does not name '" + needle + "':\n" + r.err);
   expect(r.out.empty(), "`" + cmd + "` printed on stdout:\n" + r.out);
   std::cout << describe(r) << ", stderr: " << r.err;
+  return 0;
+}
+
+// A full disk, made by a file-size limit (ulimit -f: writes past it fail with EFBIG): each command
+// that writes a record file fails with an error naming the file, the file keeps what it held
+// before, and no temporary file is left beside it.
+int checkDiskFull(const std::string& duplex, const fs::path& dir) {
+  const fs::path big_rays = dir / "full_disk_rays.bin";
+  runOk({duplex, "rays", "--scene", (dir / "quad.json").string(), "--random", "2000", "--seed", "3", "--out",
+         big_rays.string()},
+        dir);
+  const fs::path points = dir / "full_disk_points.bin";
+  {
+    std::vector<float> p(4 * 2000, 0.5f);
+    std::ofstream out(points, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(p.data()), static_cast<std::streamsize>(p.size() * sizeof(float)));
+  }
+  const std::string scene = (dir / "quad.json").string();
+  const fs::path out = dir / "full_disk_out.bin";
+  struct Case {
+    std::string what;
+    std::vector<std::string> args;
+  };
+  const std::vector<Case> cases = {
+      {"trace --hits", {duplex, "trace", "--scene", scene, "--rays", big_rays.string(), "--hits", out.string()}},
+      {"trace --any-hit",
+       {duplex, "trace", "--scene", scene, "--rays", big_rays.string(), "--hits", out.string(), "--any-hit"}},
+      {"trace --block-rays",
+       {duplex, "trace", "--scene", scene, "--rays", big_rays.string(), "--hits", out.string(), "--block-rays", "7"}},
+      {"rays --random", {duplex, "rays", "--scene", scene, "--random", "2000", "--seed", "1", "--out", out.string()}},
+      {"closest", {duplex, "closest", "--scene", scene, "--points", points.string(), "--out", out.string()}},
+  };
+  for (const Case& c : cases) {
+    {
+      std::ofstream before(out, std::ios::binary | std::ios::trunc);
+      before << "the previous output";
+    }
+    std::vector<std::string> argv = {"/bin/sh", "-c", "ulimit -f 4 && exec \"$0\" \"$@\""};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    const RunResult r = run(argv, dir.string());
+    expect(r.exited, c.what + " on a full disk crashed (" + describe(r) + "); stderr:\n" + r.err);
+    expect(r.exit_code != 0, c.what + " on a full disk exited 0; stdout:\n" + r.out);
+    expect(r.err.find(out.string()) != std::string::npos,
+           c.what + ": stderr does not name " + out.string() + ":\n" + r.err);
+    std::ifstream in(out, std::ios::binary);
+    const std::string kept((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    expect(kept == "the previous output", c.what + " on a full disk changed " + out.string());
+    fs::path tmp = out;
+    tmp += ".tmp";
+    expect(!fs::exists(tmp), c.what + " on a full disk left " + tmp.string());
+    std::cout << c.what << ": " << r.err;
+  }
   return 0;
 }
 
@@ -695,7 +772,7 @@ int usage() {
          "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
          "       prepare-koala DUPLEX DIR DATA_DIR |\n"
          "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR |\n"
-         "       closest DUPLEX DIR\n";
+         "       closest DUPLEX DIR | disk-full DUPLEX DIR\n";
   return 2;
 }
 
@@ -725,6 +802,7 @@ int main(int argc, char** argv) {
     if (args.size() == 3 && args[0] == "bench-update-embree") return checkBenchUpdate({args[1]}, args[2], true);
     if (args.size() == 3 && args[0] == "bench-deform") return checkBenchDeform(args[1], args[2]);
     if (args.size() == 3 && args[0] == "closest") return checkClosest(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "disk-full") return checkDiskFull(args[1], args[2]);
     return usage();
   });
 }

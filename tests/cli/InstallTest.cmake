@@ -10,11 +10,21 @@ file(REMOVE_RECURSE "${PREFIX}")
 execute_process(COMMAND "${CMAKE_COMMAND}" --install "${BUILD_DIR}" --prefix "${PREFIX}" --config "${BUILD_TYPE}"
                 OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
 foreach(f lib/cmake/duplex/duplexConfig.cmake lib/cmake/duplex/duplexConfigVersion.cmake
-          include/duplex/accel/TopLevel.h include/duplex/scenegraph/SceneTracer.h bin/duplex)
+          include/duplex/accel/TopLevel.h include/duplex/scenegraph/SceneTracer.h bin/duplex bin/duplex_demo
+          share/duplex/examples/scenes/robot_cell.json)
   if(NOT EXISTS "${PREFIX}/${f}")
     message(FATAL_ERROR "install: ${PREFIX}/${f} is missing")
   endif()
 endforeach()
+
+# The installed demo finds its default scene under the prefix, from any working directory.
+file(MAKE_DIRECTORY "${WORK_DIR}")
+execute_process(COMMAND "${PREFIX}/bin/duplex_demo" --width 32 --height 18 --threads 2 --out "${WORK_DIR}/demo.png"
+                WORKING_DIRECTORY "${WORK_DIR}/.." RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+string(FIND "${out}" "${PREFIX}/share/duplex/examples/scenes/robot_cell.json" at)
+if(NOT rc EQUAL 0 OR at EQUAL -1 OR NOT EXISTS "${WORK_DIR}/demo.png")
+  message(FATAL_ERROR "install: the installed demo did not render its default scene from the prefix (${rc}): ${out}${err}")
+endif()
 
 # The Python module, imported from the prefix alone (PYTHONPATH is the install folder, not the build's).
 if(PYTHON)

@@ -1,7 +1,7 @@
 // `duplex sensor` as an outside tool drives it: output files and keys, the closed box of
 // sensors registering all emitted power, bit-identical results for 1 and 2 threads, --resume equal
 // to one longer run, --target-error, and clear errors for bad lights and sensors; spectral bands
-// and angular bins in the sensor files.
+// and angular bins in the sensor files; far-field sensors and their .ies files; --at and timed edits.
 //   duplex_sensor_cli_check DUPLEX DIR
 
 #include "CheckSupport.h"
@@ -23,6 +23,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <cstdlib>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
@@ -187,6 +189,37 @@ int check(const std::string& duplex, const fs::path& dir) {
   // Bit-identical for 2 threads; --resume from 8,000 rays equals the 20,000-ray run.
   (void)runJson(sensorArgs(duplex, scene, "20000", "2", dir / "two"), dir);
   expectSameMaps(dir / "one", dir / "two", "1 vs 2 threads");
+
+  // Maps above --text-map-limit bins: NumPy files named in "map_files" instead of JSON arrays and
+  // CSV rows, holding the same values bit for bit.
+  {
+    std::vector<std::string> args = sensorArgs(duplex, scene, "20000", "1", dir / "npy");
+    args.insert(args.end(), {"--text-map-limit", "11"});
+    (void)runJson(args, dir);
+    for (int k = 0; k < 6; ++k) {
+      const std::string name = "face" + std::to_string(k);
+      const nlohmann::json text = readJson(dir / "one" / (name + ".json"));
+      const nlohmann::json j = readJson(dir / "npy" / (name + ".json"));
+      expect(!j.contains("irradiance_w_m2") && j.contains("map_files") && j["total_flux_w"] == text["total_flux_w"],
+             name + ".json above the limit: expected map_files, no arrays, the same totals: " + j.dump());
+      expect(!fs::exists(dir / "npy" / (name + ".csv")), name + ".csv written above the limit");
+      for (const char* key : {"irradiance_w_m2", "stderr_w_m2", "flux_w", "bin_area_m2"}) {
+        const fs::path file = dir / "npy" / j["map_files"][key].get<std::string>();
+        std::ifstream in(file, std::ios::binary);
+        const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        expect(bytes.size() > 10 && bytes.compare(0, 6, "\x93NUMPY") == 0, file.string() + " is not a .npy file");
+        const std::size_t header =
+            10 + static_cast<unsigned char>(bytes[8]) + 256u * static_cast<unsigned char>(bytes[9]);
+        const std::string dict = bytes.substr(10, header - 10);
+        expect(header % 64 == 0 && dict.find("'descr': '<f8'") != std::string::npos &&
+                   dict.find("'shape': (3, 4)") != std::string::npos && bytes.size() == header + 12 * 8,
+               file.string() + ": header " + dict);
+        const std::vector<double> expected = text[key].get<std::vector<double>>();
+        expect(std::memcmp(bytes.data() + header, expected.data(), 12 * 8) == 0,
+               file.string() + " differs from the JSON array of the same run");
+      }
+    }
+  }
   (void)runJson(sensorArgs(duplex, scene, "8000", "2", dir / "resumed"), dir);
   std::vector<std::string> resume = sensorArgs(duplex, scene, "20000", "1", dir / "resumed");
   resume.push_back("--resume");
@@ -396,6 +429,115 @@ void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
   expect(std::abs(sj["total_flux_w"].get<double>() - 3.0) < 1e-12, "the sphere around the light did not see all 3 W");
 }
 
+// The numbers of an IES LM-63 file after its TILT=NONE line (read here, not by the library).
+std::vector<double> iesNumbers(const fs::path& p, std::string& header) {
+  std::ifstream in(p);
+  expect(static_cast<bool>(in), p.string() + " was not written");
+  std::stringstream text;
+  text << in.rdbuf();
+  header = text.str();
+  const std::size_t tilt = header.find("TILT=NONE\n");
+  expect(tilt != std::string::npos, p.string() + " has no TILT=NONE line");
+  std::istringstream numbers(header.substr(tilt + 10));
+  std::vector<double> out;
+  for (std::string token; numbers >> token;) out.push_back(std::strtod(token.c_str(), nullptr));
+  header.resize(tilt);
+  return out;
+}
+
+// A far-field sensor: its keys (gamma fastest), intensity x solid angle summing to the escaped
+// power, an isotropic source's P / (4 pi) per cell, and the .ies file holding the JSON's numbers.
+// Timed edits: --at T applies those up to T (run.json's at and edits_applied; the scene's sensor
+// and light follow them: the same files as a scene written with the edits done), stderr says
+// which edits a run leaves out.
+void checkFarFieldAndEdits(const std::string& duplex, const fs::path& dir) {
+  fs::create_directories(dir);
+  write(dir / "far.json", R"({"format": "scene-json-v1",
+    "objects": [{"name": "floor", "mesh": {"positions": [-1,-1,0, 1,-1,0, 1,1,0, -1,1,0], "indices": [0,1,2, 0,2,3]}}],
+    "instances": [{"object": "floor", "transform": [1,0,0,0, 0,1,0,0, 0,0,1,0]}],
+    "lights": [{"type": "point", "position": [0, 0, 0.5], "power": 12.566370614359172}],
+    "sensors": [{"name": "far", "shape": "farfield", "bins": [6, 5]}]})");
+  const nlohmann::json report = runJson(sensorArgs(duplex, dir / "far.json", "60000", "2", dir / "far"), dir);
+  const nlohmann::json j = readJson(dir / "far" / "far.json");
+  for (const char* key : {"rays", "total_flux_w", "c_deg", "gamma_deg", "intensity_w_sr", "intensity_stderr_w_sr"})
+    expect(j.contains(key), std::string("far.json lacks the exact key ") + key);
+  expect(j["shape"] == "farfield" && j["bins"] == nlohmann::json({6, 5}), "far.json is not a 6 x 5 far field");
+  expect(j["c_deg"] == nlohmann::json({0, 60, 120, 180, 240, 300}) &&
+             j["gamma_deg"] == nlohmann::json({0, 45, 90, 135, 180}),
+         "far.json's angles are not the IES grid: " + j["c_deg"].dump() + " " + j["gamma_deg"].dump());
+  const double escaped = report["energy"]["escaped_w"], total = j["total_flux_w"];
+  expect(std::abs(total - escaped) <= 1e-12 * escaped, "the far field did not see the escaped power");
+  double sum = 0.0;
+  for (std::size_t b = 0; b < 30; ++b) {
+    const double i = j["intensity_w_sr"][b], se = j["intensity_stderr_w_sr"][b], omega = j["solid_angle_sr"][b];
+    sum += i * omega;
+    const std::size_t g = b % 5;  // gamma fastest: cells of gamma 0 (and 45) look at the floor
+    if (g == 0) expect(i == 0.0, "a ray through the floor reached the nadir cell " + std::to_string(b));
+    if (g >= 3)
+      expect(std::abs(i - 1.0) < 4.5 * se,
+             "cell " + std::to_string(b) + ": I = " + std::to_string(i) + " W/sr, not the source's 1 W/sr");
+  }
+  expect(std::abs(sum - total) <= 1e-9 * total, "intensity x solid angle does not sum to total_flux_w");
+  std::string header;
+  const std::vector<double> ies = iesNumbers(dir / "far" / "far.ies", header);
+  expect(header.rfind("IESNA:LM-63-2002\n", 0) == 0 && header.find("[_UNITS] W/sr") != std::string::npos,
+         "far.ies is not an LM-63-2002 file that says its values are W/sr:\n" + header);
+  // 1 lamp, -1 lm, x1, 5 vertical, 7 horizontal (0 ... 360), type C, metres, 0 0 0, 1 1 0.
+  const std::vector<double> counts = {1, -1, 1, 5, 7, 1, 2, 0, 0, 0, 1, 1, 0};
+  expect(ies.size() == 13 + 5 + 7 + 35 && std::equal(counts.begin(), counts.end(), ies.begin()),
+         "far.ies's counts are not those of a 5 x 7 type C table");
+  expect(ies[13 + 5 + 6] == 360.0, "far.ies's last C-plane is not 360");
+  for (std::size_t b = 0; b < 35; ++b)
+    expect(ies[25 + b] == j["intensity_w_sr"][b % 30].get<double>(),
+           "far.ies value " + std::to_string(b) + " is not the JSON's intensity");
+
+  // Timed edits: the sensor moves at t = 1 and shrinks at t = 2, the lamp's node moves at t = 3.
+  const std::string objects = R"({"format": "duplex-scene-v1",
+    "objects": [{"name": "plate", "sensor": {"size": [1, 1], "bins": [2, 2]}},
+                {"name": "floor", "plane": {"size": 4}, "material": {"type": "lambertian", "reflectance": 0.5}}],
+    "lights": [{"type": "point", "node": "/lamp", "position": [0, 0, 0], "power": 10}],)";
+  auto nodes = [](const char* sensor, const char* lamp) {
+    return std::string(R"("nodes": [{"instance": "floor", "object": "floor"},
+      {"group": "rig", "translate": [0, 0, 1], "children": [{"instance": "plate", "object": "plate", "transform": )") +
+           sensor + R"(}]}, {"group": "lamp", "translate": )" + lamp + "}]";
+  };
+  write(dir / "edits.json", objects + nodes(R"({"translate": [0, 0, 0]})", "[0, 0, 2]") + R"(, "edits": [
+      {"time": 1, "node": "/rig/plate", "set_transform": {"translate": [0.3, 0, 0]}},
+      {"time": 2, "node": "/rig/plate", "set_transform": {"translate": [0.3, 0, 0], "scale": 0.5}},
+      {"time": 3, "node": "/lamp", "set_transform": {"translate": [0, 0, 3]}}]})");
+  write(dir / "at2.json", objects + nodes(R"({"translate": [0.3, 0, 0], "scale": 0.5})", "[0, 0, 2]") + "}");
+  std::vector<std::string> args = sensorArgs(duplex, dir / "edits.json", "20000", "1", dir / "none");
+  RunResult r = runOk(args, dir);
+  expect(r.err.find("3 timed edit(s)") != std::string::npos && r.err.find("none is applied") != std::string::npos,
+         "a run without --at did not say that the scene's 3 edits are not applied:\n" + r.err);
+  expect(!nlohmann::json::parse(r.out).contains("at"), "run.json has \"at\" without --at");
+  args = sensorArgs(duplex, dir / "edits.json", "20000", "1", dir / "at2");
+  args.insert(args.end(), {"--at", "2"});
+  r = runOk(args, dir);
+  const nlohmann::json at2 = nlohmann::json::parse(r.out);
+  expect(at2["at"] == 2.0 && at2["edits_applied"] == 2, "run.json lacks at 2, edits_applied 2: " + at2.dump());
+  expect(r.err.find("applied 2, the 1 after it are not applied") != std::string::npos,
+         "--at 2 did not say that one edit is left out:\n" + r.err);
+  (void)runJson(sensorArgs(duplex, dir / "at2.json", "20000", "1", dir / "baked"), dir);
+  const nlohmann::json edited = readJson(dir / "at2" / "plate.json"), baked = readJson(dir / "baked" / "plate.json");
+  for (const char* key : {"flux_w", "irradiance_w_m2", "bin_area_m2", "ray_count", "stderr_w_m2"})
+    expect(edited[key] == baked[key], std::string("--at 2: ") + key + " differs from the scene with the edits done");
+  expect(std::abs(edited["bin_area_m2"][0].get<double>() - 0.0625) < 1e-15, "the shrunk sensor kept its bin areas");
+  args = sensorArgs(duplex, dir / "edits.json", "20000", "1", dir / "at9");
+  args.insert(args.end(), {"--at", "9"});
+  r = runOk(args, dir);
+  expect(nlohmann::json::parse(r.out)["edits_applied"] == 3 && r.err.find("timed edit") == std::string::npos,
+         "--at 9 did not apply all 3 edits silently: " + r.out + r.err);
+  const nlohmann::json at9 = readJson(dir / "at9" / "plate.json");
+  expect(at9["total_flux_w"].get<double>() < edited["total_flux_w"].get<double>(),
+         "the lamp moved up, yet the sensor saw no less");
+  args = sensorArgs(duplex, dir / "edits.json", "100", "1", dir / "bad_at");
+  args.insert(args.end(), {"--at", "-1"});
+  const RunResult bad = run(args, dir.string());
+  expect(bad.exited && bad.exit_code != 0 && bad.err.find("--at") != std::string::npos,
+         "--at -1: expected an error naming the option, got " + describe(bad));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -406,6 +548,7 @@ int main(int argc, char** argv) {
   return reportFailures([&] {
     const int status = check(argv[1], argv[2]);  // clears DIR first
     checkBandsAndAngles(argv[1], fs::path(argv[2]) / "spectral");
+    checkFarFieldAndEdits(argv[1], fs::path(argv[2]) / "farfield");
     return status;
   });
 }

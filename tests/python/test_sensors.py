@@ -10,20 +10,25 @@ from conftest import SCENES, run_cli
 RAYS = 40000
 
 
-@pytest.mark.parametrize("name", ["sensor_room.json", "sensor_spectral.json"])
-def test_run_equals_cli_output(cli, tmp_path, name):
+@pytest.mark.parametrize("name,at", [("sensor_room.json", None), ("sensor_spectral.json", None),
+                                     ("sensor_luminaire.json", 1)])
+def test_run_equals_cli_output(cli, tmp_path, name, at):
     scene_file = SCENES / name
+    at_args = ["--at", at] if at is not None else []
     report = run_cli(cli, "sensor", "--scene", scene_file, "--rays", RAYS, "--seed", 3, "--out", tmp_path,
-                     "--progress", "none", "--threads", 2)
-    result = duplex.run_sensors(str(scene_file), rays=RAYS, seed=3, threads=1)
+                     "--progress", "none", "--threads", 2, *at_args)
+    result = duplex.run_sensors(str(scene_file), rays=RAYS, seed=3, threads=1, at=at)
     assert sorted(result) == sorted(s["name"] for s in report["sensors"])
     for entry in report["sensors"]:
         ref = json.loads(open(entry["file"]).read())
         got = result[entry["name"]]
         nx, ny = ref["bins"]
-        assert got["bins"] == (nx, ny) and got["irradiance"].shape == (ny, nx)
-        for key, ref_key in (("irradiance", "irradiance_w_m2"), ("stderr", "stderr_w_m2"), ("flux", "flux_w"),
-                             ("ray_count", "ray_count"), ("bin_area", "bin_area_m2")):
+        far = ref["shape"] == "farfield"
+        assert got["bins"] == (nx, ny) and got["flux"].shape == ((nx, ny) if far else (ny, nx))
+        keys = ((("intensity", "intensity_w_sr"), ("intensity_stderr", "intensity_stderr_w_sr"),
+                 ("solid_angle", "solid_angle_sr")) if far else
+                (("irradiance", "irradiance_w_m2"), ("stderr", "stderr_w_m2"), ("bin_area", "bin_area_m2")))
+        for key, ref_key in keys + (("flux", "flux_w"), ("ray_count", "ray_count")):
             assert np.array_equal(got[key].ravel(), np.array(ref[ref_key])), key
         assert got["total_flux"] == ref["total_flux_w"] and got["efficiency"] == ref["efficiency"]
         assert got["rays"] == RAYS and got["seed"] == 3 and got["status"] == "completed"
@@ -76,3 +81,46 @@ def test_target_error_stops_early():
     result = duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10**8, seed=2, target_error=0.05)
     first = next(iter(result.values()))
     assert first["status"] == "target_reached" and first["rays"] < 10**8
+
+
+EDITED_SCENE = {
+    "format": "duplex-scene-v1",
+    "objects": [{"name": "plate", "sensor": {"size": [1, 1], "bins": [2, 2]}},
+                {"name": "floor", "plane": {"size": 4}, "material": {"type": "lambertian", "reflectance": 0.5}}],
+    "lights": [{"type": "point", "node": "/lamp", "position": [0, 0, 0], "power": 10}],
+    "sensors": [{"name": "far", "shape": "farfield", "bins": [4, 3]}],
+    "nodes": [{"instance": "floor", "object": "floor"},
+              {"group": "rig", "translate": [0, 0, 1], "children": [{"instance": "plate", "object": "plate"}]},
+              {"group": "lamp", "translate": [0, 0, 2]}],
+    "edits": [{"time": 1, "node": "/rig/plate", "set_transform": {"translate": [0.3, 0, 0], "scale": 0.5}},
+              {"time": 2, "node": "/lamp", "set_transform": {"translate": [0, 0, 3]}}],
+}
+
+
+def test_at_applies_the_timed_edits_as_the_cli_does(cli, tmp_path):
+    """run_sensors(at=T) follows the edits up to T (sensor and light): the numbers of `duplex sensor --at T`."""
+    scene_file = tmp_path / "edits.json"
+    scene_file.write_text(json.dumps(EDITED_SCENE))
+    report = run_cli(cli, "sensor", "--scene", scene_file, "--rays", 20000, "--seed", 3, "--out", tmp_path / "o",
+                     "--progress", "none", "--threads", 1, "--at", 1.5)
+    assert report["at"] == 1.5 and report["edits_applied"] == 1
+    ref = json.loads((tmp_path / "o" / "plate.json").read_text())
+    with pytest.warns(UserWarning, match="1 after at are not applied"):
+        got = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=2, at=1.5)
+    assert got["plate"]["edits_applied"] == 1
+    assert np.array_equal(got["plate"]["flux"].ravel(), np.array(ref["flux_w"]))
+    assert np.array_equal(got["plate"]["bin_area"].ravel(), np.array(ref["bin_area_m2"]))
+    assert np.allclose(got["plate"]["bin_area"], 0.0625)  # the scaled sensor's bins
+    far = json.loads((tmp_path / "o" / "far.json").read_text())
+    assert got["far"]["shape"] == "farfield" and got["far"]["intensity"].shape == (4, 3)
+    assert np.array_equal(got["far"]["intensity"].ravel(), np.array(far["intensity_w_sr"]))
+    assert list(got["far"]["gamma_deg"]) == far["gamma_deg"] == [0, 90, 180]
+    with pytest.warns(UserWarning, match="2 timed edit.*not applied"):
+        unedited = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1)
+    assert unedited["plate"]["edits_applied"] == 0
+    assert np.allclose(unedited["plate"]["bin_area"], 0.25)
+    later = duplex.run_sensors(str(scene_file), rays=20000, seed=3, threads=1, at=5)
+    assert later["plate"]["edits_applied"] == 2
+    assert later["plate"]["total_flux"] < got["plate"]["total_flux"]  # the lamp moved up
+    with pytest.raises(ValueError, match="at"):
+        duplex.run_sensors(str(scene_file), rays=10, at=-1.0)

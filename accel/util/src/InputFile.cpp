@@ -1,5 +1,10 @@
 #include "duplex/accel/InputFile.h"
 
+#include "duplex/accel/Error.h"
+
+#include <fstream>
+#include <sstream>
+
 namespace duplex {
 
 std::string notRegularFile(const std::filesystem::path& path) {
@@ -15,6 +20,25 @@ std::string notRegularFile(const std::filesystem::path& path) {
 bool sameFile(const std::filesystem::path& input, const std::filesystem::path& output) {
   std::error_code ec;
   return std::filesystem::equivalent(input, output, ec) && !ec;
+}
+
+std::string readWholeFile(const std::filesystem::path& path, std::string_view what) {
+  auto fail = [&](const std::string& problem) {
+    std::ostringstream msg;
+    msg << what << " '" << path.string() << "': " << problem;
+    throw FileError(msg.str());
+  };
+  if (const std::string problem = notRegularFile(path); !problem.empty()) fail(problem);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail("cannot be opened");
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  if (size < 0) fail("cannot be read (its size is unknown)");
+  if (size == 0) fail("empty");
+  in.seekg(0, std::ios::beg);
+  std::string bytes(static_cast<std::size_t>(size), '\0');
+  if (!in.read(bytes.data(), size)) fail("cannot be read");
+  return bytes;
 }
 
 }  // namespace duplex

@@ -3,10 +3,15 @@
 
 #include "duplex/accel/Error.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <bit>
+#include <cerrno>
 #include <cstring>
-#include <fstream>
 #include <limits>
+#include <sstream>
 
 namespace duplex {
 
@@ -23,32 +28,104 @@ ClosestRecord ClosestRecord::none() {
 
 HitRecord HitRecord::miss() { return {std::numeric_limits<float>::infinity(), 0.0f, 0.0f, kInvalidId, kInvalidId}; }
 
+template <class Record>
+RecordFileReader<Record>::RecordFileReader(const std::filesystem::path& path, std::string_view kind)
+    : path_(path), kind_(kind) {
+  const auto fail = [&](const std::string& problem) {
+    std::ostringstream msg;
+    msg << kind_ << " file '" << path_.string() << "': " << problem;
+    throw FileError(msg.str());
+  };
+  if (const std::string problem = notRegularFile(path_); !problem.empty()) fail(problem);
+  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) fail(std::string("cannot open (") + std::strerror(errno) + ")");
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0) {
+    const int err = errno;
+    ::close(fd_);
+    fail(std::string("cannot read its size (") + std::strerror(err) + ")");
+  }
+  const auto size = static_cast<std::uint64_t>(st.st_size);
+  if (size % sizeof(Record) != 0) {
+    ::close(fd_);
+    std::ostringstream problem;
+    problem << "size " << size << " bytes is not a multiple of the " << sizeof(Record) << "-byte record";
+    fail(problem.str());
+  }
+  count_ = static_cast<std::size_t>(size / sizeof(Record));
+}
+
+template <class Record>
+RecordFileReader<Record>::~RecordFileReader() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+template <class Record>
+void RecordFileReader<Record>::read(std::size_t first, std::span<Record> out) {
+  if (first > count_ || out.size() > count_ - first) {
+    std::ostringstream msg;
+    msg << kind_ << " file '" << path_.string() << "': records " << first << ".." << first + out.size() << " asked of "
+        << count_;
+    throw InvalidArgument(msg.str());
+  }
+  auto* bytes = reinterpret_cast<unsigned char*>(out.data());
+  std::size_t done = 0;
+  const std::size_t want = out.size_bytes();
+  const auto offset = static_cast<off_t>(first * sizeof(Record));
+  while (done < want) {
+    const ssize_t n = ::pread(fd_, bytes + done, want - done, offset + static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      std::ostringstream msg;
+      msg << kind_ << " file '" << path_.string() << "': "
+          << (n == 0 ? std::string("shorter than when it was opened")
+                     : std::string("read failed (") + std::strerror(errno) + ")");
+      throw FileError(msg.str());
+    }
+    done += static_cast<std::size_t>(n);
+  }
+}
+
+template <class Record>
+RecordFileWriter<Record>::RecordFileWriter(const std::filesystem::path& path, std::string_view kind)
+    : out_(path, std::string(kind) + " file") {}
+
+template <class Record>
+void RecordFileWriter<Record>::write(std::span<const Record> records) {
+  out_.write({reinterpret_cast<const unsigned char*>(records.data()), records.size_bytes()});
+}
+
+template <class Record>
+void RecordFileWriter<Record>::commit() {
+  out_.commit();
+}
+
+template class RecordFileReader<Ray>;
+template class RecordFileReader<HitRecord>;
+template class RecordFileReader<PointRecord>;
+template class RecordFileReader<ClosestRecord>;
+template class RecordFileReader<float>;
+template class RecordFileWriter<Ray>;
+template class RecordFileWriter<HitRecord>;
+template class RecordFileWriter<PointRecord>;
+template class RecordFileWriter<ClosestRecord>;
+template class RecordFileWriter<float>;
+
 namespace {
 
 template <class Record>
 std::vector<Record> readRecords(const std::filesystem::path& path, const char* kind) {
-  if (const std::string problem = notRegularFile(path); !problem.empty())
-    throw FileError(std::string(kind) + " file '" + path.string() + "': " + problem);
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) throw FileError(std::string(kind) + " file '" + path.string() + "': cannot open");
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw FileError(std::string(kind) + " file '" + path.string() + "': cannot read its size");
-  if (size % static_cast<std::streamoff>(sizeof(Record)) != 0)
-    throw FileError(std::string(kind) + " file '" + path.string() + "': size " + std::to_string(size) +
-                    " bytes is not a multiple of the " + std::to_string(sizeof(Record)) + "-byte record");
-  std::vector<Record> out(static_cast<std::size_t>(size) / sizeof(Record));
-  in.seekg(0);
-  if (!in.read(reinterpret_cast<char*>(out.data()), size))
-    throw FileError(std::string(kind) + " file '" + path.string() + "': read failed");
+  RecordFileReader<Record> in(path, kind);
+  std::vector<Record> out(in.count());
+  in.read(0, out);
   return out;
 }
 
 template <class Record>
 void writeRecords(const std::filesystem::path& path, std::span<const Record> records, const char* kind) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) throw FileError(std::string(kind) + " file '" + path.string() + "': cannot create");
-  out.write(reinterpret_cast<const char*>(records.data()), static_cast<std::streamsize>(records.size_bytes()));
-  if (!out) throw FileError(std::string(kind) + " file '" + path.string() + "': write failed");
+  RecordFileWriter<Record> out(path, kind);
+  out.write(records);
+  out.commit();
 }
 
 }  // namespace

@@ -4,9 +4,12 @@
 
 #include <glm/geometric.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <random>
+#include <sstream>
 #include <string>
 
 namespace duplex {
@@ -48,35 +51,55 @@ glm::dvec3 PinholeCamera::directionAt(double x, double y, std::uint32_t width, s
 }
 
 std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height) {
-  const PinholeCamera cam = PinholeCamera::looking_at_box(world_bounds);
   std::vector<Ray> rays(static_cast<std::size_t>(width) * height);
-  for (std::uint32_t y = 0; y < height; ++y)
-    for (std::uint32_t x = 0; x < width; ++x) {
-      Ray& r = rays[static_cast<std::size_t>(y) * width + x];
-      r.origin = glm::vec3(cam.eye);
-      r.dir = cam.direction(x, y, width, height);
-      r.tnear = 0.0f;
-      r.tfar = std::numeric_limits<float>::infinity();
-    }
+  primaryRays(world_bounds, width, height, 0, rays);
   return rays;
 }
 
-std::vector<Ray> randomRays(const Box& b, std::size_t count, std::uint64_t seed) {
-  requireBounds(b, "randomRays");
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
-  std::vector<Ray> rays(count);
-  for (Ray& r : rays) {
-    for (int k = 0; k < 3; ++k) r.origin[k] = static_cast<float>(b.lo[k] + unit(rng) * (b.hi[k] - b.lo[k]));
+void primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height, std::size_t first,
+                 std::span<Ray> out) {
+  const PinholeCamera cam = PinholeCamera::looking_at_box(world_bounds);
+  const std::size_t total = static_cast<std::size_t>(width) * height;
+  if (first > total || out.size() > total - first) {
+    std::ostringstream msg;
+    msg << "primaryRays: rays " << first << ".." << first + out.size() << " asked of " << total;
+    throw InvalidArgument(msg.str());
+  }
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const std::size_t pixel = first + i;
+    Ray& r = out[i];
+    r.origin = glm::vec3(cam.eye);
+    r.dir = cam.direction(static_cast<std::uint32_t>(pixel % width), static_cast<std::uint32_t>(pixel / width), width,
+                          height);
+    r.tnear = 0.0f;
+    r.tfar = std::numeric_limits<float>::infinity();
+  }
+}
+
+RandomRayStream::RandomRayStream(const Box& world_bounds, std::uint64_t seed) : bounds_(world_bounds), rng_(seed) {
+  requireBounds(world_bounds, "randomRays");
+}
+
+void RandomRayStream::next(std::span<Ray> out) {
+  std::uniform_real_distribution<double> unit(0.0, 1.0);  // stateless for doubles: blocks do not matter
+  const Box& b = bounds_;
+  for (Ray& r : out) {
+    for (int k = 0; k < 3; ++k) r.origin[k] = static_cast<float>(b.lo[k] + unit(rng_) * (b.hi[k] - b.lo[k]));
     // Uniform on the sphere: z uniform in [-1, 1], azimuth uniform.
-    const double z = 2.0 * unit(rng) - 1.0;
-    const double phi = 2.0 * std::numbers::pi * unit(rng);
+    const double z = 2.0 * unit(rng_) - 1.0;
+    const double phi = 2.0 * std::numbers::pi * unit(rng_);
     const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
     r.dir =
         glm::vec3(static_cast<float>(s * std::cos(phi)), static_cast<float>(s * std::sin(phi)), static_cast<float>(z));
     r.tnear = 0.0f;
     r.tfar = std::numeric_limits<float>::infinity();
   }
+}
+
+std::vector<Ray> randomRays(const Box& b, std::size_t count, std::uint64_t seed) {
+  RandomRayStream stream(b, seed);
+  std::vector<Ray> rays(count);
+  stream.next(rays);
   return rays;
 }
 

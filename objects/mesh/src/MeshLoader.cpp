@@ -1,10 +1,14 @@
 // OpenMesh is kept in this translation unit only: its headers are heavy and its streams global.
+// The text and binary formats are read by the project's own strict readers (MeshFileReaders.cpp);
+// OpenMesh reads OM files and subdivides.
 
 #include "duplex/objects/MeshLoader.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/InputFile.h"
 #include "duplex/accel/Log.h"
+
+#include "MeshFileReaders.h"
 
 // OpenMesh's property containers trip GCC 12's -Wmaybe-uninitialized under the sanitizers (a
 // default-constructed VectorT pushed back); the warning is in its headers, not in our code.
@@ -21,8 +25,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <limits>
 #include <iostream>
+#include <map>
 #include <mutex>
 #include <sstream>
 
@@ -70,65 +74,6 @@ class OpenMeshCapture {
   std::ostringstream* buffer_;
 };
 
-// What a file's header declares, for the formats that have a face count (OFF, PLY, binary STL),
-// so that a file cut short is refused instead of loading fewer faces: OpenMesh's readers stop at
-// the end of the data without reporting it (and its OFF reader even invents faces past the end).
-struct FaceCount {
-  long long declared = -1;  // -1: unknown
-  long long present = -1;   // faces actually in the file, where we walked the list (-1: not known)
-};
-
-FaceCount declaredFaceCount(const std::filesystem::path& path, const std::string& ext) {
-  FaceCount fc;
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return fc;
-  if (ext == ".off") {
-    std::string word;
-    if (!(in >> word) || word != "OFF") return fc;  // COFF, NOFF, binary OFF: left to OpenMesh
-    long long v = -1, f = -1, e = -1;
-    if (!(in >> v >> f >> e) || v < 0 || f < 0) return fc;
-    fc.declared = f;
-    fc.present = 0;
-    double x;
-    for (long long i = 0; i < 3 * v; ++i)
-      if (!(in >> x)) return fc;
-    for (long long i = 0; i < f; ++i) {
-      long long k = 0, index = 0;
-      if (!(in >> k) || k < 0) break;
-      bool ok = true;
-      for (long long j = 0; j < k && ok; ++j) ok = static_cast<bool>(in >> index);
-      if (!ok) break;
-      ++fc.present;
-      in.ignore(std::numeric_limits<std::streamsize>::max(), '\n');  // optional colour values
-    }
-    return fc;
-  }
-  if (ext == ".ply") {
-    std::string line;
-    while (std::getline(in, line)) {
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      if (line.rfind("element face ", 0) == 0) fc.declared = std::atoll(line.c_str() + 13);
-      if (line == "end_header") break;
-    }
-    return fc;
-  }
-  if (ext == ".stl" || ext == ".stlb") {
-    char header[84];
-    if (!in.read(header, 84)) return fc;
-    std::uint32_t n = 0;
-    std::memcpy(&n, header + 80, 4);
-    std::error_code ec;
-    const auto size = std::filesystem::file_size(path, ec);
-    if (ec) return fc;
-    // "solid" starts ASCII files but also some binary ones; the exact binary size decides.
-    if (std::string(header, 5) == "solid" && size != 84ull + 50ull * n) return fc;
-    fc.declared = n;
-    fc.present = static_cast<long long>(std::min<std::uintmax_t>(n, (size - 84) / 50));
-    return fc;
-  }
-  return fc;
-}
-
 std::size_t countOccurrences(const std::string& text, const std::string& what) {
   std::size_t n = 0;
   for (std::size_t pos = text.find(what); pos != std::string::npos; pos = text.find(what, pos + what.size())) ++n;
@@ -147,18 +92,8 @@ std::vector<glm::vec3> vertexPositions(const OpenMeshMesh& mesh) {
   return positions;
 }
 
-}  // namespace
-
-TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report) {
-  if (const std::string problem = notRegularFile(path); !problem.empty())
-    throw FileError("mesh file '" + path.string() + "': " + problem);
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (ext != ".obj" && ext != ".ply" && ext != ".off" && ext != ".stl" && ext != ".stla" && ext != ".stlb" &&
-      ext != ".om")
-    throw FileError("mesh file '" + path.string() + "': unsupported extension '" + ext +
-                    "' (expected .obj, .ply, .off, .stl or .om)");
-
+// An OM file through OpenMesh (the only format without a reader of our own: OpenMesh's own).
+mesh_files::ParsedMesh readOm(const std::filesystem::path& path, MeshLoadReport& rep) {
   PolyMesh mesh;
   std::string messages;
   bool ok = false;
@@ -170,38 +105,62 @@ TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report)
     messages = capture.text();
   }
   if (!ok) throw FileError("mesh file '" + path.string() + "': OpenMesh could not read it (malformed or truncated)");
-
-  const FaceCount faces = declaredFaceCount(path, ext);
-  if (faces.present >= 0 && faces.present < faces.declared)
-    throw FileError("mesh file '" + path.string() + "': declares " + std::to_string(faces.declared) +
-                    " faces but contains only " + std::to_string(faces.present) + " (truncated or malformed)");
-  if (faces.declared >= 0 && static_cast<long long>(mesh.n_faces()) < faces.declared)
-    throw FileError("mesh file '" + path.string() + "': declares " + std::to_string(faces.declared) +
-                    " faces but only " + std::to_string(mesh.n_faces()) + " could be read (truncated or malformed)");
-
-  MeshLoadReport rep;
   rep.complex_edge_warnings = countOccurrences(messages, "complex edge") + countOccurrences(messages, "complex vertex");
   const std::size_t lines = static_cast<std::size_t>(std::count(messages.begin(), messages.end(), '\n'));
   rep.other_warnings = lines > rep.complex_edge_warnings ? lines - rep.complex_edge_warnings : 0;
-
-  std::vector<glm::vec3> positions = vertexPositions(mesh);
-  std::vector<TriangleMesh::Triangle> triangles;
-  triangles.reserve(mesh.n_faces());
+  mesh_files::ParsedMesh parsed;
+  parsed.positions = vertexPositions(mesh);
+  parsed.triangles.reserve(mesh.n_faces());
   std::vector<std::uint32_t> corners;
   for (const auto fh : mesh.faces()) {
     corners.clear();
     for (const auto vh : mesh.fv_range(fh)) corners.push_back(static_cast<std::uint32_t>(vh.idx()));
-    if (corners.size() < 3) continue;
-    if (corners.size() > 3) ++rep.polygons_triangulated;
-    for (std::size_t k = 1; k + 1 < corners.size(); ++k) triangles.push_back({corners[0], corners[k], corners[k + 1]});
+    if (corners.size() > 3) ++parsed.polygons_triangulated;
+    for (std::size_t k = 1; k + 1 < corners.size(); ++k)
+      parsed.triangles.push_back({corners[0], corners[k], corners[k + 1]});
   }
+  return parsed;
+}
+
+}  // namespace
+
+TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report) {
+  if (const std::string problem = notRegularFile(path); !problem.empty())
+    throw FileError("mesh file '" + path.string() + "': " + problem);
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  using mesh_files::Format;
+  static const std::map<std::string, Format> kFormats = {{".obj", Format::Obj},       {".ply", Format::Ply},
+                                                         {".off", Format::Off},       {".stl", Format::Stl},
+                                                         {".stla", Format::StlAscii}, {".stlb", Format::StlBinary}};
+  const auto format = kFormats.find(ext);
+  if (format == kFormats.end() && ext != ".om")
+    throw FileError("mesh file '" + path.string() + "': unsupported extension '" + ext +
+                    "' (expected .obj, .ply, .off, .stl or .om)");
+
+  MeshLoadReport rep;
+  mesh_files::ParsedMesh parsed;
+  if (format != kFormats.end()) {
+    parsed = mesh_files::read(format->second, readWholeFile(path, "mesh file"), path.string());
+    rep.other_warnings = parsed.ignored_statements;
+  } else {
+    parsed = readOm(path, rep);
+  }
+  rep.polygons_triangulated = parsed.polygons_triangulated;
+  rep.repeated_corner_faces = parsed.repeated_corner_faces;
   if (rep.complex_edge_warnings > 0)
     logger()->info("mesh file '{}': {} non-manifold faces (OpenMesh 'complex edge/vertex'), all kept", path.string(),
                    rep.complex_edge_warnings);
+  if (rep.repeated_corner_faces > 0)
+    logger()->info("mesh file '{}': {} faces name a vertex twice; kept as degenerate triangles (never hit)",
+                   path.string(), rep.repeated_corner_faces);
+  if (rep.other_warnings > 0)
+    logger()->info("mesh file '{}': {} statements not used (free-form geometry or unknown keywords)", path.string(),
+                   rep.other_warnings);
   if (report) *report = rep;
-  if (triangles.empty()) throw FileError("mesh file '" + path.string() + "': contains no triangles");
+  if (parsed.triangles.empty()) throw FileError("mesh file '" + path.string() + "': contains no triangles");
   try {
-    return TriangleMesh::fromTriangles(std::move(positions), std::move(triangles), path.string());
+    return TriangleMesh::fromTriangles(std::move(parsed.positions), std::move(parsed.triangles), path.string());
   } catch (const InvalidArgument& e) {
     throw FileError(e.what());
   }

@@ -27,6 +27,7 @@ std::shared_ptr<const TriangleMesh> readMeshFile(const std::filesystem::path& fi
   MeshLoadReport report;
   auto mesh = std::make_shared<const TriangleMesh>(loadMesh(file, &report));
   cache.addCount("complex_edge_warnings", report.complex_edge_warnings);
+  cache.addCount("repeated_corner_faces", report.repeated_corner_faces);
   return mesh;
 }
 

@@ -46,6 +46,19 @@ double diskRectangleArea(double r, double x0, double x1, double y0, double y1) {
 SensorObject::SensorObject(std::string name, const SensorSpec& spec)
     : Object(std::move(name), ObjectRole::Crossing), spec_(spec) {
   auto bad = [this](const std::string& what) { throw InvalidArgument("sensor '" + this->name() + "': " + what); };
+  if (spec.shape == SensorShape::FarField) {
+    if (spec.nx == 0 || spec.ny < 2) bad("a far-field sensor needs at least 1 C-plane and 2 vertical angles");
+    if (static_cast<std::uint64_t>(spec.nx) * spec.ny > (1u << 26)) bad("more than 2^26 bins");
+    if (spec.theta_bins != 0) bad("a far-field sensor takes no angular bins (its bins are directions)");
+    // Exact solid angle of each C-gamma cell: dC (cos gamma0 - cos gamma1).
+    bin_area_.resize(binCount());
+    const double dc = 2.0 * std::numbers::pi / spec.nx, dg = std::numbers::pi / (spec.ny - 1);
+    for (std::uint32_t ig = 0; ig < spec.ny; ++ig) {
+      const double g0 = std::max(0.0, (ig - 0.5) * dg), g1 = std::min(std::numbers::pi, (ig + 0.5) * dg);
+      for (std::uint32_t ic = 0; ic < spec.nx; ++ic) bin_area_[ic * spec.ny + ig] = dc * (std::cos(g0) - std::cos(g1));
+    }
+    return;
+  }
   if (!(std::isfinite(spec.width) && spec.width > 0.0) || !(std::isfinite(spec.height) && spec.height > 0.0))
     bad("size must be finite and > 0");
   if (spec.nx == 0 || spec.ny == 0) bad("bins must be at least 1 x 1");
@@ -94,12 +107,14 @@ double SensorObject::angleBinSolidAngle(std::uint32_t bin) const {
 }
 
 double SensorObject::area() const {
+  if (spec_.shape == SensorShape::FarField) return 4.0 * std::numbers::pi;
   if (spec_.shape == SensorShape::Disk) return std::numbers::pi * 0.25 * spec_.width * spec_.width;
   if (spec_.shape == SensorShape::Sphere) return std::numbers::pi * spec_.width * spec_.width;
   return spec_.width * spec_.height;
 }
 
 Box SensorObject::bounds() const {
+  if (spec_.shape == SensorShape::FarField) return Box{};  // nowhere: never placed in a scene
   if (spec_.shape == SensorShape::Sphere) {
     const float r = std::nextafter(static_cast<float>(0.5 * spec_.width), INFINITY);
     return Box(glm::vec3(-r), glm::vec3(r));
@@ -161,6 +176,7 @@ void sphereCrossings(const SensorObject& s, double r, const Ray& ray_os, std::ve
 }  // namespace
 
 bool SensorObject::cross(const Ray& ray_os, float& t_out, SensorCell& cell) const {
+  if (spec_.shape == SensorShape::FarField) return false;
   if (spec_.shape == SensorShape::Sphere) {  // the first crossing
     std::vector<Hit> hits;
     sphereCrossings(*this, 0.5 * spec_.width, ray_os, hits);
@@ -194,7 +210,23 @@ std::uint32_t SensorObject::sphereBinAt(const glm::dvec3& n) const {
   return iy * spec_.nx + ix;
 }
 
+std::uint32_t SensorObject::farFieldBinAt(const glm::dvec3& d) const {
+  const double len = glm::length(d);
+  if (!(len > 0.0) || !std::isfinite(len)) return kInvalidId;
+  constexpr double kTwoPi = 2.0 * std::numbers::pi;
+  const double gamma = std::acos(std::clamp(-d.z / len, -1.0, 1.0));
+  double c = std::atan2(d.y, d.x);
+  if (c < 0.0) c += kTwoPi;
+  // Cells centred on the grid's angles: floor(x + 1/2) puts an inner edge into the cell above it;
+  // C wraps (the cell of C = 0 spans [-dC/2, dC/2)).
+  const auto ig = std::min<std::uint32_t>(
+      spec_.ny - 1, static_cast<std::uint32_t>(std::floor(gamma / std::numbers::pi * (spec_.ny - 1) + 0.5)));
+  const auto ic = static_cast<std::uint32_t>(std::floor(c / kTwoPi * spec_.nx + 0.5)) % spec_.nx;
+  return ic * spec_.ny + ig;
+}
+
 void SensorObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext&) const {
+  if (spec_.shape == SensorShape::FarField) return;
   if (spec_.shape == SensorShape::Sphere) {
     sphereCrossings(*this, 0.5 * spec_.width, ray_os, hits);
     return;
@@ -212,7 +244,7 @@ void SensorObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, Query
 }
 
 std::optional<FlatCrossings> SensorObject::flatCrossings() const {
-  if (spec_.shape == SensorShape::Sphere) return std::nullopt;
+  if (spec_.shape == SensorShape::Sphere || spec_.shape == SensorShape::FarField) return std::nullopt;
   const Box b = bounds();  // the half sizes rounded outwards: never inside the closed border
   return FlatCrossings{b.hi.x, b.hi.y, !spec_.two_sided};
 }

@@ -24,7 +24,7 @@ std::uint32_t binCount(const json& v, const std::string& p, const ObjectSpecCont
 }  // namespace
 
 SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx,
-                          std::initializer_list<std::string_view> extra_keys) {
+                          std::initializer_list<std::string_view> extra_keys, bool allow_far_field) {
   const std::string& p = ctx.pointer;
   if (!spec.is_object()) ctx.fail(p, "expected an object");
   if (ctx.strict) {
@@ -40,7 +40,26 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx,
     if (shape == "rectangle") s.shape = SensorShape::Rectangle;
     else if (shape == "disk") s.shape = SensorShape::Disk;
     else if (shape == "sphere") s.shape = SensorShape::Sphere;
-    else ctx.fail(p + "/shape", "expected \"rectangle\", \"disk\" or \"sphere\", got \"" + shape + "\"");
+    else if (shape == "farfield" && allow_far_field) s.shape = SensorShape::FarField;
+    else if (shape == "farfield")
+      ctx.fail(p + "/shape",
+               "a \"farfield\" sensor is not an object of the scene: list it in the top-level \"sensors\"");
+    else
+      ctx.fail(p + "/shape", std::string("expected \"rectangle\", \"disk\", \"sphere\"") +
+                                 (allow_far_field ? " or \"farfield\"" : "") + ", got \"" + shape + "\"");
+  }
+  if (s.shape == SensorShape::FarField) {
+    // Directions only: no size, sides or angular bins; "bins" [n_c, n_gamma] (n_gamma >= 2:
+    // the grid includes gamma 0 and 180).
+    for (const char* key : {"size", "two_sided", "angular_bins"})
+      if (spec.contains(key)) ctx.fail(p + "/" + key, std::string("a far-field sensor takes no \"") + key + "\"");
+    const json& b = ctx.member(spec, p, "bins");
+    if (!b.is_array() || b.size() != 2) ctx.fail(p + "/bins", "expected [n_c, n_gamma] (C-planes, vertical angles)");
+    s.nx = binCount(b[0], p + "/bins/0", ctx);
+    s.ny = binCount(b[1], p + "/bins/1", ctx);
+    if (s.ny < 2) ctx.fail(p + "/bins/1", "a far-field sensor needs at least 2 vertical angles (0 and 180 degrees)");
+    if (static_cast<std::uint64_t>(s.nx) * s.ny > (1u << 26)) ctx.fail(p + "/bins", "more than 2^26 bins");
+    return s;
   }
   const std::vector<double> size = ctx.positiveSizes(ctx.member(spec, p, "size"), p + "/size", 2);
   s.width = size[0];

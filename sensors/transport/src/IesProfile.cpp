@@ -4,8 +4,10 @@
 /// "TILT=", optional tilt data, then whitespace- or comma-separated numbers in a fixed order.
 
 #include "duplex/sensors/IesProfile.h"
+#include "duplex/sensors/SensorResults.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/AtomicFile.h"
 #include "duplex/accel/InputFile.h"
 
 #include <algorithm>
@@ -394,6 +396,106 @@ double IesProfile::pdf(const glm::dvec3& direction_lf) const {
   const double solid_angle =
       (std::cos(vertical_rad_[v]) - std::cos(vertical_rad_[v + 1])) * (horizontal_rad_[h + 1] - horizontal_rad_[h]);
   return cell_weight / total_ / solid_angle;
+}
+
+}  // namespace duplex
+
+namespace duplex {
+
+namespace {
+
+// The shortest decimal form that reads back as the same double.
+std::string shortest(double v) {
+  char buf[64];
+  const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  return ec == std::errc() ? std::string(buf, end) : NumberReader::format(v);
+}
+
+// Numbers of one kind, at most ten per line (LM-63-2002 keeps lines within 256 characters).
+void putNumbers(std::string& out, const double* v, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i) {
+    out += shortest(v[i]);
+    out += (i + 1) % 10 == 0 || i + 1 == n ? '\n' : ' ';
+  }
+}
+
+}  // namespace
+
+std::string formatIes(const IesTable& table) {
+  // The reader's checks (angles, symmetric ranges, counts, negative values) decide what is writable.
+  (void)IesProfile::fromTable(table.vertical_deg, table.horizontal_deg, table.values, "formatIes");
+  const double v0 = table.vertical_deg.front(), v1 = table.vertical_deg.back();
+  if (!((v0 == 0.0 || v0 == 90.0) && (v1 == 90.0 || v1 == 180.0)))
+    throw InvalidArgument("formatIes: type C vertical angles must run from 0 or 90 to 90 or 180 degrees");
+  std::string out = "IESNA:LM-63-2002\n";
+  std::vector<std::pair<std::string, std::string>> keywords = table.keywords;
+  for (const char* required : {"TEST", "TESTLAB", "ISSUEDATE", "MANUFAC"}) {
+    const bool present =
+        std::any_of(keywords.begin(), keywords.end(), [&](const auto& k) { return k.first == required; });
+    if (!present) keywords.emplace_back(required, "");
+  }
+  for (const auto& [key, value] : keywords) {
+    if (key.empty() || key.find_first_of("[]\r\n") != std::string::npos)
+      throw InvalidArgument("formatIes: keyword '" + key + "' must be non-empty, without brackets or line breaks");
+    std::string_view rest = value;
+    bool first = true;
+    do {
+      const std::size_t eol = std::min(rest.find('\n'), rest.size());
+      out += first ? "[" + key + "] " : std::string("[MORE] ");
+      out += rest.substr(0, eol);
+      out += '\n';
+      rest = eol < rest.size() ? rest.substr(eol + 1) : std::string_view{};
+      first = false;
+    } while (!rest.empty());
+  }
+  out += "TILT=NONE\n";
+  // lamps, lumens per lamp, multiplier, vertical and horizontal counts, photometric type C (1),
+  // units (2: metres), luminous opening 0 x 0 x 0 (a point), ballast factor, file generation type
+  // (future use: 1), input watts.
+  std::ostringstream header;
+  header << "1 " << shortest(table.lumens_per_lamp) << " 1 " << table.vertical_deg.size() << ' '
+         << table.horizontal_deg.size() << " 1 2 0 0 0\n1 1 0\n";
+  out += header.str();
+  putNumbers(out, table.vertical_deg.data(), table.vertical_deg.size());
+  putNumbers(out, table.horizontal_deg.data(), table.horizontal_deg.size());
+  for (std::size_t h = 0; h < table.horizontal_deg.size(); ++h)
+    putNumbers(out, table.values.data() + h * table.vertical_deg.size(), table.vertical_deg.size());
+  return out;
+}
+
+void writeIes(const std::filesystem::path& file, const IesTable& table) {
+  const std::string text = formatIes(table);
+  writeFileAtomically(file, {reinterpret_cast<const unsigned char*>(text.data()), text.size()}, "IES file",
+                      /*sync=*/false);
+}
+
+}  // namespace duplex
+
+namespace duplex {
+
+IesTable farFieldIesTable(const SensorResult& s, std::uint64_t rays, std::uint64_t seed) {
+  if (s.shape != SensorShape::FarField)
+    throw InvalidArgument("farFieldIesTable: sensor '" + s.name + "' is not a far-field sensor");
+  const std::uint32_t nc = s.nx, ng = s.ny;
+  IesTable table;
+  for (std::uint32_t ig = 0; ig < ng; ++ig) table.vertical_deg.push_back(ig * 180.0 / (ng - 1));
+  for (std::uint32_t ic = 0; ic < nc; ++ic) table.horizontal_deg.push_back(ic * 360.0 / nc);
+  // The run's flux per unit of a cell's measure (its solid angle) is the intensity.
+  table.values = s.irradiance_w_m2;
+  if (nc > 1) {  // a full circle of C-planes ends with 360, the plane of 0 again
+    table.horizontal_deg.push_back(360.0);
+    table.values.insert(table.values.end(), s.irradiance_w_m2.begin(), s.irradiance_w_m2.begin() + ng);
+  }
+  std::ostringstream other;
+  other << "Radiant intensity in W/sr (a radiometric run), not candela: " << rays << " rays, seed " << seed;
+  table.keywords = {{"TEST", "duplex sensor far-field measurement"},
+                    {"TESTLAB", "duplex (simulated)"},
+                    {"ISSUEDATE", ""},
+                    {"MANUFAC", ""},
+                    {"LUMCAT", s.name},
+                    {"OTHER", other.str()},
+                    {"_UNITS", "W/sr"}};
+  return table;
 }
 
 }  // namespace duplex

@@ -7,7 +7,9 @@
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <string>
 #include <numbers>
 
 namespace duplex {
@@ -78,6 +80,31 @@ double Light::intensity(const glm::dvec3& dir_ws) const {
       return power_w * profile->intensity(glm::transpose(world_from_light.linear) * dir_ws) / profile->integral();
     default: return 0.0;
   }
+}
+
+Light placeLight(const Light& light, const Affine& world_from_node) {
+  Light out = light;
+  const Affine& w = world_from_node;
+  out.position = w.point(light.position);
+  out.direction = w.vector(light.direction);
+  out.world_from_light = w * light.world_from_light;
+  if (light.type == LightType::Directional || light.type == LightType::Goniometric) {
+    // The uniform scale of a similarity: |L e_x|, checked against L^T L = s^2 I.
+    const glm::dmat3 g = glm::transpose(w.linear) * w.linear;
+    const double s2 = g[0][0];
+    double off = 0.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) off = std::max(off, std::abs(g[i][j] - (i == j ? s2 : 0.0)));
+    if (!(off <= 1e-9 * s2) || !(glm::determinant(w.linear) > 0.0))
+      throw InvalidArgument("light '" + light.name +
+                            "': its node's world transform must be a rotation with uniform scale (a " +
+                            (light.type == LightType::Directional ? "directional" : "goniometric") + " light)");
+    const double scale = std::sqrt(s2);
+    if (light.type == LightType::Directional) out.radius = light.radius * scale;
+    else out.world_from_light.linear = (w.linear / scale) * light.world_from_light.linear;
+  }
+  out.validate();
+  return out;
 }
 
 EmittedRay sampleLight(const Light& light, const double u[4]) {

@@ -91,6 +91,11 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   const bool scatter = scene_.scatters();
   CrossingQuery query = config_.query;
   if (scatter) query.medium_mask = 0;
+  // Far-field sensors (after the graph's sensors) record the direction of every ray that escapes.
+  std::vector<std::uint32_t> far_field;
+  if (!config_.closest_hit_only)
+    for (std::size_t s = 0; s < sensors.size(); ++s)
+      if (sensors[s].object->spec().shape == SensorShape::FarField) far_field.push_back(static_cast<std::uint32_t>(s));
   QueryContext ctx;
   std::vector<Crossing> crossings;
   std::vector<BinEvent> path_bins;  // this path's deposits before merging
@@ -188,6 +193,12 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       w = w_after;
       if (!end.hit.valid()) {
         e.escaped_w += w;
+        for (const std::uint32_t s : far_field) {  // the direction in the sensor's frame
+          const SensorInstance& si = sensors[s];
+          const std::uint32_t b = si.object->farFieldBinAt(
+              {glm::dot(dir, si.frame_x), glm::dot(dir, si.frame_y), glm::dot(dir, si.normal)});
+          if (b != kInvalidId) path_bins.push_back({si.first_bin + b, s, w});
+        }
         break;
       }
       if (depth == config_.max_depth) {

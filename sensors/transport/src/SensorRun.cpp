@@ -43,6 +43,7 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
     throw InvalidArgument("SensorRun: threads above 4096 (" + std::to_string(config_.threads) + ")");
   if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
+  revision_ = scene_.revision();  // the scene as of the graph's last commit (derived now if it changed)
   double acc = 0.0;
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
   {
@@ -60,6 +61,7 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
   }
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& si = scene_.sensors()[k];
+    if (si.node == kInvalidNode) continue;  // far field: deposits on escape, not at crossings
     if (si.node >= deposit_targets_.size()) deposit_targets_.resize(std::size_t{si.node} + 1);
     deposit_targets_[si.node] = {si.first_bin, static_cast<std::int32_t>(k), si.object->spec().theta_bins != 0};
   }
@@ -84,6 +86,13 @@ std::unique_ptr<SensorRun::Tally> SensorRun::makeTally() const {
     t->band_sensor_sum2.assign(t->sensors.size() * nb, 0.0);
   }
   return t;
+}
+
+void SensorRun::checkScene() const {
+  if (scene_.graph().revision() != revision_)
+    throw InvalidArgument(
+        "SensorRun: the scene graph was committed since the run was made (its sensors, lights and paths may "
+        "differ): make a new run");
 }
 
 // How many deposits ahead the reduction prefetches their accumulators.
@@ -163,6 +172,7 @@ std::uint64_t SensorRun::traceRange(std::uint64_t first, std::uint64_t end, Tall
 SensorRunStatus SensorRun::runUntil(std::uint64_t total_rays,
                                     const std::function<void(const SensorProgress&)>& progress,
                                     const SensorStopRule& stop) {
+  checkScene();
   if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
   if (stop.sensor >= static_cast<int>(scene_.sensors().size()))
     throw InvalidArgument("SensorRun: stop rule names sensor " + std::to_string(stop.sensor) + ", the scene has " +
@@ -217,6 +227,7 @@ void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, doubl
 }  // namespace
 
 double SensorRun::relativeStderr(int sensor) const {
+  checkScene();
   if (sensor < 0 || static_cast<std::size_t>(sensor) >= scene_.sensors().size())
     throw InvalidArgument("SensorRun::relativeStderr: sensor " + std::to_string(sensor) + " (the scene has " +
                           std::to_string(scene_.sensors().size()) + ")");
@@ -228,6 +239,7 @@ double SensorRun::relativeStderr(int sensor) const {
 }
 
 SensorRunResults SensorRun::results() const {
+  checkScene();
   // The finished batches and the open one (empty at batch boundaries: adding its zeros changes nothing).
   Tally all = *closed_;
   detail::addTally(all, *open_, scene_.bandCount());

@@ -35,6 +35,7 @@ void put(std::vector<std::byte>& out, const T* data, std::size_t count) {
 }  // namespace
 
 SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_rays) {
+  checkScene();
   if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
   const std::uint64_t first = batch * config_.batch_rays;
   if (batch > total_rays / config_.batch_rays || first >= total_rays)
@@ -84,6 +85,7 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
 }
 
 void SensorRun::addBatch(std::span<const std::byte> tally) {
+  checkScene();
   const auto refuse = [](const std::string& why) { throw InvalidArgument("SensorRun::addBatch: " + why); };
   if (tally.size() < kBatchHead || std::memcmp(tally.data(), kBatchMagic, sizeof kBatchMagic) != 0)
     refuse("not a batch tally of this version (" + std::to_string(tally.size()) + " bytes)");

@@ -89,6 +89,7 @@ std::uint64_t SensorRun::computeFingerprint() const {
   }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();
+    if (spec.shape == SensorShape::FarField) addAffine(s.world_from_object);  // not an instance of the graph
     add(&spec.shape, sizeof spec.shape);
     for (const double x : {spec.width, spec.height}) addDouble(x);
     const std::uint32_t grid[3] = {spec.nx, spec.ny, spec.two_sided ? 1u : 0u};
@@ -219,6 +220,7 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
 }  // namespace
 
 void SensorRun::saveState(const std::filesystem::path& file) const {
+  checkScene();
   std::vector<char> bytes;
   const std::uint64_t header[5] = {fingerprint(), config_.seed, rays_done_, closed_->bins.size(),
                                    closed_->sensors.size()};
@@ -235,6 +237,7 @@ void SensorRun::saveState(const std::filesystem::path& file) const {
 }
 
 void SensorRun::loadState(const std::filesystem::path& file) {
+  checkScene();
   if (const std::string problem = notRegularFile(file); !problem.empty())
     throw FileError(file.string() + ": cannot open the run state: " + problem);
   std::ifstream in(file, std::ios::binary | std::ios::ate);

@@ -6,53 +6,47 @@
 #include <glm/matrix.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <mutex>
+#include <string>
 #include <unordered_set>
 
 namespace duplex {
 
+// The Derived of the graph's last commit. The pointer is read without the lock on every access
+// (the hot loop asks for materials per hit), so it is atomic; a new one is made under the mutex.
+struct SensorScene::Cache {
+  std::mutex mutex;
+  std::atomic<const Derived*> current{nullptr};
+  std::unique_ptr<Derived> owned;
+};
+
 SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials,
-                         std::vector<std::string> bands)
-    : graph_(&graph), lights_(std::move(lights)), bands_(std::move(bands)) {
-  prepare(std::move(materials));
-}
-
-SensorScene::SensorScene(SensorScene&&) noexcept = default;
-SensorScene& SensorScene::operator=(SensorScene&&) noexcept = default;
-SensorScene::~SensorScene() = default;
-
-void SensorScene::prepare(std::vector<Material> materials) {
-  // Bands, and each light's cumulative spectrum (what a ray's band is drawn from).
+                         std::vector<std::string> bands, std::vector<FarFieldSensor> far_field)
+    : graph_(&graph),
+      given_lights_(std::move(lights)),
+      materials_(std::move(materials)),
+      bands_(std::move(bands)),
+      far_field_(std::move(far_field)),
+      cache_(std::make_unique<Cache>()) {
+  // What does not depend on the graph is checked once: bands, per-object materials, far-field sensors.
   std::unordered_set<std::string> band_names;
   for (const std::string& b : bands_)
     if (b.empty() || !band_names.insert(b).second)
       throw InvalidArgument("SensorScene: band names must be non-empty and distinct ('" + b + "')");
   if (bands_.size() > 256) throw InvalidArgument("SensorScene: more than 256 bands");
   const std::uint32_t nb = bandCount();
-  for (const Light& l : lights_) {
-    l.validate();
-    total_power_ += l.power_w;
+  for (const Light& l : given_lights_) {
+    if (l.node != kInvalidNode && !graph_->contains(l.node))
+      throw InvalidArgument("light '" + l.name + "': node " + std::to_string(l.node) + " is not in the graph");
     if (!l.spectrum.empty() && l.spectrum.size() != nb)
       throw InvalidArgument("light '" + l.name + "': spectrum has " + std::to_string(l.spectrum.size()) +
                             " entries, the scene has " + std::to_string(nb) + " band(s)");
-    std::vector<double> cdf(nb);
-    double acc = 0.0, sum = 0.0;
-    for (std::uint32_t k = 0; k < nb; ++k) sum += l.spectrum.empty() ? 1.0 : l.spectrum[k];
-    for (std::uint32_t k = 0; k < nb; ++k) cdf[k] = (acc += l.spectrum.empty() ? 1.0 : l.spectrum[k]) / sum;
-    cdf.back() = 1.0;
-    band_cdf_.push_back(std::move(cdf));
   }
-  if (graph_->hasPendingEdits()) throw InvalidArgument("SensorScene: the scene graph has uncommitted edits");
-  tracer_ = std::make_unique<SceneTracer>(*graph_);
-  // Per-node table (node ids are small integers): which material.
-  std::vector<NodeId> instances = graph_->visibleInstances();
-  std::sort(instances.begin(), instances.end());
-  const NodeId max_node = instances.empty() ? 0 : instances.back();
-  material_of_node_.assign(instances.empty() ? 0 : max_node + 1, Material{});
   const ObjectLibrary& library = graph_->library();
-  std::unordered_set<std::string> names;
-  for (std::size_t id = 0; id < materials.size(); ++id) {
-    const Material& m = materials[id];
+  for (std::size_t id = 0; id < materials_.size(); ++id) {
+    const Material& m = materials_[id];
     const std::string what =
         "material of object " +
         (id < library.size() ? "'" + library.name(static_cast<ObjectId>(id)) + "'" : std::to_string(id));
@@ -70,12 +64,88 @@ void SensorScene::prepare(std::vector<Material> materials) {
     if (m.type == MaterialType::Medium && !(m.g > -1.0 && m.g < 1.0))
       throw InvalidArgument(what + ": g must be in (-1, 1)");
   }
+  for (const FarFieldSensor& f : far_field_) {
+    if (!f.object || f.object->spec().shape != SensorShape::FarField)
+      throw InvalidArgument("far-field sensor '" + f.name + "': needs a far-field sensor object");
+    const glm::dmat3& l = f.world_from_sensor.linear;
+    if (!isSimilarity(l) || !(std::abs(glm::determinant(l) - 1.0) < 1e-9) ||
+        f.world_from_sensor.translation != glm::dvec3(0.0))
+      throw InvalidArgument("far-field sensor '" + f.name + "': its transform must be a rotation (no translation)");
+  }
+  if (graph_->hasPendingEdits()) throw InvalidArgument("SensorScene: the scene graph has uncommitted edits");
+  tracer_ = std::make_unique<SceneTracer>(*graph_);
+  (void)current();  // validates the graph's sensors, media and lights now
+}
+
+SensorScene::SensorScene(SensorScene&&) noexcept = default;
+SensorScene& SensorScene::operator=(SensorScene&&) noexcept = default;
+SensorScene::~SensorScene() = default;
+
+const SensorScene::Derived& SensorScene::current() const {
+  const std::uint64_t revision = graph_->revision();
+  if (const Derived* d = cache_->current.load(std::memory_order_acquire); d && d->revision == revision) return *d;
+  std::lock_guard lock(cache_->mutex);
+  if (const Derived* d = cache_->current.load(std::memory_order_acquire); d && d->revision == revision) return *d;
+  std::unique_ptr<Derived> fresh = derive();  // throws: the previous tables stay
+  cache_->current.store(fresh.get(), std::memory_order_release);
+  cache_->owned = std::move(fresh);
+  return *cache_->owned;
+}
+
+std::unique_ptr<SensorScene::Derived> SensorScene::derive() const {
+  if (graph_->hasPendingEdits())
+    throw InvalidArgument("SensorScene: the scene graph has uncommitted edits (commit them before a run)");
+  auto out = std::make_unique<Derived>();
+  Derived& d = *out;
+  d.revision = graph_->revision();
+  const std::uint32_t nb = bandCount();
+  // Lights: placed at their nodes as of this commit; a hidden node's light is off.
+  for (const Light& given : given_lights_) {
+    Light l = given;
+    if (given.node != kInvalidNode) {
+      if (!graph_->contains(given.node))
+        throw InvalidArgument("light '" + given.name + "': its node (id " + std::to_string(given.node) +
+                              ") was removed from the graph");
+      bool visible = true;
+      for (const NodeId id : graph_->pathIds(given.node)) visible = visible && graph_->node(id).visible;
+      if (!visible) continue;
+      l = placeLight(given, graph_->worldTransform(given.node));
+    }
+    l.validate();
+    d.total_power += l.power_w;
+    std::vector<double> cdf(nb);
+    double acc = 0.0, sum = 0.0;
+    for (std::uint32_t k = 0; k < nb; ++k) sum += l.spectrum.empty() ? 1.0 : l.spectrum[k];
+    for (std::uint32_t k = 0; k < nb; ++k) cdf[k] = (acc += l.spectrum.empty() ? 1.0 : l.spectrum[k]) / sum;
+    cdf.back() = 1.0;
+    d.band_cdf.push_back(std::move(cdf));
+    d.lights.push_back(std::move(l));
+  }
+  // Per-node table (node ids are small integers): which material.
+  std::vector<NodeId> instances = graph_->visibleInstances();
+  std::sort(instances.begin(), instances.end());
+  const NodeId max_node = instances.empty() ? 0 : instances.back();
+  d.material_of_node.assign(instances.empty() ? 0 : max_node + 1, Material{});
+  const ObjectLibrary& library = graph_->library();
+  std::unordered_set<std::string> names;
   bool scatters = false;
   std::vector<NodeId> media;
+  auto addSensor = [&](SensorInstance s) {
+    if (!names.insert(s.name).second) throw InvalidArgument("SensorScene: two sensors named '" + s.name + "'");
+    s.first_bin = d.bin_count;
+    if (static_cast<std::uint64_t>(d.bin_count) + s.object->binCount() > 0xFFFFFFF0ull)
+      throw InvalidArgument("SensorScene: more than 2^32 sensor bins");
+    d.bin_count += s.object->binCount();
+    s.first_angle_bin = d.angle_bin_count;
+    if (static_cast<std::uint64_t>(d.angle_bin_count) + s.object->spec().angleBinCount() > 0x7FFFFFF0ull)
+      throw InvalidArgument("SensorScene: more than 2^31 angular bins");
+    d.angle_bin_count += s.object->spec().angleBinCount();
+    d.sensors.push_back(std::move(s));
+  };
   for (const NodeId node : instances) {
     const NodeInfo info = graph_->node(node);
-    if (info.object < materials.size()) material_of_node_[node] = materials[info.object];
-    const Material& m = material_of_node_[node];
+    if (info.object < materials_.size()) d.material_of_node[node] = materials_[info.object];
+    const Material& m = d.material_of_node[node];
     const ObjectRole role = library.get(info.object)->role();
     if (role == ObjectRole::Medium) {
       if (m.type != MaterialType::Absorber && m.type != MaterialType::Medium)
@@ -93,6 +163,9 @@ void SensorScene::prepare(std::vector<Material> materials) {
     s.name = std::string(info.name);
     s.node = node;
     s.object = std::move(object);
+    if (s.object->spec().shape == SensorShape::FarField)
+      throw InvalidArgument("sensor '" + s.name +
+                            "': a far-field sensor is not placed in the scene graph (it records the rays leaving it)");
     s.world_from_object = graph_->worldTransform(node);
     const glm::dvec3 ex = s.world_from_object.vector(glm::dvec3(1, 0, 0)),
                      ey = s.world_from_object.vector(glm::dvec3(0, 1, 0));
@@ -103,22 +176,23 @@ void SensorScene::prepare(std::vector<Material> materials) {
     if (s.object->spec().shape == SensorShape::Sphere && !isSimilarity(s.world_from_object.linear))
       throw InvalidArgument("sensor '" + s.name +
                             "': a sphere sensor's transform must be a rotation with uniform scale");
-    if (!names.insert(s.name).second) throw InvalidArgument("SensorScene: two sensors named '" + s.name + "'");
-    s.first_bin = bin_count_;
-    if (static_cast<std::uint64_t>(bin_count_) + s.object->binCount() > 0xFFFFFFF0ull)
-      throw InvalidArgument("SensorScene: more than 2^32 sensor bins");
-    bin_count_ += s.object->binCount();
-    s.first_angle_bin = angle_bin_count_;
-    if (static_cast<std::uint64_t>(angle_bin_count_) + s.object->spec().angleBinCount() > 0x7FFFFFF0ull)
-      throw InvalidArgument("SensorScene: more than 2^31 angular bins");
-    angle_bin_count_ += s.object->spec().angleBinCount();
-    sensors_.push_back(std::move(s));
+    addSensor(std::move(s));
   }
-  if (static_cast<std::uint64_t>(bin_count_) + angle_bin_count_ > 0xFFFFFFF0ull)
+  for (const FarFieldSensor& f : far_field_) {
+    SensorInstance s;
+    s.name = f.name;
+    s.object = f.object;
+    s.world_from_object = f.world_from_sensor;
+    s.frame_x = f.world_from_sensor.vector(glm::dvec3(1, 0, 0));
+    s.frame_y = f.world_from_sensor.vector(glm::dvec3(0, 1, 0));
+    s.normal = f.world_from_sensor.vector(glm::dvec3(0, 0, 1));
+    addSensor(std::move(s));
+  }
+  if (static_cast<std::uint64_t>(d.bin_count) + d.angle_bin_count > 0xFFFFFFF0ull)
     throw InvalidArgument("SensorScene: more than 2^32 sensor bins and angular bins");
   // Scattering media: every fog is then sampled by free flights (one without a material absorbs at
   // each collision), so only fogs that can sample free flights are allowed.
-  if (!scatters) return;
+  if (!scatters) return out;
   for (const NodeId node : media) {
     const NodeInfo info = graph_->node(node);
     MediumInstance mi;
@@ -135,9 +209,10 @@ void SensorScene::prepare(std::vector<Material> materials) {
     mi.world_lo = glm::dvec3(box.lo);
     mi.world_hi = glm::dvec3(box.hi);
     mi.mask = info.mask;
-    mi.material = material_of_node_[node];
-    media_.push_back(std::move(mi));
+    mi.material = d.material_of_node[node];
+    d.media.push_back(std::move(mi));
   }
+  return out;
 }
 
 bool SensorScene::isSimilarity(const glm::dmat3& linear) {
@@ -150,8 +225,9 @@ bool SensorScene::isSimilarity(const glm::dmat3& linear) {
 }
 
 int SensorScene::findSensor(const std::string& name) const {
-  for (std::size_t k = 0; k < sensors_.size(); ++k)
-    if (sensors_[k].name == name) return static_cast<int>(k);
+  const std::vector<SensorInstance>& list = sensors();
+  for (std::size_t k = 0; k < list.size(); ++k)
+    if (list[k].name == name) return static_cast<int>(k);
   return -1;
 }
 

@@ -5,9 +5,12 @@
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 
+#include <glm/matrix.hpp>
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <optional>
+#include <string>
 #include <cmath>
 #include <numbers>
 
@@ -48,20 +51,27 @@ std::vector<double> numbers(const json& v, const std::string& p, const ObjectSpe
   return out;
 }
 
-Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx, const SceneGraph& graph) {
   if (!v.is_object()) ctx.fail(p, "expected a light (an object with \"type\")");
   Light l;
+  if (v.contains("node")) {  // attached to a node: the geometry below is in its local space
+    const std::string path = ctx.string(v["node"], at(p, "node"));
+    const std::optional<NodeId> node = graph.find(path);
+    if (!node || *node == kRootNode)
+      ctx.fail(at(p, "node"), "no node \"" + path + "\" in the scene (a path such as \"/lamp\")");
+    l.node = *node;
+  }
   l.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
   const double power = ctx.number(ctx.member(v, p, "power"), at(p, "power"));
   if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
   l.power_w = power;
   if (type == "point") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position"});
     l.type = LightType::Point;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
   } else if (type == "spot") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position", "direction", "half_angle"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position", "direction", "half_angle"});
     l.type = LightType::Spot;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
@@ -69,13 +79,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
     l.cone_angle = deg * std::numbers::pi / 180.0;
   } else if (type == "directional") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "position", "direction", "radius"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position", "direction", "radius"});
     l.type = LightType::Directional;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
     l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
   } else if (type == "area") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "size", "transform", "two_sided"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "size", "transform", "two_sided"});
     l.type = LightType::Area;
     const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
     l.width = size[0];
@@ -86,7 +96,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       l.two_sided = v["two_sided"].get<bool>();
     }
   } else if (type == "ies") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "file", "position", "transform"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "file", "position", "transform"});
     l.type = LightType::Goniometric;
     if (v.contains("position") == v.contains("transform"))
       ctx.fail(p, "an \"ies\" light has either \"position\" or \"transform\" (rotation and translation)");
@@ -183,6 +193,15 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     if (objects[i].contains("material"))
       materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx);
 
+  // Objects declared by "add_object" edits may carry a material too (applied once they are instanced).
+  if (root.contains("edits"))
+    for (const SceneEdit& e : doc->edits)
+      if (e.kind == SceneEditKind::AddObject && e.object < materials.size()) {
+        const json& entry = root["edits"][std::stoul(e.pointer.substr(std::string("/edits/").size()))]["add_object"];
+        if (entry.is_object() && entry.contains("material"))
+          materials[e.object] = readMaterial(entry["material"], at(at(e.pointer, "add_object"), "material"), ctx);
+      }
+
   std::vector<std::string> bands;
   if (root.contains("bands")) {
     const json& list = root["bands"];
@@ -211,11 +230,12 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     const json& list = root["lights"];
     if (!list.is_array()) ctx.fail("/lights", "expected an array of lights");
     for (std::size_t i = 0; i < list.size(); ++i) {
-      lights.push_back(readLight(list[i], at("/lights", i), ctx));
+      lights.push_back(readLight(list[i], at("/lights", i), ctx, graph));
       bandCount(lights.back().spectrum, at(at("/lights", i), "spectrum"));
     }
   }
 
+  std::vector<FarFieldSensor> far_field;
   if (root.contains("sensors")) {
     const json& list = root["sensors"];
     if (!list.is_array()) ctx.fail("/sensors", "expected an array of sensors");
@@ -224,11 +244,20 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const json& e = list[i];
       ObjectSpecContext sctx = ctx;
       sctx.pointer = p;
-      const SensorSpec spec = readSensorSpec(e, sctx, {"name", "transform"});
+      const SensorSpec spec = readSensorSpec(e, sctx, {"name", "transform"}, /*allow_far_field=*/true);
       const std::string name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
       if (name.empty()) ctx.fail(at(p, "name"), "expected a non-empty sensor name");
       const Affine world =
           e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();
+      if (spec.shape == SensorShape::FarField) {  // not in the graph: it records the rays leaving the scene
+        if (!SensorScene::isSimilarity(world.linear) || !(std::abs(glm::determinant(world.linear) - 1.0) < 1e-9) ||
+            world.translation != glm::dvec3(0.0))
+          ctx.fail(at(p, "transform"), "a far-field sensor's transform must be a rotation (no translation, no scale)");
+        for (const FarFieldSensor& f : far_field)
+          if (f.name == name) ctx.fail(at(p, "name"), "two sensors named '" + name + "'");
+        far_field.push_back({name, std::make_shared<const SensorObject>(name, spec), world});
+        continue;
+      }
       if (spec.shape == SensorShape::Sphere && !SensorScene::isSimilarity(world.linear))
         ctx.fail(at(p, "transform"), "a sphere sensor's transform must be a rotation with uniform scale");
       try {
@@ -241,7 +270,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     (void)graph.commit();
   }
   try {
-    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands));
+    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {

@@ -78,7 +78,8 @@ struct SceneLoadFigures {
   std::size_t nodes = 0;              ///< graph nodes, root included
   /// What the object types report, summed: each object's Object::figures() over the distinct
   /// objects ("triangles", "degenerate_triangles", ...), the counts their readers added while
-  /// reading files ("complex_edge_warnings"), and "<kind>_files", the distinct files read per kind
+  /// reading files ("repeated_corner_faces", "complex_edge_warnings"), and "<kind>_files", the distinct files read per
+  /// kind
   /// ("mesh_files").
   std::map<std::string, std::size_t, std::less<>> counts;
 
@@ -137,6 +138,19 @@ struct SceneDocument {
 /// depth first), else nothing. Throws FileError naming doc.file and edit.pointer when the node path
 /// does not exist (now) or the graph refuses the edit; the graph is then unchanged.
 std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit);
+
+/// Applies the edits of one step of the animation, doc.edits[first, end) that share
+/// doc.edits[first].time, in file order, without committing; returns end (first when first >=
+/// doc.edits.size()). Throws as applyEdit; the group's earlier edits then stay pending (commit or
+/// roll them back).
+std::size_t applyEditGroup(SceneDocument& doc, std::size_t first);
+
+/// Plays the timed edits up to `time` (seconds): every edit with time <= `time`, one group of equal
+/// times after another, committing the graph after each group as a player does (an edit's node
+/// path is resolved against the graph the earlier groups left). Returns the number of edits
+/// applied. A failing edit or commit rolls its group back (the earlier groups stay committed) and
+/// throws FileError naming doc.file and the edit's pointer. A NaN `time` applies nothing.
+std::size_t applyEditsUntil(SceneDocument& doc, double time);
 
 /// Writes the prepared bottom-level structure of every object of doc's library whose type has a
 /// prepared format (Object::preparedExtension(); meshes: ".dbvh" or ".dkdt"), built now if deferred, to `dir`

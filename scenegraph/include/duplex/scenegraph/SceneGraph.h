@@ -185,6 +185,10 @@ class SceneGraph {
   [[nodiscard]] std::size_t nodeCount() const;
   /// Commits that changed something (the number the last such ChangeSet carries).
   [[nodiscard]] std::uint64_t commitCount() const;
+  /// Commits that applied edits, also those whose net effect on instances is nil (a transform node
+  /// without instances below it moved, a rename): for layers that read more of the graph than its
+  /// instances (lights placed at nodes, node names), which must notice such commits too.
+  [[nodiscard]] std::uint64_t revision() const;
 
   /// Bytes the graph holds per instance node (documented in the README): the node record (local and
   /// committed world transform, links, object, mask, flags, name in the small-string buffer) plus its

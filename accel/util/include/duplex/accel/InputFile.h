@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 namespace duplex {
 
@@ -18,5 +19,9 @@ namespace duplex {
 /// Whether `output` names the existing file `input` (the same path, or another path to the same
 /// file): writing it would destroy the input before it is read. False when either does not exist.
 [[nodiscard]] bool sameFile(const std::filesystem::path& input, const std::filesystem::path& output);
+
+/// The whole content of the regular file `path`, read in one piece. Throws FileError
+/// "<what> '<path>': <problem>" when it is not a regular file, cannot be opened or read, or is empty.
+[[nodiscard]] std::string readWholeFile(const std::filesystem::path& path, std::string_view what);
 
 }  // namespace duplex

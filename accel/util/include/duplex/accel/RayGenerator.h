@@ -7,6 +7,8 @@
 #include "duplex/accel/Ray.h"
 
 #include <cstdint>
+#include <random>
+#include <span>
 #include <vector>
 
 namespace duplex {
@@ -38,9 +40,28 @@ struct PinholeCamera {
 /// width * height primary rays, row-major from the top-left pixel; unit directions, t in [0, inf).
 /// Throws InvalidArgument for empty or non-finite bounds.
 [[nodiscard]] std::vector<Ray> primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height);
+/// Rays [first, first + out.size()) of primaryRays(world_bounds, width, height), written to `out`:
+/// the same rays, a block at a time. Throws InvalidArgument for empty or non-finite bounds and
+/// for a range past width * height.
+void primaryRays(const Box& world_bounds, std::uint32_t width, std::uint32_t height, std::size_t first,
+                 std::span<Ray> out);
 /// `count` rays with origins uniform in `world_bounds` and directions uniform on the unit sphere,
 /// t in [0, inf). Deterministic for a seed (std::mt19937_64, independent of the thread count).
 /// Throws InvalidArgument for empty or non-finite bounds.
 [[nodiscard]] std::vector<Ray> randomRays(const Box& world_bounds, std::size_t count, std::uint64_t seed);
+
+/// The rays of randomRays(world_bounds, count, seed) a block at a time: the first n calls of
+/// next() give, in order, exactly the rays randomRays gives, whatever the block sizes.
+class RandomRayStream {
+ public:
+  /// Throws InvalidArgument for empty or non-finite bounds.
+  RandomRayStream(const Box& world_bounds, std::uint64_t seed);
+  /// Fills `out` with the next out.size() rays.
+  void next(std::span<Ray> out);
+
+ private:
+  Box bounds_;
+  std::mt19937_64 rng_;
+};
 
 }  // namespace duplex

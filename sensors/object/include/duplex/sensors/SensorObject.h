@@ -27,6 +27,15 @@
 /// the rays entering it (travelling against the outward normal), a two-sided sphere both. A ray
 /// tangent to the sphere (one touching point) does not cross it. Instances must be similarities
 /// (rotation and uniform scale: SensorScene checks), and spheres take no angular bins.
+///
+/// Far-field sensors (SensorShape::FarField) have no geometry and are never placed in a scene
+/// graph: a sensor run bins the direction of every ray that leaves the scene (SensorScene.h). Bins
+/// form an IES type C grid of nx = n_c C-planes times ny = n_gamma vertical angles, bin index
+/// ic * n_gamma + ig (gamma fastest), in the sensor's frame: C = atan2(y, x) from local +x towards
+/// +y, gamma the angle from local -z (the nadir). The grid's angles are C_c = c 360 / n_c and
+/// gamma_g = g 180 / (n_gamma - 1), 0 and 180 included; each bin is the cell around its angles,
+/// [C_c - dC/2, C_c + dC/2) x [gamma_g - dg/2, gamma_g + dg/2) clipped to [0, 180] (the cells at
+/// gamma 0 and 180 are polar caps of half height), an angle on an inner edge in the cell above it.
 
 #include "duplex/accel/Object.h"
 
@@ -42,7 +51,8 @@ namespace duplex {
 enum class SensorShape : std::uint8_t {
   Rectangle,  ///< w x h rectangle in the plane z = 0
   Disk,       ///< disk of diameter w = h in the plane z = 0
-  Sphere      ///< sphere of diameter w = h, bins by outward normal
+  Sphere,     ///< sphere of diameter w = h, bins by outward normal
+  FarField    ///< directions of the rays leaving the scene, on a C-gamma grid (never in a scene graph)
 };
 
 /// What a sensor looks like. Lengths in object-space units.
@@ -50,8 +60,8 @@ struct SensorSpec {
   SensorShape shape = SensorShape::Rectangle;  ///< rectangle, disk or sphere
   double width = 1.0;                          ///< along x (a disk's or sphere's diameter)
   double height = 1.0;                         ///< along y (a disk or sphere: equal to width)
-  std::uint32_t nx = 1;                        ///< bins along x (a sphere: azimuth steps), >= 1
-  std::uint32_t ny = 1;                        ///< bins along y (a sphere: steps of n.z), >= 1
+  std::uint32_t nx = 1;   ///< bins along x (a sphere: azimuth steps; far field: C-planes n_c), >= 1
+  std::uint32_t ny = 1;   ///< bins along y (a sphere: steps of n.z; far field: vertical angles n_gamma, >= 2), >= 1
   bool two_sided = true;  ///< records rays arriving at both faces (else only the front face, travelling towards -z)
   /// Optional angular bins of the incoming direction (per sensor, not per spatial bin): 0 = none.
   /// theta: the angle between the incoming direction (towards where the light came from) and the
@@ -89,7 +99,8 @@ class SensorObject final : public Object {
   /// Number of spatial bins: nx * ny.
   [[nodiscard]] std::uint32_t binCount() const { return spec_.nx * spec_.ny; }
   /// Object-space area of bin `bin` that belongs to the sensor (for a disk, the exact area of the
-  /// bin's square inside the circle; zero for bins outside it). Precondition: bin < binCount()
+  /// bin's square inside the circle; zero for bins outside it; a far-field sensor: the cell's
+  /// solid angle in sr, dC (cos gamma0 - cos gamma1)). Precondition: bin < binCount()
   /// (not checked: used per deposit).
   [[nodiscard]] double binArea(std::uint32_t bin) const { return bin_area_[bin]; }
   /// Angular bin of an incoming direction given by the cosine of its angle to the crossed face's
@@ -123,6 +134,13 @@ class SensorObject final : public Object {
   [[nodiscard]] std::uint32_t binAt(double x, double y) const;
   /// Sphere sensors: the bin of a point with outward unit normal n (object space).
   [[nodiscard]] std::uint32_t sphereBinAt(const glm::dvec3& n) const;
+  /// Far-field sensors: the bin of direction `d` (the sensor's frame, any length > 0; see the file
+  /// comment for the grid); kInvalidId for a zero or non-finite vector.
+  [[nodiscard]] std::uint32_t farFieldBinAt(const glm::dvec3& d) const;
+  /// Far-field sensors: the C angle (degrees) of C-plane `ic`, ic * 360 / n_c.
+  [[nodiscard]] double farFieldC(std::uint32_t ic) const { return ic * 360.0 / spec_.nx; }
+  /// Far-field sensors: the vertical angle (degrees from the nadir) of row `ig`, ig * 180 / (n_gamma - 1).
+  [[nodiscard]] double farFieldGamma(std::uint32_t ig) const { return ig * 180.0 / (spec_.ny - 1); }
 
  private:
   SensorSpec spec_;

@@ -26,9 +26,11 @@ void registerSensorTypes(ObjectTypeRegistry& registry);
 
 /// Reads the shape keys of a sensor description at ctx.pointer ("shape", "size", "bins",
 /// "two_sided", "angular_bins"); `extra_keys` are further keys the caller reads itself (strict
-/// mode refuses others).
+/// mode refuses others). `allow_far_field`: also "shape": "farfield" with "bins": [n_c, n_gamma]
+/// and no size (the top-level "sensors" list; an object entry refuses it, naming the list).
 /// Errors throw FileError naming the file and the JSON pointer.
 [[nodiscard]] SensorSpec readSensorSpec(const nlohmann::json& spec, const ObjectSpecContext& ctx,
-                                        std::initializer_list<std::string_view> extra_keys = {});
+                                        std::initializer_list<std::string_view> extra_keys = {},
+                                        bool allow_far_field = false);
 
 }  // namespace duplex

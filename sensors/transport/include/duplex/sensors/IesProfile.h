@@ -1,7 +1,8 @@
 #pragma once
 /// \file IesProfile.h
 /// A goniometric intensity table read from an IES LM-63 photometric file (the 1986, 1991, 1995,
-/// 2002 and 2019 layouts), for point lights whose emission is not isotropic.
+/// 2002 and 2019 layouts), for point lights whose emission is not isotropic; and the writer of
+/// LM-63-2002 files (far-field sensors' measured tables).
 ///
 /// Model: type C photometry. A direction of the luminaire's frame is given by the vertical angle
 /// gamma from the nadir (gamma = 0 looks down the luminaire's -z axis, 180 degrees up +z) and the
@@ -24,6 +25,7 @@
 #include <map>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace duplex {
@@ -75,6 +77,11 @@ class IesProfile {
 
   /// Tabulated horizontal angles in degrees after unfolding (0 ... 360).
   [[nodiscard]] const std::vector<double>& horizontalAngles() const { return horizontal_deg_; }
+  /// Tabulated vertical angles in degrees (as in the file).
+  [[nodiscard]] const std::vector<double>& verticalAngles() const { return vertical_deg_; }
+  /// The unfolded table: [h * verticalAngles().size() + v] over horizontalAngles(), in the file's
+  /// units times its multiplier and ballast factor.
+  [[nodiscard]] const std::vector<double>& table() const { return candela_; }
   /// Keywords of the header ("[TEST]" -> "TEST"), [MORE] lines appended with a newline.
   [[nodiscard]] const std::map<std::string, std::string>& keywords() const { return keywords_; }
   /// The file's TILT line (recorded; tilt factors are not applied).
@@ -103,5 +110,29 @@ class IesProfile {
   std::vector<double> cell_cdf_;  // cumulative cell integrals, cell = h * (nv - 1) + v
   double total_ = 0.0;
 };
+
+/// A type C intensity table to write as an IES LM-63-2002 file (writeIes).
+struct IesTable {
+  /// Vertical angles gamma (degrees from the nadir, increasing; type C: from 0 or 90 to 90 or 180).
+  std::vector<double> vertical_deg;
+  /// Horizontal angles C (degrees, increasing): one (rotationally symmetric), or 0 ... 90, 180 or
+  /// 360 (a full table ends with 360, repeating 0).
+  std::vector<double> horizontal_deg;
+  std::vector<double> values;  ///< [h * vertical_deg.size() + v], >= 0 (candela, or W/sr: say so in `keywords`)
+  /// Header keywords in order, written "[KEY] value" ("TEST", "MANUFAC", ...; a value with newlines
+  /// continues on [MORE] lines). The LM-63-2002 required keywords missing here are written empty.
+  std::vector<std::pair<std::string, std::string>> keywords;
+  double lumens_per_lamp = -1.0;  ///< -1: absolute photometry (the values are the luminaire's own)
+};
+
+/// The LM-63-2002 text of `table`: "IESNA:LM-63-2002", the keywords, TILT=NONE, one lamp,
+/// multiplier 1, type C, metres, no luminous opening, then the angles and values, shortest
+/// round-trip decimal forms (IesProfile::parse reads the same numbers back). Throws
+/// InvalidArgument for a table IesProfile::fromTable would refuse, or a keyword with ']' or a
+/// line break in its name.
+[[nodiscard]] std::string formatIes(const IesTable& table);
+/// Writes formatIes(table) to `file` (through a temporary file renamed over it). Throws FileError
+/// naming the file, InvalidArgument as formatIes.
+void writeIes(const std::filesystem::path& file, const IesTable& table);
 
 }  // namespace duplex

@@ -3,9 +3,11 @@
 /// Light sources of a sensor run, each with a total power in watts (radiometric; in spectral scenes
 /// shared among the bands by `spectrum`).
 /// Positions and directions are in world space (scene units; irradiance is reported per square
-/// scene unit, W/m^2 when the scene is in metres).
+/// scene unit, W/m^2 when the scene is in metres), or, for a light placed at a scene-graph node
+/// (Light::node), in that node's local space: the scene places it (placeLight) at every commit.
 
 #include "duplex/accel/Affine.h"
+#include "duplex/scenegraph/NodeId.h"
 #include "duplex/sensors/IesProfile.h"
 
 #include <glm/vec3.hpp>
@@ -45,6 +47,10 @@ struct Light {
   /// Spectral scenes: relative power per band (>= 0, not all 0; normalised by the scene); empty:
   /// the power is shared equally among the bands. Its length must be the scene's band count.
   std::vector<double> spectrum;
+  /// The scene-graph node the light is attached to (kInvalidNode: none, world space). Its position,
+  /// direction and transform are then in the node's local space and follow the node's world
+  /// transform (moves, rotations, scales, re-parenting); the light is off while the node is hidden.
+  NodeId node = kInvalidNode;
 
   /// Throws InvalidArgument naming the light for non-finite values, power <= 0, a zero direction,
   /// a cone angle outside (0, pi], or a non-positive size or radius, or a singular transform; a
@@ -55,6 +61,15 @@ struct Light {
   /// `dir_ws` (any length); 0 outside a spot's cone. For analytic checks.
   [[nodiscard]] double intensity(const glm::dvec3& dir_ws) const;
 };
+
+/// `light` (its geometry in a node's local space) placed by that node's world transform
+/// `world_from_node`: positions map as points, directions as vectors, an area light's rectangle
+/// through the whole transform (its size scales with it); a directional light's radius and a
+/// goniometric light's orientation take the similarity's scale out (a goniometric light keeps its
+/// table's solid angles). Throws InvalidArgument naming the light when a directional or
+/// goniometric light's node transform is not a similarity (rotation and uniform scale), or the
+/// placed light is invalid (validate()). The result's node is kept.
+[[nodiscard]] Light placeLight(const Light& light, const Affine& world_from_node);
 
 /// One emitted ray: world-space origin and unit direction.
 struct EmittedRay {

@@ -11,6 +11,7 @@
 /// the same way.
 
 #include "duplex/scenegraph/NodeId.h"
+#include "duplex/sensors/IesProfile.h"
 #include "duplex/sensors/SensorObject.h"
 
 #include <cstdint>
@@ -23,7 +24,7 @@ namespace duplex {
 struct SensorResult {
   std::string name;                            ///< the sensor's name (its instance node's)
   NodeId node = kInvalidNode;                  ///< the sensor's instance node
-  SensorShape shape = SensorShape::Rectangle;  ///< rectangle, disk or sphere
+  SensorShape shape = SensorShape::Rectangle;  ///< rectangle, disk, sphere or far field
   /// \var nx
   /// Bins along local x (spheres: azimuth steps).
   /// \var ny
@@ -31,16 +32,21 @@ struct SensorResult {
   std::uint32_t nx = 0, ny = 0;
   bool two_sided = true;  ///< records both faces
   /// Row-major nx * ny arrays, bin (0, 0) at local (-w/2, -h/2), x fastest.
-  std::vector<double> flux_w;            ///< W
-  std::vector<double> flux_stderr_w;     ///< standard error of flux_w
-  std::vector<double> irradiance_w_m2;   ///< W per square scene unit (0 for bins of zero area)
-  std::vector<double> stderr_w_m2;       ///< standard error of irradiance_w_m2
-  std::vector<double> bin_area_m2;       ///< world area of each bin
-  std::vector<std::uint64_t> ray_count;  ///< emitted rays whose path crossed the bin
-  double total_flux_w = 0.0;             ///< flux over all bins, W
-  double total_flux_stderr_w = 0.0;      ///< standard error of total_flux_w, W
-  double relative_stderr = 0.0;          ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
-  double efficiency = 0.0;               ///< total_flux_w / emitted power
+  std::vector<double> flux_w;           ///< W
+  std::vector<double> flux_stderr_w;    ///< standard error of flux_w
+  std::vector<double> irradiance_w_m2;  ///< W per square scene unit (0 for bins of zero area)
+  std::vector<double> stderr_w_m2;      ///< standard error of irradiance_w_m2
+  std::vector<double> bin_area_m2;      ///< world area of each bin
+  std::vector<std::uint64_t>
+      ray_count;  ///< emitted rays whose path crossed the bin (far field: escaped through the cell)
+  // Far-field sensors (shape FarField; row-major ic * n_gamma + ig, nx = n_c, ny = n_gamma): the
+  // arrays hold per direction cell its flux, the cell's solid angle (sr) in bin_area_m2, and the
+  // radiant intensity I = flux / solid angle (W/sr) and its standard error in irradiance_w_m2 and
+  // stderr_w_m2 (per-band arrays likewise): flux per unit of the bin's measure, as for areas.
+  double total_flux_w = 0.0;         ///< flux over all bins, W
+  double total_flux_stderr_w = 0.0;  ///< standard error of total_flux_w, W
+  double relative_stderr = 0.0;      ///< total_flux_stderr_w / total_flux_w (infinity when nothing arrived)
+  double efficiency = 0.0;           ///< total_flux_w / emitted power
   /// Angular bins of the incoming direction (SensorSpec::theta_bins; empty without): index
   /// iphi * theta_bins + itheta. Flux (W) that arrived from directions in the bin, its standard
   /// error, the bin's solid angle on one face, and the emitted rays that crossed with such a direction.
@@ -86,5 +92,12 @@ struct SensorRunResults {
   std::vector<double> band_emitted_w;  ///< per band: the lights' power in it (exact, from their spectra)
   std::vector<SensorResult> sensors;   ///< in the scene's sensor order
 };
+
+/// The IES type C table of a far-field sensor's result (shape FarField): vertical angles gamma_g =
+/// g 180 / (n_gamma - 1), horizontal angles C_c = c 360 / n_c and 360 repeating C = 0 (one C-plane:
+/// just 0, rotational symmetry), values the measured intensity (W/sr, said by the keywords
+/// "_UNITS" and "OTHER", with the rays and the seed), absolute photometry. Throws InvalidArgument
+/// for a result of another shape.
+[[nodiscard]] IesTable farFieldIesTable(const SensorResult& far_field, std::uint64_t rays, std::uint64_t seed);
 
 }  // namespace duplex

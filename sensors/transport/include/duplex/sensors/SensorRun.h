@@ -116,8 +116,12 @@ struct SensorBatchTally {
 /// A light-tracing run over a SensorScene (see the file comment for the transport, determinism and threading).
 class SensorRun {
  public:
-  /// The scene must outlive the run and stay unchanged. Throws InvalidArgument for a bad config
-  /// (chunk_rays or batch_rays 0, max_depth > 1000, roulette_threshold outside [0, 1)).
+  /// The scene must outlive the run. The run takes the scene as of its graph's last commit (the
+  /// sensors, lights and materials SensorScene derives from it); once the graph is committed again
+  /// the run refuses to go on (runUntil, results, relativeStderr, saveState and loadState throw
+  /// InvalidArgument): make a new run. Throws InvalidArgument for a bad config (chunk_rays or
+  /// batch_rays 0, max_depth > 1000, roulette_threshold outside [0, 1)), and as the scene's
+  /// accessors for a committed graph that makes no valid scene.
   SensorRun(const SensorScene& scene, const SensorRunConfig& config = {});
   ~SensorRun();
   SensorRun(const SensorRun&) = delete;
@@ -198,7 +202,11 @@ class SensorRun {
   // life, and hashing every mesh and grid again at each periodic checkpoint would stall the workers.
   [[nodiscard]] std::uint64_t computeFingerprint() const;
 
+  // Throws InvalidArgument when the scene's graph was committed since the run was made.
+  void checkScene() const;
+
   const SensorScene& scene_;
+  std::uint64_t revision_ = 0;  // the graph's revision (its commit) that the run traces
   mutable std::once_flag fingerprint_once_;
   mutable std::uint64_t fingerprint_ = 0;
   SensorRunConfig config_;

@@ -8,7 +8,14 @@
 /// becomes an object of type "sensor" named `sensors/<name>` with one instance under the root named
 /// `<name>`; in duplex-scene-v1 files sensor objects may also be instanced in the node tree like any
 /// object. Every visible instance of a SensorObject is a sensor of the run, named after its
-/// instance node.
+/// instance node. Far-field sensors ("shape": "farfield") are not in the graph: they follow the
+/// scene's sensors in sensors(), with node kInvalidNode.
+///
+/// Scene edits: everything that depends on the graph (the sensors, their world frames and bin
+/// areas, the materials of the instances, the scattering media, and the lights placed at nodes) is
+/// derived from the graph's last commit, again after every commit that applied edits: each
+/// accessor describes the committed graph as it is now, and a SensorRun takes the scene as it is
+/// when the run is made (a run refuses to go on once the graph was committed again).
 
 #include "duplex/objects/VolumeObject.h"
 #include "duplex/scenegraph/SceneDocument.h"
@@ -32,7 +39,8 @@ struct SensorInstance {
   std::string name;                            ///< the instance node's name (unique among the scene's sensors)
   NodeId node = kInvalidNode;                  ///< the sensor's instance node
   std::shared_ptr<const SensorObject> object;  ///< the sensor object (object-space geometry and bins)
-  Affine world_from_object;                    ///< the instance's world transform when the scene was made
+  /// The instance's world transform as of the graph's last commit (a far-field sensor: its rotation).
+  Affine world_from_object;
   /// World area per object-space area of the sensor plane: |cross(L e_x, L e_y)| for the linear
   /// part L of world_from_object.
   double area_scale = 1.0;
@@ -50,6 +58,14 @@ struct SensorInstance {
 
   /// World-space area (square scene units) of bin `bin`.
   [[nodiscard]] double binAreaWorld(std::uint32_t bin) const { return object->binArea(bin) * area_scale; }
+};
+
+/// A far-field sensor of a scene: not in the graph (it records the rays leaving the scene), oriented
+/// by a rotation.
+struct FarFieldSensor {
+  std::string name;                            ///< unique among the scene's sensors
+  std::shared_ptr<const SensorObject> object;  ///< a SensorShape::FarField object (its grid)
+  Affine world_from_sensor;                    ///< a rotation (no translation): the sensor's frame in world space
 };
 
 /// A fog instance of a scene whose media scatter (SensorScene::scatteringMedia()): light tracing
@@ -83,9 +99,13 @@ class SensorScene {
                           const ObjectTypeRegistry& registry = sensorTypeRegistry());
 
   /// A scene over a committed `graph` (kept by reference: it must outlive this scene and must not
-  /// be edited while a run traces it). `materials` is indexed by ObjectId; objects beyond its end
-  /// are absorbers. `bands` names the spectral bands (empty: one radiometric band, no per-band
-  /// output). Validates the lights (InvalidArgument naming the light). A scene without lights can
+  /// be edited while a run traces it; edits committed between runs are followed, see the file
+  /// comment). `materials` is indexed by ObjectId; objects beyond its end are absorbers (also
+  /// objects added to the library later). `bands` names the spectral bands (empty: one radiometric
+  /// band, no per-band output). Lights whose Light::node is set are placed at that node (their
+  /// geometry is in its local space). `far_field` lists far-field sensors (SensorShape::FarField
+  /// objects with the rotation that orients them and their names), outside the graph. Validates
+  /// the lights (InvalidArgument naming the light). A scene without lights can
   /// be made (for picking or inspection), but SensorRun::run refuses it. Throws InvalidArgument
   /// naming the object or light for a reflectance or albedo outside [0, 1] or NaN, an index of
   /// refraction that is not finite and positive, a "medium" material on an object that is not a
@@ -93,29 +113,40 @@ class SensorScene {
   /// a scene whose media scatter, per-band values whose count is not the band count, or empty or
   /// repeated band names.
   SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
-              std::vector<std::string> bands = {});
+              std::vector<std::string> bands = {}, std::vector<FarFieldSensor> far_field = {});
   /// Moves everything (the graph stays where it is: a loaded scene owns it through its document).
   SensorScene(SensorScene&&) noexcept;
   /// Moves everything, like the move constructor.
   SensorScene& operator=(SensorScene&&) noexcept;
   ~SensorScene();
 
-  /// The lights, validated; positions and directions in world space.
-  [[nodiscard]] const std::vector<Light>& lights() const { return lights_; }
+  // The accessors below describe the graph as of its last commit (re-derived on the first call
+  // after a commit that applied edits, SceneGraph::revision); the references they return stay
+  // valid until then. They throw InvalidArgument, naming the sensor, light or object, when the
+  // committed graph makes an invalid scene (a sphere sensor scaled unevenly, a light's node
+  // removed, ...), or has uncommitted edits while it must be derived again.
+
+  /// The lights that shine (those at hidden nodes are off), validated; positions and directions in
+  /// world space.
+  [[nodiscard]] const std::vector<Light>& lights() const { return current().lights; }
   /// Sum of the lights' power (W).
-  [[nodiscard]] double totalPower() const { return total_power_; }
-  /// Sensor instances, sorted by node id.
-  [[nodiscard]] const std::vector<SensorInstance>& sensors() const { return sensors_; }
+  [[nodiscard]] double totalPower() const { return current().total_power; }
+  /// Sensor instances, sorted by node id, then the far-field sensors in their given order.
+  [[nodiscard]] const std::vector<SensorInstance>& sensors() const { return current().sensors; }
   /// Index into sensors() of the sensor with this name, or -1.
   [[nodiscard]] int findSensor(const std::string& name) const;
   /// Total number of bins over all sensors.
-  [[nodiscard]] std::uint32_t binCount() const { return bin_count_; }
+  [[nodiscard]] std::uint32_t binCount() const { return current().bin_count; }
   /// Total number of angular bins over all sensors.
-  [[nodiscard]] std::uint32_t angleBinCount() const { return angle_bin_count_; }
+  [[nodiscard]] std::uint32_t angleBinCount() const { return current().angle_bin_count; }
   /// Material of instance `node` (absorber when none was given).
   [[nodiscard]] const Material& materialOf(NodeId node) const {
-    return node < material_of_node_.size() ? material_of_node_[node] : kAbsorber;
+    const Derived& d = current();
+    return node < d.material_of_node.size() ? d.material_of_node[node] : kAbsorber;
   }
+  /// The graph's revision (SceneGraph::revision: its commits that applied edits) that the accessors
+  /// describe, derived now if needed.
+  [[nodiscard]] std::uint64_t revision() const { return current().revision; }
   /// Spectral band names (empty: a single radiometric band).
   [[nodiscard]] const std::vector<std::string>& bands() const { return bands_; }
   /// Number of bands transported (1 when the scene has no "bands").
@@ -124,37 +155,50 @@ class SensorScene {
   }
   /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1); `light`
   /// must be < lights().size() (not checked: the run's hot loop).
-  [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return band_cdf_[light]; }
+  [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return current().band_cdf[light]; }
   /// Whether `linear` is a rotation (or reflection) times a uniform scale, to relative 1e-9: the
   /// transforms a sphere sensor accepts (its bins keep equal areas only under these).
   [[nodiscard]] static bool isSimilarity(const glm::dmat3& linear);
   /// Whether some fog scatters (has a "medium" material); then every fog instance is listed in
   /// scatteringMedia() and transported by free flights, else fogs only attenuate.
-  [[nodiscard]] bool scatters() const { return !media_.empty(); }
+  [[nodiscard]] bool scatters() const { return !current().media.empty(); }
   /// The fog instances transported by free flights (empty unless scatters()).
-  [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return media_; }
+  [[nodiscard]] const std::vector<MediumInstance>& scatteringMedia() const { return current().media; }
   /// The tracer over the graph.
   [[nodiscard]] const SceneTracer& tracer() const { return *tracer_; }
   /// The graph (owned by the document of a loaded scene, else the caller's).
   [[nodiscard]] const SceneGraph& graph() const { return *graph_; }
   /// The document when the scene was loaded from a file, else nullptr.
   [[nodiscard]] const SceneDocument* document() const { return doc_.get(); }
+  /// The document, to apply its timed edits (applyEditsUntil) before a run; nullptr when the scene
+  /// was not loaded from a file.
+  [[nodiscard]] SceneDocument* document() { return doc_.get(); }
 
  private:
+  // What the scene derives from one commit of the graph.
+  struct Derived {
+    std::uint64_t revision = 0;
+    std::vector<Light> lights;
+    double total_power = 0.0;
+    std::vector<std::vector<double>> band_cdf;
+    std::vector<SensorInstance> sensors;
+    std::uint32_t bin_count = 0;
+    std::uint32_t angle_bin_count = 0;
+    std::vector<Material> material_of_node;
+    std::vector<MediumInstance> media;
+  };
+  struct Cache;
   static inline const Material kAbsorber{};
-  void prepare(std::vector<Material> materials);
+  [[nodiscard]] const Derived& current() const;
+  [[nodiscard]] std::unique_ptr<Derived> derive() const;
   std::unique_ptr<SceneDocument> doc_;
   SceneGraph* graph_ = nullptr;
   std::unique_ptr<SceneTracer> tracer_;
-  std::vector<Light> lights_;
-  double total_power_ = 0.0;
-  std::vector<SensorInstance> sensors_;
-  std::uint32_t bin_count_ = 0;
-  std::uint32_t angle_bin_count_ = 0;
-  std::vector<Material> material_of_node_;
+  std::vector<Light> given_lights_;  // as given (at a node: in its local space)
+  std::vector<Material> materials_;  // by object id
   std::vector<std::string> bands_;
-  std::vector<std::vector<double>> band_cdf_;
-  std::vector<MediumInstance> media_;
+  std::vector<FarFieldSensor> far_field_;
+  std::unique_ptr<Cache> cache_;  // the Derived of the last commit (a mutex guards its renewal)
 };
 
 }  // namespace duplex
