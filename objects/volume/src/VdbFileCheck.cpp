@@ -336,7 +336,8 @@ class FloatTreeWalk {
            " bytes of values expected)");
     };
     if (chunk <= 0) {
-      if (chunk != -bytes) bad("declares " + std::to_string(-chunk) + " raw bytes");
+      // The raw byte count, negated without overflow (INT64_MIN is no length at all).
+      if (chunk != -bytes) bad("declares " + std::to_string(0 - static_cast<std::uint64_t>(chunk)) + " raw bytes");
       r_.skip(bytes, "raw values");
       return;
     }
