@@ -117,24 +117,6 @@ class Lines {
   std::size_t number_ = 0;
 };
 
-// One face of `corners` (vertex indices, already checked against the vertex count): triangles
-// (c0, ck, ck+1) in order, as every reader numbers them.
-void addFace(ParsedMesh& mesh, const std::vector<std::uint32_t>& corners) {
-  const std::size_t n = corners.size();
-  if (n > 3) ++mesh.polygons_triangulated;
-  bool repeated = false;
-  if (n <= 8) {
-    for (std::size_t i = 0; i < n && !repeated; ++i)
-      for (std::size_t j = i + 1; j < n && !repeated; ++j) repeated = corners[i] == corners[j];
-  } else {
-    std::vector<std::uint32_t> sorted(corners);
-    std::sort(sorted.begin(), sorted.end());
-    repeated = std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end();
-  }
-  if (repeated) ++mesh.repeated_corner_faces;
-  for (std::size_t k = 1; k + 1 < n; ++k) mesh.triangles.push_back({corners[0], corners[k], corners[k + 1]});
-}
-
 // ---------------------------------------------------------------------------------------------
 // OBJ: "v x y z [w | r g b]" and "f i[/t][/n] ..." (1-based; negative indices count back from the
 // vertices read so far). Forward references are allowed and checked once the file is read.
@@ -889,6 +871,22 @@ ParsedMesh readStl(std::string_view bytes, const std::string& file) {
 }
 
 }  // namespace
+
+void addFace(ParsedMesh& mesh, const std::vector<std::uint32_t>& corners) {
+  const std::size_t n = corners.size();
+  if (n > 3) ++mesh.polygons_triangulated;
+  bool repeated = false;
+  if (n <= 8) {
+    for (std::size_t i = 0; i < n && !repeated; ++i)
+      for (std::size_t j = i + 1; j < n && !repeated; ++j) repeated = corners[i] == corners[j];
+  } else {
+    std::vector<std::uint32_t> sorted(corners);
+    std::sort(sorted.begin(), sorted.end());
+    repeated = std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end();
+  }
+  if (repeated) ++mesh.repeated_corner_faces;
+  for (std::size_t k = 1; k + 1 < n; ++k) mesh.triangles.push_back({corners[0], corners[k], corners[k + 1]});
+}
 
 ParsedMesh read(Format format, std::string_view bytes, const std::string& file) {
   switch (format) {

@@ -24,6 +24,10 @@ struct ParsedMesh {
   std::size_t ignored_statements = 0;     ///< OBJ statements not used (free-form geometry, unknown keywords)
 };
 
+/// Appends one face of `corners` (vertex indices, already checked against the vertex count) as
+/// the fan (c0, ck, ck+1), counting polygons and repeated corners: how every reader numbers faces.
+void addFace(ParsedMesh& mesh, const std::vector<std::uint32_t>& corners);
+
 /// The formats, as loadMesh() picks them from the extension.
 enum class Format { Obj, Ply, Off, Stl, StlAscii, StlBinary };
 

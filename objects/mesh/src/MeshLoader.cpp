@@ -115,9 +115,7 @@ mesh_files::ParsedMesh readOm(const std::filesystem::path& path, MeshLoadReport&
   for (const auto fh : mesh.faces()) {
     corners.clear();
     for (const auto vh : mesh.fv_range(fh)) corners.push_back(static_cast<std::uint32_t>(vh.idx()));
-    if (corners.size() > 3) ++parsed.polygons_triangulated;
-    for (std::size_t k = 1; k + 1 < corners.size(); ++k)
-      parsed.triangles.push_back({corners[0], corners[k], corners[k + 1]});
+    mesh_files::addFace(parsed, corners);
   }
   return parsed;
 }
