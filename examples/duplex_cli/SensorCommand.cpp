@@ -3,6 +3,7 @@
 #include "LoadScene.h"
 #include "SensorExr.h"
 #include "SensorImage.h"
+#include "SensorOutput.h"
 #include "SensorRanks.h"
 #include "WorkerThreads.h"
 
@@ -36,13 +37,6 @@
 namespace duplex::cli {
 
 namespace {
-
-std::string fileName(const std::string& name) {
-  std::string s = name;
-  for (char& c : s)
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) c = '_';
-  return s.empty() ? "_" : s;
-}
 
 // What a SIGINT / SIGTERM stops: the scene load (its cancel token) and then the run. Lock-free
 // atomics only: the handler may run on any thread.
@@ -105,7 +99,7 @@ class StopSignals {
 void checkOutputNames(const SensorScene& scene, const std::filesystem::path& scene_file) {
   std::map<std::string, std::string> owner;
   for (const SensorInstance& s : scene.sensors()) {
-    const std::string base = fileName(s.name);
+    const std::string base = sensorFileStem(s.name);
     // NAME_MAX of Linux file systems, for the longest of the files written (".json", ".png", ...).
     if (base.size() + 5 > 255)
       throw InvalidArgument(scene_file.string() + ": sensor name '" + s.name.substr(0, 40) + "...' (" +
@@ -210,7 +204,7 @@ void putBandTotals(nlohmann::ordered_json& j, const SensorResult& s, const Senso
 // .ies file's keywords say.
 void writeFarFieldFiles(const std::filesystem::path& dir, const SensorResult& s, const SensorInstance& inst,
                         const SensorRunResults& r) {
-  const std::string base = fileName(s.name);
+  const std::string base = sensorFileStem(s.name);
   const SensorObject& object = *inst.object;
   const std::uint32_t nc = s.nx, ng = s.ny;
   std::vector<double> c_deg, gamma_deg;
@@ -286,7 +280,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
     writeFarFieldFiles(dir, s, inst, r);
     return;
   }
-  const std::string base = fileName(s.name);
+  const std::string base = sensorFileStem(s.name);
   const SensorSpec& spec = inst.object->spec();
   nlohmann::ordered_json j;
   j["name"] = s.name;
@@ -398,6 +392,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   std::optional<SensorScene> loaded;
   std::optional<SensorRun> running;
   std::size_t edit_count = 0, edits_applied = 0;
+  std::vector<std::string> stems;  // the sensors' file stems
   const std::filesystem::path state = o.out / "run_state.bin";
   // What may fail on one rank only (its scene, rank 0's state file) fails on every rank together.
   ranks.together([&] {
@@ -432,6 +427,8 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
     if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
     checkOutputNames(scene, o.scene);
+    for (const SensorInstance& s : scene.sensors()) stems.push_back(sensorFileStem(s.name));
+    if (files) checkOutputFolder(o.out, stems, o.resume, o.overwrite);
 
     SensorRunConfig cfg;
     cfg.seed = o.seed;
@@ -536,16 +533,26 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];
-    writeSensorFiles(o.out, s, scene.sensors()[k], r, o.text_map_limit);
     sensors.push_back({{"name", s.name},
-                       {"file", (o.out / (fileName(s.name) + ".json")).string()},
+                       {"file", (o.out / (sensorFileStem(s.name) + ".json")).string()},
                        {"total_flux_w", s.total_flux_w},
                        {"relative_stderr", finiteOrNull(s.relative_stderr)},
                        {"efficiency", s.efficiency}});
   }
   report["sensors"] = sensors;
   if (ranks.shared()) report["mpi"] = ranks.report();
-  writeText(o.out / "run.json", report.dump() + "\n");
+  // All result files or none: written into a staging folder, moved into --out when complete.
+  try {
+    SensorOutputSet output(o.out);
+    for (std::size_t k = 0; k < r.sensors.size(); ++k)
+      writeSensorFiles(output.staging(), r.sensors[k], scene.sensors()[k], r, o.text_map_limit);
+    writeText(output.staging() / "run.json", report.dump() + "\n");
+    output.commit(stems);
+  } catch (const Error& e) {
+    throw FileError(std::string(e.what()) + "; " + o.out.string() +
+                    " keeps the files it held before, and the run is saved in " + state.string() +
+                    " (--resume --rays " + std::to_string(r.rays) + " writes its results)");
+  }
   return report;
 }
 

@@ -11,7 +11,10 @@
 /// DIR/<name>.ies (LM-63-2002, values in W/sr); plus DIR/run_state.bin (the exact
 /// accumulators, for --resume) and DIR/run.json (the report printed on stdout). Characters of a
 /// sensor name other than [A-Za-z0-9._-] become '_' in file names; sensors whose file names would
-/// collide (with each other, or "run" with run.json) are refused before the run.
+/// collide (with each other, or "run" with run.json) are refused before the run. The result files
+/// appear together or not at all (SensorOutputSet): a failure while writing them (a full disk)
+/// leaves DIR's earlier files as they were and the run saved in run_state.bin. A DIR holding an
+/// earlier run's results is refused unless --resume or --overwrite (checkOutputFolder).
 /// SIGINT / SIGTERM stop the run after the chunks in flight: the rays traced so far are saved to
 /// run_state.bin and written out as usual, the report's status is "interrupted", and the process
 /// exits with 128 + the signal (a second signal kills it at once).
@@ -37,7 +40,10 @@ struct SensorOptions {
   int threads = 0;         ///< 0: all hardware threads
   std::uint64_t seed = 1;
   std::filesystem::path out = ".";
-  bool resume = false;        ///< continue from DIR/run_state.bin (same scene and seed) up to `rays`
+  bool resume = false;  ///< continue from DIR/run_state.bin (same scene and seed) up to `rays`
+  /// replace an earlier run's results in DIR; without it (or `resume`) a folder holding run.json,
+  /// run_state.bin or a file of one of the sensors' names is refused before the run
+  bool overwrite = false;
   double target_error = 0.0;  ///< > 0: stop once the target sensor's relative standard error is at most this
   std::string target_sensor;  ///< the sensor of target_error (default: the first)
   // Path limits: SensorRunConfig's fields and defaults (surface interactions; fog collisions; the

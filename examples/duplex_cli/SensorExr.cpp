@@ -1,5 +1,6 @@
 #include "SensorExr.h"
 
+#include <duplex/accel/AtomicFile.h>
 #include <duplex/accel/Error.h>
 
 #ifdef DUPLEX_HAVE_OPENEXR
@@ -7,6 +8,7 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfStringAttribute.h>
 #endif
 
@@ -49,9 +51,19 @@ void writeSensorExr(const std::filesystem::path& path, const std::string& sensor
     const std::size_t xs = sizeof(float), ys = sizeof(float) * nx;
     fb.insert("Y", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(y.data()), xs, ys));
     fb.insert("stderr", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(e.data()), xs, ys));
-    Imf::OutputFile file(path.c_str(), header);
-    file.setFrameBuffer(fb);
-    file.writePixels(static_cast<int>(ny));
+    // Encoded in memory, then written through the atomic path (a full disk is an error naming the
+    // file, never a cut image).
+    Imf::StdOSStream stream;
+    {
+      Imf::OutputFile file(stream, header);
+      file.setFrameBuffer(fb);
+      file.writePixels(static_cast<int>(ny));
+    }
+    const std::string encoded = stream.str();
+    writeFileAtomically(path, {reinterpret_cast<const unsigned char*>(encoded.data()), encoded.size()}, "EXR image",
+                        false);
+  } catch (const FileError&) {
+    throw;
   } catch (const std::exception& ex) {
     // OpenEXR reports I/O failures as Iex exceptions; keep our error type and name the file.
     throw FileError(path.string() + ": cannot write EXR (" + ex.what() + ")");

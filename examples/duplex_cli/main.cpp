@@ -245,8 +245,12 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option(
       "--out", sensor.out,
       "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
-  sensor_cmd->add_flag("--resume", sensor.resume,
-                       "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
+  CLI::Option* resume_opt = sensor_cmd->add_flag(
+      "--resume", sensor.resume, "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
+  sensor_cmd
+      ->add_flag("--overwrite", sensor.overwrite,
+                 "Replace an earlier run's results in DIR (without it, or --resume, such a folder is refused)")
+      ->excludes(resume_opt);
   CLI::Option* target_error_opt =
       sensor_cmd
           ->add_option("--target-error", sensor.target_error,

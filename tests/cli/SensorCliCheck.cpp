@@ -29,6 +29,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <stdexcept>
 #include <sstream>
 #include <string>
@@ -348,7 +349,7 @@ int check(const std::string& duplex, const fs::path& dir) {
     fs::create_directories(dir / "state_dir" / "run_state.bin");
     for (const bool resume : {false, true}) {
       args = sensorArgs(duplex, scene, "100", "1", dir / "state_dir");
-      if (resume) args.push_back("--resume");
+      args.push_back(resume ? "--resume" : "--overwrite");
       const RunResult rd = run(args, dir.string());
       expect(rd.exited && rd.exit_code == 1 && rd.err.find("a directory, not a file") != std::string::npos &&
                  rd.out.empty(),
@@ -538,6 +539,88 @@ void checkFarFieldAndEdits(const std::string& duplex, const fs::path& dir) {
          "--at -1: expected an error naming the option, got " + describe(bad));
 }
 
+// Every file of a folder, name -> bytes.
+std::map<std::string, std::string> folderFiles(const fs::path& dir) {
+  std::map<std::string, std::string> files;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir)) {
+    std::ifstream in(e.path(), std::ios::binary);
+    files[e.path().filename().string()] =
+        std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  return files;
+}
+
+// The output folder: an earlier run's results are refused without --overwrite / --resume and left
+// as they were; --overwrite removes the files of sensors the new run does not have and keeps the
+// user's own files; a failure while writing the results (a full disk, made by a file-size limit
+// that the run state fits under and one result file does not) keeps the earlier files byte for
+// byte, leaves no staging folder, and --resume then writes the run's results.
+void checkOutputFolderRules(const std::string& duplex, const fs::path& dir) {
+  fs::create_directories(dir);
+  const std::string sensors = R"("sensors": [{"name": "big", "shape": "rectangle", "size": [2, 2], "bins": [64, 64]},
+                                             {"name": "small", "shape": "rectangle", "size": [2, 2], "bins": [2, 2]}]})";
+  const std::string light = R"({"format": "scene-json-v1", "objects": [], "instances": [],
+    "lights": [{"type": "point", "position": [0, 0, 1], "power": 5}], )";
+  write(dir / "two.json", light + sensors);
+  write(dir / "one.json",
+        light + R"("sensors": [{"name": "other", "shape": "rectangle", "size": [1, 1], "bins": [3, 3]}]})");
+  const fs::path out = dir / "out";
+  (void)runJson(sensorArgs(duplex, dir / "two.json", "2000", "1", out), dir);
+  write(out / "notes.txt", "the user's own file");
+  const std::map<std::string, std::string> earlier = folderFiles(out);
+
+  // Refused, naming the earlier report and the way out; nothing changed.
+  const RunResult again = run(sensorArgs(duplex, dir / "two.json", "3000", "1", out), dir.string());
+  expect(again.exited && again.exit_code == 1 && again.err.find("run.json") != std::string::npos &&
+             again.err.find("--overwrite") != std::string::npos && again.out.empty(),
+         "a second run into the same --out: " + describe(again) + "\n" + again.err);
+  expect(folderFiles(out) == earlier, "a refused run changed the output folder");
+  std::vector<std::string> both = sensorArgs(duplex, dir / "two.json", "3000", "1", out);
+  both.insert(both.end(), {"--overwrite", "--resume"});
+  const RunResult conflict = run(both, dir.string());
+  expect(conflict.exited && conflict.exit_code != 0 && folderFiles(out) == earlier,
+         "--overwrite with --resume accepted: " + describe(conflict));
+  // A folder holding only other files (here the scenes) is not refused.
+  fs::create_directories(dir / "plain");
+  write(dir / "plain" / "scene.json", light + sensors);
+  (void)runJson(sensorArgs(duplex, dir / "plain" / "scene.json", "1000", "1", dir / "plain"), dir);
+
+  // A full disk while the results are written: the earlier files stay, the run is saved.
+  std::vector<std::string> limited = {"/bin/sh", "-c", "ulimit -f 500 && exec \"$0\" \"$@\""};
+  const std::vector<std::string> big = sensorArgs(duplex, dir / "two.json", "200000", "1", out);
+  limited.insert(limited.end(), big.begin(), big.end());
+  limited.push_back("--overwrite");
+  const RunResult full = run(limited, dir.string());
+  expect(full.exited && full.exit_code == 1 && full.err.find("keeps the files it held before") != std::string::npos &&
+             full.err.find("--resume") != std::string::npos,
+         "results on a full disk: " + describe(full) + "\n" + full.err);
+  std::map<std::string, std::string> after = folderFiles(out);
+  expect(!after.count(".duplex-sensor-staging"), "a failed write left the staging folder");
+  after.erase("run_state.bin");
+  std::map<std::string, std::string> earlier_results = earlier;
+  earlier_results.erase("run_state.bin");
+  expect(after == earlier_results, "a failed write of the results changed the earlier results");
+  std::vector<std::string> resume = sensorArgs(duplex, dir / "two.json", "200000", "1", out);
+  resume.push_back("--resume");
+  const nlohmann::json resumed = runJson(resume, dir);
+  expect(resumed["resumed_from"] == 200000 && resumed["rays"] == 200000,
+         "--resume after the failed write: " + resumed.dump());
+  (void)runJson(sensorArgs(duplex, dir / "two.json", "200000", "1", dir / "direct"), dir);
+  for (const char* name : {"big.json", "small.json", "big.csv"})
+    expect(folderFiles(out)[name] == folderFiles(dir / "direct")[name],
+           std::string(name) + " written by --resume differs from the uninterrupted run's");
+
+  // --overwrite with other sensors: the earlier run's sensor files go, the user's file stays.
+  std::vector<std::string> other = sensorArgs(duplex, dir / "one.json", "1000", "1", out);
+  other.push_back("--overwrite");
+  (void)runJson(other, dir);
+  const std::map<std::string, std::string> now = folderFiles(out);
+  for (const char* gone : {"big.json", "big.csv", "big.png", "small.json", "small.csv"})
+    expect(!now.count(gone), std::string("--overwrite left the earlier run's ") + gone);
+  expect(now.count("other.json") && now.count("run.json") && now.at("notes.txt") == "the user's own file",
+         "--overwrite: expected other.json, run.json and the user's notes.txt");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -549,6 +632,7 @@ int main(int argc, char** argv) {
     const int status = check(argv[1], argv[2]);  // clears DIR first
     checkBandsAndAngles(argv[1], fs::path(argv[2]) / "spectral");
     checkFarFieldAndEdits(argv[1], fs::path(argv[2]) / "farfield");
+    checkOutputFolderRules(argv[1], fs::path(argv[2]) / "output");
     return status;
   });
 }

@@ -112,6 +112,7 @@ void expectFails(const std::vector<std::string>& argv, const fs::path& dir, cons
 }
 
 int check(const std::string& duplex, const fs::path& dir) {
+  fs::remove_all(dir);
   fs::create_directories(dir);
   openvdb::initialize();
   // Fixture: a fog box (tiles where whole nodes fit, voxels elsewhere) and a level-set sphere.
@@ -253,10 +254,12 @@ int check(const std::string& duplex, const fs::path& dir) {
       "sensors": [{"name": "wall", "shape": "rectangle", "size": [20, 20], "bins": [2, 2],
                    "transform": [0,0,1,3, 0,1,0,1.15, -1,0,0,1.15]}]})";
   };
+  // Each run replaces the previous one's results (--overwrite): only the reports are compared.
   auto sensorRun = [&](const fs::path& scene, const std::vector<std::string>& extra) {
     std::vector<std::string> argv = {duplex,       "sensor", "--scene",   scene.string(),
                                      "--rays",     "4000",   "--threads", "1",
-                                     "--progress", "none",   "--out",     (dir / "sensor_out").string()};
+                                     "--progress", "none",   "--out",     (dir / "sensor_out").string(),
+                                     "--overwrite"};
     argv.insert(argv.end(), extra.begin(), extra.end());
     return nlohmann::json::parse(runOk(argv, dir).out);
   };
