@@ -680,7 +680,10 @@ class Builder {
         ch.leaf = wantsLeaf(ch.range, ch.split);
         continue;
       }
-      const auto& [lo, hi] = sides;
+      // Named references, not a structured binding: lambdas may capture these (clang before 16
+      // cannot capture bindings).
+      const auto& lo = sides.first;
+      const auto& hi = sides.second;
       Split ls, hs;
       if (c_.parallel_threshold > 0 && std::min(lo.size(), hi.size()) >= c_.parallel_threshold) {
         // The splits inside a large node are its subtrees' critical path: bin both sides at once.

@@ -263,14 +263,14 @@ TEST(TopLevelIncremental, ManySmallEditsKeepTheCostNearAFreshBuild) {
   std::uint32_t next_id = 100000;
   for (int k = 0; k < 2500; ++k) {
     InstanceDesc& d = all[rng() % all.size()];
-    d.world_from_object.translation += glm::dvec3(step(rng), step(rng), step(rng));
+    d.world_from_object.translation += randomStep(rng, step);
     top.set(d);
     top.commit();
     if (k % 2 == 0) {
       // An instance added next to another one and removed again: nothing may stay behind.
       InstanceDesc extra = all[rng() % all.size()];
       extra.id = next_id++;
-      extra.world_from_object.translation += glm::dvec3(step(rng), step(rng), step(rng));
+      extra.world_from_object.translation += randomStep(rng, step);
       top.set(extra);
       top.commit();
       top.remove(extra.id);

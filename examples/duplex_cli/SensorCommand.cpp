@@ -139,7 +139,7 @@ std::string duration(double s) {
 // Progress on stderr: a bar redrawn in place on a terminal, a plain line at most every 2 s otherwise.
 class ProgressPrinter {
  public:
-  ProgressPrinter(std::string mode, std::uint64_t start) : start_(start) {
+  explicit ProgressPrinter(std::string mode) {
     if (mode == "auto") mode = ::isatty(2) ? "bar" : "lines";
     bar_ = mode == "bar";
     lines_ = mode == "lines";
@@ -178,7 +178,6 @@ class ProgressPrinter {
   }
 
  private:
-  std::uint64_t start_;
   bool bar_ = false, lines_ = false, drawn_ = false;
   double last_ = -1e9;
 };
@@ -467,7 +466,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   SensorRunStatus status;
   {
     signals.running(run);
-    ProgressPrinter printer(progress, start);
+    ProgressPrinter printer(progress);
     // Periodic saves between batches (the accumulators are whole there). A failed save is reported
     // and the run goes on: the previous state file stays intact (saveState writes and renames).
     double last_save = 0.0;

@@ -5,6 +5,7 @@
 // (intersectAll too) on 1 and 2 threads, lazy builds, and what queries see before a commit.
 
 #include "MeshChecks.h"
+#include "SceneChecks.h"
 #include "TestSupport.h"
 #include "TwoLevelChecks.h"
 
@@ -50,16 +51,6 @@ void scatterInstances(Fixture& f, int count, double spread, std::uint64_t seed) 
   std::mt19937_64 rng(seed);
   for (int i = 0; i < count; ++i) f.graph.addInstance(kRootNode, f.objects[i % 4], randomPlacement(rng, spread));
   f.graph.commit();
-}
-
-/// The visible instances as the graph says after its last commit.
-Model visibleModel(const SceneGraph& graph) {
-  Model m;
-  for (const NodeId id : graph.visibleInstances()) {
-    const NodeInfo info = graph.node(id);
-    m[id] = InstanceDesc{graph.library().get(info.object), graph.worldTransform(id), id, info.mask};
-  }
-  return m;
 }
 
 TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {

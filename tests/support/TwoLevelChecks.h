@@ -28,9 +28,23 @@ namespace duplex::test {
 /// around the origin.
 inline Affine randomPlacement(std::mt19937_64& rng, double spread) {
   std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.3, 1.5);
-  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
-  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, 3.14159 * u(rng), glm::dvec3(s(rng), s(rng), s(rng)),
-                                                          0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng))));
+  // One draw per statement: the order in which a call's arguments are evaluated is unspecified
+  // (GCC and clang differ), and every compiler must build the same scenes. The order is the one
+  // GCC gave the nested calls this replaces (last argument first), so the scenes stay as they were.
+  glm::dvec3 axis, scale, shift;
+  for (int k = 2; k >= 0; --k) axis[k] = u(rng);
+  axis.z += 1e-3;
+  for (int k = 2; k >= 0; --k) shift[k] = u(rng);
+  for (int k = 2; k >= 0; --k) scale[k] = s(rng);
+  const double angle = 3.14159 * u(rng);
+  return Affine::fromRowMajor3x4(rotationScaleTranslation(axis, angle, scale, 0.5 * spread * shift));
+}
+
+/// A vector of three draws of `d`, drawn z, y, x in separate statements (see randomPlacement).
+inline glm::dvec3 randomStep(std::mt19937_64& rng, std::uniform_real_distribution<double>& d) {
+  glm::dvec3 v;
+  for (int k = 2; k >= 0; --k) v[k] = d(rng);
+  return v;
 }
 
 /// The live instances as the test believes them to be.

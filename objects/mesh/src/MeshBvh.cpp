@@ -1,6 +1,7 @@
 // The mesh BVH kernels (MeshBvh.h), compiled three times from MeshBvhTraversal.inl: SSE2 (two
 // 4-wide halves per node), AVX2 (one 8-wide test) and AVX-512 (8 wide with mask registers). Each
-// copy lives in its own namespace inside a `#pragma GCC target` region, so that only the code of
+// copy lives in its own namespace inside a `#pragma GCC target` region (clang: `#pragma clang
+// attribute` with the same target), so that only the code of
 // that region may use the wider instructions: every header is included before the first region
 // (standard library and helper templates are compiled for the baseline, not per region, and the
 // linker cannot merge a wide copy into the baseline path).
@@ -141,8 +142,12 @@ struct Leaf {
 const MeshBvhKernels kKernels{SimdIsa::Sse2, intersectEntry, occludedEntry, forEachLeafEntry};
 }  // namespace sse2
 
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx2"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx2")
+#endif
 namespace avx2 {
 namespace {
 
@@ -347,10 +352,18 @@ struct Leaf {
 }  // namespace
 const MeshBvhKernels kKernels{SimdIsa::Avx2, intersectEntry, occludedEntry, forEachLeafEntry};
 }  // namespace avx2
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif
 
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx2,avx512f,avx512vl,avx512dq,avx512bw"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx2,avx512f,avx512vl,avx512dq,avx512bw")
+#endif
 namespace avx512 {
 namespace {
 
@@ -379,7 +392,11 @@ struct Node {
 }  // namespace
 const MeshBvhKernels kKernels{SimdIsa::Avx512, intersectEntry, occludedEntry, forEachLeafEntry};
 }  // namespace avx512
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif
 
 const MeshBvhKernels& meshBvhKernels(SimdIsa isa) {
   switch (isa) {
