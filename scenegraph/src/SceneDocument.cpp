@@ -2,11 +2,14 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/InputFile.h"
+#include "duplex/accel/MemoryLimit.h"
+#include "duplex/scenegraph/SceneMemory.h"
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -15,6 +18,7 @@
 #include <string>
 #include <unordered_set>
 #include <utility>
+#include <vector>
 
 namespace duplex {
 
@@ -305,19 +309,113 @@ void addNode(SceneGraph& graph, const std::filesystem::path& file, NodeId parent
   for (const SceneNodeSpec& child : spec.children) addNode(graph, file, id, child, instances, added);
 }
 
+// Counts what nlohmann::json will allocate for a document (without building it): 16 bytes per
+// value, an array's vector (24 bytes) and its elements with the parser's geometric growth, an
+// object's map (48 bytes) and a tree node per member (links, key, value), strings past the short
+// buffer, and the allocator's header of each allocation.
+class JsonFootprint : public nlohmann::json_sax<json> {
+ public:
+  std::uint64_t bytes = 0;
+  std::uint64_t values = 0;
+
+  bool null() override { return value(); }
+  bool boolean(bool) override { return value(); }
+  bool number_integer(number_integer_t) override { return value(); }
+  bool number_unsigned(number_unsigned_t) override { return value(); }
+  bool number_float(number_float_t, const string_t&) override { return value(); }
+  bool string(string_t& s) override {
+    add(sizeof(string_t) + kAllocation + longString(s));
+    return value();
+  }
+  bool binary(binary_t& b) override {
+    add(sizeof(binary_t) + kAllocation + b.size());
+    return value();
+  }
+  bool start_object(std::size_t) override {
+    (void)value();
+    add(sizeof(json::object_t) + kAllocation);
+    open_.push_back(0);
+    return true;
+  }
+  bool key(string_t& k) override {
+    add(kMapNode + kAllocation + longString(k));
+    return true;
+  }
+  bool end_object() override {
+    open_.pop_back();
+    return true;
+  }
+  bool start_array(std::size_t) override {
+    (void)value();
+    add(sizeof(json::array_t) + kAllocation);
+    open_.push_back(1);  // element count + 1: 0 marks an object
+    return true;
+  }
+  bool end_array() override {
+    const std::uint64_t n = open_.back() - 1;
+    open_.pop_back();
+    if (n) add(arrayBytes(std::bit_ceil(n), sizeof(json)) + kAllocation);
+    return true;
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override { return false; }
+
+ private:
+  // A std::map node: three links and the colour (32 bytes), the key and the value.
+  static constexpr std::uint64_t kMapNode = 32 + sizeof(string_t) + sizeof(json);
+  static constexpr std::uint64_t kAllocation = 16;  // glibc's chunk header and rounding
+  static std::uint64_t longString(const string_t& s) { return s.size() > 15 ? s.size() + 1 + kAllocation : 0; }
+  void add(std::uint64_t b) { bytes = saturatingAdd(bytes, b); }
+  // A value inside an array counts as an element (its 16 bytes are the array's); elsewhere
+  // (a member's value, the root) they are inside the map node or the document.
+  bool value() {
+    ++values;
+    if (!open_.empty() && open_.back() != 0) ++open_.back();
+    return true;
+  }
+  std::vector<std::uint64_t> open_;  // per open container: 0 for an object, 1 + elements for an array
+};
+
 json parseFile(const std::filesystem::path& path) {
   if (const std::string problem = notRegularFile(path); !problem.empty())
     throw FileError(path.string() + ": cannot open scene file: " + problem);
-  std::ifstream in(path, std::ios::binary);
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) throw FileError(path.string() + ": cannot open scene file");
-  std::stringstream text;
-  text << in.rdbuf();
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw FileError(path.string() + ": cannot read scene file");
+  // The text, then the document nlohmann::json builds from it, against the memory limit.
+  requireMemory(static_cast<std::uint64_t>(size), "scene file '" + path.string() + "' (its text)");
+  std::string text(static_cast<std::size_t>(size), '\0');
+  in.seekg(0);
+  if (!in.read(text.data(), size)) throw FileError(path.string() + ": cannot read scene file");
+  JsonFootprint footprint;
+  if (json::sax_parse(text, &footprint)) {
+    std::ostringstream what;
+    what << "scene file '" << path.string() << "' (its text and its " << footprint.values << " JSON values)";
+    requireMemory(saturatingAdd(footprint.bytes, text.size()), what.str());
+  }
   try {
-    return json::parse(text.str());
+    return json::parse(text);
   } catch (const json::exception& e) {
     // parse_error, and out_of_range for numbers such as 1e999
     throw FileError(path.string() + ": not valid JSON (" + e.what() + ")");
   }
+}
+
+// The nodes of a duplex-scene-v1 "nodes" list and their "children", at any depth (iteratively:
+// the depth is checked when they are read).
+std::uint64_t countNodes(const json& nodes) {
+  std::uint64_t n = 0;
+  std::vector<const json*> stack = {&nodes};
+  while (!stack.empty()) {
+    const json* list = stack.back();
+    stack.pop_back();
+    if (!list->is_array()) continue;
+    for (const json& node : *list) {
+      ++n;
+      if (node.is_object() && node.contains("children")) stack.push_back(&node["children"]);
+    }
+  }
+  return n;
 }
 
 }  // namespace
@@ -350,6 +448,15 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   // from doc.parsed.
   ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors", "bands"});
   DocumentReader reader(ctx, graph, registry);
+  // The instances (scene-json-v1) or nodes (duplex-scene-v1) against the memory limit, before any
+  // object is read or built.
+  {
+    const char* key = v1 ? "instances" : "nodes";
+    const std::uint64_t count = !root.contains(key) ? 0 : v1 ? root[key].size() : countNodes(root[key]);
+    std::ostringstream what;
+    what << "scene file '" << path.string() << "' (" << count << (v1 ? " instances" : " nodes") << ")";
+    requireMemory(arrayBytes(count, sceneBytesPerInstance()), what.str());
+  }
 
   // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).
   const json& objects = ctx.member(root, "", "objects");
