@@ -841,16 +841,19 @@ int checkMemoryLimit(const std::string& duplex, const fs::path& dir) {
        {"--count 100000 (the instances of '" + mesh.string() + "')"},
        out},
       {"sensor",
-       {"sensor", "--scene", big_sensor.string(), "--rays", "10", "--out", out_dir.string(), "--max-memory", "64M"},
-       {big_sensor.string() + ": /sensors/0: sensor 'screen' (4096 x 4096 bins", "needs 128 MiB",
+       {"sensor", "--scene", big_sensor.string(), "--rays", "10", "--out", out_dir.string(), "--progress", "none",
+        "--max-memory", "64M"},
+       {big_sensor.string() + ": /sensors/0: sensor 'screen' (4096 x 4096 bins) needs 128 MiB",
         "memory limit of 64.0 MiB"},
        out_dir},
       {"sensor",
-       {"sensor", "--scene", sensor.string(), "--rays", "10", "--out", out_dir.string(), "--max-memory", "4M"},
-       {"the sensor run (1 sensors, the largest 'screen' with 256 x 256 bins", "memory limit of 4.00 MiB"},
+       {"sensor", "--scene", sensor.string(), "--rays", "10", "--out", out_dir.string(), "--progress", "none",
+        "--max-memory", "4M"},
+       {"the sensor run of '" + sensor.string() + "' (sensors: 1, the largest 'screen' with 256 x 256 bins",
+        "memory limit of 4.00 MiB"},
        out_dir},
       {"sensor",
-       {"sensor", "--scene", overflow_sensor.string(), "--rays", "10", "--out", out_dir.string()},
+       {"sensor", "--scene", overflow_sensor.string(), "--rays", "10", "--out", out_dir.string(), "--progress", "none"},
        {overflow_sensor.string(), "/sensors/0/bins/0", "expected a bin count"},
        out_dir},
   };
@@ -859,8 +862,7 @@ int checkMemoryLimit(const std::string& duplex, const fs::path& dir) {
     argv.insert(argv.end(), c.args.begin(), c.args.end());
     const RunResult r = run(argv, work.string());
     const std::string what = "duplex " + c.command + " (" + c.args.back() + ")";
-    expect(r.exited && r.exit_code == 1, what + " ended with " + describe(r) + "; stderr:
-" + r.err);
+    expect(r.exited && r.exit_code == 1, what + " ended with " + describe(r) + "; stderr:\n" + r.err);
     const std::string head = "duplex " + c.command + ": error: ";
     expect(r.err.rfind(head, 0) == 0 && std::count(r.err.begin(), r.err.end(), '\n') == 1,
            what + ": stderr is not one line starting '" + head + "':\n" + r.err);

@@ -1,12 +1,11 @@
 #include "duplex/accel/MemoryLimit.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <sstream>
 
 namespace duplex {
@@ -18,11 +17,29 @@ struct DefaultLimit {
   const char* source = "the default: the machine's physical memory";
 };
 
+// The start of a small file (at most sizeof(buffer) - 1 bytes), read without a stream: the first
+// check may run inside a reader that must not allocate more than its input justifies.
+template <std::size_t N>
+std::string_view readSmallFile(const std::string& file, char (&buffer)[N]) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return {};
+  std::size_t size = 0;
+  for (;;) {
+    const ::ssize_t got = ::read(fd, buffer + size, N - 1 - size);
+    if (got <= 0) break;
+    size += static_cast<std::size_t>(got);
+    if (size == N - 1) break;
+  }
+  ::close(fd);
+  return {buffer, size};
+}
+
 // A number of bytes in a control group's file ("max" or a value past any machine reads as none).
-std::optional<std::uint64_t> readLimitFile(const std::filesystem::path& file) {
-  std::ifstream in(file);
-  std::string text;
-  if (!(in >> text) || text == "max") return std::nullopt;
+std::optional<std::uint64_t> readLimitFile(const std::string& file) {
+  char buffer[64];
+  std::string_view text = readSmallFile(file, buffer);
+  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.remove_suffix(1);
+  if (text.empty() || text == "max") return std::nullopt;
   const std::optional<std::uint64_t> value = parseByteSize(text);
   if (!value || *value >= (std::uint64_t{1} << 62)) return std::nullopt;  // cgroup v1 writes ~2^63 for "none"
   return value;
@@ -31,28 +48,36 @@ std::optional<std::uint64_t> readLimitFile(const std::filesystem::path& file) {
 // The smallest limit of the process's control group and the groups above it (a parent's limit
 // holds for its children too), cgroup v2 or v1.
 std::optional<std::uint64_t> cgroupLimit() {
-  std::ifstream in("/proc/self/cgroup");
-  std::string line;
+  char buffer[8192];
+  std::string_view lines = readSmallFile("/proc/self/cgroup", buffer);
   std::optional<std::uint64_t> smallest;
-  const auto consider = [&](std::filesystem::path dir, const std::filesystem::path& root, const char* name) {
+  const auto consider = [&](const std::string& root, std::string_view group, const char* name) {
+    // group: "/a/b" or "/"; the files root/a/b/name, root/a/name, root/name.
+    std::string dir = root;
+    if (group.size() > 1) dir.append(group);
     for (;;) {
-      if (const auto v = readLimitFile(dir / name)) smallest = smallest ? std::min(*smallest, *v) : *v;
-      if (dir == root || !dir.has_parent_path() || dir.parent_path() == dir) break;
-      dir = dir.parent_path();
+      if (const auto v = readLimitFile(dir + "/" + name)) smallest = smallest ? std::min(*smallest, *v) : *v;
+      if (dir.size() <= root.size()) break;
+      dir.resize(dir.rfind('/'));
     }
   };
-  while (std::getline(in, line)) {
+  while (!lines.empty()) {
+    const std::size_t end = std::min(lines.find('\n'), lines.size());
+    const std::string_view line = lines.substr(0, end);
+    lines.remove_prefix(std::min(end + 1, lines.size()));
     // "<id>:<controllers>:<path>": v2 is "0::<path>"; v1 lists "memory" among the controllers.
-    const std::size_t a = line.find(':'), b = a == std::string::npos ? a : line.find(':', a + 1);
-    if (b == std::string::npos) continue;
-    const std::string controllers = line.substr(a + 1, b - a - 1), group = line.substr(b + 1);
-    const std::string relative = group.empty() || group == "/" ? std::string() : group.substr(1);
-    if (line.compare(0, a, "0") == 0 && controllers.empty()) {
-      const std::filesystem::path root = "/sys/fs/cgroup";
-      consider(relative.empty() ? root : root / relative, root, "memory.max");
-    } else if (("," + controllers + ",").find(",memory,") != std::string::npos) {
-      const std::filesystem::path root = "/sys/fs/cgroup/memory";
-      consider(relative.empty() ? root : root / relative, root, "memory.limit_in_bytes");
+    const std::size_t a = line.find(':'), b = a == std::string_view::npos ? a : line.find(':', a + 1);
+    if (b == std::string_view::npos) continue;
+    const std::string_view id = line.substr(0, a), controllers = line.substr(a + 1, b - a - 1),
+                           group = line.substr(b + 1);
+    if (id == "0" && controllers.empty()) {
+      consider("/sys/fs/cgroup", group, "memory.max");
+    } else {
+      for (std::string_view rest = controllers; !rest.empty();) {
+        const std::size_t comma = std::min(rest.find(','), rest.size());
+        if (rest.substr(0, comma) == "memory") consider("/sys/fs/cgroup/memory", group, "memory.limit_in_bytes");
+        rest.remove_prefix(std::min(comma + 1, rest.size()));
+      }
     }
   }
   return smallest;

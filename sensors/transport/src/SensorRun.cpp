@@ -83,7 +83,9 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
     for (std::size_t k = 1; k < scene_.sensors().size(); ++k)
       if (scene_.sensors()[k].object->binCount() > scene_.sensors()[largest].object->binCount()) largest = k;
     std::ostringstream what;
-    what << "the sensor run (" << scene_.sensors().size() << " sensors";
+    what << "the sensor run";
+    if (scene_.document()) what << " of '" << scene_.document()->file.string() << "'";
+    what << " (sensors: " << scene_.sensors().size();
     if (!scene_.sensors().empty()) {
       const SensorSpec& spec = scene_.sensors()[largest].object->spec();
       what << ", the largest '" << scene_.sensors()[largest].name << "' with " << spec.nx << " x " << spec.ny

@@ -254,8 +254,9 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       // memory limit (each object checks its own too).
       bins_so_far += std::uint64_t{spec.nx} * spec.ny;
       std::ostringstream what;
-      what << path.string() << ": " << p << ": sensor '" << name << "' (" << spec.nx << " x " << spec.ny << " bins, "
-           << bins_so_far << " with the " << i << " sensors before it)";
+      what << path.string() << ": " << p << ": sensor '" << name << "' (" << spec.nx << " x " << spec.ny << " bins";
+      if (i > 0) what << "; " << bins_so_far << " bins with the sensors listed before it";
+      what << ")";
       requireMemory(arrayBytes(bins_so_far, sizeof(double)), what.str());
       const Affine world =
           e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();

@@ -47,8 +47,8 @@ TEST(SensorMemoryLimit, ASensorWithTooManyBinsIsRefusedNamingItAndTheBytes) {
     const std::string m = messageOf<ResourceError>([&] { (void)SensorScene::load(file); });
     // The bin areas of both sensors: (16 * 16 + 4096 * 4096) doubles.
     EXPECT_NE(m.find(file.string() +
-                     ": /sensors/1: sensor 'screen' (4096 x 4096 bins, 16777472 with the 1 sensors "
-                     "before it) needs " +
+                     ": /sensors/1: sensor 'screen' (4096 x 4096 bins; 16777472 bins with the "
+                     "sensors listed before it) needs " +
                      formatBytes((256 + 16777216) * 8)),
               std::string::npos)
         << m;
@@ -69,7 +69,8 @@ TEST(SensorMemoryLimit, ARunWhoseAccumulatorsDoNotFitIsRefusedBeforeTracing) {
   MemoryLimitScope limit(std::uint64_t{16} << 20);  // the bin areas (8 MiB) fit, the run does not
   const SensorScene scene = SensorScene::load(file);
   const std::string m = messageOf<ResourceError>([&] { SensorRun run(scene, SensorRunConfig{}); });
-  EXPECT_NE(m.find("the sensor run (1 sensors, the largest 'screen' with 1024 x 1024 bins; 1048576 bins and 0 angular "
+  EXPECT_NE(m.find("the sensor run of '" + file.string() +
+                   "' (sensors: 1, the largest 'screen' with 1024 x 1024 bins; 1048576 bins and 0 angular "
                    "bins in all; batches of 65536 rays) needs "),
             std::string::npos)
       << m;
