@@ -461,7 +461,12 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).
   const json& objects = ctx.member(root, "", "objects");
   if (!objects.is_array()) ctx.fail("/objects", "expected an array");
-  std::vector<std::shared_ptr<std::string>> build_errors;  // per entry, set by its failing factory
+  // Per entry, set by its failing factory; `resource`: the build needed more than the memory limit.
+  struct BuildError {
+    std::string message;
+    bool resource = false;
+  };
+  std::vector<std::shared_ptr<BuildError>> build_errors;
   const std::vector<std::string> type_names = registry.names();
   std::vector<std::string_view> entry_keys = {"name", "structure", "material"};  // allowed in an entry (own format)
   entry_keys.insert(entry_keys.end(), type_names.begin(), type_names.end());
@@ -539,7 +544,7 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
       }
       auto factory = std::get<ObjectLibrary::Factory>(std::move(result));
       if (!factory) ctx.fail(object_ctx.pointer, "type \"" + type->name + "\" returned no object");
-      auto error = std::make_shared<std::string>();
+      auto error = std::make_shared<BuildError>();
       build_errors.push_back(error);
       // Errors of the build name the file and the entry; the first in file order is reported.
       const std::string prefix = path.string() + ": ";
@@ -550,7 +555,9 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
                                    } catch (const std::exception& e) {
                                      std::string message = e.what();
                                      if (message.rfind(prefix, 0) != 0) message = prefix + pointer + ": " + message;
-                                     *error = message;
+                                     error->message = message;
+                                     error->resource = dynamic_cast<const ResourceError*>(&e) != nullptr;
+                                     if (error->resource) throw ResourceError(message);
                                      throw FileError(message);
                                    }
                                  });
@@ -570,8 +577,11 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   } catch (const Cancelled&) {
     throw;  // nothing of the load is kept: the document is never returned
   } catch (const std::exception& e) {
-    for (const auto& error : build_errors)
-      if (!error->empty()) throw FileError(*error);
+    for (const auto& error : build_errors) {
+      if (error->message.empty()) continue;
+      if (error->resource) throw ResourceError(error->message);
+      throw FileError(error->message);
+    }
     throw FileError(path.string() + ": " + e.what());
   }
   doc.figures.build_ms = msSince(t_build);

@@ -130,5 +130,39 @@ TEST(SceneMemoryLimit, InstancesAndNodesAreCheckedBeforeAnyObjectIsRead) {
   EXPECT_EQ(loadSceneDocument(good, builtinObjectTypes()).instances.size(), n);
 }
 
+// A mesh the scene names, past the limit when it is read or built, fails the load with the
+// ResourceError (not a FileError: the tool and Python tell the two apart), naming the scene file,
+// the entry and the mesh file.
+TEST(SceneMemoryLimit, AMeshPastTheLimitFailsTheLoadAsAResourceError) {
+  TempDir dir;
+  std::ostringstream off;
+  const std::size_t n = 20000;  // a strip of n triangles
+  off << "OFF\n" << n + 2 << " " << n << " 0\n";
+  for (std::size_t i = 0; i < n + 2; ++i) off << i / 2 << " " << i % 2 << " 0\n";
+  for (std::size_t i = 0; i < n; ++i) off << "3 " << i << " " << i + 1 << " " << i + 2 << "\n";
+  writeTextFile(dir / "strip.off", off.str());
+  const auto scene = dir / "scene.json";
+  writeTextFile(scene, R"({"format": "scene-json-v1", "objects": [{"name": "tri", "mesh": {"file": "strip.off"}}],
+    "instances": [{"object": "tri", "transform": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]}]})");
+  {
+    MemoryLimitScope limit(off.str().size() + 1000);  // the text fits, its arrays do not
+    const std::string m = resourceMessage(scene);
+    EXPECT_NE(m.find(scene.string() + ": /objects/0/mesh: mesh file '" + (dir / "strip.off").string() +
+                     "' (20002 "
+                     "vertices, 20000 faces) needs"),
+              std::string::npos)
+        << m;
+  }
+  {
+    // The arrays fit, the structure's boxes, references and leaf blocks do not.
+    MemoryLimitScope limit(off.str().size() + 24 * n + 1000);
+    const std::string m = resourceMessage(scene);
+    EXPECT_NE(m.find("mesh '" + (dir / "strip.off").string() + "' (20000 triangles: its BVH) needs"), std::string::npos)
+        << m;
+    EXPECT_NE(m.find(scene.string()), std::string::npos) << m;
+  }
+  EXPECT_EQ(loadSceneDocument(scene, builtinObjectTypes()).instances.size(), 1u);
+}
+
 }  // namespace
 }  // namespace duplex::test
