@@ -387,8 +387,12 @@ json parseFile(const std::filesystem::path& path) {
   std::string text(static_cast<std::size_t>(size), '\0');
   in.seekg(0);
   if (!in.read(text.data(), size)) throw FileError(path.string() + ": cannot read scene file");
+  // A document takes at most about 40 bytes per byte of text (an empty object in an array while the
+  // array grows: its element twice and its map, for the three bytes "{},"): the counting pass is
+  // only needed for a text that large against the limit.
+  constexpr std::uint64_t kMostBytesPerTextByte = 48;
   JsonFootprint footprint;
-  if (json::sax_parse(text, &footprint)) {
+  if (arrayBytes(text.size(), kMostBytesPerTextByte + 1) > memoryLimit() && json::sax_parse(text, &footprint)) {
     std::ostringstream what;
     what << "scene file '" << path.string() << "' (its text and its " << footprint.values << " JSON values)";
     requireMemory(saturatingAdd(footprint.bytes, text.size()), what.str());
