@@ -1,7 +1,9 @@
 // The memory limit: sizes as people write them, byte counts that saturate instead of wrapping, and
 // the refusal's message (the input, the bytes, the limit, how to raise it).
 
+#include "MemoryLimitDetail.h"
 #include "MemoryLimitScope.h"
+#include "TestSupport.h"
 
 #include "duplex/accel/MemoryLimit.h"
 
@@ -84,6 +86,32 @@ TEST(MemoryLimit, RefusesAboveTheLimitNamingTheInputTheBytesAndTheOption) {
     EXPECT_THROW(requireMemory(kUncountableBytes, "x"), Error);
   }
   EXPECT_EQ(memoryLimit(), defaultMemoryLimit());  // the scope restored the default
+}
+
+// The control group's limit, read from a tree of cgroup files of the test's own: the smallest of
+// the group's and its ancestors', v2 and v1, "max" and v1's huge "no limit" ignored.
+TEST(MemoryLimit, ReadsTheSmallestLimitOfTheControlGroupAndItsAncestors) {
+  TempDir dir;
+  const std::string root = (dir / "cgroup").string();
+  const auto put = [&](const std::string& file, const std::string& text) { writeTextFile(root + file, text); };
+  put("/memory.max", "max\n");
+  put("/a/memory.max", "1073741824\n");
+  put("/a/b/memory.max", "max\n");
+  EXPECT_EQ(detail::cgroupMemoryLimit("0::/a/b\n", root), std::uint64_t{1} << 30);  // the parent's
+  put("/a/b/memory.max", "536870912\n");
+  EXPECT_EQ(detail::cgroupMemoryLimit("0::/a/b\n", root), std::uint64_t{1} << 29);  // the child's, smaller
+  EXPECT_EQ(detail::cgroupMemoryLimit("0::/\n", root), std::nullopt);               // the root says max
+  EXPECT_EQ(detail::cgroupMemoryLimit("0::/elsewhere\n", root), std::nullopt);      // no such files
+  // cgroup v1: the memory controller's own hierarchy, alone or among others; ~2^63 means none.
+  put("/memory/x/memory.limit_in_bytes", "9223372036854771712\n");
+  EXPECT_EQ(detail::cgroupMemoryLimit("4:memory:/x\n", root), std::nullopt);
+  put("/memory/x/memory.limit_in_bytes", "2147483648\n");
+  EXPECT_EQ(detail::cgroupMemoryLimit("9:name=systemd:/\n5:cpu,memory:/x\n0::/\n", root), std::uint64_t{2} << 30);
+  EXPECT_EQ(detail::cgroupMemoryLimit("5:cpu,cpuacct:/x\n", root), std::nullopt);  // not the memory controller
+  // Both present: the smaller.
+  EXPECT_EQ(detail::cgroupMemoryLimit("4:memory:/x\n0::/a/b\n", root), std::uint64_t{1} << 29);
+  // Lines that are no cgroup entries are skipped.
+  EXPECT_EQ(detail::cgroupMemoryLimit("garbage\n0:\n::x\n", root), std::nullopt);
 }
 
 }  // namespace

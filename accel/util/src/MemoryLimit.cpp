@@ -1,5 +1,7 @@
 #include "duplex/accel/MemoryLimit.h"
 
+#include "MemoryLimitDetail.h"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -45,12 +47,11 @@ std::optional<std::uint64_t> readLimitFile(const std::string& file) {
   return value;
 }
 
-// The smallest limit of the process's control group and the groups above it (a parent's limit
-// holds for its children too), cgroup v2 or v1.
-std::optional<std::uint64_t> cgroupLimit() {
-  char buffer[8192];
-  std::string_view lines = readSmallFile("/proc/self/cgroup", buffer);
+}  // namespace
+
+std::optional<std::uint64_t> detail::cgroupMemoryLimit(std::string_view lines, const std::string& cgroup_root) {
   std::optional<std::uint64_t> smallest;
+  // A parent's limit holds for its children too: the group's file and those above it.
   const auto consider = [&](const std::string& root, std::string_view group, const char* name) {
     // group: "/a/b" or "/"; the files root/a/b/name, root/a/name, root/name.
     std::string dir = root;
@@ -70,12 +71,13 @@ std::optional<std::uint64_t> cgroupLimit() {
     if (b == std::string_view::npos) continue;
     const std::string_view id = line.substr(0, a), controllers = line.substr(a + 1, b - a - 1),
                            group = line.substr(b + 1);
+    if (group.empty() || group.front() != '/') continue;
     if (id == "0" && controllers.empty()) {
-      consider("/sys/fs/cgroup", group, "memory.max");
+      consider(cgroup_root, group, "memory.max");
     } else {
       for (std::string_view rest = controllers; !rest.empty();) {
         const std::size_t comma = std::min(rest.find(','), rest.size());
-        if (rest.substr(0, comma) == "memory") consider("/sys/fs/cgroup/memory", group, "memory.limit_in_bytes");
+        if (rest.substr(0, comma) == "memory") consider(cgroup_root + "/memory", group, "memory.limit_in_bytes");
         rest.remove_prefix(std::min(comma + 1, rest.size()));
       }
     }
@@ -83,13 +85,17 @@ std::optional<std::uint64_t> cgroupLimit() {
   return smallest;
 }
 
+namespace {
+
 const DefaultLimit& defaults() {
   static const DefaultLimit limit = [] {
     DefaultLimit d;
     const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
     if (pages > 0 && page > 0)
       d.bytes = arrayBytes(static_cast<std::uint64_t>(pages), static_cast<std::uint64_t>(page));
-    if (const auto group = cgroupLimit(); group && *group < d.bytes) {
+    char cgroup[8192];
+    if (const auto group = detail::cgroupMemoryLimit(readSmallFile("/proc/self/cgroup", cgroup), "/sys/fs/cgroup");
+        group && *group < d.bytes) {
       d.bytes = *group;
       d.source = "the default: the memory limit of the process's control group";
     }
