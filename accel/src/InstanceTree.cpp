@@ -23,6 +23,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/KdTreeBuilder.h"
+#include "duplex/accel/TopLevelMemory.h"
 
 #include <glm/matrix.hpp>
 
@@ -35,6 +36,7 @@
 #include <utility>
 
 #include "InstanceTreeState.h"
+#include "KdBuildRefs.h"
 
 namespace duplex {
 
@@ -652,6 +654,18 @@ const Box* InstanceTree::findBounds(std::uint32_t id) const {
 std::uint32_t InstanceTree::idAt(std::uint32_t slot) const {
   if (!state_ || slot >= state_->records.size()) return kInvalidId;
   return state_->records[slot].id;
+}
+
+std::uint64_t topLevelBytesPerInstance() {
+  using toplevel_detail::Prepared;
+  using toplevel_detail::Record;
+  using toplevel_detail::SlotFilter;
+  // A node of an unordered_map<uint32_t, T>: the next pointer, the pair and its cached slot in a
+  // bucket list of about one pointer per element.
+  constexpr std::uint64_t kMapEntry = 3 * sizeof(void*) + sizeof(std::uint64_t);
+  return sizeof(InstanceDesc) + sizeof(Record) + sizeof(SlotFilter) + sizeof(std::shared_ptr<const Object>) +
+         sizeof(Box) + sizeof(std::pair<std::uint32_t, std::optional<Prepared>>) + 2 * kMapEntry +
+         2 * sizeof(std::uint32_t) + 2 * sizeof(kd_detail::PrimRef);
 }
 
 }  // namespace duplex

@@ -5,12 +5,14 @@
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/InputFile.h>
+#include <duplex/accel/MemoryLimit.h>
 #include <duplex/accel/RayFile.h>
 #include <duplex/scenegraph/SceneTracer.h>
 
 #include <chrono>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <vector>
 
 namespace duplex::cli {
@@ -28,6 +30,15 @@ nlohmann::ordered_json runClosest(const ClosestOptions& options) {
   if (sameFile(options.points, options.out))
     throw InvalidArgument("--out " + options.out.string() +
                           " names the point file given as --points: it would be overwritten");
+  {
+    // Per point: its record, the query, the answer and the record written.
+    const RecordFileReader<PointRecord> probe(options.points, "point");
+    std::ostringstream what;
+    what << "point file '" << options.points.string() << "' (" << probe.count() << " points)";
+    requireMemory(arrayBytes(probe.count(), sizeof(PointRecord) + sizeof(ClosestPointRequest) + sizeof(ClosestPoint) +
+                                                sizeof(ClosestRecord)),
+                  what.str());
+  }
   const std::vector<PointRecord> points = readPointFile(options.points);
   std::optional<SceneDocument> doc;
   std::unique_ptr<SceneTracer> tracer;

@@ -3,6 +3,7 @@
 #include "SceneWriter.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/MemoryLimit.h>
 #include <duplex/objects/MeshLoader.h>
 
 #include <glm/geometric.hpp>
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -49,6 +51,12 @@ nlohmann::ordered_json runSceneInstances(const SceneInstancesOptions& options) {
   if (options.count == 0) throw InvalidArgument("--count must be at least 1");
   if (options.count > (std::uint64_t{1} << 32))
     throw InvalidArgument("--count " + std::to_string(options.count) + " exceeds 2^32 instances");
+  {
+    // The instances are held until the file is written.
+    std::ostringstream what;
+    what << "--count " << options.count << " (the instances of '" << options.mesh.string() << "')";
+    requireMemory(arrayBytes(options.count, sizeof(SceneInstanceEntry)), what.str());
+  }
   const TriangleMesh mesh = loadMesh(options.mesh);
   const Box bounds = mesh.bounds();
   const glm::dvec3 centre = 0.5 * (glm::dvec3(bounds.lo) + glm::dvec3(bounds.hi));

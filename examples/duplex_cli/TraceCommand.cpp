@@ -5,6 +5,7 @@
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/InputFile.h>
+#include <duplex/accel/MemoryLimit.h>
 #include <duplex/accel/RayFile.h>
 #include <duplex/scenegraph/SceneTracer.h>
 
@@ -14,6 +15,7 @@
 #include <chrono>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <span>
 #include <vector>
 
@@ -58,6 +60,18 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   // that memory is bounded by the scene and the block, not by the ray count.
   RayFileReader ray_file(options.rays, "ray");
   const std::size_t ray_count = ray_file.count();
+  // What a block holds (its rays, the query's answers and the records written), checked before the
+  // scene is loaded.
+  const std::size_t block =
+      std::min<std::size_t>(static_cast<std::size_t>(options.block_rays), std::max<std::size_t>(ray_count, 1));
+  {
+    const std::uint64_t per_ray = sizeof(Ray) + (want_transmittance ? sizeof(float)
+                                                 : options.any_hit  ? sizeof(std::uint8_t) + sizeof(HitRecord)
+                                                                    : sizeof(Hit) + sizeof(HitRecord));
+    std::ostringstream what;
+    what << "--block-rays " << block << " (blocks of the ray file '" << options.rays.string() << "')";
+    requireMemory(arrayBytes(block, per_ray), what.str());
+  }
 
   // Load (bottom levels built or read in parallel inside the arena), then the tracer's top level.
   std::optional<SceneDocument> doc;
@@ -72,8 +86,6 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
 
   // Block by block: read, trace `repeat` times (each run's time summed over the blocks, reading
   // and writing excluded), store the last run's results. The output appears only when complete.
-  const std::size_t block =
-      std::min<std::size_t>(static_cast<std::size_t>(options.block_rays), std::max<std::size_t>(ray_count, 1));
   std::vector<Ray> rays(block);
   std::vector<Hit> hits(options.any_hit || want_transmittance ? 0 : block);
   std::vector<std::uint8_t> blocked(options.any_hit ? block : 0);

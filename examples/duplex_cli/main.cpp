@@ -1,7 +1,8 @@
 // The `duplex` command-line tool: the interchange contract used by tools outside the project.
 //   duplex trace --scene S.json --rays R.bin (--hits H.bin | --transmittance T.bin) [--threads N] [--any-hit]
 //                [--repeat R]
-// Every command that loads a scene takes [--structure bvh|kdtree|bvh:<parameters>].
+// Every command that loads a scene takes [--structure bvh|kdtree|bvh:<parameters>]; every command takes
+// [--max-memory SIZE] (inputs that need more memory are refused before they are allocated).
 //   duplex closest --scene S.json --points P.bin --out C.bin [--threads N]
 //   duplex rays  --scene S.json (--primary W H | --random N --seed X) --out R.bin
 //   duplex scene split     --mesh M --objects K [--loop N] --out S.json
@@ -24,6 +25,7 @@
 #include "ClosestCommand.h"
 #include "BenchUpdateCommand.h"
 #include "DecimalOption.h"
+#include "MemoryOption.h"
 #include "PrepareCommand.h"
 #include "RaysCommand.h"
 #include "SceneInstancesCommand.h"
@@ -35,6 +37,7 @@
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/Log.h>
+#include <duplex/accel/MemoryLimit.h>
 
 #include <CLI/CLI.hpp>
 
@@ -292,12 +295,19 @@ int main(int argc, char** argv) {
       "Files are described in docs/sensors.md; the run is bit-identical for any --threads, and for any number of "
       "ranks under mpirun (docs/distributed.md).");
 
+  // --max-memory of the commands that load scenes, meshes or ray files, or run (all of them).
+  std::uint64_t max_memory = 0;
+  for (CLI::App* cmd : {trace_cmd, rays_cmd, split_cmd, instances_cmd, robot_cmd, prepare_cmd, closest_cmd, update_cmd,
+                        deform_cmd, sensor_cmd})
+    duplex::cli::addMaxMemoryOption(*cmd, max_memory);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);  // help to stdout with status 0; errors to stderr with a non-zero status
   }
   if (verbose) duplex::logger()->set_level(spdlog::level::info);
+  if (max_memory != 0) duplex::setMemoryLimit(max_memory);
 
   const char* command = *trace_cmd       ? "duplex trace"
                         : *rays_cmd      ? "duplex rays"

@@ -1,12 +1,14 @@
 // The `duplex` Python module: duplex.Scene (PyScene.h), duplex.primary_rays / random_rays and
 // duplex.run_sensors (PySensors.h). Errors of the library become ValueError (bad arguments and
-// input, duplex::InvalidArgument and duplex::Error), OSError (files, duplex::FileError) and
+// input, duplex::InvalidArgument and duplex::Error), OSError (files, duplex::FileError),
+// MemoryError (duplex::ResourceError: more than the memory limit, duplex.set_max_memory) and
 // duplex.Cancelled, each carrying the library's message.
 
 #include "PyScene.h"
 #include "PySensors.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/MemoryLimit.h>
 #include <duplex/accel/WorkControl.h>
 
 #include <pybind11/stl.h>
@@ -61,7 +63,8 @@ unless `nthreads` says otherwise.
 
 Errors: ValueError for bad arguments and bad input (the message names the argument, node or
 object), OSError for files that cannot be read or are malformed (the message names the file),
-duplex.Cancelled for work stopped on request.
+MemoryError for an input that needs more memory than duplex.max_memory() (checked before it is
+allocated), duplex.Cancelled for work stopped on request.
 )doc";
 
 constexpr const char* kSceneDoc = R"doc(An object library, a scene graph and its tracer.
@@ -95,6 +98,8 @@ PYBIND11_MODULE(duplex, m) {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
+    } catch (const ResourceError& e) {  // more memory than duplex.max_memory()
+      PyErr_SetString(PyExc_MemoryError, e.what());
     } catch (const FileError& e) {
       PyErr_SetString(PyExc_OSError, e.what());
     } catch (const Error& e) {  // InvalidArgument and the other bad-input errors
@@ -259,6 +264,22 @@ world box meets it). Occlusion plays no part.)doc");
   scene.def_property_readonly("format", &PyScene::format,
                               "\"scene-json-v1\" or \"duplex-scene-v1\" for a loaded scene, \"\" otherwise.");
   scene.def_property_readonly("file", &PyScene::file, "The scene file it was loaded from (\"\" otherwise).");
+
+  m.def(
+      "set_max_memory", [](std::uint64_t bytes) { setMemoryLimit(bytes); }, "bytes"_a,
+      R"doc(Sets the memory limit (bytes) that loads and runs are checked against before they
+allocate: a scene file, mesh, sensor run or ray array that needs more raises MemoryError naming
+it. 0 restores the default: the smaller of the machine's physical memory and the memory limit of
+the process's control group (cgroup). The limit is the process's (the C++ library's too).)doc");
+  m.def(
+      "set_max_memory",
+      [](const std::string& size) {
+        const std::optional<std::uint64_t> bytes = parseByteSize(size);
+        if (!bytes) throw InvalidArgument("set_max_memory: '" + size + "' is no size (e.g. 4G, 512M, 1.5GiB, 1000000)");
+        setMemoryLimit(*bytes);
+      },
+      "size"_a, "The same with a size as text: \"4G\", \"512M\", \"1.5GiB\" (powers of 1024) or plain bytes.");
+  m.def("max_memory", &memoryLimit, "The memory limit in bytes (set_max_memory's, or the default).");
 
   m.def("primary_rays", &PyScene::primaryRays, "scene"_a, "width"_a, "height"_a,
         R"doc(The camera rays of `duplex rays --primary`: the camera at 1.0 x the diagonal of the

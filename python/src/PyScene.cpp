@@ -1,6 +1,7 @@
 #include "PyScene.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/MemoryLimit.h>
 #include <duplex/accel/RayGenerator.h>
 #include <duplex/objects/MeshLoader.h>
 #include <duplex/objects/MeshObject.h>
@@ -14,6 +15,7 @@
 #include <cmath>
 #include <exception>
 #include <new>
+#include <sstream>
 
 namespace duplex::python {
 
@@ -537,6 +539,9 @@ py::array PyScene::primaryRays(std::uint32_t width, std::uint32_t height) const 
     const Box bounds = graph_->worldBounds(instances_);
     if (bounds.empty())
       throw InvalidArgument("primary_rays: the scene has no visible instances, so no bounds to aim the camera at");
+    std::ostringstream what;
+    what << "primary_rays(" << width << ", " << height << ")";
+    requireMemory(arrayBytes(std::uint64_t{width} * height, 2 * sizeof(Ray)), what.str());  // the rays and the array
     return duplex::primaryRays(bounds, width, height);
   });
   return pythonRays(rays, {static_cast<py::ssize_t>(height), static_cast<py::ssize_t>(width)});
@@ -547,6 +552,9 @@ py::array PyScene::randomRays(std::size_t count, std::uint64_t seed) const {
     const Box bounds = graph_->worldBounds(instances_);
     if (bounds.empty())
       throw InvalidArgument("random_rays: the scene has no visible instances, so no bounds to start rays in");
+    std::ostringstream what;
+    what << "random_rays(" << count << ")";
+    requireMemory(arrayBytes(count, 2 * sizeof(Ray)), what.str());  // the rays and the array
     return duplex::randomRays(bounds, count, seed);
   });
   return pythonRays(rays, {static_cast<py::ssize_t>(count)});

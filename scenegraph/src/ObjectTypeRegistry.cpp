@@ -1,12 +1,15 @@
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <cmath>
+#include <mutex>
+#include <unordered_set>
 
 namespace duplex {
 
@@ -43,20 +46,49 @@ void SceneLoadCache::request(std::string_view kind, const std::filesystem::path&
   }
 }
 
+namespace {
+
+// The entries whose reader failed for want of memory (a ResourceError), so that the objects that
+// need the file see that error, not a FileError. Kept beside the entries (their layout is
+// public); an entry clears its own mark before it reads, so a later entry at the same address
+// never inherits one.
+std::mutex g_resource_mutex;
+std::unordered_set<const void*> g_resource_failures;
+
+void markResourceFailure(const void* entry, bool failed) {
+  std::lock_guard lock(g_resource_mutex);
+  if (failed) g_resource_failures.insert(entry);
+  else g_resource_failures.erase(entry);
+}
+
+bool isResourceFailure(const void* entry) {
+  std::lock_guard lock(g_resource_mutex);
+  return g_resource_failures.count(entry) != 0;
+}
+
+}  // namespace
+
 std::shared_ptr<const void> SceneLoadCache::read(FileEntry& e) {
   std::call_once(e.once, [&] {
+    markResourceFailure(&e, false);
     try {
       // Isolated: a reader that runs TBB work must not pick up, while it waits, a task that waits for
       // this same once-flag.
       tbb::this_task_arena::isolate([&] { e.value = e.reader(e.file, *this); });
       if (!e.value) e.error = e.file.string() + ": the reader returned nothing";
+    } catch (const ResourceError& ex) {
+      e.error = ex.what();
+      markResourceFailure(&e, true);
     } catch (const std::exception& ex) {
       e.error = ex.what();
     } catch (...) {
       e.error = e.file.string() + ": unknown error while reading";
     }
   });
-  if (!e.value) throw FileError(e.error);
+  if (!e.value) {
+    if (isResourceFailure(&e)) throw ResourceError(e.error);
+    throw FileError(e.error);
+  }
   return e.value;
 }
 

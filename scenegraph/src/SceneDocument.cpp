@@ -2,11 +2,14 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/InputFile.h"
+#include "duplex/accel/MemoryLimit.h"
+#include "duplex/scenegraph/SceneMemory.h"
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -15,6 +18,7 @@
 #include <string>
 #include <unordered_set>
 #include <utility>
+#include <vector>
 
 namespace duplex {
 
@@ -305,19 +309,117 @@ void addNode(SceneGraph& graph, const std::filesystem::path& file, NodeId parent
   for (const SceneNodeSpec& child : spec.children) addNode(graph, file, id, child, instances, added);
 }
 
+// Counts what nlohmann::json will allocate for a document (without building it): 16 bytes per
+// value, an array's vector (24 bytes) and its elements with the parser's geometric growth, an
+// object's map (48 bytes) and a tree node per member (links, key, value), strings past the short
+// buffer, and the allocator's header of each allocation.
+class JsonFootprint : public nlohmann::json_sax<json> {
+ public:
+  std::uint64_t bytes = 0;
+  std::uint64_t values = 0;
+
+  bool null() override { return value(); }
+  bool boolean(bool) override { return value(); }
+  bool number_integer(number_integer_t) override { return value(); }
+  bool number_unsigned(number_unsigned_t) override { return value(); }
+  bool number_float(number_float_t, const string_t&) override { return value(); }
+  bool string(string_t& s) override {
+    add(sizeof(string_t) + kAllocation + longString(s));
+    return value();
+  }
+  bool binary(binary_t& b) override {
+    add(sizeof(binary_t) + kAllocation + b.size());
+    return value();
+  }
+  bool start_object(std::size_t) override {
+    (void)value();
+    add(sizeof(json::object_t) + kAllocation);
+    open_.push_back(0);
+    return true;
+  }
+  bool key(string_t& k) override {
+    add(kMapNode + kAllocation + longString(k));
+    return true;
+  }
+  bool end_object() override {
+    open_.pop_back();
+    return true;
+  }
+  bool start_array(std::size_t) override {
+    (void)value();
+    add(sizeof(json::array_t) + kAllocation);
+    open_.push_back(1);  // element count + 1: 0 marks an object
+    return true;
+  }
+  bool end_array() override {
+    const std::uint64_t n = open_.back() - 1;
+    open_.pop_back();
+    if (n) add(arrayBytes(std::bit_ceil(n), sizeof(json)) + kAllocation);
+    return true;
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override { return false; }
+
+ private:
+  // A std::map node: three links and the colour (32 bytes), the key and the value.
+  static constexpr std::uint64_t kMapNode = 32 + sizeof(string_t) + sizeof(json);
+  static constexpr std::uint64_t kAllocation = 16;  // glibc's chunk header and rounding
+  static std::uint64_t longString(const string_t& s) { return s.size() > 15 ? s.size() + 1 + kAllocation : 0; }
+  void add(std::uint64_t b) { bytes = saturatingAdd(bytes, b); }
+  // A value inside an array counts as an element (its 16 bytes are the array's); elsewhere
+  // (a member's value, the root) they are inside the map node or the document.
+  bool value() {
+    ++values;
+    if (!open_.empty() && open_.back() != 0) ++open_.back();
+    return true;
+  }
+  std::vector<std::uint64_t> open_;  // per open container: 0 for an object, 1 + elements for an array
+};
+
 json parseFile(const std::filesystem::path& path) {
   if (const std::string problem = notRegularFile(path); !problem.empty())
     throw FileError(path.string() + ": cannot open scene file: " + problem);
-  std::ifstream in(path, std::ios::binary);
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) throw FileError(path.string() + ": cannot open scene file");
-  std::stringstream text;
-  text << in.rdbuf();
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw FileError(path.string() + ": cannot read scene file");
+  // The text, then the document nlohmann::json builds from it, against the memory limit.
+  requireMemory(static_cast<std::uint64_t>(size), "scene file '" + path.string() + "' (its text)");
+  std::string text(static_cast<std::size_t>(size), '\0');
+  in.seekg(0);
+  if (!in.read(text.data(), size)) throw FileError(path.string() + ": cannot read scene file");
+  // A document takes at most about 40 bytes per byte of text (an empty object in an array while the
+  // array grows: its element twice and its map, for the three bytes "{},"): the counting pass is
+  // only needed for a text that large against the limit.
+  constexpr std::uint64_t kMostBytesPerTextByte = 48;
+  JsonFootprint footprint;
+  if (arrayBytes(text.size(), kMostBytesPerTextByte + 1) > memoryLimit() && json::sax_parse(text, &footprint)) {
+    std::ostringstream what;
+    what << "scene file '" << path.string() << "' (its text and its " << footprint.values << " JSON values)";
+    requireMemory(saturatingAdd(footprint.bytes, text.size()), what.str());
+  }
   try {
-    return json::parse(text.str());
+    return json::parse(text);
   } catch (const json::exception& e) {
     // parse_error, and out_of_range for numbers such as 1e999
     throw FileError(path.string() + ": not valid JSON (" + e.what() + ")");
   }
+}
+
+// The nodes of a duplex-scene-v1 "nodes" list and their "children", at any depth (iteratively:
+// the depth is checked when they are read).
+std::uint64_t countNodes(const json& nodes) {
+  std::uint64_t n = 0;
+  std::vector<const json*> stack = {&nodes};
+  while (!stack.empty()) {
+    const json* list = stack.back();
+    stack.pop_back();
+    if (!list->is_array()) continue;
+    for (const json& node : *list) {
+      ++n;
+      if (node.is_object() && node.contains("children")) stack.push_back(&node["children"]);
+    }
+  }
+  return n;
 }
 
 }  // namespace
@@ -350,11 +452,25 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   // from doc.parsed.
   ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors", "bands"});
   DocumentReader reader(ctx, graph, registry);
+  // The instances (scene-json-v1) or nodes (duplex-scene-v1) against the memory limit, before any
+  // object is read or built.
+  {
+    const char* key = v1 ? "instances" : "nodes";
+    const std::uint64_t count = !root.contains(key) ? 0 : v1 ? root[key].size() : countNodes(root[key]);
+    std::ostringstream what;
+    what << "scene file '" << path.string() << "' (" << count << (v1 ? " instances" : " nodes") << ")";
+    requireMemory(arrayBytes(count, sceneBytesPerInstance()), what.str());
+  }
 
   // Objects: each entry's type is the one registered key it has (v1: among the v1 keys only).
   const json& objects = ctx.member(root, "", "objects");
   if (!objects.is_array()) ctx.fail("/objects", "expected an array");
-  std::vector<std::shared_ptr<std::string>> build_errors;  // per entry, set by its failing factory
+  // Per entry, set by its failing factory; `resource`: the build needed more than the memory limit.
+  struct BuildError {
+    std::string message;
+    bool resource = false;
+  };
+  std::vector<std::shared_ptr<BuildError>> build_errors;
   const std::vector<std::string> type_names = registry.names();
   std::vector<std::string_view> entry_keys = {"name", "structure", "material"};  // allowed in an entry (own format)
   entry_keys.insert(entry_keys.end(), type_names.begin(), type_names.end());
@@ -432,7 +548,7 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
       }
       auto factory = std::get<ObjectLibrary::Factory>(std::move(result));
       if (!factory) ctx.fail(object_ctx.pointer, "type \"" + type->name + "\" returned no object");
-      auto error = std::make_shared<std::string>();
+      auto error = std::make_shared<BuildError>();
       build_errors.push_back(error);
       // Errors of the build name the file and the entry; the first in file order is reported.
       const std::string prefix = path.string() + ": ";
@@ -443,7 +559,9 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
                                    } catch (const std::exception& e) {
                                      std::string message = e.what();
                                      if (message.rfind(prefix, 0) != 0) message = prefix + pointer + ": " + message;
-                                     *error = message;
+                                     error->message = message;
+                                     error->resource = dynamic_cast<const ResourceError*>(&e) != nullptr;
+                                     if (error->resource) throw ResourceError(message);
                                      throw FileError(message);
                                    }
                                  });
@@ -463,8 +581,11 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   } catch (const Cancelled&) {
     throw;  // nothing of the load is kept: the document is never returned
   } catch (const std::exception& e) {
-    for (const auto& error : build_errors)
-      if (!error->empty()) throw FileError(*error);
+    for (const auto& error : build_errors) {
+      if (error->message.empty()) continue;
+      if (error->resource) throw ResourceError(error->message);
+      throw FileError(error->message);
+    }
     throw FileError(path.string() + ": " + e.what());
   }
   doc.figures.build_ms = msSince(t_build);

@@ -18,6 +18,8 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/Log.h"
+#include "duplex/accel/TopLevelMemory.h"
+#include "duplex/scenegraph/SceneMemory.h"
 #include "SlotTable.h"
 
 #include <algorithm>
@@ -858,6 +860,13 @@ std::size_t SceneGraph::bytesPerInstance() {
   // The slot table's two id maps (id -> slot, slot -> id) add 4 bytes each.
   constexpr std::size_t index_entry = sizeof(void*) + sizeof(std::pair<const std::uint64_t, NodeId>) + sizeof(void*);
   return sizeof(Node) + index_entry + 2 * sizeof(std::uint32_t);
+}
+
+std::uint64_t sceneBytesPerInstance() {
+  // An unordered_multimap<uint64_t, NodeId> node (next pointer, pair, cached hash) and its bucket.
+  constexpr std::uint64_t kNameIndexEntry = 2 * sizeof(void*) + sizeof(std::pair<std::uint64_t, NodeId>) + 8;
+  return sizeof(Node) + 2 * sizeof(std::uint32_t) + kNameIndexEntry + sizeof(Undo) + sizeof(Touched) + sizeof(NodeId) +
+         topLevelBytesPerInstance();
 }
 
 }  // namespace duplex

@@ -17,6 +17,7 @@
 //   duplex_cli_check bench-deform DUPLEX DIR           `duplex bench deform` keys and figures on the quad scene
 //   duplex_cli_check closest DUPLEX DIR                `duplex closest` records on the quad scene, the JSON line
 //   duplex_cli_check disk-full DUPLEX DIR              record files on a full disk: an error, the old file kept
+//   duplex_cli_check memory-limit DUPLEX DIR           --max-memory refusals: exit 1, one line, nothing written
 // Exit status: 0 pass, 1 fail, 77 skipped.
 
 #include "QuadScene.h"
@@ -765,6 +766,142 @@ int checkClosest(const std::string& duplex, const fs::path& dir) {
   return 0;
 }
 
+// --max-memory: inputs that need more than the limit are refused before they are allocated, with
+// exit status 1, one line "duplex <cmd>: error: ..." naming the file (or option) and the option to
+// raise it, and no output written; sizes are read as 4G, 512M, 1.5GiB or bytes, anything else is a
+// usage error; under a large limit the same runs give the same files.
+int checkMemoryLimit(const std::string& duplex, const fs::path& dir) {
+  const fs::path work = dir / "memory_limit";
+  fs::remove_all(work);
+  fs::create_directories(work);
+  // 5000 instances of a triangle: 0.3 MB of text, several MB as a JSON document.
+  const fs::path many = work / "many.json";
+  {
+    std::ofstream out(many);
+    out << R"({"format": "scene-json-v1", "objects": [{"name": "tri", "mesh": {"positions": [0, 0, 0, 1, 0, 0, 0, 1, 0],)"
+        << R"( "indices": [0, 1, 2]}}], "instances": [)";
+    for (int i = 0; i < 5000; ++i)
+      out << (i ? ",\n" : "") << R"({"object": "tri", "transform": [1, 0, 0, )" << i << R"(, 0, 1, 0, 0, 0, 0, 1, 0]})";
+    out << "]}";
+  }
+  const fs::path points = work / "points.bin";
+  writeRecords(points, std::vector<PointRecord>(100000, PointRecord{0.5f, 0.5f, 1.0f, 10.0f}));
+  const fs::path rays = work / "rays.bin";
+  runOk({duplex, "rays", "--scene", (dir / "quad.json").string(), "--random", "2000", "--seed", "1", "--out",
+         rays.string()},
+        work);
+  const auto sensorScene = [&](const std::string& name, const std::string& bins) {
+    const fs::path file = work / name;
+    std::ofstream(file) << R"({"format": "scene-json-v1", "objects": [], "instances": [],
+      "lights": [{"type": "point", "position": [0, 0, 1], "power": 1}],
+      "sensors": [{"name": "screen", "size": [1, 1], "bins": )"
+                        << bins << "}]}";
+    return file;
+  };
+  const fs::path big_sensor = sensorScene("big_sensor.json", "[4096, 4096]");
+  const fs::path sensor = sensorScene("sensor.json", "[256, 256]");
+  const fs::path mesh = work / "tri.obj";
+  std::ofstream(mesh) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  const fs::path overflow_sensor = sensorScene("overflow_sensor.json", "[2147483648, 2147483648]");
+  const fs::path out = work / "out.bin", out_dir = work / "sensor_out";
+
+  struct Case {
+    std::string command;               // "duplex <command>: error: " starts the line
+    std::vector<std::string> args;     // after the tool's path
+    std::vector<std::string> needles;  // in the message
+    fs::path output;                   // must not appear
+  };
+  const std::vector<Case> cases = {
+      {"trace",
+       {"trace", "--scene", many.string(), "--rays", rays.string(), "--hits", out.string(), "--max-memory", "1M"},
+       {"scene file '" + many.string() + "' (its text and its", "more than the memory limit of 1.00 MiB",
+        "--max-memory"},
+       out},
+      {"trace",
+       {"trace", "--scene", many.string(), "--rays", rays.string(), "--hits", out.string(), "--max-memory", "64K"},
+       {"--block-rays 2000 (blocks of the ray file '" + rays.string() + "')", "memory limit of 64.0 KiB"},
+       out},
+      {"closest",
+       {"closest", "--scene", (dir / "quad.json").string(), "--points", points.string(), "--out", out.string(),
+        "--max-memory", "1.5MiB"},
+       {"point file '" + points.string() + "' (100000 points)", "memory limit of 1.50 MiB"},
+       out},
+      {"rays",
+       {"rays", "--scene", many.string(), "--random", "10", "--seed", "1", "--out", out.string(), "--max-memory",
+        "1048576"},
+       {"scene file '" + many.string() + "'", "memory limit of 1.00 MiB"},
+       out},
+      {"prepare",
+       {"prepare", "--scene", many.string(), "--out", (work / "prepared").string(), "--max-memory", "1M"},
+       {"scene file '" + many.string() + "'"},
+       work / "prepared"},
+      {"scene instances",
+       {"scene", "instances", "--mesh", mesh.string(), "--count", "100000", "--seed", "1", "--out", out.string(),
+        "--max-memory", "1M"},
+       {"--count 100000 (the instances of '" + mesh.string() + "')"},
+       out},
+      {"sensor",
+       {"sensor", "--scene", big_sensor.string(), "--rays", "10", "--out", out_dir.string(), "--progress", "none",
+        "--max-memory", "64M"},
+       {big_sensor.string() + ": /sensors/0: sensor 'screen' (4096 x 4096 bins) needs 128 MiB",
+        "memory limit of 64.0 MiB"},
+       out_dir},
+      {"sensor",
+       {"sensor", "--scene", sensor.string(), "--rays", "10", "--out", out_dir.string(), "--progress", "none",
+        "--max-memory", "4M"},
+       {"the sensor run of '" + sensor.string() + "' (sensors: 1, the largest 'screen' with 256 x 256 bins",
+        "memory limit of 4.00 MiB"},
+       out_dir},
+      {"sensor",
+       {"sensor", "--scene", overflow_sensor.string(), "--rays", "10", "--out", out_dir.string(), "--progress", "none"},
+       {overflow_sensor.string(), "/sensors/0/bins/0", "expected a bin count"},
+       out_dir},
+  };
+  for (const Case& c : cases) {
+    std::vector<std::string> argv = {duplex};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    const RunResult r = run(argv, work.string());
+    const std::string what = "duplex " + c.command + " (" + c.args.back() + ")";
+    expect(r.exited && r.exit_code == 1, what + " ended with " + describe(r) + "; stderr:\n" + r.err);
+    const std::string head = "duplex " + c.command + ": error: ";
+    expect(r.err.rfind(head, 0) == 0 && std::count(r.err.begin(), r.err.end(), '\n') == 1,
+           what + ": stderr is not one line starting '" + head + "':\n" + r.err);
+    for (const std::string& needle : c.needles)
+      expect(r.err.find(needle) != std::string::npos, what + ": stderr does not say '" + needle + "':\n" + r.err);
+    expect(r.out.empty(), what + " printed on stdout:\n" + r.out);
+    expect(!fs::exists(c.output), what + " wrote " + c.output.string());
+    std::cout << r.err;
+  }
+
+  // Sizes the option refuses: a usage error naming the option, before anything runs.
+  for (const char* bad : {"abc", "0", "-1", "1.5", "4 G", "1e9", "99999999999999999999"}) {
+    const RunResult r = run({duplex, "trace", "--scene", (dir / "quad.json").string(), "--rays", rays.string(),
+                             "--hits", out.string(), "--max-memory", bad},
+                            work.string());
+    expect(r.exited && r.exit_code != 0 && r.exit_code != 1 && r.exit_code != 3,
+           std::string("--max-memory ") + bad + " ended with " + describe(r));
+    expect(r.err.find("--max-memory") != std::string::npos,
+           std::string("--max-memory ") + bad + ": stderr does not name the option:\n" + r.err);
+    expect(!fs::exists(out), std::string("--max-memory ") + bad + " wrote " + out.string());
+  }
+
+  // Under a limit that holds them, the same commands give the same files as without one.
+  const fs::path plain = work / "plain.bin";
+  runOk({duplex, "trace", "--scene", many.string(), "--rays", rays.string(), "--hits", plain.string()}, work);
+  for (const char* size : {"1G", "1.5GiB", "4294967296"}) {
+    runOk({duplex, "trace", "--scene", many.string(), "--rays", rays.string(), "--hits", out.string(), "--max-memory",
+           size},
+          work);
+    expectSameFile(out, plain);
+  }
+  runOk({duplex, "sensor", "--scene", sensor.string(), "--rays", "10", "--out", out_dir.string(), "--max-memory", "64M",
+         "--progress", "none"},
+        work);
+  expect(fs::exists(out_dir / "run.json"), "duplex sensor --max-memory 64M wrote no run.json");
+  std::cout << "memory-limit: " << cases.size() << " refusals, bad sizes refused, runs under the limit unchanged\n";
+  return 0;
+}
+
 int usage() {
   std::cerr
       << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
@@ -772,7 +909,7 @@ int usage() {
          "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
          "       prepare-koala DUPLEX DIR DATA_DIR |\n"
          "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR |\n"
-         "       closest DUPLEX DIR | disk-full DUPLEX DIR\n";
+         "       closest DUPLEX DIR | disk-full DUPLEX DIR | memory-limit DUPLEX DIR\n";
   return 2;
 }
 
@@ -803,6 +940,7 @@ int main(int argc, char** argv) {
     if (args.size() == 3 && args[0] == "bench-deform") return checkBenchDeform(args[1], args[2]);
     if (args.size() == 3 && args[0] == "closest") return checkClosest(args[1], args[2]);
     if (args.size() == 3 && args[0] == "disk-full") return checkDiskFull(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "memory-limit") return checkMemoryLimit(args[1], args[2]);
     return usage();
   });
 }

@@ -108,3 +108,32 @@ def test_help_is_useful():
             assert getattr(duplex.Scene, name).__doc__, f"Scene.{name} has no docstring"
     for fn in (duplex.primary_rays, duplex.random_rays, duplex.run_sensors):
         assert len(fn.__doc__) > 200
+
+
+def test_memory_limit(scene, tmp_path):
+    """Inputs past duplex.max_memory() raise MemoryError naming them, before they are allocated;
+    the same calls succeed once the limit is restored."""
+    default = duplex.max_memory()
+    assert default > 0
+    many = tmp_path / "many.json"
+    instances = ",".join('{"object": "tri", "transform": [1, 0, 0, %d, 0, 1, 0, 0, 0, 0, 1, 0]}' % i
+                         for i in range(5000))
+    many.write_text('{"format": "scene-json-v1", "objects": [{"name": "tri", "mesh": {"positions": '
+                    '[0, 0, 0, 1, 0, 0, 0, 1, 0], "indices": [0, 1, 2]}}], "instances": [%s]}' % instances)
+    try:
+        duplex.set_max_memory("1M")
+        assert duplex.max_memory() == 1 << 20
+        with pytest.raises(MemoryError, match=r"scene file '.*many\.json' \(its text and its \d+ JSON values\) "
+                                              r"needs .* more than the memory limit of 1\.00 MiB"):
+            duplex.Scene.load(str(many))
+        with pytest.raises(MemoryError, match=r"random_rays\(100000\) needs 6\.10 MiB"):
+            duplex.random_rays(scene, 100000, 1)
+        duplex.set_max_memory(1 << 30)
+        assert duplex.max_memory() == 1 << 30
+        assert len(duplex.Scene.load(str(many)).instances) == 5000
+        assert duplex.random_rays(scene, 100000, 1).shape == (100000, 8)
+        with pytest.raises(ValueError, match="is no size"):
+            duplex.set_max_memory("4 G")
+    finally:
+        duplex.set_max_memory(0)
+    assert duplex.max_memory() == default

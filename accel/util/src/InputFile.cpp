@@ -1,6 +1,7 @@
 #include "duplex/accel/InputFile.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include <fstream>
 #include <sstream>
@@ -35,6 +36,11 @@ std::string readWholeFile(const std::filesystem::path& path, std::string_view wh
   const std::streamoff size = in.tellg();
   if (size < 0) fail("cannot be read (its size is unknown)");
   if (size == 0) fail("empty");
+  {
+    std::ostringstream name;
+    name << what << " '" << path.string() << "'";
+    requireMemory(static_cast<std::uint64_t>(size), name.str());
+  }
   in.seekg(0, std::ios::beg);
   std::string bytes(static_cast<std::size_t>(size), '\0');
   if (!in.read(bytes.data(), size)) fail("cannot be read");

@@ -2,6 +2,7 @@
 #include "duplex/accel/InputFile.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -116,6 +117,9 @@ namespace {
 template <class Record>
 std::vector<Record> readRecords(const std::filesystem::path& path, const char* kind) {
   RecordFileReader<Record> in(path, kind);
+  std::ostringstream what;
+  what << kind << " file '" << path.string() << "' (" << in.count() << " records, read whole)";
+  requireMemory(arrayBytes(in.count(), sizeof(Record)), what.str());
   std::vector<Record> out(in.count());
   in.read(0, out);
   return out;

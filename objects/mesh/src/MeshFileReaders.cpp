@@ -1,6 +1,7 @@
 #include "MeshFileReaders.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include <algorithm>
 #include <array>
@@ -17,6 +18,18 @@
 namespace duplex::mesh_files {
 
 namespace {
+
+// The arrays a reader is about to build, with the file's bytes it holds meanwhile, against the
+// memory limit: a position per vertex, a triangle per face (more corners add triangles as they
+// are read), and `extra` bytes (the STL readers' vertex index).
+void requireArrays(const std::string& file, std::uint64_t file_bytes, std::uint64_t vertices, std::uint64_t faces,
+                   std::uint64_t extra = 0) {
+  std::uint64_t bytes = saturatingAdd(file_bytes, arrayBytes(vertices, sizeof(glm::vec3)));
+  bytes = saturatingAdd(bytes, arrayBytes(faces, sizeof(TriangleMesh::Triangle)));
+  std::ostringstream what;
+  what << "mesh file '" << file << "' (" << vertices << " vertices, " << faces << " faces)";
+  requireMemory(saturatingAdd(bytes, extra), what.str());
+}
 
 [[noreturn]] void fail(const std::string& file, const std::string& where, const std::string& what) {
   std::ostringstream msg;
@@ -130,6 +143,20 @@ ParsedMesh readObj(std::string_view text, const std::string& file) {
   std::string joined;  // a line continued with '\'
   long long max_index = 0;
   std::size_t max_index_line = 0;
+  // The arrays grow as statements are read: before a growth (to twice the capacity, the old
+  // array still held while it is copied), what they will take against the memory limit.
+  const auto requireGrowth = [&](std::size_t more_positions, std::size_t more_triangles) {
+    const auto grown = [](std::size_t size, std::size_t capacity, std::size_t more) -> std::uint64_t {
+      return size + more <= capacity ? capacity : std::max<std::uint64_t>(2 * std::uint64_t{capacity}, size + more);
+    };
+    const std::uint64_t nv = grown(mesh.positions.size(), mesh.positions.capacity(), more_positions);
+    const std::uint64_t nt = grown(mesh.triangles.size(), mesh.triangles.capacity(), more_triangles);
+    if (nv == mesh.positions.capacity() && nt == mesh.triangles.capacity()) return;
+    const std::uint64_t copying = nv != mesh.positions.capacity()
+                                      ? arrayBytes(mesh.positions.capacity(), sizeof(glm::vec3))
+                                      : arrayBytes(mesh.triangles.capacity(), sizeof(TriangleMesh::Triangle));
+    requireArrays(file, text.size(), nv, nt, copying);
+  };
   while (auto raw = lines.next()) {
     std::string_view line = *raw;
     const std::size_t first_line = lines.number();
@@ -161,6 +188,7 @@ ParsedMesh readObj(std::string_view text, const std::string& file) {
       }
       if (mesh.positions.size() >= std::numeric_limits<std::uint32_t>::max())
         fail(file, lineName(first_line), "more than 2^32 - 1 vertices");
+      requireGrowth(1, 0);
       mesh.positions.push_back(p);
     } else if (*keyword == "f") {
       corners.clear();
@@ -188,6 +216,7 @@ ParsedMesh readObj(std::string_view text, const std::string& file) {
         corners.push_back(static_cast<std::uint32_t>(zero_based));
       }
       if (corners.size() < 3) fail(file, lineName(first_line), "a face needs at least three vertices");
+      requireGrowth(0, corners.size() - 2);
       addFace(mesh, corners);
     } else if (*keyword == "vt" || *keyword == "vn" || *keyword == "vp" || *keyword == "g" || *keyword == "o" ||
                *keyword == "s" || *keyword == "usemtl" || *keyword == "mtllib" || *keyword == "l" || *keyword == "p") {
@@ -380,6 +409,7 @@ ParsedMesh readPly(std::string_view bytes, const std::string& file) {
     }
   }
 
+  requireArrays(file, bytes.size(), vertex->count, face->count);
   ParsedMesh mesh;
   mesh.positions.resize(vertex->count);
   mesh.triangles.reserve(face->count);
@@ -567,8 +597,8 @@ OffHeader parseOffKeyword(std::string_view bytes, const std::string& file) {
 }
 
 // Binary OFF in one layout; nullopt when the file does not read exactly in it.
-std::optional<ParsedMesh> readOffBinary(std::string_view bytes, std::size_t pos, int vertex_extra, bool big,
-                                        bool colour_counts, std::string& why) {
+std::optional<ParsedMesh> readOffBinary(std::string_view bytes, const std::string& file, std::size_t pos,
+                                        int vertex_extra, bool big, bool colour_counts, std::string& why) {
   auto need = [&](std::uint64_t n) { return n <= bytes.size() - pos; };
   auto int32 = [&]() {
     const auto v = static_cast<std::int32_t>(static_cast<std::uint32_t>(loadBits(bytes.data() + pos, 4, big)));
@@ -589,6 +619,7 @@ std::optional<ParsedMesh> readOffBinary(std::string_view bytes, std::size_t pos,
     why = s.str();
     return std::nullopt;
   }
+  requireArrays(file, bytes.size(), static_cast<std::uint64_t>(nv), static_cast<std::uint64_t>(nf));
   ParsedMesh mesh;
   mesh.positions.resize(static_cast<std::size_t>(nv));
   for (std::int32_t i = 0; i < nv; ++i) {
@@ -649,7 +680,7 @@ ParsedMesh readOff(std::string_view bytes, const std::string& file) {
     constexpr std::array<std::pair<bool, bool>, 4> kLayouts = {
         {{true, true}, {false, false}, {false, true}, {true, false}}};
     for (const auto& [big, colours] : kLayouts) {
-      if (auto mesh = readOffBinary(bytes, header.after, header.vertex_extra, big, colours, why))
+      if (auto mesh = readOffBinary(bytes, file, header.after, header.vertex_extra, big, colours, why))
         return std::move(*mesh);
       if (why_first.empty()) why_first = why;
     }
@@ -688,6 +719,7 @@ ParsedMesh readOff(std::string_view bytes, const std::string& file) {
     fail(file, where(), what.str());
   }
   if (*nv > std::numeric_limits<std::uint32_t>::max()) fail(file, where(), "more than 2^32 - 1 vertices");
+  requireArrays(file, bytes.size(), static_cast<std::uint64_t>(*nv), static_cast<std::uint64_t>(*nf));
   ParsedMesh mesh;
   mesh.positions.resize(static_cast<std::size_t>(*nv));
   for (long long i = 0; i < *nv; ++i) {
@@ -755,6 +787,10 @@ struct VertexKeyHash {
 
 class VertexMerger {
  public:
+  /// Bytes of the index per vertex: a node (next pointer, key, value, cached hash, the allocator's
+  /// header) and its bucket.
+  static constexpr std::uint64_t kBytesPerVertex =
+      sizeof(void*) + sizeof(VertexKey) + sizeof(std::uint32_t) + sizeof(std::size_t) + 16 + sizeof(void*);
   explicit VertexMerger(ParsedMesh& mesh, std::size_t corners) : mesh_(mesh) { index_.reserve(corners); }
   std::uint32_t add(const glm::vec3& p) {
     VertexKey key;
@@ -778,6 +814,8 @@ ParsedMesh readStlBinary(std::string_view bytes, const std::string& file) {
     what << "declares " << n << " facets but has room for only " << room << " (truncated)";
     fail(file, "", what.str());
   }
+  // At most three vertices per facet.
+  requireArrays(file, bytes.size(), 3ull * n, n, arrayBytes(3ull * n, VertexMerger::kBytesPerVertex));
   ParsedMesh mesh;
   mesh.triangles.reserve(n);
   VertexMerger merger(mesh, 3ull * n);
@@ -796,6 +834,9 @@ ParsedMesh readStlBinary(std::string_view bytes, const std::string& file) {
 }
 
 ParsedMesh readStlAscii(std::string_view bytes, const std::string& file) {
+  // Facets need far more than 64 bytes each: a bound for the vertices, the facets and the index.
+  requireArrays(file, bytes.size(), 3 * (bytes.size() / 64), bytes.size() / 64,
+                arrayBytes(3 * (bytes.size() / 64), VertexMerger::kBytesPerVertex));
   ParsedMesh mesh;
   // Facets need far more than 64 bytes each: a bound for the reservation.
   VertexMerger merger(mesh, bytes.size() / 64);

@@ -7,6 +7,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/InputFile.h"
 #include "duplex/accel/Log.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include "MeshFileReaders.h"
 
@@ -170,6 +171,28 @@ TriangleMesh loadMesh(const std::filesystem::path& path, MeshLoadReport* report)
 
 TriangleMesh loopSubdivide(const TriangleMesh& input, int steps) {
   if (steps < 0) throw InvalidArgument("loopSubdivide: negative step count");
+  {
+    // Each step adds a vertex per edge, splits each edge in two and adds three per face, and
+    // makes four faces of each (from at most three edges per input face). The half-edge mesh
+    // keeps its kernel items, a status per item and a point per vertex; the subdivider a point
+    // per vertex and per edge; the result its positions and triangles.
+    std::uint64_t v = input.positions().size(), f = input.triangleCount(), e = arrayBytes(f, 3);
+    for (int k = 0; k < steps; ++k) {
+      v = saturatingAdd(v, e);
+      e = saturatingAdd(arrayBytes(e, 2), arrayBytes(f, 3));
+      f = arrayBytes(f, 4);
+    }
+    using Status = OpenMesh::Attributes::StatusInfo;
+    std::uint64_t bytes =
+        arrayBytes(v, sizeof(TriMesh::Vertex) + sizeof(Status) + 2 * sizeof(TriMesh::Point) + sizeof(glm::vec3));
+    bytes = saturatingAdd(bytes, arrayBytes(e, sizeof(TriMesh::Edge) + 3 * sizeof(Status) + sizeof(TriMesh::Point)));
+    bytes =
+        saturatingAdd(bytes, arrayBytes(f, sizeof(TriMesh::Face) + sizeof(Status) + sizeof(TriangleMesh::Triangle)));
+    std::ostringstream what;
+    what << "loopSubdivide of '" << input.name() << "' (" << input.triangleCount() << " triangles, " << steps
+         << " steps: up to " << f << " triangles)";
+    requireMemory(bytes, what.str());
+  }
   TriMesh mesh;
   std::vector<TriMesh::VertexHandle> handles;
   handles.reserve(input.positions().size());

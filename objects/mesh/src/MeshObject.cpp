@@ -4,6 +4,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
 #include "duplex/accel/KdTreeBuilder.h"
+#include "duplex/accel/MemoryLimit.h"
 #include "duplex/objects/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
 #include "MeshBvh.h"
@@ -21,6 +22,7 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -289,8 +291,24 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const KdBuildCo
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const BvhBuildConfig& config)
     : MeshObject(std::move(mesh), MeshBuildConfig{MeshStructure::Bvh, config, {}}) {}
 
+namespace {
+
+// The least a build of either structure over `m` holds besides the mesh, against the memory limit:
+// per triangle its box (and the builder's copy of it), a reference, and a quarter of the
+// four-triangle leaf block it lands in. Nodes, spatial-split duplicates and the builders' own
+// working lists come on top.
+void requireBuildMemory(const TriangleMesh& m, const char* structure) {
+  const std::uint64_t per_triangle = 2 * sizeof(Box) + sizeof(std::uint32_t) + (sizeof(detail::TriangleBlock4) + 3) / 4;
+  std::ostringstream what;
+  what << "mesh '" << m.name() << "' (" << m.triangleCount() << " triangles: its " << structure << ")";
+  requireMemory(arrayBytes(m.triangleCount(), per_triangle), what.str());
+}
+
+}  // namespace
+
 void MeshObject::buildKd(const KdBuildConfig& config) {
   const TriangleMesh& m = *mesh_;
+  requireBuildMemory(m, "kd-tree");
   const std::vector<Box> bounds = triangleBounds(m);
   try {
     tree_ = buildKdTree(
@@ -310,6 +328,7 @@ void MeshObject::buildKd(const KdBuildConfig& config) {
 
 void MeshObject::buildBvh(const BvhBuildConfig& config) {
   const TriangleMesh& m = *mesh_;
+  requireBuildMemory(m, "BVH");
   const std::vector<Box> bounds = triangleBounds(m);
   try {
     bvh_ = buildWideBvh(bounds, config,

@@ -4,6 +4,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/InputFile.h"
 #include "duplex/accel/KdTree.h"
+#include "duplex/accel/MemoryLimit.h"
 #include "duplex/accel/WideBvh.h"
 #include "duplex/accel/Xxh64.h"
 
@@ -11,6 +12,7 @@
 #include <cstring>
 #include <fstream>
 #include <span>
+#include <sstream>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -174,6 +176,13 @@ std::shared_ptr<const MeshObject> loadMeshObject(const std::filesystem::path& pa
   if (!in) fail("cannot open bottom-level structure file");
   const std::streamoff size = in.tellg();
   if (size < 0) fail("cannot read the file size");
+  // The file's bytes, then its nodes and references copied out of them.
+  {
+    std::ostringstream what;
+    what << "bottom-level structure file '" << path.string() << "' (" << formatBytes(static_cast<std::uint64_t>(size))
+         << ")";
+    requireMemory(arrayBytes(static_cast<std::uint64_t>(size), 2), what.str());
+  }
   std::vector<unsigned char> bytes(static_cast<std::size_t>(size));
   in.seekg(0);
   if (!bytes.empty() && !in.read(reinterpret_cast<char*>(bytes.data()), size)) fail("read error");

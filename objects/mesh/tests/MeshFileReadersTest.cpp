@@ -5,9 +5,11 @@
 // exception or an allocation larger than the file justifies.
 
 #include "MeshFileReaders.h"
+#include "MemoryLimitScope.h"
 #include "TestSupport.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 #include "duplex/objects/MeshLoader.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/TriangleMesh.h"
@@ -20,6 +22,7 @@
 #include <cstring>
 #include <new>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -300,6 +303,52 @@ TEST(MeshFileReaders, CountsAreBoundedByTheFileSize) {
       {Format::StlBinary, std::string(80, ' ') + std::string("\xff\xff\xff\xff", 4) + std::string(100, '\0')},
   };
   for (const auto& [format, bytes] : cases) EXPECT_FALSE(readsOrIsRefused(format, bytes, bytes.substr(0, 60)));
+}
+
+// The arrays a file's counts call for are checked against the memory limit before they are
+// allocated (a count the file's size allows can still be more than the process may take), and the
+// file's bytes before they are read: a ResourceError naming the file, no allocation past the text.
+TEST(MeshFileReaders, ArraysBeyondTheMemoryLimitAreRefusedBeforeAllocating) {
+  TempDir dir;
+  const std::size_t n = 20000;  // a strip of n triangles over n + 2 vertices
+  std::ostringstream off, obj;
+  off << "OFF\n" << n + 2 << " " << n << " 0\n";
+  for (std::size_t i = 0; i < n + 2; ++i) {
+    off << i / 2 << " " << i % 2 << " 0\n";
+    obj << "v " << i / 2 << " " << i % 2 << " 0\n";
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    off << "3 " << i << " " << i + 1 << " " << i + 2 << "\n";
+    obj << "f " << i + 1 << " " << i + 2 << " " << i + 3 << "\n";
+  }
+  for (const auto& [name, text] : {std::pair{std::string("strip.off"), off.str()}, {"strip.obj", obj.str()}}) {
+    writeTextFile(dir / name, text);
+    const std::string file = (dir / name).string();
+    {
+      // The text fits, its 12-byte positions and triangles do not.
+      MemoryLimitScope limit(text.size() + 1000);
+      g_largest_allocation = 0;
+      try {
+        (void)loadMesh(dir / name);
+        ADD_FAILURE() << name << ": no ResourceError";
+      } catch (const ResourceError& e) {
+        const std::string m = e.what();
+        EXPECT_NE(m.find("mesh file '" + file + "' ("), std::string::npos) << m;
+        EXPECT_NE(m.find("more than the memory limit of"), std::string::npos) << m;
+        if (name == "strip.off") {
+          std::ostringstream expected;
+          expected << "(" << n + 2 << " vertices, " << n << " faces) needs " << formatBytes(text.size() + 24 * n + 24);
+          EXPECT_NE(m.find(expected.str()), std::string::npos) << m;
+        }
+      }
+      EXPECT_LE(g_largest_allocation.load(), text.size() + 1000) << name;
+    }
+    {
+      MemoryLimitScope limit(text.size() - 1);
+      expectErrorNaming<ResourceError>([&] { (void)loadMesh(dir / name); }, "mesh file '" + file + "' needs");
+    }
+    EXPECT_EQ(loadMesh(dir / name).triangleCount(), n) << name;
+  }
 }
 
 // An ASCII PLY whose header lost a line (OpenMesh printed "Unsupported keyword : e" and crashed).

@@ -6,10 +6,12 @@
 //
 // Fixtures: objects/mesh/tests/data/*.obj|off|ply|stl (hand-written ascii); binary files are written here.
 
+#include "MemoryLimitScope.h"
 #include "Reference.h"
 #include "TestSupport.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 #include "duplex/objects/MeshLoader.h"
 #include "duplex/objects/TriangleMesh.h"
 
@@ -449,6 +451,28 @@ TEST(LoopSubdivide, MultipliesTrianglesByFourAndStaysClosed) {
     EXPECT_LE(signedVolume(m), signedVolume(ico) + 1e-9);
   }
   EXPECT_THROW((void)loopSubdivide(ico, -1), InvalidArgument);
+}
+
+// Each step quadruples the triangles: what the half-edge mesh and the result will hold is checked
+// against the memory limit before the mesh is built, naming the mesh, its triangles and the steps.
+TEST(LoopSubdivide, SubdivisionsBeyondTheMemoryLimitAreRefused) {
+  const TriangleMesh ico = icosphere(1);  // 80 triangles
+  {
+    MemoryLimitScope limit(std::uint64_t{1} << 20);
+    EXPECT_EQ(loopSubdivide(ico, 2).triangleCount(), 80u * 16u);  // 1280 triangles fit in 1 MiB
+    try {
+      (void)loopSubdivide(ico, 6);  // 327680 triangles: tens of MiB
+      ADD_FAILURE() << "no ResourceError";
+    } catch (const ResourceError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find("loopSubdivide of '" + ico.name() + "' (80 triangles, 6 steps: up to 327680 triangles) needs"),
+                std::string::npos)
+          << m;
+    }
+  }
+  // Steps whose counts overflow 64 bits are refused whatever the limit, with a message.
+  EXPECT_THROW((void)loopSubdivide(ico, 40), ResourceError);
+  EXPECT_EQ(loopSubdivide(ico, 3).triangleCount(), 80u * 64u);
 }
 
 TEST(LoopSubdivide, RefusesNonManifoldTrianglesInsteadOfDroppingThem) {

@@ -4,11 +4,13 @@
 // well framed but wrong), never a crash.
 
 #include "KdTreeChecks.h"
+#include "MemoryLimitScope.h"
 #include "MeshChecks.h"
 #include "TestSupport.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/MemoryLimit.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/accel/Xxh64.h"
 #include "duplex/objects/MeshObject.h"
@@ -19,6 +21,7 @@
 #include <bit>
 #include <cstddef>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 #include <random>
 #include <string>
@@ -141,6 +144,30 @@ void bvhRoundTrip(std::shared_ptr<const TriangleMesh> mesh, std::size_t rays, co
   EXPECT_TRUE(loaded->tree().nodes.empty());
   EXPECT_EQ(loaded->accelBytes(), built->accelBytes());
   expectIdenticalQueries(*built, *loaded, testRays(mesh->bounds(), rays), require_hits);
+}
+
+// A prepared file is read whole and its arrays copied out: twice its size is checked against the
+// memory limit before it is read, naming the file; building the same structure instead is checked
+// too.
+TEST(MeshObjectFileBvh, FilesPastTheMemoryLimitAreRefusedNamingThem) {
+  const TempDir dir;
+  const auto mesh = std::make_shared<const TriangleMesh>(icosphere(4));
+  const auto path = dir / "object.dbvh";
+  const MeshObject built(mesh, BvhBuildConfig{});
+  saveMeshObject(built, path);
+  const std::uint64_t size = std::filesystem::file_size(path);
+  {
+    MemoryLimitScope limit(2 * size - 1);
+    expectErrorNaming<ResourceError>([&] { (void)loadMeshObject(path, mesh); },
+                                     "bottom-level structure file '" + path.string() + "' (" + formatBytes(size) +
+                                         ") needs " + formatBytes(2 * size));
+    expectErrorNaming<ResourceError>([&] { (void)MeshObject(mesh, BvhBuildConfig{}); }, "triangles: its BVH) needs");
+  }
+  {
+    MemoryLimitScope limit(2 * size);
+    // Reading needs less than building (no boxes, no builder): the file loads where a build is refused.
+    EXPECT_EQ(loadMeshObject(path, mesh)->bvh().prim_indices, built.bvh().prim_indices);
+  }
 }
 
 TEST(MeshObjectFileBvh, RoundTripPresets) {

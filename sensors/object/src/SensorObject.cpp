@@ -1,12 +1,14 @@
 #include "duplex/sensors/SensorObject.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include <glm/geometric.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <sstream>
 #include <string>
 
 namespace duplex {
@@ -46,10 +48,17 @@ double diskRectangleArea(double r, double x0, double x1, double y0, double y1) {
 SensorObject::SensorObject(std::string name, const SensorSpec& spec)
     : Object(std::move(name), ObjectRole::Crossing), spec_(spec) {
   auto bad = [this](const std::string& what) { throw InvalidArgument("sensor '" + this->name() + "': " + what); };
+  // The bin areas against the process's memory limit, before they are allocated.
+  const auto requireBinAreas = [this, &spec] {
+    std::ostringstream what;
+    what << "sensor '" << this->name() << "' (" << spec.nx << " x " << spec.ny << " bins)";
+    requireMemory(arrayBytes(std::uint64_t{spec.nx} * spec.ny, sizeof(double)), what.str());
+  };
   if (spec.shape == SensorShape::FarField) {
     if (spec.nx == 0 || spec.ny < 2) bad("a far-field sensor needs at least 1 C-plane and 2 vertical angles");
     if (static_cast<std::uint64_t>(spec.nx) * spec.ny > (1u << 26)) bad("more than 2^26 bins");
     if (spec.theta_bins != 0) bad("a far-field sensor takes no angular bins (its bins are directions)");
+    requireBinAreas();
     // Exact solid angle of each C-gamma cell: dC (cos gamma0 - cos gamma1).
     bin_area_.resize(binCount());
     const double dc = 2.0 * std::numbers::pi / spec.nx, dg = std::numbers::pi / (spec.ny - 1);
@@ -69,6 +78,7 @@ SensorObject::SensorObject(std::string name, const SensorSpec& spec)
     bad("a sphere takes no angular bins (its bins are directions)");
   if (spec.theta_bins > 0 && spec.phi_bins == 0) bad("angular bins need at least one phi bin");
   if (static_cast<std::uint64_t>(spec.theta_bins) * spec.phi_bins > (1u << 20)) bad("more than 2^20 angular bins");
+  requireBinAreas();
   // Bin areas once: a rectangle's bins are equal; a disk's are its squares cut by the circle; a
   // sphere's are equal (equal steps of z and of the azimuth cut equal areas).
   bin_area_.resize(binCount());

@@ -10,6 +10,7 @@
 #include "duplex/sensors/SensorRun.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 
 #include "SensorRunChunk.h"
 
@@ -20,6 +21,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -58,6 +60,41 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
                             (nb ? " in " + std::to_string(nb) + " bands" : std::string()) + " need " +
                             std::to_string(bytes >> 20) + " MiB of accumulators, more than max_accumulator_bytes (" +
                             std::to_string(config_.max_accumulator_bytes >> 20) + " MiB)");
+    // What the run will hold, against the process's memory limit: the run's tallies, the open
+    // batch's and the copy results() sums them into (each bin's sums and its place in the list of
+    // touched bins; per band two sums per bin and sensor), the arrays of results() (per spatial
+    // bin five doubles and a count, per angular bin three and a count, per band three per spatial
+    // bin and one per angular bin), and a batch's chunks with what each keeps per ray.
+    const std::uint64_t spatial = scene_.binCount(), angular = scene_.angleBinCount();
+    std::uint64_t need = arrayBytes(all_bins, sizeof(BinSums) + sizeof(std::uint32_t));
+    need = saturatingAdd(need, arrayBytes(scene_.sensors().size(), sizeof(SensorSums)));
+    need = saturatingAdd(need, arrayBytes(arrayBytes(cells, nb), 2 * sizeof(double)));
+    need = arrayBytes(need, 3);
+    need = saturatingAdd(need, arrayBytes(spatial, 5 * sizeof(double) + sizeof(std::uint64_t)));
+    need = saturatingAdd(need, arrayBytes(angular, 3 * sizeof(double) + sizeof(std::uint64_t)));
+    need = saturatingAdd(need, arrayBytes(arrayBytes(spatial, 3 * sizeof(double)), nb));
+    need = saturatingAdd(need, arrayBytes(arrayBytes(angular, sizeof(double)), nb));
+    const std::uint64_t chunks = config_.batch_rays / config_.chunk_rays + 1;
+    need = saturatingAdd(need, arrayBytes(chunks, sizeof(Chunk)));
+    const std::uint64_t per_ray =
+        2 * sizeof(std::uint32_t) + sizeof(EnergyBalance) + (nb > 1 ? sizeof(std::uint16_t) : 0);
+    need = saturatingAdd(need, arrayBytes(config_.batch_rays, per_ray));
+    std::size_t largest = 0;
+    for (std::size_t k = 1; k < scene_.sensors().size(); ++k)
+      if (scene_.sensors()[k].object->binCount() > scene_.sensors()[largest].object->binCount()) largest = k;
+    std::ostringstream what;
+    what << "the sensor run";
+    if (scene_.document()) what << " of '" << scene_.document()->file.string() << "'";
+    what << " (sensors: " << scene_.sensors().size();
+    if (!scene_.sensors().empty()) {
+      const SensorSpec& spec = scene_.sensors()[largest].object->spec();
+      what << ", the largest '" << scene_.sensors()[largest].name << "' with " << spec.nx << " x " << spec.ny
+           << " bins";
+    }
+    what << "; " << spatial << " bins and " << angular << " angular bins in all";
+    if (nb) what << " in " << nb << " bands";
+    what << "; batches of " << config_.batch_rays << " rays)";
+    requireMemory(need, what.str());
   }
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& si = scene_.sensors()[k];

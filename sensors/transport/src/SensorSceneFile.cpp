@@ -2,6 +2,7 @@
 // (docs/sensors.md). The graph itself is read by loadSceneDocument with the sensor type registered.
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/MemoryLimit.h"
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 
@@ -10,6 +11,7 @@
 
 #include <array>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <cmath>
 #include <numbers>
@@ -239,6 +241,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   if (root.contains("sensors")) {
     const json& list = root["sensors"];
     if (!list.is_array()) ctx.fail("/sensors", "expected an array of sensors");
+    std::uint64_t bins_so_far = 0;  // of the sensors before this one
     for (std::size_t i = 0; i < list.size(); ++i) {
       const std::string p = at("/sensors", i);
       const json& e = list[i];
@@ -247,6 +250,14 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const SensorSpec spec = readSensorSpec(e, sctx, {"name", "transform"}, /*allow_far_field=*/true);
       const std::string name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
       if (name.empty()) ctx.fail(at(p, "name"), "expected a non-empty sensor name");
+      // Every sensor object keeps its bins' areas: their sum over the list so far against the
+      // memory limit (each object checks its own too).
+      bins_so_far += std::uint64_t{spec.nx} * spec.ny;
+      std::ostringstream what;
+      what << path.string() << ": " << p << ": sensor '" << name << "' (" << spec.nx << " x " << spec.ny << " bins";
+      if (i > 0) what << "; " << bins_so_far << " bins with the sensors listed before it";
+      what << ")";
+      requireMemory(arrayBytes(bins_so_far, sizeof(double)), what.str());
       const Affine world =
           e.contains("transform") ? transform12(e["transform"], at(p, "transform"), ctx) : Affine::identity();
       if (spec.shape == SensorShape::FarField) {  // not in the graph: it records the rays leaving the scene
