@@ -62,6 +62,12 @@ inline Affine facing(const glm::dvec3& n_in, const glm::dvec3& at) {
   return a;
 }
 
+// Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
+inline double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
+  auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
+  return f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0);
+}
+
 inline Light pointLight(glm::dvec3 p, double power) {
   Light l;
   l.type = LightType::Point;

@@ -1,6 +1,7 @@
 #include "duplex/sensors/SensorScene.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/sensors/Photometry.h"
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -23,12 +24,14 @@ struct SensorScene::Cache {
 };
 
 SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials,
-                         std::vector<std::string> bands, std::vector<FarFieldSensor> far_field)
+                         std::vector<std::string> bands, std::vector<FarFieldSensor> far_field,
+                         std::vector<std::array<double, 2>> band_nm)
     : graph_(&graph),
       given_lights_(std::move(lights)),
       materials_(std::move(materials)),
       bands_(std::move(bands)),
       far_field_(std::move(far_field)),
+      band_nm_(std::move(band_nm)),
       cache_(std::make_unique<Cache>()) {
   // What does not depend on the graph is checked once: bands, per-object materials, far-field sensors.
   std::unordered_set<std::string> band_names;
@@ -44,6 +47,7 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
       throw InvalidArgument("light '" + l.name + "': spectrum has " + std::to_string(l.spectrum.size()) +
                             " entries, the scene has " + std::to_string(nb) + " band(s)");
   }
+  resolvePhotometry();
   const ObjectLibrary& library = graph_->library();
   for (std::size_t id = 0; id < materials_.size(); ++id) {
     const Material& m = materials_[id];
@@ -75,6 +79,45 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
   if (graph_->hasPendingEdits()) throw InvalidArgument("SensorScene: the scene graph has uncommitted edits");
   tracer_ = std::make_unique<SceneTracer>(*graph_);
   (void)current();  // validates the graph's sensors, media and lights now
+}
+
+void SensorScene::resolvePhotometry() {
+  const std::uint32_t nb = bandCount();
+  const Light* in_lumens = nullptr;
+  const Light* in_watts = nullptr;
+  for (const Light& l : given_lights_) (l.lumens > 0.0 ? in_lumens : in_watts) = &l;
+  photometric_ = in_lumens || !band_nm_.empty();
+  if (!photometric_) return;
+  band_lm_.assign(nb, 1.0);  // luminous flux transported directly, unless the bands have wavelengths
+  if (!band_nm_.empty()) {
+    if (band_nm_.size() != bands_.size())
+      throw InvalidArgument("SensorScene: wavelengths for " + std::to_string(band_nm_.size()) +
+                            " bands, the scene has " + std::to_string(bands_.size()));
+    for (std::size_t k = 0; k < band_nm_.size(); ++k) {
+      const auto [lo, hi] = band_nm_[k];
+      if (!(std::isfinite(lo) && std::isfinite(hi) && lo > 0.0 && lo < hi))
+        throw InvalidArgument("band '" + bands_[k] + "': wavelengths [" + std::to_string(lo) + ", " +
+                              std::to_string(hi) + "] nm must be finite with 0 < lo < hi");
+      band_xyz_.push_back(kLumensPerWatt * cieBandMean(lo, hi));
+      band_lm_[k] = band_xyz_.back().y;
+    }
+  } else if (in_watts) {
+    throw InvalidArgument("light '" + in_watts->name + "' is given in watts and light '" + in_lumens->name +
+                          "' in lumens: without band wavelengths (\"bands\": [{\"name\": ..., \"nm\": [lo, hi]}]) "
+                          "watts and lumens cannot be converted; give every light in lumens, or the bands wavelengths");
+  }
+  for (Light& l : given_lights_) {
+    if (!(l.lumens > 0.0)) continue;
+    // Lumens per watt of the light's spectrum: each band's share times its efficacy.
+    double sum = 0.0, efficacy = 0.0;
+    for (std::uint32_t k = 0; k < nb; ++k) sum += l.spectrum.empty() ? 1.0 : l.spectrum[k];
+    for (std::uint32_t k = 0; k < nb; ++k) efficacy += (l.spectrum.empty() ? 1.0 : l.spectrum[k]) / sum * band_lm_[k];
+    if (!(efficacy > 0.0))
+      throw InvalidArgument("light '" + l.name +
+                            "': given in lumens, but its spectrum has no power in a band where "
+                            "V(lambda) > 0 (its luminous efficacy is 0)");
+    l.power_w = l.lumens / efficacy;
+  }
 }
 
 SensorScene::SensorScene(SensorScene&&) noexcept = default;

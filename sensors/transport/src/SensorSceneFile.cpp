@@ -65,15 +65,23 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   }
   l.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  const double power = ctx.number(ctx.member(v, p, "power"), at(p, "power"));
-  if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
-  l.power_w = power;
+  // Watts or lumens, never both; an "ies" light with neither takes its lumens from its file.
+  if (v.contains("power") && v.contains("lumens"))
+    ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
+  if (v.contains("lumens")) {
+    l.lumens = ctx.number(v["lumens"], at(p, "lumens"));
+    if (!(l.lumens > 0.0)) ctx.fail(at(p, "lumens"), "lumens must be > 0 lm (got " + std::to_string(l.lumens) + ")");
+  } else if (v.contains("power") || type != "ies") {
+    const double power = ctx.number(ctx.member(v, p, "power"), at(p, "power"));
+    if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
+    l.power_w = power;
+  }
   if (type == "point") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position"});
     l.type = LightType::Point;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
   } else if (type == "spot") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position", "direction", "half_angle"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position", "direction", "half_angle"});
     l.type = LightType::Spot;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
@@ -81,13 +89,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
     l.cone_angle = deg * std::numbers::pi / 180.0;
   } else if (type == "directional") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position", "direction", "radius"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position", "direction", "radius"});
     l.type = LightType::Directional;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
     l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
   } else if (type == "area") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "size", "transform", "two_sided"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "size", "transform", "two_sided"});
     l.type = LightType::Area;
     const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
     l.width = size[0];
@@ -98,7 +106,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       l.two_sided = v["two_sided"].get<bool>();
     }
   } else if (type == "ies") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "file", "position", "transform"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "file", "position", "transform"});
     l.type = LightType::Goniometric;
     if (v.contains("position") == v.contains("transform"))
       ctx.fail(p, "an \"ies\" light has either \"position\" or \"transform\" (rotation and translation)");
@@ -114,6 +122,9 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     } catch (const Error& e) {
       ctx.fail(at(p, "file"), e.what());
     }
+    // Neither watts nor lumens: the file's candela values (multiplier applied) are the intensity,
+    // so the light emits their integral.
+    if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
     ctx.fail(at(p, "type"), "unknown light type \"" + type +
                                 "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
@@ -205,12 +216,27 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       }
 
   std::vector<std::string> bands;
+  std::vector<std::array<double, 2>> band_nm;
   if (root.contains("bands")) {
     const json& list = root["bands"];
     if (!list.is_array() || list.empty()) ctx.fail("/bands", "expected a non-empty array of band names");
     if (list.size() > 256) ctx.fail("/bands", std::to_string(list.size()) + " bands, at most 256");
     for (std::size_t i = 0; i < list.size(); ++i) {
-      bands.push_back(ctx.string(list[i], at("/bands", i)));
+      const std::string p = at("/bands", i);
+      // A name, or {"name": N, "nm": [lo, hi]}: wavelengths for every band or for none.
+      if (list[i].is_object()) {
+        ctx.onlyKeys(list[i], p, {"name", "nm"});
+        bands.push_back(ctx.string(ctx.member(list[i], p, "name"), at(p, "name")));
+        const json& nm = ctx.member(list[i], p, "nm");
+        if (!nm.is_array() || nm.size() != 2) ctx.fail(at(p, "nm"), "expected [lo, hi] in nm");
+        const double lo = ctx.number(nm[0], at(at(p, "nm"), 0)), hi = ctx.number(nm[1], at(at(p, "nm"), 1));
+        if (!(lo > 0.0 && lo < hi)) ctx.fail(at(p, "nm"), "expected wavelengths 0 < lo < hi in nm");
+        band_nm.push_back({lo, hi});
+      } else {
+        bands.push_back(ctx.string(list[i], p));
+      }
+      if (band_nm.size() != (band_nm.empty() ? 0 : i + 1))
+        ctx.fail(p, "either every band has wavelengths (\"nm\") or none");
       for (std::size_t j = 0; j < i; ++j)
         if (bands[j] == bands[i] || bands[i].empty())
           ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
@@ -281,7 +307,8 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     (void)graph.commit();
   }
   try {
-    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field));
+    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field),
+                      std::move(band_nm));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {

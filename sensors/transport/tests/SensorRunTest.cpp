@@ -12,6 +12,7 @@
 #include "duplex/sensors/SensorScene.h"
 #include "SensorFixture.h"
 #include "SlabMedium.h"
+#include "SensorRunChunk.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -21,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <unistd.h>
@@ -29,12 +31,6 @@ namespace duplex {
 namespace {
 
 using namespace test;
-
-// Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
-double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
-  auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
-  return f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0);
-}
 
 TEST(SensorRun, PointSourceOnALargePlaneMatchesTheExactPerBinIntegral) {
   Fixture f;
@@ -441,6 +437,53 @@ TEST(SensorRun, WithAnAbsorberInsideMissingPowerEqualsAbsorbedPower) {
   EXPECT_NEAR(sensorSum(r) + r.energy.absorbed_w, 2.0, 1e-12);
   EXPECT_NEAR(sensorSum(r), r.energy.escaped_w, 1e-12);
   EXPECT_EQ(r.energy.depth_limited_w, 0.0);
+  // Materials keep a surviving path's power and nothing attenuates: every path ends with the power
+  // it was emitted with, so each term is its ray count times that power, and the counts are the rays.
+  const EnergyBalance& e = r.energy;
+  EXPECT_GT(e.absorbed_rays, 1000u);
+  EXPECT_EQ(e.escaped_rays + e.absorbed_rays, r.rays);
+  EXPECT_EQ(e.medium_absorbed_rays + e.depth_limited_rays + e.roulette_rays + e.failed_rays, 0u);
+  EXPECT_NEAR(e.absorbed_w, 2.0 * static_cast<double>(e.absorbed_rays) / static_cast<double>(r.rays), 1e-12);
+  EXPECT_NEAR(e.escaped_w, 2.0 * static_cast<double>(e.escaped_rays) / static_cast<double>(r.rays), 1e-12);
+  EXPECT_EQ(e.failed_w, 0.0);
+}
+
+TEST(SensorRun, EveryPathEndsOneWayAndTheCountsSumToTheRays) {
+  // Fog, a Lambertian ceiling and a roulette threshold of 0.9 (it kills paths), a depth limit of 2
+  // (it cuts some): every ending is counted once.
+  Fixture f;
+  const SensorScene scene = fogUnderCeiling(f);
+  SensorRunConfig cfg;
+  cfg.roulette_threshold = 0.9;
+  cfg.max_depth = 2;
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(40000);
+  const EnergyBalance e = run.results().energy;
+  EXPECT_EQ(e.escaped_rays + e.absorbed_rays + e.medium_absorbed_rays + e.depth_limited_rays + e.roulette_rays +
+                e.failed_rays,
+            40000u);
+  EXPECT_GT(e.roulette_rays, 0u);
+  EXPECT_GT(e.escaped_rays, 0u);
+  EXPECT_EQ(e.failed_rays, 0u);
+  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w + e.failed_w,
+              e.emitted_w, 1e-12 * e.emitted_w);
+  // Counts travel with batches and states like the sums.
+  SensorRun worker(scene, cfg), sum(scene, cfg);
+  sum.addBatch(worker.traceBatch(0, 40000).bytes);
+  EXPECT_EQ(sum.results().energy.roulette_rays, e.roulette_rays);
+  EXPECT_EQ(sum.results().energy.depth_limited_rays, e.depth_limited_rays);
+}
+
+TEST(SensorRun, ADirectionThatDoesNotLeaveTheSurfaceIsAFailure) {
+  const glm::dvec3 n(0.0, 0.0, 1.0);  // faces the incoming ray
+  EXPECT_TRUE(detail::leavesSurface({0.3, 0.0, 0.9}, n, false));
+  EXPECT_FALSE(detail::leavesSurface({0.3, 0.0, 0.9}, n, true));  // a refraction must cross
+  EXPECT_TRUE(detail::leavesSurface({0.3, 0.0, -0.9}, n, true));
+  EXPECT_FALSE(detail::leavesSurface({1.0, 0.0, 0.0}, n, false));  // tangent: neither side
+  EXPECT_FALSE(detail::leavesSurface({1.0, 0.0, 0.0}, n, true));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(detail::leavesSurface({nan, 0.0, 1.0}, n, false));
+  EXPECT_FALSE(detail::leavesSurface({0.0, 0.0, std::numeric_limits<double>::infinity()}, n, false));
 }
 
 SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32_t chunk, std::uint64_t rays,
