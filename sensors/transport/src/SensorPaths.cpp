@@ -7,6 +7,7 @@
 #include "duplex/sensors/SensorRun.h"
 
 #include "OrthonormalBasis.h"
+#include "SurfaceScatter.h"
 #include "SensorRunChunk.h"
 
 #include <glm/geometric.hpp>
@@ -247,7 +248,22 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           break;
         }
         next = m.type == MaterialType::Mirror ? reflect(d, nf) : cosineDirection(nf, rng.uniform(), rng.uniform());
+      } else if (m.type == MaterialType::Coating) {  // reflect, pass undeviated, or absorb
+        const double u = rng.uniform(), r = m.reflectanceIn(band);
+        if (u >= r + m.transmittanceIn(band)) {
+          e.absorbed_w += w;
+          ++e.absorbed_rays;
+          break;
+        }
+        transmits = u >= r;
+        next = transmits ? d : reflect(d, nf);
       } else {  // dielectric: exact Fresnel for unpolarised light, reflect or refract by it
+        // A ray reaching the surface from inside crossed the glass from its last surface: Beer-Lambert.
+        if (const double a = m.absorptionIn(band); !front && a > 0.0) {
+          const double keep = std::exp(-a * static_cast<double>(end.hit.t));
+          e.absorbed_w += w * (1.0 - keep);
+          w *= keep;
+        }
         const double eta_i = front ? 1.0 : m.ior, eta_t = front ? m.ior : 1.0;
         const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
         const double sin_t2 = (eta_i / eta_t) * (eta_i / eta_t) * (1.0 - cos_i * cos_i);
@@ -260,6 +276,12 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         }
         transmits = !(rng.uniform() < fresnel);
         next = transmits ? (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - cos_t) * nf : reflect(d, nf);
+      }
+      // Rough surfaces spread a fraction of the specular light about the specular direction; a
+      // material whose lobe yields no direction refuses the path (a numerical failure below).
+      if (m.scatter != ScatterModel::None && rng.uniform() < m.scatter_fraction) {
+        const glm::dvec3 specular = glm::normalize(next);
+        if (!detail::scatterAbout(m, specular, transmits ? -nf : nf, rng, next)) next = glm::dvec3(0.0);
       }
       // A direction that does not leave the surface to the side the material sends it (tangent,
       // on the wrong side, not finite) would be traced from the wrong side of the offset: the

@@ -86,6 +86,15 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(&m.type, sizeof m.type);
     for (const double x : {m.reflectance, m.ior, m.g}) addDouble(x);
     add(m.band_reflectance.data(), m.band_reflectance.size() * sizeof(double));
+    // Coatings, absorption and roughness, where a material has them.
+    if (m.type == MaterialType::Coating || m.absorption != 0.0 || m.scatter != ScatterModel::None ||
+        !m.band_absorption.empty()) {
+      add(&m.scatter, sizeof m.scatter);
+      for (const double x : {m.transmittance, m.absorption, m.scatter_fraction, m.sigma, m.abg_a, m.abg_b, m.abg_g})
+        addDouble(x);
+      add(m.band_transmittance.data(), m.band_transmittance.size() * sizeof(double));
+      add(m.band_absorption.data(), m.band_absorption.size() * sizeof(double));
+    }
   }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();

@@ -6,10 +6,14 @@
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 
+#include "SurfaceScatter.h"
+
 #include <glm/matrix.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <array>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -142,22 +146,57 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
   if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
   Material m;
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  // A number in [0, 1], or one per band (then `reflectance` keeps their mean, for messages).
-  auto fraction = [&](const char* key) {
+  // A number in [lo, hi], or one per band into `per_band` (then the result is their mean, for messages).
+  auto perBand = [&](const char* key, double hi, std::vector<double>& per_band) {
     const json& x = ctx.member(v, p, key);
     const std::vector<double> values =
         x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
     double sum = 0.0;
     for (std::size_t k = 0; k < values.size(); ++k) {
-      if (!(values[k] >= 0.0 && values[k] <= 1.0))
-        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key),
-                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key + " in [0, 1]");
+      if (!(values[k] >= 0.0 && values[k] <= hi))
+        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key), std::string("expected ") +
+                                                                    (key[0] == 'a' ? "an " : "a ") + key +
+                                                                    (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
       sum += values[k];
     }
-    if (x.is_array()) m.band_reflectance = values;
+    if (x.is_array()) per_band = values;
     return sum / static_cast<double>(values.size());
   };
+  auto fraction = [&](const char* key) { return perBand(key, 1.0, m.band_reflectance); };
   auto reflectance = [&] { return fraction("reflectance"); };
+  // "scatter": {"model": "gaussian", "sigma": s, "fraction": f} or {"model": "abg", "A", "B", "g"}.
+  auto scatter = [&] {
+    if (!v.contains("scatter")) return;
+    const std::string q = at(p, "scatter");
+    const json& sv = v["scatter"];
+    if (!sv.is_object()) ctx.fail(q, "expected a scatter model (an object with \"model\")");
+    const std::string model = ctx.string(ctx.member(sv, q, "model"), at(q, "model"));
+    if (model == "gaussian") {
+      ctx.onlyKeys(sv, q, {"model", "sigma", "fraction"});
+      m.scatter = ScatterModel::Gaussian;
+      m.sigma = ctx.number(ctx.member(sv, q, "sigma"), at(q, "sigma"));
+      if (!(m.sigma > 0.0 && std::isfinite(m.sigma)))
+        ctx.fail(at(q, "sigma"), "a Gaussian scatter's sigma must be > 0 (got " + std::to_string(m.sigma) + ")");
+      m.scatter_fraction = sv.contains("fraction") ? ctx.number(sv["fraction"], at(q, "fraction")) : 1.0;
+      if (!(m.scatter_fraction >= 0.0 && m.scatter_fraction <= 1.0))
+        ctx.fail(at(q, "fraction"), "expected a scattered fraction in [0, 1]");
+    } else if (model == "abg") {
+      ctx.onlyKeys(sv, q, {"model", "A", "B", "g"});
+      m.scatter = ScatterModel::ABg;
+      m.abg_a = ctx.number(ctx.member(sv, q, "A"), at(q, "A"));
+      m.abg_b = ctx.number(ctx.member(sv, q, "B"), at(q, "B"));
+      m.abg_g = ctx.number(ctx.member(sv, q, "g"), at(q, "g"));
+      if (!(m.abg_a >= 0.0)) ctx.fail(at(q, "A"), "ABg's A must be >= 0");
+      if (!(m.abg_b > 0.0)) ctx.fail(at(q, "B"), "ABg's B must be > 0");
+      if (!(m.abg_g > 0.0 && m.abg_g <= 8.0)) ctx.fail(at(q, "g"), "ABg's g must be in (0, 8]");
+      m.scatter_fraction = detail::abgTotalIntegratedScatter(m.abg_a, m.abg_b, m.abg_g);
+      if (!(m.scatter_fraction <= 1.0))
+        ctx.fail(q, "ABg parameters scatter more than all the light (total integrated scatter " +
+                        std::to_string(m.scatter_fraction) + " > 1): not energy conserving");
+    } else {
+      ctx.fail(at(q, "model"), "unknown scatter model \"" + model + "\" (expected \"gaussian\" or \"abg\")");
+    }
+  };
   if (type == "absorber") {
     ctx.onlyKeys(v, p, {"type"});
   } else if (type == "lambertian") {
@@ -165,13 +204,44 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
     m.type = MaterialType::Lambertian;
     m.reflectance = reflectance();
   } else if (type == "mirror") {
-    ctx.onlyKeys(v, p, {"type", "reflectance"});
+    ctx.onlyKeys(v, p, {"type", "reflectance", "scatter"});
     m.type = MaterialType::Mirror;
     m.reflectance = v.contains("reflectance") ? reflectance() : 1.0;
+    scatter();
   } else if (type == "dielectric") {
-    ctx.onlyKeys(v, p, {"type", "ior"});
+    ctx.onlyKeys(v, p, {"type", "ior", "absorption", "scatter"});
     m.type = MaterialType::Dielectric;
     m.ior = ctx.positiveNumber(ctx.member(v, p, "ior"), at(p, "ior"));
+    if (v.contains("absorption"))
+      m.absorption = perBand("absorption", std::numeric_limits<double>::max(), m.band_absorption);
+    scatter();
+  } else if (type == "coating") {
+    // Fractions reflected, transmitted and absorbed: any of the three may be left out (0, or for
+    // "absorb" what the others leave); given, they sum to 1.
+    ctx.onlyKeys(v, p, {"type", "reflect", "transmit", "absorb"});
+    m.type = MaterialType::Coating;
+    if (v.contains("reflect")) m.reflectance = perBand("reflect", 1.0, m.band_reflectance);
+    if (v.contains("transmit")) m.transmittance = perBand("transmit", 1.0, m.band_transmittance);
+    std::vector<double> absorb;
+    if (v.contains("absorb")) (void)perBand("absorb", 1.0, absorb);
+    const std::size_t n =
+        std::max({m.band_reflectance.size(), m.band_transmittance.size(), absorb.size(), std::size_t{1}});
+    for (std::size_t k = 0; k < n; ++k) {
+      auto pick = [k](const std::vector<double>& bands, double one) {
+        return bands.empty() ? one : bands[std::min(k, bands.size() - 1)];
+      };
+      const double r = pick(m.band_reflectance, m.reflectance), t = pick(m.band_transmittance, m.transmittance);
+      if (r + t > 1.0 + 1e-12)
+        ctx.fail(p, "a coating reflects and transmits more than all the light (reflect + transmit = " +
+                        std::to_string(r + t) + (n > 1 ? " in band " + std::to_string(k) : "") + ")");
+      if (v.contains("absorb")) {
+        const double a =
+            absorb.empty() ? ctx.number(v["absorb"], at(p, "absorb")) : absorb[std::min(k, absorb.size() - 1)];
+        if (std::abs(r + t + a - 1.0) > 1e-9)
+          ctx.fail(at(p, "absorb"), "reflect + transmit + absorb must be 1 (got " + std::to_string(r + t + a) +
+                                        (n > 1 ? " in band " + std::to_string(k) : "") + ")");
+      }
+    }
   } else if (type == "medium") {
     ctx.onlyKeys(v, p, {"type", "albedo", "g"});
     m.type = MaterialType::Medium;
@@ -182,7 +252,8 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
     }
   } else {
     ctx.fail(at(p, "type"), "unknown material \"" + type +
-                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\" or \"medium\")");
+                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\", \"coating\" or "
+                                "\"medium\")");
   }
   return m;
 }
@@ -214,6 +285,33 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
         if (entry.is_object() && entry.contains("material"))
           materials[e.object] = readMaterial(entry["material"], at(at(e.pointer, "add_object"), "material"), ctx);
       }
+
+  // Instances' own materials: scene-json-v1 "instances" entries, duplex-scene-v1 instance nodes
+  // (doc->instances lists them depth first in file order, as the walk below meets them).
+  std::vector<std::pair<NodeId, Material>> instance_materials;
+  std::size_t instance_index = 0;
+  auto instanceMaterial = [&](const json& entry, const std::string& p) {
+    if (instance_index >= doc->instances.size()) return;
+    const NodeId node = doc->instances[instance_index++];
+    if (entry.is_object() && entry.contains("material"))
+      instance_materials.emplace_back(node, readMaterial(entry["material"], at(p, "material"), ctx));
+  };
+  if (doc->format == "scene-json-v1") {
+    if (root.contains("instances") && root["instances"].is_array())
+      for (std::size_t i = 0; i < root["instances"].size(); ++i)
+        instanceMaterial(root["instances"][i], at("/instances", i));
+  } else if (root.contains("nodes") && root["nodes"].is_array()) {
+    auto walk = [&](auto&& self, const json& list, const std::string& p) -> void {
+      for (std::size_t i = 0; i < list.size(); ++i) {
+        const json& n = list[i];
+        if (!n.is_object()) continue;
+        if (n.contains("instance")) instanceMaterial(n, at(p, i));
+        else if (n.contains("children") && n["children"].is_array())
+          self(self, n["children"], at(at(p, i), "children"));
+      }
+    };
+    walk(walk, root["nodes"], "/nodes");
+  }
 
   std::vector<std::string> bands;
   std::vector<std::array<double, 2>> band_nm;
@@ -249,8 +347,18 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   };
   for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
     const Material& m = materials[doc->objects[i]];
-    bandCount(m.band_reflectance,
-              at(at(at("/objects", i), "material"), m.type == MaterialType::Medium ? "albedo" : "reflectance"));
+    const std::string q = at(at("/objects", i), "material");
+    bandCount(m.band_reflectance, at(q, m.type == MaterialType::Medium    ? "albedo"
+                                        : m.type == MaterialType::Coating ? "reflect"
+                                                                          : "reflectance"));
+    bandCount(m.band_transmittance, at(q, "transmit"));
+    bandCount(m.band_absorption, at(q, "absorption"));
+  }
+  for (const auto& [node, m] : instance_materials) {
+    const std::string q = graph.path(node) + " material";  // the node, as JSON pointers of nodes are not kept
+    bandCount(m.band_reflectance, q);
+    bandCount(m.band_transmittance, q);
+    bandCount(m.band_absorption, q);
   }
 
   std::vector<Light> lights;
@@ -308,7 +416,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   }
   try {
     SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field),
-                      std::move(band_nm));
+                      std::move(band_nm), std::move(instance_materials));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {

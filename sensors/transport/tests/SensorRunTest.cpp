@@ -710,14 +710,6 @@ TEST(SensorRun, BadLightsAndConfigurationsAreRefused) {
 
 // ---- scene files ----
 
-std::filesystem::path writeScene(const std::string& name, const std::string& text) {
-  const auto dir = std::filesystem::temp_directory_path() / ("duplex_sensor_scenes_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  const auto path = dir / name;
-  std::ofstream(path) << text;
-  return path;
-}
-
 const char* kQuadObject =
     R"({"name": "floor", "mesh": {"positions": [-5,-5,0, 5,-5,0, 5,5,0, -5,5,0], "indices": [0,1,2, 0,2,3]}})";
 
@@ -732,7 +724,7 @@ TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
                  "transform": [1,0,0,0, 0,1,0,0, 0,0,1,2]},
                 {"name": "round", "shape": "disk", "size": 1, "bins": [3, 3], "two_sided": false,
                  "transform": [2,0,0,0, 0,2,0,0, 0,0,2,1]}]})";
-  const SensorScene scene = SensorScene::load(writeScene("ok.json", text));
+  const SensorScene scene = SensorScene::load(writeTestFile("ok.json", text));
   ASSERT_EQ(scene.lights().size(), 4u);
   EXPECT_EQ(scene.totalPower(), 15.5);
   ASSERT_EQ(scene.sensors().size(), 2u);
@@ -748,7 +740,7 @@ TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
 TEST(SensorSceneFile, UnknownKeysAreIgnoredInSceneJsonV1AndRefusedInTheOwnFormat) {
   const std::string lights = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2, "colour": "red"}])";
   const std::string sensors = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2], "vendor": "acme"}])";
-  const SensorScene v1 = SensorScene::load(writeScene(
+  const SensorScene v1 = SensorScene::load(writeTestFile(
       "v1_unknown.json",
       R"({"format": "scene-json-v1", "objects": [], "instances": [], "note": "x", )" + lights + ", " + sensors + "}"));
   EXPECT_EQ(v1.totalPower(), 2.0);
@@ -758,7 +750,7 @@ TEST(SensorSceneFile, UnknownKeysAreIgnoredInSceneJsonV1AndRefusedInTheOwnFormat
   const std::string light_only = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2}])";
   const std::string sensor_only = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2]}])";
   const auto own = [](const std::string& name, const std::string& body) {
-    return writeScene(name, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], )" + body + "}");
+    return writeTestFile(name, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], )" + body + "}");
   };
   (void)SensorScene::load(own("own_known.json", light_only + ", " + sensor_only));  // the keys alone are fine
   expectErrorNaming<FileError>([&] { (void)SensorScene::load(own("own_light.json", lights + ", " + sensor_only)); },
@@ -775,7 +767,7 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
               {"group": "row", "translate": [0, 0, 1], "children": [
                 {"instance": "a", "object": "cell"}, {"instance": "b", "object": "cell", "transform": {"translate": [2, 0, 0]}}]}],
     "lights": [{"type": "point", "position": [0, 0, 3], "power": 1}]})";
-  const SensorScene scene = SensorScene::load(writeScene("own.json", text));
+  const SensorScene scene = SensorScene::load(writeTestFile("own.json", text));
   ASSERT_EQ(scene.sensors().size(), 2u);
   EXPECT_EQ(scene.sensors()[0].name, "a");
   EXPECT_EQ(scene.sensors()[1].name, "b");
@@ -786,9 +778,9 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
 
 // An LM-63 file next to the scenes: rotationally symmetric, 100 cd at the nadir, 50 at the horizon.
 void writeLampIes() {
-  (void)writeScene("lamp.ies",
-                   "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
-                   "0 90 180\n0\n100 50 0\n");
+  (void)writeTestFile("lamp.ies",
+                      "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
+                      "0 90 180\n0\n100 50 0\n");
 }
 
 TEST(SensorSceneFile, ReadsAnIesLight) {
@@ -796,7 +788,7 @@ TEST(SensorSceneFile, ReadsAnIesLight) {
   const std::string text = R"({"format": "scene-json-v1", "objects": [], "instances": [],
     "lights": [{"type": "ies", "file": "lamp.ies", "position": [0, 0, 3], "power": 5}],
     "sensors": [{"name": "floor", "size": 1}]})";
-  const SensorScene scene = SensorScene::load(writeScene("ies.json", text));
+  const SensorScene scene = SensorScene::load(writeTestFile("ies.json", text));
   ASSERT_EQ(scene.lights().size(), 1u);
   const Light& l = scene.lights()[0];
   EXPECT_EQ(l.type, LightType::Goniometric);
@@ -804,16 +796,9 @@ TEST(SensorSceneFile, ReadsAnIesLight) {
 }
 
 void expectFileError(const std::string& name, const std::string& body, const std::string& needle) {
-  const auto path = writeScene(name, std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
-                                         R"(], "instances": [], )" + body + "}");
-  try {
-    (void)SensorScene::load(path);
-    ADD_FAILURE() << name << ": no error";
-  } catch (const FileError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(path.string()), std::string::npos) << what;
-    EXPECT_NE(what.find(needle), std::string::npos) << what;
-  }
+  const auto path = writeTestFile(name, std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
+                                            R"(], "instances": [], )" + body + "}");
+  expectLoadError(path, {needle});
 }
 
 TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {

@@ -31,6 +31,8 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace duplex {
@@ -120,10 +122,13 @@ class SensorScene {
   /// wavelengths, else lumens itself when every light is in lumens (luminous flux is transported
   /// directly). Throws InvalidArgument naming the light for lights in lumens beside lights in watts
   /// without wavelengths, or a light in lumens whose spectrum has no power where V(lambda) > 0; and
-  /// for wavelengths not one pair per band or not 0 < lo < hi.
+  /// for wavelengths not one pair per band or not 0 < lo < hi. `instance_materials` gives instance
+  /// nodes materials of their own, which replace their object's (two copies of a part in different
+  /// finishes); checked as the objects' materials, named by the node's path.
   SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
               std::vector<std::string> bands = {}, std::vector<FarFieldSensor> far_field = {},
-              std::vector<std::array<double, 2>> band_nm = {});
+              std::vector<std::array<double, 2>> band_nm = {},
+              std::vector<std::pair<NodeId, Material>> instance_materials = {});
   /// Moves everything (the graph stays where it is: a loaded scene owns it through its document).
   SensorScene(SensorScene&&) noexcept;
   /// Moves everything, like the move constructor.
@@ -215,6 +220,9 @@ class SensorScene {
   [[nodiscard]] std::unique_ptr<Derived> derive() const;
   // Photometric scenes: the bands' luminous and tristimulus weights, the power of lights in lumens.
   void resolvePhotometry();
+  // Coatings, absorption and scatter models of a material (`what` names it in errors); sets an
+  // ABg material's scattered fraction (its total integrated scatter).
+  static void checkSurfaceMaterial(Material& m, const std::string& what, std::uint32_t nb);
   std::unique_ptr<SceneDocument> doc_;
   SceneGraph* graph_ = nullptr;
   std::unique_ptr<SceneTracer> tracer_;
@@ -222,7 +230,8 @@ class SensorScene {
   std::vector<Material> materials_;  // by object id
   std::vector<std::string> bands_;
   std::vector<FarFieldSensor> far_field_;
-  std::vector<std::array<double, 2>> band_nm_;  // per band [lo, hi] nm, or empty
+  std::vector<std::array<double, 2>> band_nm_;               // per band [lo, hi] nm, or empty
+  std::unordered_map<NodeId, Material> instance_materials_;  // instances' own materials
   bool photometric_ = false;
   std::vector<double> band_lm_;       // per band: lumens per transported unit (photometric scenes)
   std::vector<glm::dvec3> band_xyz_;  // per band: 683 x (mean x-bar, y-bar, z-bar) (colorimetric scenes)
