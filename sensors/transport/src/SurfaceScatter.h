@@ -15,7 +15,7 @@ namespace duplex::detail {
 [[nodiscard]] double abgTotalIntegratedScatter(double a, double b, double g);
 
 // A radius of the model's lobe in direction-cosine space, from the radial density
-// r * BSDF(r) on [0, r_max] (Gaussian: r exp(-r^2 / sigma^2), exact by inversion; ABg:
+// r * BSDF(r) on [0, r_max] (Gaussian: r exp(-r^2 / sigma^2), exact by inversion of the truncated CDF; ABg:
 // r / (B + r^g), exact by rejection from an envelope that inverts in closed form, accepting at
 // least half of its draws). Returns a negative number when 256 draws were all rejected.
 [[nodiscard]] double sampleLobeRadius(const Material& m, double r_max, CounterRng& rng);

@@ -174,6 +174,18 @@ TEST(SensorMaterials, GaussianAndAbgLobesAreSampledExactly) {
   std::printf(", ABg %.1f\n", chi_abg);
   // The ABg total integrated scatter is 2 pi A times that integral.
   EXPECT_NEAR(detail::abgTotalIntegratedScatter(0.05, 0.01, 1.5), 2.0 * std::numbers::pi * 0.05 * total, 1e-9);
+  // A lobe far wider than the disk is flat over it: never refused, directions uniform in beta
+  // (the projected solid angle, a Lambertian), so |beta|^2 is uniform on [0, 1]: its mean is 1/2.
+  Material wide = gaussian;
+  wide.sigma = 100.0;
+  double mean_s2 = 0.0;
+  for (int i = 0; i < 20000; ++i) {
+    CounterRng rng(9, static_cast<std::uint64_t>(i));
+    glm::dvec3 out;
+    ASSERT_TRUE(detail::scatterAbout(wide, {0, 0, 1}, {0, 0, 1}, rng, out));
+    mean_s2 += (out.x * out.x + out.y * out.y) / 20000.0;
+  }
+  EXPECT_NEAR(mean_s2, 0.5, 4.5 * std::sqrt(1.0 / 12.0 / 20000.0));
   // A narrow lobe about an oblique specular direction stays around it (mean of beta = beta0).
   Material narrow = gaussian;
   narrow.sigma = 0.05;
