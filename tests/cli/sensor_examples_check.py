@@ -32,6 +32,7 @@ def near(value, se, expected, expected_se, what, k=4.5):
 
 
 def run(duplex, scenes, work, name):
+    """Runs scenes/name.json into work/name; returns run.json and a reader of the sensors' JSON."""
     out = os.path.join(work, name)
     report = subprocess.run([duplex, "sensor", "--scene", os.path.join(scenes, name + ".json"), "--rays", str(RAYS),
                              "--seed", "1", "--threads", "2", "--out", out, "--overwrite", "--progress", "none"],
@@ -94,6 +95,21 @@ def main():
     ng = len(gamma)
     mean = [sum(far["intensity_w_sr"][c * ng + g] for c in range(far["bins"][0])) / far["bins"][0] for g in range(ng)]
     check(mean[3] > 0.7 * mean[0] and mean[6] < 0.6 * mean[0], "light guide: exit profile %s" % mean[:8])
+
+    # Photometric far field: an isotropic 1000 lm source measured in candela, its .ies in candela.
+    scene = {"format": "scene-json-v1", "objects": [], "instances": [],
+             "lights": [{"type": "point", "position": [0, 0, 0], "lumens": 1000}],
+             "sensors": [{"name": "far", "shape": "farfield", "bins": [4, 5]}]}
+    with open(os.path.join(work, "lumens.json"), "w") as f:
+        json.dump(scene, f)
+    r, sensor = run(duplex, work, work, "lumens")
+    far = sensor("far")
+    check(r["emitted_luminous_flux_lm"] == 1000, "lumens: emitted_luminous_flux_lm %s" % r["emitted_luminous_flux_lm"])
+    check(abs(far["luminous_flux_lm"] - 1000) < 1e-9, "lumens: the far field's luminous flux is not 1000 lm")
+    for c, (i, se) in enumerate(zip(far["intensity_cd"], far["intensity_stderr_cd"])):
+        check(abs(i - 1000 / (4 * math.pi)) < 4.5 * se, "lumens: cell %d: %.5g cd, expected %.5g" % (c, i, 1000 / (4 * math.pi)))
+    ies = open(os.path.join(work, "lumens", "far.ies")).read()
+    check("[_UNITS] cd" in ies and "candela" in ies, "lumens: far.ies is not in candela")
 
     if failures:
         print("%d failure(s)" % len(failures))

@@ -142,24 +142,44 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   return l;
 }
 
-Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+// `bands`: the scene's band names, which per-band values may use as keys ({"red": 0.9, ...}).
+Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx,
+                      const std::vector<std::string>& bands) {
   if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
   Material m;
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
   // A number in [lo, hi], or one per band into `per_band` (then the result is their mean, for messages).
   auto perBand = [&](const char* key, double hi, std::vector<double>& per_band) {
     const json& x = ctx.member(v, p, key);
-    const std::vector<double> values =
-        x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
+    std::vector<double> values;
+    if (x.is_object()) {  // by band name: every band once
+      values.assign(bands.size(), 0.0);
+      std::vector<bool> given(bands.size(), false);
+      for (const auto& [name, value] : x.items()) {
+        const auto it = std::find(bands.begin(), bands.end(), name);
+        if (it == bands.end())
+          ctx.fail(at(p, key), "unknown band \"" + name + "\" (the scene's \"bands\" are " +
+                                   (bands.empty() ? std::string("none") : "\"" + bands.front() + "\", ...") + ")");
+        const auto k = static_cast<std::size_t>(it - bands.begin());
+        values[k] = ctx.number(value, at(at(p, key), name));
+        given[k] = true;
+      }
+      for (std::size_t k = 0; k < bands.size(); ++k)
+        if (!given[k]) ctx.fail(at(p, key), "no value for band \"" + bands[k] + "\"");
+    } else {
+      values = x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
+    }
     double sum = 0.0;
     for (std::size_t k = 0; k < values.size(); ++k) {
       if (!(values[k] >= 0.0 && values[k] <= hi))
-        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key), std::string("expected ") +
-                                                                    (key[0] == 'a' ? "an " : "a ") + key +
-                                                                    (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
+        ctx.fail(x.is_array()    ? at(at(p, key), k)
+                 : x.is_object() ? at(at(p, key), bands[k])
+                                 : at(p, key),
+                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key +
+                     (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
       sum += values[k];
     }
-    if (x.is_array()) per_band = values;
+    if (x.is_array() || x.is_object()) per_band = values;
     return sum / static_cast<double>(values.size());
   };
   auto fraction = [&](const char* key) { return perBand(key, 1.0, m.band_reflectance); };
@@ -270,49 +290,6 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   ctx.cache = std::make_shared<SceneLoadCache>();
   SceneGraph& graph = *doc->graph;
 
-  // Materials by object (file order = library order of the "objects" entries).
-  std::vector<Material> materials(graph.library().size());
-  const json& objects = root["objects"];
-  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i)
-    if (objects[i].contains("material"))
-      materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx);
-
-  // Objects declared by "add_object" edits may carry a material too (applied once they are instanced).
-  if (root.contains("edits"))
-    for (const SceneEdit& e : doc->edits)
-      if (e.kind == SceneEditKind::AddObject && e.object < materials.size()) {
-        const json& entry = root["edits"][std::stoul(e.pointer.substr(std::string("/edits/").size()))]["add_object"];
-        if (entry.is_object() && entry.contains("material"))
-          materials[e.object] = readMaterial(entry["material"], at(at(e.pointer, "add_object"), "material"), ctx);
-      }
-
-  // Instances' own materials: scene-json-v1 "instances" entries, duplex-scene-v1 instance nodes
-  // (doc->instances lists them depth first in file order, as the walk below meets them).
-  std::vector<std::pair<NodeId, Material>> instance_materials;
-  std::size_t instance_index = 0;
-  auto instanceMaterial = [&](const json& entry, const std::string& p) {
-    if (instance_index >= doc->instances.size()) return;
-    const NodeId node = doc->instances[instance_index++];
-    if (entry.is_object() && entry.contains("material"))
-      instance_materials.emplace_back(node, readMaterial(entry["material"], at(p, "material"), ctx));
-  };
-  if (doc->format == "scene-json-v1") {
-    if (root.contains("instances") && root["instances"].is_array())
-      for (std::size_t i = 0; i < root["instances"].size(); ++i)
-        instanceMaterial(root["instances"][i], at("/instances", i));
-  } else if (root.contains("nodes") && root["nodes"].is_array()) {
-    auto walk = [&](auto&& self, const json& list, const std::string& p) -> void {
-      for (std::size_t i = 0; i < list.size(); ++i) {
-        const json& n = list[i];
-        if (!n.is_object()) continue;
-        if (n.contains("instance")) instanceMaterial(n, at(p, i));
-        else if (n.contains("children") && n["children"].is_array())
-          self(self, n["children"], at(at(p, i), "children"));
-      }
-    };
-    walk(walk, root["nodes"], "/nodes");
-  }
-
   std::vector<std::string> bands;
   std::vector<std::array<double, 2>> band_nm;
   if (root.contains("bands")) {
@@ -340,6 +317,50 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
           ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
     }
   }
+  // Materials by object (file order = library order of the "objects" entries).
+  std::vector<Material> materials(graph.library().size());
+  const json& objects = root["objects"];
+  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i)
+    if (objects[i].contains("material"))
+      materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx, bands);
+
+  // Objects declared by "add_object" edits may carry a material too (applied once they are instanced).
+  if (root.contains("edits"))
+    for (const SceneEdit& e : doc->edits)
+      if (e.kind == SceneEditKind::AddObject && e.object < materials.size()) {
+        const json& entry = root["edits"][std::stoul(e.pointer.substr(std::string("/edits/").size()))]["add_object"];
+        if (entry.is_object() && entry.contains("material"))
+          materials[e.object] =
+              readMaterial(entry["material"], at(at(e.pointer, "add_object"), "material"), ctx, bands);
+      }
+
+  // Instances' own materials: scene-json-v1 "instances" entries, duplex-scene-v1 instance nodes
+  // (doc->instances lists them depth first in file order, as the walk below meets them).
+  std::vector<std::pair<NodeId, Material>> instance_materials;
+  std::size_t instance_index = 0;
+  auto instanceMaterial = [&](const json& entry, const std::string& p) {
+    if (instance_index >= doc->instances.size()) return;
+    const NodeId node = doc->instances[instance_index++];
+    if (entry.is_object() && entry.contains("material"))
+      instance_materials.emplace_back(node, readMaterial(entry["material"], at(p, "material"), ctx, bands));
+  };
+  if (doc->format == "scene-json-v1") {
+    if (root.contains("instances") && root["instances"].is_array())
+      for (std::size_t i = 0; i < root["instances"].size(); ++i)
+        instanceMaterial(root["instances"][i], at("/instances", i));
+  } else if (root.contains("nodes") && root["nodes"].is_array()) {
+    auto walk = [&](auto&& self, const json& list, const std::string& p) -> void {
+      for (std::size_t i = 0; i < list.size(); ++i) {
+        const json& n = list[i];
+        if (!n.is_object()) continue;
+        if (n.contains("instance")) instanceMaterial(n, at(p, i));
+        else if (n.contains("children") && n["children"].is_array())
+          self(self, n["children"], at(at(p, i), "children"));
+      }
+    };
+    walk(walk, root["nodes"], "/nodes");
+  }
+
   auto bandCount = [&](const std::vector<double>& values, const std::string& p) {
     if (!values.empty() && values.size() != std::max<std::size_t>(1, bands.size()))
       ctx.fail(p, std::to_string(values.size()) + " per-band values, the scene has " +

@@ -314,6 +314,18 @@ void expectError(const std::string& name, const std::string& body, const std::ve
   expectLoadError(path, needles);
 }
 
+TEST(SensorMaterials, PerBandValuesMayNameTheirBands) {
+  const auto path = writeTestFile("named.json", R"({"format": "duplex-scene-v1", "bands": ["vis", "nir"],
+    "objects": [{"name": "filter", "box": {"size": 1},
+                 "material": {"type": "coating", "reflect": {"nir": 0.6, "vis": 0.05}, "transmit": [0.9, 0.3]}}],
+    "nodes": [{"instance": "f", "object": "filter"}],
+    "lights": [{"type": "point", "position": [0, 0, 2], "power": 1}]})");
+  const SensorScene scene = SensorScene::load(path);
+  const Material& m = scene.materialOf(*scene.graph().find("/f"));
+  EXPECT_EQ(m.band_reflectance, (std::vector<double>{0.05, 0.6}));
+  EXPECT_EQ(m.band_transmittance, (std::vector<double>{0.9, 0.3}));
+}
+
 TEST(SensorMaterials, MalformedMaterialsNameTheFileAndTheObject) {
   auto object = [](const std::string& material) {
     return R"("objects": [{"name": "part", "box": {"size": 1}, "material": )" + material +
@@ -343,6 +355,15 @@ TEST(SensorMaterials, MalformedMaterialsNameTheFileAndTheObject) {
   expectError("bands.json",
               R"("bands": ["a", "b"], )" + object(R"({"type": "dielectric", "ior": 1.5, "absorption": [1, 2, 3]})"),
               {"/objects/0/material/absorption", "3 per-band values"});
+  expectError("unknown_band.json",
+              R"("bands": ["vis", "nir"], )" + object(R"({"type": "coating", "transmit": {"vis": 0.9, "uv": 0.1}})"),
+              {"/objects/0/material/transmit", "unknown band \"uv\""});
+  expectError("missing_band.json",
+              R"("bands": ["vis", "nir"], )" + object(R"({"type": "coating", "transmit": {"vis": 0.9}})"),
+              {"/objects/0/material/transmit", "no value for band \"nir\""});
+  expectError("band_value.json",
+              R"("bands": ["vis", "nir"], )" + object(R"({"type": "coating", "reflect": {"vis": 0.2, "nir": 1.5}})"),
+              {"/objects/0/material/reflect/nir"});
   expectError("instance.json",
               R"("objects": [{"name": "part", "box": {"size": 1}}],
                  "nodes": [{"group": "g", "children": [{"instance": "p", "object": "part",
