@@ -51,6 +51,8 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   if (threads < 0) throw InvalidArgument("threads must be >= 0 (0: all hardware threads)");
   if (!(options.target_error >= 0.0 && std::isfinite(options.target_error)))
     throw InvalidArgument("target_error must be a finite number >= 0");
+  if (!(options.failure_threshold >= 0.0 && options.failure_threshold <= 1.0))
+    throw InvalidArgument("failure_threshold must be in [0, 1]");
   if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
     throw InvalidArgument("progress must be None or a callable (done, total)");
 
@@ -119,6 +121,13 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   if (raised) throw std::move(*raised);
 
   const SensorRunResults r = run.results();
+  if (r.energy.failed_rays != 0 && r.energy.failed_w > options.failure_threshold * r.energy.emitted_w) {
+    std::ostringstream note;
+    note << "numerical failures ended " << r.energy.failed_rays << " of " << r.rays << " paths, carrying "
+         << r.energy.failed_w << " W, " << 100.0 * r.energy.failed_w / r.energy.emitted_w
+         << "% of the emitted power (above failure_threshold " << 100.0 * options.failure_threshold << "%)";
+    if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
+  }
   py::dict energy;
   energy["emitted_w"] = r.energy.emitted_w;
   energy["escaped_w"] = r.energy.escaped_w;

@@ -81,6 +81,8 @@ def test_bad_runs(tmp_path):
         duplex.run_sensors(str(tmp_path / "missing.json"), rays=10)
     with pytest.raises(ValueError, match="rays"):
         duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=0)
+    with pytest.raises(ValueError, match="failure_threshold"):
+        duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10, failure_threshold=2)
     with pytest.raises(ValueError, match="progress"):
         duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10, progress=5)
     with pytest.raises(ValueError, match="target_sensor"):
