@@ -57,7 +57,27 @@ std::vector<double> numbers(const json& v, const std::string& p, const ObjectSpe
   return out;
 }
 
-Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx, const SceneGraph& graph) {
+// Per-band values given by band name ({"red": 0.9, ...}): every band of `bands` once, in band order.
+std::vector<double> namedBandValues(const json& x, const std::string& p, const ObjectSpecContext& ctx,
+                                    const std::vector<std::string>& bands) {
+  std::vector<double> values(bands.size(), 0.0);
+  std::vector<bool> given(bands.size(), false);
+  for (const auto& [name, value] : x.items()) {
+    const auto it = std::find(bands.begin(), bands.end(), name);
+    if (it == bands.end())
+      ctx.fail(p, "unknown band \"" + name + "\" (the scene's \"bands\" are " +
+                      (bands.empty() ? std::string("none") : "\"" + bands.front() + "\", ...") + ")");
+    const auto k = static_cast<std::size_t>(it - bands.begin());
+    values[k] = ctx.number(value, at(p, name));
+    given[k] = true;
+  }
+  for (std::size_t k = 0; k < bands.size(); ++k)
+    if (!given[k]) ctx.fail(p, "no value for band \"" + bands[k] + "\"");
+  return values;
+}
+
+Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx, const SceneGraph& graph,
+                const std::vector<std::string>& bands) {
   if (!v.is_object()) ctx.fail(p, "expected a light (an object with \"type\")");
   Light l;
   if (v.contains("node")) {  // attached to a node: the geometry below is in its local space
@@ -133,7 +153,9 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     ctx.fail(at(p, "type"), "unknown light type \"" + type +
                                 "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
   }
-  if (v.contains("spectrum")) l.spectrum = numbers(v["spectrum"], at(p, "spectrum"), ctx);
+  if (v.contains("spectrum"))
+    l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
+                                           : numbers(v["spectrum"], at(p, "spectrum"), ctx);
   try {
     l.validate();
   } catch (const InvalidArgument& e) {
@@ -151,24 +173,9 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
   // A number in [lo, hi], or one per band into `per_band` (then the result is their mean, for messages).
   auto perBand = [&](const char* key, double hi, std::vector<double>& per_band) {
     const json& x = ctx.member(v, p, key);
-    std::vector<double> values;
-    if (x.is_object()) {  // by band name: every band once
-      values.assign(bands.size(), 0.0);
-      std::vector<bool> given(bands.size(), false);
-      for (const auto& [name, value] : x.items()) {
-        const auto it = std::find(bands.begin(), bands.end(), name);
-        if (it == bands.end())
-          ctx.fail(at(p, key), "unknown band \"" + name + "\" (the scene's \"bands\" are " +
-                                   (bands.empty() ? std::string("none") : "\"" + bands.front() + "\", ...") + ")");
-        const auto k = static_cast<std::size_t>(it - bands.begin());
-        values[k] = ctx.number(value, at(at(p, key), name));
-        given[k] = true;
-      }
-      for (std::size_t k = 0; k < bands.size(); ++k)
-        if (!given[k]) ctx.fail(at(p, key), "no value for band \"" + bands[k] + "\"");
-    } else {
-      values = x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
-    }
+    const std::vector<double> values =
+        x.is_object() ? namedBandValues(x, at(p, key), ctx, bands)
+                      : (x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))});
     double sum = 0.0;
     for (std::size_t k = 0; k < values.size(); ++k) {
       if (!(values[k] >= 0.0 && values[k] <= hi))
@@ -387,7 +394,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     const json& list = root["lights"];
     if (!list.is_array()) ctx.fail("/lights", "expected an array of lights");
     for (std::size_t i = 0; i < list.size(); ++i) {
-      lights.push_back(readLight(list[i], at("/lights", i), ctx, graph));
+      lights.push_back(readLight(list[i], at("/lights", i), ctx, graph, bands));
       bandCount(lights.back().spectrum, at(at("/lights", i), "spectrum"));
     }
   }

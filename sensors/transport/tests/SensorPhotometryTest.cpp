@@ -225,6 +225,17 @@ void expectError(const std::string& name, const std::string& body, const std::ve
   expectLoadError(path, needles);
 }
 
+TEST(Photometry, ASpectrumMayNameItsBands) {
+  const auto path = writeTestFile("named_spectrum.json", R"({"format": "duplex-scene-v1", "objects": [],
+    "bands": [{"name": "g", "nm": [540, 560]}, {"name": "r", "nm": [620, 640]}],
+    "sensors": [{"name": "s", "size": 1}],
+    "lights": [{"type": "point", "position": [0, 0, 1], "lumens": 100, "spectrum": {"r": 3, "g": 1}}]})");
+  const SensorScene scene = SensorScene::load(path);
+  EXPECT_EQ(scene.lights()[0].spectrum, (std::vector<double>{1.0, 3.0}));
+  const double kg = 683.0 * cieBandMean(540.0, 560.0).y, kr = 683.0 * cieBandMean(620.0, 640.0).y;
+  EXPECT_NEAR(scene.lights()[0].power_w, 100.0 / (0.25 * kg + 0.75 * kr), 1e-12);
+}
+
 TEST(Photometry, MalformedLumensAndBandsNameTheFileAndTheLightOrBand) {
   writeTestFile("lamp.ies", kLampIes);
   const std::string sensor = R"("sensors": [{"name": "s", "size": 1}], )";
@@ -251,6 +262,10 @@ TEST(Photometry, MalformedLumensAndBandsNameTheFileAndTheLightOrBand) {
   expectError("nm_key.json", sensor + R"("bands": [{"name": "a", "nm": [400, 500], "colour": 1}],
                           "lights": [{"type": "point", "position": [0,0,1], "power": 1}])",
               {"/bands/0", "colour"});
+  expectError("spectrum_band.json",
+              sensor + R"("bands": [{"name": "g", "nm": [500, 600]}, {"name": "r", "nm": [600, 700]}],
+                          "lights": [{"type": "point", "position": [0,0,1], "lumens": 10, "spectrum": {"g": 1, "b": 2}}])",
+              {"/lights/0/spectrum", "unknown band \"b\""});
   expectError("invisible.json",
               sensor + R"("bands": [{"name": "ir", "nm": [900, 1000]}, {"name": "g", "nm": [500, 600]}],
                           "lights": [{"type": "point", "name": "heater", "position": [0,0,1], "lumens": 10,
