@@ -198,6 +198,38 @@ void putBandTotals(nlohmann::ordered_json& j, const SensorResult& s, const Senso
   j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
 }
 
+// Per-bin pairs or triples of a flat array (index n * bin + c) as JSON rows, NaN as null.
+nlohmann::ordered_json rows(const std::vector<double>& flat, std::size_t n) {
+  nlohmann::ordered_json out = nlohmann::ordered_json::array();
+  for (std::size_t b = 0; b + n <= flat.size(); b += n) {
+    nlohmann::ordered_json row = nlohmann::ordered_json::array();
+    for (std::size_t c = 0; c < n; ++c) row.push_back(finiteOrNull(flat[b + c]));
+    out.push_back(row);
+  }
+  return out;
+}
+
+// Photometric runs: the sensor's luminous quantities after its radiometric keys (`value` and
+// `value_stderr`: the per-bin keys, illuminance or, for a far field, intensity), and in colorimetric
+// runs its CIE XYZ and chromaticities. maps: whether the per-bin arrays go into the JSON.
+void putPhotometry(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r, const char* value,
+                   const char* value_stderr, bool maps) {
+  if (!r.photometric) return;
+  j["luminous_flux_lm"] = s.luminous_flux_lm;
+  j["luminous_flux_stderr_lm"] = s.luminous_flux_stderr_lm;
+  if (maps) {
+    j[value] = s.illuminance_lx;
+    j[value_stderr] = s.illuminance_stderr_lx;
+  }
+  if (!r.colorimetric) return;
+  j["total_cie_xyz"] = rows(s.total_cie_xyz, 3)[0];
+  j["total_chromaticity_xy"] = rows(s.total_chromaticity_xy, 2)[0];
+  if (maps) {
+    j["cie_xyz"] = rows(s.cie_xyz, 3);
+    j["chromaticity_xy"] = rows(s.chromaticity_xy, 2);
+  }
+}
+
 // A far-field sensor: DIR/<name>.json (intensity per C-gamma cell, gamma fastest), .csv and an
 // LM-63-2002 .ies file of the measured table. Without photometry the values are W/sr, which the
 // .ies file's keywords say.
@@ -230,6 +262,7 @@ void writeFarFieldFiles(const std::filesystem::path& dir, const SensorResult& s,
     j["band_intensity_stderr_w_sr"] = s.band_stderr_w_m2;
     j["band_flux_w"] = s.band_flux_w;
   }
+  putPhotometry(j, s, r, "intensity_cd", "intensity_stderr_cd", true);
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
   std::string csv = "ic,ig,c_deg,gamma_deg,flux_w,intensity_w_sr,intensity_stderr_w_sr,ray_count\n";
@@ -325,6 +358,14 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
       map("band_stderr_w_m2", flat(s.band_stderr_w_m2), "<f8", dims);
       map("band_flux_w", flat(s.band_flux_w), "<f8", dims);
     }
+    if (r.photometric) {
+      map("illuminance_lx", s.illuminance_lx, "<f8", shape.str());
+      map("illuminance_stderr_lx", s.illuminance_stderr_lx, "<f8", shape.str());
+    }
+    if (r.colorimetric) {  // [row][column][component]
+      map("cie_xyz", s.cie_xyz, "<f8", shape.str() + ", 3");
+      map("chromaticity_xy", s.chromaticity_xy, "<f8", shape.str() + ", 2");
+    }
     j["map_files"] = files;
   }
   // Only what the scene asked for: per-band arrays (the keys above are their sums) and angular bins.
@@ -344,6 +385,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
     j["angular_ray_count"] = s.angular_ray_count;
     if (!r.bands.empty()) j["band_angular_flux_w"] = s.band_angular_flux_w;
   }
+  putPhotometry(j, s, r, "illuminance_lx", "illuminance_stderr_lx", text_maps);
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
   // CSV: one row per bin with its centre in sensor-local coordinates (a sphere: its direction).
@@ -378,6 +420,8 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     throw InvalidArgument("--target-error must be a finite number >= 0");
   if (!(o.checkpoint_s >= 0.0 && std::isfinite(o.checkpoint_s)))
     throw InvalidArgument("--checkpoint must be a finite number of seconds >= 0 (0: save only at the end)");
+  if (!(o.failure_threshold >= 0.0 && o.failure_threshold <= 1.0))
+    throw InvalidArgument("--failure-threshold must be in [0, 1] (got " + std::to_string(o.failure_threshold) + ")");
   if (!(o.roulette >= 0.0 && o.roulette < 1.0))
     throw InvalidArgument("--roulette must be in [0, 1) (got " + std::to_string(o.roulette) + ")");
   // Shared runs: rank 0 reads and writes the files and reports progress; every rank traces.
@@ -519,15 +563,31 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   report["seconds"] = seconds;
   report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;
   report["emitted_power_w"] = r.energy.emitted_w;
-  report["energy"] = {{"escaped_w", r.energy.escaped_w},
-                      {"absorbed_w", r.energy.absorbed_w},
-                      {"medium_absorbed_w", r.energy.medium_absorbed_w},
-                      {"depth_limited_w", r.energy.depth_limited_w},
-                      {"roulette_w", r.energy.roulette_w}};
+  const EnergyBalance& e = r.energy;
+  report["energy"] = {{"escaped_w", e.escaped_w},
+                      {"escaped_rays", e.escaped_rays},
+                      {"absorbed_w", e.absorbed_w},
+                      {"absorbed_rays", e.absorbed_rays},
+                      {"medium_absorbed_w", e.medium_absorbed_w},
+                      {"medium_absorbed_rays", e.medium_absorbed_rays},
+                      {"depth_limited_w", e.depth_limited_w},
+                      {"depth_limited_rays", e.depth_limited_rays},
+                      {"roulette_w", e.roulette_w},
+                      {"roulette_rays", e.roulette_rays},
+                      {"failed_w", e.failed_w},
+                      {"failed_rays", e.failed_rays}};
+  report["failure_threshold"] = o.failure_threshold;
+  if (e.failed_rays != 0 && e.failed_w > o.failure_threshold * e.emitted_w)
+    std::cerr << "duplex sensor: warning: numerical failures ended " << e.failed_rays << " of " << r.rays
+              << " paths, carrying " << e.failed_w << " W, " << 100.0 * e.failed_w / e.emitted_w
+              << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
+              << "%): the results miss that power\n";
   if (!r.bands.empty()) {
     report["bands"] = r.bands;
     report["band_emitted_w"] = r.band_emitted_w;
   }
+  if (r.colorimetric) report["band_nm"] = r.band_nm;
+  if (r.photometric) report["emitted_luminous_flux_lm"] = r.emitted_lm;
   if (scene.scatters()) report["scatterings"] = run.counters().scatterings;
   nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {

@@ -69,6 +69,9 @@ struct SensorOptions {
   /// Rays per batch (SensorRunConfig::batch_rays): the unit of the ordered sums (results depend on
   /// it), of the work dealt to MPI ranks, of checkpoints and of --target-error checks.
   std::uint64_t batch_rays = SensorRunConfig{}.batch_rays;
+  /// --failure-threshold F: a run whose numerical failures (EnergyBalance::failed_w) carry more than
+  /// this fraction of the emitted power says so on stderr (the results are written all the same).
+  double failure_threshold = 0.001;
 };
 
 /// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene
@@ -88,10 +91,11 @@ class Interrupted : public std::runtime_error {
 /// run: 1, or the MPI ranks), max_depth, max_scatterings, roulette_threshold, batch_rays, status
 /// ("completed", "target_reached", "interrupted" with the signal's number in `signal`),
 /// resumed_from (rays already done when the run started: 0, or the saved count with --resume),
-/// seconds, rays_per_s, emitted_power_w, energy {escaped_w, absorbed_w, medium_absorbed_w,
-/// depth_limited_w, roulette_w}, bands and band_emitted_w (spectral scenes only), scatterings
-/// (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr,
-/// efficiency}], with --at also at and edits_applied, and for a run under mpirun mpi {ranks, batches, rank0_batches,
+/// seconds, rays_per_s, emitted_power_w, energy {escaped_w, escaped_rays, absorbed_w, absorbed_rays,
+/// medium_absorbed_w, medium_absorbed_rays, depth_limited_w, depth_limited_rays, roulette_w,
+/// roulette_rays, failed_w, failed_rays}, failure_threshold, bands and band_emitted_w (spectral scenes only),
+/// scatterings (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr, efficiency}],
+/// with --at also at and edits_applied, and for a run under mpirun mpi {ranks, batches, rank0_batches,
 /// tally_bytes_received, tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
 /// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
 /// returns the report, the others return null. Throws duplex::Error for bad input.

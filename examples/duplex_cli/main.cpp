@@ -15,7 +15,8 @@
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
 //                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
-//                 [--roulette R] [--progress MODE] [--checkpoint SECONDS] [--at T] [--text-map-limit N]
+//                 [--roulette R] [--failure-threshold F] [--progress MODE] [--checkpoint SECONDS] [--at T]
+//                 [--text-map-limit N]
 //                 [--batch-rays B]; under `mpirun -np N` the ranks share the batches
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
@@ -271,6 +272,9 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option(
       "--roulette", sensor.roulette,
       "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
+  sensor_cmd->add_option("--failure-threshold", sensor.failure_threshold,
+                         "Warn on stderr when numerical failures carry more than this fraction of the emitted "
+                         "power, in [0, 1] (default 0.001)");
   sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
       ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
   sensor_cmd

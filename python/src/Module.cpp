@@ -294,10 +294,11 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
       "run_sensors",
       [](const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
          const py::object& progress, std::uint32_t max_depth, std::uint32_t max_scatterings, double roulette,
-         double target_error, const std::string& target_sensor, const std::string& structure,
-         std::optional<double> at) {
+         double target_error, const std::string& target_sensor, const std::string& structure, std::optional<double> at,
+         double failure_threshold) {
         SensorRunOptions o;
         o.at = at;
+        o.failure_threshold = failure_threshold;
         o.max_depth = max_depth;
         o.max_scatterings = max_scatterings;
         o.roulette_threshold = roulette;
@@ -309,14 +310,16 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
       "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0, "progress"_a = py::none(),
       "max_depth"_a = SensorRunOptions{}.max_depth, "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
       "roulette"_a = SensorRunOptions{}.roulette_threshold, "target_error"_a = 0.0, "target_sensor"_a = "",
-      "structure"_a = "", "at"_a = py::none(),
+      "structure"_a = "", "at"_a = py::none(), "failure_threshold"_a = SensorRunOptions{}.failure_threshold,
       R"doc(A light-tracing run of a scene file's lights and sensors, as `duplex sensor` runs it:
 the same seed gives the same numbers, for any thread count. progress: None or a callable
 (done, total) called from the calling thread between batches of rays; an exception raised in it
 (or Ctrl-C) stops the run and is raised again. target_error > 0 stops once the target sensor's
 relative standard error is at most it. at: None, or a time (seconds): the scene's timed edits
 with time <= at are applied before the run (`duplex sensor --at`); the result's "edits_applied"
-counts them, and a UserWarning says how many edits the run leaves out.
+counts them, and a UserWarning says how many edits the run leaves out. failure_threshold: a
+UserWarning when numerical failures ("energy"'s "failed_w") carry more than this fraction of the
+emitted power (`duplex sensor --failure-threshold`).
 Returns a dict sensor name -> dict: "irradiance", "stderr" (W per square scene unit), "flux",
 "flux_stderr" (W), "ray_count", "bin_area", each (ny, nx) with bin (0, 0) at local (-w/2, -h/2);
 "total_flux", "total_flux_stderr" (W), "relative_stderr" (None before any power arrived),
@@ -324,7 +327,13 @@ Returns a dict sensor name -> dict: "irradiance", "stderr" (W per square scene u
 "angular_stderr", "angular_solid_angle", "angular_ray_count" (phi, theta); in spectral scenes
 "bands", "band_irradiance", "band_stderr", "band_flux" (band, ny, nx), "band_total_flux",
 "band_total_flux_stderr"; and the run's "rays", "seed", "status" ("completed",
-"target_reached"), "emitted_power" (W), "energy" (where the power went, W), "edits_applied".
+"target_reached"), "emitted_power" (W), "energy" (where the power went, W, with the paths that
+ended each way: "escaped_rays", ..., "failed_w", "failed_rays"), "edits_applied"; in photometric
+scenes (lights in lumens, or bands with wavelengths) "luminous_flux", "luminous_flux_stderr" (lm),
+"illuminance", "illuminance_stderr" (lm per square scene unit; far field "intensity_cd",
+"intensity_cd_stderr"), "emitted_luminous_flux"; with wavelengths "cie_xyz" (ny, nx, 3),
+"chromaticity_xy" (ny, nx, 2; NaN where no light arrived), "total_cie_xyz",
+"total_chromaticity_xy", "band_nm".
 A far-field sensor ("shape" "farfield", "bins" (n_c, n_gamma)) has instead of the (ny, nx)
 arrays "intensity", "intensity_stderr" (W/sr), "flux", "ray_count", "solid_angle" (sr), each
 (n_c, n_gamma), and "c_deg", "gamma_deg" (the grid's angles).)doc");

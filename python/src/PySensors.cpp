@@ -51,6 +51,8 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   if (threads < 0) throw InvalidArgument("threads must be >= 0 (0: all hardware threads)");
   if (!(options.target_error >= 0.0 && std::isfinite(options.target_error)))
     throw InvalidArgument("target_error must be a finite number >= 0");
+  if (!(options.failure_threshold >= 0.0 && options.failure_threshold <= 1.0))
+    throw InvalidArgument("failure_threshold must be in [0, 1]");
   if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
     throw InvalidArgument("progress must be None or a callable (done, total)");
 
@@ -119,6 +121,13 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   if (raised) throw std::move(*raised);
 
   const SensorRunResults r = run.results();
+  if (r.energy.failed_rays != 0 && r.energy.failed_w > options.failure_threshold * r.energy.emitted_w) {
+    std::ostringstream note;
+    note << "numerical failures ended " << r.energy.failed_rays << " of " << r.rays << " paths, carrying "
+         << r.energy.failed_w << " W, " << 100.0 * r.energy.failed_w / r.energy.emitted_w
+         << "% of the emitted power (above failure_threshold " << 100.0 * options.failure_threshold << "%)";
+    if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
+  }
   py::dict energy;
   energy["emitted_w"] = r.energy.emitted_w;
   energy["escaped_w"] = r.energy.escaped_w;
@@ -126,6 +135,13 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   energy["medium_absorbed_w"] = r.energy.medium_absorbed_w;
   energy["depth_limited_w"] = r.energy.depth_limited_w;
   energy["roulette_w"] = r.energy.roulette_w;
+  energy["failed_w"] = r.energy.failed_w;
+  energy["escaped_rays"] = r.energy.escaped_rays;
+  energy["absorbed_rays"] = r.energy.absorbed_rays;
+  energy["medium_absorbed_rays"] = r.energy.medium_absorbed_rays;
+  energy["depth_limited_rays"] = r.energy.depth_limited_rays;
+  energy["roulette_rays"] = r.energy.roulette_rays;
+  energy["failed_rays"] = r.energy.failed_rays;
   const char* status_name = status == SensorRunStatus::TargetReached ? "target_reached"
                             : status == SensorRunStatus::Cancelled   ? "cancelled"
                                                                      : "completed";
@@ -172,6 +188,21 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
       d["band_flux"] = bandGrids(s.band_flux_w, ny, nx);
       d["band_total_flux"] = s.band_total_flux_w;
       d["band_total_flux_stderr"] = s.band_total_flux_stderr_w;
+    }
+    if (r.photometric) {  // the CLI's photometric keys, named like the dict's others (no units)
+      d["luminous_flux"] = s.luminous_flux_lm;
+      d["luminous_flux_stderr"] = s.luminous_flux_stderr_lm;
+      d[far ? "intensity_cd" : "illuminance"] = grid(s.illuminance_lx, rows, cols);
+      d[far ? "intensity_cd_stderr" : "illuminance_stderr"] = grid(s.illuminance_stderr_lx, rows, cols);
+      d["emitted_luminous_flux"] = r.emitted_lm;
+    }
+    if (r.colorimetric) {  // (rows, cols, 3) and (rows, cols, 2); chromaticity NaN where no light arrived
+      py::array_t<double> xyz = grid(s.cie_xyz, rows * cols, 3), xy = grid(s.chromaticity_xy, rows * cols, 2);
+      d["cie_xyz"] = xyz.reshape({rows, cols, py::ssize_t{3}});
+      d["chromaticity_xy"] = xy.reshape({rows, cols, py::ssize_t{2}});
+      d["total_cie_xyz"] = s.total_cie_xyz;
+      d["total_chromaticity_xy"] = s.total_chromaticity_xy;
+      d["band_nm"] = r.band_nm;
     }
     d["rays"] = r.rays;
     d["seed"] = r.seed;

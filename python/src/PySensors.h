@@ -28,6 +28,9 @@ struct SensorRunOptions {
   /// Apply the scene's timed edits with time <= at (seconds) before the run, as `duplex sensor
   /// --at`; unset: none.
   std::optional<double> at;
+  /// A UserWarning when numerical failures carry more than this fraction of the emitted power
+  /// (`duplex sensor --failure-threshold`).
+  double failure_threshold = 0.001;
 };
 
 /// Runs `rays` light paths of `scene_file` with `seed` on `threads` threads (0: all) and returns a

@@ -151,7 +151,8 @@ class DocumentReader {
     spec.pointer = p;
     if (v.contains("visible")) spec.visible = boolean(v["visible"], at(p, "visible"));
     if (instance) {
-      ctx_.onlyKeys(v, p, {"instance", "object", "transform", "mask", "visible"});
+      // "material" belongs to duplex::sensors, which reads it (an instance's own material).
+      ctx_.onlyKeys(v, p, {"instance", "object", "transform", "mask", "visible", "material"});
       spec.kind = NodeKind::Instance;
       spec.name = ctx_.string(v["instance"], at(p, "instance"));
       spec.object = object(ctx_.member(v, p, "object"), at(p, "object"));

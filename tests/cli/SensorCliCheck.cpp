@@ -468,6 +468,18 @@ void checkFarFieldAndEdits(const std::string& duplex, const fs::path& dir) {
          "far.json's angles are not the IES grid: " + j["c_deg"].dump() + " " + j["gamma_deg"].dump());
   const double escaped = report["energy"]["escaped_w"], total = j["total_flux_w"];
   expect(std::abs(total - escaped) <= 1e-12 * escaped, "the far field did not see the escaped power");
+  // Every path ends one way: escaped (through the far field) or absorbed by the floor, each with
+  // the power it was emitted with; no numerical failure.
+  const nlohmann::json& e = report["energy"];
+  for (const char* key : {"escaped_rays", "absorbed_rays", "medium_absorbed_rays", "depth_limited_rays",
+                          "roulette_rays", "failed_w", "failed_rays"})
+    expect(e.contains(key), std::string("run.json's energy lacks ") + key);
+  expect(report["failure_threshold"] == 0.001, "run.json lacks the default failure_threshold 0.001");
+  const std::uint64_t escaped_rays = e["escaped_rays"], absorbed_rays = e["absorbed_rays"];
+  expect(escaped_rays + absorbed_rays == 60000 && e["failed_rays"] == 0,
+         "the ray counts do not sum to the rays: " + e.dump());
+  expect(std::abs(escaped - 12.566370614359172 * static_cast<double>(escaped_rays) / 60000.0) <= 1e-12 * escaped,
+         "escaped_w is not its ray count times the ray power: " + e.dump());
   double sum = 0.0;
   for (std::size_t b = 0; b < 30; ++b) {
     const double i = j["intensity_w_sr"][b], se = j["intensity_stderr_w_sr"][b], omega = j["solid_angle_sr"][b];

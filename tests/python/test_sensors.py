@@ -11,7 +11,8 @@ RAYS = 40000
 
 
 @pytest.mark.parametrize("name,at", [("sensor_room.json", None), ("sensor_spectral.json", None),
-                                     ("sensor_luminaire.json", 1)])
+                                     ("sensor_luminaire.json", 1), ("office_ies.json", None),
+                                     ("light_guide.json", None)])
 def test_run_equals_cli_output(cli, tmp_path, name, at):
     scene_file = SCENES / name
     at_args = ["--at", at] if at is not None else []
@@ -34,6 +35,17 @@ def test_run_equals_cli_output(cli, tmp_path, name, at):
         assert got["rays"] == RAYS and got["seed"] == 3 and got["status"] == "completed"
         assert got["emitted_power"] == report["emitted_power_w"]
         assert got["energy"]["escaped_w"] == report["energy"]["escaped_w"]
+        for key in ("escaped_rays", "absorbed_rays", "depth_limited_rays", "roulette_rays", "failed_w", "failed_rays"):
+            assert got["energy"][key] == report["energy"][key], key
+        if "luminous_flux_lm" in ref:  # photometric scenes: the same luminous keys
+            assert got["luminous_flux"] == ref["luminous_flux_lm"]
+            assert got["emitted_luminous_flux"] == report["emitted_luminous_flux_lm"]
+            lum = (("intensity_cd", "intensity_cd"), ("intensity_cd_stderr", "intensity_stderr_cd")) if far else \
+                (("illuminance", "illuminance_lx"), ("illuminance_stderr", "illuminance_stderr_lx"))
+            for key, ref_key in lum:
+                assert np.array_equal(got[key].ravel(), np.array(ref[ref_key])), key
+        else:
+            assert "luminous_flux" not in got
         if "bands" in ref:
             assert got["bands"] == ref["bands"]
             assert np.array_equal(got["band_irradiance"].reshape(len(ref["bands"]), -1),
@@ -69,6 +81,8 @@ def test_bad_runs(tmp_path):
         duplex.run_sensors(str(tmp_path / "missing.json"), rays=10)
     with pytest.raises(ValueError, match="rays"):
         duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=0)
+    with pytest.raises(ValueError, match="failure_threshold"):
+        duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10, failure_threshold=2)
     with pytest.raises(ValueError, match="progress"):
         duplex.run_sensors(str(SCENES / "sensor_room.json"), rays=10, progress=5)
     with pytest.raises(ValueError, match="target_sensor"):
@@ -124,3 +138,26 @@ def test_at_applies_the_timed_edits_as_the_cli_does(cli, tmp_path):
     assert later["plate"]["total_flux"] < got["plate"]["total_flux"]  # the lamp moved up
     with pytest.raises(ValueError, match="at"):
         duplex.run_sensors(str(scene_file), rays=10, at=-1.0)
+
+
+def test_colour_keys_of_bands_with_wavelengths(tmp_path):
+    """Bands with wavelengths: CIE XYZ per bin whose Y is the illuminance, one band's chromaticity
+    everywhere it is lit, NaN where no light arrived."""
+    scene = {"format": "duplex-scene-v1",
+             "objects": [{"name": "plate", "sensor": {"size": [4, 4], "bins": [6, 6], "two_sided": False}}],
+             "nodes": [{"instance": "plate", "object": "plate"}],
+             "bands": [{"name": "green", "nm": [540, 560]}, {"name": "red", "nm": [620, 640]}],
+             "lights": [{"type": "spot", "position": [0, 0, 1], "direction": [0, 0, -1], "half_angle": 40,
+                         "lumens": 100, "spectrum": [1, 0]}]}
+    path = tmp_path / "colour.json"
+    path.write_text(json.dumps(scene))
+    got = duplex.run_sensors(str(path), rays=20000, seed=4)["plate"]
+    assert got["cie_xyz"].shape == (6, 6, 3) and got["chromaticity_xy"].shape == (6, 6, 2)
+    assert np.allclose(got["cie_xyz"][:, :, 1], got["illuminance"], rtol=1e-12, atol=0)
+    lit = got["flux"] > 0
+    assert lit.any() and (~lit).any()
+    xy = got["chromaticity_xy"][lit]
+    assert np.allclose(xy, xy[0], rtol=0, atol=1e-12) and 0.2 < xy[0][0] < 0.4 and xy[0][1] > 0.6
+    assert np.isnan(got["chromaticity_xy"][~lit]).all()
+    assert got["emitted_luminous_flux"] == pytest.approx(100.0, rel=1e-12)
+    assert got["band_nm"] == [[540.0, 560.0], [620.0, 640.0]] or got["band_nm"] == [(540.0, 560.0), (620.0, 640.0)]

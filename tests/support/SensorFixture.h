@@ -5,6 +5,7 @@
 
 #include "MeshChecks.h"
 
+#include "duplex/accel/Error.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/TriangleMesh.h"
 #include "duplex/scenegraph/SceneGraph.h"
@@ -15,10 +16,14 @@
 #include <glm/geometric.hpp>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <numbers>
 #include <string>
 #include <vector>
+
+#include <unistd.h>
 
 namespace duplex::test {
 
@@ -60,6 +65,33 @@ inline Affine facing(const glm::dvec3& n_in, const glm::dvec3& at) {
                                        y * x * k + z * s, c + y * y * k, y * z * k - x * s,  //
                                        z * x * k - y * s, z * y * k + x * s, c + z * z * k));
   return a;
+}
+
+// Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
+inline double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
+  auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
+  return f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0);
+}
+
+// Writes `text` to the file `name` in a folder of this process's own in the temporary directory.
+inline std::filesystem::path writeTestFile(const std::string& name, const std::string& text) {
+  const auto dir = std::filesystem::temp_directory_path() / ("duplex_sensor_tests_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const auto path = dir / name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+// Loading the scene file `path` throws a FileError whose message names the file and every needle.
+inline void expectLoadError(const std::filesystem::path& path, const std::vector<std::string>& needles) {
+  try {
+    (void)SensorScene::load(path);
+    ADD_FAILURE() << path << ": no error";
+  } catch (const FileError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path.string()), std::string::npos) << what;
+    for (const std::string& needle : needles) EXPECT_NE(what.find(needle), std::string::npos) << what;
+  }
 }
 
 inline Light pointLight(glm::dvec3 p, double power) {

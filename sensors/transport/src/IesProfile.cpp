@@ -480,21 +480,25 @@ IesTable farFieldIesTable(const SensorResult& s, std::uint64_t rays, std::uint64
   IesTable table;
   for (std::uint32_t ig = 0; ig < ng; ++ig) table.vertical_deg.push_back(ig * 180.0 / (ng - 1));
   for (std::uint32_t ic = 0; ic < nc; ++ic) table.horizontal_deg.push_back(ic * 360.0 / nc);
-  // The run's flux per unit of a cell's measure (its solid angle) is the intensity.
-  table.values = s.irradiance_w_m2;
+  // The run's flux per unit of a cell's measure (its solid angle) is the intensity: candela when
+  // the run is photometric, else W/sr.
+  const bool candela = !s.illuminance_lx.empty();
+  const std::vector<double>& values = candela ? s.illuminance_lx : s.irradiance_w_m2;
+  table.values = values;
   if (nc > 1) {  // a full circle of C-planes ends with 360, the plane of 0 again
     table.horizontal_deg.push_back(360.0);
-    table.values.insert(table.values.end(), s.irradiance_w_m2.begin(), s.irradiance_w_m2.begin() + ng);
+    table.values.insert(table.values.end(), values.begin(), values.begin() + ng);
   }
   std::ostringstream other;
-  other << "Radiant intensity in W/sr (a radiometric run), not candela: " << rays << " rays, seed " << seed;
+  if (candela) other << "Luminous intensity in candela (a photometric run): " << rays << " rays, seed " << seed;
+  else other << "Radiant intensity in W/sr (a radiometric run), not candela: " << rays << " rays, seed " << seed;
   table.keywords = {{"TEST", "duplex sensor far-field measurement"},
                     {"TESTLAB", "duplex (simulated)"},
                     {"ISSUEDATE", ""},
                     {"MANUFAC", ""},
                     {"LUMCAT", s.name},
                     {"OTHER", other.str()},
-                    {"_UNITS", "W/sr"}};
+                    {"_UNITS", candela ? "cd" : "W/sr"}};
   return table;
 }
 

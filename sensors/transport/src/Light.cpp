@@ -26,6 +26,8 @@ void Light::validate() const {
   auto bad = [this](const std::string& what) { throw InvalidArgument("light '" + name + "': " + what); };
   if (!std::isfinite(power_w)) bad("power is not finite");
   if (!(power_w > 0.0)) bad("power must be > 0 W (got " + std::to_string(power_w) + ")");
+  if (!(std::isfinite(lumens) && lumens >= 0.0))
+    bad("lumens must be finite and >= 0 (0: the light is given in watts; got " + std::to_string(lumens) + ")");
   double spectrum_sum = 0.0;
   for (const double s : spectrum) {
     if (!(std::isfinite(s) && s >= 0.0)) bad("spectrum entries must be finite and >= 0");

@@ -7,6 +7,7 @@
 #include "duplex/sensors/SensorRun.h"
 
 #include "OrthonormalBasis.h"
+#include "SurfaceScatter.h"
 #include "SensorRunChunk.h"
 
 #include <glm/geometric.hpp>
@@ -60,6 +61,18 @@ bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_m
   }
   return t0 <= t1;
 }
+
+bool isFinite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+}  // namespace
+
+bool detail::leavesSurface(const glm::dvec3& next, const glm::dvec3& n_in, bool transmits) {
+  const double side = glm::dot(next, n_in);
+  return std::isfinite(next.x) && std::isfinite(next.y) && std::isfinite(next.z) &&
+         (transmits ? side < 0.0 : side > 0.0);
+}
+
+namespace {
 
 // Sorts a path's deposits by bin, keeping the path order within a bin. Most paths deposit in a
 // handful of bins: a stable insertion sort, where std::stable_sort would allocate a buffer per path.
@@ -174,6 +187,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         ++chunk.counters.scatterings;
         if (scatterings == config_.max_scatterings) {
           e.depth_limited_w += w;
+          ++e.depth_limited_rays;
           break;
         }
         ++scatterings;
@@ -181,11 +195,17 @@ void SensorRun::traceChunk(Chunk& chunk) const {
             collided->material.type == MaterialType::Medium ? collided->material.reflectanceIn(band) : 0.0;
         if (!(rng.uniform() < albedo)) {
           e.medium_absorbed_w += w;
+          ++e.medium_absorbed_rays;
           break;
         }
         const glm::dvec3 d = glm::normalize(dir);
         origin = origin + t_collision * dir;
         dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, rng.uniform(), rng.uniform());
+        if (!isFinite(dir)) {
+          e.failed_w += w;
+          ++e.failed_rays;
+          break;
+        }
         continue;
       }
       const double w_after = w * end.transmittance;
@@ -193,6 +213,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       w = w_after;
       if (!end.hit.valid()) {
         e.escaped_w += w;
+        ++e.escaped_rays;
         for (const std::uint32_t s : far_field) {  // the direction in the sensor's frame
           const SensorInstance& si = sensors[s];
           const std::uint32_t b = si.object->farFieldBinAt(
@@ -203,6 +224,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       }
       if (depth == config_.max_depth) {
         e.depth_limited_w += w;
+        ++e.depth_limited_rays;
         break;
       }
       ++depth;
@@ -214,16 +236,34 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       const bool front = glm::dot(d, n) < 0.0;
       const glm::dvec3 nf = front ? n : -n;  // faces the incoming ray
       glm::dvec3 next;
+      bool transmits = false;  // whether `next` must cross to the far side of the surface
       if (m.type == MaterialType::Absorber || m.type == MaterialType::Medium) {
         e.absorbed_w += w;
+        ++e.absorbed_rays;
         break;
       } else if (m.type == MaterialType::Lambertian || m.type == MaterialType::Mirror) {
         if (rng.uniform() >= m.reflectanceIn(band)) {
           e.absorbed_w += w;
+          ++e.absorbed_rays;
           break;
         }
         next = m.type == MaterialType::Mirror ? reflect(d, nf) : cosineDirection(nf, rng.uniform(), rng.uniform());
+      } else if (m.type == MaterialType::Coating) {  // reflect, pass undeviated, or absorb
+        const double u = rng.uniform(), r = m.reflectanceIn(band);
+        if (u >= r + m.transmittanceIn(band)) {
+          e.absorbed_w += w;
+          ++e.absorbed_rays;
+          break;
+        }
+        transmits = u >= r;
+        next = transmits ? d : reflect(d, nf);
       } else {  // dielectric: exact Fresnel for unpolarised light, reflect or refract by it
+        // A ray reaching the surface from inside crossed the glass from its last surface: Beer-Lambert.
+        if (const double a = m.absorptionIn(band); !front && a > 0.0) {
+          const double keep = std::exp(-a * static_cast<double>(end.hit.t));
+          e.absorbed_w += w * (1.0 - keep);
+          w *= keep;
+        }
         const double eta_i = front ? 1.0 : m.ior, eta_t = front ? m.ior : 1.0;
         const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
         const double sin_t2 = (eta_i / eta_t) * (eta_i / eta_t) * (1.0 - cos_i * cos_i);
@@ -234,13 +274,28 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           const double rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
           fresnel = 0.5 * (rs * rs + rp * rp);
         }
-        if (rng.uniform() < fresnel) next = reflect(d, nf);
-        else next = (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - cos_t) * nf;
+        transmits = !(rng.uniform() < fresnel);
+        next = transmits ? (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - cos_t) * nf : reflect(d, nf);
+      }
+      // Rough surfaces spread a fraction of the specular light about the specular direction; a
+      // material whose lobe yields no direction refuses the path (a numerical failure below).
+      if (m.scatter != ScatterModel::None && rng.uniform() < m.scatter_fraction) {
+        const glm::dvec3 specular = glm::normalize(next);
+        if (!detail::scatterAbout(m, specular, transmits ? -nf : nf, rng, next)) next = glm::dvec3(0.0);
+      }
+      // A direction that does not leave the surface to the side the material sends it (tangent,
+      // on the wrong side, not finite) would be traced from the wrong side of the offset: the
+      // path is a numerical failure, counted as such rather than hidden in another term.
+      if (!detail::leavesSurface(next, nf, transmits) || !std::isfinite(w)) {
+        e.failed_w += w;
+        ++e.failed_rays;
+        break;
       }
       // Russian roulette on power lost to media (materials keep a surviving path's power).
       if (w < rr_level) {
         if (rng.uniform() * rr_level >= w) {
           e.roulette_w += w;
+          ++e.roulette_rays;
           break;
         }
         e.roulette_w -= rr_level - w;

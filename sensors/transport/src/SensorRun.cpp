@@ -168,12 +168,7 @@ void SensorRun::reduce(const Chunk& chunk, Tally& into) const {
         into.band_sensor_sum2[ev.sensor * nb + band] += ev.value * ev.value;
       }
     }
-    const EnergyBalance& e = chunk.energy[k];
-    into.energy.escaped_w += e.escaped_w;
-    into.energy.absorbed_w += e.absorbed_w;
-    into.energy.medium_absorbed_w += e.medium_absorbed_w;
-    into.energy.depth_limited_w += e.depth_limited_w;
-    into.energy.roulette_w += e.roulette_w;
+    detail::addEnergy(into.energy, chunk.energy[k]);
   }
   into.rays += chunk.count;
   into.counters.segments += chunk.counters.segments;
@@ -290,6 +285,13 @@ SensorRunResults SensorRun::results() const {
   r.energy.medium_absorbed_w = all.energy.medium_absorbed_w / n;
   r.energy.depth_limited_w = all.energy.depth_limited_w / n;
   r.energy.roulette_w = all.energy.roulette_w / n;
+  r.energy.failed_w = all.energy.failed_w / n;
+  r.energy.escaped_rays = all.energy.escaped_rays;
+  r.energy.absorbed_rays = all.energy.absorbed_rays;
+  r.energy.medium_absorbed_rays = all.energy.medium_absorbed_rays;
+  r.energy.depth_limited_rays = all.energy.depth_limited_rays;
+  r.energy.roulette_rays = all.energy.roulette_rays;
+  r.energy.failed_rays = all.energy.failed_rays;
   const bool spectral = !all.band_bin_sum.empty();
   const std::size_t nb = scene_.bandCount();
   if (spectral) {
@@ -300,6 +302,15 @@ SensorRunResults SensorRun::results() const {
       for (std::size_t k = 0; k < nb; ++k)
         r.band_emitted_w[k] += scene_.lights()[l].power_w * (cdf[k] - (k ? cdf[k - 1] : 0.0));
     }
+  }
+  r.photometric = scene_.photometric();
+  r.colorimetric = scene_.colorimetric();
+  r.band_nm = scene_.bandWavelengths();
+  if (r.photometric && rays_done_) {
+    if (spectral)
+      for (std::size_t k = 0; k < nb; ++k)
+        r.emitted_lm += r.band_emitted_w[k] * scene_.luminousWeight(static_cast<std::uint32_t>(k));
+    else r.emitted_lm = scene_.totalPower() * scene_.luminousWeight(0);
   }
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& s = scene_.sensors()[k];
@@ -360,12 +371,69 @@ SensorRunResults SensorRun::results() const {
                       out.band_total_flux_w[band], out.band_total_flux_stderr_w[band]);
       }
     }
+    if (r.photometric) photometricResults(all, s, k, out);
     out.relative_stderr =
         out.total_flux_w > 0.0 ? out.total_flux_stderr_w / out.total_flux_w : std::numeric_limits<double>::infinity();
     out.efficiency = scene_.totalPower() > 0.0 ? out.total_flux_w / scene_.totalPower() : 0.0;
     r.sensors.push_back(std::move(out));
   }
   return r;
+}
+
+void SensorRun::photometricResults(const Tally& all, const SensorInstance& s, std::size_t sensor,
+                                   SensorResult& out) const {
+  const std::uint32_t bins = s.object->binCount();
+  const std::size_t nb = scene_.bandCount();
+  const bool spectral = !all.band_bin_sum.empty();
+  // A ray carries one band: its luminous sample is its deposit times that band's weight, so the
+  // samples' sums and squares follow from the per-band ones (zeros in the other bands).
+  auto luminous = [&](const double* sum, const double* sum2, const double* plain_sum, const double* plain_sum2,
+                      double& mean, double& se) {
+    double y = 0.0, y2 = 0.0;
+    if (spectral) {
+      for (std::size_t k = 0; k < nb; ++k) {
+        const double w = scene_.luminousWeight(static_cast<std::uint32_t>(k));
+        y += w * sum[k];
+        y2 += w * w * sum2[k];
+      }
+    } else {
+      const double w = scene_.luminousWeight(0);
+      y = w * *plain_sum;
+      y2 = w * w * *plain_sum2;
+    }
+    meanAndStderr(y, y2, rays_done_, mean, se);
+  };
+  for (std::uint32_t b = 0; b < bins; ++b) {
+    const std::size_t i = s.first_bin + b;
+    double mean, se;
+    luminous(spectral ? &all.band_bin_sum[i * nb] : nullptr, spectral ? &all.band_bin_sum2[i * nb] : nullptr,
+             &all.bins[i].sum, &all.bins[i].sum2, mean, se);
+    const double area = out.bin_area_m2[b];
+    out.illuminance_lx.push_back(area > 0.0 ? mean / area : 0.0);
+    out.illuminance_stderr_lx.push_back(area > 0.0 ? se / area : 0.0);
+  }
+  luminous(spectral ? &all.band_sensor_sum[sensor * nb] : nullptr,
+           spectral ? &all.band_sensor_sum2[sensor * nb] : nullptr, &all.sensors[sensor].sum, &all.sensors[sensor].sum2,
+           out.luminous_flux_lm, out.luminous_flux_stderr_lm);
+  if (!scene_.colorimetric()) return;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  auto chromaticity = [nan](const glm::dvec3& xyz, std::vector<double>& to) {
+    const double sum = xyz.x + xyz.y + xyz.z;
+    to.push_back(sum > 0.0 ? xyz.x / sum : nan);
+    to.push_back(sum > 0.0 ? xyz.y / sum : nan);
+  };
+  glm::dvec3 total(0.0);
+  for (std::size_t k = 0; k < nb; ++k)
+    total += scene_.tristimulusWeight(static_cast<std::uint32_t>(k)) * out.band_total_flux_w[k];
+  for (std::uint32_t b = 0; b < bins; ++b) {
+    glm::dvec3 xyz(0.0);
+    for (std::size_t k = 0; k < nb; ++k)
+      xyz += scene_.tristimulusWeight(static_cast<std::uint32_t>(k)) * out.band_irradiance_w_m2[k][b];
+    out.cie_xyz.insert(out.cie_xyz.end(), {xyz.x, xyz.y, xyz.z});
+    chromaticity(xyz, out.chromaticity_xy);
+  }
+  out.total_cie_xyz = {total.x, total.y, total.z};
+  chromaticity(total, out.total_chromaticity_xy);
 }
 
 }  // namespace duplex

@@ -2,10 +2,11 @@
 // its rays only) serialised with the bins it reached, and added to a run's in batch order, exactly
 // as runUntil adds the batches it traces itself.
 //
-// Layout (this machine's byte order): "DXBATCH1", then 64-bit fingerprint, first ray, rays, bins,
+// Layout (this machine's byte order): "DXBATCH2", then 64-bit fingerprint, first ray, rays, bins,
 // sensors, bands (0: one radiometric band), reached bins R, segments, crossings, scatterings; then
 // R bin indices (32-bit), their sums, squares and counts, per band their sums and squares
-// (R * bands each), the sensors' sums and squares, per band theirs, and the five energy sums.
+// (R * bands each), the sensors' sums and squares, per band theirs, and the energy tallies (six powers, six ray
+// counts).
 
 #include "duplex/sensors/SensorRun.h"
 
@@ -23,7 +24,7 @@ namespace duplex {
 
 namespace {
 
-constexpr char kBatchMagic[8] = {'D', 'X', 'B', 'A', 'T', 'C', 'H', '1'};
+constexpr char kBatchMagic[8] = {'D', 'X', 'B', 'A', 'T', 'C', 'H', '2'};
 constexpr std::size_t kBatchHead = sizeof kBatchMagic + 10 * sizeof(std::uint64_t);
 
 template <class T>
@@ -63,7 +64,8 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
                                   t.counters.crossings,
                                   t.counters.scatterings};
   std::vector<std::byte>& b = out.bytes;
-  b.reserve(kBatchHead + t.touched.size() * (4 + 24 + 16 * nb) + t.sensors.size() * 16 * (1 + nb) + 40);
+  b.reserve(kBatchHead + t.touched.size() * (4 + 24 + 16 * nb) + t.sensors.size() * 16 * (1 + nb) +
+            sizeof(detail::EnergyWords));
   put(b, kBatchMagic, sizeof kBatchMagic);
   put(b, head, 10);
   put(b, t.touched.data(), t.touched.size());
@@ -77,9 +79,8 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
     for (const SensorSums& s : t.sensors) put(b, k ? &s.sum2 : &s.sum, 1);
   put(b, t.band_sensor_sum.data(), t.band_sensor_sum.size());
   put(b, t.band_sensor_sum2.data(), t.band_sensor_sum2.size());
-  const double energy[5] = {t.energy.escaped_w, t.energy.absorbed_w, t.energy.medium_absorbed_w,
-                            t.energy.depth_limited_w, t.energy.roulette_w};
-  put(b, energy, 5);
+  const detail::EnergyWords energy = detail::energyWords(t.energy);
+  put(b, &energy, 1);
   detail::clearTally(t, nb);  // for the next batch: only what this one reached
   return out;
 }
@@ -103,7 +104,7 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
   const std::size_t ns = closed_->sensors.size();
   const std::size_t expected =
       kBatchHead + reached * (sizeof(std::uint32_t) + 2 * sizeof(double) + sizeof(std::uint64_t)) +
-      reached * 2 * nb * sizeof(double) + ns * 2 * (1 + nb) * sizeof(double) + 5 * sizeof(double);
+      reached * 2 * nb * sizeof(double) + ns * 2 * (1 + nb) * sizeof(double) + sizeof(detail::EnergyWords);
   if (tally.size() != expected)
     refuse("batch tally of " + std::to_string(tally.size()) + " bytes, expected " + std::to_string(expected));
   // Read into the spare tallies and check them: a refused batch leaves the run as it was.
@@ -151,11 +152,9 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
     get(t.band_sensor_sum2.data(), t.band_sensor_sum2.size() * sizeof(double));
     for (const double x : t.band_sensor_sum) value(x);
     for (const double x : t.band_sensor_sum2) value(x);
-    double energy[5];
-    get(energy, sizeof energy);
-    for (int k = 0; k < 4; ++k) value(energy[k]);
-    ok = ok && std::isfinite(energy[4]);  // the roulette's net term may be negative
-    t.energy = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
+    detail::EnergyWords energy;
+    get(&energy, sizeof energy);
+    ok = ok && detail::energyFromWords(energy, rays, t.energy);
     t.counters = {h[7], h[8], h[9]};
     t.rays = rays;
   }

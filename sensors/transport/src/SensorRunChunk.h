@@ -4,7 +4,10 @@
 
 #include "duplex/sensors/SensorRun.h"
 
+#include <glm/vec3.hpp>
+
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -55,6 +58,53 @@ struct SensorRun::Tally {
 
 namespace detail {
 
+// Whether a scattered direction `next` leaves a surface whose unit normal `n_in` faces the incoming
+// ray: to the front (reflection) or, when `transmits`, to the back; false for a tangent or
+// non-finite direction. A path whose next direction fails this is a numerical failure.
+bool leavesSurface(const glm::dvec3& next, const glm::dvec3& n_in, bool transmits);
+
+// Adds the energy tallies of `from` (sums over rays; emitted_w unused) into `to`.
+inline void addEnergy(EnergyBalance& to, const EnergyBalance& from) {
+  to.escaped_w += from.escaped_w;
+  to.absorbed_w += from.absorbed_w;
+  to.medium_absorbed_w += from.medium_absorbed_w;
+  to.depth_limited_w += from.depth_limited_w;
+  to.roulette_w += from.roulette_w;
+  to.failed_w += from.failed_w;
+  to.escaped_rays += from.escaped_rays;
+  to.absorbed_rays += from.absorbed_rays;
+  to.medium_absorbed_rays += from.medium_absorbed_rays;
+  to.depth_limited_rays += from.depth_limited_rays;
+  to.roulette_rays += from.roulette_rays;
+  to.failed_rays += from.failed_rays;
+}
+
+// The energy tallies as run states and batch tallies store them: six powers, then six ray counts.
+struct EnergyWords {
+  double power[6];
+  std::uint64_t rays[6];
+};
+inline EnergyWords energyWords(const EnergyBalance& e) {
+  return {
+      {e.escaped_w, e.absorbed_w, e.medium_absorbed_w, e.depth_limited_w, e.roulette_w, e.failed_w},
+      {e.escaped_rays, e.absorbed_rays, e.medium_absorbed_rays, e.depth_limited_rays, e.roulette_rays, e.failed_rays}};
+}
+// Back from the stored words; false for values no run makes (negative or non-finite powers but the
+// roulette's net term, which may be negative; ray counts summing to more than `rays`).
+inline bool energyFromWords(const EnergyWords& w, std::uint64_t rays, EnergyBalance& e) {
+  bool ok = std::isfinite(w.power[4]);
+  std::uint64_t paths = 0;
+  for (int k = 0; k < 6; ++k) {
+    if (k != 4) ok = ok && std::isfinite(w.power[k]) && w.power[k] >= 0.0;
+    ok = ok && w.rays[k] <= rays;
+    paths += w.rays[k];
+  }
+  if (!ok || paths > rays) return false;
+  e = {0.0,       w.power[0], w.power[1], w.power[2], w.power[3], w.power[4], w.power[5],
+       w.rays[0], w.rays[1],  w.rays[2],  w.rays[3],  w.rays[4],  w.rays[5]};
+  return true;
+}
+
 // Adds batch tallies `from` (its bins listed in from.touched: the others are zero, and adding a
 // zero changes no sum) into `to`.
 template <class Tally>
@@ -80,11 +130,7 @@ void addTally(Tally& to, const Tally& from, std::size_t bands) {
     to.band_sensor_sum[j] += from.band_sensor_sum[j];
     to.band_sensor_sum2[j] += from.band_sensor_sum2[j];
   }
-  to.energy.escaped_w += from.energy.escaped_w;
-  to.energy.absorbed_w += from.energy.absorbed_w;
-  to.energy.medium_absorbed_w += from.energy.medium_absorbed_w;
-  to.energy.depth_limited_w += from.energy.depth_limited_w;
-  to.energy.roulette_w += from.energy.roulette_w;
+  addEnergy(to.energy, from.energy);
   to.counters.segments += from.counters.segments;
   to.counters.crossings += from.counters.crossings;
   to.counters.scatterings += from.counters.scatterings;

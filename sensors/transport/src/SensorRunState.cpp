@@ -22,7 +22,7 @@
 
 namespace duplex {
 
-// ---- saved state: "DXSENSR5", fingerprint, seed, rays, sizes, the raw accumulators of the finished
+// ---- saved state: "DXSENSR6", fingerprint, seed, rays, sizes, the raw accumulators of the finished
 // batches (and of the open batch when the rays end inside one), XXH64 checksum ----
 
 std::uint64_t SensorRun::fingerprint() const {
@@ -86,6 +86,15 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(&m.type, sizeof m.type);
     for (const double x : {m.reflectance, m.ior, m.g}) addDouble(x);
     add(m.band_reflectance.data(), m.band_reflectance.size() * sizeof(double));
+    // Coatings, absorption and roughness, where a material has them.
+    if (m.type == MaterialType::Coating || m.absorption != 0.0 || m.scatter != ScatterModel::None ||
+        !m.band_absorption.empty()) {
+      add(&m.scatter, sizeof m.scatter);
+      for (const double x : {m.transmittance, m.absorption, m.scatter_fraction, m.sigma, m.abg_a, m.abg_b, m.abg_g})
+        addDouble(x);
+      add(m.band_transmittance.data(), m.band_transmittance.size() * sizeof(double));
+      add(m.band_absorption.data(), m.band_absorption.size() * sizeof(double));
+    }
   }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();
@@ -111,7 +120,7 @@ namespace {
 
 // The format is "DXSENSR" and one version character. A 0.x library owes no compatibility with its
 // own earlier states: any other magic or version is refused, naming both.
-constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '5'};
+constexpr char kStateMagic[8] = {'D', 'X', 'S', 'E', 'N', 'S', 'R', '6'};
 
 // The first bytes of a file as a quoted string, non-printable bytes as \xNN.
 std::string quotedPrefix(std::span<const char> bytes) {
@@ -155,9 +164,8 @@ void putTally(std::vector<char>& bytes, const Tally& t) {
   put(column(t.bins, &Bin::count));
   put(column(t.sensors, &Sensor::sum));
   put(column(t.sensors, &Sensor::sum2));
-  const double energy[5] = {t.energy.escaped_w, t.energy.absorbed_w, t.energy.medium_absorbed_w,
-                            t.energy.depth_limited_w, t.energy.roulette_w};
-  append(bytes, energy, 5);
+  const detail::EnergyWords energy = detail::energyWords(t.energy);
+  append(bytes, &energy, 1);
   put(t.band_bin_sum);  // empty unless the scene has bands
   put(t.band_bin_sum2);
   put(t.band_sensor_sum);
@@ -168,7 +176,7 @@ void putTally(std::vector<char>& bytes, const Tally& t) {
 template <class Tally>
 std::size_t tallyBytes(const Tally& t) {
   return t.bins.size() * (2 * sizeof(double) + sizeof(std::uint64_t)) + t.sensors.size() * 2 * sizeof(double) +
-         5 * sizeof(double) +
+         sizeof(detail::EnergyWords) +
          (t.band_bin_sum.size() + t.band_bin_sum2.size() + t.band_sensor_sum.size() + t.band_sensor_sum2.size()) *
              sizeof(double);
 }
@@ -191,7 +199,7 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
   get(bc);
   get(s1);
   get(s2);
-  std::array<double, 5> energy;
+  std::array<detail::EnergyWords, 1> energy;
   get(energy);
   get(t.band_bin_sum);
   get(t.band_bin_sum2);
@@ -201,8 +209,8 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
     return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
   };
   const bool counts_ok = std::all_of(bc.begin(), bc.end(), [&](std::uint64_t c) { return c <= rays; });
-  // The roulette's net term (what it killed minus what it added) may be negative; the others not.
-  const bool energy_ok = valid(std::span<const double>(energy).first(4)) && std::isfinite(energy[4]);
+  EnergyBalance e;
+  const bool energy_ok = detail::energyFromWords(energy[0], rays, e);
   if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(t.band_bin_sum) || !valid(t.band_bin_sum2) ||
       !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !energy_ok || !counts_ok)
     return false;
@@ -212,7 +220,7 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
     if (bc[i] != 0) t.touched.push_back(static_cast<std::uint32_t>(i));
   }
   for (std::size_t i = 0; i < ns; ++i) t.sensors[i] = {s1[i], s2[i]};
-  t.energy = {0.0, energy[0], energy[1], energy[2], energy[3], energy[4]};
+  t.energy = e;
   t.rays = rays;
   return true;
 }

@@ -1,6 +1,9 @@
 #include "duplex/sensors/SensorScene.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/sensors/Photometry.h"
+
+#include "SurfaceScatter.h"
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -23,12 +26,16 @@ struct SensorScene::Cache {
 };
 
 SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials,
-                         std::vector<std::string> bands, std::vector<FarFieldSensor> far_field)
+                         std::vector<std::string> bands, std::vector<FarFieldSensor> far_field,
+                         std::vector<std::array<double, 2>> band_nm,
+                         std::vector<std::pair<NodeId, Material>> instance_materials)
     : graph_(&graph),
       given_lights_(std::move(lights)),
       materials_(std::move(materials)),
       bands_(std::move(bands)),
       far_field_(std::move(far_field)),
+      band_nm_(std::move(band_nm)),
+      instance_materials_(instance_materials.begin(), instance_materials.end()),
       cache_(std::make_unique<Cache>()) {
   // What does not depend on the graph is checked once: bands, per-object materials, far-field sensors.
   std::unordered_set<std::string> band_names;
@@ -44,12 +51,9 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
       throw InvalidArgument("light '" + l.name + "': spectrum has " + std::to_string(l.spectrum.size()) +
                             " entries, the scene has " + std::to_string(nb) + " band(s)");
   }
+  resolvePhotometry();
   const ObjectLibrary& library = graph_->library();
-  for (std::size_t id = 0; id < materials_.size(); ++id) {
-    const Material& m = materials_[id];
-    const std::string what =
-        "material of object " +
-        (id < library.size() ? "'" + library.name(static_cast<ObjectId>(id)) + "'" : std::to_string(id));
+  auto checkMaterial = [nb](Material& m, const std::string& what) {
     if (!m.band_reflectance.empty() && m.band_reflectance.size() != nb)
       throw InvalidArgument(what + ": " + std::to_string(m.band_reflectance.size()) +
                             " per-band values, the scene has " + std::to_string(nb) + " band(s)");
@@ -63,7 +67,15 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
       throw InvalidArgument(what + ": index of refraction " + std::to_string(m.ior) + " must be finite and positive");
     if (m.type == MaterialType::Medium && !(m.g > -1.0 && m.g < 1.0))
       throw InvalidArgument(what + ": g must be in (-1, 1)");
-  }
+    checkSurfaceMaterial(m, what, nb);
+  };
+  for (std::size_t id = 0; id < materials_.size(); ++id)
+    checkMaterial(materials_[id],
+                  "material of object " +
+                      (id < library.size() ? "'" + library.name(static_cast<ObjectId>(id)) + "'" : std::to_string(id)));
+  for (auto& [node, m] : instance_materials_)
+    checkMaterial(m, "material of instance " +
+                         (graph_->contains(node) ? "'" + graph_->path(node) + "'" : "node " + std::to_string(node)));
   for (const FarFieldSensor& f : far_field_) {
     if (!f.object || f.object->spec().shape != SensorShape::FarField)
       throw InvalidArgument("far-field sensor '" + f.name + "': needs a far-field sensor object");
@@ -75,6 +87,78 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
   if (graph_->hasPendingEdits()) throw InvalidArgument("SensorScene: the scene graph has uncommitted edits");
   tracer_ = std::make_unique<SceneTracer>(*graph_);
   (void)current();  // validates the graph's sensors, media and lights now
+}
+
+void SensorScene::checkSurfaceMaterial(Material& m, const std::string& what, std::uint32_t nb) {
+  for (const std::vector<double>* v : {&m.band_transmittance, &m.band_absorption})
+    if (!v->empty() && v->size() != nb)
+      throw InvalidArgument(what + ": " + std::to_string(v->size()) + " per-band values, the scene has " +
+                            std::to_string(nb) + " band(s)");
+  if (m.type == MaterialType::Coating)
+    for (std::uint32_t k = 0; k < nb; ++k) {
+      const double r = m.reflectanceIn(k), t = m.transmittanceIn(k);
+      if (!(t >= 0.0 && r + t <= 1.0 + 1e-12))
+        throw InvalidArgument(what + ": a coating's transmittance must be >= 0 and reflect + transmit at most 1 (got " +
+                              std::to_string(r) + " + " + std::to_string(t) + ")");
+    }
+  for (std::uint32_t k = 0; k < nb; ++k)
+    if (!(std::isfinite(m.absorptionIn(k)) && m.absorptionIn(k) >= 0.0))
+      throw InvalidArgument(what + ": absorption must be finite and >= 0");
+  if (m.scatter == ScatterModel::None) return;
+  if (m.type != MaterialType::Mirror && m.type != MaterialType::Dielectric)
+    throw InvalidArgument(what + ": only mirrors and dielectrics scatter (a rough surface)");
+  if (m.scatter == ScatterModel::Gaussian &&
+      !(m.sigma > 0.0 && std::isfinite(m.sigma) && m.scatter_fraction >= 0.0 && m.scatter_fraction <= 1.0))
+    throw InvalidArgument(what + ": a Gaussian scatter needs sigma > 0 and a fraction in [0, 1] (got sigma " +
+                          std::to_string(m.sigma) + ", fraction " + std::to_string(m.scatter_fraction) + ")");
+  if (m.scatter == ScatterModel::ABg) {
+    if (!(m.abg_a >= 0.0 && m.abg_b > 0.0 && m.abg_g > 0.0 && m.abg_g <= 8.0 && std::isfinite(m.abg_a) &&
+          std::isfinite(m.abg_b)))
+      throw InvalidArgument(what + ": ABg needs A >= 0, B > 0 and g in (0, 8]");
+    m.scatter_fraction = detail::abgTotalIntegratedScatter(m.abg_a, m.abg_b, m.abg_g);
+    if (!(m.scatter_fraction <= 1.0))
+      throw InvalidArgument(what + ": ABg parameters scatter more than all the light (total integrated scatter " +
+                            std::to_string(m.scatter_fraction) + " > 1)");
+  }
+}
+
+void SensorScene::resolvePhotometry() {
+  const std::uint32_t nb = bandCount();
+  const Light* in_lumens = nullptr;
+  const Light* in_watts = nullptr;
+  for (const Light& l : given_lights_) (l.lumens > 0.0 ? in_lumens : in_watts) = &l;
+  photometric_ = in_lumens || !band_nm_.empty();
+  if (!photometric_) return;
+  band_lm_.assign(nb, 1.0);  // luminous flux transported directly, unless the bands have wavelengths
+  if (!band_nm_.empty()) {
+    if (band_nm_.size() != bands_.size())
+      throw InvalidArgument("SensorScene: wavelengths for " + std::to_string(band_nm_.size()) +
+                            " bands, the scene has " + std::to_string(bands_.size()));
+    for (std::size_t k = 0; k < band_nm_.size(); ++k) {
+      const auto [lo, hi] = band_nm_[k];
+      if (!(std::isfinite(lo) && std::isfinite(hi) && lo > 0.0 && lo < hi))
+        throw InvalidArgument("band '" + bands_[k] + "': wavelengths [" + std::to_string(lo) + ", " +
+                              std::to_string(hi) + "] nm must be finite with 0 < lo < hi");
+      band_xyz_.push_back(kLumensPerWatt * cieBandMean(lo, hi));
+      band_lm_[k] = band_xyz_.back().y;
+    }
+  } else if (in_watts) {
+    throw InvalidArgument("light '" + in_watts->name + "' is given in watts and light '" + in_lumens->name +
+                          "' in lumens: without band wavelengths (\"bands\": [{\"name\": ..., \"nm\": [lo, hi]}]) "
+                          "watts and lumens cannot be converted; give every light in lumens, or the bands wavelengths");
+  }
+  for (Light& l : given_lights_) {
+    if (!(l.lumens > 0.0)) continue;
+    // Lumens per watt of the light's spectrum: each band's share times its efficacy.
+    double sum = 0.0, efficacy = 0.0;
+    for (std::uint32_t k = 0; k < nb; ++k) sum += l.spectrum.empty() ? 1.0 : l.spectrum[k];
+    for (std::uint32_t k = 0; k < nb; ++k) efficacy += (l.spectrum.empty() ? 1.0 : l.spectrum[k]) / sum * band_lm_[k];
+    if (!(efficacy > 0.0))
+      throw InvalidArgument("light '" + l.name +
+                            "': given in lumens, but its spectrum has no power in a band where "
+                            "V(lambda) > 0 (its luminous efficacy is 0)");
+    l.power_w = l.lumens / efficacy;
+  }
 }
 
 SensorScene::SensorScene(SensorScene&&) noexcept = default;
@@ -144,7 +228,10 @@ std::unique_ptr<SensorScene::Derived> SensorScene::derive() const {
   };
   for (const NodeId node : instances) {
     const NodeInfo info = graph_->node(node);
-    if (info.object < materials_.size()) d.material_of_node[node] = materials_[info.object];
+    // An instance's own material, else its object's.
+    if (const auto it = instance_materials_.find(node); it != instance_materials_.end())
+      d.material_of_node[node] = it->second;
+    else if (info.object < materials_.size()) d.material_of_node[node] = materials_[info.object];
     const Material& m = d.material_of_node[node];
     const ObjectRole role = library.get(info.object)->role();
     if (role == ObjectRole::Medium) {

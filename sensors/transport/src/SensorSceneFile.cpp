@@ -6,10 +6,14 @@
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 
+#include "SurfaceScatter.h"
+
 #include <glm/matrix.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <array>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -53,7 +57,27 @@ std::vector<double> numbers(const json& v, const std::string& p, const ObjectSpe
   return out;
 }
 
-Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx, const SceneGraph& graph) {
+// Per-band values given by band name ({"red": 0.9, ...}): every band of `bands` once, in band order.
+std::vector<double> namedBandValues(const json& x, const std::string& p, const ObjectSpecContext& ctx,
+                                    const std::vector<std::string>& bands) {
+  std::vector<double> values(bands.size(), 0.0);
+  std::vector<bool> given(bands.size(), false);
+  for (const auto& [name, value] : x.items()) {
+    const auto it = std::find(bands.begin(), bands.end(), name);
+    if (it == bands.end())
+      ctx.fail(p, "unknown band \"" + name + "\" (the scene's \"bands\" are " +
+                      (bands.empty() ? std::string("none") : "\"" + bands.front() + "\", ...") + ")");
+    const auto k = static_cast<std::size_t>(it - bands.begin());
+    values[k] = ctx.number(value, at(p, name));
+    given[k] = true;
+  }
+  for (std::size_t k = 0; k < bands.size(); ++k)
+    if (!given[k]) ctx.fail(p, "no value for band \"" + bands[k] + "\"");
+  return values;
+}
+
+Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ctx, const SceneGraph& graph,
+                const std::vector<std::string>& bands) {
   if (!v.is_object()) ctx.fail(p, "expected a light (an object with \"type\")");
   Light l;
   if (v.contains("node")) {  // attached to a node: the geometry below is in its local space
@@ -65,15 +89,23 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   }
   l.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  const double power = ctx.number(ctx.member(v, p, "power"), at(p, "power"));
-  if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
-  l.power_w = power;
+  // Watts or lumens, never both; an "ies" light with neither takes its lumens from its file.
+  if (v.contains("power") && v.contains("lumens"))
+    ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
+  if (v.contains("lumens")) {
+    l.lumens = ctx.number(v["lumens"], at(p, "lumens"));
+    if (!(l.lumens > 0.0)) ctx.fail(at(p, "lumens"), "lumens must be > 0 lm (got " + std::to_string(l.lumens) + ")");
+  } else if (v.contains("power") || type != "ies") {
+    const double power = ctx.number(ctx.member(v, p, "power"), at(p, "power"));
+    if (!(power > 0.0)) ctx.fail(at(p, "power"), "power must be > 0 W (got " + std::to_string(power) + ")");
+    l.power_w = power;
+  }
   if (type == "point") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position"});
     l.type = LightType::Point;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
   } else if (type == "spot") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position", "direction", "half_angle"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position", "direction", "half_angle"});
     l.type = LightType::Spot;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
@@ -81,13 +113,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
     l.cone_angle = deg * std::numbers::pi / 180.0;
   } else if (type == "directional") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "position", "direction", "radius"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position", "direction", "radius"});
     l.type = LightType::Directional;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
     l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
   } else if (type == "area") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "size", "transform", "two_sided"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "size", "transform", "two_sided"});
     l.type = LightType::Area;
     const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
     l.width = size[0];
@@ -98,7 +130,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       l.two_sided = v["two_sided"].get<bool>();
     }
   } else if (type == "ies") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "spectrum", "node", "file", "position", "transform"});
+    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "file", "position", "transform"});
     l.type = LightType::Goniometric;
     if (v.contains("position") == v.contains("transform"))
       ctx.fail(p, "an \"ies\" light has either \"position\" or \"transform\" (rotation and translation)");
@@ -114,11 +146,16 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     } catch (const Error& e) {
       ctx.fail(at(p, "file"), e.what());
     }
+    // Neither watts nor lumens: the file's candela values (multiplier applied) are the intensity,
+    // so the light emits their integral.
+    if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
     ctx.fail(at(p, "type"), "unknown light type \"" + type +
                                 "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
   }
-  if (v.contains("spectrum")) l.spectrum = numbers(v["spectrum"], at(p, "spectrum"), ctx);
+  if (v.contains("spectrum"))
+    l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
+                                           : numbers(v["spectrum"], at(p, "spectrum"), ctx);
   try {
     l.validate();
   } catch (const InvalidArgument& e) {
@@ -127,26 +164,66 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   return l;
 }
 
-Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx) {
+// `bands`: the scene's band names, which per-band values may use as keys ({"red": 0.9, ...}).
+Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx,
+                      const std::vector<std::string>& bands) {
   if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
   Material m;
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  // A number in [0, 1], or one per band (then `reflectance` keeps their mean, for messages).
-  auto fraction = [&](const char* key) {
+  // A number in [lo, hi], or one per band into `per_band` (then the result is their mean, for messages).
+  auto perBand = [&](const char* key, double hi, std::vector<double>& per_band) {
     const json& x = ctx.member(v, p, key);
     const std::vector<double> values =
-        x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))};
+        x.is_object() ? namedBandValues(x, at(p, key), ctx, bands)
+                      : (x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))});
     double sum = 0.0;
     for (std::size_t k = 0; k < values.size(); ++k) {
-      if (!(values[k] >= 0.0 && values[k] <= 1.0))
-        ctx.fail(x.is_array() ? at(at(p, key), k) : at(p, key),
-                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key + " in [0, 1]");
+      if (!(values[k] >= 0.0 && values[k] <= hi))
+        ctx.fail(x.is_array()    ? at(at(p, key), k)
+                 : x.is_object() ? at(at(p, key), bands[k])
+                                 : at(p, key),
+                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key +
+                     (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
       sum += values[k];
     }
-    if (x.is_array()) m.band_reflectance = values;
+    if (x.is_array() || x.is_object()) per_band = values;
     return sum / static_cast<double>(values.size());
   };
+  auto fraction = [&](const char* key) { return perBand(key, 1.0, m.band_reflectance); };
   auto reflectance = [&] { return fraction("reflectance"); };
+  // "scatter": {"model": "gaussian", "sigma": s, "fraction": f} or {"model": "abg", "A", "B", "g"}.
+  auto scatter = [&] {
+    if (!v.contains("scatter")) return;
+    const std::string q = at(p, "scatter");
+    const json& sv = v["scatter"];
+    if (!sv.is_object()) ctx.fail(q, "expected a scatter model (an object with \"model\")");
+    const std::string model = ctx.string(ctx.member(sv, q, "model"), at(q, "model"));
+    if (model == "gaussian") {
+      ctx.onlyKeys(sv, q, {"model", "sigma", "fraction"});
+      m.scatter = ScatterModel::Gaussian;
+      m.sigma = ctx.number(ctx.member(sv, q, "sigma"), at(q, "sigma"));
+      if (!(m.sigma > 0.0 && std::isfinite(m.sigma)))
+        ctx.fail(at(q, "sigma"), "a Gaussian scatter's sigma must be > 0 (got " + std::to_string(m.sigma) + ")");
+      m.scatter_fraction = sv.contains("fraction") ? ctx.number(sv["fraction"], at(q, "fraction")) : 1.0;
+      if (!(m.scatter_fraction >= 0.0 && m.scatter_fraction <= 1.0))
+        ctx.fail(at(q, "fraction"), "expected a scattered fraction in [0, 1]");
+    } else if (model == "abg") {
+      ctx.onlyKeys(sv, q, {"model", "A", "B", "g"});
+      m.scatter = ScatterModel::ABg;
+      m.abg_a = ctx.number(ctx.member(sv, q, "A"), at(q, "A"));
+      m.abg_b = ctx.number(ctx.member(sv, q, "B"), at(q, "B"));
+      m.abg_g = ctx.number(ctx.member(sv, q, "g"), at(q, "g"));
+      if (!(m.abg_a >= 0.0)) ctx.fail(at(q, "A"), "ABg's A must be >= 0");
+      if (!(m.abg_b > 0.0)) ctx.fail(at(q, "B"), "ABg's B must be > 0");
+      if (!(m.abg_g > 0.0 && m.abg_g <= 8.0)) ctx.fail(at(q, "g"), "ABg's g must be in (0, 8]");
+      m.scatter_fraction = detail::abgTotalIntegratedScatter(m.abg_a, m.abg_b, m.abg_g);
+      if (!(m.scatter_fraction <= 1.0))
+        ctx.fail(q, "ABg parameters scatter more than all the light (total integrated scatter " +
+                        std::to_string(m.scatter_fraction) + " > 1): not energy conserving");
+    } else {
+      ctx.fail(at(q, "model"), "unknown scatter model \"" + model + "\" (expected \"gaussian\" or \"abg\")");
+    }
+  };
   if (type == "absorber") {
     ctx.onlyKeys(v, p, {"type"});
   } else if (type == "lambertian") {
@@ -154,13 +231,44 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
     m.type = MaterialType::Lambertian;
     m.reflectance = reflectance();
   } else if (type == "mirror") {
-    ctx.onlyKeys(v, p, {"type", "reflectance"});
+    ctx.onlyKeys(v, p, {"type", "reflectance", "scatter"});
     m.type = MaterialType::Mirror;
     m.reflectance = v.contains("reflectance") ? reflectance() : 1.0;
+    scatter();
   } else if (type == "dielectric") {
-    ctx.onlyKeys(v, p, {"type", "ior"});
+    ctx.onlyKeys(v, p, {"type", "ior", "absorption", "scatter"});
     m.type = MaterialType::Dielectric;
     m.ior = ctx.positiveNumber(ctx.member(v, p, "ior"), at(p, "ior"));
+    if (v.contains("absorption"))
+      m.absorption = perBand("absorption", std::numeric_limits<double>::max(), m.band_absorption);
+    scatter();
+  } else if (type == "coating") {
+    // Fractions reflected, transmitted and absorbed: any of the three may be left out (0, or for
+    // "absorb" what the others leave); given, they sum to 1.
+    ctx.onlyKeys(v, p, {"type", "reflect", "transmit", "absorb"});
+    m.type = MaterialType::Coating;
+    if (v.contains("reflect")) m.reflectance = perBand("reflect", 1.0, m.band_reflectance);
+    if (v.contains("transmit")) m.transmittance = perBand("transmit", 1.0, m.band_transmittance);
+    std::vector<double> absorb;
+    if (v.contains("absorb")) (void)perBand("absorb", 1.0, absorb);
+    const std::size_t n =
+        std::max({m.band_reflectance.size(), m.band_transmittance.size(), absorb.size(), std::size_t{1}});
+    for (std::size_t k = 0; k < n; ++k) {
+      auto pick = [k](const std::vector<double>& bands, double one) {
+        return bands.empty() ? one : bands[std::min(k, bands.size() - 1)];
+      };
+      const double r = pick(m.band_reflectance, m.reflectance), t = pick(m.band_transmittance, m.transmittance);
+      if (r + t > 1.0 + 1e-12)
+        ctx.fail(p, "a coating reflects and transmits more than all the light (reflect + transmit = " +
+                        std::to_string(r + t) + (n > 1 ? " in band " + std::to_string(k) : "") + ")");
+      if (v.contains("absorb")) {
+        const double a =
+            absorb.empty() ? ctx.number(v["absorb"], at(p, "absorb")) : absorb[std::min(k, absorb.size() - 1)];
+        if (std::abs(r + t + a - 1.0) > 1e-9)
+          ctx.fail(at(p, "absorb"), "reflect + transmit + absorb must be 1 (got " + std::to_string(r + t + a) +
+                                        (n > 1 ? " in band " + std::to_string(k) : "") + ")");
+      }
+    }
   } else if (type == "medium") {
     ctx.onlyKeys(v, p, {"type", "albedo", "g"});
     m.type = MaterialType::Medium;
@@ -171,7 +279,8 @@ Material readMaterial(const json& v, const std::string& p, const ObjectSpecConte
     }
   } else {
     ctx.fail(at(p, "type"), "unknown material \"" + type +
-                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\" or \"medium\")");
+                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\", \"coating\" or "
+                                "\"medium\")");
   }
   return m;
 }
@@ -188,12 +297,39 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   ctx.cache = std::make_shared<SceneLoadCache>();
   SceneGraph& graph = *doc->graph;
 
+  std::vector<std::string> bands;
+  std::vector<std::array<double, 2>> band_nm;
+  if (root.contains("bands")) {
+    const json& list = root["bands"];
+    if (!list.is_array() || list.empty()) ctx.fail("/bands", "expected a non-empty array of band names");
+    if (list.size() > 256) ctx.fail("/bands", std::to_string(list.size()) + " bands, at most 256");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string p = at("/bands", i);
+      // A name, or {"name": N, "nm": [lo, hi]}: wavelengths for every band or for none.
+      if (list[i].is_object()) {
+        ctx.onlyKeys(list[i], p, {"name", "nm"});
+        bands.push_back(ctx.string(ctx.member(list[i], p, "name"), at(p, "name")));
+        const json& nm = ctx.member(list[i], p, "nm");
+        if (!nm.is_array() || nm.size() != 2) ctx.fail(at(p, "nm"), "expected [lo, hi] in nm");
+        const double lo = ctx.number(nm[0], at(at(p, "nm"), 0)), hi = ctx.number(nm[1], at(at(p, "nm"), 1));
+        if (!(lo > 0.0 && lo < hi)) ctx.fail(at(p, "nm"), "expected wavelengths 0 < lo < hi in nm");
+        band_nm.push_back({lo, hi});
+      } else {
+        bands.push_back(ctx.string(list[i], p));
+      }
+      if (band_nm.size() != (band_nm.empty() ? 0 : i + 1))
+        ctx.fail(p, "either every band has wavelengths (\"nm\") or none");
+      for (std::size_t j = 0; j < i; ++j)
+        if (bands[j] == bands[i] || bands[i].empty())
+          ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
+    }
+  }
   // Materials by object (file order = library order of the "objects" entries).
   std::vector<Material> materials(graph.library().size());
   const json& objects = root["objects"];
   for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i)
     if (objects[i].contains("material"))
-      materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx);
+      materials[doc->objects[i]] = readMaterial(objects[i]["material"], at(at("/objects", i), "material"), ctx, bands);
 
   // Objects declared by "add_object" edits may carry a material too (applied once they are instanced).
   if (root.contains("edits"))
@@ -201,21 +337,37 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       if (e.kind == SceneEditKind::AddObject && e.object < materials.size()) {
         const json& entry = root["edits"][std::stoul(e.pointer.substr(std::string("/edits/").size()))]["add_object"];
         if (entry.is_object() && entry.contains("material"))
-          materials[e.object] = readMaterial(entry["material"], at(at(e.pointer, "add_object"), "material"), ctx);
+          materials[e.object] =
+              readMaterial(entry["material"], at(at(e.pointer, "add_object"), "material"), ctx, bands);
       }
 
-  std::vector<std::string> bands;
-  if (root.contains("bands")) {
-    const json& list = root["bands"];
-    if (!list.is_array() || list.empty()) ctx.fail("/bands", "expected a non-empty array of band names");
-    if (list.size() > 256) ctx.fail("/bands", std::to_string(list.size()) + " bands, at most 256");
-    for (std::size_t i = 0; i < list.size(); ++i) {
-      bands.push_back(ctx.string(list[i], at("/bands", i)));
-      for (std::size_t j = 0; j < i; ++j)
-        if (bands[j] == bands[i] || bands[i].empty())
-          ctx.fail(at("/bands", i), "band names must be non-empty and distinct");
-    }
+  // Instances' own materials: scene-json-v1 "instances" entries, duplex-scene-v1 instance nodes
+  // (doc->instances lists them depth first in file order, as the walk below meets them).
+  std::vector<std::pair<NodeId, Material>> instance_materials;
+  std::size_t instance_index = 0;
+  auto instanceMaterial = [&](const json& entry, const std::string& p) {
+    if (instance_index >= doc->instances.size()) return;
+    const NodeId node = doc->instances[instance_index++];
+    if (entry.is_object() && entry.contains("material"))
+      instance_materials.emplace_back(node, readMaterial(entry["material"], at(p, "material"), ctx, bands));
+  };
+  if (doc->format == "scene-json-v1") {
+    if (root.contains("instances") && root["instances"].is_array())
+      for (std::size_t i = 0; i < root["instances"].size(); ++i)
+        instanceMaterial(root["instances"][i], at("/instances", i));
+  } else if (root.contains("nodes") && root["nodes"].is_array()) {
+    auto walk = [&](auto&& self, const json& list, const std::string& p) -> void {
+      for (std::size_t i = 0; i < list.size(); ++i) {
+        const json& n = list[i];
+        if (!n.is_object()) continue;
+        if (n.contains("instance")) instanceMaterial(n, at(p, i));
+        else if (n.contains("children") && n["children"].is_array())
+          self(self, n["children"], at(at(p, i), "children"));
+      }
+    };
+    walk(walk, root["nodes"], "/nodes");
   }
+
   auto bandCount = [&](const std::vector<double>& values, const std::string& p) {
     if (!values.empty() && values.size() != std::max<std::size_t>(1, bands.size()))
       ctx.fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
@@ -223,8 +375,18 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
   };
   for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
     const Material& m = materials[doc->objects[i]];
-    bandCount(m.band_reflectance,
-              at(at(at("/objects", i), "material"), m.type == MaterialType::Medium ? "albedo" : "reflectance"));
+    const std::string q = at(at("/objects", i), "material");
+    bandCount(m.band_reflectance, at(q, m.type == MaterialType::Medium    ? "albedo"
+                                        : m.type == MaterialType::Coating ? "reflect"
+                                                                          : "reflectance"));
+    bandCount(m.band_transmittance, at(q, "transmit"));
+    bandCount(m.band_absorption, at(q, "absorption"));
+  }
+  for (const auto& [node, m] : instance_materials) {
+    const std::string q = graph.path(node) + " material";  // the node, as JSON pointers of nodes are not kept
+    bandCount(m.band_reflectance, q);
+    bandCount(m.band_transmittance, q);
+    bandCount(m.band_absorption, q);
   }
 
   std::vector<Light> lights;
@@ -232,7 +394,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     const json& list = root["lights"];
     if (!list.is_array()) ctx.fail("/lights", "expected an array of lights");
     for (std::size_t i = 0; i < list.size(); ++i) {
-      lights.push_back(readLight(list[i], at("/lights", i), ctx, graph));
+      lights.push_back(readLight(list[i], at("/lights", i), ctx, graph, bands));
       bandCount(lights.back().spectrum, at(at("/lights", i), "spectrum"));
     }
   }
@@ -281,7 +443,8 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     (void)graph.commit();
   }
   try {
-    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field));
+    SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field),
+                      std::move(band_nm), std::move(instance_materials));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {

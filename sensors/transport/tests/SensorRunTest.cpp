@@ -12,6 +12,7 @@
 #include "duplex/sensors/SensorScene.h"
 #include "SensorFixture.h"
 #include "SlabMedium.h"
+#include "SensorRunChunk.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -21,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <unistd.h>
@@ -29,12 +31,6 @@ namespace duplex {
 namespace {
 
 using namespace test;
-
-// Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
-double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
-  auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
-  return f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0);
-}
 
 TEST(SensorRun, PointSourceOnALargePlaneMatchesTheExactPerBinIntegral) {
   Fixture f;
@@ -441,6 +437,53 @@ TEST(SensorRun, WithAnAbsorberInsideMissingPowerEqualsAbsorbedPower) {
   EXPECT_NEAR(sensorSum(r) + r.energy.absorbed_w, 2.0, 1e-12);
   EXPECT_NEAR(sensorSum(r), r.energy.escaped_w, 1e-12);
   EXPECT_EQ(r.energy.depth_limited_w, 0.0);
+  // Materials keep a surviving path's power and nothing attenuates: every path ends with the power
+  // it was emitted with, so each term is its ray count times that power, and the counts are the rays.
+  const EnergyBalance& e = r.energy;
+  EXPECT_GT(e.absorbed_rays, 1000u);
+  EXPECT_EQ(e.escaped_rays + e.absorbed_rays, r.rays);
+  EXPECT_EQ(e.medium_absorbed_rays + e.depth_limited_rays + e.roulette_rays + e.failed_rays, 0u);
+  EXPECT_NEAR(e.absorbed_w, 2.0 * static_cast<double>(e.absorbed_rays) / static_cast<double>(r.rays), 1e-12);
+  EXPECT_NEAR(e.escaped_w, 2.0 * static_cast<double>(e.escaped_rays) / static_cast<double>(r.rays), 1e-12);
+  EXPECT_EQ(e.failed_w, 0.0);
+}
+
+TEST(SensorRun, EveryPathEndsOneWayAndTheCountsSumToTheRays) {
+  // Fog, a Lambertian ceiling and a roulette threshold of 0.9 (it kills paths), a depth limit of 2
+  // (it cuts some): every ending is counted once.
+  Fixture f;
+  const SensorScene scene = fogUnderCeiling(f);
+  SensorRunConfig cfg;
+  cfg.roulette_threshold = 0.9;
+  cfg.max_depth = 2;
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(40000);
+  const EnergyBalance e = run.results().energy;
+  EXPECT_EQ(e.escaped_rays + e.absorbed_rays + e.medium_absorbed_rays + e.depth_limited_rays + e.roulette_rays +
+                e.failed_rays,
+            40000u);
+  EXPECT_GT(e.roulette_rays, 0u);
+  EXPECT_GT(e.escaped_rays, 0u);
+  EXPECT_EQ(e.failed_rays, 0u);
+  EXPECT_NEAR(e.escaped_w + e.absorbed_w + e.medium_absorbed_w + e.depth_limited_w + e.roulette_w + e.failed_w,
+              e.emitted_w, 1e-12 * e.emitted_w);
+  // Counts travel with batches and states like the sums.
+  SensorRun worker(scene, cfg), sum(scene, cfg);
+  sum.addBatch(worker.traceBatch(0, 40000).bytes);
+  EXPECT_EQ(sum.results().energy.roulette_rays, e.roulette_rays);
+  EXPECT_EQ(sum.results().energy.depth_limited_rays, e.depth_limited_rays);
+}
+
+TEST(SensorRun, ADirectionThatDoesNotLeaveTheSurfaceIsAFailure) {
+  const glm::dvec3 n(0.0, 0.0, 1.0);  // faces the incoming ray
+  EXPECT_TRUE(detail::leavesSurface({0.3, 0.0, 0.9}, n, false));
+  EXPECT_FALSE(detail::leavesSurface({0.3, 0.0, 0.9}, n, true));  // a refraction must cross
+  EXPECT_TRUE(detail::leavesSurface({0.3, 0.0, -0.9}, n, true));
+  EXPECT_FALSE(detail::leavesSurface({1.0, 0.0, 0.0}, n, false));  // tangent: neither side
+  EXPECT_FALSE(detail::leavesSurface({1.0, 0.0, 0.0}, n, true));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(detail::leavesSurface({nan, 0.0, 1.0}, n, false));
+  EXPECT_FALSE(detail::leavesSurface({0.0, 0.0, std::numeric_limits<double>::infinity()}, n, false));
 }
 
 SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32_t chunk, std::uint64_t rays,
@@ -667,14 +710,6 @@ TEST(SensorRun, BadLightsAndConfigurationsAreRefused) {
 
 // ---- scene files ----
 
-std::filesystem::path writeScene(const std::string& name, const std::string& text) {
-  const auto dir = std::filesystem::temp_directory_path() / ("duplex_sensor_scenes_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  const auto path = dir / name;
-  std::ofstream(path) << text;
-  return path;
-}
-
 const char* kQuadObject =
     R"({"name": "floor", "mesh": {"positions": [-5,-5,0, 5,-5,0, 5,5,0, -5,5,0], "indices": [0,1,2, 0,2,3]}})";
 
@@ -689,7 +724,7 @@ TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
                  "transform": [1,0,0,0, 0,1,0,0, 0,0,1,2]},
                 {"name": "round", "shape": "disk", "size": 1, "bins": [3, 3], "two_sided": false,
                  "transform": [2,0,0,0, 0,2,0,0, 0,0,2,1]}]})";
-  const SensorScene scene = SensorScene::load(writeScene("ok.json", text));
+  const SensorScene scene = SensorScene::load(writeTestFile("ok.json", text));
   ASSERT_EQ(scene.lights().size(), 4u);
   EXPECT_EQ(scene.totalPower(), 15.5);
   ASSERT_EQ(scene.sensors().size(), 2u);
@@ -705,7 +740,7 @@ TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
 TEST(SensorSceneFile, UnknownKeysAreIgnoredInSceneJsonV1AndRefusedInTheOwnFormat) {
   const std::string lights = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2, "colour": "red"}])";
   const std::string sensors = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2], "vendor": "acme"}])";
-  const SensorScene v1 = SensorScene::load(writeScene(
+  const SensorScene v1 = SensorScene::load(writeTestFile(
       "v1_unknown.json",
       R"({"format": "scene-json-v1", "objects": [], "instances": [], "note": "x", )" + lights + ", " + sensors + "}"));
   EXPECT_EQ(v1.totalPower(), 2.0);
@@ -715,7 +750,7 @@ TEST(SensorSceneFile, UnknownKeysAreIgnoredInSceneJsonV1AndRefusedInTheOwnFormat
   const std::string light_only = R"("lights": [{"type": "point", "position": [0, 0, 1], "power": 2}])";
   const std::string sensor_only = R"("sensors": [{"name": "s", "size": 1, "bins": [2, 2]}])";
   const auto own = [](const std::string& name, const std::string& body) {
-    return writeScene(name, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], )" + body + "}");
+    return writeTestFile(name, R"({"format": "duplex-scene-v1", "objects": [], "nodes": [], )" + body + "}");
   };
   (void)SensorScene::load(own("own_known.json", light_only + ", " + sensor_only));  // the keys alone are fine
   expectErrorNaming<FileError>([&] { (void)SensorScene::load(own("own_light.json", lights + ", " + sensor_only)); },
@@ -732,7 +767,7 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
               {"group": "row", "translate": [0, 0, 1], "children": [
                 {"instance": "a", "object": "cell"}, {"instance": "b", "object": "cell", "transform": {"translate": [2, 0, 0]}}]}],
     "lights": [{"type": "point", "position": [0, 0, 3], "power": 1}]})";
-  const SensorScene scene = SensorScene::load(writeScene("own.json", text));
+  const SensorScene scene = SensorScene::load(writeTestFile("own.json", text));
   ASSERT_EQ(scene.sensors().size(), 2u);
   EXPECT_EQ(scene.sensors()[0].name, "a");
   EXPECT_EQ(scene.sensors()[1].name, "b");
@@ -743,9 +778,9 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
 
 // An LM-63 file next to the scenes: rotationally symmetric, 100 cd at the nadir, 50 at the horizon.
 void writeLampIes() {
-  (void)writeScene("lamp.ies",
-                   "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
-                   "0 90 180\n0\n100 50 0\n");
+  (void)writeTestFile("lamp.ies",
+                      "IESNA:LM-63-2002\n[TEST] sensor test\nTILT=NONE\n1 -1 1 3 1 1 2 0 0 0\n1 1 100\n"
+                      "0 90 180\n0\n100 50 0\n");
 }
 
 TEST(SensorSceneFile, ReadsAnIesLight) {
@@ -753,7 +788,7 @@ TEST(SensorSceneFile, ReadsAnIesLight) {
   const std::string text = R"({"format": "scene-json-v1", "objects": [], "instances": [],
     "lights": [{"type": "ies", "file": "lamp.ies", "position": [0, 0, 3], "power": 5}],
     "sensors": [{"name": "floor", "size": 1}]})";
-  const SensorScene scene = SensorScene::load(writeScene("ies.json", text));
+  const SensorScene scene = SensorScene::load(writeTestFile("ies.json", text));
   ASSERT_EQ(scene.lights().size(), 1u);
   const Light& l = scene.lights()[0];
   EXPECT_EQ(l.type, LightType::Goniometric);
@@ -761,16 +796,9 @@ TEST(SensorSceneFile, ReadsAnIesLight) {
 }
 
 void expectFileError(const std::string& name, const std::string& body, const std::string& needle) {
-  const auto path = writeScene(name, std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
-                                         R"(], "instances": [], )" + body + "}");
-  try {
-    (void)SensorScene::load(path);
-    ADD_FAILURE() << name << ": no error";
-  } catch (const FileError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(path.string()), std::string::npos) << what;
-    EXPECT_NE(what.find(needle), std::string::npos) << what;
-  }
+  const auto path = writeTestFile(name, std::string(R"({"format": "scene-json-v1", "objects": [)") + kQuadObject +
+                                            R"(], "instances": [], )" + body + "}");
+  expectLoadError(path, {needle});
 }
 
 TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {

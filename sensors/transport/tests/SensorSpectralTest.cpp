@@ -255,11 +255,11 @@ TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   // Any other version, older or newer, and any other file: one message with what was found and
   // what this build reads.
   b = clean;
-  for (const char version : {'1', '4', '6'}) {
+  for (const char version : {'1', '5', '7'}) {
     b[7] = version;
-    refusedWith(b, std::string("found \"DXSENSR") + version + "\", expected \"DXSENSR5\"");
+    refusedWith(b, std::string("found \"DXSENSR") + version + "\", expected \"DXSENSR6\"");
   }
-  refusedWith(std::vector<char>{'P', 'K', '\x03', '\x04'}, "found \"PK\\x03\\x04\", expected \"DXSENSR5\"");
+  refusedWith(std::vector<char>{'P', 'K', '\x03', '\x04'}, "found \"PK\\x03\\x04\", expected \"DXSENSR6\"");
   refusedWith(std::vector<char>(clean.begin(), clean.begin() + 12), "12 bytes, truncated");
   // The clean file still resumes to the same accumulators.
   {

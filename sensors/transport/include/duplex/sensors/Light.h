@@ -51,11 +51,17 @@ struct Light {
   /// direction and transform are then in the node's local space and follow the node's world
   /// transform (moves, rotations, scales, re-parenting); the light is off while the node is hidden.
   NodeId node = kInvalidNode;
+  /// > 0: the light was given in lumens (luminous flux), and the scene sets power_w from it: by the
+  /// luminous efficacy of its spectrum when the bands have wavelengths, else power_w = lumens (a
+  /// scene whose lights are all in lumens and whose bands have no wavelengths transports luminous
+  /// flux directly). 0: given in watts.
+  double lumens = 0.0;
 
   /// Throws InvalidArgument naming the light for non-finite values, power <= 0, a zero direction,
   /// a cone angle outside (0, pi], or a non-positive size or radius, or a singular transform; a
   /// goniometric light without a profile or whose transform's linear part is not a rotation, a
-  /// spectrum with a negative or non-finite entry or without a positive one.
+  /// spectrum with a negative or non-finite entry or without a positive one, lumens negative or
+  /// not finite.
   void validate() const;
   /// Radiant intensity (W/sr) of a Point, Spot or Goniometric light towards world direction
   /// `dir_ws` (any length); 0 outside a spot's cone. For analytic checks.

@@ -14,6 +14,7 @@
 #include "duplex/sensors/IesProfile.h"
 #include "duplex/sensors/SensorObject.h"
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -68,12 +69,30 @@ struct SensorResult {
   std::vector<std::vector<double>> band_stderr_w_m2;      ///< [band][bin]
   std::vector<double> band_total_flux_w;                  ///< [band]
   std::vector<double> band_total_flux_stderr_w;           ///< [band]
+  /// Photometric scenes (SensorRunResults::photometric): the same quantities weighted by the bands'
+  /// luminous efficacy (683 lm/W times V(lambda); 1 when luminous flux is transported directly).
+  /// A ray carries one band, so each ray's luminous sample is its deposit times its band's weight
+  /// and the standard errors are those of these samples. Far-field sensors: illuminance_lx holds
+  /// the luminous intensity (cd) and illuminance_stderr_lx its standard error.
+  double luminous_flux_lm = 0.0;              ///< over all bins, lm
+  double luminous_flux_stderr_lm = 0.0;       ///< standard error of luminous_flux_lm
+  std::vector<double> illuminance_lx;         ///< [bin], lm per square scene unit (far field: cd)
+  std::vector<double> illuminance_stderr_lx;  ///< [bin], standard error of illuminance_lx
+  /// Colorimetric scenes (the bands have wavelengths): per bin the CIE 1931 tristimulus values X, Y,
+  /// Z in the units of illuminance_lx (Y = illuminance_lx), index 3 * bin + c, and the chromaticity
+  /// x, y (index 2 * bin + c; NaN where X + Y + Z = 0); and the same over the whole sensor.
+  std::vector<double> cie_xyz;
+  std::vector<double> chromaticity_xy;
+  std::vector<double> total_cie_xyz;          ///< [3], X, Y, Z of the total flux (Y = luminous_flux_lm)
+  std::vector<double> total_chromaticity_xy;  ///< [2], or NaN when no light arrived
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
-/// emitted = escaped + absorbed + medium_absorbed + depth_limited + roulette up to rounding.
+/// emitted = escaped + absorbed + medium_absorbed + depth_limited + roulette + failed up to rounding.
 /// medium_absorbed counts attenuation (fogs that do not scatter) and absorbing collisions (fogs
 /// that do); depth_limited also paths cut after SensorRunConfig::max_scatterings collisions.
+/// Beside each power, the emitted rays whose path ended that way (each path ends one way, so the
+/// counts sum to the rays traced; attenuation by fogs that do not scatter ends no path).
 struct EnergyBalance {
   double emitted_w = 0.0;          ///< the lights' total power (0 before any ray is traced)
   double escaped_w = 0.0;          ///< left the scene (no blocking hit)
@@ -81,6 +100,16 @@ struct EnergyBalance {
   double medium_absorbed_w = 0.0;  ///< attenuated by media
   double depth_limited_w = 0.0;    ///< still travelling when the depth limit cut the path
   double roulette_w = 0.0;         ///< net power removed by Russian roulette (zero in expectation)
+  /// Power of paths ended by a numerical failure: a non-finite direction or power, a scattered
+  /// direction that does not leave the surface to the side its material sends it (tangent, or on
+  /// the wrong side), or a direction a material's sampling refused.
+  double failed_w = 0.0;
+  std::uint64_t escaped_rays = 0;          ///< paths that left the scene
+  std::uint64_t absorbed_rays = 0;         ///< paths absorbed by a surface
+  std::uint64_t medium_absorbed_rays = 0;  ///< paths absorbed at a collision in a scattering fog
+  std::uint64_t depth_limited_rays = 0;    ///< paths cut by max_depth or max_scatterings
+  std::uint64_t roulette_rays = 0;         ///< paths killed by Russian roulette
+  std::uint64_t failed_rays = 0;           ///< paths ended by a numerical failure (failed_w)
 };
 
 /// What a sensor run measured: every sensor's result and the energy balance, over the rays traced so far.
@@ -90,13 +119,20 @@ struct SensorRunResults {
   EnergyBalance energy;                ///< where the emitted power went
   std::vector<std::string> bands;      ///< the scene's band names (empty: one radiometric band)
   std::vector<double> band_emitted_w;  ///< per band: the lights' power in it (exact, from their spectra)
-  std::vector<SensorResult> sensors;   ///< in the scene's sensor order
+  /// Whether the photometric quantities of the sensors are filled (a light given in lumens, or
+  /// bands with wavelengths); then emitted_lm is the lights' luminous flux (exact, from their spectra).
+  bool photometric = false;
+  bool colorimetric = false;                   ///< whether the sensors' CIE XYZ and chromaticities are filled
+  double emitted_lm = 0.0;                     ///< the lights' luminous flux, lm (photometric runs)
+  std::vector<std::array<double, 2>> band_nm;  ///< the bands' wavelengths [lo, hi] nm (colorimetric runs)
+  std::vector<SensorResult> sensors;           ///< in the scene's sensor order
 };
 
 /// The IES type C table of a far-field sensor's result (shape FarField): vertical angles gamma_g =
 /// g 180 / (n_gamma - 1), horizontal angles C_c = c 360 / n_c and 360 repeating C = 0 (one C-plane:
-/// just 0, rotational symmetry), values the measured intensity (W/sr, said by the keywords
-/// "_UNITS" and "OTHER", with the rays and the seed), absolute photometry. Throws InvalidArgument
+/// just 0, rotational symmetry), values the measured intensity (W/sr; candela when the run
+/// is photometric, illuminance_lx filled; said by the keywords "_UNITS" and "OTHER", with the rays
+/// and the seed), absolute photometry. Throws InvalidArgument
 /// for a result of another shape.
 [[nodiscard]] IesTable farFieldIesTable(const SensorResult& far_field, std::uint64_t rays, std::uint64_t seed);
 

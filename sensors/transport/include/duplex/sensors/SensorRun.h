@@ -193,6 +193,9 @@ class SensorRun {
   std::uint64_t traceRange(std::uint64_t first, std::uint64_t end, Tally& into);
   // Adds the open batch's tallies to the run's (the batch is full) and empties them.
   void closeBatch();
+  // Photometric scenes: sensor `sensor`'s (s's) luminous and colorimetric quantities, from `all`
+  // (the run's tallies) and the radiometric ones already in `out`.
+  void photometricResults(const Tally& all, const SensorInstance& s, std::size_t sensor, SensorResult& out) const;
   [[nodiscard]] std::unique_ptr<Tally> makeTally() const;
   /// The first collision in the scene's scattering fogs along world-space origin + t dir, t in
   /// [0, t_max] (t_max infinite: the whole ray): the medium, with t_collision, or nullptr.

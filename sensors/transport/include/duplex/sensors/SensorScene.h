@@ -26,10 +26,13 @@
 #include "duplex/sensors/SensorObject.h"
 #include "duplex/sensors/SensorTypes.h"
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace duplex {
@@ -112,8 +115,20 @@ class SensorScene {
   /// fog, a surface material on a fog, a fog that cannot be sampled (a medium of another type) in
   /// a scene whose media scatter, per-band values whose count is not the band count, or empty or
   /// repeated band names.
+  ///
+  /// Photometry: `band_nm` gives every band its wavelengths [lo, hi] nm (empty: none). Lights given
+  /// in lumens (Light::lumens > 0) get their power_w here: lumens over their spectrum's luminous
+  /// efficacy (683 lm/W times the band means of V(lambda), cieBandMean) when the bands have
+  /// wavelengths, else lumens itself when every light is in lumens (luminous flux is transported
+  /// directly). Throws InvalidArgument naming the light for lights in lumens beside lights in watts
+  /// without wavelengths, or a light in lumens whose spectrum has no power where V(lambda) > 0; and
+  /// for wavelengths not one pair per band or not 0 < lo < hi. `instance_materials` gives instance
+  /// nodes materials of their own, which replace their object's (two copies of a part in different
+  /// finishes); checked as the objects' materials, named by the node's path.
   SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vector<Material> materials = {},
-              std::vector<std::string> bands = {}, std::vector<FarFieldSensor> far_field = {});
+              std::vector<std::string> bands = {}, std::vector<FarFieldSensor> far_field = {},
+              std::vector<std::array<double, 2>> band_nm = {},
+              std::vector<std::pair<NodeId, Material>> instance_materials = {});
   /// Moves everything (the graph stays where it is: a loaded scene owns it through its document).
   SensorScene(SensorScene&&) noexcept;
   /// Moves everything, like the move constructor.
@@ -153,6 +168,18 @@ class SensorScene {
   [[nodiscard]] std::uint32_t bandCount() const {
     return bands_.empty() ? 1u : static_cast<std::uint32_t>(bands_.size());
   }
+  /// The bands' wavelengths [lo, hi] nm (empty: the bands have none).
+  [[nodiscard]] const std::vector<std::array<double, 2>>& bandWavelengths() const { return band_nm_; }
+  /// Whether the run reports photometric quantities: some light was given in lumens, or the bands
+  /// have wavelengths.
+  [[nodiscard]] bool photometric() const { return photometric_; }
+  /// Whether the run reports CIE XYZ and chromaticities: the bands have wavelengths.
+  [[nodiscard]] bool colorimetric() const { return !band_nm_.empty(); }
+  /// Lumens per transported unit of band `band` (< bandCount()) of a photometric scene: 683 lm/W
+  /// times the band's mean V(lambda), or 1 when luminous flux is transported directly.
+  [[nodiscard]] double luminousWeight(std::uint32_t band) const { return band_lm_[band]; }
+  /// 683 lm/W times the band's means of x-bar, y-bar, z-bar (colorimetric scenes only).
+  [[nodiscard]] const glm::dvec3& tristimulusWeight(std::uint32_t band) const { return band_xyz_[band]; }
   /// Cumulative normalised spectrum of light `light` (bandCount() entries, the last 1); `light`
   /// must be < lights().size() (not checked: the run's hot loop).
   [[nodiscard]] const std::vector<double>& bandCdf(std::size_t light) const { return current().band_cdf[light]; }
@@ -191,6 +218,11 @@ class SensorScene {
   static inline const Material kAbsorber{};
   [[nodiscard]] const Derived& current() const;
   [[nodiscard]] std::unique_ptr<Derived> derive() const;
+  // Photometric scenes: the bands' luminous and tristimulus weights, the power of lights in lumens.
+  void resolvePhotometry();
+  // Coatings, absorption and scatter models of a material (`what` names it in errors); sets an
+  // ABg material's scattered fraction (its total integrated scatter).
+  static void checkSurfaceMaterial(Material& m, const std::string& what, std::uint32_t nb);
   std::unique_ptr<SceneDocument> doc_;
   SceneGraph* graph_ = nullptr;
   std::unique_ptr<SceneTracer> tracer_;
@@ -198,7 +230,12 @@ class SensorScene {
   std::vector<Material> materials_;  // by object id
   std::vector<std::string> bands_;
   std::vector<FarFieldSensor> far_field_;
-  std::unique_ptr<Cache> cache_;  // the Derived of the last commit (a mutex guards its renewal)
+  std::vector<std::array<double, 2>> band_nm_;               // per band [lo, hi] nm, or empty
+  std::unordered_map<NodeId, Material> instance_materials_;  // instances' own materials
+  bool photometric_ = false;
+  std::vector<double> band_lm_;       // per band: lumens per transported unit (photometric scenes)
+  std::vector<glm::dvec3> band_xyz_;  // per band: 683 x (mean x-bar, y-bar, z-bar) (colorimetric scenes)
+  std::unique_ptr<Cache> cache_;      // the Derived of the last commit (a mutex guards its renewal)
 };
 
 }  // namespace duplex
