@@ -6,6 +6,7 @@
 
 #include "MeshChecks.h"
 #include "TestSupport.h"
+#include "TwoLevelChecks.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/RayGenerator.h"
@@ -25,12 +26,6 @@
 
 namespace duplex::test {
 namespace {
-
-bool sameBits(const Hit& a, const Hit& b) {
-  return std::memcmp(&a.t, &b.t, sizeof(float)) == 0 && std::memcmp(&a.u, &b.u, sizeof(float)) == 0 &&
-         std::memcmp(&a.v, &b.v, sizeof(float)) == 0 && a.prim_id == b.prim_id && a.instance_id == b.instance_id &&
-         std::memcmp(&a.ng, &b.ng, sizeof(glm::vec3)) == 0;
-}
 
 /// Rays through vertices and edge midpoints of the mesh's triangles from random origins around it:
 /// a ray through a shared edge hits both triangles at the same t.
@@ -121,7 +116,7 @@ Tally expectPacketsEqualSingle(const MeshObject& object, const std::vector<Ray>&
       tally.rays += on ? 1 : 0;
       tally.hits += expect_found ? 1 : 0;
       tally.occluded += expect_blocked ? 1 : 0;
-      const bool ok = expect_found == ((found >> j & 1u) != 0) && sameBits(hits[j], expected[j]) &&
+      const bool ok = expect_found == ((found >> j & 1u) != 0) && sameHitBits(hits[j], expected[j]) &&
                       expect_blocked == ((blocked >> j & 1u) != 0);
       if (!ok && ++mismatches <= 5) {
         ADD_FAILURE() << label << ": lane " << j << " of packet at " << first << ", " << r << ": packet " << hits[j]
@@ -218,7 +213,7 @@ TEST_F(MeshPacket, ObjectEntryPointsEqualSingleRaysForBothStructures) {
         const bool f = object->intersect(packet[j], want[j], ctx);
         hits += f ? 1 : 0;
         EXPECT_EQ(f, (found >> j & 1u) != 0);
-        EXPECT_TRUE(sameBits(got[j], want[j])) << got[j] << " vs " << want[j];
+        EXPECT_TRUE(sameHitBits(got[j], want[j])) << got[j] << " vs " << want[j];
         EXPECT_EQ(object->occluded(packet[j], ctx), (blocked >> j & 1u) != 0);
       }
     }
