@@ -14,13 +14,24 @@
 #include "BenchBuild.h"
 #include "BenchCommon.h"
 
+#include "duplex/accel/Error.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/accel/SimdIsa.h"
 #include "duplex/objects/MeshLoader.h"
 #include "duplex/objects/MeshObject.h"
 
+#include "duplex/objects/BuiltinTypes.h"
+#include "duplex/scenegraph/SceneDocument.h"
+#include "duplex/scenegraph/SceneGraph.h"
+#include "duplex/scenegraph/SceneTracer.h"
+
 #if DUPLEX_BENCH_HAVE_EMBREE
 #include "EmbreeBaseline.h"
+#include "EmbreeTwoLevel.h"
+#endif
+
+#if DUPLEX_BENCH_HAVE_CALLGRIND
+#include <valgrind/callgrind.h>
 #endif
 
 #include <CLI/CLI.hpp>
@@ -29,6 +40,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <bit>
 #include <atomic>
 #include <cstring>
@@ -62,25 +74,6 @@ std::vector<Ray> tiledPrimaryRays(const Box& bounds, std::uint32_t side, bool ji
           r.dir = glm::vec3(cam.directionAt(x + ox, y + oy, side, side));
           rays.push_back(r);
         }
-  return rays;
-}
-
-/// Shadow rays from the hits of `primary` towards a point light above and beside the camera; rays
-/// that missed give no shadow ray. Order: that of the primary rays (coherent).
-std::vector<Ray> shadowRays(const MeshObject& object, const std::vector<Ray>& primary, const Box& bounds) {
-  const glm::vec3 c = bounds.center(), ext = bounds.hi - bounds.lo;
-  const glm::vec3 light = c + glm::vec3(0.3f * ext.x, 1.5f * ext.y, 0.9f * ext.z);
-  std::vector<Ray> rays;
-  for (const Ray& r : primary) {
-    Hit h;
-    if (!object.intersect(r, h)) continue;
-    Ray s;
-    s.origin = r.origin + h.t * r.dir;
-    s.dir = light - s.origin;
-    s.tnear = 1e-4f;
-    s.tfar = 1.0f - 1e-4f;
-    rays.push_back(s);
-  }
   return rays;
 }
 
@@ -215,27 +208,28 @@ std::map<std::string, Tracer> embreePacketTracers(RTCScene scene, bool closest, 
   return t;
 }
 
-std::map<std::string, Tracer> embreeTracers(const EmbreeMesh& mesh, bool closest) {
+// Embree's single-ray and packet queries on `scene` (a mesh's or a two-level scene's).
+std::map<std::string, Tracer> embreeTracers(RTCScene scene, bool closest) {
   std::map<std::string, Tracer> t;
-  if (closest)
-    t["embree_1"] = [&mesh](std::span<const Ray> rays) {
-      std::uint64_t n = 0;
-      for (const Ray& r : rays) {
-        Hit h;
-        n += mesh.intersect(r, h) ? 1 : 0;
+  t["embree_1"] = [scene, closest](std::span<const Ray> rays) {
+    std::uint64_t n = 0;
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (const Ray& r : rays) {
+      RTCRayHit rh = toRayHit(r, r.tfar);
+      if (closest) {
+        rtcIntersect1(scene, &ctx, &rh);
+        n += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? 1 : 0;
+      } else {
+        rtcOccluded1(scene, &ctx, &rh.ray);
+        n += rh.ray.tfar < 0.0f ? 1 : 0;
       }
-      return n;
-    };
-  else
-    t["embree_1"] = [&mesh](std::span<const Ray> rays) {
-      std::uint64_t n = 0;
-      for (const Ray& r : rays) n += mesh.occluded(r) ? 1 : 0;
-      return n;
-    };
-  t.merge(embreePacketTracers<4, RTCRayHit4, RTCRay4>(mesh.scene(), closest, rtcIntersect4, rtcOccluded4, "embree_4"));
-  t.merge(embreePacketTracers<8, RTCRayHit8, RTCRay8>(mesh.scene(), closest, rtcIntersect8, rtcOccluded8, "embree_8"));
-  t.merge(embreePacketTracers<16, RTCRayHit16, RTCRay16>(mesh.scene(), closest, rtcIntersect16, rtcOccluded16,
-                                                         "embree_16"));
+    }
+    return n;
+  };
+  t.merge(embreePacketTracers<4, RTCRayHit4, RTCRay4>(scene, closest, rtcIntersect4, rtcOccluded4, "embree_4"));
+  t.merge(embreePacketTracers<8, RTCRayHit8, RTCRay8>(scene, closest, rtcIntersect8, rtcOccluded8, "embree_8"));
+  t.merge(embreePacketTracers<16, RTCRayHit16, RTCRay16>(scene, closest, rtcIntersect16, rtcOccluded16, "embree_16"));
   return t;
 }
 #endif
@@ -262,22 +256,243 @@ std::size_t packetMismatches(const MeshObject& object, const std::vector<Ray>& r
   return bad;
 }
 
+/// Light for the shadow rays: above and beside the box's centre.
+glm::vec3 lightOf(const Box& bounds) {
+  const glm::vec3 c = bounds.center(), ext = bounds.hi - bounds.lo;
+  return c + glm::vec3(0.3f * ext.x, 1.5f * ext.y, 0.9f * ext.z);
+}
+
+/// The shadow ray from the hit of `r` at distance t towards `light`.
+Ray shadowRay(const Ray& r, float t, const glm::vec3& light) {
+  Ray s;
+  s.origin = r.origin + t * r.dir;
+  s.dir = light - s.origin;
+  s.tnear = 1e-4f;
+  s.tfar = 1.0f - 1e-4f;
+  return s;
+}
+
+/// The interleaved measurement of every tracer on every ray set and thread count, appended to
+/// `results`. makeTracers(closest) gives the tracers of a ray set; mismatches(rays, closest) the rays
+/// whose packet result differs from the single one (must be 0).
+/// With --callgrind: each tracer once over the first `count` rays of each set on the calling thread,
+/// instrumented and dumped under "<mesh or scene>/<set>/<tracer>" (run the program under
+/// `valgrind --tool=callgrind --instr-atstart=no`); no timing.
+std::size_t g_callgrind_rays = 0;
+
+template <class MakeTracers>
+void callgrindTracers(const nlohmann::json& what, const std::map<std::string, std::vector<Ray>>& sets,
+                      MakeTracers&& makeTracers) {
+  for (const auto& [set, all] : sets) {
+    const std::span<const Ray> rays(all.data(), std::min(all.size(), g_callgrind_rays));
+    for (const auto& [tname, trace] : makeTracers(set != "shadow")) {
+      (void)trace(rays.first(std::min<std::size_t>(rays.size(), 64)));  // lazy binding and caches outside the count
+      const std::string name = std::string(what.value("mesh", what.value("scene", ""))) + "/" + set + "/" + tname;
+#if DUPLEX_BENCH_HAVE_CALLGRIND
+      CALLGRIND_ZERO_STATS;
+      CALLGRIND_START_INSTRUMENTATION;
+#endif
+      const std::uint64_t n = trace(rays);
+#if DUPLEX_BENCH_HAVE_CALLGRIND
+      CALLGRIND_STOP_INSTRUMENTATION;
+      CALLGRIND_DUMP_STATS_AT(name.c_str());
+#endif
+      std::cerr << name << ": " << rays.size() << " rays, " << n << " hits\n";
+    }
+  }
+}
+
+template <class MakeTracers, class Mismatches>
+void measure(const nlohmann::json& what, const std::map<std::string, std::vector<Ray>>& sets,
+             const std::vector<int>& threads, int reps, Arenas& arenas, MakeTracers&& makeTracers,
+             Mismatches&& mismatches, nlohmann::json& results) {
+  if (g_callgrind_rays != 0) {
+    callgrindTracers(what, sets, makeTracers);
+    return;
+  }
+  for (const auto& [set, rays] : sets) {
+    const bool closest = set != "shadow";
+    const std::map<std::string, Tracer> tracers = makeTracers(closest);
+    const std::size_t bad = mismatches(rays, closest);
+    for (int n : threads) {
+      tbb::task_arena& arena = arenas.get(n);
+      std::map<std::string, std::vector<double>> ms;
+      std::map<std::string, std::uint64_t> counts;
+      for (int rep = 0; rep < reps; ++rep)
+        for (const auto& [tname, trace] : tracers) {
+          const auto [wall, count] = timeTracer(arena, rays, trace);
+          ms[tname].push_back(wall);
+          counts[tname] = count;
+        }
+      nlohmann::json row = what;
+      row["rays"] = set;
+      row["ray_count"] = rays.size();
+      row["threads"] = n;
+      row["query"] = closest ? "closest" : "any";
+      row["mismatches_packet_vs_single"] = bad;
+      std::map<std::string, double> mrays;
+      for (const auto& [tname, samples] : ms) {
+        mrays[tname] = static_cast<double>(rays.size()) / (median(samples) * 1e3);
+        row["mrays_per_s"][tname] = mrays[tname];
+        row["hits"][tname] = counts[tname];
+      }
+      row["ratio"]["packet_vs_single"] = mrays["ours_packet"] / mrays["ours_single"];
+      if (mrays.count("embree_16") != 0) {
+        row["ratio"]["packet_vs_embree_16"] = mrays["ours_packet"] / mrays["embree_16"];
+        row["ratio"]["packet_vs_embree_1"] = mrays["ours_packet"] / mrays["embree_1"];
+        row["ratio"]["single_vs_embree_1"] = mrays["ours_single"] / mrays["embree_1"];
+        row["ratio"]["embree_16_vs_embree_1"] = mrays["embree_16"] / mrays["embree_1"];
+      }
+      std::cerr << what.dump() << " " << set << " " << n << "T: " << row["ratio"].dump() << "\n";
+      results.push_back(row);
+    }
+  }
+}
+
+/// Primary, jittered primary and random rays of `bounds`.
+std::map<std::string, std::vector<Ray>> raySets(const Box& bounds, std::uint32_t side, std::size_t random_count) {
+  std::map<std::string, std::vector<Ray>> sets;
+  sets["primary"] = tiledPrimaryRays(bounds, side, false, 1);
+  sets["primary_jittered"] = tiledPrimaryRays(bounds, side, true, 2);
+  sets["random"] = randomRays(bounds, random_count, 3);
+  return sets;
+}
+
+void benchMesh(const std::filesystem::path& path, const std::string& name, std::uint32_t side, std::size_t random_count,
+               const std::vector<int>& threads, int reps, Arenas& arenas, nlohmann::json& results) {
+  const auto mesh = std::make_shared<const TriangleMesh>(loadMesh(path));
+  const MeshObject object(mesh, BvhBuildConfig{});
+  const Box bounds = mesh->bounds();
+  auto sets = raySets(bounds, side, random_count);
+  const glm::vec3 light = lightOf(bounds);
+  for (const Ray& r : sets["primary"]) {
+    Hit h;
+    if (object.intersect(r, h)) sets["shadow"].push_back(shadowRay(r, h.t, light));
+  }
+#if DUPLEX_BENCH_HAVE_EMBREE
+  EmbreeDevice device(*std::max_element(threads.begin(), threads.end()), "");
+  const EmbreeMesh embree(device, *mesh, RTC_BUILD_QUALITY_MEDIUM);
+#endif
+  auto make = [&](bool closest) {
+    std::map<std::string, Tracer> tracers = oursTracers(object, closest);
+#if DUPLEX_BENCH_HAVE_EMBREE
+    tracers.merge(embreeTracers(embree.scene(), closest));
+#endif
+    return tracers;
+  };
+  const nlohmann::json what = {{"kind", "mesh"}, {"mesh", name}, {"triangles", mesh->triangleCount()}};
+  measure(
+      what, sets, threads, reps, arenas, make,
+      [&](const std::vector<Ray>& rays, bool) { return packetMismatches(object, rays); }, results);
+}
+
+/// A two-level scene: ours through SceneTracer's batch queries (packets on and off), Embree's
+/// two-level scene (one scene per object, one instance geometry per instance).
+void benchScene(const std::filesystem::path& path, std::uint32_t side, std::size_t random_count,
+                const std::vector<int>& threads, int reps, Arenas& arenas, nlohmann::json& results) {
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
+  SceneGraph& graph = *doc.graph;
+  SceneTracer tracer(graph);
+  const Box bounds = tracer.bounds();
+  auto sets = raySets(bounds, side, random_count);
+  {
+    std::vector<Hit> hits(sets["primary"].size());
+    tracer.intersect(sets["primary"], hits);
+    const glm::vec3 light = lightOf(bounds);
+    for (std::size_t i = 0; i < hits.size(); ++i)
+      if (hits[i].valid()) sets["shadow"].push_back(shadowRay(sets["primary"][i], hits[i].t, light));
+  }
+#if DUPLEX_BENCH_HAVE_EMBREE
+  std::vector<std::shared_ptr<const Object>> held;
+  std::vector<const TriangleMesh*> meshes;
+  for (ObjectId i = 0; i < graph.library().size(); ++i) {
+    held.push_back(graph.library().get(i));
+    const auto* m = dynamic_cast<const MeshObject*>(held.back().get());
+    if (m == nullptr) throw InvalidArgument(path.string() + ": objects other than meshes are not compared with Embree");
+    meshes.push_back(&m->mesh());
+  }
+  std::vector<EmbreeInstanceDesc> instances;
+  for (const NodeId node : graph.visibleInstances())
+    instances.push_back({graph.node(node).object, graph.worldTransform(node)});
+  EmbreeDevice device(*std::max_element(threads.begin(), threads.end()), "");
+  const EmbreeTwoLevel embree(device, meshes, instances, EmbreeTopLevelMode::Default);
+#endif
+  auto batch = [&tracer](bool packets, bool closest) -> Tracer {
+    return [&tracer, packets, closest](std::span<const Ray> rays) {
+      tracer.setBatchPackets(packets);
+      std::uint64_t n = 0;
+      if (closest) {
+        std::vector<Hit> hits(rays.size());
+        tracer.intersect(rays, hits);
+        for (const Hit& h : hits) n += h.valid() ? 1 : 0;
+      } else {
+        std::vector<std::uint8_t> blocked(rays.size());
+        tracer.occluded(rays, blocked);
+        for (const std::uint8_t b : blocked) n += b;
+      }
+      return n;
+    };
+  };
+  auto make = [&](bool closest) {
+    std::map<std::string, Tracer> tracers;
+    tracers["ours_single"] = batch(false, closest);
+    tracers["ours_packet"] = batch(true, closest);
+#if DUPLEX_BENCH_HAVE_EMBREE
+    tracers.merge(embreeTracers(embree.scene(), closest));
+#endif
+    return tracers;
+  };
+  auto mismatches = [&](const std::vector<Ray>& rays, bool closest) {
+    std::size_t bad = 0;
+    if (closest) {
+      std::vector<Hit> a(rays.size()), b(rays.size());
+      tracer.setBatchPackets(true);
+      tracer.intersect(rays, a);
+      tracer.setBatchPackets(false);
+      tracer.intersect(rays, b);
+      for (std::size_t i = 0; i < rays.size(); ++i)
+        bad += std::memcmp(&a[i].t, &b[i].t, 12) == 0 && a[i].prim_id == b[i].prim_id &&
+                       a[i].instance_id == b[i].instance_id
+                   ? 0
+                   : 1;
+    } else {
+      std::vector<std::uint8_t> a(rays.size()), b(rays.size());
+      tracer.setBatchPackets(true);
+      tracer.occluded(rays, a);
+      tracer.setBatchPackets(false);
+      tracer.occluded(rays, b);
+      for (std::size_t i = 0; i < rays.size(); ++i) bad += a[i] == b[i] ? 0 : 1;
+    }
+    return bad;
+  };
+  const nlohmann::json what = {{"kind", "scene"},
+                               {"scene", path.filename().string()},
+                               {"instances", graph.visibleInstances().size()},
+                               {"triangles", doc.figures.count("triangles")}};
+  measure(what, sets, threads, reps, arenas, make, mismatches, results);
+}
+
 int run(int argc, char** argv) {
-  CLI::App app{"Ray packets against single rays on single meshes, Embree 3 as the baseline"};
+  CLI::App app{"Ray packets against single rays on single meshes and two-level scenes, Embree 3 as the baseline"};
   std::vector<std::string> meshes = {"spot.obj", "hammer.obj", "koala.obj", "abb_irb6640/link_1.stl"};
+  std::vector<std::string> scenes;
   std::string data_dir = DUPLEX_BENCH_DATA_DIR;
   std::string out = "packet_bench.json";
   std::uint32_t side = 1024;
   std::size_t random_count = 1u << 20;
   std::vector<int> threads = {1, 2};
   int reps = 3;
-  app.add_option("--meshes", meshes, "meshes below <data>/meshes");
+  app.add_option("--meshes", meshes, "meshes below <data>/meshes (none: --meshes '')");
+  app.add_option("--scenes", scenes, "scene files (scene-json-v1 or duplex-scene-v1) of meshes: two-level");
   app.add_option("--data", data_dir, "the shared data folder");
   app.add_option("--side", side, "primary rays: side x side pixels")->check(CLI::Range(16u, 8192u));
   app.add_option("--random", random_count, "random rays")->check(CLI::Range(std::size_t{1024}, std::size_t{1} << 26));
   app.add_option("--threads", threads, "thread counts")->check(CLI::Range(1, 64));
   app.add_option("--reps", reps, "interleaved repetitions (medians)")->check(CLI::Range(1, 50));
   app.add_option("--out", out, "JSON output");
+  app.add_option("--callgrind", g_callgrind_rays,
+                 "instead of timing: count each tracer over the first N rays of each set (under valgrind "
+                 "--tool=callgrind --instr-atstart=no)");
   CLI11_PARSE(app, argc, argv);
 
   setFtzDaz();
@@ -290,61 +505,11 @@ int run(int argc, char** argv) {
                    {"packet_call_rays", kPacket},
                    {"simd_isa", toString(widestSimdIsa())}};
   doc["results"] = nlohmann::json::array();
-  for (const std::string& name : meshes) {
-    const auto mesh = std::make_shared<const TriangleMesh>(loadMesh(std::filesystem::path(data_dir) / "meshes" / name));
-    const MeshObject object(mesh, BvhBuildConfig{});
-    const Box bounds = mesh->bounds();
-    std::map<std::string, std::vector<Ray>> sets;
-    sets["primary"] = tiledPrimaryRays(bounds, side, false, 1);
-    sets["primary_jittered"] = tiledPrimaryRays(bounds, side, true, 2);
-    sets["random"] = randomRays(bounds, random_count, 3);
-    sets["shadow"] = shadowRays(object, sets["primary"], bounds);
-#if DUPLEX_BENCH_HAVE_EMBREE
-    EmbreeDevice device(*std::max_element(threads.begin(), threads.end()), "");
-    const EmbreeMesh embree(device, *mesh, RTC_BUILD_QUALITY_MEDIUM);
-#endif
-    for (const auto& [set, rays] : sets) {
-      const bool closest = set != "shadow";
-      std::map<std::string, Tracer> tracers = oursTracers(object, closest);
-#if DUPLEX_BENCH_HAVE_EMBREE
-      tracers.merge(embreeTracers(embree, closest));
-#endif
-      const std::size_t mismatches = packetMismatches(object, rays);
-      for (int n : threads) {
-        tbb::task_arena& arena = arenas.get(n);
-        std::map<std::string, std::vector<double>> ms;
-        std::map<std::string, std::uint64_t> counts;
-        for (int rep = 0; rep < reps; ++rep)
-          for (const auto& [tname, trace] : tracers) {
-            const auto [wall, count] = timeTracer(arena, rays, trace);
-            ms[tname].push_back(wall);
-            counts[tname] = count;
-          }
-        nlohmann::json row = {{"mesh", name},
-                              {"triangles", mesh->triangleCount()},
-                              {"rays", set},
-                              {"ray_count", rays.size()},
-                              {"threads", n},
-                              {"query", closest ? "closest" : "any"},
-                              {"mismatches_packet_vs_single", mismatches}};
-        std::map<std::string, double> mrays;
-        for (const auto& [tname, samples] : ms) {
-          mrays[tname] = static_cast<double>(rays.size()) / (median(samples) * 1e3);
-          row["mrays_per_s"][tname] = mrays[tname];
-          row["hits"][tname] = counts[tname];
-        }
-        row["ratio"]["packet_vs_single"] = mrays["ours_packet"] / mrays["ours_single"];
-        if (mrays.count("embree_16")) {
-          row["ratio"]["packet_vs_embree_16"] = mrays["ours_packet"] / mrays["embree_16"];
-          row["ratio"]["packet_vs_embree_1"] = mrays["ours_packet"] / mrays["embree_1"];
-          row["ratio"]["single_vs_embree_1"] = mrays["ours_single"] / mrays["embree_1"];
-          row["ratio"]["embree_16_vs_embree_1"] = mrays["embree_16"] / mrays["embree_1"];
-        }
-        std::cerr << name << " " << set << " " << n << "T: " << row["ratio"].dump() << "\n";
-        doc["results"].push_back(row);
-      }
-    }
-  }
+  for (const std::string& name : meshes)
+    if (!name.empty())
+      benchMesh(std::filesystem::path(data_dir) / "meshes" / name, name, side, random_count, threads, reps, arenas,
+                doc["results"]);
+  for (const std::string& scene : scenes) benchScene(scene, side, random_count, threads, reps, arenas, doc["results"]);
   doc["machine"]["load_average_after"] = loadAverage();
   writeJson(out, doc);
   return 0;

@@ -33,6 +33,9 @@ using namespace toplevel_detail;
 
 namespace {
 constexpr int kLanes = kMaxPacketRays;
+// Octant groups of at most this many rays go the single-ray way: the packet walk's bookkeeping
+// per node costs more than two or three rays save (random rays: one or two per octant).
+constexpr int kMinPacket = 3;
 }  // namespace
 
 // A packet's rays by their index in the caller's packet.
@@ -97,7 +100,8 @@ std::uint32_t InstanceTree::packetWalk(PacketState& p, std::uint32_t lanes, std:
       const std::uint32_t swap = (octant >> axis & 1u) != 0 ? lower ^ upper : 0u;
       const std::uint32_t near_child = lower ^ swap, far_child = upper ^ swap;
       std::uint32_t near_m = 0, far_m = 0;
-      Entry far{far_child, 0, {}};
+      Entry far;  // lanes and intervals are written for the rays that go far, and only those are read
+      far.node = far_child;
       for (std::uint32_t l = m; l != 0; l &= l - 1) {
         const int j = std::countr_zero(l);
         const float t_plane = (node.split() - p.kray[j].origin[axis]) * p.kray[j].inv_dir[axis];
@@ -190,8 +194,8 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   std::uint32_t result = 0;
   ctx.stats.rays += static_cast<std::uint64_t>(n);
   if (tree_.empty()) return 0;
-  // Queryable rays that meet the root box, by octant; one ray alone in its octant goes the single
-  // path (identical results, no packet set-up).
+  // Queryable rays that meet the root box, by octant; groups of at most kMinPacket rays go the
+  // single path (identical results, no packet set-up).
   PacketState p;
   std::uint32_t by_octant[8] = {};
   for (int i = 0; i < n; ++i) {
@@ -206,15 +210,17 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   for (std::uint32_t octant = 0; octant < 8; ++octant) {
     const std::uint32_t lanes = by_octant[octant];
     if (lanes == 0) continue;
-    if (std::popcount(lanes) == 1) {
-      const int i = std::countr_zero(lanes);
-      const Ray& r = rays_ws[static_cast<std::size_t>(i)];
-      --ctx.stats.rays;  // counted above
-      if constexpr (AnyHit) {
-        if (occluded(r, ctx, mask)) result |= 1u << i;
-      } else {
-        hits[static_cast<std::size_t>(i)] = intersect(r, ctx, mask);
-        if (hits[static_cast<std::size_t>(i)].valid()) result |= 1u << i;
+    if (std::popcount(lanes) <= kMinPacket) {
+      for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
+        const int i = std::countr_zero(l);
+        const Ray& r = rays_ws[static_cast<std::size_t>(i)];
+        --ctx.stats.rays;  // counted above
+        if constexpr (AnyHit) {
+          if (occluded(r, ctx, mask)) result |= 1u << i;
+        } else {
+          hits[static_cast<std::size_t>(i)] = intersect(r, ctx, mask);
+          if (hits[static_cast<std::size_t>(i)].valid()) result |= 1u << i;
+        }
       }
       continue;
     }

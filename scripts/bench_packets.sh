@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Ray packets against single rays and Embree 3's packets (docs/bench.md, "Ray packets"): runs
+# duplex_bench_packets on meshes of ../shared/data/meshes and on the paper's scenes (generated as
+# scripts/bench_update.sh generates them), once per SIMD path (DUPLEX_ISA: packets of 16, 8 and 4
+# rays; the narrower paths on the meshes only), and draws docs/bench/packets/*.png and packets.txt.
+#
+# Environment:
+#   BUILD_DIR   build directory (default: build)
+#   OUTDIR      results (default: docs/bench/packets)
+#   SCENE_DIR   generated scenes (default: out/paper)
+#   SCENES      scenes (default: "paper-1 paper-2 robot5")
+#   MESHES      meshes (default: "spot.obj hammer.obj koala.obj abb_irb6640/link_1.stl")
+#   ARGS        extra arguments of duplex_bench_packets (e.g. "--side 512 --reps 5")
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+BUILD_DIR=${BUILD_DIR:-$ROOT/build}
+OUTDIR=${OUTDIR:-$ROOT/docs/bench/packets}
+SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
+SCENES=${SCENES:-"paper-1 paper-2 robot5"}
+MESHES=${MESHES:-"spot.obj hammer.obj koala.obj abb_irb6640/link_1.stl"}
+ARGS=${ARGS:-}
+DATA=$ROOT/../shared/data/meshes
+DUPLEX=$BUILD_DIR/bin/duplex
+BENCH=$BUILD_DIR/bench/duplex_bench_packets
+if [ ! -d "$DATA" ]; then echo "bench_packets.sh: $DATA is absent" >&2; exit 1; fi
+cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DDUPLEX_BUILD_EXAMPLES=ON -DDUPLEX_BUILD_BENCH=ON >/dev/null
+cmake --build "$BUILD_DIR" -j2 --target duplex_cli duplex_bench_packets >/dev/null
+mkdir -p "$OUTDIR" "$SCENE_DIR"
+
+scene_files=()
+for name in $SCENES; do
+  out=$SCENE_DIR/$name.json
+  if [ ! -f "$out" ]; then
+    case "$name" in
+      paper-1) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --objects 19 --out "$out" ;;
+      paper-2) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --objects 6804 --out "$out" ;;
+      paper-3) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --loop 1 --objects 20968 --out "$out" ;;
+      robot5) "$DUPLEX" scene robot --urdf "$DATA/abb_irb6640/irb6640.urdf" --copies 5 --out "$out" ;;
+      hammer1k) "$DUPLEX" scene instances --mesh "$DATA/hammer.obj" --count 1000 --seed 1 --out "$out" ;;
+      *) echo "bench_packets.sh: unknown scene $name" >&2; exit 2 ;;
+    esac >/dev/null
+  fi
+  scene_files+=("$out")
+done
+
+# shellcheck disable=SC2086
+DUPLEX_ISA=avx512 "$BENCH" --meshes $MESHES --scenes "${scene_files[@]}" $ARGS --out "$OUTDIR/packets_avx512.json"
+for isa in avx2 sse2; do
+  # shellcheck disable=SC2086
+  DUPLEX_ISA=$isa "$BENCH" --meshes $MESHES --threads 1 $ARGS --out "$OUTDIR/packets_$isa.json"
+done
+python3 "$ROOT/scripts/plot_packets.py" --json "$OUTDIR/packets_avx512.json" --json "$OUTDIR/packets_avx2.json" \
+  --json "$OUTDIR/packets_sse2.json" --outdir "$OUTDIR"
