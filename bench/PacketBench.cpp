@@ -279,6 +279,8 @@ Ray shadowRay(const Ray& r, float t, const glm::vec3& light) {
 /// instrumented and dumped under "<mesh or scene>/<set>/<tracer>" (run the program under
 /// `valgrind --tool=callgrind --instr-atstart=no`); no timing.
 std::size_t g_callgrind_rays = 0;
+/// Writes the JSON with the rows measured so far.
+std::function<void()> g_partial;
 
 template <class MakeTracers>
 void callgrindTracers(const nlohmann::json& what, const std::map<std::string, std::vector<Ray>>& sets,
@@ -345,6 +347,7 @@ void measure(const nlohmann::json& what, const std::map<std::string, std::vector
       }
       std::cerr << what.dump() << " " << set << " " << n << "T: " << row["ratio"].dump() << "\n";
       results.push_back(row);
+      if (g_partial) g_partial();  // the file holds every finished row, should a later one not finish
     }
   }
 }
@@ -505,6 +508,10 @@ int run(int argc, char** argv) {
                    {"packet_call_rays", kPacket},
                    {"simd_isa", toString(widestSimdIsa())}};
   doc["results"] = nlohmann::json::array();
+  g_partial = [&] {
+    doc["machine"]["load_average_after"] = loadAverage();
+    writeJson(out, doc);
+  };
   for (const std::string& name : meshes)
     if (!name.empty())
       benchMesh(std::filesystem::path(data_dir) / "meshes" / name, name, side, random_count, threads, reps, arenas,

@@ -36,6 +36,9 @@ constexpr int kLanes = kMaxPacketRays;
 // Octant groups of at most this many rays go the single-ray way: the packet walk's bookkeeping
 // per node costs more than two or three rays save (random rays: one or two per octant).
 constexpr int kMinPacket = 3;
+// A packet whose rays point into more octants than this is traced ray by ray: 16 random directions
+// cover about 7 of the 8, camera rays 1, or up to 4 in the tiles on the image's axes.
+constexpr int kMaxOctants = 4;
 }  // namespace
 
 // A packet's rays by their index in the caller's packet.
@@ -194,34 +197,48 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   std::uint32_t result = 0;
   ctx.stats.rays += static_cast<std::uint64_t>(n);
   if (tree_.empty()) return 0;
-  // Queryable rays that meet the root box, by octant; groups of at most kMinPacket rays go the
-  // single path (identical results, no packet set-up).
-  PacketState p;
+  // A ray alone (or one of at most kMinPacket) in its octant, or every ray of a packet spread over
+  // more than kMaxOctants octants (incoherent: random directions), goes the single path (identical
+  // results, no packet set-up). The octant is the sign bits of the direction, as KdRay's.
+  auto single = [&](int i) {
+    const Ray& r = rays_ws[static_cast<std::size_t>(i)];
+    --ctx.stats.rays;  // counted above
+    if constexpr (AnyHit) {
+      if (occluded(r, ctx, mask)) result |= 1u << i;
+    } else {
+      hits[static_cast<std::size_t>(i)] = intersect(r, ctx, mask);
+      if (hits[static_cast<std::size_t>(i)].valid()) result |= 1u << i;
+    }
+  };
   std::uint32_t by_octant[8] = {};
   for (int i = 0; i < n; ++i) {
     const Ray& r = rays_ws[static_cast<std::size_t>(i)];
     if (!isQueryable(r)) continue;
-    p.kray[i] = KdRay(r);
-    float tmin, tmax;
-    if (!clipRayToBox(p.kray[i], tree_.bounds, tmin, tmax)) continue;
-    const KdRay& k = p.kray[i];
-    by_octant[(k.neg_mask[0] & 1u) | (k.neg_mask[1] & 2u) | (k.neg_mask[2] & 4u)] |= 1u << i;
+    by_octant[static_cast<int>(std::signbit(r.dir.x)) | static_cast<int>(std::signbit(r.dir.y)) << 1 |
+              static_cast<int>(std::signbit(r.dir.z)) << 2] |= 1u << i;
+  }
+  int octants = 0;
+  for (const std::uint32_t lanes : by_octant) octants += lanes != 0 ? 1 : 0;
+  if (octants > kMaxOctants) {
+    for (const std::uint32_t lanes : by_octant)
+      for (std::uint32_t l = lanes; l != 0; l &= l - 1) single(std::countr_zero(l));
+    return result;
+  }
+  // The rays that miss the root box have their (miss) result already.
+  PacketState p;
+  for (std::uint32_t& lanes : by_octant) {
+    for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
+      const int i = std::countr_zero(l);
+      p.kray[i] = KdRay(rays_ws[static_cast<std::size_t>(i)]);
+      float tmin, tmax;
+      if (!clipRayToBox(p.kray[i], tree_.bounds, tmin, tmax)) lanes &= ~(1u << i);
+    }
   }
   for (std::uint32_t octant = 0; octant < 8; ++octant) {
     const std::uint32_t lanes = by_octant[octant];
     if (lanes == 0) continue;
     if (std::popcount(lanes) <= kMinPacket) {
-      for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
-        const int i = std::countr_zero(l);
-        const Ray& r = rays_ws[static_cast<std::size_t>(i)];
-        --ctx.stats.rays;  // counted above
-        if constexpr (AnyHit) {
-          if (occluded(r, ctx, mask)) result |= 1u << i;
-        } else {
-          hits[static_cast<std::size_t>(i)] = intersect(r, ctx, mask);
-          if (hits[static_cast<std::size_t>(i)].valid()) result |= 1u << i;
-        }
-      }
+      for (std::uint32_t l = lanes; l != 0; l &= l - 1) single(std::countr_zero(l));
       continue;
     }
     for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
