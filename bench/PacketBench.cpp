@@ -279,6 +279,8 @@ Ray shadowRay(const Ray& r, float t, const glm::vec3& light) {
 /// instrumented and dumped under "<mesh or scene>/<set>/<tracer>" (run the program under
 /// `valgrind --tool=callgrind --instr-atstart=no`); no timing.
 std::size_t g_callgrind_rays = 0;
+/// --sets: the ray sets measured (empty: all).
+std::vector<std::string> g_sets;
 /// Writes the JSON with the rows measured so far.
 std::function<void()> g_partial;
 
@@ -313,6 +315,7 @@ void measure(const nlohmann::json& what, const std::map<std::string, std::vector
     return;
   }
   for (const auto& [set, rays] : sets) {
+    if (!g_sets.empty() && std::find(g_sets.begin(), g_sets.end(), set) == g_sets.end()) continue;
     const bool closest = set != "shadow";
     const std::map<std::string, Tracer> tracers = makeTracers(closest);
     const std::size_t bad = mismatches(rays, closest);
@@ -492,6 +495,8 @@ int run(int argc, char** argv) {
   app.add_option("--random", random_count, "random rays")->check(CLI::Range(std::size_t{1024}, std::size_t{1} << 26));
   app.add_option("--threads", threads, "thread counts")->check(CLI::Range(1, 64));
   app.add_option("--reps", reps, "interleaved repetitions (medians)")->check(CLI::Range(1, 50));
+  std::vector<std::string> only_sets;
+  app.add_option("--sets", only_sets, "ray sets to run (primary, primary_jittered, random, shadow; default: all)");
   app.add_option("--out", out, "JSON output");
   app.add_option("--callgrind", g_callgrind_rays,
                  "instead of timing: count each tracer over the first N rays of each set (under valgrind "
@@ -508,6 +513,7 @@ int run(int argc, char** argv) {
                    {"packet_call_rays", kPacket},
                    {"simd_isa", toString(widestSimdIsa())}};
   doc["results"] = nlohmann::json::array();
+  g_sets = only_sets;
   g_partial = [&] {
     doc["machine"]["load_average_after"] = loadAverage();
     writeJson(out, doc);

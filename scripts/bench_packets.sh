@@ -41,5 +41,5 @@ for isa in avx2 sse2; do
   # shellcheck disable=SC2086
   DUPLEX_ISA=$isa "$BENCH" --meshes $MESHES --threads 1 $ARGS --out "$OUTDIR/packets_$isa.json"
 done
-python3 "$ROOT/scripts/plot_packets.py" --json "$OUTDIR/packets_avx512.json" --json "$OUTDIR/packets_avx2.json" \
+/usr/bin/python3 "$ROOT/scripts/plot_packets.py" --json "$OUTDIR/packets_avx512.json" --json "$OUTDIR/packets_avx2.json" \
   --json "$OUTDIR/packets_sse2.json" --outdir "$OUTDIR"

@@ -274,11 +274,11 @@ inline unsigned occludedPacketKernel(const MeshBvhView& bvh, const MeshRay* cons
 }
 
 // Splits the queryable lanes of a packet (at most kMaxPacketRays rays) by octant and into groups of
-// PV::kWidth lanes. A group of at most PV::kMinPacket rays (random rays: one or two per octant)
-// goes ray by ray through `single(oct, i)` (i: the packet index), since packet setup would cost
-// more than it saves; larger groups go through `packet(oct, lanes, p, group)`, where group[j] is
-// the packet index of lane j of `p` and `lanes` the group's lane mask. Rays that are not
-// queryable are left out.
+// PV::kWidth lanes. A group of at most PV::kMinPacket rays (random rays: one or two per octant),
+// and every group of a packet spread over more than 4 octants, goes ray by ray through
+// `single(oct, i)` (i: the packet index), since packet setup would cost more than it saves; larger groups go through
+// `packet(oct, lanes, p, group)`, where group[j] is the packet index of lane j of `p` and `lanes` the group's lane
+// mask. Rays that are not queryable are left out.
 template <class Single, class Packet>
 inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepared, Single&& single, Packet&& packet) {
   unsigned by_octant[8] = {};
@@ -286,9 +286,14 @@ inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepar
     const int i = std::countr_zero(lanes);
     if (prepareMeshRay(rays[i], prepared[i])) by_octant[octantOf(prepared[i])] |= 1u << i;
   }
+  // Rays spread over more than 4 octants (16 random directions cover about 7) are incoherent: ray
+  // by ray, at the single path's cost.
+  int octants = 0;
+  for (const unsigned lanes : by_octant) octants += lanes != 0 ? 1 : 0;
+  const int min_packet = octants > 4 ? kMaxPacketRays : PV::kMinPacket;
   for (int oct = 0; oct < 8; ++oct) {
     unsigned left = by_octant[oct];
-    if (std::popcount(left) <= PV::kMinPacket) {
+    if (std::popcount(left) <= min_packet) {
       for (; left != 0; left &= left - 1) single(oct, std::countr_zero(left));
       continue;
     }
