@@ -179,6 +179,33 @@ TEST_F(MeshPacket, RaysThroughSharedEdgesAndVerticesEqualSingleRays) {
   }
 }
 
+TEST_F(MeshPacket, CoherentRaysThroughGridVerticesAndEdgesEqualSingleRays) {
+  // Parallel rays down onto a grid (z = 0.25, cells of 0.125), on a lattice of half cells: every
+  // ray passes through a vertex or an edge, where edge functions are exactly zero, and whole
+  // packets share the test's permutation, so the packet leaf test's exact path runs for many
+  // rays at once; also tilted (2 ulp-exact shear: 1/8 and 1/4) and through cell centres.
+  const auto object = buildChecked(flatGrid(16), BvhBuildConfig{});
+  std::vector<Ray> rays;
+  for (const glm::vec3 dir : {glm::vec3(0.0f, 0.0f, -1.0f), glm::vec3(0.125f, 0.25f, -1.0f)})
+    for (int ty = 0; ty < 32; ty += 4)
+      for (int tx = 0; tx < 32; tx += 4)
+        for (int y = ty; y < ty + 4; ++y)
+          for (int x = tx; x < tx + 4; ++x) {
+            Ray r;
+            r.origin = glm::vec3(0.0625f * static_cast<float>(x), 0.0625f * static_cast<float>(y), 1.25f) - dir;
+            r.dir = dir;
+            rays.push_back(r);
+          }
+  runAll(object, rays, "grid lattice", false);
+  QueryContext ctx;
+  std::size_t hits = 0;
+  for (const Ray& r : rays) {
+    Hit h;
+    hits += object->intersect(r, h, ctx) ? 1 : 0;
+  }
+  EXPECT_GT(hits, rays.size() / 2);
+}
+
 TEST_F(MeshPacket, AwkwardRaysEqualSingleRays) {
   const auto object = buildChecked(icosphere(3), BvhBuildConfig{});
   const auto rays = awkwardRays(object->bounds());
