@@ -288,6 +288,7 @@ template <class MakeTracers>
 void callgrindTracers(const nlohmann::json& what, const std::map<std::string, std::vector<Ray>>& sets,
                       MakeTracers&& makeTracers) {
   for (const auto& [set, all] : sets) {
+    if (!g_sets.empty() && std::find(g_sets.begin(), g_sets.end(), set) == g_sets.end()) continue;
     const std::span<const Ray> rays(all.data(), std::min(all.size(), g_callgrind_rays));
     for (const auto& [tname, trace] : makeTracers(set != "shadow")) {
       (void)trace(rays.first(std::min<std::size_t>(rays.size(), 64)));  // lazy binding and caches outside the count

@@ -153,18 +153,6 @@ struct PV {
   static V abs(V a) { return _mm_andnot_ps(_mm_set1_ps(-0.0f), a); }
   static unsigned le(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(a, b))); }
   static unsigned gt(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmpgt_ps(a, b))); }
-  static unsigned lt(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(a, b))); }
-  static unsigned eq(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmpeq_ps(a, b))); }
-  static V div(V a, V b) { return _mm_div_ps(a, b); }
-  static V flipSign(V x, V s) { return _mm_xor_ps(x, _mm_and_ps(s, _mm_set1_ps(-0.0f))); }
-  static V blend(unsigned m, V a, V b) {
-    const __m128i bits = _mm_setr_epi32(1, 2, 4, 8);
-    const __m128 sel =
-        _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(static_cast<int>(m)), bits), bits));
-    return _mm_or_ps(_mm_and_ps(sel, a), _mm_andnot_ps(sel, b));
-  }
-  static constexpr int kGroupBlocks = 1;  // the leaf test's groups: one block (closestInLeaf)
-  static constexpr int kLeafMinRays = 2;
 };
 
 #include "MeshBvhTraversal.inl"
@@ -396,17 +384,6 @@ struct PV {
   static V abs(V a) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), a); }
   static unsigned le(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }
   static unsigned gt(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_GT_OQ))); }
-  static unsigned lt(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LT_OQ))); }
-  static unsigned eq(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_EQ_OQ))); }
-  static V div(V a, V b) { return _mm256_div_ps(a, b); }
-  static V flipSign(V x, V s) { return _mm256_xor_ps(x, _mm256_and_ps(s, _mm256_set1_ps(-0.0f))); }
-  static V blend(unsigned m, V a, V b) {
-    const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-    const __m256i sel = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(m)), bits), bits);
-    return _mm256_blendv_ps(b, a, _mm256_castsi256_ps(sel));
-  }
-  static constexpr int kGroupBlocks = 2;  // the leaf test's groups: two blocks (Leaf::closest's 8 lanes)
-  static constexpr int kLeafMinRays = 2;
 };
 
 #include "MeshBvhTraversal.inl"
@@ -468,16 +445,6 @@ struct PV {
   static V abs(V a) { return _mm512_abs_ps(a); }
   static unsigned le(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_LE_OQ); }
   static unsigned gt(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ); }
-  static unsigned lt(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_LT_OQ); }
-  static unsigned eq(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_EQ_OQ); }
-  static V div(V a, V b) { return _mm512_div_ps(a, b); }
-  static V flipSign(V x, V s) {
-    return _mm512_castsi512_ps(_mm512_xor_si512(
-        _mm512_castps_si512(x), _mm512_and_si512(_mm512_castps_si512(s), _mm512_set1_epi32(INT32_MIN))));
-  }
-  static V blend(unsigned m, V a, V b) { return _mm512_mask_blend_ps(static_cast<__mmask16>(m), b, a); }
-  static constexpr int kGroupBlocks = 2;  // the leaf test's groups: two blocks (avx2::Leaf, which it uses)
-  static constexpr int kLeafMinRays = 2;
 };
 
 #include "MeshBvhTraversal.inl"

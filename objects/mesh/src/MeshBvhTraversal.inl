@@ -148,170 +148,7 @@ struct PacketRays {
   alignas(64) float inv[3][PV::kWidth];
   alignas(64) float tnear[PV::kWidth];
   alignas(64) float t_best[PV::kWidth];  // closest hit so far (any hit: tfar)
-  // The watertight test's constants (WatertightRay4): origin in the ray's permuted order, shear.
-  alignas(64) float wo[3][PV::kWidth];
-  alignas(64) float ws[3][PV::kWidth];  // sx, sy, sz
-  alignas(64) float wtnear[PV::kWidth];
 };
-
-// ---- Leaves, one triangle against the packet's rays ----
-//
-// The rays of `lanes` share the watertight test's axis permutation (kx, ky, kz), so each triangle's
-// rows are the same for all of them: one triangle is tested against every ray at once, each lane
-// computing exactly the operations of the single-ray test (intersectWatertight4v, in the same
-// order). The leaf's triangles are taken in the single path's groups (Leaf::kGroupBlocks blocks:
-// the 8-lane test of two blocks, or one block), and per ray each group is settled as the single path
-// settles it: the closest of its triangles decided in float (the first of equal t), then the
-// triangles with an edge function exactly zero one by one through the scalar test, with t_max
-// updated in between. So every ray records the hit the single path records, bit for bit.
-
-template <class F>
-inline void forEachLeafGroup(std::uint32_t count, F&& f) {
-  int left = static_cast<int>(count);
-  for (int first = 0; left > 0;) {
-    const int tris = (PV::kGroupBlocks == 2 && left > 4) ? std::min(left, 8) : std::min(left, 4);
-    f(first, tris);
-    const int blocks = (tris + 3) / 4;
-    first += blocks;
-    left -= 4 * blocks;
-  }
-}
-
-// The edge functions, determinant and scaled distance of triangle `lane` of `b` for every ray of
-// the packet; returns the rays decided in float (`fast`) and those with a zero edge function.
-struct PacketTri {
-  typename PV::V t_num, det, V, W;
-  unsigned fast = 0, exact = 0;
-};
-
-inline PacketTri packetTriangle(const PacketRays& p, const TriangleBlock4& b, int lane, int kx, int ky, int kz,
-                                unsigned lanes) {
-  using V = typename PV::V;
-  const V ox = PV::load(p.wo[0]), oy = PV::load(p.wo[1]), oz = PV::load(p.wo[2]);
-  const V sx = PV::load(p.ws[0]), sy = PV::load(p.ws[1]), sz = PV::load(p.ws[2]);
-  const V Az = PV::sub(PV::set1(b.v[kz][lane]), oz);
-  const V ax = PV::sub(PV::sub(PV::set1(b.v[kx][lane]), ox), PV::mul(sx, Az));
-  const V ay = PV::sub(PV::sub(PV::set1(b.v[ky][lane]), oy), PV::mul(sy, Az));
-  const V Bz = PV::sub(PV::set1(b.v[3 + kz][lane]), oz);
-  const V bx = PV::sub(PV::sub(PV::set1(b.v[3 + kx][lane]), ox), PV::mul(sx, Bz));
-  const V by = PV::sub(PV::sub(PV::set1(b.v[3 + ky][lane]), oy), PV::mul(sy, Bz));
-  const V Cz = PV::sub(PV::set1(b.v[6 + kz][lane]), oz);
-  const V cx = PV::sub(PV::sub(PV::set1(b.v[6 + kx][lane]), ox), PV::mul(sx, Cz));
-  const V cy = PV::sub(PV::sub(PV::set1(b.v[6 + ky][lane]), oy), PV::mul(sy, Cz));
-  PacketTri r;
-  r.V = PV::sub(PV::mul(ax, cy), PV::mul(ay, cx));
-  r.W = PV::sub(PV::mul(bx, ay), PV::mul(by, ax));
-  const V U = PV::sub(PV::mul(cx, by), PV::mul(cy, bx));
-  const V zero = PV::set1(0.0f);
-  r.exact = (PV::eq(U, zero) | PV::eq(r.V, zero) | PV::eq(r.W, zero)) & lanes;
-  const unsigned mixed = PV::lt(PV::min(U, PV::min(r.V, r.W)), zero) & PV::gt(PV::max(U, PV::max(r.V, r.W)), zero);
-  r.det = PV::add(PV::add(U, r.V), r.W);
-  const unsigned candidates = ~(mixed | PV::eq(r.det, zero)) & lanes & ~r.exact;
-  if (candidates == 0) return r;
-  r.t_num = PV::add(PV::add(PV::mul(U, PV::mul(sz, Az)), PV::mul(r.V, PV::mul(sz, Bz))), PV::mul(r.W, PV::mul(sz, Cz)));
-  const V abs_det = PV::abs(r.det);
-  const V sT = PV::flipSign(r.t_num, r.det);
-  const unsigned outside =
-      PV::lt(sT, PV::mul(PV::load(p.wtnear), abs_det)) | PV::gt(sT, PV::mul(PV::load(p.t_best), abs_det));
-  r.fast = candidates & ~outside;
-  return r;
-}
-
-// Closest hits of the rays `lanes` (one permutation) in the leaf `block`, `count` triangles.
-inline unsigned packetLeafClosest(const MeshRay* const* rays, unsigned lanes, const TriangleBlock4* block,
-                                  std::uint32_t count, PacketRays& p, ClosestHit* best, int kx, int ky, int kz) {
-  using V = typename PV::V;
-  unsigned found = 0;
-  forEachLeafGroup(count, [&](int first, int tris) {
-    const TriangleBlock4* g = block + first;
-    alignas(64) float best_t[PV::kWidth], best_u[PV::kWidth], best_v[PV::kWidth], best_k[PV::kWidth];
-    V bt = PV::set1(std::numeric_limits<float>::infinity()), bu = bt, bv = bt, bk = bt;
-    unsigned any_fast = 0;
-    unsigned exact[8];
-    for (int k = 0; k < tris; ++k) {
-      const PacketTri r = packetTriangle(p, g[k >> 2], k & 3, kx, ky, kz, lanes);
-      exact[k] = r.exact;
-      if (r.fast == 0) continue;
-      const V inv = PV::div(PV::set1(1.0f), r.det);  // the single test's final step
-      const V t = PV::mul(r.t_num, inv);
-      const unsigned better = r.fast & PV::lt(t, bt);  // strictly: the first of equal t wins
-      bt = PV::blend(better, t, bt);
-      bu = PV::blend(better, PV::mul(r.V, inv), bu);
-      bv = PV::blend(better, PV::mul(r.W, inv), bv);
-      bk = PV::blend(better, PV::set1(static_cast<float>(k)), bk);
-      any_fast |= r.fast;
-    }
-    if (any_fast != 0) {
-      PV::store(best_t, bt);
-      PV::store(best_u, bu);
-      PV::store(best_v, bv);
-      PV::store(best_k, bk);
-      for (unsigned l = any_fast; l != 0; l &= l - 1) {
-        const int j = std::countr_zero(l);
-        const int k = static_cast<int>(best_k[j]);
-        p.t_best[j] = best_t[j];
-        best[j] = {g + (k >> 2), k & 3, best_u[j], best_v[j]};
-      }
-      found |= any_fast;
-    }
-    for (int k = 0; k < tris; ++k) {
-      const TriangleBlock4& b = g[k >> 2];
-      for (unsigned l = exact[k]; l != 0; l &= l - 1) {
-        const int j = std::countr_zero(l);
-        float t, u, v;
-        if (!intersectWatertight(rays[j]->wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), p.t_best[j],
-                                 t, u, v))
-          continue;
-        p.t_best[j] = t;
-        best[j] = {&b, k & 3, u, v};
-        found |= 1u << j;
-      }
-    }
-  });
-  return found;
-}
-
-// The rays of `lanes` (one permutation) that a triangle of the leaf blocks within [tnear, tfar].
-inline unsigned packetLeafAny(const MeshRay* const* rays, unsigned lanes, const TriangleBlock4* block,
-                              std::uint32_t count, const PacketRays& p, int kx, int ky, int kz) {
-  unsigned blocked = 0;
-  forEachLeafGroup(count, [&](int first, int tris) {
-    const TriangleBlock4* g = block + first;
-    for (int k = 0; k < tris && (lanes & ~blocked) != 0; ++k) {
-      const PacketTri r = packetTriangle(p, g[k >> 2], k & 3, kx, ky, kz, lanes & ~blocked);
-      blocked |= r.fast;
-      const TriangleBlock4& b = g[k >> 2];
-      for (unsigned l = r.exact & ~blocked; l != 0; l &= l - 1) {
-        const int j = std::countr_zero(l);
-        float t, u, v;
-        if (intersectWatertight(rays[j]->wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), p.t_best[j],
-                                t, u, v))
-          blocked |= 1u << j;
-      }
-    }
-  });
-  return blocked;
-}
-
-// Runs `packet(kx, ky, kz, lanes)` on each set of at least PV::kLeafMinRays rays of `m` that share
-// the watertight permutation, and `single(j)` on the others.
-template <class Packet, class Single>
-inline void forEachPermutation(const MeshRay* const* rays, unsigned m, Packet&& packet, Single&& single) {
-  while (m != 0) {
-    const WatertightRay& w0 = rays[std::countr_zero(m)]->wray;
-    unsigned same = 0;
-    for (unsigned l = m; l != 0; l &= l - 1) {
-      const WatertightRay& w = rays[std::countr_zero(l)]->wray;
-      if (w.kx == w0.kx && w.ky == w0.ky && w.kz == w0.kz) same |= l & (~l + 1);
-    }
-    m &= ~same;
-    if (std::popcount(same) >= PV::kLeafMinRays) {
-      packet(w0.kx, w0.ky, w0.kz, same);
-    } else {
-      for (; same != 0; same &= same - 1) single(std::countr_zero(same));
-    }
-  }
-}
 
 // The lanes of `active` that enter child slot k of `node` (as Node::push's box test), and their
 // widened entry distances in `tn_out`.
@@ -375,15 +212,11 @@ inline unsigned intersectPacketKernel(const MeshBvhView& bvh, const MeshRay* con
     } else {
       const TriangleBlock4* blocks = bvh.blocks + BvhRef::leafBlock(cur);
       const std::uint32_t count = BvhRef::leafCount(cur);
-      forEachPermutation(
-          rays, m,
-          [&](int kx, int ky, int kz, unsigned same) {
-            found |= packetLeafClosest(rays, same, blocks, count, p, best, kx, ky, kz);
-          },
-          [&](int j) {
-            if (Leaf::closest(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j], best[j]))
-              found |= 1u << j;
-          });
+      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
+        const int j = std::countr_zero(lanes);
+        if (Leaf::closest(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j], best[j]))
+          found |= 1u << j;
+      }
     }
     // Pop the next child with a lane not behind its closest hit.
     do {
@@ -426,14 +259,10 @@ inline unsigned occludedPacketKernel(const MeshBvhView& bvh, const MeshRay* cons
     } else {
       const TriangleBlock4* blocks = bvh.blocks + BvhRef::leafBlock(cur);
       const std::uint32_t count = BvhRef::leafCount(cur);
-      forEachPermutation(
-          rays, m,
-          [&](int kx, int ky, int kz, unsigned same) {
-            blocked |= packetLeafAny(rays, same, blocks, count, p, kx, ky, kz);
-          },
-          [&](int j) {
-            if (Leaf::any(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j])) blocked |= 1u << j;
-          });
+      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
+        const int j = std::countr_zero(lanes);
+        if (Leaf::any(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j])) blocked |= 1u << j;
+      }
       if (blocked == active) return blocked;
     }
     do {
@@ -483,19 +312,11 @@ inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepar
         }
         p.tnear[j] = kd.tnear;
         p.t_best[j] = kd.tfar;
-        const WatertightRay& w = prepared[i].wray;
-        p.wo[0][j] = w.origin[w.kx];
-        p.wo[1][j] = w.origin[w.ky];
-        p.wo[2][j] = w.origin[w.kz];
-        p.ws[0][j] = w.sx;
-        p.ws[1][j] = w.sy;
-        p.ws[2][j] = w.sz;
-        p.wtnear[j] = w.tnear;
       }
       for (int j = std::popcount(lanes); j < PV::kWidth; ++j) {
         group[j] = group[0];
-        for (int a = 0; a < 3; ++a) p.o[a][j] = p.inv[a][j] = p.wo[a][j] = p.ws[a][j] = 0.0f;
-        p.tnear[j] = p.t_best[j] = p.wtnear[j] = 0.0f;
+        for (int a = 0; a < 3; ++a) p.o[a][j] = p.inv[a][j] = 0.0f;
+        p.tnear[j] = p.t_best[j] = 0.0f;
       }
       packet(oct, lanes, p, group);
     }

@@ -182,8 +182,8 @@ TEST_F(MeshPacket, RaysThroughSharedEdgesAndVerticesEqualSingleRays) {
 TEST_F(MeshPacket, CoherentRaysThroughGridVerticesAndEdgesEqualSingleRays) {
   // Parallel rays down onto a grid (z = 0.25, cells of 0.125), on a lattice of half cells: every
   // ray passes through a vertex or an edge, where edge functions are exactly zero, and whole
-  // packets share the test's permutation, so the packet leaf test's exact path runs for many
-  // rays at once; also tilted (2 ulp-exact shear: 1/8 and 1/4) and through cell centres.
+  // packets stay together down to the leaves, where many rays take the exact path at once; also
+  // tilted (exact shears 1/8 and 1/4).
   const auto object = buildChecked(flatGrid(16), BvhBuildConfig{});
   std::vector<Ray> rays;
   for (const glm::vec3 dir : {glm::vec3(0.0f, 0.0f, -1.0f), glm::vec3(0.125f, 0.25f, -1.0f)})
