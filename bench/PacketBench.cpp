@@ -138,7 +138,7 @@ std::map<std::string, Tracer> oursTracers(const MeshObject& object, bool closest
 
 #if DUPLEX_BENCH_HAVE_EMBREE
 template <int N, class RH>
-void fillEmbree(RH& rh, std::span<const Ray> rays, int* valid, bool hit) {
+void fillEmbree(RH& rh, std::span<const Ray> rays, int* valid) {
   for (int j = 0; j < N; ++j) {
     const bool on = static_cast<std::size_t>(j) < rays.size();
     valid[j] = on ? -1 : 0;
@@ -164,8 +164,28 @@ void fillEmbree(RH& rh, std::span<const Ray> rays, int* valid, bool hit) {
       rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
       rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
     }
-    (void)hit;
   }
+}
+
+// One Embree packet query (rtcIntersectN or rtcOccludedN on a record of type Rec) over a span, in
+// packets of N consecutive rays with the coherent flag; count(record, m) counts the hits among m rays.
+template <int N, class Rec, class Query, class Count>
+Tracer embreePackets(RTCScene scene, Query query, Count count) {
+  return [scene, query, count](std::span<const Ray> rays) {
+    std::uint64_t n = 0;
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    for (std::size_t i = 0; i < rays.size(); i += N) {
+      alignas(64) Rec rec;
+      alignas(64) int valid[N];
+      const std::size_t m = std::min<std::size_t>(N, rays.size() - i);
+      fillEmbree<N>(rec, rays.subspan(i, m), valid);
+      query(valid, scene, &ctx, &rec);
+      n += count(rec, m);
+    }
+    return n;
+  };
 }
 
 template <int N, class RH, class R, class FI, class FO>
@@ -173,37 +193,17 @@ std::map<std::string, Tracer> embreePacketTracers(RTCScene scene, bool closest, 
                                                   const std::string& name) {
   std::map<std::string, Tracer> t;
   if (closest) {
-    t[name] = [scene, intersectN](std::span<const Ray> rays) {
+    t[name] = embreePackets<N, RH>(scene, intersectN, [](const RH& rh, std::size_t m) {
       std::uint64_t n = 0;
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-      for (std::size_t i = 0; i < rays.size(); i += N) {
-        alignas(64) RH rh;
-        alignas(64) int valid[N];
-        const std::size_t m = std::min<std::size_t>(N, rays.size() - i);
-        fillEmbree<N>(rh, rays.subspan(i, m), valid, true);
-        intersectN(valid, scene, &ctx, &rh);
-        for (std::size_t j = 0; j < m; ++j) n += rh.hit.geomID[j] != RTC_INVALID_GEOMETRY_ID ? 1 : 0;
-      }
+      for (std::size_t j = 0; j < m; ++j) n += rh.hit.geomID[j] != RTC_INVALID_GEOMETRY_ID ? 1 : 0;
       return n;
-    };
+    });
   } else {
-    t[name] = [scene, occludedN](std::span<const Ray> rays) {
+    t[name] = embreePackets<N, R>(scene, occludedN, [](const R& r, std::size_t m) {
       std::uint64_t n = 0;
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-      for (std::size_t i = 0; i < rays.size(); i += N) {
-        alignas(64) R r;
-        alignas(64) int valid[N];
-        const std::size_t m = std::min<std::size_t>(N, rays.size() - i);
-        fillEmbree<N>(r, rays.subspan(i, m), valid, false);
-        occludedN(valid, scene, &ctx, &r);
-        for (std::size_t j = 0; j < m; ++j) n += r.tfar[j] < 0.0f ? 1 : 0;
-      }
+      for (std::size_t j = 0; j < m; ++j) n += r.tfar[j] < 0.0f ? 1 : 0;
       return n;
-    };
+    });
   }
   return t;
 }
