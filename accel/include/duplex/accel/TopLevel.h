@@ -121,7 +121,8 @@ class TopLevel {
   /// each instance they reach answers the sub-packet of rays that reach it, transformed to object
   /// space (Object::intersectPacket). hits[i] is bit for bit intersect(rays_ws[i], ctx, mask) (a
   /// miss: Hit{}); returns the lanes that hit. Coherent rays (neighbouring pixels, rays towards one
-  /// light) trace fastest; up to three rays alone in their octant go the single-ray way. Throws
+  /// light) trace fastest; the rays of an octant holding at most three, and every ray of a packet
+  /// spread over more than four octants (random directions), go the single-ray way. Throws
   /// InvalidArgument for more than kMaxPacketRays rays or fewer hits than rays.
   std::uint32_t intersectPacket(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
                                 std::uint32_t mask = 0xFFFFFFFFu) const;
