@@ -76,6 +76,8 @@ class EmbreeTwoLevel {
   /// instance_id, and ng in the object's space (Embree 3's convention for instanced hits). A miss
   /// is an invalid Hit. Thread-safe between commits.
   [[nodiscard]] Hit intersect(const Ray& ray_ws) const;
+  /// The committed top-level scene, for queries the wrapper does not offer (packets, occlusion).
+  [[nodiscard]] RTCScene scene() const { return top_; }
 
  private:
   RTCGeometry newInstanceGeometry(std::uint32_t object, const Affine& world_from_object);

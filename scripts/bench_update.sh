@@ -41,18 +41,8 @@ cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DDUPLEX_BUILD_EXAMP
 cmake --build "$BUILD_DIR" -j2 --target duplex_cli duplex_bench_update >/dev/null
 mkdir -p "$OUTDIR" "$SCENE_DIR"
 
-make_scene() {
-  local name=$1 out=$SCENE_DIR/$1.json
-  [ -f "$out" ] && return
-  case "$name" in
-    paper-1) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --objects 19 --out "$out" ;;
-    paper-2) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --objects 6804 --out "$out" ;;
-    paper-3) "$DUPLEX" scene split --mesh "$DATA/koala.obj" --loop 1 --objects 20968 --out "$out" ;;
-    robot5) "$DUPLEX" scene robot --urdf "$DATA/abb_irb6640/irb6640.urdf" --copies 5 --out "$out" ;;
-    hammer1k) "$DUPLEX" scene instances --mesh "$DATA/hammer.obj" --count 1000 --seed 1 --out "$out" ;;
-    *) echo "bench_update.sh: unknown scene $name" >&2; exit 2 ;;
-  esac >/dev/null
-}
+# shellcheck source=paper_scenes.sh
+source "$ROOT/scripts/paper_scenes.sh"
 
 for scene in $SCENES; do
   make_scene "$scene"

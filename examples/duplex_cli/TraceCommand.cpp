@@ -82,6 +82,7 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
     const auto t0 = Clock::now();
     tracer = std::make_unique<SceneTracer>(*doc->graph);
     top_build_ms = msSince(t0);
+    tracer->setBatchPackets(!options.single);
   });
 
   // Block by block: read, trace `repeat` times (each run's time summed over the blocks, reading
@@ -158,6 +159,7 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
   report["trace_ms_all"] = trace_ms;
   report["format"] = doc->format;
   report["structures_loaded"] = figures.structures_loaded;
+  report["packets"] = !options.single;
   report["graph_ms"] = figures.graph_ms;
   report["mesh_structures"] = meshStructureCounts(*doc);
   report["block_rays"] = block;

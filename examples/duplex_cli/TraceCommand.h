@@ -36,6 +36,9 @@ struct TraceOptions {
   /// Rays read, traced and written per block (>= 1): memory holds one block of rays and results
   /// (about 100 bytes per ray), whatever the file's size. Results do not depend on it.
   std::int64_t block_rays = std::int64_t{1} << 20;
+  /// --single: trace one ray at a time instead of in packets (SceneTracer::setBatchPackets); the
+  /// hits are the same bit for bit, only the speed differs (for comparisons).
+  bool single = false;
 };
 
 /// Runs the command and returns the report. Contract keys: rays, hits (rays that hit, or are
@@ -46,10 +49,9 @@ struct TraceOptions {
 /// triangles (in the object library), instanced_triangles (summed over instances),
 /// bottom_build_ms, top_build_ms, trace_ms_all, format, structures_loaded (prepared bottom levels
 /// read instead of built), graph_ms (part of load_ms), block_rays (rays per block, at most the
-/// ray count). Times are wall-clock milliseconds. The output file is written atomically: it
-/// appears complete, or not at all when anything fails (a full disk included).
-/// With `transmittance`: hits counts the blocked rays (transmittance 0), and the extra keys
-/// transmittance (true) and mean_transmittance are added.
+/// ray count), packets (false with --single). Times are wall-clock milliseconds. The output file is written atomically:
+/// it appears complete, or not at all when anything fails (a full disk included). With `transmittance`: hits counts the
+/// blocked rays (transmittance 0), and the extra keys transmittance (true) and mean_transmittance are added.
 ///
 /// A hit record's instance_id is the position of the instance in SceneDocument::instances: for
 /// scene-json-v1 its position in "instances" (the contract); for duplex-scene-v1 its position in

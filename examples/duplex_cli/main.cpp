@@ -1,5 +1,6 @@
 // The `duplex` command-line tool: the interchange contract used by tools outside the project.
 //   duplex trace --scene S.json --rays R.bin (--hits H.bin | --transmittance T.bin) [--threads N] [--any-hit]
+//   [--single]
 //                [--repeat R]
 // Every command that loads a scene takes [--structure bvh|kdtree|bvh:<parameters>]; every command takes
 // [--max-memory SIZE] (inputs that need more memory are refused before they are allocated).
@@ -93,6 +94,8 @@ int main(int argc, char** argv) {
   duplex::cli::addThreadsOption(*trace_cmd, trace.threads);
   trace_cmd->add_flag("--any-hit", trace.any_hit,
                       "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
+  trace_cmd->add_flag("--single", trace.single,
+                      "Trace one ray at a time instead of in packets (same hits; for speed comparisons)");
   trace_cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
       ->transform(kDecimal)
       ->check(CLI::Range(1, 1000000));

@@ -30,6 +30,7 @@ struct SceneTracer::Impl {
   mutable WriterPreferringMutex mutex;
   SceneGraph::ObserverId observer = 0;
   double last_update_ms = 0.0;
+  std::atomic<bool> packets{true};  // batch queries trace packets (setBatchPackets)
 
   explicit Impl(const TopLevelConfig& config) : top(config) {}
 };
@@ -187,26 +188,73 @@ void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, 
                });
 }
 
-// forEachRay over rays that `load` supplies and results that `store` takes, kStreamBlock at a time.
-template <class Out, class Query>
+// The batch closest-hit and any-hit queries over rays [0, n) of `rays` into `out`, in packets of
+// kMaxPacketRays consecutive rays (TopLevel::intersectPacket / occludedPacket) or ray by ray.
+void intersectRange(const TopLevel& top, bool packets, std::span<const Ray> rays, Hit* out, QueryContext& ctx,
+                    std::uint32_t mask) {
+  if (!packets) {
+    for (std::size_t i = 0; i < rays.size(); ++i) out[i] = top.intersect(rays[i], ctx, mask);
+    return;
+  }
+  constexpr auto kPacket = static_cast<std::size_t>(kMaxPacketRays);
+  for (std::size_t first = 0; first < rays.size(); first += kPacket) {
+    const std::size_t n = std::min(kPacket, rays.size() - first);
+    (void)top.intersectPacket(rays.subspan(first, n), std::span<Hit>(out + first, n), ctx, mask);
+  }
+}
+
+void occludedRange(const TopLevel& top, bool packets, std::span<const Ray> rays, std::uint8_t* out, QueryContext& ctx,
+                   std::uint32_t mask) {
+  if (!packets) {
+    for (std::size_t i = 0; i < rays.size(); ++i) out[i] = top.occluded(rays[i], ctx, mask) ? 1 : 0;
+    return;
+  }
+  constexpr auto kPacket = static_cast<std::size_t>(kMaxPacketRays);
+  for (std::size_t first = 0; first < rays.size(); first += kPacket) {
+    const std::size_t n = std::min(kPacket, rays.size() - first);
+    const std::uint32_t blocked = top.occludedPacket(rays.subspan(first, n), ctx, mask);
+    for (std::size_t j = 0; j < n; ++j) out[first + j] = (blocked >> j & 1u) != 0 ? 1 : 0;
+  }
+}
+
+// Checks the sizes as forEachRay, then runs range(rays of a chunk, first result, ctx) per chunk.
+template <class Out, class Range>
+void forEachRayRange(const char* what, std::span<const Ray> rays, std::span<Out> out, const WorkControl& control,
+                     Range&& range) {
+  if (out.size() != rays.size())
+    throw InvalidArgument(std::string(what) + ": " + std::to_string(rays.size()) + " rays but room for " +
+                          std::to_string(out.size()) + " results");
+  forEachChunk(what, rays.size(), kBatchGrain, control,
+               [&](const tbb::blocked_range<std::size_t>& r, QueryContext& ctx) {
+                 range(rays.subspan(r.begin(), r.size()), out.data() + r.begin(), ctx);
+               });
+}
+
+// The batch over rays that `load` supplies and results that `store` takes, kStreamBlock at a time:
+// range(rays of a block, results of the block, ctx).
+template <class Out, class Range>
 void forEachBlock(const char* what, std::size_t count, const SceneTracer::RayBlockLoader& load,
                   const std::function<void(std::size_t, std::span<const Out>)>& store, const WorkControl& control,
-                  Query&& query) {
+                  Range&& range) {
   if (!load || !store) throw InvalidArgument(std::string(what) + ": the loader and the store must not be empty");
   constexpr std::size_t kBlock = SceneTracer::kStreamBlock;
-  forEachChunk(what, count, kBlock, control, [&](const tbb::blocked_range<std::size_t>& range, QueryContext& ctx) {
+  forEachChunk(what, count, kBlock, control, [&](const tbb::blocked_range<std::size_t>& r, QueryContext& ctx) {
     std::array<Ray, kBlock> rays;
     std::array<Out, kBlock> out;
-    for (std::size_t first = range.begin(); first < range.end(); first += kBlock) {
-      const std::size_t n = std::min(kBlock, range.end() - first);
+    for (std::size_t first = r.begin(); first < r.end(); first += kBlock) {
+      const std::size_t n = std::min(kBlock, r.end() - first);
       load(first, std::span<Ray>(rays.data(), n));
-      for (std::size_t i = 0; i < n; ++i) out[i] = query(rays[i], ctx);
+      range(std::span<const Ray>(rays.data(), n), out.data(), ctx);
       store(first, std::span<const Out>(out.data(), n));
     }
   });
 }
 
 }  // namespace
+
+void SceneTracer::setBatchPackets(bool on) { impl_->packets.store(on, std::memory_order_relaxed); }
+
+bool SceneTracer::batchPackets() const { return impl_->packets.load(std::memory_order_relaxed); }
 
 SceneClosestPoint SceneTracer::closestPoint(const glm::dvec3& point_ws, double max_distance, std::uint32_t mask) const {
   std::shared_lock lock(impl_->mutex);
@@ -234,34 +282,42 @@ void SceneTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits, std:
                             const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::intersect", rays, hits, control,
-             [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
+  const bool packets = batchPackets();
+  forEachRayRange(
+      "SceneTracer::intersect", rays, hits, control,
+      [&](std::span<const Ray> r, Hit* out, QueryContext& ctx) { intersectRange(top, packets, r, out, ctx, mask); });
 }
 
 void SceneTracer::intersectBlocks(std::size_t count, const RayBlockLoader& load, const HitBlockStore& store,
                                   std::uint32_t mask, const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachBlock<Hit>("SceneTracer::intersectBlocks", count, load, store, control,
-                    [&](const Ray& r, QueryContext& ctx) { return top.intersect(r, ctx, mask); });
+  const bool packets = batchPackets();
+  forEachBlock<Hit>(
+      "SceneTracer::intersectBlocks", count, load, store, control,
+      [&](std::span<const Ray> r, Hit* out, QueryContext& ctx) { intersectRange(top, packets, r, out, ctx, mask); });
 }
 
 void SceneTracer::occludedBlocks(std::size_t count, const RayBlockLoader& load, const OccludedBlockStore& store,
                                  std::uint32_t mask, const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachBlock<std::uint8_t>(
-      "SceneTracer::occludedBlocks", count, load, store, control,
-      [&](const Ray& r, QueryContext& ctx) { return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0); });
+  const bool packets = batchPackets();
+  forEachBlock<std::uint8_t>("SceneTracer::occludedBlocks", count, load, store, control,
+                             [&](std::span<const Ray> r, std::uint8_t* out, QueryContext& ctx) {
+                               occludedRange(top, packets, r, out, ctx, mask);
+                             });
 }
 
 void SceneTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded, std::uint32_t mask,
                            const WorkControl& control) const {
   std::shared_lock lock(impl_->mutex);
   const TopLevel& top = impl_->top;
-  forEachRay("SceneTracer::occluded", rays, occluded, control, [&](const Ray& r, QueryContext& ctx) {
-    return static_cast<std::uint8_t>(top.occluded(r, ctx, mask) ? 1 : 0);
-  });
+  const bool packets = batchPackets();
+  forEachRayRange("SceneTracer::occluded", rays, occluded, control,
+                  [&](std::span<const Ray> r, std::uint8_t* out, QueryContext& ctx) {
+                    occludedRange(top, packets, r, out, ctx, mask);
+                  });
 }
 
 void SceneTracer::transmittance(std::span<const Ray> rays, std::span<float> transmittance, std::uint32_t mask,

@@ -327,8 +327,10 @@ int checkDemo(const std::string& demo, const fs::path& dir) {
   return 0;
 }
 
+void expectSameFile(const fs::path& a, const fs::path& b);
+
 // Real meshes from ../shared/data: three instances of spot.obj, primary rays, closest and any-hit
-// agree on which rays hit, and thread counts do not change the records.
+// agree on which rays hit, and thread counts and --single (no packets) do not change the records.
 int checkSharedData(const std::string& duplex, const fs::path& dir, const fs::path& data) {
   const fs::path spot = data / "meshes" / "spot.obj";
   if (!fs::exists(spot)) {
@@ -355,6 +357,13 @@ int checkSharedData(const std::string& duplex, const fs::path& dir, const fs::pa
   const nlohmann::json closest = trace(dir / "spot_hits1.bin", {"--threads", "1"});
   trace(dir / "spot_hits2.bin", {"--threads", "2"});
   const nlohmann::json any = trace(dir / "spot_any.bin", {"--any-hit"});
+  const nlohmann::json single = trace(dir / "spot_single.bin", {"--single"});
+  const nlohmann::json any_single = trace(dir / "spot_any_single.bin", {"--any-hit", "--single"});
+  expect(closest.value("packets", false) && !single.value("packets", true),
+         "\"packets\" is not true by default and false with --single: " + closest.dump() + " / " + single.dump());
+  expectSameFile(dir / "spot_hits1.bin", dir / "spot_single.bin");
+  expectSameFile(dir / "spot_any.bin", dir / "spot_any_single.bin");
+  (void)any_single;
   expect(number(closest, "hits") > 0.0, "no primary ray hits spot: " + closest.dump());
   expect(number(closest, "hits") == number(any, "hits"),
          "closest hit and --any-hit disagree on the number of hits: " + closest.dump() + " vs " + any.dump());

@@ -16,6 +16,7 @@
 #include <glm/matrix.hpp>
 
 #include <algorithm>
+#include <cstring>
 #include <map>
 #include <random>
 #include <set>
@@ -80,6 +81,13 @@ inline Hit bruteIntersect(const Model& model, const Ray& ray, std::uint32_t mask
 inline ::testing::AssertionResult sameHit(const Hit& a, const Hit& b) {
   if (a.valid() != b.valid() || (a.valid() && a.t != b.t)) return ::testing::AssertionFailure() << a << " vs " << b;
   return ::testing::AssertionSuccess();
+}
+
+/// Whether two hits agree bit for bit: t, u, v, ids and normal (packets against single rays).
+inline bool sameHitBits(const Hit& a, const Hit& b) {
+  return std::memcmp(&a.t, &b.t, sizeof(float)) == 0 && std::memcmp(&a.u, &b.u, sizeof(float)) == 0 &&
+         std::memcmp(&a.v, &b.v, sizeof(float)) == 0 && a.prim_id == b.prim_id && a.instance_id == b.instance_id &&
+         std::memcmp(&a.ng, &b.ng, sizeof(glm::vec3)) == 0;
 }
 
 /// Structure and coverage of the (possibly incrementally updated) tree: nodes reached once, jumps

@@ -136,10 +136,30 @@ struct Leaf {
   }
 };
 
+// The packet traversal's lanes (MeshBvhTraversal.inl): one ray each, 4 rays.
+struct PV {
+  using V = __m128;
+  static constexpr int kWidth = 4;
+  static constexpr int kFallback = 1;
+  static constexpr int kMinPacket = 1;
+  static V load(const float* p) { return _mm_load_ps(p); }
+  static void store(float* p, V x) { _mm_store_ps(p, x); }
+  static V set1(float x) { return _mm_set1_ps(x); }
+  static V add(V a, V b) { return _mm_add_ps(a, b); }
+  static V sub(V a, V b) { return _mm_sub_ps(a, b); }
+  static V mul(V a, V b) { return _mm_mul_ps(a, b); }
+  static V max(V a, V b) { return _mm_max_ps(a, b); }
+  static V min(V a, V b) { return _mm_min_ps(a, b); }
+  static V abs(V a) { return _mm_andnot_ps(_mm_set1_ps(-0.0f), a); }
+  static unsigned le(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(a, b))); }
+  static unsigned gt(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmpgt_ps(a, b))); }
+};
+
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
-const MeshBvhKernels kKernels{SimdIsa::Sse2, intersectEntry, occludedEntry, forEachLeafEntry};
+const MeshBvhKernels kKernels{SimdIsa::Sse2,        intersectEntry,      occludedEntry, forEachLeafEntry,
+                              intersectPacketEntry, occludedPacketEntry, PV::kWidth};
 }  // namespace sse2
 
 #if defined(__clang__)
@@ -347,10 +367,30 @@ struct Leaf {
   }
 };
 
+// The packet traversal's lanes (MeshBvhTraversal.inl): one ray each, 8 rays.
+struct PV {
+  using V = __m256;
+  static constexpr int kWidth = 8;
+  static constexpr int kFallback = 1;
+  static constexpr int kMinPacket = 2;
+  static V load(const float* p) { return _mm256_load_ps(p); }
+  static void store(float* p, V x) { _mm256_store_ps(p, x); }
+  static V set1(float x) { return _mm256_set1_ps(x); }
+  static V add(V a, V b) { return _mm256_add_ps(a, b); }
+  static V sub(V a, V b) { return _mm256_sub_ps(a, b); }
+  static V mul(V a, V b) { return _mm256_mul_ps(a, b); }
+  static V max(V a, V b) { return _mm256_max_ps(a, b); }
+  static V min(V a, V b) { return _mm256_min_ps(a, b); }
+  static V abs(V a) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), a); }
+  static unsigned le(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }
+  static unsigned gt(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_GT_OQ))); }
+};
+
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
-const MeshBvhKernels kKernels{SimdIsa::Avx2, intersectEntry, occludedEntry, forEachLeafEntry};
+const MeshBvhKernels kKernels{SimdIsa::Avx2,        intersectEntry,      occludedEntry, forEachLeafEntry,
+                              intersectPacketEntry, occludedPacketEntry, PV::kWidth};
 }  // namespace avx2
 #if defined(__clang__)
 #pragma clang attribute pop
@@ -387,10 +427,31 @@ struct Node {
   }
 };
 
+// The packet traversal's lanes (MeshBvhTraversal.inl): one ray each, 16 rays.
+struct PV {
+  using V = __m512;
+  static constexpr int kWidth = 16;
+  static constexpr int kFallback = 2;
+  static constexpr int kMinPacket = 3;
+  static V load(const float* p) { return _mm512_load_ps(p); }
+  static void store(float* p, V x) { _mm512_store_ps(p, x); }
+  static V set1(float x) { return _mm512_set1_ps(x); }
+  static V add(V a, V b) { return _mm512_add_ps(a, b); }
+  static V sub(V a, V b) { return _mm512_sub_ps(a, b); }
+  static V mul(V a, V b) { return _mm512_mul_ps(a, b); }
+  // The masked forms with every lane set: GCC warns about the unmasked forms' undefined pass-through.
+  static V max(V a, V b) { return _mm512_mask_max_ps(a, 0xFFFF, a, b); }
+  static V min(V a, V b) { return _mm512_mask_min_ps(a, 0xFFFF, a, b); }
+  static V abs(V a) { return _mm512_abs_ps(a); }
+  static unsigned le(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_LE_OQ); }
+  static unsigned gt(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ); }
+};
+
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
-const MeshBvhKernels kKernels{SimdIsa::Avx512, intersectEntry, occludedEntry, forEachLeafEntry};
+const MeshBvhKernels kKernels{SimdIsa::Avx512,      intersectEntry,      occludedEntry, forEachLeafEntry,
+                              intersectPacketEntry, occludedPacketEntry, PV::kWidth};
 }  // namespace avx512
 #if defined(__clang__)
 #pragma clang attribute pop

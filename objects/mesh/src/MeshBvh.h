@@ -37,6 +37,14 @@ struct MeshBvhKernels {
   bool (*occluded)(const MeshBvhView& bvh, const Ray& ray);
   /// Every leaf whose box the ray's segment meets (no culling by hits).
   void (*forEachLeaf)(const MeshBvhView& bvh, const Ray& ray, MeshBvhLeafVisitor visit, void* context);
+  /// Closest hits of the lanes `active` (bit i: rays[i], i < kMaxPacketRays; object space), each
+  /// exactly as intersect(rays[i], hits[i]); returns the lanes that found a hit. Traced in packets
+  /// of packet_width rays of one octant.
+  unsigned (*intersectPacket)(const MeshBvhView& bvh, const Ray* rays, Hit* hits, unsigned active);
+  /// The lanes of `active` that occluded(rays[i]) would report blocked.
+  unsigned (*occludedPacket)(const MeshBvhView& bvh, const Ray* rays, unsigned active);
+  /// Rays traced together: 4 (SSE2), 8 (AVX2), 16 (AVX-512).
+  int packet_width;
 };
 
 /// The kernels of widestSimdIsa().

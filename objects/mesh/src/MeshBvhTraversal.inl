@@ -12,17 +12,18 @@
 // (WideBvh::kMaxDepth levels) plus one 8-lane write fit.
 constexpr int kStackSize = 7 * WideBvh::kMaxDepth + 8;
 
+// The closest hit below `cur` (a node or leaf of the ray's traversal) closer than t_best: lowers
+// t_best and records the hit in `best`, and returns whether it did. The single-ray traversal runs
+// it from the root; the packet traversal from the node where a packet's rays have thinned out.
 template <int kOct>
-inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, Hit& hit) {
-  float t_best = std::min(hit.t, ray_os.tfar);
+inline bool closestSubtree(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray, float& t_best,
+                           ClosestHit& best) {
   const BoxRay box_ray(ray.kd);
   const Leaf::RayConstants leaf_ray(ray);
-  ClosestHit best;
   bool found = false;
   alignas(32) std::uint32_t refs[kStackSize];
   alignas(32) float dists[kStackSize];
   int sp = 0;
-  std::uint32_t cur = bvh.root;
   while (true) {
     if (BvhRef::isInner(cur)) {
       sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_best, refs + sp, dists + sp);
@@ -32,11 +33,7 @@ inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mes
     }
     // Pop the next child not behind the closest hit.
     do {
-      if (sp == 0) {
-        if (!found) return false;
-        fillHit(best, t_best, hit);
-        return true;
-      }
+      if (sp == 0) return found;
       --sp;
     } while (dists[sp] > t_best);
     cur = refs[sp];
@@ -44,14 +41,22 @@ inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mes
 }
 
 template <int kOct>
-inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray) {
-  const float t_far = ray_os.tfar;
+inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, Hit& hit) {
+  float t_best = std::min(hit.t, ray_os.tfar);
+  ClosestHit best;
+  if (!closestSubtree<kOct>(bvh, bvh.root, ray, t_best, best)) return false;
+  fillHit(best, t_best, hit);
+  return true;
+}
+
+// Whether anything below `cur` blocks the ray within [tnear, t_far].
+template <int kOct>
+inline bool occludedSubtree(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray, float t_far) {
   const BoxRay box_ray(ray.kd);
   const Leaf::RayConstants leaf_ray(ray);
   alignas(32) std::uint32_t refs[kStackSize];
   alignas(32) float dists[kStackSize];
   int sp = 0;
-  std::uint32_t cur = bvh.root;
   while (true) {
     if (BvhRef::isInner(cur)) {
       sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_far, refs + sp, dists + sp);
@@ -61,6 +66,11 @@ inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const Mesh
     if (sp == 0) return false;
     cur = refs[--sp];
   }
+}
+
+template <int kOct>
+inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray) {
+  return occludedSubtree<kOct>(bvh, bvh.root, ray, ray_os.tfar);
 }
 
 template <int kOct>
@@ -120,4 +130,239 @@ inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhL
   MeshRay ray;
   if (!prepareMeshRay(ray_os, ray)) return;
   byOctant(octantOf(ray), [&](auto oct) { forEachLeafKernel<oct.value>(bvh, ray_os, ray, visit, context); });
+}
+
+// ---- Packets: PV::kWidth rays of one octant through the tree together ----
+//
+// Per node, each child's box is tested against every active ray of the packet (SIMD over the rays,
+// PV), with each lane's operations exactly those of Node::push for that ray alone; children that
+// some ray enters are pushed in the node's order for the octant with the lanes that enter them and
+// their entry distances. So every ray meets the nodes and leaves it would meet alone, in the same
+// order, with the same best distance at each: the results are the single-ray path's bit for bit,
+// ties included. Leaves run the single-ray leaf test per active lane, and a subtree reached by at
+// most PV::kFallback rays is finished ray by ray by the single-ray walk (a diverged packet costs
+// the single path's price, not more).
+
+struct PacketRays {
+  alignas(64) float o[3][PV::kWidth];
+  alignas(64) float inv[3][PV::kWidth];
+  alignas(64) float tnear[PV::kWidth];
+  alignas(64) float t_best[PV::kWidth];  // closest hit so far (any hit: tfar)
+};
+
+// The lanes of `active` that enter child slot k of `node` (as Node::push's box test), and their
+// widened entry distances in `tn_out`.
+template <int kOct>
+inline unsigned packetEnters(const BvhNode8& node, int k, const PacketRays& p, unsigned active,
+                             typename PV::V& tn_out) {
+  using V = typename PV::V;
+  const float* base = &node.lo[0][0] + k;
+  V tn = PV::load(p.tnear), tf = PV::load(p.t_best);
+  auto slab = [&](auto axis) {
+    constexpr int a = decltype(axis)::value;
+    const V o = PV::load(p.o[a]), inv = PV::load(p.inv[a]);
+    const V n = PV::mul(PV::sub(PV::set1(base[nearRow<kOct, a>()]), o), inv);
+    const V f = PV::mul(PV::sub(PV::set1(base[farRow<kOct, a>()]), o), inv);
+    tn = PV::max(n, tn);
+    tf = PV::min(f, tf);
+  };
+  slab(std::integral_constant<int, 2>());
+  slab(std::integral_constant<int, 1>());
+  slab(std::integral_constant<int, 0>());
+  const V widen = PV::set1(kBoxWiden);
+  tf = PV::add(tf, PV::mul(PV::abs(tf), widen));
+  tn_out = PV::sub(tn, PV::mul(PV::abs(tn), widen));
+  return PV::le(tn_out, tf) & active;
+}
+
+// Packet stack: 7 pending children per level at most, as the single-ray stack.
+constexpr int kPacketStackSize = 7 * WideBvh::kMaxDepth + 1;
+
+// Closest hits of the lanes `active` of `p` (rays[j]: lane j's prepared ray); lowers p.t_best and
+// records in best[j]; returns the lanes that found a hit.
+template <int kOct>
+inline unsigned intersectPacketKernel(const MeshBvhView& bvh, const MeshRay* const* rays, unsigned active,
+                                      PacketRays& p, ClosestHit* best) {
+  std::uint32_t refs[kPacketStackSize];
+  unsigned masks[kPacketStackSize];
+  alignas(64) float dists[kPacketStackSize][PV::kWidth];
+  unsigned found = 0;
+  int sp = 0;
+  std::uint32_t cur = bvh.root;
+  unsigned m = active;
+  while (true) {
+    if (std::popcount(m) <= PV::kFallback) {
+      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
+        const int j = std::countr_zero(lanes);
+        if (closestSubtree<kOct>(bvh, cur, *rays[j], p.t_best[j], best[j])) found |= 1u << j;
+      }
+    } else if (BvhRef::isInner(cur)) {
+      const BvhNode8& node = bvh.nodes[cur];
+      for (int rank = 0; rank < 8; ++rank) {
+        const int k = node.orderedSlot(kOct, rank);
+        if (node.child[k] == BvhRef::kEmpty) continue;
+        typename PV::V tn;
+        const unsigned enter = packetEnters<kOct>(node, k, p, m, tn);
+        if (enter == 0) continue;
+        refs[sp] = node.child[k];
+        masks[sp] = enter;
+        PV::store(dists[sp], tn);
+        ++sp;
+      }
+    } else {
+      const TriangleBlock4* blocks = bvh.blocks + BvhRef::leafBlock(cur);
+      const std::uint32_t count = BvhRef::leafCount(cur);
+      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
+        const int j = std::countr_zero(lanes);
+        if (Leaf::closest(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j], best[j]))
+          found |= 1u << j;
+      }
+    }
+    // Pop the next child with a lane not behind its closest hit.
+    do {
+      if (sp == 0) return found;
+      --sp;
+      m = masks[sp] & ~PV::gt(PV::load(dists[sp]), PV::load(p.t_best));
+    } while (m == 0);
+    cur = refs[sp];
+  }
+}
+
+// The lanes of `active` that something blocks within [tnear, p.t_best] (tfar).
+template <int kOct>
+inline unsigned occludedPacketKernel(const MeshBvhView& bvh, const MeshRay* const* rays, unsigned active,
+                                     const PacketRays& p) {
+  std::uint32_t refs[kPacketStackSize];
+  unsigned masks[kPacketStackSize];
+  unsigned blocked = 0;
+  int sp = 0;
+  std::uint32_t cur = bvh.root;
+  unsigned m = active;
+  while (true) {
+    if (std::popcount(m) <= PV::kFallback) {
+      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
+        const int j = std::countr_zero(lanes);
+        if (occludedSubtree<kOct>(bvh, cur, *rays[j], p.t_best[j])) blocked |= 1u << j;
+      }
+    } else if (BvhRef::isInner(cur)) {
+      const BvhNode8& node = bvh.nodes[cur];
+      for (int rank = 0; rank < 8; ++rank) {
+        const int k = node.orderedSlot(kOct, rank);
+        if (node.child[k] == BvhRef::kEmpty) continue;
+        typename PV::V tn;
+        const unsigned enter = packetEnters<kOct>(node, k, p, m, tn);
+        if (enter == 0) continue;
+        refs[sp] = node.child[k];
+        masks[sp] = enter;
+        ++sp;
+      }
+    } else {
+      const TriangleBlock4* blocks = bvh.blocks + BvhRef::leafBlock(cur);
+      const std::uint32_t count = BvhRef::leafCount(cur);
+      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
+        const int j = std::countr_zero(lanes);
+        if (Leaf::any(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j])) blocked |= 1u << j;
+      }
+      if (blocked == active) return blocked;
+    }
+    do {
+      if (sp == 0) return blocked;
+      m = masks[--sp] & ~blocked;
+    } while (m == 0);
+    cur = refs[sp];
+  }
+}
+
+// Splits the queryable lanes of a packet (at most kMaxPacketRays rays) by octant and into groups of
+// PV::kWidth lanes. A group of at most PV::kMinPacket rays (random rays: one or two per octant),
+// and every group of a packet spread over more than 4 octants, goes ray by ray through
+// `single(oct, i)` (i: the packet index), since packet setup would cost more than it saves; larger groups go through
+// `packet(oct, lanes, p, group)`, where group[j] is the packet index of lane j of `p` and `lanes` the group's lane
+// mask. Rays that are not queryable are left out.
+template <class Single, class Packet>
+inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepared, Single&& single, Packet&& packet) {
+  unsigned by_octant[8] = {};
+  for (unsigned lanes = active; lanes != 0; lanes &= lanes - 1) {
+    const int i = std::countr_zero(lanes);
+    if (prepareMeshRay(rays[i], prepared[i])) by_octant[octantOf(prepared[i])] |= 1u << i;
+  }
+  // Rays spread over more than 4 octants (16 random directions cover about 7) are incoherent: ray
+  // by ray, at the single path's cost.
+  int octants = 0;
+  for (const unsigned lanes : by_octant) octants += lanes != 0 ? 1 : 0;
+  const int min_packet = octants > 4 ? kMaxPacketRays : PV::kMinPacket;
+  for (int oct = 0; oct < 8; ++oct) {
+    unsigned left = by_octant[oct];
+    if (std::popcount(left) <= min_packet) {
+      for (; left != 0; left &= left - 1) single(oct, std::countr_zero(left));
+      continue;
+    }
+    while (left != 0) {
+      PacketRays p;
+      int group[PV::kWidth];
+      unsigned lanes = 0;
+      for (int j = 0; j < PV::kWidth && left != 0; ++j, left &= left - 1) {
+        const int i = std::countr_zero(left);
+        group[j] = i;
+        lanes |= 1u << j;
+        const KdRay& kd = prepared[i].kd;
+        for (int a = 0; a < 3; ++a) {
+          p.o[a][j] = kd.origin[a];
+          p.inv[a][j] = kd.inv_dir[a];
+        }
+        p.tnear[j] = kd.tnear;
+        p.t_best[j] = kd.tfar;
+      }
+      for (int j = std::popcount(lanes); j < PV::kWidth; ++j) {
+        group[j] = group[0];
+        for (int a = 0; a < 3; ++a) p.o[a][j] = p.inv[a][j] = 0.0f;
+        p.tnear[j] = p.t_best[j] = 0.0f;
+      }
+      packet(oct, lanes, p, group);
+    }
+  }
+}
+
+inline unsigned intersectPacketEntry(const MeshBvhView& bvh, const Ray* rays, Hit* hits, unsigned active) {
+  if (bvh.root == BvhRef::kEmpty) return 0;
+  MeshRay prepared[kMaxPacketRays];
+  unsigned found = 0;
+  auto single = [&](int oct, int i) {
+    if (byOctant(oct, [&](auto o) { return intersectKernel<o.value>(bvh, rays[i], prepared[i], hits[i]); }))
+      found |= 1u << i;
+  };
+  auto packet = [&](int oct, unsigned lanes, PacketRays& p, const int* group) {
+    const MeshRay* rs[PV::kWidth];
+    ClosestHit best[PV::kWidth];
+    for (int j = 0; j < PV::kWidth; ++j) {
+      rs[j] = &prepared[group[j]];
+      p.t_best[j] = std::min(hits[group[j]].t, rays[group[j]].tfar);
+    }
+    const unsigned hit_lanes =
+        byOctant(oct, [&](auto o) { return intersectPacketKernel<o.value>(bvh, rs, lanes, p, best); });
+    for (unsigned l = hit_lanes; l != 0; l &= l - 1) {
+      const int j = std::countr_zero(l);
+      fillHit(best[j], p.t_best[j], hits[group[j]]);
+      found |= 1u << group[j];
+    }
+  };
+  forEachPacketGroup(rays, active, prepared, single, packet);
+  return found;
+}
+
+inline unsigned occludedPacketEntry(const MeshBvhView& bvh, const Ray* rays, unsigned active) {
+  if (bvh.root == BvhRef::kEmpty) return 0;
+  MeshRay prepared[kMaxPacketRays];
+  unsigned blocked = 0;
+  auto single = [&](int oct, int i) {
+    if (byOctant(oct, [&](auto o) { return occludedKernel<o.value>(bvh, rays[i], prepared[i]); })) blocked |= 1u << i;
+  };
+  auto packet = [&](int oct, unsigned lanes, PacketRays& p, const int* group) {
+    const MeshRay* rs[PV::kWidth];
+    for (int j = 0; j < PV::kWidth; ++j) rs[j] = &prepared[group[j]];
+    const unsigned hit_lanes = byOctant(oct, [&](auto o) { return occludedPacketKernel<o.value>(bvh, rs, lanes, p); });
+    for (unsigned l = hit_lanes; l != 0; l &= l - 1) blocked |= 1u << group[std::countr_zero(l)];
+  };
+  forEachPacketGroup(rays, active, prepared, single, packet);
+  return blocked;
 }

@@ -819,6 +819,22 @@ bool MeshObject::trianglesInRegion(const ConvexRegion& region, std::vector<Regio
 
 bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occluded(ray_os); }
 
+std::uint32_t MeshObject::intersectPacket(std::span<const Ray> rays_os, std::span<Hit> hits, std::uint32_t active,
+                                          QueryContext& ctx) const {
+  if (structure_ != MeshStructure::Bvh || rays_os.size() > static_cast<std::size_t>(kMaxPacketRays) ||
+      hits.size() < rays_os.size())
+    return Object::intersectPacket(rays_os, hits, active, ctx);  // the kd-tree, or the default's errors
+  if (rays_os.size() < static_cast<std::size_t>(kMaxPacketRays)) active &= (1u << rays_os.size()) - 1u;
+  return detail::meshBvhKernels().intersectPacket(bvhView(bvh_, blocks_), rays_os.data(), hits.data(), active);
+}
+
+std::uint32_t MeshObject::occludedPacket(std::span<const Ray> rays_os, std::uint32_t active, QueryContext& ctx) const {
+  if (structure_ != MeshStructure::Bvh || rays_os.size() > static_cast<std::size_t>(kMaxPacketRays))
+    return Object::occludedPacket(rays_os, active, ctx);
+  if (rays_os.size() < static_cast<std::size_t>(kMaxPacketRays)) active &= (1u << rays_os.size()) - 1u;
+  return detail::meshBvhKernels().occludedPacket(bvhView(bvh_, blocks_), rays_os.data(), active);
+}
+
 std::size_t MeshObject::accelBytes() const {
   return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
          blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode) +

@@ -149,6 +149,13 @@ class InstanceTree {
   [[nodiscard]] Hit intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Whether a Surface instance whose mask meets `mask` is hit within [tnear, tfar].
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Closest hits of up to kMaxPacketRays world rays traced together (see TopLevel::intersectPacket):
+  /// hits[i] is exactly intersect(rays_ws[i], ctx, mask). Returns the lanes that hit.
+  std::uint32_t intersectPacket(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                                std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Bit i set when occluded(rays_ws[i], ctx, mask) (see TopLevel::occludedPacket).
+  [[nodiscard]] std::uint32_t occludedPacket(std::span<const Ray> rays_ws, QueryContext& ctx,
+                                             std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Every hit within [tnear, tfar] of this tree's instances whose mask meets `mask`, of any role,
   /// sorted by t (ties by instance id, then primitive id); world-space t and ng.
   void intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,
@@ -203,6 +210,15 @@ class InstanceTree {
   void shrinkRootIfDue(bool periodic);
   void compact();
   Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
+  // The packet queries (InstanceTreePacket.cpp).
+  struct PacketState;
+  static void checkPacket(const char* what, std::size_t rays, std::size_t hits);
+  template <bool AnyHit>
+  std::uint32_t packetQuery(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                            std::uint32_t mask) const;
+  template <bool AnyHit>
+  std::uint32_t packetWalk(PacketState& p, std::uint32_t lanes, std::uint32_t octant, QueryContext& ctx,
+                           std::uint32_t mask) const;
   /// Every hit of this tree and, when given, of `also` (the top level's other tree): one query.
   void intersectAllImpl(const Ray& ray_f, const RayD* ray_d, std::vector<Hit>& hits, QueryContext& ctx,
                         std::uint32_t mask, const InstanceTree* also = nullptr) const;

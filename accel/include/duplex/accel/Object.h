@@ -110,6 +110,20 @@ class Object {
   /// epsilons (relative) in t into one.
   /// For picking through layers and, for sensors, the crossings a ray deposits energy in.
   virtual void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const = 0;
+  /// Closest hits of a packet of up to kMaxPacketRays rays (object space, as intersect()): for
+  /// every lane i set in `active` (bit i; lanes at or past rays_os.size() are ignored), exactly
+  /// what intersect(rays_os[i], hits[i], ctx) does, bit for bit (same t, u, v, prim_id, ng).
+  /// Returns the lanes whose hit was overwritten. `hits` must be as long as `rays_os`. Types with
+  /// a packet traversal (meshes with a BVH) override it; the default asks intersect() lane by lane.
+  /// Packets trace fastest when their rays are coherent: neighbouring camera pixels, shadow rays
+  /// towards one light. Throws InvalidArgument for more than kMaxPacketRays rays or a short `hits`.
+  virtual std::uint32_t intersectPacket(std::span<const Ray> rays_os, std::span<Hit> hits, std::uint32_t active,
+                                        QueryContext& ctx) const;
+  /// Any hit of a packet (object space, as occluded()): bit i of the result is set when lane i is
+  /// in `active` and occluded(rays_os[i], ctx) holds. Default: occluded() lane by lane. Throws
+  /// InvalidArgument for more than kMaxPacketRays rays.
+  [[nodiscard]] virtual std::uint32_t occludedPacket(std::span<const Ray> rays_os, std::uint32_t active,
+                                                     QueryContext& ctx) const;
   /// Optional: a bound of where intersectAll() can report crossings, for objects whose crossings
   /// all lie in a rectangle of their plane z = 0 (flat sensors). The crossing query then skips,
   /// without calling intersectAll(), an instance that a ray clearly misses (by a margin well above

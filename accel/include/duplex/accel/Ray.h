@@ -25,6 +25,10 @@ struct Ray {
 };
 static_assert(sizeof(Ray) == 32, "Ray must match the 32-byte ray-file record");
 
+/// The most rays a packet query takes at once (Object::intersectPacket(), occludedPacket(): one
+/// bit each of their lane masks): the widest packet of the SIMD paths (AVX-512: 16 rays).
+inline constexpr int kMaxPacketRays = 16;
+
 /// A world-space ray in double precision, for queries far from the origin (picking): the top level
 /// converts it to object space in double, so a hit's accuracy depends on the object's size, not on
 /// its distance from the origin.

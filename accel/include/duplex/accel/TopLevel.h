@@ -116,6 +116,20 @@ class TopLevel {
   [[nodiscard]] Hit intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Whether any blocking instance whose mask meets `mask` is hit within [tnear, tfar].
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Closest hits of up to kMaxPacketRays world rays (world space, t in units of each ray's
+  /// direction) traced together: the rays of each octant go through the kd-tree as one packet, and
+  /// each instance they reach answers the sub-packet of rays that reach it, transformed to object
+  /// space (Object::intersectPacket). hits[i] is bit for bit intersect(rays_ws[i], ctx, mask) (a
+  /// miss: Hit{}); returns the lanes that hit. Coherent rays (neighbouring pixels, rays towards one
+  /// light) trace fastest; the rays of an octant holding at most three, and every ray of a packet
+  /// spread over more than four octants (random directions), go the single-ray way. Throws
+  /// InvalidArgument for more than kMaxPacketRays rays or fewer hits than rays.
+  std::uint32_t intersectPacket(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                                std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Bit i set when occluded(rays_ws[i], ctx, mask), the rays traced as intersectPacket's. Throws
+  /// InvalidArgument for more than kMaxPacketRays rays.
+  [[nodiscard]] std::uint32_t occludedPacket(std::span<const Ray> rays_ws, QueryContext& ctx,
+                                             std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Every hit within [tnear, tfar] of instances whose mask meets `mask`, of any role (sensor
   /// crossings included), sorted by t (ties by instance id, then primitive id); world-space t and ng.
   void intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,

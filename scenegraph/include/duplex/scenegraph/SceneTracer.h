@@ -144,6 +144,13 @@ class SceneTracer {
   /// written). control.progress gets (rays done, rays.size()) after each chunk of rays; once
   /// control.cancel is set no further chunk starts and Cancelled is thrown (the output is then
   /// incomplete).
+  ///
+  /// intersect(), occluded() and their streamed forms intersectBlocks() / occludedBlocks() trace
+  /// packets of kMaxPacketRays consecutive rays (TopLevel::intersectPacket) unless
+  /// setBatchPackets(false): the results are the same bit for bit, only the speed differs. Order
+  /// the rays so that neighbours are coherent (camera rays in small tiles, e.g. 4 x 4 pixels, or
+  /// rows; shadow rays in the order of the points they start from); incoherent rays (random
+  /// directions) trace at the single-ray speed.
   void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::uint32_t mask = 0xFFFFFFFFu,
                  const WorkControl& control = {}) const;
   /// Batch occluded(): occluded[i] is 1 when rays[i] is blocked, else 0.
@@ -169,6 +176,13 @@ class SceneTracer {
   using HitBlockStore = std::function<void(std::size_t first, std::span<const Hit> hits)>;
   /// Receives the occlusion flags (1: blocked) of rays [first, first + occluded.size()).
   using OccludedBlockStore = std::function<void(std::size_t first, std::span<const std::uint8_t> occluded)>;
+  /// Whether the batch closest-hit and any-hit queries (span and streamed) trace packets (the
+  /// default) or one ray at a time; the results are identical. Safe to call while queries run (a
+  /// batch reads it once, when it starts).
+  void setBatchPackets(bool on);
+  /// See setBatchPackets.
+  [[nodiscard]] bool batchPackets() const;
+
   /// Rays per call of a streamed batch's loader and store.
   static constexpr std::size_t kStreamBlock = 256;
   /// Batch intersect() of `count` rays that the caller supplies and collects block by block, so
