@@ -57,12 +57,21 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
   Fixture f;
   SceneGraph& g = f.graph;
   std::mt19937_64 rng(2024);
+  // Every draw is a statement of its own, in the order GCC evaluated the call arguments (last
+  // first): the order of arguments is unspecified, and the counts checked at the end hold for the
+  // edits this sequence makes, whichever compiler builds the test.
   // Start: a few groups and transform nodes with instances below them.
   std::vector<NodeId> parents{kRootNode};
-  for (int i = 0; i < 6; ++i)
-    parents.push_back(g.addTransform(parents[rng() % parents.size()], randomPlacement(rng, 6.0)));
-  for (int i = 0; i < 30; ++i)
-    g.addInstance(parents[rng() % parents.size()], f.objects[rng() % 4], randomPlacement(rng, 8.0));
+  for (int i = 0; i < 6; ++i) {
+    const Affine placement = randomPlacement(rng, 6.0);
+    const NodeId parent = parents[rng() % parents.size()];
+    parents.push_back(g.addTransform(parent, placement));
+  }
+  for (int i = 0; i < 30; ++i) {
+    const Affine placement = randomPlacement(rng, 8.0);
+    const ObjectId object = f.objects[rng() % 4];
+    g.addInstance(parents[rng() % parents.size()], object, placement);
+  }
   g.commit();
   TopLevelConfig config;  // small scene, large batches: keep them incremental to test that path
   config.min_incremental_instances = 0;
@@ -87,10 +96,13 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
       const int kind = static_cast<int>(rng() % 13);
       try {
         if (kind < 2 || inst.size() < 10) {
-          g.addInstance(containers[rng() % containers.size()], f.objects[rng() % 4], randomPlacement(rng, 8.0), {},
-                        rng() % 3 == 0 ? 2u : 0xFFFFFFFFu);
+          const std::uint32_t mask = rng() % 3 == 0 ? 2u : 0xFFFFFFFFu;
+          const Affine placement = randomPlacement(rng, 8.0);
+          const ObjectId object = f.objects[rng() % 4];
+          g.addInstance(containers[rng() % containers.size()], object, placement, {}, mask);
         } else if (kind < 3 && containers.size() < 12) {
-          parents.push_back(g.addTransform(containers[rng() % containers.size()], randomPlacement(rng, 4.0)));
+          const Affine placement = randomPlacement(rng, 4.0);
+          parents.push_back(g.addTransform(containers[rng() % containers.size()], placement));
         } else if (kind < 4) {
           // Remove an instance, or now and then a whole transform node's subtree.
           if (rng() % 5 == 0 && containers.size() > 3) {
@@ -104,7 +116,10 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
           const NodeId target = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];
           Affine a = g.node(target).local;
           std::uniform_real_distribution<double> u(-0.7, 0.7);
-          a.translation += glm::dvec3(u(rng), u(rng), u(rng));
+          const double dz = u(rng);
+          const double dy = u(rng);
+          const double dx = u(rng);
+          a.translation += glm::dvec3(dx, dy, dz);
           if (rng() % 50 == 0) a.translation.x = std::numeric_limits<double>::quiet_NaN();  // must be rejected
           g.setTransform(target, a);
         } else if (kind < 8) {  // re-parent (cycles must be rejected)
@@ -123,14 +138,19 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
         } else if (rng() % 3 != 0) {  // deform the sphere under all its instances (refit or rebuild)
           std::vector<glm::vec3> p = rest;
           std::uniform_real_distribution<float> u(-0.15f, 0.15f);
-          const glm::vec3 wobble(u(rng), u(rng), u(rng));
+          const float wz = u(rng);
+          const float wy = u(rng);
+          const float wx = u(rng);
+          const glm::vec3 wobble(wx, wy, wz);
           for (glm::vec3& v : p)
             v += wobble * glm::vec3(std::sin(3.0f * v.y), std::sin(3.0f * v.z), std::sin(3.0f * v.x));
           if (rng() % 20 == 0) p.pop_back();  // must be rejected
           g.deformObject(f.objects[0], p);
           ++object_edits;
         } else {  // the soup gets another topology
-          g.replaceObject(f.objects[3], buildChecked(triangleSoup(60 + static_cast<std::size_t>(rng() % 120), rng())));
+          const std::uint64_t soup_seed = rng();
+          const std::size_t soup_size = 60 + static_cast<std::size_t>(rng() % 120);
+          g.replaceObject(f.objects[3], buildChecked(triangleSoup(soup_size, soup_seed)));
           ++object_edits;
         }
       } catch (const InvalidArgument&) {

@@ -81,8 +81,8 @@ struct SensorResult {
   /// Colorimetric scenes (the bands have wavelengths): per bin the CIE 1931 tristimulus values X, Y,
   /// Z in the units of illuminance_lx (Y = illuminance_lx), index 3 * bin + c, and the chromaticity
   /// x, y (index 2 * bin + c; NaN where X + Y + Z = 0); and the same over the whole sensor.
-  std::vector<double> cie_xyz;
-  std::vector<double> chromaticity_xy;
+  std::vector<double> cie_xyz;                ///< [3 * bin + c], X, Y, Z
+  std::vector<double> chromaticity_xy;        ///< [2 * bin + c], x, y
   std::vector<double> total_cie_xyz;          ///< [3], X, Y, Z of the total flux (Y = luminous_flux_lm)
   std::vector<double> total_chromaticity_xy;  ///< [2], or NaN when no light arrived
 };
