@@ -23,7 +23,7 @@ ensure_packages() {
 }
 
 # The packages every build needs.
-build_packages=(build-essential cmake ninja-build libopenmesh-dev libopenvdb-dev libboost-iostreams-dev libglm-dev
+build_packages=(build-essential cmake ninja-build libopenmesh-dev libopenvdb-dev libboost-iostreams-dev libblosc-dev zlib1g-dev libglm-dev
                 libspdlog-dev libtbb-dev libgtest-dev nlohmann-json3-dev libcli11-dev libstb-dev libpng-dev
                 python3-matplotlib libembree-dev libopenexr-dev libxxhash-dev libtinyxml2-dev
                 pybind11-dev python3-dev python3-numpy python3-pytest libopenmpi-dev openmpi-bin)

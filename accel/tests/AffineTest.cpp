@@ -29,10 +29,10 @@ std::vector<Affine> randomTransforms(int count, std::uint64_t seed) {
   std::uniform_real_distribution<double> u(-1.0, 1.0), s(0.2, 5.0);
   std::vector<Affine> out;
   for (int i = 0; i < count; ++i) {
-    glm::dvec3 scale(s(rng), s(rng), s(rng));
+    glm::dvec3 scale = draw3<glm::dvec3>(s, rng);
     if (i % 3 == 1) scale.z = -scale.z;
-    out.push_back(Affine::fromRowMajor3x4(rotationScaleTranslation(
-        glm::dvec3(u(rng), u(rng), u(rng)) + 1e-3, 4.0 * u(rng), scale, glm::dvec3(u(rng), u(rng), u(rng)) * 100.0)));
+    out.push_back(Affine::fromRowMajor3x4(rotationScaleTranslation(draw3<glm::dvec3>(u, rng) + 1e-3, 4.0 * u(rng),
+                                                                   scale, draw3<glm::dvec3>(u, rng) * 100.0)));
   }
   return out;
 }
@@ -76,7 +76,7 @@ TEST(Affine, InverseAndComposition) {
       for (int r = 0; r < 3; ++r) EXPECT_NEAR(id.linear[c][r], c == r ? 1.0 : 0.0, 1e-12) << a;
     EXPECT_LT(maxAbsDiff(id.translation, glm::dvec3(0.0)), 1e-10) << a;
     for (int k = 0; k < 10; ++k) {
-      const glm::dvec3 p(u(rng), u(rng), u(rng));
+      const glm::dvec3 p = draw3<glm::dvec3>(u, rng);
       EXPECT_LT(maxAbsDiff(inv.point(a.point(p)), p), 1e-10) << a;
       EXPECT_LT(maxAbsDiff((a * b).point(p), a.point(b.point(p))), 1e-9) << a << " * " << b;
       EXPECT_LT(maxAbsDiff((a * b).vector(p), a.vector(b.vector(p))), 1e-9);
@@ -90,8 +90,9 @@ TEST(Affine, TransformedBoxContainsEveryCornerAndIsTight) {
   std::uniform_real_distribution<float> u(-10.0f, 10.0f), e(0.0f, 5.0f);
   for (std::size_t i = 0; i < transforms.size(); ++i) {
     const Affine& a = transforms[i];
-    glm::vec3 lo(u(rng), u(rng), u(rng));
-    glm::vec3 hi = lo + glm::vec3(e(rng), e(rng), i % 5 == 0 ? 0.0f : e(rng));  // some flat boxes
+    glm::vec3 lo = draw3(u, rng);
+    glm::vec3 hi = lo + draw3(e, rng);
+    if (i % 5 == 0) hi.z = lo.z;  // some flat boxes
     const Box box(lo, hi);
     const Box out = a.apply(box);
     ASSERT_FALSE(out.empty());
@@ -123,8 +124,8 @@ TEST(Affine, RayDirectionIsNotRenormalised) {
   std::uniform_real_distribution<float> u(-3.0f, 3.0f);
   for (const Affine& a : transforms) {
     Ray r;
-    r.origin = glm::vec3(u(rng), u(rng), u(rng));
-    r.dir = glm::vec3(u(rng), u(rng), u(rng));
+    r.origin = draw3(u, rng);
+    r.dir = draw3(u, rng);
     r.tnear = 0.25f;
     r.tfar = 7.5f;
     const Ray w = a.apply(r);

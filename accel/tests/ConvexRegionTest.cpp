@@ -54,10 +54,10 @@ TEST(ConvexRegion, TriangleTestAgreesWithTheSeparatingAxisTest) {
   std::uniform_real_distribution<double> u(-2.0, 2.0), s(0.1, 1.5);
   int met = 0, missed = 0;
   for (int k = 0; k < 20000; ++k) {
-    const glm::dvec3 lo(u(rng) * 0.5, u(rng) * 0.5, u(rng) * 0.5);
-    const glm::dvec3 hi = lo + glm::dvec3(s(rng), s(rng), s(rng));
-    const std::array<glm::dvec3, 3> tri{glm::dvec3(u(rng), u(rng), u(rng)), glm::dvec3(u(rng), u(rng), u(rng)),
-                                        glm::dvec3(u(rng), u(rng), u(rng))};
+    const glm::dvec3 lo = 0.5 * draw3<glm::dvec3>(u, rng);
+    const glm::dvec3 hi = lo + draw3<glm::dvec3>(s, rng);
+    const std::array<glm::dvec3, 3> tri{draw3<glm::dvec3>(u, rng), draw3<glm::dvec3>(u, rng),
+                                        draw3<glm::dvec3>(u, rng)};
     const ConvexRegion region(boxPlanes(lo, hi));
     const bool want = satOverlap(lo, hi, tri);
     ASSERT_EQ(region.meetsTriangle(tri[0], tri[1], tri[2]), want) << "case " << k;
@@ -77,14 +77,14 @@ TEST(ConvexRegion, TransformedRegionsSeeTheSameTrianglesAndPoints) {
     glm::dmat3 m;
     for (int c = 0; c < 3; ++c)
       for (int r = 0; r < 3; ++r) m[c][r] = u(rng) + (c == r ? 1.5 : 0.0);
-    const Affine world_from_object{m, glm::dvec3(u(rng), u(rng), u(rng)) * 3.0};
+    const Affine world_from_object{m, draw3<glm::dvec3>(u, rng) * 3.0};
     const glm::dvec3 lo(-0.6, -0.4, -0.8), hi(0.7, 0.5, 0.3);
     const ConvexRegion world(boxPlanes(lo, hi));
     const ConvexRegion object = world.transformed(world_from_object);
     const Affine object_from_world = world_from_object.inverse();
     std::array<glm::dvec3, 3> tri_os, tri_ws;
     for (int i = 0; i < 3; ++i) {
-      tri_ws[i] = glm::dvec3(u(rng), u(rng), u(rng)) * 1.5;
+      tri_ws[i] = draw3<glm::dvec3>(u, rng) * 1.5;
       tri_os[i] = object_from_world.point(tri_ws[i]);
     }
     ASSERT_EQ(object.meetsTriangle(tri_os[0], tri_os[1], tri_os[2]), satOverlap(lo, hi, tri_ws)) << "case " << k;
@@ -114,8 +114,8 @@ TEST(ConvexRegion, BoxTestsAgreeWithTheCorners) {
   const ConvexRegion region(planes);
   int inside = 0, excluded = 0;
   for (int k = 0; k < 20000; ++k) {
-    const glm::vec3 lo(u(rng), u(rng), u(rng));
-    const Box b(lo, lo + glm::vec3(s(rng), s(rng), s(rng)));
+    const glm::vec3 lo = draw3(u, rng);
+    const Box b(lo, lo + draw3(s, rng));
     int corners_in = 0;
     for (int c = 0; c < 8; ++c)
       corners_in +=

@@ -54,8 +54,8 @@ std::vector<Box> randomBoxes(std::size_t count, std::uint64_t seed) {
   std::uniform_real_distribution<float> u(0.0f, 4.0f), s(0.0f, 0.4f);
   std::vector<Box> boxes;
   for (std::size_t i = 0; i < count; ++i) {
-    glm::vec3 lo(u(rng), u(rng), u(rng));
-    glm::vec3 hi = lo + glm::vec3(s(rng), s(rng), s(rng));
+    glm::vec3 lo = draw3(u, rng);
+    glm::vec3 hi = lo + draw3(s, rng);
     switch (i % 6) {
       case 1: hi[i % 3] = lo[i % 3]; break;  // flat
       case 2: hi = lo; break;                // point
@@ -339,8 +339,8 @@ TEST(KdTreeBuilder, ParallelBuildEqualsSerialBuild) {
   std::uniform_real_distribution<float> u(0.0f, 1.0f), d(-0.01f, 0.01f);
   std::vector<std::array<glm::vec3, 3>> tris;
   while (tris.size() < 70000) {
-    const glm::vec3 c(u(rng), u(rng), 0.2f * u(rng));
-    tris.push_back({c, c + glm::vec3(d(rng), d(rng), d(rng)), c + glm::vec3(d(rng), d(rng), d(rng))});
+    const glm::vec3 c = draw3(u, rng) * glm::vec3(1.0f, 1.0f, 0.2f);
+    tris.push_back({c, c + draw3(d, rng), c + draw3(d, rng)});
   }
   KdBuildConfig serial;
   serial.parallel_threshold = 0;
@@ -374,9 +374,10 @@ TEST(KdTreeBuilder, ChunkedPassesEqualSerialPassesWithSignedZerosAndSkippedBoxes
       continue;
     }
     const float zero = i < kCount / 2 ? -0.0f : 0.0f;
-    const glm::vec3 lo = i % 2 == 0 ? glm::vec3(zero, u(rng), u(rng))                          // x from 0, y in [0, 1]
-                                    : glm::vec3(2.0f * u(rng) - 1.0f, 2.0f + u(rng), u(rng));  // x from -1, y in [2, 3]
-    boxes.emplace_back(lo, lo + glm::vec3(s(rng), s(rng), s(rng)));
+    const glm::vec3 r = draw3(u, rng);
+    const glm::vec3 lo = i % 2 == 0 ? glm::vec3(zero, r.y, r.z)                       // x from 0, y in [0, 1]
+                                    : glm::vec3(2.0f * r.x - 1.0f, 2.0f + r.y, r.z);  // x from -1, y in [2, 3]
+    boxes.emplace_back(lo, lo + draw3(s, rng));
   }
   KdBuildConfig serial;
   serial.intersection_cost = 1.0f;  // as the top level: small leaves, many cuts
@@ -502,7 +503,7 @@ TEST(KdTraversal, NearestBoxAgreesWithBruteForce) {
     std::uniform_real_distribution<float> u(-1.0f, 5.0f);
     for (int i = 0; i < 600; ++i) {
       Ray r;
-      r.origin = glm::vec3(u(rng), u(rng), u(rng));
+      r.origin = draw3(u, rng);
       const int axis = i % 3;
       r.dir = glm::vec3(i % 2 ? -0.0f : 0.0f, (i / 2) % 2 ? -0.0f : 0.0f, (i / 4) % 2 ? -0.0f : 0.0f);
       r.dir[axis] = (i / 3) % 2 ? 1.0f : -1.0f;
@@ -578,9 +579,9 @@ TEST(KdTraversal, ZeroDirectionComponentsAndSplitPlanes) {
     if (n.isLeaf()) continue;
     for (int rep = 0; rep < 4; ++rep, ++checked) {
       Ray r;
-      r.origin = glm::vec3(u(rng), u(rng), u(rng));
+      r.origin = draw3(u, rng);
       r.origin[n.axis()] = n.split();
-      r.dir = glm::normalize(glm::vec3(u(rng) - 2.0f, u(rng) - 2.0f, u(rng) - 2.0f));
+      r.dir = glm::normalize(draw3(u, rng) - 2.0f);
       r.dir[n.axis()] = rep % 2 ? -0.0f : 0.0f;
       std::set<std::uint32_t> expected, visited;
       for (std::uint32_t b = 0; b < boxes.size(); ++b)

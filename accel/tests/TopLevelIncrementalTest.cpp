@@ -91,7 +91,7 @@ EditRun runRandomEdits(TopLevelUpdate mode, std::size_t total_edits, std::uint64
         InstanceDesc d = model[id];
         std::uniform_real_distribution<double> u(-1.0, 1.0);
         const double step = rng() % 4 == 0 ? spread : 0.05 * spread;
-        d.world_from_object.translation += step * glm::dvec3(u(rng), u(rng), u(rng));
+        d.world_from_object.translation += step * draw3<glm::dvec3>(u, rng);
         top.set(d);
         model[id] = d;
       } else if (kind < 9) {  // replace the object
@@ -203,7 +203,7 @@ TEST(TopLevelIncremental, RegionQueryMatchesBoxTest) {
   std::uniform_real_distribution<double> u(-20.0, 20.0);
   for (int q = 0; q < 50; ++q) {
     // An axis-aligned query box as six planes n.x <= d.
-    const glm::dvec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const glm::dvec3 a = draw3<glm::dvec3>(u, rng), b = draw3<glm::dvec3>(u, rng);
     const glm::dvec3 lo = glm::min(a, b), hi = glm::max(a, b);
     const std::vector<glm::dvec4> planes = {{1, 0, 0, hi.x},   {-1, 0, 0, -lo.x}, {0, 1, 0, hi.y},
                                             {0, -1, 0, -lo.y}, {0, 0, 1, hi.z},   {0, 0, -1, -lo.z}};

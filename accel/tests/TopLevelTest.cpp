@@ -85,12 +85,12 @@ World randomWorld(const Library& lib, int count, glm::dvec3 offset, double sprea
   else w.add(lib.sphere, Affine::fromRowMajor3x4({1, 0, 0, offset.x, 0, 1, 0, offset.y, 0, 0, 1, offset.z}), 100);
   w.add(lib.box, Affine::fromRowMajor3x4({2, 0, 0, offset.x, 0, 2, 0, offset.y, 0, 0, 2, offset.z}), 101);
   for (int i = 2; i < count; ++i) {
-    glm::dvec3 scale(s(rng), s(rng), s(rng));
+    glm::dvec3 scale = draw3<glm::dvec3>(s, rng);
     if (i % 3 == 0) scale = glm::dvec3(scale.x);  // uniform
     if (mirrors && i % 4 == 1) scale.y = -scale.y;
-    const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
-    const auto m = rotationScaleTranslation(axis, 3.14159 * u(rng), scale,
-                                            offset + 0.5 * spread * glm::dvec3(u(rng), u(rng), u(rng)));
+    const glm::dvec3 axis = draw3<glm::dvec3>(u, rng) + glm::dvec3(0.0, 0.0, 1e-3);
+    const double angle = 3.14159 * u(rng);
+    const auto m = rotationScaleTranslation(axis, angle, scale, offset + 0.5 * spread * draw3<glm::dvec3>(u, rng));
     w.add(objects[static_cast<std::size_t>(i) % objects.size()], Affine::fromRowMajor3x4(m),
           100 + static_cast<std::uint32_t>(i));
   }
@@ -202,12 +202,12 @@ TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {
   World w;
   std::mt19937_64 rng(77);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (std::uint32_t i = 0; i < 60; ++i)
+  for (std::uint32_t i = 0; i < 60; ++i) {
+    const double ax = u(rng), ay = u(rng), angle = u(rng), scale = 0.5 + 0.3 * u(rng);
+    const glm::dvec3 at = draw3<glm::dvec3>(u, rng);
     w.add(lib.sphere,
-          Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(u(rng), u(rng), 1.0), u(rng),
-                                                           glm::dvec3(0.5 + 0.3 * u(rng)),
-                                                           glm::dvec3(u(rng), u(rng), u(rng)))),
-          i);
+          Affine::fromRowMajor3x4(rotationScaleTranslation(glm::dvec3(ax, ay, 1.0), angle, glm::dvec3(scale), at)), i);
+  }
   TopLevel top;
   buildTopChecked(top, w.instances);
   auto rays = worldRays(top.bounds(), 78);

@@ -1,6 +1,8 @@
 // The wide BVH builder's spatial splits (the High preset) and its determinism: primitives are
 // line segments, whose exact clip is simple, so that coverage can be checked point by point.
 
+#include "TestSupport.h"
+
 #include "duplex/accel/WideBvh.h"
 
 #include <gtest/gtest.h>
@@ -34,8 +36,8 @@ std::vector<Segment> diagonalSegments(std::size_t n, unsigned seed, float length
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::vector<Segment> out;
   for (std::size_t i = 0; i < n; ++i) {
-    const glm::vec3 p(u(rng), u(rng), u(rng));
-    const glm::vec3 d = glm::vec3(u(rng), u(rng), u(rng)) - 0.5f;
+    const glm::vec3 p = test::draw3(u, rng);
+    const glm::vec3 d = test::draw3(u, rng) - 0.5f;
     out.push_back({p - length * d, p + length * d});
   }
   return out;

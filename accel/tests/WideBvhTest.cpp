@@ -35,8 +35,8 @@ std::vector<Box> uniformBoxes(std::size_t n, std::uint64_t seed, float extent = 
   std::uniform_real_distribution<float> c(0.0f, extent), s(0.0f, size);
   std::vector<Box> out;
   for (std::size_t i = 0; i < n; ++i) {
-    const glm::vec3 lo(c(rng), c(rng), c(rng));
-    out.emplace_back(lo * scale, (lo + glm::vec3(s(rng), s(rng), s(rng))) * scale);
+    const glm::vec3 lo = draw3(c, rng);
+    out.emplace_back(lo * scale, (lo + draw3(s, rng)) * scale);
   }
   return out;
 }
@@ -50,10 +50,12 @@ std::vector<Box> clusteredBoxes(std::size_t n, std::uint64_t seed) {
   std::vector<Box> out;
   for (std::size_t i = 0; i < n; ++i) {
     if (i % 50 == 0) {  // long boxes spanning clusters
-      out.emplace_back(glm::vec3(-300.0f, 0.0f, 0.0f), glm::vec3(1000.0f * u(rng), 10.0f, 9000.0f * u(rng)));
+      const float x = 1000.0f * u(rng);
+      const float z = 9000.0f * u(rng);
+      out.emplace_back(glm::vec3(-300.0f, 0.0f, 0.0f), glm::vec3(x, 10.0f, z));
       continue;
     }
-    const glm::vec3 p = centres[i % 4] + glm::vec3(g(rng), g(rng), g(rng));
+    const glm::vec3 p = centres[i % 4] + draw3(g, rng);
     out.emplace_back(p, p + glm::vec3(0.01f + 0.1f * u(rng)));
   }
   return out;
@@ -364,7 +366,7 @@ TEST(WideBvhNode, ChildOrderRunsFarToNearAlongEachOctant) {
     BvhNode8 node;
     for (int k = 0; k < BvhNode8::kWidth; ++k) node.setChild(k, BvhRef::kEmpty, Box());
     for (int k = 0; k < used; ++k) {
-      const glm::vec3 c(u(rng), u(rng), u(rng));
+      const glm::vec3 c = draw3(u, rng);
       node.setChild(k, static_cast<std::uint32_t>(k + 1), Box(c - glm::vec3(1.0f), c + glm::vec3(2.0f)));
     }
     node.computeOrder();
@@ -405,7 +407,7 @@ TEST(WideBvhNode, ChildOrderIsAStableSortOfTheKeys) {
     BvhNode8 node;
     for (int k = 0; k < BvhNode8::kWidth; ++k) node.setChild(k, BvhRef::kEmpty, Box());
     for (int k = 0; k < used; ++k) {
-      glm::vec3 c(static_cast<float>(coarse(rng)), static_cast<float>(coarse(rng)), static_cast<float>(coarse(rng)));
+      glm::vec3 c = draw3(coarse, rng);
       for (int a = 0; a < 3; ++a)
         if (c[a] == 0.0f && (rng() & 1)) c[a] = -0.0f;
       node.setChild(k, static_cast<std::uint32_t>(k + 1), Box(c, c));
@@ -457,8 +459,11 @@ TEST(WideBvhNode, UpdatedOrderEqualsTheComputedOne) {
     for (int k = 0; k < BvhNode8::kWidth; ++k) node.setChild(k, BvhRef::kEmpty, Box());
     auto place = [&](bool move) {
       for (int k = 0; k < used; ++k) {
-        glm::vec3 c = move ? node.childBox(k).lo : glm::vec3(coarse(rng), coarse(rng), coarse(rng));
-        if (move && trial % 3 != 0) c += glm::vec3(jitter(rng), 0.0f, jitter(rng));  // a third keeps ties
+        glm::vec3 c = move ? node.childBox(k).lo : draw3(coarse, rng);
+        if (move && trial % 3 != 0) {  // a third keeps ties
+          c.x += jitter(rng);
+          c.z += jitter(rng);
+        }
         node.setChild(k, static_cast<std::uint32_t>(k + 1), Box(c, c + glm::vec3(1.0f)));
       }
     };
@@ -504,7 +509,7 @@ TEST(WideBvhRefit, MovedBoxesKeepTheTopologyAndGetTightBoxes) {
     const float step = std::max(1e-30f, 0.2f * std::max({e.x, e.y, e.z}));
     for (std::size_t i = 0; i < moved.size(); ++i) {
       if (!usable[i]) continue;
-      const glm::vec3 d = step * glm::vec3(g(rng), g(rng), g(rng));
+      const glm::vec3 d = step * draw3(g, rng);
       const glm::vec3 grow = std::abs(g(rng)) * 0.1f * moved[i].extent();
       moved[i] = Box(moved[i].lo + d - grow, moved[i].hi + d + grow);
     }

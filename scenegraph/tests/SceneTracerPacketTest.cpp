@@ -69,7 +69,8 @@ std::vector<Ray> tiledCameraRays(const Box& bounds, std::uint32_t side, bool jit
         for (std::uint32_t x = tx; x < tx + 4; ++x) {
           Ray r;
           r.origin = glm::vec3(cam.eye);
-          r.dir = glm::vec3(cam.directionAt(x + (jitter ? u(rng) : 0.5), y + (jitter ? u(rng) : 0.5), side, side));
+          const double jx = jitter ? u(rng) : 0.5, jy = jitter ? u(rng) : 0.5;
+          r.dir = glm::vec3(cam.directionAt(x + jx, y + jy, side, side));
           rays.push_back(r);
         }
   return rays;

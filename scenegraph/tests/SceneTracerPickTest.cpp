@@ -281,9 +281,13 @@ TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
   for (int q = 0; q < 150; ++q) {
     // A third of the cursors near a projected vertex, a third inside a projected triangle, a
     // third anywhere.
-    glm::dvec2 c(ux(rng), uy(rng));
+    const double cx = ux(rng), cy = uy(rng);
+    glm::dvec2 c(cx, cy);
     const WorldTriangle& aim = tris[pick_tri(rng)];
-    if (q % 3 == 0) c = project(cam, aim.p[0]).px + glm::dvec2(jitter(rng), jitter(rng));
+    if (q % 3 == 0) {
+      const double dx = jitter(rng), dy = jitter(rng);
+      c = project(cam, aim.p[0]).px + glm::dvec2(dx, dy);
+    }
     if (q % 3 == 1) {
       const double b1 = u01(rng), b2 = u01(rng) * (1.0 - b1);
       c = project(cam, aim.p[0] + b1 * (aim.p[1] - aim.p[0]) + b2 * (aim.p[2] - aim.p[0])).px;

@@ -113,9 +113,9 @@ std::vector<glm::dvec3> queryPoints(const TriangleMesh& mesh, const Affine& worl
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::vector<glm::dvec3> pts;
-  for (int i = 0; i < 60; ++i) pts.push_back(centre + glm::dvec3(u(rng), u(rng), u(rng)) * half);
-  for (int i = 0; i < 30; ++i) pts.push_back(centre + 3.0 * glm::dvec3(u(rng), u(rng), u(rng)) * half);
-  for (int i = 0; i < 10; ++i) pts.push_back(centre + 10.0 * diag * glm::normalize(glm::dvec3(u(rng), u(rng), u(rng))));
+  for (int i = 0; i < 60; ++i) pts.push_back(centre + draw3<glm::dvec3>(u, rng) * half);
+  for (int i = 0; i < 30; ++i) pts.push_back(centre + 3.0 * draw3<glm::dvec3>(u, rng) * half);
+  for (int i = 0; i < 10; ++i) pts.push_back(centre + 10.0 * diag * glm::normalize(draw3<glm::dvec3>(u, rng)));
   for (std::size_t t = 0; t < mesh.triangleCount(); t += std::max<std::size_t>(1, mesh.triangleCount() / 20)) {
     const auto v = mesh.vertices(t);
     pts.push_back(world_from_object.point(glm::dvec3(v[0])));
@@ -215,7 +215,7 @@ TEST(SceneClosestPoint, VisibleInstancesMasksBatchesAndPaths) {
   };
   std::uniform_real_distribution<double> u(-20.0, 20.0);
   std::vector<ClosestPointRequest> requests;
-  for (int i = 0; i < 150; ++i) requests.push_back({glm::dvec3(u(rng), u(rng), u(rng)), i % 10 == 0 ? 1.0 : kInf});
+  for (int i = 0; i < 150; ++i) requests.push_back({draw3<glm::dvec3>(u, rng), i % 10 == 0 ? 1.0 : kInf});
   for (const std::uint32_t mask : {0xFFFFFFFFu, 1u, 2u}) {
     const auto ref = reference(mask);
     std::vector<ClosestPoint> batch(requests.size());

@@ -37,7 +37,7 @@ std::vector<glm::vec3> smoothlyMoved(const std::vector<glm::vec3>& p, float ampl
   glm::vec3 w[3];
   float ph[3];
   for (int k = 0; k < 3; ++k) {
-    w[k] = glm::normalize(glm::vec3(n(rng), n(rng), n(rng)));
+    w[k] = glm::normalize(draw3(n, rng));
     ph[k] = phase(rng);
   }
   std::vector<glm::vec3> out(p.size());

@@ -5,6 +5,7 @@
 // components, denormal components, origins on the box faces and outside, directions that overflow
 // 1/d, non-finite and non-queryable rays).
 
+#include "TestSupport.h"
 #include "MeshRay.h"
 
 #include "duplex/accel/Box.h"
@@ -101,8 +102,8 @@ TEST(MeshRaySetup, RandomRaysEqualTheSeparateComputations) {
   std::normal_distribution<float> n(0.0f, 1.0f);
   for (int i = 0; i < 200000; ++i) {
     Ray r;
-    r.origin = glm::vec3(u(rng), u(rng), u(rng));
-    r.dir = glm::vec3(n(rng), n(rng), n(rng));
+    r.origin = draw3(u, rng);
+    r.dir = draw3(n, rng);
     if (i % 3 == 0) r.tnear = std::abs(u(rng));
     if (i % 5 == 0) r.tfar = r.tnear + std::abs(u(rng));
     checkRay(r, box);

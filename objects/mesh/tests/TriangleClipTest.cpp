@@ -23,9 +23,8 @@ namespace {
 /// anywhere in [0, 1]^3.
 Box boxNearTriangle(const std::array<glm::vec3, 3>& t, std::size_t i, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  const glm::vec3 centre = i % 4 == 0 ? glm::vec3(u(rng), u(rng), u(rng)) : (t[0] + t[1] + t[2]) / 3.0f;
-  const glm::vec3 half(0.01f + 0.05f * static_cast<float>(u(rng)), 0.01f + 0.05f * static_cast<float>(u(rng)),
-                       0.01f + 0.05f * static_cast<float>(u(rng)));
+  const glm::vec3 centre = i % 4 == 0 ? draw3(u, rng) : (t[0] + t[1] + t[2]) / 3.0f;
+  const glm::vec3 half = 0.01f + 0.05f * draw3(u, rng);
   return Box(centre - half, centre + half);
 }
 

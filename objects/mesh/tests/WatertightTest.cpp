@@ -97,7 +97,7 @@ bool chooseDirection(const Target& target, const std::vector<glm::dvec3>& normal
   std::normal_distribution<double> g(0.0, 1.0);
   for (int attempt = 0; attempt < 8; ++attempt) {
     const double amount = attempt < 4 ? 0.4 : (attempt < 7 ? 0.1 : 0.0);
-    dir = glm::normalize(-mean + amount * glm::dvec3(g(rng), g(rng), g(rng)));
+    dir = glm::normalize(-mean + amount * draw3<glm::dvec3>(g, rng));
     if (minFacing(dir, target, normals) > 0.05) return true;
   }
   return false;

@@ -6,6 +6,7 @@
 // triangles sharing edges and vertices with rays aimed at them, tiny and huge triangles, axis-aligned
 // ones, and rays with zero (+0 / -0) direction components and every axis permutation.
 
+#include "TestSupport.h"
 #include "MeshRay.h"
 #include "TriangleBlock4.h"
 #include "WatertightTriangle4.h"
@@ -111,16 +112,16 @@ TEST(WatertightTriangle4, RandomTrianglesAndRaysEqualTheScalarTest) {
     const float s = scales[i % 3];
     std::vector<Triangle> tris(1 + i % 4);
     for (Triangle& t : tris)
-      for (glm::vec3& p : t) p = s * glm::vec3(u(rng), u(rng), u(rng));
+      for (glm::vec3& p : t) p = s * draw3(u, rng);
     Ray ray;
-    ray.origin = s * glm::vec3(2.0f * u(rng), 2.0f * u(rng), 2.0f * u(rng));
+    ray.origin = s * (2.0f * draw3(u, rng));
     // Aim at a point of one triangle half the time, so that hits are common.
     if (i % 2 == 0) {
       const Triangle& t = tris[i % tris.size()];
       const float a = std::abs(u(rng)) / 2.0f, b = std::abs(u(rng)) / 2.0f;
       ray.dir = t[0] + a * (t[1] - t[0]) + b * (t[2] - t[0]) - ray.origin;
     } else {
-      ray.dir = glm::vec3(n(rng), n(rng), n(rng));
+      ray.dir = draw3(n, rng);
     }
     ray.tnear = i % 5 == 0 ? 0.5f : 0.0f;
     const float t_max = i % 7 == 0 ? 1.0f : std::numeric_limits<float>::infinity();
@@ -139,14 +140,14 @@ TEST(WatertightTriangle4, SharedEdgesAndVerticesEqualTheScalarTest) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   int hits = 0;
   for (int i = 0; i < 20000; ++i) {
-    const glm::vec3 c(u(rng), u(rng), u(rng));
+    const glm::vec3 c = draw3(u, rng);
     const glm::vec3 ring[4] = {c + glm::vec3(1.0f, 0.1f * u(rng), 0.0f), c + glm::vec3(0.0f, 1.0f, 0.1f * u(rng)),
                                c + glm::vec3(-1.0f, 0.1f * u(rng), 0.0f), c + glm::vec3(0.0f, -1.0f, 0.1f * u(rng))};
     std::vector<Triangle> fan;
     for (int k = 0; k < 4; ++k) fan.push_back({c, ring[k], ring[(k + 1) % 4]});
     const glm::vec3 targets[3] = {c, 0.5f * (c + ring[i % 4]), ring[i % 4]};
     Ray ray;
-    ray.origin = c + 3.0f * glm::vec3(u(rng), u(rng), u(rng));
+    ray.origin = c + 3.0f * draw3(u, rng);
     ray.dir = targets[i % 3] - ray.origin;
     hits += compareRay(ray, fan, std::numeric_limits<float>::infinity());
     if (::testing::Test::HasFailure()) return;
@@ -164,13 +165,13 @@ TEST(WatertightTriangle4, AxisParallelRaysAndFlatTrianglesEqualTheScalarTest) {
   for (int i = 0; i < 30000; ++i) {
     std::vector<Triangle> tris(4);
     for (int k = 0; k < 4; ++k) {
-      for (glm::vec3& p : tris[k]) p = glm::vec3(u(rng), u(rng), u(rng));
+      for (glm::vec3& p : tris[k]) p = draw3(u, rng);
       const int flat_axis = (i + k) % 4;  // 3: not flat
       if (flat_axis < 3)
         for (glm::vec3& p : tris[k]) p[flat_axis] = 0.25f;
     }
     Ray ray;
-    ray.origin = glm::vec3(u(rng), u(rng), u(rng));
+    ray.origin = draw3(u, rng);
     const int axis = i % 3;
     ray.dir = glm::vec3(zeros[(i / 3) & 1], zeros[(i / 6) & 1], zeros[(i / 12) & 1]);
     ray.dir[axis] = (i / 24) & 1 ? 1.0f : -1.0f;

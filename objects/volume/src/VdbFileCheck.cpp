@@ -1,7 +1,7 @@
 // The .vdb layout checked here (OpenVDB io/Archive.cc, GridDescriptor.cc, MetaMap.cc; little
 // endian):
 //   header   int64 magic 0x56444220, uint32 file version, uint32 library major, minor, char
-//            has-grid-offsets, 36-char ASCII UUID
+//            has-grid-offsets, 36-char ASCII UUID (8-4-4-4-12 hex digits)
 //   metadata uint32 count, then per entry: string name, string type, uint32 size, size bytes
 //   grids    int32 count, then per grid: string unique name, string type, string instance parent
 //            (file version >= 216), int64 grid, block and end positions; the grid's data spans
@@ -28,10 +28,17 @@
 // OpenVDB 10 reads a raw chunk of whatever length it declares into a buffer sized for the values
 // (a heap overflow on a damaged file) and hands blosc a chunk whose header may claim more bytes
 // than were read; the walk below checks every chunk's lengths first.
+// The chunks of the internal nodes (read with the tree's topology) are also decompressed here: when
+// one does not decompress to its values, OpenVDB 10 throws from RootNode::readTopology after
+// allocating the node, which it then leaks. The leaves' chunks (read with the buffers, where a
+// throw leaks nothing) are only checked for their lengths, which keeps the check cheap.
 
 #include "VdbFileCheck.h"
 
 #include "duplex/accel/Error.h"
+
+#include <blosc.h>
+#include <zlib.h>
 
 #include <array>
 #include <bit>
@@ -101,6 +108,24 @@ class Reader {
   std::int64_t size_;
   std::int64_t pos_ = 0;
 };
+
+// OpenVDB reads the UUID with a formatted stream read (boost's operator>>), which skips
+// whitespace before and inside it: a whitespace byte there would make OpenVDB read everything
+// after it one byte later than this walk does, and trust lengths this walk never checked. So the
+// UUID must be exactly what OpenVDB writes.
+void uuid(Reader& r) {
+  const std::int64_t at = r.pos();
+  std::array<char, 36> text{};
+  r.bytes(text.data(), 36, "UUID");
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    const bool dash = i == 8 || i == 13 || i == 18 || i == 23;
+    const bool ok = dash ? c == '-' : (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f') || (c >= 'A' && c <= 'F');
+    if (!ok)
+      r.fail("the UUID at byte " + std::to_string(at) + " has byte " + std::to_string(static_cast<unsigned char>(c)) +
+             " at character " + std::to_string(i + 1) + " (expected 8-4-4-4-12 hexadecimal digits)");
+  }
+}
 
 // Bytes of the transform's map after its type name (the doubles each map type writes); maps not
 // listed are unknown to OpenVDB too (the frustum map is walked by transformMap).
@@ -305,7 +330,7 @@ class FloatTreeWalk {
     std::vector<std::uint64_t> child(n / 64);
     r_.bytes(reinterpret_cast<char*>(child.data()), n / 8, "internal node child mask");
     const std::uint32_t active = mask(n, "internal node value mask");
-    compressedValues(active, n, "internal node at byte " + std::to_string(at));
+    compressedValues(active, n, "internal node at byte " + std::to_string(at), true);
     for (const std::uint64_t w : child)
       for (int b = 0; b < std::popcount(w); ++b) {
         if (log2dim == 5) {
@@ -317,7 +342,8 @@ class FloatTreeWalk {
   }
 
   // io::readCompressedValues: `active` of the `count` values are active (the node's value mask).
-  void compressedValues(std::uint32_t active, std::uint32_t count, const std::string& where) {
+  // `inflate`: also decompress a zip or blosc chunk and require exactly the values' bytes.
+  void compressedValues(std::uint32_t active, std::uint32_t count, const std::string& where, bool inflate = false) {
     const auto flag = r_.value<std::int8_t>("value compression flag");
     if (flag == 2 || flag == 4 || flag == 5) r_.skip(4, "inactive value");
     if (flag == 5) r_.skip(4, "second inactive value");
@@ -342,6 +368,28 @@ class FloatTreeWalk {
       return;
     }
     if (chunk > e_.end_pos - r_.pos()) bad("declares " + std::to_string(chunk) + " bytes, past the grid's end");
+    if (inflate) {
+      const std::int64_t start = r_.pos();
+      if (compression_ & kBlosc) {
+        bloscChunk(r_, chunk, bytes, what_ + ": " + where + ": the chunk at byte " + std::to_string(at));
+        r_.seek(start);
+      }
+      std::vector<char> packed(static_cast<std::size_t>(chunk));
+      r_.bytes(packed.data(), chunk, "compressed values");
+      std::vector<char> values(static_cast<std::size_t>(bytes) + 1);  // + 1: a longer result is an error too
+      std::int64_t got = -1;
+      if (compression_ & kBlosc) {
+        got = blosc_decompress_ctx(packed.data(), values.data(), values.size(), 1);
+      } else {
+        uLongf n = static_cast<uLongf>(values.size());
+        if (uncompress(reinterpret_cast<Bytef*>(values.data()), &n, reinterpret_cast<const Bytef*>(packed.data()),
+                       static_cast<uLong>(chunk)) == Z_OK)
+          got = static_cast<std::int64_t>(n);
+      }
+      if (got != bytes)
+        bad(got < 0 ? std::string("does not decompress") : "decompresses to " + std::to_string(got) + " bytes");
+      return;
+    }
     if (compression_ & kBlosc) {
       bloscChunk(r_, chunk, bytes, what_ + ": " + where + ": the chunk at byte " + std::to_string(at));
     } else {
@@ -376,7 +424,7 @@ std::vector<VdbGridExtent> checkVdbFileStructure(const std::filesystem::path& fi
   (void)r.value<std::uint32_t>("library major version");
   (void)r.value<std::uint32_t>("library minor version");
   const char has_offsets = r.value<char>("grid-offsets flag");
-  r.skip(36, "UUID");
+  uuid(r);
   if (!has_offsets) r.fail("written without grid offsets (an io::Stream archive); only seekable .vdb files are read");
 
   // File-level metadata.

@@ -41,7 +41,7 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 
 glm::dvec3 randomUnit(std::mt19937& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
-  return glm::normalize(glm::dvec3(n(rng), n(rng), n(rng)));
+  return glm::normalize(test::draw3<glm::dvec3>(n, rng));
 }
 
 // Density sigma over voxels [lo, hi]^3, stored as voxels (no tiles), voxel size `voxel`.
@@ -355,8 +355,9 @@ TEST(TopLevelTransmittance, MultipliesMediaOnceEachAndIsZeroBehindSurfaces) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   int blocked = 0, attenuated = 0;
   for (int r = 0; r < 300; ++r) {
-    const glm::dvec3 o(-2.0, 0.2 + 0.8 * u(rng), 0.2 + 0.8 * u(rng));
-    const glm::dvec3 target(22.0, 0.6 + 0.6 * (u(rng) - 0.5), 0.6 + 0.6 * (u(rng) - 0.5));
+    const double oy = u(rng), oz = u(rng), ty = u(rng), tz = u(rng);
+    const glm::dvec3 o(-2.0, 0.2 + 0.8 * oy, 0.2 + 0.8 * oz);
+    const glm::dvec3 target(22.0, 0.6 + 0.6 * (ty - 0.5), 0.6 + 0.6 * (tz - 0.5));
     Ray ray{glm::vec3(o), 0.0f, glm::vec3(target - o), r % 2 ? 1.0f : 0.8f};
     // Reference: the product over instances of the object's own transmittance of the object-space
     // ray, and the sphere's occlusion.
@@ -500,7 +501,8 @@ TEST(VolumeFailureCases, ThinFeaturesAreFoundWhenTheirNegativeRunIsAStepLong) {
     const double elev = (0.5 + 60.0 * std::pow(u(rng), 3.0)) * 3.14159265358979 / 180.0;
     const double az = 6.283185307 * u(rng);
     const glm::dvec3 d(std::cos(elev) * std::cos(az), std::cos(elev) * std::sin(az), -std::sin(elev));
-    const glm::dvec3 o = glm::dvec3(80.0 * (u(rng) - 0.5), 80.0 * (u(rng) - 0.5), 0.0) - d * (0.6 / std::sin(elev));
+    const double ox = u(rng), oy = u(rng);
+    const glm::dvec3 o = glm::dvec3(80.0 * (ox - 0.5), 80.0 * (oy - 0.5), 0.0) - d * (0.6 / std::sin(elev));
     const double t_end = 1.2 / std::sin(elev);
     Ray ray{glm::vec3(o), 0.0f, glm::vec3(d), static_cast<float>(t_end)};
     // Reference negative runs.
@@ -862,7 +864,7 @@ TEST(LevelSetClosestPoint, InstancesOfAnyAffineTransformGetTheWorldNearestPoint)
   const Affine similar = Affine::fromRowMajor3x4(
       rotationScaleTranslation(glm::dvec3(0.2, 1.0, 0.4), 0.7, glm::dvec3(2.0), glm::dvec3(3.0, -1.0, 5.0)));
   for (int k = 0; k < 100; ++k) {
-    const glm::dvec3 p = glm::dvec3(3.0, -1.0, 5.0) + 2.5 * glm::dvec3(u(rng), u(rng), u(rng));
+    const glm::dvec3 p = glm::dvec3(3.0, -1.0, 5.0) + 2.5 * test::draw3<glm::dvec3>(u, rng);
     const ClosestPoint c = query(*sphere, p, similar, ctx);
     ASSERT_TRUE(c.valid());
     EXPECT_NEAR(c.distance, std::abs(glm::length(p - glm::dvec3(3.0, -1.0, 5.0)) - 2.0 * radius), 0.05 * voxel);
@@ -881,7 +883,7 @@ TEST(LevelSetClosestPoint, InstancesOfAnyAffineTransformGetTheWorldNearestPoint)
                                    glm::dvec3(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th))));
     }
   for (int k = 0; k < 60; ++k) {
-    const glm::dvec3 p = glm::dvec3(-4.0, 2.0, 1.0) + 2.0 * glm::dvec3(u(rng), u(rng), u(rng));
+    const glm::dvec3 p = glm::dvec3(-4.0, 2.0, 1.0) + 2.0 * test::draw3<glm::dvec3>(u, rng);
     const ClosestPoint c = query(*sphere, p, uneven, ctx);
     ASSERT_TRUE(c.valid());
     EXPECT_NEAR(distanceAt(*grid, to_object.point(c.point_ws)), 0.0, 1e-3 * voxel) << "on the zero crossing";
@@ -947,7 +949,8 @@ TEST(LevelSetClosestPoint, TopLevelFindsTheNearestAmongMeshesAndLevelSets) {
   std::uniform_real_distribution<double> ux(-0.5, 8.5), uy(-1.0, 1.0);
   int mesh_nearest = 0, level_set_nearest = 0;
   for (int k = 0; k < 300; ++k) {
-    const glm::dvec3 p(ux(rng), uy(rng), uy(rng));
+    const double x = ux(rng), y = uy(rng), z = uy(rng);
+    const glm::dvec3 p(x, y, z);
     double want = kInf;
     std::uint32_t owner = kInvalidId;
     for (std::uint32_t i = 0; i < 3; ++i) {
@@ -975,7 +978,7 @@ TEST(LevelSetClosestPoint, FirstQueriesFromManyThreadsAtOnceAgree) {
   std::vector<glm::dvec3> points;
   std::mt19937 rng(35);
   std::uniform_real_distribution<double> u(-1.5, 1.5);
-  for (int k = 0; k < 150; ++k) points.emplace_back(u(rng), u(rng), u(rng));
+  for (int k = 0; k < 150; ++k) points.push_back(test::draw3<glm::dvec3>(u, rng));
   std::vector<double> reference;
   {
     const auto sphere = makeVolumeObject(sphereLevelSet(0.5f, 0.02f));

@@ -9,6 +9,7 @@
 /// leave the grid for the tree), rays with zero direction components, and sensors far from the
 /// origin; and that the float plane test drops only sensors the exact test misses.
 
+#include "TestSupport.h"
 #include "duplex/accel/Crossing.h"
 #include "duplex/accel/TopLevel.h"
 #include "duplex/sensors/SensorObject.h"
@@ -68,7 +69,8 @@ Scene makeScene(const glm::dvec3& offset, double scale = 1.0) {
     const int kind = static_cast<int>(id % 10);
     d.object = kind < 4 ? square : kind < 6 ? square_front : kind < 8 ? disk : kind < 9 ? disk_front : ball;
     s.half.push_back((kind < 6 || kind == 9 ? 0.05 : 0.06) * scale);
-    const glm::dvec3 at = offset + glm::dvec3(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
+    const glm::dvec3 at =
+        offset + glm::dvec3(-4.8, -4.8, 0.2) + glm::dvec3(9.6, 9.6, 3.6) * test::draw3<glm::dvec3>(u, rng);
     if (id % 8 == 0) {  // axis-aligned: flat world boxes, the border in a box face
       d.world_from_object.translation = at;
     } else {

@@ -2,6 +2,7 @@
 // one- and two-sided sensors, parallel rays, disk bin areas, and the crossing semantics (each
 // crossing once, in t order, only before the first blocking hit) against a brute force.
 
+#include "TestSupport.h"
 #include "duplex/accel/Error.h"
 #include "duplex/accel/TopLevel.h"
 #include "duplex/objects/BuiltinTypes.h"
@@ -212,13 +213,15 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
     std::vector<std::shared_ptr<const SensorObject>> sensors;
     std::vector<Affine> sensor_world;
     for (std::uint32_t k = 0; k < 60; ++k) {
-      auto s = sensor(0.5 + std::abs(u(rng)), 0.5 + std::abs(u(rng)), 3, 2, k % 2 == 0);
+      const double width = 0.5 + std::abs(u(rng)), height = 0.5 + std::abs(u(rng));
+      auto s = sensor(width, height, 3, 2, k % 2 == 0);
       // Random rotation (axis-angle) and position.
-      glm::dvec3 axis(u(rng), u(rng), u(rng));
+      glm::dvec3 axis = test::draw3<glm::dvec3>(u, rng);
       axis = glm::normalize(axis + glm::dvec3(0, 0, 1e-3));
       const double a = 3.0 * u(rng), c = std::cos(a), sn = std::sin(a), kk = 1 - c;
+      const glm::dvec3 at = 5.0 * test::draw3<glm::dvec3>(u, rng);
       const Affine w =
-          translate(5 * u(rng), 5 * u(rng), 5 * u(rng)) *
+          translate(at.x, at.y, at.z) *
           Affine::fromRowMajor3x4(
               {c + axis.x * axis.x * kk, axis.x * axis.y * kk - axis.z * sn, axis.x * axis.z * kk + axis.y * sn, 0,
                axis.y * axis.x * kk + axis.z * sn, c + axis.y * axis.y * kk, axis.y * axis.z * kk - axis.x * sn, 0,
@@ -227,8 +230,11 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
       sensors.push_back(s);
       sensor_world.push_back(w);
     }
-    for (std::uint32_t k = 0; k < 10; ++k)
-      inst.push_back({quad(0.5 + std::abs(u(rng)), "q"), translate(5 * u(rng), 5 * u(rng), 5 * u(rng)), 1000 + k});
+    for (std::uint32_t k = 0; k < 10; ++k) {
+      const double side = 0.5 + std::abs(u(rng));
+      const glm::dvec3 at = 5.0 * test::draw3<glm::dvec3>(u, rng);
+      inst.push_back({quad(side, "q"), translate(at.x, at.y, at.z), 1000 + k});
+    }
     TopLevel top;
     top.build(inst);
     QueryContext ctx;
@@ -236,8 +242,8 @@ TEST(CrossingQuery, MatchesBruteForceOnRandomScenes) {
     std::size_t total = 0;
     for (int i = 0; i < 2000; ++i) {
       Ray r;
-      r.origin = glm::vec3(glm::dvec3(6 * u(rng), 6 * u(rng), 6 * u(rng)));
-      r.dir = glm::vec3(glm::dvec3(u(rng), u(rng), u(rng)));
+      r.origin = glm::vec3(6.0 * test::draw3<glm::dvec3>(u, rng));
+      r.dir = glm::vec3(test::draw3<glm::dvec3>(u, rng));
       const SegmentEnd end = top.intersectWithCrossings(r, crossings, ctx);
       const Hit ref_hit = top.intersect(r, ctx);
       ASSERT_EQ(end.hit.valid(), ref_hit.valid());

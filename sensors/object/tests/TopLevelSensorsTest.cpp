@@ -75,9 +75,10 @@ struct Model {
 
 Affine randomPlacement(std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  const glm::dvec3 axis(u(rng), u(rng), u(rng) + 1e-3);
-  return Affine::fromRowMajor3x4(test::rotationScaleTranslation(axis, 3.0 * u(rng), glm::dvec3(0.8 + 0.3 * u(rng)),
-                                                                glm::dvec3(4.0 * u(rng), 4.0 * u(rng), 4.0 * u(rng))));
+  const glm::dvec3 axis = test::draw3<glm::dvec3>(u, rng) + glm::dvec3(0.0, 0.0, 1e-3);
+  const double angle = 3.0 * u(rng), scale = 0.8 + 0.3 * u(rng);
+  return Affine::fromRowMajor3x4(
+      test::rotationScaleTranslation(axis, angle, glm::dvec3(scale), 4.0 * test::draw3<glm::dvec3>(u, rng)));
 }
 
 /// `count` 2 x 2-bin sensors at random placements (ids 0, 1, ...) and a sphere (id `sphere_id`).
@@ -245,10 +246,11 @@ void checkManySmallSensors(const glm::dvec3& offset, const TopLevelConfig& confi
     // rotated at random.
     Affine a;
     if (id % 4 != 0) {
-      a = Affine::fromRowMajor3x4(test::rotationScaleTranslation(
-          glm::dvec3(u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5 + 1e-3), 6.3 * u(rng), glm::dvec3(1.0), glm::dvec3(0.0)));
+      const glm::dvec3 axis = test::draw3<glm::dvec3>(u, rng) - glm::dvec3(0.5, 0.5, 0.5 - 1e-3);
+      const double angle = 6.3 * u(rng);
+      a = Affine::fromRowMajor3x4(test::rotationScaleTranslation(axis, angle, glm::dvec3(1.0), glm::dvec3(0.0)));
     }
-    a.translation = offset + glm::dvec3(-4.8 + 9.6 * u(rng), -4.8 + 9.6 * u(rng), 0.2 + 3.6 * u(rng));
+    a.translation = offset + glm::dvec3(-4.8, -4.8, 0.2) + glm::dvec3(9.6, 9.6, 3.6) * test::draw3<glm::dvec3>(u, rng);
     d.world_from_object = a;
     d.mask = id % 7 == 0 ? 2u : 1u | 2u;
     return d;

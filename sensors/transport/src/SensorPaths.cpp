@@ -200,7 +200,10 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         }
         const glm::dvec3 d = glm::normalize(dir);
         origin = origin + t_collision * dir;
-        dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, rng.uniform(), rng.uniform());
+        // Random numbers are drawn in statements of their own: a call's arguments are evaluated in
+        // an order each compiler picks, and a run must give the same paths whichever built it.
+        const double u1 = rng.uniform(), u2 = rng.uniform();
+        dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, u1, u2);
         if (!isFinite(dir)) {
           e.failed_w += w;
           ++e.failed_rays;
@@ -247,7 +250,12 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           ++e.absorbed_rays;
           break;
         }
-        next = m.type == MaterialType::Mirror ? reflect(d, nf) : cosineDirection(nf, rng.uniform(), rng.uniform());
+        if (m.type == MaterialType::Mirror) {
+          next = reflect(d, nf);
+        } else {
+          const double u1 = rng.uniform(), u2 = rng.uniform();
+          next = cosineDirection(nf, u1, u2);
+        }
       } else if (m.type == MaterialType::Coating) {  // reflect, pass undeviated, or absorb
         const double u = rng.uniform(), r = m.reflectanceIn(band);
         if (u >= r + m.transmittanceIn(band)) {

@@ -84,7 +84,8 @@ TEST(IesProfile, IsotropicFileHasTheIntegralOfASphereAndUnitWeights) {
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   for (int i = 0; i < 1000; ++i) {
-    const auto s = p.sample(u(rng), u(rng));
+    const double u1 = u(rng), u2 = u(rng);
+    const auto s = p.sample(u1, u2);
     EXPECT_NEAR(glm::dot(s.direction_lf, s.direction_lf), 1.0, 1e-12);
     EXPECT_NEAR(s.weight, 1.0, 1e-9);
     EXPECT_NEAR(p.pdf(s.direction_lf), 1.0 / (4.0 * kPi), 1e-12);
@@ -154,7 +155,8 @@ TEST(IesProfile, SamplingIsUnbiasedAgainstQuadrature) {
     const int n = 200000;
     double sum = 0.0, sum2 = 0.0;
     for (int i = 0; i < n; ++i) {
-      const auto s = p.sample(u(rng), u(rng));
+      const double u1 = u(rng), u2 = u(rng);
+      const auto s = p.sample(u1, u2);
       // The weight is the ratio the class promises, for every sample.
       ASSERT_NEAR(s.weight, p.intensity(s.direction_lf) / (p.pdf(s.direction_lf) * p.integral()),
                   1e-9 * (1 + s.weight));

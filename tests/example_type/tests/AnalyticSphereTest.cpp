@@ -84,8 +84,9 @@ TEST(AnalyticSphere, RaysAgreeWithTheClosedFormInWorldSpace) {
   int hits = 0;
   for (int i = 0; i < 4000; ++i) {
     // From a point on a large box around the scene towards a random point near the balls.
-    const glm::dvec3 from(coord(rng) * 3.0, coord(rng) * 3.0, -20.0);
-    const glm::dvec3 to(coord(rng) * 1.5, coord(rng), coord(rng) * 0.5);
+    const double fx = coord(rng), fy = coord(rng), tx = coord(rng), ty = coord(rng), tz = coord(rng);
+    const glm::dvec3 from(fx * 3.0, fy * 3.0, -20.0);
+    const glm::dvec3 to(tx * 1.5, ty, tz * 0.5);
     const glm::dvec3 d = glm::normalize(to - from);
     Ray ray;
     ray.origin = glm::vec3(from);
