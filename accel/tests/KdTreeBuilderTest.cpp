@@ -102,9 +102,11 @@ TEST(KdTreeBuilder, EventRadixSortEqualsStdSort) {
       else if (kind == 1) x = specials[rng() % std::size(specials)];
       else if (kind == 2)
         x = std::bit_cast<float>(std::bit_cast<std::uint32_t>(base) ^ static_cast<std::uint32_t>(rng() & 0xFFu));
-      else
-        x = rng() % 3 == 0 ? specials[rng() % std::size(specials)]
-                           : std::ldexp(float(rng() % 1000) - 500.0f, int(rng() % 60) - 30);
+      else if (rng() % 3 == 0) x = specials[rng() % std::size(specials)];
+      else {
+        const float mantissa = float(rng() % 1000) - 500.0f;
+        x = std::ldexp(mantissa, int(rng() % 60) - 30);
+      }
     }
     if (trial % 50 == 7) std::fill(v.begin(), v.end(), base);
     std::vector<float> expected = v;

@@ -69,8 +69,12 @@ TEST(SceneConcurrency, QueriesDuringCommitsSeeOneCommittedScene) {
   std::mt19937_64 rng(77);
   std::vector<NodeId> parents{kRootNode};
   for (int i = 0; i < 4; ++i) parents.push_back(graph.addTransform(kRootNode, randomPlacement(rng, 6.0)));
-  for (int i = 0; i < 40; ++i)
-    graph.addInstance(parents[rng() % parents.size()], objects[rng() % objects.size()], randomPlacement(rng, 8.0));
+  for (int i = 0; i < 40; ++i) {
+    // One draw per statement: a call's arguments are evaluated in an order each compiler picks.
+    const NodeId parent = parents[rng() % parents.size()];
+    const ObjectId object = objects[rng() % objects.size()];
+    graph.addInstance(parent, object, randomPlacement(rng, 8.0));
+  }
   graph.commit();
   SceneTracer tracer(graph);
   const std::vector<Ray> rays = randomRays(Box(glm::vec3(-9.0f), glm::vec3(9.0f)), 200, 5);
@@ -117,10 +121,12 @@ TEST(SceneConcurrency, QueriesDuringCommitsSeeOneCommittedScene) {
       const std::vector<NodeId> inst = graph.instances();
       const NodeId pick = inst.empty() ? kInvalidNode : inst[rng() % inst.size()];
       switch (inst.size() < 10 ? 0 : rng() % 7) {
-        case 0:
-          graph.addInstance(parents[rng() % parents.size()], objects[rng() % objects.size()],
-                            randomPlacement(rng, 8.0));
+        case 0: {
+          const NodeId parent = parents[rng() % parents.size()];
+          const ObjectId object = objects[rng() % objects.size()];
+          graph.addInstance(parent, object, randomPlacement(rng, 8.0));
           break;
+        }
         case 1: graph.remove(pick); break;
         case 2: graph.setTransform(pick, randomPlacement(rng, 8.0)); break;
         case 3: graph.setVisible(pick, rng() % 2 == 0); break;

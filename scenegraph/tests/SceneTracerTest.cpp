@@ -127,7 +127,8 @@ TEST(SceneTracer, TenThousandRandomGraphEditsAgreeWithBruteForce) {
           const NodeId what = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];
           g.reparent(what, containers[rng() % containers.size()]);
         } else if (kind < 9) {
-          g.setObject(inst[rng() % inst.size()], f.objects[rng() % 4]);
+          const ObjectId object = f.objects[rng() % 4];  // drawn first, as GCC evaluated the call
+          g.setObject(inst[rng() % inst.size()], object);
         } else if (kind < 11) {
           const bool node = rng() % 3 == 0 && containers.size() > 1;
           const NodeId target = node ? containers[1 + rng() % (containers.size() - 1)] : inst[rng() % inst.size()];

@@ -75,7 +75,8 @@ std::vector<Ray> outsideRays(std::size_t count, std::uint32_t seed) {
   std::vector<Ray> rays;
   for (std::size_t k = 0; k < count; ++k) {
     const glm::dvec3 o = kCentre + 3.0 * randomUnit(rng);
-    const glm::dvec3 target = kCentre + 1.4 * u(rng) * randomUnit(rng);
+    const double target_scale = u(rng);
+    const glm::dvec3 target = kCentre + 1.4 * target_scale * randomUnit(rng);
     const glm::dvec3 d = (target - o) * (0.25 + 2.0 * u(rng));
     rays.push_back(Ray{glm::vec3(o), 0.0f, glm::vec3(d), std::numeric_limits<float>::infinity()});
   }
@@ -146,8 +147,10 @@ TEST_P(LevelSetSphere, RangeLimitsAndRaysFromInside) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   double max_err = 0.0;
   for (int k = 0; k < 1000; ++k) {
-    const glm::dvec3 o = kCentre + 0.8 * u(rng) * randomUnit(rng);
-    const glm::dvec3 d = randomUnit(rng) * (0.5 + u(rng));
+    const double o_scale = u(rng);
+    const glm::dvec3 o = kCentre + 0.8 * o_scale * randomUnit(rng);
+    const glm::dvec3 dir = randomUnit(rng);
+    const glm::dvec3 d = dir * (0.5 + u(rng));
     const Ray ray{glm::vec3(o), 0.0f, glm::vec3(d), std::numeric_limits<float>::infinity()};
     Hit hit;
     ASSERT_TRUE(object->intersect(ray, hit, ctx)) << ray;
@@ -352,8 +355,10 @@ TEST(VolumeObject, FogTransmittanceThroughABoxIsExact) {
   int crossing = 0;
   const glm::dvec3 centre = 0.5 * (glm::dvec3(b.lo) + glm::dvec3(b.hi));
   for (int k = 0; k < 5000; ++k) {
-    const glm::dvec3 o = centre + 3.0 * u(rng) * randomUnit(rng);
-    const glm::dvec3 target = centre + 1.5 * u(rng) * randomUnit(rng);
+    const double o_scale = u(rng);
+    const glm::dvec3 o = centre + 3.0 * o_scale * randomUnit(rng);
+    const double target_scale = u(rng);
+    const glm::dvec3 target = centre + 1.5 * target_scale * randomUnit(rng);
     Ray ray{glm::vec3(o), 0.0f, glm::vec3((target - o) * (0.3 + u(rng))), std::numeric_limits<float>::infinity()};
     if (k % 2) {  // finite segments, some starting inside
       ray.tnear = static_cast<float>(u(rng) * 1.5);

@@ -84,8 +84,10 @@ std::vector<Ray> raysThrough(const Box& b, std::size_t count, std::uint32_t seed
   const double r = 0.5 * glm::length(glm::dvec3(b.hi) - glm::dvec3(b.lo));
   std::vector<Ray> rays;
   for (std::size_t k = 0; k < count; ++k) {
-    const glm::dvec3 o = c + (k % 4 == 0 ? 0.5 : 2.0) * r * u(rng) * randomUnit(rng);
-    const glm::dvec3 target = c + 0.6 * r * u(rng) * randomUnit(rng);
+    const double o_scale = u(rng);
+    const glm::dvec3 o = c + (k % 4 == 0 ? 0.5 : 2.0) * r * o_scale * randomUnit(rng);
+    const double target_scale = u(rng);
+    const glm::dvec3 target = c + 0.6 * r * target_scale * randomUnit(rng);
     Ray ray{glm::vec3(o), 0.0f, glm::vec3((target - o) * (0.5 + u(rng))), kInf};
     if (k % 3 == 1) ray.tfar = static_cast<float>(0.5 + 2.0 * u(rng));
     rays.push_back(ray);
@@ -919,7 +921,8 @@ TEST(LevelSetClosestPoint, AcrossAGapTheNearerWallWins) {
   int decided = 0;
   for (int k = 0; k < 300; ++k) {
     const double t = ut(rng);
-    const glm::dvec3 p = t * axis + us(rng) * side1 + us(rng) * side2;
+    const double s1 = us(rng), s2 = us(rng);
+    const glm::dvec3 p = t * axis + s1 * side1 + s2 * side2;
     const double da = glm::length(p - ca) - 0.5, db = glm::length(p - cb) - 0.5;
     const ClosestPoint c = query(*pair, p, Affine::identity(), ctx);
     ASSERT_TRUE(c.valid());
