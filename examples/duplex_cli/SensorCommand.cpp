@@ -564,18 +564,12 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;
   report["emitted_power_w"] = r.energy.emitted_w;
   const EnergyBalance& e = r.energy;
-  report["energy"] = {{"escaped_w", e.escaped_w},
-                      {"escaped_rays", e.escaped_rays},
-                      {"absorbed_w", e.absorbed_w},
-                      {"absorbed_rays", e.absorbed_rays},
-                      {"medium_absorbed_w", e.medium_absorbed_w},
-                      {"medium_absorbed_rays", e.medium_absorbed_rays},
-                      {"depth_limited_w", e.depth_limited_w},
-                      {"depth_limited_rays", e.depth_limited_rays},
-                      {"roulette_w", e.roulette_w},
-                      {"roulette_rays", e.roulette_rays},
-                      {"failed_w", e.failed_w},
-                      {"failed_rays", e.failed_rays}};
+  nlohmann::ordered_json energy = nlohmann::ordered_json::object();
+  for (const EnergyEnding& k : kEnergyEndings) {
+    energy[std::string(k.name) + "_w"] = e.*k.power;
+    energy[std::string(k.name) + "_rays"] = e.*k.rays;
+  }
+  report["energy"] = std::move(energy);
   report["failure_threshold"] = o.failure_threshold;
   if (e.failed_rays != 0 && e.failed_w > o.failure_threshold * e.emitted_w)
     std::cerr << "duplex sensor: warning: numerical failures ended " << e.failed_rays << " of " << r.rays

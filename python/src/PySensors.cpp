@@ -130,18 +130,10 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   }
   py::dict energy;
   energy["emitted_w"] = r.energy.emitted_w;
-  energy["escaped_w"] = r.energy.escaped_w;
-  energy["absorbed_w"] = r.energy.absorbed_w;
-  energy["medium_absorbed_w"] = r.energy.medium_absorbed_w;
-  energy["depth_limited_w"] = r.energy.depth_limited_w;
-  energy["roulette_w"] = r.energy.roulette_w;
-  energy["failed_w"] = r.energy.failed_w;
-  energy["escaped_rays"] = r.energy.escaped_rays;
-  energy["absorbed_rays"] = r.energy.absorbed_rays;
-  energy["medium_absorbed_rays"] = r.energy.medium_absorbed_rays;
-  energy["depth_limited_rays"] = r.energy.depth_limited_rays;
-  energy["roulette_rays"] = r.energy.roulette_rays;
-  energy["failed_rays"] = r.energy.failed_rays;
+  for (const EnergyEnding& k : kEnergyEndings) {
+    energy[(std::string(k.name) + "_w").c_str()] = r.energy.*k.power;
+    energy[(std::string(k.name) + "_rays").c_str()] = r.energy.*k.rays;
+  }
   const char* status_name = status == SensorRunStatus::TargetReached ? "target_reached"
                             : status == SensorRunStatus::Cancelled   ? "cancelled"
                                                                      : "completed";

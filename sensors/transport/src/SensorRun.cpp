@@ -280,18 +280,10 @@ SensorRunResults SensorRun::results() const {
   r.seed = config_.seed;
   const double n = rays_done_ ? static_cast<double>(rays_done_) : 1.0;
   r.energy.emitted_w = rays_done_ ? scene_.totalPower() : 0.0;
-  r.energy.escaped_w = all.energy.escaped_w / n;
-  r.energy.absorbed_w = all.energy.absorbed_w / n;
-  r.energy.medium_absorbed_w = all.energy.medium_absorbed_w / n;
-  r.energy.depth_limited_w = all.energy.depth_limited_w / n;
-  r.energy.roulette_w = all.energy.roulette_w / n;
-  r.energy.failed_w = all.energy.failed_w / n;
-  r.energy.escaped_rays = all.energy.escaped_rays;
-  r.energy.absorbed_rays = all.energy.absorbed_rays;
-  r.energy.medium_absorbed_rays = all.energy.medium_absorbed_rays;
-  r.energy.depth_limited_rays = all.energy.depth_limited_rays;
-  r.energy.roulette_rays = all.energy.roulette_rays;
-  r.energy.failed_rays = all.energy.failed_rays;
+  for (const EnergyEnding& k : kEnergyEndings) {
+    r.energy.*k.power = all.energy.*k.power / n;
+    r.energy.*k.rays = all.energy.*k.rays;
+  }
   const bool spectral = !all.band_bin_sum.empty();
   const std::size_t nb = scene_.bandCount();
   if (spectral) {

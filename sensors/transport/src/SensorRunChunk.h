@@ -65,18 +65,10 @@ bool leavesSurface(const glm::dvec3& next, const glm::dvec3& n_in, bool transmit
 
 // Adds the energy tallies of `from` (sums over rays; emitted_w unused) into `to`.
 inline void addEnergy(EnergyBalance& to, const EnergyBalance& from) {
-  to.escaped_w += from.escaped_w;
-  to.absorbed_w += from.absorbed_w;
-  to.medium_absorbed_w += from.medium_absorbed_w;
-  to.depth_limited_w += from.depth_limited_w;
-  to.roulette_w += from.roulette_w;
-  to.failed_w += from.failed_w;
-  to.escaped_rays += from.escaped_rays;
-  to.absorbed_rays += from.absorbed_rays;
-  to.medium_absorbed_rays += from.medium_absorbed_rays;
-  to.depth_limited_rays += from.depth_limited_rays;
-  to.roulette_rays += from.roulette_rays;
-  to.failed_rays += from.failed_rays;
+  for (const EnergyEnding& k : kEnergyEndings) {
+    to.*k.power += from.*k.power;
+    to.*k.rays += from.*k.rays;
+  }
 }
 
 // The energy tallies as run states and batch tallies store them: six powers, then six ray counts.
@@ -85,9 +77,12 @@ struct EnergyWords {
   std::uint64_t rays[6];
 };
 inline EnergyWords energyWords(const EnergyBalance& e) {
-  return {
-      {e.escaped_w, e.absorbed_w, e.medium_absorbed_w, e.depth_limited_w, e.roulette_w, e.failed_w},
-      {e.escaped_rays, e.absorbed_rays, e.medium_absorbed_rays, e.depth_limited_rays, e.roulette_rays, e.failed_rays}};
+  EnergyWords w{};
+  for (std::size_t k = 0; k < kEnergyEndings.size(); ++k) {
+    w.power[k] = e.*kEnergyEndings[k].power;
+    w.rays[k] = e.*kEnergyEndings[k].rays;
+  }
+  return w;
 }
 // Back from the stored words; false for values no run makes (negative or non-finite powers but the
 // roulette's net term, which may be negative; ray counts summing to more than `rays`).
@@ -100,8 +95,11 @@ inline bool energyFromWords(const EnergyWords& w, std::uint64_t rays, EnergyBala
     paths += w.rays[k];
   }
   if (!ok || paths > rays) return false;
-  e = {0.0,       w.power[0], w.power[1], w.power[2], w.power[3], w.power[4], w.power[5],
-       w.rays[0], w.rays[1],  w.rays[2],  w.rays[3],  w.rays[4],  w.rays[5]};
+  e = {};
+  for (std::size_t k = 0; k < kEnergyEndings.size(); ++k) {
+    e.*kEnergyEndings[k].power = w.power[k];
+    e.*kEnergyEndings[k].rays = w.rays[k];
+  }
   return true;
 }
 

@@ -112,6 +112,23 @@ struct EnergyBalance {
   std::uint64_t failed_rays = 0;           ///< paths ended by a numerical failure (failed_w)
 };
 
+/// One way a path ends, as EnergyBalance tallies it: the name (the keys of run.json's "energy" and
+/// of the Python result are name + "_w" and name + "_rays"), the member with its power (W) and the
+/// member with its path count. kEnergyEndings lists every one, in the order run states store them.
+struct EnergyEnding {
+  const char* name;
+  double EnergyBalance::*power;
+  std::uint64_t EnergyBalance::*rays;
+};
+inline constexpr std::array<EnergyEnding, 6> kEnergyEndings{{
+    {"escaped", &EnergyBalance::escaped_w, &EnergyBalance::escaped_rays},
+    {"absorbed", &EnergyBalance::absorbed_w, &EnergyBalance::absorbed_rays},
+    {"medium_absorbed", &EnergyBalance::medium_absorbed_w, &EnergyBalance::medium_absorbed_rays},
+    {"depth_limited", &EnergyBalance::depth_limited_w, &EnergyBalance::depth_limited_rays},
+    {"roulette", &EnergyBalance::roulette_w, &EnergyBalance::roulette_rays},
+    {"failed", &EnergyBalance::failed_w, &EnergyBalance::failed_rays},
+}};
+
 /// What a sensor run measured: every sensor's result and the energy balance, over the rays traced so far.
 struct SensorRunResults {
   std::uint64_t rays = 0;              ///< emitted rays
