@@ -116,10 +116,11 @@ struct EnergyBalance {
 /// of the Python result are name + "_w" and name + "_rays"), the member with its power (W) and the
 /// member with its path count. kEnergyEndings lists every one, in the order run states store them.
 struct EnergyEnding {
-  const char* name;
-  double EnergyBalance::*power;
-  std::uint64_t EnergyBalance::*rays;
+  const char* name;                    ///< e.g. "escaped"
+  double EnergyBalance::*power;        ///< e.g. &EnergyBalance::escaped_w (W)
+  std::uint64_t EnergyBalance::*rays;  ///< e.g. &EnergyBalance::escaped_rays
 };
+/// Every way a path ends (EnergyEnding), in the order run states and batch tallies store them.
 inline constexpr std::array<EnergyEnding, 6> kEnergyEndings{{
     {"escaped", &EnergyBalance::escaped_w, &EnergyBalance::escaped_rays},
     {"absorbed", &EnergyBalance::absorbed_w, &EnergyBalance::absorbed_rays},
