@@ -14,8 +14,8 @@
 // So the hits are those of intersect() bit for bit, ties between instances included.
 
 #include "duplex/accel/InstanceTree.h"
-#include "duplex/accel/Error.h"
 #include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/Object.h"
 #include "duplex/accel/TopLevel.h"
 
 #include "InstanceTreeState.h"
@@ -25,7 +25,6 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <string>
 
 namespace duplex {
 
@@ -36,16 +35,14 @@ constexpr int kLanes = kMaxPacketRays;
 // Octant groups of at most this many rays go the single-ray way: the packet walk's bookkeeping
 // per node costs more than two or three rays save (random rays: one or two per octant).
 constexpr int kMinPacket = 3;
-// A packet whose rays point into more octants than this is traced ray by ray: 16 random directions
-// cover about 7 of the 8, camera rays 1, or up to 4 in the tiles on the image's axes.
-constexpr int kMaxOctants = 4;
 }  // namespace
 
 // A packet's rays by their index in the caller's packet.
 struct InstanceTree::PacketState {
   KdRay kray[kLanes];
   WorldRay w[kLanes];
-  float t[kLanes];  // best distance so far (closest hit), tfar (any hit)
+  float t[kLanes];                        // best distance so far (closest hit), tfar (any hit)
+  float t_enter[kLanes], t_exit[kLanes];  // the ray's segment in the tree's bounds
   Hit best[kLanes];
   const Record* winner[kLanes];
   Mailbox mailbox[kLanes];
@@ -56,15 +53,6 @@ struct Interval {
   float lo[kLanes], hi[kLanes];
 };
 }  // namespace
-
-void InstanceTree::checkPacket(const char* what, std::size_t rays, std::size_t hits) {
-  if (rays > static_cast<std::size_t>(kMaxPacketRays))
-    throw InvalidArgument(std::string(what) + ": " + std::to_string(rays) + " rays, at most " +
-                          std::to_string(kMaxPacketRays));
-  if (hits < rays)
-    throw InvalidArgument(std::string(what) + ": " + std::to_string(hits) + " hits for " + std::to_string(rays) +
-                          " rays");
-}
 
 template <bool AnyHit>
 std::uint32_t InstanceTree::packetWalk(PacketState& p, std::uint32_t lanes, std::uint32_t octant, QueryContext& ctx,
@@ -85,10 +73,8 @@ std::uint32_t InstanceTree::packetWalk(PacketState& p, std::uint32_t lanes, std:
   Interval iv;
   for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
     const int j = std::countr_zero(l);
-    float tmin, tmax;
-    clipRayToBox(p.kray[j], tree_.bounds, tmin, tmax);  // true: the caller kept only such rays
-    iv.lo[j] = widen_down(tmin);
-    iv.hi[j] = widen_up(tmax);
+    iv.lo[j] = widen_down(p.t_enter[j]);
+    iv.hi[j] = widen_up(p.t_exit[j]);
   }
   std::uint32_t done = 0;  // any hit: blocked lanes; closest hit: lanes that found something
   std::uint32_t index = 0;
@@ -198,7 +184,7 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   ctx.stats.rays += static_cast<std::uint64_t>(n);
   if (tree_.empty()) return 0;
   // A ray alone (or one of at most kMinPacket) in its octant, or every ray of a packet spread over
-  // more than kMaxOctants octants (incoherent: random directions), goes the single path (identical
+  // more than kMaxPacketOctants octants (incoherent: random directions), goes the single path (identical
   // results, no packet set-up). The octant is the sign bits of the direction, as KdRay's.
   auto single = [&](int i) {
     const Ray& r = rays_ws[static_cast<std::size_t>(i)];
@@ -219,7 +205,7 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   }
   int octants = 0;
   for (const std::uint32_t lanes : by_octant) octants += lanes != 0 ? 1 : 0;
-  if (octants > kMaxOctants) {
+  if (octants > kMaxPacketOctants) {
     for (const std::uint32_t lanes : by_octant)
       for (std::uint32_t l = lanes; l != 0; l &= l - 1) single(std::countr_zero(l));
     return result;
@@ -230,8 +216,7 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
     for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
       const int i = std::countr_zero(l);
       p.kray[i] = KdRay(rays_ws[static_cast<std::size_t>(i)]);
-      float tmin, tmax;
-      if (!clipRayToBox(p.kray[i], tree_.bounds, tmin, tmax)) lanes &= ~(1u << i);
+      if (!clipRayToBox(p.kray[i], tree_.bounds, p.t_enter[i], p.t_exit[i])) lanes &= ~(1u << i);
     }
   }
   for (std::uint32_t octant = 0; octant < 8; ++octant) {
@@ -271,13 +256,15 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
 
 std::uint32_t InstanceTree::intersectPacket(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
                                             std::uint32_t mask) const {
-  checkPacket("InstanceTree::intersectPacket", rays_ws.size(), hits.size());
+  if (!packetSizeOk(rays_ws.size(), hits.size()))
+    throwPacketSizeError("InstanceTree::intersectPacket", rays_ws.size(), hits.size());
   for (std::size_t i = 0; i < rays_ws.size(); ++i) hits[i] = Hit{};
   return packetQuery<false>(rays_ws, hits, ctx, mask);
 }
 
 std::uint32_t InstanceTree::occludedPacket(std::span<const Ray> rays_ws, QueryContext& ctx, std::uint32_t mask) const {
-  checkPacket("InstanceTree::occludedPacket", rays_ws.size(), rays_ws.size());
+  if (!packetSizeOk(rays_ws.size(), rays_ws.size()))
+    throwPacketSizeError("InstanceTree::occludedPacket", rays_ws.size(), rays_ws.size());
   return packetQuery<true>(rays_ws, {}, ctx, mask);
 }
 

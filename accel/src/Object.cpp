@@ -12,21 +12,17 @@ void Object::savePrepared(const std::filesystem::path& path) const {
                         "' has no prepared structure format (cannot write " + path.string() + ")");
 }
 
-namespace {
-std::uint32_t checkedLanes(const Object& object, std::size_t rays, std::uint32_t active) {
+void throwPacketSizeError(const std::string& what, std::size_t rays, std::size_t hits) {
   if (rays > static_cast<std::size_t>(kMaxPacketRays))
-    throw InvalidArgument("packet query of object '" + object.name() + "': " + std::to_string(rays) +
-                          " rays, at most " + std::to_string(kMaxPacketRays));
-  return rays == static_cast<std::size_t>(kMaxPacketRays) ? active : active & ((1u << rays) - 1u);
+    throw InvalidArgument(what + ": " + std::to_string(rays) + " rays, at most " + std::to_string(kMaxPacketRays));
+  throw InvalidArgument(what + ": " + std::to_string(hits) + " hits for " + std::to_string(rays) + " rays");
 }
-}  // namespace
 
 std::uint32_t Object::intersectPacket(std::span<const Ray> rays_os, std::span<Hit> hits, std::uint32_t active,
                                       QueryContext& ctx) const {
-  active = checkedLanes(*this, rays_os.size(), active);
-  if (hits.size() < rays_os.size())
-    throw InvalidArgument("packet query of object '" + name() + "': " + std::to_string(hits.size()) + " hits for " +
-                          std::to_string(rays_os.size()) + " rays");
+  if (!packetSizeOk(rays_os.size(), hits.size()))
+    throwPacketSizeError("packet query of object '" + name() + "'", rays_os.size(), hits.size());
+  active &= packetLanes(rays_os.size());
   std::uint32_t found = 0;
   for (; active != 0; active &= active - 1) {
     const int i = std::countr_zero(active);
@@ -36,7 +32,9 @@ std::uint32_t Object::intersectPacket(std::span<const Ray> rays_os, std::span<Hi
 }
 
 std::uint32_t Object::occludedPacket(std::span<const Ray> rays_os, std::uint32_t active, QueryContext& ctx) const {
-  active = checkedLanes(*this, rays_os.size(), active);
+  if (!packetSizeOk(rays_os.size(), rays_os.size()))
+    throwPacketSizeError("packet query of object '" + name() + "'", rays_os.size(), rays_os.size());
+  active &= packetLanes(rays_os.size());
   std::uint32_t blocked = 0;
   for (; active != 0; active &= active - 1) {
     const int i = std::countr_zero(active);

@@ -275,7 +275,7 @@ inline unsigned occludedPacketKernel(const MeshBvhView& bvh, const MeshRay* cons
 
 // Splits the queryable lanes of a packet (at most kMaxPacketRays rays) by octant and into groups of
 // PV::kWidth lanes. A group of at most PV::kMinPacket rays (random rays: one or two per octant),
-// and every group of a packet spread over more than 4 octants, goes ray by ray through
+// and every group of a packet spread over more than kMaxPacketOctants octants, goes ray by ray through
 // `single(oct, i)` (i: the packet index), since packet setup would cost more than it saves; larger groups go through
 // `packet(oct, lanes, p, group)`, where group[j] is the packet index of lane j of `p` and `lanes` the group's lane
 // mask. Rays that are not queryable are left out.
@@ -286,11 +286,11 @@ inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepar
     const int i = std::countr_zero(lanes);
     if (prepareMeshRay(rays[i], prepared[i])) by_octant[octantOf(prepared[i])] |= 1u << i;
   }
-  // Rays spread over more than 4 octants (16 random directions cover about 7) are incoherent: ray
-  // by ray, at the single path's cost.
+  // Incoherent rays (spread over more than kMaxPacketOctants octants): ray by ray, at the single
+  // path's cost.
   int octants = 0;
   for (const unsigned lanes : by_octant) octants += lanes != 0 ? 1 : 0;
-  const int min_packet = octants > 4 ? kMaxPacketRays : PV::kMinPacket;
+  const int min_packet = octants > kMaxPacketOctants ? kMaxPacketRays : PV::kMinPacket;
   for (int oct = 0; oct < 8; ++oct) {
     unsigned left = by_octant[oct];
     if (std::popcount(left) <= min_packet) {

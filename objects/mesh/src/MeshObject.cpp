@@ -821,17 +821,16 @@ bool MeshObject::occluded(const Ray& ray_os, QueryContext&) const { return occlu
 
 std::uint32_t MeshObject::intersectPacket(std::span<const Ray> rays_os, std::span<Hit> hits, std::uint32_t active,
                                           QueryContext& ctx) const {
-  if (structure_ != MeshStructure::Bvh || rays_os.size() > static_cast<std::size_t>(kMaxPacketRays) ||
-      hits.size() < rays_os.size())
+  if (structure_ != MeshStructure::Bvh || !packetSizeOk(rays_os.size(), hits.size()))
     return Object::intersectPacket(rays_os, hits, active, ctx);  // the kd-tree, or the default's errors
-  if (rays_os.size() < static_cast<std::size_t>(kMaxPacketRays)) active &= (1u << rays_os.size()) - 1u;
+  active &= packetLanes(rays_os.size());
   return detail::meshBvhKernels().intersectPacket(bvhView(bvh_, blocks_), rays_os.data(), hits.data(), active);
 }
 
 std::uint32_t MeshObject::occludedPacket(std::span<const Ray> rays_os, std::uint32_t active, QueryContext& ctx) const {
-  if (structure_ != MeshStructure::Bvh || rays_os.size() > static_cast<std::size_t>(kMaxPacketRays))
+  if (structure_ != MeshStructure::Bvh || !packetSizeOk(rays_os.size(), rays_os.size()))
     return Object::occludedPacket(rays_os, active, ctx);
-  if (rays_os.size() < static_cast<std::size_t>(kMaxPacketRays)) active &= (1u << rays_os.size()) - 1u;
+  active &= packetLanes(rays_os.size());
   return detail::meshBvhKernels().occludedPacket(bvhView(bvh_, blocks_), rays_os.data(), active);
 }
 

@@ -212,7 +212,6 @@ class InstanceTree {
   Hit intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const;
   // The packet queries (InstanceTreePacket.cpp).
   struct PacketState;
-  static void checkPacket(const char* what, std::size_t rays, std::size_t hits);
   template <bool AnyHit>
   std::uint32_t packetQuery(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
                             std::uint32_t mask) const;

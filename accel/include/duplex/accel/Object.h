@@ -75,6 +75,10 @@ struct ObjectFigure {
   std::size_t value = 0;  ///< the count
 };
 
+/// Throws InvalidArgument naming `what` (the query and its object) for a packet query given more
+/// than kMaxPacketRays rays or fewer hits than rays (packetSizeOk in Ray.h is false).
+[[noreturn]] void throwPacketSizeError(const std::string& what, std::size_t rays, std::size_t hits);
+
 /// An immutable, shareable object (a mesh, a volume, a sensor). Any number of instances refer to
 /// one Object and share its bottom-level structure. All methods are const and thread-safe; per-query
 /// mutable state (caches, accessors, counters) lives in the QueryContext, one per thread.

@@ -5,6 +5,8 @@
 #include <glm/vec3.hpp>
 
 #include <cmath>
+#include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <ostream>
 
@@ -28,6 +30,17 @@ static_assert(sizeof(Ray) == 32, "Ray must match the 32-byte ray-file record");
 /// The most rays a packet query takes at once (Object::intersectPacket(), occludedPacket(): one
 /// bit each of their lane masks): the widest packet of the SIMD paths (AVX-512: 16 rays).
 inline constexpr int kMaxPacketRays = 16;
+/// A packet whose rays point into more octants than this is incoherent (16 random directions cover
+/// about 7 of the 8): the packet queries trace its rays one by one.
+inline constexpr int kMaxPacketOctants = 4;
+
+/// The lanes of a packet of `rays` rays (at most kMaxPacketRays): bits 0 to rays - 1.
+constexpr std::uint32_t packetLanes(std::size_t rays) { return (1u << rays) - 1u; }
+/// Whether a packet query may take `rays` rays with room for `hits` hits (throwPacketSizeError in
+/// Object.h reports it when not).
+constexpr bool packetSizeOk(std::size_t rays, std::size_t hits) {
+  return rays <= static_cast<std::size_t>(kMaxPacketRays) && hits >= rays;
+}
 
 /// A world-space ray in double precision, for queries far from the origin (picking): the top level
 /// converts it to object space in double, so a hit's accuracy depends on the object's size, not on
