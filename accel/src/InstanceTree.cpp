@@ -58,6 +58,7 @@ Prepared prepare(const InstanceDesc& d) {
   p.record.mask = d.mask;
   p.record.role = d.object->role();
   p.record.identity = l == glm::dmat3(1.0) && d.world_from_object.translation == glm::dvec3(0.0);
+  p.record.entry = d.object->rayEntry();
   p.owner = d.object;
   p.box = d.world_from_object.apply(d.object->bounds());
   // A finite double transform can still carry the box beyond float range (a scale of 1e30 on an
@@ -522,36 +523,37 @@ void InstanceTree::shrinkRootIfDue(bool periodic) {
 // ---------------------------------------------------------------------------------------------
 // Queries (the per-ray helpers are in InstanceTreeState.h)
 
+// The closest-hit and any-hit walks: the ray is set up once with SSE (validity, inverse direction,
+// the clip to the root box), a leaf tests each box's three slabs at once, and the closest-hit walk
+// visits a leaf's instances nearest first (InstanceTreeState.h).
 Hit InstanceTree::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
-  if (!isQueryable(ray_f) || tree_.empty()) return Hit{};
-  const WorldRay w = ray_d ? fromDouble(*ray_d) : fromFloat(ray_f);
+  KdRay kray;
+  float tmin, tmax;
+  if (tree_.empty() || !prepareKdRay(ray_f, kray) || !clipPreparedRay(ray_f, kray, tree_.bounds, tmin, tmax))
+    return Hit{};
+  const WorldRay w{ray_f, ray_d};
   const Record* records = state_->records.data();
   const SlotFilter* filters = state_->filters.data();
   const Box* boxes = state_->boxes.data();
+  const std::uint32_t* prims = tree_.prim_indices.data();
   Hit best;
-  best.t = ray_f.tfar;
+  std::uint32_t best_id = kInvalidId;
   const Record* winner = nullptr;
   Mailbox mailbox;
-  const KdRay kray(ray_f);
   float t_best = ray_f.tfar;
-  traverseKdTree<false>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
-    bool found = false;
-    for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t slot = tree_.prim_indices[i];
-      const SlotFilter f = filters[slot];
-      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], t) ||
-          mailbox.seen(slot))
-        continue;
-      const Record& rec = records[slot];
-      ++ctx.stats.instance_visits;
-      if (closerHit(rec, w, best, t, ctx)) {
-        winner = &rec;
-        found = true;
-      }
-    }
-    return found;
-  });
+  const auto pass = [mask](SlotFilter f) { return (f.mask & mask) != 0 && f.role == ObjectRole::Surface; };
+  const BoxTestRay box_ray(kray);
+  traverseKdTreeClipped<false>(
+      tree_, kray, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
+        return closestInLeaf(box_ray, prims + begin, count, filters, boxes, t, mailbox, pass, [&](std::uint32_t slot) {
+          const Record& rec = records[slot];
+          ++ctx.stats.instance_visits;
+          if (!closerHit(rec, w, best, t, best_id, ctx)) return false;
+          winner = &rec;
+          return true;
+        });
+      });
   if (!winner) return Hit{};
   best.instance_id = winner->id;
   best.ng = normalToWorld(*winner, best.ng);
@@ -568,27 +570,31 @@ Hit InstanceTree::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t
 
 bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
-  if (!isQueryable(ray_ws) || tree_.empty()) return false;
+  KdRay kray;
+  float tmin, tmax;
+  if (tree_.empty() || !prepareKdRay(ray_ws, kray) || !clipPreparedRay(ray_ws, kray, tree_.bounds, tmin, tmax))
+    return false;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
   const SlotFilter* filters = state_->filters.data();
   const Box* boxes = state_->boxes.data();
+  const std::uint32_t* prims = tree_.prim_indices.data();
   Mailbox mailbox;
-  const KdRay kray(ray_ws);
   float t_best = ray_ws.tfar;
-  return traverseKdTree<true>(tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
-    for (std::uint32_t i = begin; i < begin + count; ++i) {
-      const std::uint32_t slot = tree_.prim_indices[i];
-      const SlotFilter f = filters[slot];
-      if ((f.mask & mask) == 0 || f.role != ObjectRole::Surface || !meetsBox(kray, boxes[slot], ray_ws.tfar) ||
-          mailbox.seen(slot))
-        continue;
-      const Record& rec = records[slot];
-      ++ctx.stats.instance_visits;
-      if (rec.object->occluded(toObject(rec, w), ctx)) return true;
-    }
-    return false;
-  });
+  const auto pass = [mask](SlotFilter f) { return (f.mask & mask) != 0 && f.role == ObjectRole::Surface; };
+  const BoxTestRay box_ray(kray);
+  return traverseKdTreeClipped<true>(
+      tree_, kray, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
+        for (std::uint32_t i = begin; i < begin + count; ++i) {
+          const std::uint32_t slot = prims[i];
+          float t_enter;
+          if (!pass(filters[slot]) || !meetsBoxAt(box_ray, boxes[slot], ray_ws.tfar, t_enter) || mailbox.seen(slot))
+            continue;
+          ++ctx.stats.instance_visits;
+          if (occludes(records[slot], w, ctx)) return true;
+        }
+        return false;
+      });
 }
 
 void InstanceTree::intersectAll(const Ray& ray_ws, std::vector<Hit>& hits, QueryContext& ctx,

@@ -44,6 +44,7 @@ struct InstanceTree::PacketState {
   float t[kLanes];                        // best distance so far (closest hit), tfar (any hit)
   float t_enter[kLanes], t_exit[kLanes];  // the ray's segment in the tree's bounds
   Hit best[kLanes];
+  std::uint32_t best_id[kLanes];  // the instance of best (kInvalidId: none yet), for the tie rule
   const Record* winner[kLanes];
   Mailbox mailbox[kLanes];
 };
@@ -142,9 +143,10 @@ std::uint32_t InstanceTree::packetWalk(PacketState& p, std::uint32_t lanes, std:
         const int j = std::countr_zero(l);
         rays_os[j] = toObject(rec, p.w[j]);
         if constexpr (!AnyHit) {
-          rays_os[j].tfar = p.t[j];
-          hits_os[j] = p.best[j];
-          hits_os[j].t = p.t[j];
+          // As closerHit (InstanceTreeState.h): asked a few ulps beyond the best hit, decided by replacesBest.
+          rays_os[j].tfar = askBound(p.t[j]);
+          hits_os[j] = Hit{};
+          hits_os[j].t = rays_os[j].tfar;
         }
       }
       if constexpr (AnyHit) {
@@ -154,11 +156,13 @@ std::uint32_t InstanceTree::packetWalk(PacketState& p, std::uint32_t lanes, std:
         const std::uint32_t found = rec.object->intersectPacket(rays_os, hits_os, sub, ctx);
         for (std::uint32_t l = found; l != 0; l &= l - 1) {
           const int j = std::countr_zero(l);
+          if (!replacesBest(hits_os[j].t, rec.id, p.t[j], p.best_id[j])) continue;
           p.best[j] = hits_os[j];
           p.t[j] = hits_os[j].t;
+          p.best_id[j] = rec.id;
           p.winner[j] = &rec;
+          done |= 1u << j;
         }
-        done |= found;
       }
     }
     // The next entry with a ray that can still find a closer hit (any hit: is not blocked yet).
@@ -234,6 +238,7 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
       p.best[i] = Hit{};
       p.best[i].t = r.tfar;
       p.winner[i] = nullptr;
+      p.best_id[i] = kInvalidId;
       p.mailbox[i] = Mailbox{};
     }
     const std::uint32_t done = packetWalk<AnyHit>(p, lanes, octant, ctx, mask);

@@ -14,7 +14,10 @@
 
 #include <glm/matrix.hpp>
 
+#include <emmintrin.h>
+
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -55,6 +58,7 @@ struct Record {
   std::uint32_t mask = 0;
   ObjectRole role = ObjectRole::Surface;
   bool identity = false;  // skip the transform for instances placed as authored
+  ObjectRayEntry entry;   // the object's direct entry (Object::rayEntry), fetched once per edit
 };
 
 // The part of a record every reference test reads first, kept in its own dense array (8 bytes
@@ -101,31 +105,33 @@ struct Frontier {
   std::uint32_t edits;  // references added or removed in it since
 };
 
-// The world ray in both precisions: float for the top-level traversal, double for the transform
-// into object space.
+// The world ray as the caller gave it: float for the top-level traversal; the double ray when the
+// caller gave one (picking far from the origin), from which transformed instances take their
+// object-space rays. A float query converts to double only when it enters a transformed instance.
 struct WorldRay {
   Ray f;
-  RayD d;
+  const RayD* d = nullptr;
 };
 
-inline WorldRay fromFloat(const Ray& r) {
-  return {r, RayD{glm::dvec3(r.origin), glm::dvec3(r.dir), static_cast<double>(r.tnear), static_cast<double>(r.tfar)}};
-}
+inline WorldRay fromFloat(const Ray& r) { return {r, nullptr}; }
 
+// `r` must outlive the result.
 inline WorldRay fromDouble(const RayD& r) {
   Ray f;
   f.origin = glm::vec3(r.origin);
   f.dir = glm::vec3(r.dir);
   f.tnear = static_cast<float>(r.tnear);
   f.tfar = static_cast<float>(r.tfar);
-  return {f, r};
+  return {f, &r};
 }
 
 inline Ray toObject(const Record& rec, const WorldRay& w) {
   if (rec.identity) return w.f;
+  const glm::dvec3 o = w.d ? w.d->origin : glm::dvec3(w.f.origin);
+  const glm::dvec3 d = w.d ? w.d->dir : glm::dvec3(w.f.dir);
   Ray r;
-  r.origin = glm::vec3(rec.object_from_world.point(w.d.origin));
-  r.dir = glm::vec3(rec.object_from_world.vector(w.d.dir));
+  r.origin = glm::vec3(rec.object_from_world.point(o));
+  r.dir = glm::vec3(rec.object_from_world.vector(d));
   r.tnear = w.f.tnear;
   r.tfar = w.f.tfar;
   return r;
@@ -150,34 +156,151 @@ inline bool meetsBox(const KdRay& ray, const Box& box, float t_max) {
   return clipIntervalToBox(ray, box, t0, t1);
 }
 
-// Asks blocking instance `rec` for a hit closer than t (world units of w's direction); on one,
-// overwrites `best` (object-space normal, instance id not set) and t and returns true. The leaf step
-// of every closest-hit traversal (intersect and the crossing query).
-inline bool closerHit(const Record& rec, const WorldRay& w, Hit& best, float& t, QueryContext& ctx) {
+// The object-space bound an instance is asked with when the best hit so far is at world t: a few
+// ulps beyond t, so that a hit at exactly t (which an object may reject by the rounding of its own
+// test when asked with t itself) comes back and the tie rule below decides it.
+inline float askBound(float t) {
+  constexpr float kSlack = 4.0f * std::numeric_limits<float>::epsilon();
+  return t + std::abs(t) * kSlack;
+}
+
+// The closest-hit rule between instances: a hit replaces the best one when it is closer, or at the
+// same t from an instance of lower id. With it the winner does not depend on the order in which
+// instances are visited (the tree's shape, the single or packet walk, the leaf order).
+inline bool replacesBest(float t_hit, std::uint32_t id, float t_best, std::uint32_t best_id) {
+  return t_hit < t_best || (t_hit == t_best && id < best_id);
+}
+
+// Asks blocking instance `rec` for a hit; on one that replacesBest() (t, best_id: the best so far,
+// kInvalidId for none) overwrites `best` (object-space normal, instance id not set), t and best_id and
+// returns true. The leaf step of every closest-hit traversal (intersect and the crossing query).
+inline bool closerHit(const Record& rec, const WorldRay& w, Hit& best, float& t, std::uint32_t& best_id,
+                      QueryContext& ctx) {
   Ray ray_os = toObject(rec, w);
-  ray_os.tfar = t;
-  Hit h = best;
-  h.t = t;
-  if (!rec.object->intersect(ray_os, h, ctx)) return false;
+  ray_os.tfar = askBound(t);
+  Hit h;
+  h.t = ray_os.tfar;
+  const bool hit =
+      rec.entry.intersect ? rec.entry.intersect(rec.entry.data, ray_os, h) : rec.object->intersect(ray_os, h, ctx);
+  if (!hit || !replacesBest(h.t, rec.id, t, best_id)) return false;
   best = h;
   t = h.t;
+  best_id = rec.id;
   return true;
 }
 
+// Whether anything of blocking instance `rec` blocks the world ray within [tnear, tfar].
+inline bool occludes(const Record& rec, const WorldRay& w, QueryContext& ctx) {
+  const Ray ray_os = toObject(rec, w);
+  return rec.entry.occluded ? rec.entry.occluded(rec.entry.data, ray_os) : rec.object->occluded(ray_os, ctx);
+}
+
 // A small mailbox: an instance box usually spans several leaves, and a repeated bottom-level
-// traversal of the same instance for the same ray is wasted work.
+// traversal of the same instance for the same ray is wasted work. The eight slots are compared at
+// once (two vector compares, no branch per slot: how many slots a search compared depended on the
+// data and mispredicted).
 struct Mailbox {
-  std::uint32_t slots[8];
-  int count = 0, next = 0;
+  alignas(16) std::uint32_t slots[8] = {kInvalidId, kInvalidId, kInvalidId, kInvalidId,
+                                        kInvalidId, kInvalidId, kInvalidId, kInvalidId};
+  std::uint32_t next = 0;
   bool seen(std::uint32_t slot) {
-    for (int m = 0; m < count; ++m)
-      if (slots[m] == slot) return true;
+    const __m128i s = _mm_set1_epi32(static_cast<int>(slot));
+    const __m128i a = _mm_cmpeq_epi32(s, _mm_load_si128(reinterpret_cast<const __m128i*>(slots)));
+    const __m128i b = _mm_cmpeq_epi32(s, _mm_load_si128(reinterpret_cast<const __m128i*>(slots + 4)));
+    if (_mm_movemask_epi8(_mm_or_si128(a, b)) != 0) return true;
     slots[next] = slot;
-    next = (next + 1) & 7;
-    if (count < 8) ++count;
+    next = (next + 1) & 7u;
     return false;
   }
 };
+
+// A ray's values for the instance box tests, as vectors over the three axes (lane 3 unused),
+// computed once per ray.
+struct BoxTestRay {
+  __m128 origin, inv_dir;
+  float tnear;
+  bool any_zero;  // some direction component is zero: the scalar test's origin-in-slab rule
+  const KdRay* kd;
+  explicit BoxTestRay(const KdRay& r)
+      : origin(_mm_setr_ps(r.origin[0], r.origin[1], r.origin[2], 0.0f)),
+        inv_dir(_mm_setr_ps(r.inv_dir[0], r.inv_dir[1], r.inv_dir[2], 0.0f)),
+        tnear(r.tnear),
+        any_zero(r.zero[0] | r.zero[1] | r.zero[2]),
+        kd(&r) {}
+};
+
+// Whether the ray meets `box` within [ray.tnear, t_max], as meetsBox(), the three slabs at once;
+// `t_enter` gets the widened entry (the largest entry, widened once: the widening is monotonic,
+// so the bounds are clipIntervalToBox's). Rays with a zero direction component take meetsBox's
+// scalar rule.
+[[gnu::always_inline]] inline bool meetsBoxAt(const BoxTestRay& ray, const Box& box, float t_max, float& t_enter) {
+  if (ray.any_zero) {
+    float t1 = t_max;
+    t_enter = ray.tnear;
+    return clipIntervalToBox(*ray.kd, box, t_enter, t1);
+  }
+  // Box is {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z}: loads at lo.x and at lo.z stay inside it.
+  const __m128 lo = _mm_loadu_ps(&box.lo.x);
+  const __m128 b = _mm_loadu_ps(&box.lo.z);
+  const __m128 hi = _mm_shuffle_ps(b, b, _MM_SHUFFLE(3, 3, 2, 1));
+  const __m128 t0 = _mm_mul_ps(_mm_sub_ps(lo, ray.origin), ray.inv_dir);
+  const __m128 t1 = _mm_mul_ps(_mm_sub_ps(hi, ray.origin), ray.inv_dir);
+  const __m128 t_in = _mm_min_ps(t1, t0), t_out = _mm_max_ps(t1, t0);
+  // The largest entry and smallest exit of lanes 0..2.
+  const float enter =
+      _mm_cvtss_f32(_mm_max_ss(_mm_max_ss(t_in, _mm_shuffle_ps(t_in, t_in, 1)), _mm_movehl_ps(t_in, t_in)));
+  const float leave =
+      _mm_cvtss_f32(_mm_min_ss(_mm_min_ss(t_out, _mm_shuffle_ps(t_out, t_out, 1)), _mm_movehl_ps(t_out, t_out)));
+  constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
+  t_enter = std::max(ray.tnear, enter - std::abs(enter) * kWiden);
+  return t_enter <= std::min(t_max, leave + std::abs(leave) * kWiden);
+}
+
+// Calls met(slot, t_enter) for each reference of a leaf whose instance passes `pass(filter)` and
+// whose box the ray meets within [ray.tnear, t_max], in leaf order, with the box's widened entry.
+template <class Pass, class Met>
+[[gnu::always_inline]] inline void forEachMetRef(const BoxTestRay& ray, const std::uint32_t* refs, std::uint32_t count,
+                                                 const SlotFilter* filters, const Box* boxes, float t_max, Pass&& pass,
+                                                 Met&& met) {
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const std::uint32_t slot = refs[i];
+    float t_enter;
+    if (pass(filters[slot]) && meetsBoxAt(ray, boxes[slot], t_max, t_enter)) met(slot, t_enter);
+  }
+}
+
+// The closest-hit leaf step: the leaf's instances whose box the ray meets, visited in the order of
+// their box entry (the nearest first, so that its hit culls the others), skipping those whose box
+// starts behind the best hit and those the mailbox has seen. `visit(slot)` asks the instance and
+// returns whether it found a closer hit (lowering t).
+template <class Pass, class Visit>
+inline bool closestInLeaf(const BoxTestRay& ray, const std::uint32_t* refs, std::uint32_t count,
+                          const SlotFilter* filters, const Box* boxes, float& t, Mailbox& mailbox, Pass&& pass,
+                          Visit&& visit) {
+  constexpr std::uint32_t kChunk = 16;  // met references sorted at a time (leaves are far smaller)
+  bool found = false;
+  for (std::uint32_t begin = 0; begin < count; begin += kChunk) {
+    std::uint32_t met_slot[kChunk];
+    float met_t[kChunk];
+    std::uint32_t n = 0;
+    forEachMetRef(ray, refs + begin, std::min(kChunk, count - begin), filters, boxes, t, pass,
+                  [&](std::uint32_t slot, float t_enter) {
+                    // Insertion by entry distance (a leaf meets few boxes; equal entries keep leaf order).
+                    std::uint32_t j = n++;
+                    for (; j > 0 && met_t[j - 1] > t_enter; --j) {
+                      met_t[j] = met_t[j - 1];
+                      met_slot[j] = met_slot[j - 1];
+                    }
+                    met_t[j] = t_enter;
+                    met_slot[j] = slot;
+                  });
+    for (std::uint32_t j = 0; j < n && met_t[j] <= t; ++j) {
+      if (mailbox.seen(met_slot[j])) continue;
+      if (visit(met_slot[j])) found = true;
+    }
+  }
+  return found;
+}
 
 }  // namespace toplevel_detail
 

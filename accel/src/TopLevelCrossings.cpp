@@ -64,6 +64,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Cross
   media.clear();
   Hit best;
   best.t = ray_ws.tfar;
+  std::uint32_t best_id = kInvalidId;
   const Record* winner = nullptr;
   // A sensor's crossings within [tnear, t_reach] (world t), inserted in order (t, then instance
   // id): a ray meets few sensors, so keeping the list sorted costs less than sorting it. An
@@ -103,7 +104,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Cross
         const Record& rec = records[slot];
         ++ctx.stats.instance_visits;
         if (rec.role == ObjectRole::Surface) {
-          if (closerHit(rec, w, best, t, ctx)) {
+          if (closerHit(rec, w, best, t, best_id, ctx)) {
             winner = &rec;
             found = true;
           }

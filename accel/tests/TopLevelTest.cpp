@@ -216,6 +216,66 @@ TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {
   EXPECT_GT(s.hits, s.rays / 5);
 }
 
+TEST(TopLevel, TiesBetweenInstancesGoToTheLowestId) {
+  // Coincident copies of one sphere (the same transform: every ray meets all of them at the same t)
+  // beside two others: whatever the insertion order, tree shape, single or packet walk, the hit is
+  // the lowest id's, with the t and triangle of a scene holding that copy alone.
+  const Library lib;
+  const Affine at = Affine::fromRowMajor3x4(
+      rotationScaleTranslation(glm::dvec3(0.3, 0.2, 1.0), 0.7, glm::dvec3(1.3), {0.5, -0.2, 0.1}));
+  const std::uint32_t copies[] = {41, 7, 19, 3, 25, 12};
+  std::vector<InstanceDesc> instances;
+  for (const std::uint32_t id : copies) instances.push_back({lib.sphere, at, id});
+  instances.push_back({lib.box, Affine::fromRowMajor3x4({1, 0, 0, 4, 0, 1, 0, 0, 0, 0, 1, 0}), 1});
+  instances.push_back({lib.soup, Affine::fromRowMajor3x4({1, 0, 0, -4, 0, 1, 0, 0, 0, 0, 1, 0}), 2});
+  std::vector<InstanceDesc> alone(1, InstanceDesc{lib.sphere, at, 3});
+  TopLevel top, single;
+  buildTopChecked(top, instances);
+  buildTopChecked(single, alone);
+  std::vector<Ray> rays = primaryRays(top.bounds(), 48, 48);
+  const auto random = randomRays(top.bounds(), 2000, 5);
+  rays.insert(rays.end(), random.begin(), random.end());
+  QueryContext ctx;
+  auto check = [&](std::uint32_t lowest, const std::string& label) {
+    std::size_t on_copies = 0, failures = 0;
+    for (std::size_t i = 0; i < rays.size(); i += kMaxPacketRays) {
+      const std::size_t n = std::min<std::size_t>(kMaxPacketRays, rays.size() - i);
+      const std::span<const Ray> packet(rays.data() + i, n);
+      Hit packet_hits[kMaxPacketRays];
+      top.intersectPacket(packet, std::span<Hit>(packet_hits, n), ctx);
+      for (std::size_t j = 0; j < n; ++j) {
+        const Ray& ray = packet[j];
+        const Hit h = top.intersect(ray, ctx);
+        const Hit ref = single.intersect(ray, ctx);
+        const RayD ray_d{glm::dvec3(ray.origin), glm::dvec3(ray.dir), ray.tnear, ray.tfar};
+        const Hit hd = top.intersect(ray_d, ctx);
+        const bool copy_hit = h.valid() && h.instance_id != 1 && h.instance_id != 2;
+        if (copy_hit) ++on_copies;
+        const bool ok =
+            (!copy_hit || (h.instance_id == lowest && ref.valid() && h.t == ref.t && h.prim_id == ref.prim_id)) &&
+            packet_hits[j].instance_id == h.instance_id && packet_hits[j].t == h.t &&
+            packet_hits[j].prim_id == h.prim_id &&
+            (!hd.valid() || hd.instance_id == 1 || hd.instance_id == 2 || hd.instance_id == lowest);
+        if (!ok && failures++ < 5)
+          ADD_FAILURE() << label << ", ray " << i + j << ": " << h << " (packet " << packet_hits[j] << ", alone " << ref
+                        << ", double " << hd << "), expected instance " << lowest;
+      }
+    }
+    EXPECT_EQ(failures, 0u) << label;
+    EXPECT_GT(on_copies, rays.size() / 10) << label << ": too few rays reach the copies to test the rule";
+  };
+  check(3, "built");
+  // Incremental edits change the tree and the slots; the rule does not depend on them.
+  top.remove(3);
+  top.set({lib.sphere, at, 3});
+  top.remove(7);
+  top.commit();
+  check(3, "after re-adding 3 and removing 7");
+  top.remove(3);
+  top.commit();
+  check(12, "after removing 3");
+}
+
 TEST(TopLevel, AnalyticScaledBox) {
   // Unit box [-1, 1]^3 scaled by 2 around (0, 0, 0): the face z = -2 is hit at t = 8 from z = -10,
   // t is in units of the (unnormalised) world direction, and ng points along -z.

@@ -158,8 +158,9 @@ struct PV {
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
-const MeshBvhKernels kKernels{SimdIsa::Sse2,        intersectEntry,      occludedEntry, forEachLeafEntry,
-                              intersectPacketEntry, occludedPacketEntry, PV::kWidth};
+const MeshBvhKernels kKernels{SimdIsa::Sse2,    intersectEntry,       occludedEntry,
+                              forEachLeafEntry, intersectPacketEntry, occludedPacketEntry,
+                              PV::kWidth,       intersectViewEntry,   occludedViewEntry};
 }  // namespace sse2
 
 #if defined(__clang__)
@@ -389,8 +390,9 @@ struct PV {
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
-const MeshBvhKernels kKernels{SimdIsa::Avx2,        intersectEntry,      occludedEntry, forEachLeafEntry,
-                              intersectPacketEntry, occludedPacketEntry, PV::kWidth};
+const MeshBvhKernels kKernels{SimdIsa::Avx2,    intersectEntry,       occludedEntry,
+                              forEachLeafEntry, intersectPacketEntry, occludedPacketEntry,
+                              PV::kWidth,       intersectViewEntry,   occludedViewEntry};
 }  // namespace avx2
 #if defined(__clang__)
 #pragma clang attribute pop
@@ -450,8 +452,9 @@ struct PV {
 #include "MeshBvhTraversal.inl"
 
 }  // namespace
-const MeshBvhKernels kKernels{SimdIsa::Avx512,      intersectEntry,      occludedEntry, forEachLeafEntry,
-                              intersectPacketEntry, occludedPacketEntry, PV::kWidth};
+const MeshBvhKernels kKernels{SimdIsa::Avx512,  intersectEntry,       occludedEntry,
+                              forEachLeafEntry, intersectPacketEntry, occludedPacketEntry,
+                              PV::kWidth,       intersectViewEntry,   occludedViewEntry};
 }  // namespace avx512
 #if defined(__clang__)
 #pragma clang attribute pop

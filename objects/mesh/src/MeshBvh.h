@@ -45,6 +45,9 @@ struct MeshBvhKernels {
   unsigned (*occludedPacket)(const MeshBvhView& bvh, const Ray* rays, unsigned active);
   /// Rays traced together: 4 (SSE2), 8 (AVX2), 16 (AVX-512).
   int packet_width;
+  /// intersect and occluded with the view passed as ObjectRayEntry::data (MeshObject::rayEntry).
+  bool (*intersect_view)(const void* bvh, const Ray& ray, Hit& hit);
+  bool (*occluded_view)(const void* bvh, const Ray& ray);
 };
 
 /// The kernels of widestSimdIsa().

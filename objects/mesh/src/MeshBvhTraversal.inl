@@ -125,6 +125,15 @@ inline bool occludedEntry(const MeshBvhView& bvh, const Ray& ray_os) {
   return byOctant(octantOf(ray), [&](auto oct) { return occludedKernel<oct.value>(bvh, ray_os, ray); });
 }
 
+// The direct entries (ObjectRayEntry): `bvh` is the object's MeshBvhView.
+inline bool intersectViewEntry(const void* bvh, const Ray& ray_os, Hit& hit) {
+  return intersectEntry(*static_cast<const MeshBvhView*>(bvh), ray_os, hit);
+}
+
+inline bool occludedViewEntry(const void* bvh, const Ray& ray_os) {
+  return occludedEntry(*static_cast<const MeshBvhView*>(bvh), ray_os);
+}
+
 inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhLeafVisitor visit, void* context) {
   if (bvh.root == BvhRef::kEmpty) return;
   MeshRay ray;

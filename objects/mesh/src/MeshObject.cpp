@@ -352,6 +352,18 @@ void MeshObject::buildBvhBlocks() {
       fillBvhBlock(blocks_[b], &refs[4 * b], m.triangles().data(), m.positions().data(),
                    [](const glm::vec3&, const glm::vec3&, const glm::vec3&) {});
   });
+  makeView();
+}
+
+void MeshObject::makeView() {
+  view_ = std::make_unique<const detail::MeshBvhView>(
+      detail::MeshBvhView{bvh_.nodes.data(), bvh_.root, bvh_.bounds, blocks_.data()});
+}
+
+ObjectRayEntry MeshObject::rayEntry() const {
+  if (structure_ != MeshStructure::Bvh || !view_) return {};
+  const detail::MeshBvhKernels& k = detail::meshBvhKernels();
+  return {k.intersect_view, k.occluded_view, view_.get()};
 }
 
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag)
@@ -447,6 +459,7 @@ std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::
   // Every valid triangle is in a leaf: the refitted bounds are the mesh's.
   out->mesh_ =
       std::make_shared<const TriangleMesh>(mesh_->withPositionsOfSameValidity(std::move(positions), bvh.bounds));
+  out->makeView();
   return out;
 }
 

@@ -9,6 +9,8 @@
 
 #include <glm/vec3.hpp>
 
+#include <emmintrin.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -76,6 +78,80 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   tmin = ray.tnear;
   tmax = ray.tfar;
   return clipIntervalToBox(ray, box, tmin, tmax);
+}
+
+/// Fills `k` with the values KdRay(ray) holds, computed with SSE in one pass (one vector division
+/// instead of three scalar ones, one branch for the validity checks): returns false, leaving `k`
+/// unspecified, when the ray is not queryable (isQueryable in Ray.h). `ray` and `k` are in the same
+/// space (the tree's). The top level and the mesh queries both set their rays up this way.
+[[gnu::always_inline]] inline bool prepareKdRay(const Ray& ray, KdRay& k) {
+  // Ray is {ox, oy, oz, tnear, dx, dy, dz, tfar}: two unaligned loads.
+  const __m128 o = _mm_loadu_ps(&ray.origin.x);
+  const __m128 d = _mm_loadu_ps(&ray.dir.x);
+  const __m128 sign_bit = _mm_set1_ps(-0.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  // isQueryable with one branch: origin and direction finite (|x| < inf is false for NaN and inf),
+  // some direction component non-zero, tnear <= tfar.
+  const int finite = _mm_movemask_ps(
+      _mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf), _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
+  const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
+  if (((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar)) return false;
+  // 1/d is already +-inf with the sign of d for a zero (or denormal) component, which is what
+  // KdRay stores for them. Lane 3 (1/tfar) is never read.
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
+  const int zero = _mm_movemask_ps(_mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf));
+  alignas(16) float inv_dir[4];
+  alignas(16) std::uint32_t neg_mask[4];
+  _mm_store_ps(inv_dir, inv);
+  _mm_store_si128(reinterpret_cast<__m128i*>(neg_mask), _mm_srai_epi32(_mm_castps_si128(inv), 31));
+  for (int a = 0; a < 3; ++a) {
+    k.origin[a] = (&ray.origin.x)[a];
+    k.inv_dir[a] = inv_dir[a];
+    k.neg_mask[a] = neg_mask[a];
+    k.zero[a] = (zero >> a & 1) != 0;
+  }
+  k.tnear = ray.tnear;
+  k.tfar = ray.tfar;
+  return true;
+}
+
+/// clipRayToBox(k, box, tmin, tmax) for a ray `k` that prepareKdRay filled from `ray`, the three
+/// slabs at once with SSE: the same interval (only the sign of a zero bound may differ, which no
+/// comparison sees) and the same answer.
+[[gnu::always_inline]] inline bool clipPreparedRay(const Ray& ray, const KdRay& k, const Box& box, float& tmin,
+                                                   float& tmax) {
+  const __m128 o = _mm_loadu_ps(&ray.origin.x);
+  const __m128 d = _mm_loadu_ps(&ray.dir.x);
+  const __m128 sign_bit = _mm_set1_ps(-0.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 inv = _mm_setr_ps(k.inv_dir[0], k.inv_dir[1], k.inv_dir[2], 0.0f);
+  const __m128 zero_dir = _mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf);
+  // clipIntervalToBox's rules: per axis the entry and exit are widened, and a widened value that is
+  // NaN (an infinite distance) is ignored, as std::max / std::min ignore it there; SSE's max / min
+  // return their second operand when either is NaN. An axis with zero direction only tests the
+  // origin against the closed slab.
+  const __m128 lo = _mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f);
+  const __m128 hi = _mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f);
+  const __m128 outside = _mm_or_ps(_mm_cmplt_ps(o, lo), _mm_cmpgt_ps(o, hi));
+  if ((_mm_movemask_ps(_mm_and_ps(zero_dir, outside)) & 7) != 0) return false;
+  const __m128 t0 = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
+  const __m128 t1 = _mm_mul_ps(_mm_sub_ps(hi, o), inv);
+  // std::min(t0, t1) is t1 < t0 ? t1 : t0, as _mm_min_ps(t1, t0).
+  const __m128 t_in = _mm_min_ps(t1, t0);
+  const __m128 t_out = _mm_max_ps(t1, t0);
+  constexpr float kWiden = 2.0f * 3.0f * std::numeric_limits<float>::epsilon();
+  const __m128 widen = _mm_set1_ps(kWiden);
+  __m128 w_in = _mm_sub_ps(t_in, _mm_mul_ps(_mm_andnot_ps(sign_bit, t_in), widen));
+  __m128 w_out = _mm_add_ps(t_out, _mm_mul_ps(_mm_andnot_ps(sign_bit, t_out), widen));
+  // Zero-direction lanes do not limit the interval (-inf / +inf are neutral below).
+  w_in = _mm_or_ps(_mm_and_ps(zero_dir, _mm_xor_ps(inf, sign_bit)), _mm_andnot_ps(zero_dir, w_in));
+  w_out = _mm_or_ps(_mm_and_ps(zero_dir, inf), _mm_andnot_ps(zero_dir, w_out));
+  // max(tnear, w) per lane (a NaN w gives tnear), then the largest of lanes 0..2; min likewise.
+  const __m128 m_in = _mm_max_ps(w_in, _mm_shuffle_ps(o, o, _MM_SHUFFLE(3, 3, 3, 3)));
+  const __m128 m_out = _mm_min_ps(w_out, _mm_shuffle_ps(d, d, _MM_SHUFFLE(3, 3, 3, 3)));
+  tmin = _mm_cvtss_f32(_mm_max_ss(_mm_max_ss(m_in, _mm_shuffle_ps(m_in, m_in, 1)), _mm_movehl_ps(m_in, m_in)));
+  tmax = _mm_cvtss_f32(_mm_min_ss(_mm_min_ss(m_out, _mm_shuffle_ps(m_out, m_out, 1)), _mm_movehl_ps(m_out, m_out)));
+  return tmin <= tmax;
 }
 
 /// A leaf without primitives (not a jump: a jump's count field is all ones).

@@ -75,6 +75,20 @@ struct ObjectFigure {
   std::size_t value = 0;  ///< the count
 };
 
+/// A direct entry into an object's closest-hit and any-hit queries, for the top level's inner loop:
+/// plain functions and the object's data, fetched once when an instance is committed and called per
+/// visit without a virtual dispatch or a query context. A type offers one (Object::rayEntry) when
+/// those queries read nothing but the object itself (meshes with a BVH). Both functions answer
+/// exactly what Object::intersect and Object::occluded answer for the same object-space ray.
+struct ObjectRayEntry {
+  /// As Object::intersect(ray_os, hit, ctx); `data` is ObjectRayEntry::data.
+  bool (*intersect)(const void* data, const Ray& ray_os, Hit& hit) = nullptr;
+  /// As Object::occluded(ray_os, ctx).
+  bool (*occluded)(const void* data, const Ray& ray_os) = nullptr;
+  /// What both functions read; owned by the object and valid as long as it lives.
+  const void* data = nullptr;
+};
+
 /// Throws InvalidArgument naming `what` (the query and its object) for a packet query given more
 /// than kMaxPacketRays rays or fewer hits than rays (packetSizeOk in Ray.h is false).
 [[noreturn]] void throwPacketSizeError(const std::string& what, std::size_t rays, std::size_t hits);
@@ -106,6 +120,9 @@ class Object {
   /// space geometric normal) and returns true; otherwise leaves `hit` alone and returns false.
   /// Objects that do not block (role() != Surface) are never asked.
   virtual bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const = 0;
+  /// The object's direct entry for closest-hit and any-hit queries (see ObjectRayEntry), or an
+  /// empty one (the default), which makes the top level call intersect() and occluded().
+  [[nodiscard]] virtual ObjectRayEntry rayEntry() const { return {}; }
   /// Whether anything blocks `ray_os` within [tnear, tfar] (object space).
   [[nodiscard]] virtual bool occluded(const Ray& ray_os, QueryContext& ctx) const = 0;
   /// Appends every surface crossing of `ray_os` with t in [tnear, tfar] to `hits`, each once, in

@@ -20,7 +20,8 @@ namespace duplex {
 
 namespace detail {
 struct TriangleBlock4;
-}
+struct MeshBvhView;
+}  // namespace detail
 
 /// The bottom-level structures a mesh can have.
 enum class MeshStructure {
@@ -76,6 +77,8 @@ class MeshObject final : public Object {
   [[nodiscard]] Box bounds() const override { return mesh_->bounds(); }
   bool intersect(const Ray& ray_os, Hit& hit, QueryContext& ctx) const override;
   [[nodiscard]] bool occluded(const Ray& ray_os, QueryContext& ctx) const override;
+  /// The BVH's kernels with this object's view (ObjectRayEntry); empty for the kd-tree structure.
+  [[nodiscard]] ObjectRayEntry rayEntry() const override;
   void intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryContext& ctx) const override;
   /// With the BVH: the rays of one octant traced together through the tree, in packets of the SIMD
   /// path's width (4, 8 or 16 rays), bit for bit the hits of intersect(); with the kd-tree: ray by
@@ -163,8 +166,10 @@ class MeshObject final : public Object {
   void buildBvh(const BvhBuildConfig& config);
   /// Fills blocks_ and block_tree_ from tree_ (see below).
   void buildLeafBlocks();
-  /// Fills blocks_ from bvh_: block k holds bvh_.prim_indices[4k, 4k + 4).
+  /// Fills blocks_ from bvh_: block k holds bvh_.prim_indices[4k, 4k + 4), and makes view_.
   void buildBvhBlocks();
+  /// Points view_ at bvh_ and blocks_ (once both are final).
+  void makeView();
 
   std::shared_ptr<const TriangleMesh> mesh_;
   MeshStructure structure_ = MeshStructure::Bvh;
@@ -182,6 +187,9 @@ class MeshObject final : public Object {
   // block instead of into prim_indices (which stays empty), so reaching a leaf's triangles costs no
   // dependent load through an index list.
   KdTree block_tree_;
+  // The BVH kernels' view of bvh_ and blocks_ (BVH structure only), kept for the direct entry
+  // (rayEntry) so that an instance visit builds none.
+  std::unique_ptr<const detail::MeshBvhView> view_;
 };
 
 }  // namespace duplex
