@@ -529,9 +529,9 @@ void InstanceTree::shrinkRootIfDue(bool periodic) {
 Hit InstanceTree::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
   KdRay kray;
+  BoxTestRay box_ray;
   float tmin, tmax;
-  if (tree_.empty() || !prepareKdRay(ray_f, kray) || !clipPreparedRay(ray_f, kray, tree_.bounds, tmin, tmax))
-    return Hit{};
+  if (tree_.empty() || !setupWorldRay(ray_f, tree_.bounds, kray, box_ray, tmin, tmax)) return Hit{};
   const WorldRay w{ray_f, ray_d};
   const Record* records = state_->records.data();
   const SlotFilter* filters = state_->filters.data();
@@ -543,7 +543,6 @@ Hit InstanceTree::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContex
   Mailbox mailbox;
   float t_best = ray_f.tfar;
   const auto pass = [mask](SlotFilter f) { return (f.mask & mask) != 0 && f.role == ObjectRole::Surface; };
-  const BoxTestRay box_ray(kray);
   traverseKdTreeClipped<false>(
       tree_, kray, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
         return closestInLeaf(box_ray, prims + begin, count, filters, boxes, t, mailbox, pass, [&](std::uint32_t slot) {
@@ -571,9 +570,9 @@ Hit InstanceTree::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t
 bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
   KdRay kray;
+  BoxTestRay box_ray;
   float tmin, tmax;
-  if (tree_.empty() || !prepareKdRay(ray_ws, kray) || !clipPreparedRay(ray_ws, kray, tree_.bounds, tmin, tmax))
-    return false;
+  if (tree_.empty() || !setupWorldRay(ray_ws, tree_.bounds, kray, box_ray, tmin, tmax)) return false;
   const WorldRay w = fromFloat(ray_ws);
   const Record* records = state_->records.data();
   const SlotFilter* filters = state_->filters.data();
@@ -582,7 +581,6 @@ bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t 
   Mailbox mailbox;
   float t_best = ray_ws.tfar;
   const auto pass = [mask](SlotFilter f) { return (f.mask & mask) != 0 && f.role == ObjectRole::Surface; };
-  const BoxTestRay box_ray(kray);
   return traverseKdTreeClipped<true>(
       tree_, kray, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
         for (std::uint32_t i = begin; i < begin + count; ++i) {

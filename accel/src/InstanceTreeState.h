@@ -17,6 +17,7 @@
 #include <emmintrin.h>
 
 #include <algorithm>
+#include <cstddef>
 #include <limits>
 #include <cmath>
 #include <cstdint>
@@ -221,13 +222,44 @@ struct BoxTestRay {
   float tnear;
   bool any_zero;  // some direction component is zero: the scalar test's origin-in-slab rule
   const KdRay* kd;
-  explicit BoxTestRay(const KdRay& r)
-      : origin(_mm_setr_ps(r.origin[0], r.origin[1], r.origin[2], 0.0f)),
-        inv_dir(_mm_setr_ps(r.inv_dir[0], r.inv_dir[1], r.inv_dir[2], 0.0f)),
-        tnear(r.tnear),
-        any_zero(r.zero[0] | r.zero[1] | r.zero[2]),
-        kd(&r) {}
 };
+
+// Everything a top-level walk computes once per world ray, in registers: KdRay's values for the kd
+// walk (`k`), the box-test vectors (`b`, which points at `k`) and the ray clipped to `root`
+// ([tmin, tmax], as clipRayToBox). Returns false for a ray that is not queryable (isQueryable) or
+// misses the root box; `k` and `b` are then unspecified. The values are prepareKdRay's and
+// clipPreparedRay's (KdTraversal.h), computed without their round trips through memory.
+[[gnu::always_inline]] inline bool setupWorldRay(const Ray& ray, const Box& root, KdRay& k, BoxTestRay& b, float& tmin,
+                                                 float& tmax) {
+  static_assert(offsetof(KdRay, inv_dir) == 12 && offsetof(KdRay, neg_mask) == 24 && offsetof(KdRay, zero) == 36 &&
+                    offsetof(KdRay, tnear) == 40,
+                "setupWorldRay writes KdRay's arrays with 16-byte stores, each overlapping the next field");
+  const __m128 o = _mm_loadu_ps(&ray.origin.x);  // ox, oy, oz, tnear
+  const __m128 d = _mm_loadu_ps(&ray.dir.x);     // dx, dy, dz, tfar
+  const __m128 sign_bit = _mm_set1_ps(-0.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const int finite = _mm_movemask_ps(
+      _mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf), _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
+  const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
+  if (((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar)) return false;
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);  // lane 3 (1 / tfar) unused
+  const int zero = _mm_movemask_ps(_mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf));
+  // In field order, each 16-byte store's fourth lane is overwritten by the next store.
+  _mm_storeu_ps(k.origin, o);
+  _mm_storeu_ps(k.inv_dir, inv);
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(k.neg_mask), _mm_srai_epi32(_mm_castps_si128(inv), 31));
+  k.zero[0] = (zero & 1) != 0;
+  k.zero[1] = (zero & 2) != 0;
+  k.zero[2] = (zero & 4) != 0;
+  k.tnear = ray.tnear;
+  k.tfar = ray.tfar;
+  b.origin = o;
+  b.inv_dir = inv;
+  b.tnear = ray.tnear;
+  b.any_zero = (zero & 7) != 0;
+  b.kd = &k;
+  return kd_detail::clipSse(o, d, inv, kd_detail::boxLo(root), kd_detail::boxHi(root), tmin, tmax);
+}
 
 // Whether the ray meets `box` within [ray.tnear, t_max], as meetsBox(), the three slabs at once;
 // `t_enter` gets the widened entry (the largest entry, widened once: the widening is monotonic,
@@ -239,12 +271,8 @@ struct BoxTestRay {
     t_enter = ray.tnear;
     return clipIntervalToBox(*ray.kd, box, t_enter, t1);
   }
-  // Box is {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z}: loads at lo.x and at lo.z stay inside it.
-  const __m128 lo = _mm_loadu_ps(&box.lo.x);
-  const __m128 b = _mm_loadu_ps(&box.lo.z);
-  const __m128 hi = _mm_shuffle_ps(b, b, _MM_SHUFFLE(3, 3, 2, 1));
-  const __m128 t0 = _mm_mul_ps(_mm_sub_ps(lo, ray.origin), ray.inv_dir);
-  const __m128 t1 = _mm_mul_ps(_mm_sub_ps(hi, ray.origin), ray.inv_dir);
+  const __m128 t0 = _mm_mul_ps(_mm_sub_ps(kd_detail::boxLo(box), ray.origin), ray.inv_dir);
+  const __m128 t1 = _mm_mul_ps(_mm_sub_ps(kd_detail::boxHi(box), ray.origin), ray.inv_dir);
   const __m128 t_in = _mm_min_ps(t1, t0), t_out = _mm_max_ps(t1, t0);
   // The largest entry and smallest exit of lanes 0..2.
   const float enter =

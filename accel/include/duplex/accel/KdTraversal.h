@@ -115,23 +115,18 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   return true;
 }
 
-/// clipRayToBox(k, box, tmin, tmax) for a ray `k` that prepareKdRay filled from `ray`, the three
-/// slabs at once with SSE: the same interval (only the sign of a zero bound may differ, which no
-/// comparison sees) and the same answer.
-[[gnu::always_inline]] inline bool clipPreparedRay(const Ray& ray, const KdRay& k, const Box& box, float& tmin,
-                                                   float& tmax) {
-  const __m128 o = _mm_loadu_ps(&ray.origin.x);
-  const __m128 d = _mm_loadu_ps(&ray.dir.x);
+namespace kd_detail {
+// The clip of clipPreparedRay from vectors: o = (origin, tnear), d = (dir, tfar), inv = 1 / dir
+// (lane 3 unused), the box's lo and hi in lanes 0..2 (lane 3 unused).
+[[gnu::always_inline]] inline bool clipSse(__m128 o, __m128 d, __m128 inv, __m128 lo, __m128 hi, float& tmin,
+                                           float& tmax) {
   const __m128 sign_bit = _mm_set1_ps(-0.0f);
   const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
-  const __m128 inv = _mm_setr_ps(k.inv_dir[0], k.inv_dir[1], k.inv_dir[2], 0.0f);
   const __m128 zero_dir = _mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf);
   // clipIntervalToBox's rules: per axis the entry and exit are widened, and a widened value that is
   // NaN (an infinite distance) is ignored, as std::max / std::min ignore it there; SSE's max / min
   // return their second operand when either is NaN. An axis with zero direction only tests the
   // origin against the closed slab.
-  const __m128 lo = _mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f);
-  const __m128 hi = _mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f);
   const __m128 outside = _mm_or_ps(_mm_cmplt_ps(o, lo), _mm_cmpgt_ps(o, hi));
   if ((_mm_movemask_ps(_mm_and_ps(zero_dir, outside)) & 7) != 0) return false;
   const __m128 t0 = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
@@ -152,6 +147,25 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   tmin = _mm_cvtss_f32(_mm_max_ss(_mm_max_ss(m_in, _mm_shuffle_ps(m_in, m_in, 1)), _mm_movehl_ps(m_in, m_in)));
   tmax = _mm_cvtss_f32(_mm_min_ss(_mm_min_ss(m_out, _mm_shuffle_ps(m_out, m_out, 1)), _mm_movehl_ps(m_out, m_out)));
   return tmin <= tmax;
+}
+
+// A box's corners as vectors (lane 3 unused): Box is {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z}, and
+// loads at lo.x and lo.z stay inside it.
+[[gnu::always_inline]] inline __m128 boxLo(const Box& box) { return _mm_loadu_ps(&box.lo.x); }
+[[gnu::always_inline]] inline __m128 boxHi(const Box& box) {
+  const __m128 b = _mm_loadu_ps(&box.lo.z);
+  return _mm_shuffle_ps(b, b, _MM_SHUFFLE(3, 3, 2, 1));
+}
+}  // namespace kd_detail
+
+/// clipRayToBox(k, box, tmin, tmax) for a ray `k` that prepareKdRay filled from `ray`, the three
+/// slabs at once with SSE: the same interval (only the sign of a zero bound may differ, which no
+/// comparison sees) and the same answer.
+[[gnu::always_inline]] inline bool clipPreparedRay(const Ray& ray, const KdRay& k, const Box& box, float& tmin,
+                                                   float& tmax) {
+  return kd_detail::clipSse(_mm_loadu_ps(&ray.origin.x), _mm_loadu_ps(&ray.dir.x),
+                            _mm_setr_ps(k.inv_dir[0], k.inv_dir[1], k.inv_dir[2], 0.0f), kd_detail::boxLo(box),
+                            kd_detail::boxHi(box), tmin, tmax);
 }
 
 /// A leaf without primitives (not a jump: a jump's count field is all ones).
