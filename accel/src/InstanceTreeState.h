@@ -231,32 +231,13 @@ struct BoxTestRay {
 // clipPreparedRay's (KdTraversal.h), computed without their round trips through memory.
 [[gnu::always_inline]] inline bool setupWorldRay(const Ray& ray, const Box& root, KdRay& k, BoxTestRay& b, float& tmin,
                                                  float& tmax) {
-  static_assert(offsetof(KdRay, inv_dir) == 12 && offsetof(KdRay, neg_mask) == 24 && offsetof(KdRay, zero) == 36 &&
-                    offsetof(KdRay, tnear) == 40,
-                "setupWorldRay writes KdRay's arrays with 16-byte stores, each overlapping the next field");
-  const __m128 o = _mm_loadu_ps(&ray.origin.x);  // ox, oy, oz, tnear
-  const __m128 d = _mm_loadu_ps(&ray.dir.x);     // dx, dy, dz, tfar
-  const __m128 sign_bit = _mm_set1_ps(-0.0f);
-  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
-  const int finite = _mm_movemask_ps(
-      _mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf), _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
-  const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
-  if (((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar)) return false;
-  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);  // lane 3 (1 / tfar) unused
-  const int zero = _mm_movemask_ps(_mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf));
-  // In field order, each 16-byte store's fourth lane is overwritten by the next store.
-  _mm_storeu_ps(k.origin, o);
-  _mm_storeu_ps(k.inv_dir, inv);
-  _mm_storeu_si128(reinterpret_cast<__m128i*>(k.neg_mask), _mm_srai_epi32(_mm_castps_si128(inv), 31));
-  k.zero[0] = (zero & 1) != 0;
-  k.zero[1] = (zero & 2) != 0;
-  k.zero[2] = (zero & 4) != 0;
-  k.tnear = ray.tnear;
-  k.tfar = ray.tfar;
+  __m128 o, d, inv;
+  int zero;
+  if (!kd_detail::prepareSse(ray, k, o, d, inv, zero)) return false;
   b.origin = o;
   b.inv_dir = inv;
   b.tnear = ray.tnear;
-  b.any_zero = (zero & 7) != 0;
+  b.any_zero = zero != 0;
   b.kd = &k;
   return kd_detail::clipSse(o, d, inv, kd_detail::boxLo(root), kd_detail::boxHi(root), tmin, tmax);
 }

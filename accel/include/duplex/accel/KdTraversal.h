@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <utility>
@@ -80,14 +81,16 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   return clipIntervalToBox(ray, box, tmin, tmax);
 }
 
-/// Fills `k` with the values KdRay(ray) holds, computed with SSE in one pass (one vector division
-/// instead of three scalar ones, one branch for the validity checks): returns false, leaving `k`
-/// unspecified, when the ray is not queryable (isQueryable in Ray.h). `ray` and `k` are in the same
-/// space (the tree's). The top level and the mesh queries both set their rays up this way.
-[[gnu::always_inline]] inline bool prepareKdRay(const Ray& ray, KdRay& k) {
+namespace kd_detail {
+// prepareKdRay, with the vectors it computed for callers that go on in registers: o = (origin,
+// tnear), d = (dir, tfar), inv = 1 / dir (lane 3: 1 / tfar, unused), zero = KdRay::zero as bits.
+[[gnu::always_inline]] inline bool prepareSse(const Ray& ray, KdRay& k, __m128& o, __m128& d, __m128& inv, int& zero) {
+  static_assert(offsetof(KdRay, inv_dir) == 12 && offsetof(KdRay, neg_mask) == 24 && offsetof(KdRay, zero) == 36 &&
+                    offsetof(KdRay, tnear) == 40,
+                "KdRay's arrays are written with 16-byte stores, each overlapping the next field");
   // Ray is {ox, oy, oz, tnear, dx, dy, dz, tfar}: two unaligned loads.
-  const __m128 o = _mm_loadu_ps(&ray.origin.x);
-  const __m128 d = _mm_loadu_ps(&ray.dir.x);
+  o = _mm_loadu_ps(&ray.origin.x);
+  d = _mm_loadu_ps(&ray.dir.x);
   const __m128 sign_bit = _mm_set1_ps(-0.0f);
   const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
   // isQueryable with one branch: origin and direction finite (|x| < inf is false for NaN and inf),
@@ -97,22 +100,30 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
   const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
   if (((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar)) return false;
   // 1/d is already +-inf with the sign of d for a zero (or denormal) component, which is what
-  // KdRay stores for them. Lane 3 (1/tfar) is never read.
-  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
-  const int zero = _mm_movemask_ps(_mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf));
-  alignas(16) float inv_dir[4];
-  alignas(16) std::uint32_t neg_mask[4];
-  _mm_store_ps(inv_dir, inv);
-  _mm_store_si128(reinterpret_cast<__m128i*>(neg_mask), _mm_srai_epi32(_mm_castps_si128(inv), 31));
-  for (int a = 0; a < 3; ++a) {
-    k.origin[a] = (&ray.origin.x)[a];
-    k.inv_dir[a] = inv_dir[a];
-    k.neg_mask[a] = neg_mask[a];
-    k.zero[a] = (zero >> a & 1) != 0;
-  }
+  // KdRay stores for them.
+  inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
+  zero = _mm_movemask_ps(_mm_cmpeq_ps(_mm_andnot_ps(sign_bit, inv), inf)) & 7;
+  // In field order, each 16-byte store's fourth lane is overwritten by the next store.
+  _mm_storeu_ps(k.origin, o);
+  _mm_storeu_ps(k.inv_dir, inv);
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(k.neg_mask), _mm_srai_epi32(_mm_castps_si128(inv), 31));
+  k.zero[0] = (zero & 1) != 0;
+  k.zero[1] = (zero & 2) != 0;
+  k.zero[2] = (zero & 4) != 0;
   k.tnear = ray.tnear;
   k.tfar = ray.tfar;
   return true;
+}
+}  // namespace kd_detail
+
+/// Fills `k` with the values KdRay(ray) holds, computed with SSE in one pass (one vector division
+/// instead of three scalar ones, one branch for the validity checks): returns false, leaving `k`
+/// unspecified, when the ray is not queryable (isQueryable in Ray.h). `ray` and `k` are in the same
+/// space (the tree's). The top level and the mesh queries both set their rays up this way.
+[[gnu::always_inline]] inline bool prepareKdRay(const Ray& ray, KdRay& k) {
+  __m128 o, d, inv;
+  int zero;
+  return kd_detail::prepareSse(ray, k, o, d, inv, zero);
 }
 
 namespace kd_detail {
