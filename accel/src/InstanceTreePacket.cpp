@@ -40,6 +40,7 @@ constexpr int kMinPacket = 3;
 // A packet's rays by their index in the caller's packet.
 struct InstanceTree::PacketState {
   KdRay kray[kLanes];
+  BoxTestRay box_ray[kLanes];  // each ray's instance box test (points into kray)
   WorldRay w[kLanes];
   float t[kLanes];                        // best distance so far (closest hit), tfar (any hit)
   float t_enter[kLanes], t_exit[kLanes];  // the ray's segment in the tree's bounds
@@ -134,7 +135,8 @@ std::uint32_t InstanceTree::packetWalk(PacketState& p, std::uint32_t lanes, std:
       std::uint32_t sub = 0;
       for (std::uint32_t l = m & ~(AnyHit ? done : 0u); l != 0; l &= l - 1) {
         const int j = std::countr_zero(l);
-        if (meetsBox(p.kray[j], boxes[slot], p.t[j]) && !p.mailbox[j].seen(slot)) sub |= 1u << j;
+        float t_enter;
+        if (meetsBoxAt(p.box_ray[j], boxes[slot], p.t[j], t_enter) && !p.mailbox[j].seen(slot)) sub |= 1u << j;
       }
       if (sub == 0) continue;
       const Record& rec = records[slot];
@@ -219,8 +221,9 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   for (std::uint32_t& lanes : by_octant) {
     for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
       const int i = std::countr_zero(l);
-      p.kray[i] = KdRay(rays_ws[static_cast<std::size_t>(i)]);
-      if (!clipRayToBox(p.kray[i], tree_.bounds, p.t_enter[i], p.t_exit[i])) lanes &= ~(1u << i);
+      if (!setupWorldRay(rays_ws[static_cast<std::size_t>(i)], tree_.bounds, p.kray[i], p.box_ray[i], p.t_enter[i],
+                         p.t_exit[i]))
+        lanes &= ~(1u << i);
     }
   }
   for (std::uint32_t octant = 0; octant < 8; ++octant) {
