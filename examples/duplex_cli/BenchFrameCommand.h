@@ -16,7 +16,7 @@
 /// - with Embree 3 (the benchmark duplex_bench_frame; the installed tool has no Embree): its
 ///   two-level scene (one scene per object, one instance geometry per instance) with the top level
 ///   built with the default flags and with dynamic + low quality, each traced with rtcIntersect1 /
-///   rtcOccluded1 and with rtcIntersect16 / rtcOccluded16 (coherent context flag): four sides,
+///   rtcOccluded1 and with rtcIntersect16 (coherent context flag) / rtcOccluded16: four sides,
 ///   the fastest of which (median frame time) is Embree's figure in the ratios.
 ///
 /// The camera is that of `duplex rays --primary W H` (PinholeCamera::looking_at_box of the visible

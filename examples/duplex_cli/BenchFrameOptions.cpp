@@ -43,8 +43,8 @@ void addBenchFrameOptions(CLI::App& cmd, BenchFrameOptions& options) {
       ->delimiter(',')
       ->check(CLI::IsMember({"default", "dynamic_low"}));
   cmd.add_option("--embree-queries", options.embree_queries,
-                 "Embree's queries: 1 (rtcIntersect1 / rtcOccluded1), 16 (rtcIntersect16 / rtcOccluded16, "
-                 "coherent) (default: both)")
+                 "Embree's queries: 1 (rtcIntersect1 / rtcOccluded1), 16 (rtcIntersect16 coherent / "
+                 "rtcOccluded16) (default: both)")
       ->delimiter(',')
       ->check(CLI::IsMember({"1", "16"}));
 #endif
