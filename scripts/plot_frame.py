@@ -34,14 +34,25 @@ def chart(docs, outdir):
     for k, doc in enumerate(docs):
         ax = axes[k // cols][k % cols]
         threads = sorted({r["threads"] for r in doc["runs"]})
+        ticks = set()
         for t in threads:
-            runs = sorted((r for r in doc["runs"] if r["threads"] == t), key=lambda r: r["moves"])
+            # One point per k: on small scenes "1" and "1%" are the same k.
+            by_k = {}
+            for r in doc["runs"]:
+                if r["threads"] == t:
+                    by_k.setdefault(r["moves"], r)
+            runs = [by_k[k] for k in sorted(by_k)]
             xs = [max(r["moves"], 0.5) for r in runs]  # 0 moved (a static frame) drawn at 0.5 on the log axis
+            ticks.update(xs)
             line = ax.plot(xs, [r["ours"]["frame_ms_median"] for r in runs], "o-", label=f"ours, {t}T")[0]
             if all("embree_frame_ms_median" in r for r in runs):
                 ax.plot(xs, [r["embree_frame_ms_median"] for r in runs], "s--", color=line.get_color(), alpha=0.6,
                         label=f"Embree, {t}T")
         ax.set_xscale("log")
+        ax.set_xticks(sorted(ticks))
+        ax.set_xticklabels(["0" if x < 1 else f"{x:,}" for x in sorted(ticks)])
+        ax.minorticks_off()
+        ax.set_xlim(min(ticks) / 1.5, max(ticks) * 1.5)
         ax.set_ylim(bottom=0)
         ax.set_title(f"{name(doc)}: {doc['instances']:,} instances", fontsize=9)
         ax.set_xlabel("instances moved per frame", fontsize=8)

@@ -525,7 +525,7 @@ nlohmann::ordered_json runBenchFrame(const BenchFrameOptions& options) {
         run["ratio_edit_commit"] = median(ours.edit_ms) / median(e.edit_ms);
         run["ratio_trace"] = median(ours.trace_ms) / median(e.trace_ms);
         nlohmann::ordered_json per_side;
-        std::uint64_t hits_diff = 0, shadow_diff = 0, shadow_rays = 0;
+        std::uint64_t hits_diff = 0, shadow_diff = 0;
         for (std::size_t s = 1; s < sides.size(); ++s) {
           per_side[sides[s]->name()] = median(ours.frame_ms) / median(figures[s].frame_ms);
           hits_diff =
@@ -535,16 +535,15 @@ nlohmann::ordered_json runBenchFrame(const BenchFrameOptions& options) {
           for (std::size_t f = 0; f < ours.frame_ms.size(); ++f) {
             hits_diff = std::max(hits_diff, absDiff(ours.primary_hits[f], figures[s].primary_hits[f]));
             shadow_diff = std::max(shadow_diff, absDiff(ours.shadow_blocked[f], figures[s].shadow_blocked[f]));
-            shadow_rays = std::max(shadow_rays, ours.shadow_rays[f]);
           }
         }
         run["ratio_frame_per_side"] = per_side;
         run["hits_max_diff"] = hits_diff;
         run["shadow_max_diff"] = shadow_diff;
-        run["hits_agree"] =
-            static_cast<double>(hits_diff) <= options.hit_tolerance * static_cast<double>(rays.size()) &&
-            static_cast<double>(shadow_diff) <=
-                options.hit_tolerance * static_cast<double>(std::max(shadow_rays, ours.static_frame.shadow_rays));
+        // Both counts against the frame's pixels: a shadow ray starts where its side's own primary hit
+        // lies, so rounding moves a few starts across a nearby surface.
+        const double allowed = options.hit_tolerance * static_cast<double>(rays.size());
+        run["hits_agree"] = static_cast<double>(hits_diff) <= allowed && static_cast<double>(shadow_diff) <= allowed;
       }
 #endif
       runs.push_back(std::move(run));

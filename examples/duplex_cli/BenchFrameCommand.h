@@ -59,8 +59,9 @@ struct BenchFrameOptions {
   std::uint32_t width = 1024;      ///< image width in pixels
   std::uint32_t height = 768;      ///< image height in pixels
   std::uint64_t seed = 1;          ///< seed of the moves
-  /// Largest difference of a frame's hit count (primary hits, blocked shadow rays) between ours and
-  /// an Embree side, as a fraction of the rays, for hits_agree: transforms are rounded differently.
+  /// Largest difference of a frame's hit counts (primary hits, blocked shadow rays) between ours and
+  /// an Embree side, as a fraction of the primary rays, for hits_agree: transforms and hit distances
+  /// are rounded differently.
   double hit_tolerance = 1e-4;
   /// Embree sides (duplex_bench_frame only): top-level builds ("default", "dynamic_low") and queries
   /// ("1": rtcIntersect1 / rtcOccluded1, "16": rtcIntersect16 / rtcOccluded16).

@@ -35,7 +35,7 @@ void addBenchFrameOptions(CLI::App& cmd, BenchFrameOptions& options) {
       ->check(CLI::Range(1u, 16384u));
   cmd.add_option("--seed", options.seed, "Seed of the moves (default 1)")->transform(kDecimal);
   cmd.add_option("--hit-tolerance", options.hit_tolerance,
-                 "Largest per-frame difference of hit counts from Embree's, as a fraction of the rays, for "
+                 "Largest per-frame difference of hit counts from Embree's, as a fraction of the primary rays, for "
                  "hits_agree (default 1e-4)")
       ->check(CLI::Range(0.0, 1.0));
 #if DUPLEX_BENCH_HAVE_EMBREE
