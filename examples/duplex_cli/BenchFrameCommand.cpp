@@ -6,6 +6,7 @@
 #include "BenchBuild.h"
 
 #include <duplex/accel/Error.h>
+#include <duplex/accel/MemoryLimit.h>
 #include <duplex/accel/RayGenerator.h>
 #include <duplex/objects/MeshObject.h>
 #include <duplex/scenegraph/SceneDocument.h>
@@ -422,6 +423,16 @@ nlohmann::ordered_json runBenchFrame(const BenchFrameOptions& options) {
   if (n == 0) throw InvalidArgument(options.scene.string() + ": no visible instances to move");
   std::vector<std::size_t> moves;
   for (const std::string& spec : options.moves) moves.push_back(parseMoves(spec, n));
+  // The frame's buffers, per side: the camera rays (shared), hits, shadow rays and their flags.
+  const std::uint64_t pixels = std::uint64_t{options.width} * options.height;
+  std::size_t side_count = 1;
+#if DUPLEX_BENCH_HAVE_EMBREE
+  side_count += options.embree_top.size() * options.embree_queries.size();
+#endif
+  requireMemory(
+      saturatingAdd(arrayBytes(pixels, sizeof(Ray)), arrayBytes(pixels, side_count * (sizeof(Hit) + sizeof(Ray) + 1))),
+      "bench frame: " + std::to_string(options.width) + " x " + std::to_string(options.height) + " pixels, " +
+          std::to_string(side_count) + " side(s)");
   const Box bounds = visibleWorldBounds(*doc);
   const double cube_side = 0.05 * glm::length(glm::dvec3(bounds.hi) - glm::dvec3(bounds.lo));
   const std::vector<Ray> rays = tiledPrimaryRays(bounds, options.width, options.height);
