@@ -12,6 +12,8 @@
 //   duplex prepare --scene S.json --out DIR [--threads N]
 //   duplex bench update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]
 //                       [--primary W] [--build-repeat B] [--baseline-repeat B]
+//   duplex bench frame --scene S.json [--moves 1,1%,10%] [--threads 1,2] [--frames N] [--size W H] [--seed X]
+//                      [--hit-tolerance F]
 //   duplex bench deform --scene S.json --object NAME [--steps K] [--seed X] [--amplitude A] [--threads N]
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
@@ -24,6 +26,7 @@
 // message naming the file and the problem and a non-zero exit status.
 
 #include "BenchDeformCommand.h"
+#include "BenchFrameCommand.h"
 #include "ClosestCommand.h"
 #include "BenchUpdateCommand.h"
 #include "DecimalOption.h"
@@ -219,7 +222,7 @@ int main(int argc, char** argv) {
   duplex::cli::addThreadsOption(*closest_cmd, closest.threads);
 
   // duplex bench update
-  CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update, deform)");
+  CLI::App* bench_cmd = app.add_subcommand("bench", "Benchmarks (update, frame, deform)");
   bench_cmd->require_subcommand(1);
   duplex::cli::BenchUpdateOptions bench_update;
   CLI::App* update_cmd = bench_cmd->add_subcommand(
@@ -227,6 +230,13 @@ int main(int argc, char** argv) {
       "Time commits of moved, added and removed instances (ours incremental, ours full rebuild; the Embree "
       "baseline is in the benchmark duplex_bench_update)");
   duplex::cli::addBenchUpdateOptions(*update_cmd, bench_update);
+  // duplex bench frame
+  duplex::cli::BenchFrameOptions bench_frame;
+  CLI::App* frame_cmd = bench_cmd->add_subcommand(
+      "frame",
+      "Time interactive frames: move k instances, commit, trace a camera frame with shadow rays (the Embree "
+      "baseline is in the benchmark duplex_bench_frame)");
+  duplex::cli::addBenchFrameOptions(*frame_cmd, bench_frame);
   // duplex bench deform
   duplex::cli::BenchDeformOptions bench_deform;
   CLI::App* deform_cmd = bench_cmd->add_subcommand(
@@ -305,7 +315,7 @@ int main(int argc, char** argv) {
   // --max-memory of the commands that load scenes, meshes or ray files, or run (all of them).
   std::uint64_t max_memory = 0;
   for (CLI::App* cmd : {trace_cmd, rays_cmd, split_cmd, instances_cmd, robot_cmd, prepare_cmd, closest_cmd, update_cmd,
-                        deform_cmd, sensor_cmd})
+                        frame_cmd, deform_cmd, sensor_cmd})
     duplex::cli::addMaxMemoryOption(*cmd, max_memory);
 
   try {
@@ -325,6 +335,7 @@ int main(int argc, char** argv) {
                         : *prepare_cmd   ? "duplex prepare"
                         : *closest_cmd   ? "duplex closest"
                         : *deform_cmd    ? "duplex bench deform"
+                        : *frame_cmd     ? "duplex bench frame"
                                          : "duplex bench update";
   try {
     nlohmann::ordered_json result;
@@ -342,6 +353,8 @@ int main(int argc, char** argv) {
       result = duplex::cli::runClosest(closest);
     } else if (*update_cmd) {
       result = duplex::cli::runBenchUpdate(bench_update);
+    } else if (*frame_cmd) {
+      result = duplex::cli::runBenchFrame(bench_frame);
     } else if (*deform_cmd) {
       result = duplex::cli::runBenchDeform(bench_deform);
     } else if (*robot_cmd) {

@@ -14,6 +14,8 @@
 //   duplex_cli_check prepare-koala DUPLEX DIR DATA_DIR koala in 19 objects, prepared (skipped without data)
 //   duplex_cli_check bench-update DUPLEX DIR           `duplex bench update` keys and figures on tiny scenes
 //   duplex_cli_check bench-update-embree BENCH DIR     the same by duplex_bench_update, with Embree's keys
+//   duplex_cli_check bench-frame DUPLEX DIR            `duplex bench frame` keys, hit counts against `duplex trace`
+//   duplex_cli_check bench-frame-embree BENCH DUPLEX DIR   the same by duplex_bench_frame; ours and Embree's hits agree
 //   duplex_cli_check bench-deform DUPLEX DIR           `duplex bench deform` keys and figures on the quad scene
 //   duplex_cli_check closest DUPLEX DIR                `duplex closest` records on the quad scene, the JSON line
 //   duplex_cli_check disk-full DUPLEX DIR              record files on a full disk: an error, the old file kept
@@ -698,6 +700,89 @@ int checkBenchUpdate(const std::vector<std::string>& command, const fs::path& fi
   return 0;
 }
 
+// `duplex bench frame` on tiny scenes and frames. Every run starts from the loaded scene, so its
+// untimed first frame hits as many primary rays as `duplex trace` on `duplex rays --primary W H`
+// (the same pixels); frames without moves keep that count; ours replays the same frames with 1 and
+// 2 threads, so its per-frame counts agree between them. duplex_bench_frame (`embree`) adds
+// Embree's sides, whose per-frame hit counts must agree with ours (hits_agree), and the ratios.
+int checkBenchFrame(const std::vector<std::string>& command, const std::string& duplex, const fs::path& fixtures,
+                    bool embree) {
+  const fs::path dir = fixtures / (embree ? "bench_frame_embree" : "bench_frame");
+  writeDocumentFixtures(dir);
+  for (const fs::path& scene : {fixtures / "quad.json", dir / "doc_tree.json"}) {
+    const std::string stem = scene.stem().string();
+    const fs::path rays = dir / (stem + "_frame_rays.bin"), hits = dir / (stem + "_frame_hits.bin");
+    runOk({duplex, "rays", "--scene", scene.string(), "--primary", "40", "30", "--out", rays.string()}, dir);
+    (void)traceJson(duplex, dir, scene, rays, hits, {"--threads", "1"});
+    std::uint64_t expected_hits = 0;
+    for (const HitRecord& h : readRecords<HitRecord>(hits)) expected_hits += h.instance_id != kNone ? 1 : 0;
+    expect(expected_hits > 0, scene.string() + ": the check's camera sees nothing");
+
+    std::vector<std::string> args = command;
+    args.insert(args.end(), {"--scene", scene.string(), "--moves", "0,1,50%", "--threads", "1,2", "--frames", "3",
+                             "--size", "40", "30", "--seed", "4"});
+    const nlohmann::json j = parseOneLine(runOk(args, dir).out);
+    expect(number(j, "primary_rays") == 1200.0 && number(j, "frames") == 3.0, "rays/frames not as given: " + j.dump());
+    expect(j.contains("runs") && j["runs"].is_array() && j["runs"].size() == 6, "expected 6 runs: " + j.dump());
+    expect(j.contains("sides") && j["sides"].is_array() && !j["sides"].empty() && j["sides"][0] == "ours",
+           "\"sides\" does not start with ours: " + j.dump());
+    expect(j.contains("machine") && j["machine"].is_object(), "no \"machine\" object: " + j.dump());
+    const nlohmann::json& runs = j["runs"];
+    for (std::size_t r = 0; r < runs.size(); ++r) {
+      const nlohmann::json& run = runs[r];
+      expect(number(run, "threads") == (r < 3 ? 1.0 : 2.0), "runs not ordered by threads, then moves: " + j.dump());
+      for (const auto& name : j["sides"]) {
+        expect(run.contains(name.get<std::string>()), "run without side " + name.dump() + ": " + run.dump());
+        const nlohmann::json& side = run[name.get<std::string>()];
+        for (const char* key : {"frame_ms_median", "trace_ms_median", "primary_ms_median"})
+          expect(number(side, key) > 0.0, std::string("\"") + key + "\" is not positive: " + side.dump());
+        expect(number(side, "edit_commit_ms_median") >= 0.0 && number(side, "shadow_ms_median") >= 0.0,
+               "negative times: " + side.dump());
+        expect(number(side, "frame_ms_min") <= number(side, "frame_ms_median") &&
+                   number(side, "frame_ms_median") <= number(side, "frame_ms_max"),
+               "frame_ms min / median / max out of order: " + side.dump());
+        for (const char* key :
+             {"frame_ms", "edit_commit_ms", "trace_ms", "primary_hits", "shadow_rays", "shadow_blocked"})
+          expect(side.contains(key) && side[key].is_array() && side[key].size() == 3,
+                 std::string("\"") + key + "\" is not an array of 3 frames: " + side.dump());
+        expect(number(side, "static_primary_hits") == static_cast<double>(expected_hits),
+               scene.string() + ": the first frame's hits differ from `duplex trace` (" +
+                   std::to_string(expected_hits) + "): " + side.dump());
+        if (run["moves"] == 0)
+          for (std::size_t f = 0; f < 3; ++f)
+            expect(side["primary_hits"][f] == side["static_primary_hits"] &&
+                       side["shadow_blocked"][f] == side["static_shadow_blocked"] &&
+                       side["shadow_rays"][f] == side["static_primary_hits"],
+                   "frames without moves changed the hits: " + side.dump());
+      }
+      // The same frames with 1 and 2 threads.
+      if (r >= 3)
+        for (const char* key : {"primary_hits", "shadow_blocked"})
+          expect(run["ours"][key] == runs[r - 3]["ours"][key],
+                 std::string("ours: \"") + key + "\" differs between 1 and 2 threads: " + j.dump());
+      if (embree) {
+        expect(run.value("hits_agree", false) == true, "ours and Embree's hit counts disagree: " + run.dump());
+        for (const char* key : {"ratio_frame", "ratio_trace", "embree_frame_ms_median"})
+          expect(number(run, key) > 0.0, std::string("\"") + key + "\" is not positive: " + run.dump());
+        expect(run.contains("embree_best") && run.contains(run["embree_best"].get<std::string>()),
+               "\"embree_best\" names no side: " + run.dump());
+      } else {
+        for (const auto& [key, value] : run.items())
+          expect(key.find("embree") == std::string::npos && key.find("ratio") == std::string::npos,
+                 "the tool, built without Embree, reports \"" + key + "\": " + run.dump());
+      }
+    }
+    // 50% of 4 instances (quad.json) and of 5 visible ones (doc_tree.json, rounded half up).
+    expect(runs[1]["moves"] == 1 && runs[2]["moves"] == (stem == "doc_tree" ? 3 : 2),
+           "--moves 1 and 50% not resolved as expected: " + j.dump());
+    if (embree)
+      expect(j["machine"].value("embree_version", nlohmann::json()).is_string(),
+             "machine.embree_version is not a string: " + j["machine"].dump());
+    std::cout << "bench frame " << scene.filename().string() << ": " << runs[1].dump() << "\n";
+  }
+  return 0;
+}
+
 // `duplex bench deform` on the quad scene: the documented keys, positive times, every step either
 // a refit or a counted rebuild, and the refitted object tracing the same hits as a fresh one.
 int checkBenchDeform(const std::string& duplex, const fs::path& fixtures) {
@@ -918,6 +1003,7 @@ int usage() {
          "       document DUPLEX DIR | prepare DUPLEX DIR | structure DUPLEX DIR |\n"
          "       prepare-koala DUPLEX DIR DATA_DIR |\n"
          "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR |\n"
+         "       bench-frame DUPLEX DIR | bench-frame-embree DUPLEX_BENCH_FRAME DUPLEX DIR |\n"
          "       closest DUPLEX DIR | disk-full DUPLEX DIR | memory-limit DUPLEX DIR\n";
   return 2;
 }
@@ -946,6 +1032,9 @@ int main(int argc, char** argv) {
     if (args.size() == 3 && args[0] == "bench-update")
       return checkBenchUpdate({args[1], "bench", "update"}, args[2], false);
     if (args.size() == 3 && args[0] == "bench-update-embree") return checkBenchUpdate({args[1]}, args[2], true);
+    if (args.size() == 3 && args[0] == "bench-frame")
+      return checkBenchFrame({args[1], "bench", "frame"}, args[1], args[2], false);
+    if (args.size() == 4 && args[0] == "bench-frame-embree") return checkBenchFrame({args[1]}, args[2], args[3], true);
     if (args.size() == 3 && args[0] == "bench-deform") return checkBenchDeform(args[1], args[2]);
     if (args.size() == 3 && args[0] == "closest") return checkClosest(args[1], args[2]);
     if (args.size() == 3 && args[0] == "disk-full") return checkDiskFull(args[1], args[2]);
