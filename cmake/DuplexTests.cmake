@@ -28,7 +28,8 @@ else()
 endif()
 target_link_libraries(duplex_test_support INTERFACE ${duplex_test_libraries} GTest::gtest GTest::gtest_main duplex_warnings)
 
-# duplex_add_unit_tests(TESTS name... [DIR dir] [PRIVATE_INCLUDE dir...] [LIBS target...] [ISA_VARIANTS])
+# duplex_add_unit_tests(TESTS name... [DIR dir] [PRIVATE_INCLUDE dir...] [LIBS target...] [ISA_VARIANTS]
+#                       [OWN_EXECUTABLE])
 # Adds <dir>/<name>.cpp of the calling folder (dir: "tests" unless given; "." for the folder itself)
 # to the folder's test executable duplex_tests_<folder> (a folder may call this several times),
 # its GoogleTest cases discovered into CTest (labels "unit" and the folder, e.g. "objects/mesh").
@@ -36,9 +37,11 @@ target_link_libraries(duplex_test_support INTERFACE ${duplex_test_libraries} GTe
 # folder; given to these files only). LIBS: what these files need besides the library and GoogleTest.
 # ISA_VARIANTS: these files' cases run again with DUPLEX_ISA=sse2 and avx2 (except the kd-tree's,
 # whose parameter names start with kdtree), so each narrower SIMD path is tested on any x86-64
-# machine (Release only: the sanitizer build runs the widest path).
+# machine (Release only: the sanitizer build runs the widest path). OWN_EXECUTABLE: each file in an
+# executable of its own (duplex_tests_<folder>_<name>), for files that change the whole process
+# (a replaced global operator new).
 function(duplex_add_unit_tests)
-  cmake_parse_arguments(arg "ISA_VARIANTS" "DIR" "TESTS;PRIVATE_INCLUDE;LIBS" ${ARGN})
+  cmake_parse_arguments(arg "ISA_VARIANTS;OWN_EXECUTABLE" "DIR" "TESTS;PRIVATE_INCLUDE;LIBS" ${ARGN})
   if(NOT arg_DIR)
     set(arg_DIR tests)
   endif()
@@ -56,8 +59,24 @@ function(duplex_add_unit_tests)
 
   file(RELATIVE_PATH area ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_SOURCE_DIR})
   string(REGEX REPLACE "^tests/" "" area "${area}")
-  string(REPLACE "/" "_" target "${area}")
-  set(target duplex_tests_${target})
+  string(REPLACE "/" "_" folder_target "${area}")
+  set(folder_target duplex_tests_${folder_target})
+  if(arg_OWN_EXECUTABLE)
+    # A file that replaces process-wide behaviour (the global operator new) gets an executable of
+    # its own, duplex_tests_<folder>_<name>, so that the folder's other cases do not run with it.
+    foreach(source IN LISTS sources)
+      get_filename_component(name ${source} NAME_WE)
+      _duplex_add_to_test_executable(${folder_target}_${name} ${area} ${source})
+    endforeach()
+  else()
+    _duplex_add_to_test_executable(${folder_target} ${area} ${sources})
+  endif()
+endfunction()
+
+# Adds the sources to the test executable `target` (created on first use) with the arguments of the
+# calling duplex_add_unit_tests (arg_PRIVATE_INCLUDE, arg_LIBS, arg_ISA_VARIANTS).
+macro(_duplex_add_to_test_executable target area)
+  set(duplex_target_sources ${ARGN})
   if(NOT TARGET ${target})
     add_executable(${target})
     target_link_libraries(${target} PRIVATE duplex_test_support)
@@ -78,9 +97,9 @@ function(duplex_add_unit_tests)
     # The cases are discovered once all of the folder's files are added (end of the folder's CMakeLists.txt).
     cmake_language(EVAL CODE "cmake_language(DEFER CALL duplex_discover_unit_tests ${target} ${area})")
   endif()
-  target_sources(${target} PRIVATE ${sources})
+  target_sources(${target} PRIVATE ${duplex_target_sources})
   foreach(dir IN LISTS arg_PRIVATE_INCLUDE)
-    set_property(SOURCE ${sources} APPEND PROPERTY INCLUDE_DIRECTORIES ${CMAKE_CURRENT_SOURCE_DIR}/${dir})
+    set_property(SOURCE ${duplex_target_sources} APPEND PROPERTY INCLUDE_DIRECTORIES ${CMAKE_CURRENT_SOURCE_DIR}/${dir})
   endforeach()
   if(arg_LIBS)
     target_link_libraries(${target} PRIVATE ${arg_LIBS})
@@ -88,15 +107,15 @@ function(duplex_add_unit_tests)
   if(arg_ISA_VARIANTS)
     # The GoogleTest filter of these files' cases: their suites (TEST*(Suite, ...)), plain or with an
     # instantiation prefix (Prefix/Suite.Case/parameter).
-    foreach(source IN LISTS sources)
-      file(STRINGS ${source} lines REGEX "^ *(TEST|TEST_F|TEST_P|TYPED_TEST)\\( *[A-Za-z0-9_]+ *,")
-      foreach(line IN LISTS lines)
-        string(REGEX REPLACE "^ *[A-Z_]+\\( *([A-Za-z0-9_]+) *,.*$" "\\1" suite "${line}")
-        set_property(TARGET ${target} APPEND PROPERTY DUPLEX_ISA_SUITES ${suite})
+    foreach(duplex_source IN LISTS duplex_target_sources)
+      file(STRINGS ${duplex_source} duplex_lines REGEX "^ *(TEST|TEST_F|TEST_P|TYPED_TEST)\\( *[A-Za-z0-9_]+ *,")
+      foreach(duplex_line IN LISTS duplex_lines)
+        string(REGEX REPLACE "^ *[A-Z_]+\\( *([A-Za-z0-9_]+) *,.*$" "\\1" duplex_suite "${duplex_line}")
+        set_property(TARGET ${target} APPEND PROPERTY DUPLEX_ISA_SUITES ${duplex_suite})
       endforeach()
     endforeach()
   endif()
-endfunction()
+endmacro()
 
 # Discovers the cases of a folder's test executable into CTest: once as they are, and, for the
 # suites of the ISA_VARIANTS files (Release only), once per narrower ISA with the prefix "<isa>.".
