@@ -38,7 +38,7 @@ for name in $SCENES; do
   fi
   valgrind --tool=callgrind --instr-atstart=no --branch-sim=yes --callgrind-out-file="$work/$name.%p" \
     "$BENCH" --meshes '' --scenes "$SCENE_DIR/$name.json" --side 256 --random 1024 --threads 1 --reps 1 \
-    --sets primary --callgrind 65536 >/dev/null 2>"$work/$name.log"
+    --sets primary --callgrind 65536 --out "$work/$name.json" >/dev/null 2>"$work/$name.log"
 done
 /usr/bin/python3 - "$work" "$OUT" $SCENES <<'PY'
 import glob, json, os, re, subprocess, sys
