@@ -1,7 +1,8 @@
 """Duplex: two-level ray tracing of scenes that change.
 
 duplex.Scene holds an object library, a scene graph and its tracer (queries from NumPy arrays,
-edits with commits). docs/python.md is the guide.
+edits with commits); duplex.RaycastingScene has the names, arguments and results of Open3D 0.18's
+open3d.t.geometry.RaycastingScene on top of it. docs/python.md is the guide.
 """
 import sys as _sys
 
@@ -42,5 +43,7 @@ except ImportError as _e:
         f"`{_sys.executable} -m pip install .` in the repository, or cmake -DPython_EXECUTABLE={_sys.executable}"
     ) from None
 
-__all__ = ["Cancelled", "INVALID_ID", "Scene", "max_memory", "primary_rays",
+from ._open3d import Array, RaycastingScene  # noqa: E402
+
+__all__ = ["Array", "Cancelled", "INVALID_ID", "RaycastingScene", "Scene", "max_memory", "primary_rays",
            "random_rays", "run_sensors", "set_max_memory", "__version__"]
