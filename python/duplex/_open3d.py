@@ -266,8 +266,7 @@ class RaycastingScene:
         """1.0 inside, 0.0 outside (float32). Exact for closed meshes; nsamples > 1 (odd) votes over
         that many ray directions, for meshes with holes."""
         q = _floats(query_points, "query_points", 3)
-        d = self.scene.compute_closest_points(q, nthreads=self._threads(nthreads))["distances"]
-        return self._inside(q, d, nsamples, nthreads).astype(np.float32).view(Array)
+        return self._inside(q, None, nsamples, nthreads).astype(np.float32).view(Array)
 
     # ---- cameras ----
 
@@ -330,7 +329,7 @@ class RaycastingScene:
         if not isinstance(nsamples, numbers.Integral) or nsamples < 1:
             raise ValueError(f"nsamples must be an integer >= 1, got {nsamples!r}")
         q = query_points.reshape(-1, 3).astype(np.float32).astype(np.float64)  # the rays' own origins
-        d = distances.reshape(-1)
+        d = None if distances is None else distances.reshape(-1)
         votes = np.zeros(len(q), np.int64)
         tries = len(_DIRECTIONS) // nsamples
         for s in range(nsamples):
@@ -344,8 +343,10 @@ class RaycastingScene:
         scene_size = 0.0 if bounds is None else float(np.abs(bounds).max())
         size = np.maximum(scene_size, np.abs(q).max(axis=1)) if len(q) else np.zeros(0)
         # A point on the surface (within the tolerance) is neither inside nor outside exactly: the
-        # first ray decides it.
-        surface = distances <= _TOLERANCE * size
+        # first ray decides it. Without distances (occupancy alone, where the closest-point query
+        # would cost more than the rays) such a point is cast again like any other; either answer
+        # is right for it.
+        surface = np.zeros(len(q), bool) if distances is None else distances <= _TOLERANCE * size
         parity = np.zeros(len(q), np.int64)
         pending = np.arange(len(q))
         for k, direction in enumerate(directions):
