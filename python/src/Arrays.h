@@ -24,7 +24,8 @@ namespace duplex::python {
 
 namespace py = pybind11;
 
-/// The array behind `obj` (NumPy arrays as they are, sequences converted by NumPy). Throws
+/// The array behind `obj` (NumPy arrays as they are, DLPack tensors through numpy.from_dlpack,
+/// sequences converted by NumPy). Throws
 /// InvalidArgument naming `what` when NumPy cannot make an array of it.
 py::array asArray(const py::object& obj, const char* what);
 

@@ -136,3 +136,26 @@ def test_import_of_a_foreign_extension_names_both_interpreters():
     assert proc.returncode != 0
     assert "its extension module did not load" in proc.stderr and "it was built for" in proc.stderr
     assert sys.executable in proc.stderr
+
+
+class DLPackOnly:
+    """A tensor that NumPy can read only through DLPack (as Open3D's and PyTorch's)."""
+
+    def __init__(self, a):
+        self._a = np.ascontiguousarray(a)
+
+    def __dlpack__(self, stream=None):
+        return self._a.__dlpack__()
+
+    def __dlpack_device__(self):
+        return self._a.__dlpack_device__()
+
+
+def test_dlpack_tensors_are_read_by_both_apis():
+    scene, obj, node = triangle_scene(duplex)
+    rays = DOWN.astype(np.float32)
+    assert scene.cast_rays(DLPackOnly(rays))["instance_ids"].tolist() == [0, duplex.INVALID_ID]
+    rs = duplex.RaycastingScene()
+    gid = rs.add_triangles(DLPackOnly(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)),
+                           DLPackOnly(np.array([[0, 1, 2]], np.uint32)))
+    assert rs.cast_rays(DLPackOnly(rays))["geometry_ids"].tolist() == [gid, duplex.INVALID_ID]
