@@ -261,7 +261,7 @@ ObjectId PyScene::addMeshObject(TriangleMesh mesh, const std::optional<std::stri
   return graph_->library().add(name && !name->empty() ? *name : uniqueName(base), std::move(object));
 }
 
-ObjectId PyScene::addMesh(const py::object& positions, const py::object& triangles,
+ObjectId PyScene::addMesh(const PositionsArray& positions, const TrianglesArray& triangles,
                           const std::optional<std::string>& name, const std::string& structure, int nthreads) {
   std::vector<glm::vec3> p = positionsFrom(positions);
   std::vector<TriangleMesh::Triangle> t = trianglesFrom(triangles, p.size());
@@ -296,7 +296,7 @@ ObjectId PyScene::loadVolume(const std::filesystem::path& path, const std::optio
   return graph_->library().add(name && !name->empty() ? *name : uniqueName(object->name()), std::move(object));
 }
 
-void PyScene::deformObject(ObjectId object, const py::object& positions) {
+void PyScene::deformObject(ObjectId object, const PositionsArray& positions) {
   const std::vector<glm::vec3> p = positionsFrom(positions);
   exclusive(mutex_, [&] {
     graph_->deformObject(object, p);
@@ -323,7 +323,7 @@ std::optional<ObjectId> PyScene::findObject(const std::string& name) const {
 
 // ---- nodes ----
 
-NodeId PyScene::addGroup(const std::optional<NodeId>& parent, const py::object& transform,
+NodeId PyScene::addGroup(const std::optional<NodeId>& parent, const TransformArray& transform,
                          const std::optional<std::string>& name) {
   const bool has_transform = !transform.is_none();
   const Affine local = transformFrom(transform, "transform");
@@ -336,7 +336,7 @@ NodeId PyScene::addGroup(const std::optional<NodeId>& parent, const py::object& 
   });
 }
 
-NodeId PyScene::addInstance(ObjectId object, const py::object& transform, const std::optional<NodeId>& parent,
+NodeId PyScene::addInstance(ObjectId object, const TransformArray& transform, const std::optional<NodeId>& parent,
                             const std::optional<std::string>& name, std::uint32_t mask) {
   const Affine local = transformFrom(transform, "transform");
   return exclusive(mutex_, [&] {
@@ -347,7 +347,7 @@ NodeId PyScene::addInstance(ObjectId object, const py::object& transform, const 
   });
 }
 
-void PyScene::setTransform(NodeId node, const py::object& transform) {
+void PyScene::setTransform(NodeId node, const TransformArray& transform) {
   const Affine local = transformFrom(transform, "T");
   exclusive(mutex_, [&] {
     graph_->setTransform(node, local);
@@ -407,7 +407,7 @@ void PyScene::rollback() {
 
 // ---- queries ----
 
-py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t mask) const {
+py::dict PyScene::castRays(const RaysArray& rays, int nthreads, std::uint32_t mask) const {
   beforeQuery();
   const FloatRows rows = floatRows(rays, {6, 8}, "rays");
   auto t_hit = newArray<float>(rows.shape);
@@ -460,7 +460,7 @@ py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t m
   return d;
 }
 
-py::array PyScene::testOcclusions(const py::object& rays, int nthreads, std::uint32_t mask) const {
+py::array PyScene::testOcclusions(const RaysArray& rays, int nthreads, std::uint32_t mask) const {
   beforeQuery();
   const FloatRows rows = floatRows(rays, {6, 8}, "rays");
   auto out = newArray<bool>(rows.shape);
@@ -480,7 +480,7 @@ py::array PyScene::testOcclusions(const py::object& rays, int nthreads, std::uin
   return out;
 }
 
-py::dict PyScene::listIntersections(const py::object& rays, int nthreads, std::uint32_t mask) const {
+py::dict PyScene::listIntersections(const RaysArray& rays, int nthreads, std::uint32_t mask) const {
   beforeQuery();
   const FloatRows rows = floatRows(rays, {6, 8}, "rays");
   std::vector<Hit> hits;
@@ -526,13 +526,13 @@ py::dict PyScene::listIntersections(const py::object& rays, int nthreads, std::u
   return d;
 }
 
-py::dict PyScene::computeClosestPoints(const py::object& points, const py::object& max_distance, int nthreads,
+py::dict PyScene::computeClosestPoints(const PointsArray& points, const DistanceLimit& max_distance, int nthreads,
                                        std::uint32_t mask) const {
   const FloatRows rows = floatRows(points, {3}, "points");
   beforeQuery();
   // max_distance: None (no limit), a number, or an array that broadcasts to the points' shape.
   py::module_ np = py::module_::import("numpy");
-  py::object limit = max_distance.is_none() ? py::object(py::float_(INFINITY)) : max_distance;
+  py::object limit = max_distance.is_none() ? py::object(py::float_(INFINITY)) : py::object(max_distance);
   py::array_t<double, py::array::c_style | py::array::forcecast> limits;
   try {
     limits = np.attr("ascontiguousarray")(

@@ -59,23 +59,23 @@ class PyScene {
   ~PyScene();
 
   // ---- objects (library ids) ----
-  ObjectId addMesh(const py::object& positions, const py::object& triangles, const std::optional<std::string>& name,
+  ObjectId addMesh(const PositionsArray& positions, const TrianglesArray& triangles, const std::optional<std::string>& name,
                    const std::string& structure, int nthreads = 0);
   ObjectId loadMesh(const std::filesystem::path& path, const std::optional<std::string>& name,
                     const std::string& structure);
   ObjectId loadVolume(const std::filesystem::path& path, const std::optional<std::string>& grid,
                       const std::optional<std::string>& kind, const std::optional<std::string>& name);
-  void deformObject(ObjectId object, const py::object& positions);
+  void deformObject(ObjectId object, const PositionsArray& positions);
   void removeObject(ObjectId object);
   [[nodiscard]] std::size_t objectCount() const;
   [[nodiscard]] std::optional<ObjectId> findObject(const std::string& name) const;
 
   // ---- nodes (node ids) ----
-  NodeId addGroup(const std::optional<NodeId>& parent, const py::object& transform,
+  NodeId addGroup(const std::optional<NodeId>& parent, const TransformArray& transform,
                   const std::optional<std::string>& name);
-  NodeId addInstance(ObjectId object, const py::object& transform, const std::optional<NodeId>& parent,
+  NodeId addInstance(ObjectId object, const TransformArray& transform, const std::optional<NodeId>& parent,
                      const std::optional<std::string>& name, std::uint32_t mask);
-  void setTransform(NodeId node, const py::object& transform);
+  void setTransform(NodeId node, const TransformArray& transform);
   void setVisible(NodeId node, bool visible);
   void setMask(NodeId node, std::uint32_t mask);
   void remove(NodeId node);
@@ -83,10 +83,10 @@ class PyScene {
   void rollback();
 
   // ---- queries (world space) ----
-  py::dict castRays(const py::object& rays, int nthreads, std::uint32_t mask) const;
-  py::array testOcclusions(const py::object& rays, int nthreads, std::uint32_t mask) const;
-  py::dict listIntersections(const py::object& rays, int nthreads, std::uint32_t mask) const;
-  py::dict computeClosestPoints(const py::object& points, const py::object& max_distance, int nthreads,
+  py::dict castRays(const RaysArray& rays, int nthreads, std::uint32_t mask) const;
+  py::array testOcclusions(const RaysArray& rays, int nthreads, std::uint32_t mask) const;
+  py::dict listIntersections(const RaysArray& rays, int nthreads, std::uint32_t mask) const;
+  py::dict computeClosestPoints(const PointsArray& points, const DistanceLimit& max_distance, int nthreads,
                                 std::uint32_t mask) const;
   py::dict pick(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height, double x, double y,
                 std::uint32_t mask) const;

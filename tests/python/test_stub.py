@@ -176,3 +176,14 @@ def test_stub_functions_have_the_runtime_parameters(tree):
         rs = runtime_signatures(getattr(duplex, name), name)
         ss = stub_signatures(tree, None, name)
         assert len(rs) == len(ss) and all(any(same(r, s) for s in ss) for r in rs), f"{name}: runtime {rs} != stub {ss}"
+
+
+def test_help_shows_array_shapes_not_object():
+    # The signatures that help() prints: every array parameter names its dtype and shape.
+    for name in ("add_mesh", "deform_object", "add_group", "add_instance", "set_transform", "cast_rays",
+                 "test_occlusions", "list_intersections", "compute_closest_points"):
+        first = getattr(duplex.Scene, name).__doc__.splitlines()[0]
+        params = split_top_level(first[first.index("(") + 1:first.rindex(") ->")])
+        plain = [p for p in params if p.split("=")[0].split(":", 1)[1].strip() == "object"]
+        assert not plain, f"Scene.{name}: {plain} shown as a plain object"
+    assert "(..., 6) | (..., 8)" in duplex.Scene.cast_rays.__doc__.splitlines()[0]
