@@ -31,8 +31,7 @@ py::array asArray(const py::object& obj, const char* what) {
     // come in through DLPack; without this NumPy would make an array of dtype object of them.
     if (!py::isinstance<py::array>(obj) && !py::hasattr(obj, "__array__") && py::hasattr(obj, "__dlpack__"))
       a = py::module_::import("numpy").attr("from_dlpack")(obj);
-    else
-      a = py::array::ensure(obj);
+    else a = py::array::ensure(obj);
   } catch (const py::error_already_set&) {
     a = py::array();
   }

@@ -27,9 +27,9 @@ namespace py = pybind11;
 // Arguments that take an array (or anything NumPy or DLPack converts): a py::object that accepts
 // every object, read by floatRows() and its kin, whose name in the signatures that help() and
 // editors show says the shape and dtype expected (handle_type_name below).
-#define DUPLEX_ARRAY_ARGUMENT(Name)                                 \
-  class Name : public py::object {                                  \
-   public:                                                          \
+#define DUPLEX_ARRAY_ARGUMENT(Name)                                           \
+  class Name : public py::object {                                            \
+   public:                                                                    \
     PYBIND11_OBJECT_DEFAULT(Name, py::object, [](PyObject*) { return true; }) \
   };
 DUPLEX_ARRAY_ARGUMENT(RaysArray)

@@ -130,7 +130,7 @@ commit: for edits made in one thread while others query).)doc");
         return PyScene::load(path, structure, pendingPolicy(pending));
       },
       "path"_a, "structure"_a = "", "pending"_a = "commit",
-                   R"doc(Reads a scene file: scene-json-v1 or duplex-scene-v1 (sensors included; lights and
+      R"doc(Reads a scene file: scene-json-v1 or duplex-scene-v1 (sensors included; lights and
 timed edits are read by run_sensors and the tool, not applied here). Bottom-level structures are
 built in parallel, or read from the prepared files the scene names. structure: the choice for
 meshes that make none ("bvh", "kdtree", "bvh:fast", ...; "" = the default BVH). Raises OSError

@@ -59,8 +59,8 @@ class PyScene {
   ~PyScene();
 
   // ---- objects (library ids) ----
-  ObjectId addMesh(const PositionsArray& positions, const TrianglesArray& triangles, const std::optional<std::string>& name,
-                   const std::string& structure, int nthreads = 0);
+  ObjectId addMesh(const PositionsArray& positions, const TrianglesArray& triangles,
+                   const std::optional<std::string>& name, const std::string& structure, int nthreads = 0);
   ObjectId loadMesh(const std::filesystem::path& path, const std::optional<std::string>& name,
                     const std::string& structure);
   ObjectId loadVolume(const std::filesystem::path& path, const std::optional<std::string>& grid,
