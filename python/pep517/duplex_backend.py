@@ -86,13 +86,16 @@ def _run(cmd):
 
 
 def _cached_python(build):
+    """The interpreter a configured build folder is for (FindPython's entries), or None."""
     cache = build / "CMakeCache.txt"
     if not cache.exists():
         return None
+    found = {}
     for line in cache.read_text(errors="replace").splitlines():
-        if line.startswith("Python_EXECUTABLE:"):
-            return line.split("=", 1)[1]
-    return None
+        for key in ("Python_EXECUTABLE:", "_Python_EXECUTABLE:"):
+            if line.startswith(key):
+                found[key] = line.split("=", 1)[1]
+    return found.get("Python_EXECUTABLE:") or found.get("_Python_EXECUTABLE:")
 
 
 def _build():
@@ -107,9 +110,11 @@ def _build():
     build = pathlib.Path(os.environ.get("DUPLEX_BUILD_DIR") or SOURCE / "build" / "pip" / tag)
     if not build.is_absolute():
         build = SOURCE / build
+    configured = (build / "CMakeCache.txt").exists()
     cached = _cached_python(build)
     configure = ["cmake", "-S", SOURCE, "-B", build]
-    if cached is None:
+    # A folder configured before (by this backend, scripts/test or by hand) keeps its options.
+    if not configured:
         configure += ["-DCMAKE_BUILD_TYPE=Release", "-DDUPLEX_BUILD_TESTS=OFF", "-DDUPLEX_BUILD_EXAMPLES=OFF",
                       "-DDUPLEX_BUILD_BENCH=OFF"]
         if shutil.which("ninja"):
