@@ -12,8 +12,6 @@ def _import_error(reason):
         f"duplex cannot be imported by {_sys.executable} (Python {_sys.version.split()[0]}): {reason}")
 
 
-# NumPy is checked before the extension is loaded: without it the extension imports, and only the
-# first query would fail, far from the cause.
 def _built_for():
     try:
         from ._build_info import PYTHON_EXECUTABLE, PYTHON_VERSION
@@ -22,6 +20,8 @@ def _built_for():
         return None
 
 
+# NumPy is checked before the extension is loaded: without it the extension imports, and only the
+# first query would fail, far from the cause.
 try:
     import numpy as _np  # noqa: F401
 except ImportError as _e:
