@@ -27,7 +27,11 @@ py::array asArray(const py::object& obj, const char* what) {
   if (obj.is_none()) throw InvalidArgument(std::string(what) + ": expected an array, got None");
   py::array a;
   try {
-    a = py::array::ensure(obj);
+    // Tensors of other libraries (Open3D's, PyTorch's) that NumPy cannot read through __array__
+    // come in through DLPack; without this NumPy would make an array of dtype object of them.
+    if (!py::isinstance<py::array>(obj) && !py::hasattr(obj, "__array__") && py::hasattr(obj, "__dlpack__"))
+      a = py::module_::import("numpy").attr("from_dlpack")(obj);
+    else a = py::array::ensure(obj);
   } catch (const py::error_already_set&) {
     a = py::array();
   }

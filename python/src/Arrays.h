@@ -24,7 +24,24 @@ namespace duplex::python {
 
 namespace py = pybind11;
 
-/// The array behind `obj` (NumPy arrays as they are, sequences converted by NumPy). Throws
+// Arguments that take an array (or anything NumPy or DLPack converts): a py::object that accepts
+// every object, read by floatRows() and its kin, whose name in the signatures that help() and
+// editors show says the shape and dtype expected (handle_type_name below).
+#define DUPLEX_ARRAY_ARGUMENT(Name)                                           \
+  class Name : public py::object {                                            \
+   public:                                                                    \
+    PYBIND11_OBJECT_DEFAULT(Name, py::object, [](PyObject*) { return true; }) \
+  };
+DUPLEX_ARRAY_ARGUMENT(RaysArray)
+DUPLEX_ARRAY_ARGUMENT(PointsArray)
+DUPLEX_ARRAY_ARGUMENT(PositionsArray)
+DUPLEX_ARRAY_ARGUMENT(TrianglesArray)
+DUPLEX_ARRAY_ARGUMENT(TransformArray)
+DUPLEX_ARRAY_ARGUMENT(DistanceLimit)
+#undef DUPLEX_ARRAY_ARGUMENT
+
+/// The array behind `obj` (NumPy arrays as they are, DLPack tensors through numpy.from_dlpack,
+/// sequences converted by NumPy). Throws
 /// InvalidArgument naming `what` when NumPy cannot make an array of it.
 py::array asArray(const py::object& obj, const char* what);
 
@@ -102,3 +119,30 @@ void parallelRows(std::size_t n, F&& body) {
 }
 
 }  // namespace duplex::python
+
+namespace pybind11::detail {
+template <>
+struct handle_type_name<duplex::python::RaysArray> {
+  static constexpr auto name = const_name("numpy.ndarray[float32 | float64, (..., 6) | (..., 8)]");
+};
+template <>
+struct handle_type_name<duplex::python::PointsArray> {
+  static constexpr auto name = const_name("numpy.ndarray[float32 | float64, (..., 3)]");
+};
+template <>
+struct handle_type_name<duplex::python::PositionsArray> {
+  static constexpr auto name = const_name("numpy.ndarray[float32 | float64, (N, 3)]");
+};
+template <>
+struct handle_type_name<duplex::python::TrianglesArray> {
+  static constexpr auto name = const_name("numpy.ndarray[integer, (M, 3)]");
+};
+template <>
+struct handle_type_name<duplex::python::TransformArray> {
+  static constexpr auto name = const_name("numpy.ndarray[float64, (3, 4) | (4, 4)] | None");
+};
+template <>
+struct handle_type_name<duplex::python::DistanceLimit> {
+  static constexpr auto name = const_name("float | numpy.ndarray[float64, (...)] | None");
+};
+}  // namespace pybind11::detail

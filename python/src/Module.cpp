@@ -73,7 +73,9 @@ Node ids (what add_group and add_instance return) address nodes in edits. Instan
 the instances in the order they entered the scene: a loaded file's first (for scene-json-v1 the
 position in "instances", as in the hit files of `duplex trace`), then each add_instance. Hits,
 commits, selections and closest points report instance ids; instance_node(id) and
-instance_id(node) convert. Edits take effect for queries at the next commit().
+instance_id(node) convert. Edits take effect for queries at the next commit(); a query with
+edits pending commits them first (pending="commit", the default), raises naming them ("raise") or
+answers from the last commit ("snapshot").
 )doc";
 
 constexpr const char* kRaysDoc =
@@ -86,9 +88,15 @@ mask meets it count.)doc";
 }  // namespace
 }  // namespace duplex::python
 
-PYBIND11_MODULE(duplex, m) {
+// The extension is duplex._duplex inside the package duplex (python/duplex/__init__.py checks the
+// interpreter and NumPy before importing it, and adds the Open3D-style RaycastingScene).
+PYBIND11_MODULE(_duplex, m) {
   using namespace duplex;
   using namespace duplex::python;
+  // Classes take their __module__ from the module's name when they are created: name them after
+  // the package that re-exports them, so that help(), repr() and pickling say duplex.Scene.
+  const py::object extension_name = m.attr("__name__");
+  m.attr("__name__") = "duplex";
   m.doc() = kModuleDoc;
   m.attr("INVALID_ID") = py::int_(kInvalidId);
   m.attr("__version__") = "0.1.0";
@@ -110,9 +118,19 @@ PYBIND11_MODULE(duplex, m) {
   });
 
   py::class_<PyScene> scene(m, "Scene", kSceneDoc);
-  scene.def(py::init<>(), "An empty scene (the root group only).");
-  scene.def_static("load", &PyScene::load, "path"_a, "structure"_a = "",
-                   R"doc(Reads a scene file: scene-json-v1 or duplex-scene-v1 (sensors included; lights and
+  scene.def(py::init([](const std::string& pending) { return std::make_unique<PyScene>(pendingPolicy(pending)); }),
+            "pending"_a = "commit",
+            R"doc(An empty scene (the root group only). pending: what a query does while edits wait
+for a commit: "commit" (default: commit them first, as commit() would; its change lists are not
+reported), "raise" (ValueError naming the pending edits) or "snapshot" (answer from the last
+commit: for edits made in one thread while others query).)doc");
+  scene.def_static(
+      "load",
+      [](const std::filesystem::path& path, const std::string& structure, const std::string& pending) {
+        return PyScene::load(path, structure, pendingPolicy(pending));
+      },
+      "path"_a, "structure"_a = "", "pending"_a = "commit",
+      R"doc(Reads a scene file: scene-json-v1 or duplex-scene-v1 (sensors included; lights and
 timed edits are read by run_sensors and the tool, not applied here). Bottom-level structures are
 built in parallel, or read from the prepared files the scene names. structure: the choice for
 meshes that make none ("bvh", "kdtree", "bvh:fast", ...; "" = the default BVH). Raises OSError
@@ -120,11 +138,13 @@ naming the file and the JSON pointer of the first problem.)doc");
 
   // ---- objects ----
   scene.def("add_mesh", &PyScene::addMesh, "positions"_a, "triangles"_a, "name"_a = py::none(), "structure"_a = "",
+            "nthreads"_a = 0,
             R"doc(Adds a triangle mesh to the library and builds its structure; returns its object id.
 positions: (N, 3) float32 or float64, object space (stored as float32). triangles: (M, 3) integer
 vertex indices. Degenerate triangles keep their index (primitive ids are row numbers of
 `triangles`) but are never hit. name: unique in the library (None: "mesh", made unique).
-structure: "bvh" (default), "kdtree", "bvh:fast", "bvh:high,leaf=4", ...
+structure: "bvh" (default), "kdtree", "bvh:fast", "bvh:high,leaf=4", ... nthreads: worker
+threads of the build (0: all). The object is not hit until add_instance places it.
 Raises ValueError for bad shapes, dtypes, indices out of range or no valid triangle.)doc");
   scene.def("load_mesh", &PyScene::loadMesh, "path"_a, "name"_a = py::none(), "structure"_a = "",
             R"doc(Reads a mesh file (OBJ, PLY, STL, OFF, OM: any format of the C++ loader; polygons are
@@ -151,7 +171,8 @@ transform ((3, 4) or (4, 4), float64, local -> parent space) it is a transform n
             "name"_a = py::none(), "mask"_a = 0xFFFFFFFFu,
             R"doc(Adds an instance of library object `obj` under `parent` (None: the root) with its
 object -> parent transform ((3, 4) or (4, 4); None: identity) and a 32-bit mask; returns its node
-id. It gets the next instance id (instance_id(node)).)doc");
+id: node ids address edits; hits, commits and closest points report the instance id, which
+instance_id(node) gives (the next number: the instances in the order they were added).)doc");
   scene.def("set_transform", &PyScene::setTransform, "node"_a, "T"_a,
             "Sets a node's local transform T: (3, 4) or (4, 4), object (local) -> parent space, float64.");
   scene.def("set_visible", &PyScene::setVisible, "node"_a, "flag"_a,
@@ -264,6 +285,10 @@ world box meets it). Occlusion plays no part.)doc");
   scene.def_property_readonly("format", &PyScene::format,
                               "\"scene-json-v1\" or \"duplex-scene-v1\" for a loaded scene, \"\" otherwise.");
   scene.def_property_readonly("file", &PyScene::file, "The scene file it was loaded from (\"\" otherwise).");
+  scene.def_property_readonly("pending", &PyScene::pending,
+                              "What a query does with uncommitted edits: \"commit\", \"raise\" or \"snapshot\".");
+  scene.def("pending_edits", &PyScene::pendingEdits,
+            "The edits since the last commit, as calls (\"set_transform(node=3)\", ...; the first 8, then a count).");
 
   m.def(
       "set_max_memory", [](std::uint64_t bytes) { setMemoryLimit(bytes); }, "bytes"_a,
@@ -337,4 +362,6 @@ scenes (lights in lumens, or bands with wavelengths) "luminous_flux", "luminous_
 A far-field sensor ("shape" "farfield", "bins" (n_c, n_gamma)) has instead of the (ny, nx)
 arrays "intensity", "intensity_stderr" (W/sr), "flux", "ray_count", "solid_angle" (sr), each
 (n_c, n_gamma), and "c_deg", "gamma_deg" (the grid's angles).)doc");
+
+  m.attr("__name__") = extension_name;
 }

@@ -116,9 +116,18 @@ std::vector<TriangleMesh::Triangle> trianglesFrom(const py::object& obj, std::si
 
 }  // namespace
 
-PyScene::PyScene() : graph_(std::make_unique<SceneGraph>()), tracer_(std::make_unique<SceneTracer>(*graph_)) {}
+PendingPolicy pendingPolicy(const std::string& name) {
+  if (name == "commit") return PendingPolicy::Commit;
+  if (name == "raise") return PendingPolicy::Raise;
+  if (name == "snapshot") return PendingPolicy::Snapshot;
+  throw InvalidArgument("pending: expected \"commit\", \"raise\" or \"snapshot\", got \"" + name + "\"");
+}
 
-PyScene::PyScene(SceneDocument doc) : graph_(std::move(doc.graph)), format_(doc.format), file_(doc.file.string()) {
+PyScene::PyScene(PendingPolicy pending)
+    : graph_(std::make_unique<SceneGraph>()), tracer_(std::make_unique<SceneTracer>(*graph_)), pending_(pending) {}
+
+PyScene::PyScene(SceneDocument doc, PendingPolicy pending)
+    : graph_(std::move(doc.graph)), pending_(pending), format_(doc.format), file_(doc.file.string()) {
   {
     py::gil_scoped_release nogil;
     tracer_ = std::make_unique<SceneTracer>(*graph_);
@@ -129,7 +138,8 @@ PyScene::PyScene(SceneDocument doc) : graph_(std::move(doc.graph)), format_(doc.
 
 PyScene::~PyScene() = default;
 
-std::unique_ptr<PyScene> PyScene::load(const std::filesystem::path& path, const std::string& structure) {
+std::unique_ptr<PyScene> PyScene::load(const std::filesystem::path& path, const std::string& structure,
+                                       PendingPolicy pending) {
   SceneDocumentOptions options;
   options.structure = structure;
   std::optional<SceneDocument> doc;
@@ -145,7 +155,71 @@ std::unique_ptr<PyScene> PyScene::load(const std::filesystem::path& path, const 
       throw FileError(path.string() + ": " + e.what());
     }
   }
-  return std::unique_ptr<PyScene>(new PyScene(std::move(*doc)));
+  return std::unique_ptr<PyScene>(new PyScene(std::move(*doc), pending));
+}
+
+std::string PyScene::pending() const {
+  switch (pending_) {
+    case PendingPolicy::Commit: return "commit";
+    case PendingPolicy::Raise: return "raise";
+    case PendingPolicy::Snapshot: return "snapshot";
+  }
+  return "commit";
+}
+
+std::vector<std::string> PyScene::pendingEdits() const {
+  std::shared_lock lock(mutex_);
+  std::vector<std::string> out = pending_log_;
+  if (pending_count_ > out.size()) out.push_back("... " + std::to_string(pending_count_ - out.size()) + " more");
+  return out;
+}
+
+void PyScene::noteEdit(std::string call) {
+  // Called under the exclusive lock, after the edit succeeded.
+  constexpr std::size_t kShown = 8;
+  if (pending_log_.size() < kShown) pending_log_.push_back(std::move(call));
+  ++pending_count_;
+}
+
+void PyScene::beforeQuery() const {
+  if (pending_ != PendingPolicy::Snapshot) {
+    bool pending = false;
+    {
+      py::gil_scoped_release nogil;
+      std::shared_lock lock(mutex_);
+      pending = graph_->hasPendingEdits();
+    }
+    if (pending && pending_ == PendingPolicy::Raise) {
+      std::string calls;
+      for (const std::string& c : pendingEdits()) calls += (calls.empty() ? "" : ", ") + c;
+      throw InvalidArgument("the scene has edits that no commit() applied yet (" + calls +
+                            "); call commit() before querying (Scene(pending=\"commit\") does it for you)");
+    }
+    if (pending) {
+      exclusive(mutex_, [&] {
+        // Another thread may have committed between the two locks.
+        if (graph_->hasPendingEdits()) graph_->commit();
+        committed_instances_ = instances_.size();
+        pending_log_.clear();
+        pending_count_ = 0;
+      });
+    }
+  }
+  if (!warned_no_instances_) {
+    bool empty = false;
+    {
+      std::shared_lock lock(mutex_);
+      empty = graph_->library().count() > 0 && instances_.empty();
+    }
+    if (empty) {
+      warned_no_instances_ = true;
+      if (PyErr_WarnEx(PyExc_UserWarning,
+                       "duplex.Scene: the library has objects but the scene has no instance of them, so every "
+                       "query misses; place them with add_instance(object_id)",
+                       1) != 0)
+        throw py::error_already_set();
+    }
+  }
 }
 
 void PyScene::noteInstance(NodeId node) {
@@ -187,12 +261,18 @@ ObjectId PyScene::addMeshObject(TriangleMesh mesh, const std::optional<std::stri
   return graph_->library().add(name && !name->empty() ? *name : uniqueName(base), std::move(object));
 }
 
-ObjectId PyScene::addMesh(const py::object& positions, const py::object& triangles,
-                          const std::optional<std::string>& name, const std::string& structure) {
+ObjectId PyScene::addMesh(const PositionsArray& positions, const TrianglesArray& triangles,
+                          const std::optional<std::string>& name, const std::string& structure, int nthreads) {
   std::vector<glm::vec3> p = positionsFrom(positions);
   std::vector<TriangleMesh::Triangle> t = trianglesFrom(triangles, p.size());
   const std::string mesh_name = name && !name->empty() ? *name : "mesh";
-  return addMeshObject(TriangleMesh::fromTriangles(std::move(p), std::move(t), mesh_name), name, "mesh", structure);
+  if (nthreads < 0) throw InvalidArgument("nthreads must be >= 0 (0: all hardware threads)");
+  ObjectId id = 0;
+  // The build runs in an arena of nthreads workers; the GIL is released inside addMeshObject.
+  withThreads(nthreads, [&] {
+    id = addMeshObject(TriangleMesh::fromTriangles(std::move(p), std::move(t), mesh_name), name, "mesh", structure);
+  });
+  return id;
 }
 
 ObjectId PyScene::loadMesh(const std::filesystem::path& path, const std::optional<std::string>& name,
@@ -216,13 +296,19 @@ ObjectId PyScene::loadVolume(const std::filesystem::path& path, const std::optio
   return graph_->library().add(name && !name->empty() ? *name : uniqueName(object->name()), std::move(object));
 }
 
-void PyScene::deformObject(ObjectId object, const py::object& positions) {
+void PyScene::deformObject(ObjectId object, const PositionsArray& positions) {
   const std::vector<glm::vec3> p = positionsFrom(positions);
-  exclusive(mutex_, [&] { graph_->deformObject(object, p); });
+  exclusive(mutex_, [&] {
+    graph_->deformObject(object, p);
+    noteEdit("deform_object(object=" + std::to_string(object) + ")");
+  });
 }
 
 void PyScene::removeObject(ObjectId object) {
-  exclusive(mutex_, [&] { graph_->removeObject(object); });
+  exclusive(mutex_, [&] {
+    graph_->removeObject(object);
+    noteEdit("remove_object(object=" + std::to_string(object) + ")");
+  });
 }
 
 std::size_t PyScene::objectCount() const {
@@ -237,47 +323,65 @@ std::optional<ObjectId> PyScene::findObject(const std::string& name) const {
 
 // ---- nodes ----
 
-NodeId PyScene::addGroup(const std::optional<NodeId>& parent, const py::object& transform,
+NodeId PyScene::addGroup(const std::optional<NodeId>& parent, const TransformArray& transform,
                          const std::optional<std::string>& name) {
   const bool has_transform = !transform.is_none();
   const Affine local = transformFrom(transform, "transform");
   return exclusive(mutex_, [&] {
     const NodeId p = parent.value_or(kRootNode);
-    return has_transform ? graph_->addTransform(p, local, name.value_or("")) : graph_->addGroup(p, name.value_or(""));
+    const NodeId node =
+        has_transform ? graph_->addTransform(p, local, name.value_or("")) : graph_->addGroup(p, name.value_or(""));
+    noteEdit("add_group() -> node " + std::to_string(node));
+    return node;
   });
 }
 
-NodeId PyScene::addInstance(ObjectId object, const py::object& transform, const std::optional<NodeId>& parent,
+NodeId PyScene::addInstance(ObjectId object, const TransformArray& transform, const std::optional<NodeId>& parent,
                             const std::optional<std::string>& name, std::uint32_t mask) {
   const Affine local = transformFrom(transform, "transform");
   return exclusive(mutex_, [&] {
     const NodeId node = graph_->addInstance(parent.value_or(kRootNode), object, local, name.value_or(""), mask);
     noteInstance(node);
+    noteEdit("add_instance(obj=" + std::to_string(object) + ") -> node " + std::to_string(node));
     return node;
   });
 }
 
-void PyScene::setTransform(NodeId node, const py::object& transform) {
+void PyScene::setTransform(NodeId node, const TransformArray& transform) {
   const Affine local = transformFrom(transform, "T");
-  exclusive(mutex_, [&] { graph_->setTransform(node, local); });
+  exclusive(mutex_, [&] {
+    graph_->setTransform(node, local);
+    noteEdit("set_transform(node=" + std::to_string(node) + ")");
+  });
 }
 
 void PyScene::setVisible(NodeId node, bool visible) {
-  exclusive(mutex_, [&] { graph_->setVisible(node, visible); });
+  exclusive(mutex_, [&] {
+    graph_->setVisible(node, visible);
+    noteEdit("set_visible(node=" + std::to_string(node) + ")");
+  });
 }
 
 void PyScene::setMask(NodeId node, std::uint32_t mask) {
-  exclusive(mutex_, [&] { graph_->setMask(node, mask); });
+  exclusive(mutex_, [&] {
+    graph_->setMask(node, mask);
+    noteEdit("set_mask(node=" + std::to_string(node) + ")");
+  });
 }
 
 void PyScene::remove(NodeId node) {
-  exclusive(mutex_, [&] { graph_->remove(node); });
+  exclusive(mutex_, [&] {
+    graph_->remove(node);
+    noteEdit("remove(node=" + std::to_string(node) + ")");
+  });
 }
 
 py::dict PyScene::commit() {
   const ChangeSet c = exclusive(mutex_, [&] {
     ChangeSet changes = graph_->commit();
     committed_instances_ = instances_.size();
+    pending_log_.clear();
+    pending_count_ = 0;
     return changes;
   });
   py::dict d;
@@ -294,6 +398,8 @@ py::dict PyScene::commit() {
 void PyScene::rollback() {
   exclusive(mutex_, [&] {
     graph_->rollback();
+    pending_log_.clear();
+    pending_count_ = 0;
     for (std::size_t i = committed_instances_; i < instances_.size(); ++i) id_of_node_[instances_[i]] = kInvalidId;
     instances_.resize(committed_instances_);
   });
@@ -301,7 +407,8 @@ void PyScene::rollback() {
 
 // ---- queries ----
 
-py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t mask) const {
+py::dict PyScene::castRays(const RaysArray& rays, int nthreads, std::uint32_t mask) const {
+  beforeQuery();
   const FloatRows rows = floatRows(rays, {6, 8}, "rays");
   auto t_hit = newArray<float>(rows.shape);
   auto inst = newArray<std::uint32_t>(rows.shape);
@@ -353,7 +460,8 @@ py::dict PyScene::castRays(const py::object& rays, int nthreads, std::uint32_t m
   return d;
 }
 
-py::array PyScene::testOcclusions(const py::object& rays, int nthreads, std::uint32_t mask) const {
+py::array PyScene::testOcclusions(const RaysArray& rays, int nthreads, std::uint32_t mask) const {
+  beforeQuery();
   const FloatRows rows = floatRows(rays, {6, 8}, "rays");
   auto out = newArray<bool>(rows.shape);
   // NumPy's bool is one byte holding 0 or 1, as the batch query writes it.
@@ -372,7 +480,8 @@ py::array PyScene::testOcclusions(const py::object& rays, int nthreads, std::uin
   return out;
 }
 
-py::dict PyScene::listIntersections(const py::object& rays, int nthreads, std::uint32_t mask) const {
+py::dict PyScene::listIntersections(const RaysArray& rays, int nthreads, std::uint32_t mask) const {
+  beforeQuery();
   const FloatRows rows = floatRows(rays, {6, 8}, "rays");
   std::vector<Hit> hits;
   std::vector<std::size_t> offsets;
@@ -417,12 +526,13 @@ py::dict PyScene::listIntersections(const py::object& rays, int nthreads, std::u
   return d;
 }
 
-py::dict PyScene::computeClosestPoints(const py::object& points, const py::object& max_distance, int nthreads,
+py::dict PyScene::computeClosestPoints(const PointsArray& points, const DistanceLimit& max_distance, int nthreads,
                                        std::uint32_t mask) const {
   const FloatRows rows = floatRows(points, {3}, "points");
+  beforeQuery();
   // max_distance: None (no limit), a number, or an array that broadcasts to the points' shape.
   py::module_ np = py::module_::import("numpy");
-  py::object limit = max_distance.is_none() ? py::object(py::float_(INFINITY)) : max_distance;
+  py::object limit = max_distance.is_none() ? py::object(py::float_(INFINITY)) : py::object(max_distance);
   py::array_t<double, py::array::c_style | py::array::forcecast> limits;
   try {
     limits = np.attr("ascontiguousarray")(
@@ -471,6 +581,7 @@ py::dict PyScene::computeClosestPoints(const py::object& points, const py::objec
 
 py::dict PyScene::pick(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height, double x, double y,
                        std::uint32_t mask) const {
+  beforeQuery();
   struct Found {
     std::vector<SceneHit> hits;
     std::string path;
@@ -500,6 +611,7 @@ py::dict PyScene::pick(const PinholeCamera& camera, std::uint32_t width, std::ui
 
 py::dict PyScene::pickElement(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height, double x,
                               double y, const PickOptions& options) const {
+  beforeQuery();
   struct Found {
     ElementPick pick;
     std::string path;
@@ -529,6 +641,7 @@ py::dict PyScene::pickElement(const PinholeCamera& camera, std::uint32_t width, 
 
 py::array PyScene::selectRectangle(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height, double x0,
                                    double y0, double x1, double y1, std::uint32_t mask, RegionMode mode) const {
+  beforeQuery();
   const std::vector<NodeId> nodes =
       shared(mutex_, [&] { return tracer_->selectRectangle(camera, x0, y0, x1, y1, width, height, mask, mode); });
   return instanceIds(nodes);

@@ -56,9 +56,9 @@ def read_hits(path):
     return np.fromfile(path, dtype=HIT_RECORD)
 
 
-def triangle_scene(duplex, offset=(0.0, 0.0, 0.0)):
+def triangle_scene(duplex, offset=(0.0, 0.0, 0.0), pending="commit"):
     """A unit right triangle in the z = 0 plane of object space, one instance translated by offset."""
-    scene = duplex.Scene()
+    scene = duplex.Scene(pending=pending)
     obj = scene.add_mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]), name="tri")
     t = np.eye(4)
     t[:3, 3] = offset

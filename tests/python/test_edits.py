@@ -15,12 +15,12 @@ def hit_instance(scene, x, y):
 
 
 def test_moved_instance_is_hit_where_it_went():
-    scene, obj, node = triangle_scene(duplex)
+    scene, obj, node = triangle_scene(duplex, pending="snapshot")
     assert hit_instance(scene, 0.2, 0.2) == 0
     t = np.eye(4)
     t[:3, 3] = [10, 0, 0]
     scene.set_transform(node, t)
-    # Not committed yet: queries still see the old scene.
+    # Not committed yet: a "snapshot" scene's queries still see the old scene.
     assert hit_instance(scene, 0.2, 0.2) == 0
     changes = scene.commit()
     assert list(changes["moved"]) == [0]

@@ -14,7 +14,8 @@ def big_scene():
     i = np.arange(n - 1)
     a = (i[:, None] * n + i[None, :]).ravel()
     triangles = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
-    scene = duplex.Scene()
+    # "snapshot": the queries of other threads see whole commits, never half a batch of edits.
+    scene = duplex.Scene(pending="snapshot")
     obj = scene.add_mesh(positions, triangles)
     nodes = [scene.add_instance(obj, np.array([[1, 0, 0, k], [0, 1, 0, 0], [0, 0, 1, 0]], float)) for k in range(4)]
     scene.commit()
