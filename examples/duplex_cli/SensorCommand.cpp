@@ -615,8 +615,12 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
   SensorRanks ranks;
   try {
     return runSensorOn(ranks, o);
-  } catch (const AllRanksFailed&) {
-    throw;  // every rank ends with it
+  } catch (const AllRanksFailed& e) {
+    // Every rank ends with it. Each writes it before any rank exits: a launcher ends the whole job
+    // when the first process exits with an error, which could cut off a slower rank's message.
+    std::cerr << "duplex sensor: error: " << e.what() << '\n' << std::flush;
+    ranks.barrier();
+    throw AllRanksFailedReported(e.what());
   } catch (const std::exception& e) {
     ranks.failed(e);  // shared: a failure of this rank alone ends every rank
     throw;

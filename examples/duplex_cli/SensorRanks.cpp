@@ -99,6 +99,12 @@ SensorRunStatus SensorRanks::runUntil(SensorRun& run, std::uint64_t total_rays,
 #endif
 }
 
+void SensorRanks::barrier() const {
+#ifdef DUPLEX_HAVE_MPI
+  if (shared_) MPI_Barrier(MPI_COMM_WORLD);
+#endif
+}
+
 void SensorRanks::failed(const std::exception& e) const {
   if (!shared_) return;
 #ifdef DUPLEX_HAVE_MPI

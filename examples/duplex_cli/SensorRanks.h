@@ -23,6 +23,13 @@ class AllRanksFailed : public Error {
   using Error::Error;
 };
 
+/// AllRanksFailed after this rank wrote it to stderr (runSensor): the tool exits with its bad-input
+/// status without writing it again.
+class AllRanksFailedReported : public AllRanksFailed {
+ public:
+  using AllRanksFailed::AllRanksFailed;
+};
+
 /// The processes of one `duplex sensor` run (see the file comment).
 class SensorRanks {
  public:
@@ -53,6 +60,8 @@ class SensorRanks {
   /// message is printed with the rank and every rank is ended (MPI_Abort), as waiting for this
   /// rank would hang the others; alone, nothing (the caller reports it as usual).
   void failed(const std::exception& e) const;
+  /// Waits until every rank of a shared run gets here (nothing when the run is not shared).
+  void barrier() const;
 
  private:
   int rank_ = 0, size_ = 1;

@@ -37,6 +37,7 @@
 #include "SceneRobotCommand.h"
 #include "SceneSplitCommand.h"
 #include "SensorCommand.h"
+#include "SensorRanks.h"
 #include "StructureOption.h"
 #include "TraceCommand.h"
 
@@ -381,6 +382,8 @@ int main(int argc, char** argv) {
   } catch (const duplex::cli::Interrupted& e) {
     std::cerr << command << ": " << e.what() << " (signal " << e.signal() << ")\n";
     return 128 + e.signal();
+  } catch (const duplex::cli::AllRanksFailedReported&) {
+    return kExitBadInput;  // written by every rank before any ended (runSensor)
   } catch (const duplex::Error& e) {
     std::cerr << command << ": error: " << e.what() << '\n';
     return kExitBadInput;
