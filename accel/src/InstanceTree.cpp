@@ -36,6 +36,7 @@
 #include <utility>
 
 #include "InstanceTreeState.h"
+#include "InstanceTreeWide.h"
 #include "KdBuildRefs.h"
 
 namespace duplex {
@@ -150,6 +151,11 @@ InstanceTree::InstanceTree(const TopLevelConfig& config, Kind kind) : config_(co
 void InstanceTree::setConfig(const TopLevelConfig& config) {
   config_ = config;
   if (kind_ == Kind::Crossing) config_.build = config.crossing_build;
+  // The traversal form follows at once (it depends on nothing a commit changes).
+  if (kind_ == Kind::Blocking && state_ && config_.wide_traversal != state_->wide.usable && !tree_.empty()) {
+    if (config_.wide_traversal) state_->wide.build(tree_, state_->boxes);
+    else state_->wide = {};
+  }
 }
 
 void InstanceTree::ensureState() {
@@ -245,7 +251,7 @@ void InstanceTree::install(KdTree&& tree) {
   s.needs_rebuild = false;
   ++s.full_rebuilds;
   s.last_full = true;
-  refreshCrossingIndex();
+  refreshTraversalForms();
 }
 
 void InstanceTree::fullRebuild() {
@@ -258,15 +264,29 @@ void InstanceTree::rebuild() {
   fullRebuild();
 }
 
-void InstanceTree::refreshCrossingIndex() {
-  if (kind_ == Kind::Crossing) state_->refreshLeafBoxes(tree_);
+// The forms derived from the tree for traversal: a crossing tree's leaf boxes and grid, a blocking
+// tree's wide form (all of it after a full build or a compaction, else what lies on the paths of
+// the boxes the commit edited).
+void InstanceTree::refreshTraversalForms() {
+  State& s = *state_;
+  if (kind_ == Kind::Crossing) {
+    s.refreshLeafBoxes(tree_);
+  } else if (!config_.wide_traversal) {
+    s.wide = {};
+  } else if (s.last_full || s.wide_full) {
+    s.wide.build(tree_, s.boxes);
+  } else {
+    s.wide.refresh(tree_, s.boxes, s.wide_edited);
+  }
+  s.wide_edited.clear();
+  s.wide_full = false;
 }
 
 void InstanceTree::commit() {
   if (!state_ || (state_->pending.empty() && !state_->needs_rebuild)) return;
   try {
     commitEdits();
-    refreshCrossingIndex();
+    if (!state_->last_full) refreshTraversalForms();  // a full rebuild refreshed them
   } catch (...) {
     // The records already describe the new scene; a tree that no longer matches them must not be
     // traversed. Rebuild from the records, or (when even that fails) answer nothing until the next
@@ -276,6 +296,7 @@ void InstanceTree::commit() {
       fullRebuild();
     } catch (...) {
       tree_ = KdTree{};
+      s.wide = {};
       s.needs_rebuild = true;
     }
     throw;
@@ -301,6 +322,7 @@ void InstanceTree::commitEdits() {
   s.last_full = false;
   s.touched_jumps.clear();
   s.touched_frontiers.clear();
+  s.wide_edited.clear();
 
   // A batch that edits a large part of the scene is cheaper, and gives a better tree, as one
   // full rebuild than as as many re-insertions (the same holds for scenes of a few instances).
@@ -398,6 +420,7 @@ void InstanceTree::applyRemoval(CommitPass& pass, std::uint32_t id) {
   if (it == s.slot_of_id.end()) return;  // added and removed within this batch
   const std::uint32_t slot = it->second;
   s.boundary_left |= onRootFace(s.boxes[slot]);
+  if (pass.incremental) s.wide_edited.push_back(s.boxes[slot]);
   if (pass.incremental)
     forEachLeaf(tree_, s.frontier_of, s.boxes[slot], [&](const LeafVisit& v) { removeFromLeaf(pass, v, slot); });
   s.boxes[slot] = Box();
@@ -438,6 +461,8 @@ void InstanceTree::applySet(CommitPass& pass, std::uint32_t id, Prepared&& edit)
   s.boxes[slot] = edit.box;
   if (!pass.incremental || old_box == edit.box) return;
   s.boundary_left |= onRootFace(old_box);
+  s.wide_edited.push_back(old_box);
+  s.wide_edited.push_back(edit.box);
   // Leave the leaves only the old box touches, join those only the new box touches.
   s.scratch_old.clear();
   s.scratch_new.clear();
@@ -528,31 +553,41 @@ void InstanceTree::shrinkRootIfDue(bool periodic) {
 // visits a leaf's instances nearest first (InstanceTreeState.h).
 Hit InstanceTree::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
-  KdRay kray;
-  BoxTestRay box_ray;
-  float tmin, tmax;
-  if (tree_.empty() || !setupWorldRay(ray_f, tree_.bounds, kray, box_ray, tmin, tmax)) return Hit{};
+  if (tree_.empty()) return Hit{};
   const WorldRay w{ray_f, ray_d};
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  const Box* boxes = state_->boxes.data();
-  const std::uint32_t* prims = tree_.prim_indices.data();
+  const State& s = *state_;
   Hit best;
-  std::uint32_t best_id = kInvalidId;
   const Record* winner = nullptr;
-  Mailbox mailbox;
-  float t_best = ray_f.tfar;
-  const auto pass = [mask](SlotFilter f) { return (f.mask & mask) != 0 && f.role == ObjectRole::Surface; };
-  traverseKdTreeClipped<false>(
-      tree_, kray, tmin, tmax, t_best, [&](std::uint32_t begin, std::uint32_t count, float& t) {
-        return closestInLeaf(box_ray, prims + begin, count, filters, boxes, t, mailbox, pass, [&](std::uint32_t slot) {
-          const Record& rec = records[slot];
-          ++ctx.stats.instance_visits;
-          if (!closerHit(rec, w, best, t, best_id, ctx)) return false;
-          winner = &rec;
-          return true;
-        });
-      });
+  if (s.wide.usable) {
+    KdRay kray;
+    if (!prepareKdRay(ray_f, kray)) return Hit{};
+    winner = wideKernels().closest({&s.wide, s.records.data(), s.filters.data(), mask}, w, kray, best, ctx);
+  } else {
+    KdRay kray;
+    BoxTestRay box_ray;
+    float tmin, tmax;
+    if (!setupWorldRay(ray_f, tree_.bounds, kray, box_ray, tmin, tmax)) return Hit{};
+    const Record* records = s.records.data();
+    const SlotFilter* filters = s.filters.data();
+    const Box* boxes = s.boxes.data();
+    const std::uint32_t* prims = tree_.prim_indices.data();
+    std::uint32_t best_id = kInvalidId;
+    Mailbox mailbox;
+    float t_best = ray_f.tfar;
+    const auto pass = [mask](SlotFilter f) { return (f.mask & mask) != 0 && f.role == ObjectRole::Surface; };
+    traverseKdTreeClipped<false>(tree_, kray, tmin, tmax, t_best,
+                                 [&](std::uint32_t begin, std::uint32_t count, float& t) {
+                                   return closestInLeaf(box_ray, prims + begin, count, filters, boxes, t, mailbox, pass,
+                                                        [&](std::uint32_t slot) {
+                                                          const Record& rec = records[slot];
+                                                          ++ctx.stats.instance_visits;
+                                                          if (!closerHit(rec, toObject(rec, w), best, t, best_id, ctx))
+                                                            return false;
+                                                          winner = &rec;
+                                                          return true;
+                                                        });
+                                 });
+  }
   if (!winner) return Hit{};
   best.instance_id = winner->id;
   best.ng = normalToWorld(*winner, best.ng);
@@ -569,14 +604,21 @@ Hit InstanceTree::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t
 
 bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
+  if (tree_.empty()) return false;
+  const WorldRay w = fromFloat(ray_ws);
+  const State& s = *state_;
+  if (s.wide.usable) {
+    KdRay kray;
+    return prepareKdRay(ray_ws, kray) &&
+           wideKernels().occluded({&s.wide, s.records.data(), s.filters.data(), mask}, w, kray, ctx);
+  }
   KdRay kray;
   BoxTestRay box_ray;
   float tmin, tmax;
-  if (tree_.empty() || !setupWorldRay(ray_ws, tree_.bounds, kray, box_ray, tmin, tmax)) return false;
-  const WorldRay w = fromFloat(ray_ws);
-  const Record* records = state_->records.data();
-  const SlotFilter* filters = state_->filters.data();
-  const Box* boxes = state_->boxes.data();
+  if (!setupWorldRay(ray_ws, tree_.bounds, kray, box_ray, tmin, tmax)) return false;
+  const Record* records = s.records.data();
+  const SlotFilter* filters = s.filters.data();
+  const Box* boxes = s.boxes.data();
   const std::uint32_t* prims = tree_.prim_indices.data();
   Mailbox mailbox;
   float t_best = ray_ws.tfar;
@@ -589,7 +631,7 @@ bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t 
           if (!pass(filters[slot]) || !meetsBoxAt(box_ray, boxes[slot], ray_ws.tfar, t_enter) || mailbox.seen(slot))
             continue;
           ++ctx.stats.instance_visits;
-          if (occludes(records[slot], w, ctx)) return true;
+          if (occludes(records[slot], toObject(records[slot], w), ctx)) return true;
         }
         return false;
       });

@@ -1,6 +1,7 @@
 // InstanceTree::intersectPacket / occludedPacket (TopLevel's packet queries): up to kMaxPacketRays
-// world rays through the kd-tree together, each instance reached asked once for the sub-packet of
-// rays that reach it (Object::intersectPacket, rays in object space).
+// world rays through the tree together, each instance reached asked once for the sub-packet of
+// rays that reach it (Object::intersectPacket, rays in object space). With the wide form (the
+// default), its packet walk (InstanceTreeWide.inl); otherwise the kd-tree's, below.
 //
 // The classic packet kd-tree walk (one split plane against every ray of the packet), kept equal to
 // traverseKdTreeClipped ray for ray: the rays of a packet share their direction signs (they are
@@ -19,6 +20,7 @@
 #include "duplex/accel/TopLevel.h"
 
 #include "InstanceTreeState.h"
+#include "InstanceTreeWide.h"
 
 #include <algorithm>
 #include <array>
@@ -214,6 +216,36 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   if (octants > kMaxPacketOctants) {
     for (const std::uint32_t lanes : by_octant)
       for (std::uint32_t l = lanes; l != 0; l &= l - 1) single(std::countr_zero(l));
+    return result;
+  }
+  if (state_->wide.usable) {
+    // The wide form's packet walk (InstanceTreeWide.inl), one octant at a time.
+    const State& s = *state_;
+    const WideQuery q{&s.wide, s.records.data(), s.filters.data(), mask};
+    const WideKernels& kernels = wideKernels();
+    Ray rays[kMaxPacketRays];
+    for (int i = 0; i < n; ++i) rays[i] = rays_ws[static_cast<std::size_t>(i)];
+    for (const std::uint32_t lanes : by_octant) {
+      if (lanes == 0) continue;
+      if (std::popcount(lanes) <= kMinPacket) {
+        for (std::uint32_t l = lanes; l != 0; l &= l - 1) single(std::countr_zero(l));
+        continue;
+      }
+      if constexpr (AnyHit) {
+        result |= kernels.occludedPacket(q, rays, lanes, ctx);
+      } else {
+        Hit best[kMaxPacketRays];
+        const Record* winner[kMaxPacketRays];
+        for (std::uint32_t l = kernels.closestPacket(q, rays, lanes, best, winner, ctx); l != 0; l &= l - 1) {
+          const int i = std::countr_zero(l);
+          Hit h = best[i];
+          h.instance_id = winner[i]->id;
+          h.ng = normalToWorld(*winner[i], h.ng);
+          hits[static_cast<std::size_t>(i)] = h;
+          result |= 1u << i;
+        }
+      }
+    }
     return result;
   }
   // The rays that miss the root box have their (miss) result already.

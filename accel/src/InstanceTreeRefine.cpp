@@ -352,6 +352,7 @@ bool InstanceTree::State::refineLeaves(InstanceTree& top, std::vector<LeafVisit>
 }
 
 void InstanceTree::compact() {
+  state_->wide_full = true;  // the kd nodes are renumbered: derive the wide form afresh
   State& s = *state_;
   const KdTree& in = tree_;
   if (in.nodes.empty()) return;

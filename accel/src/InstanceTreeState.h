@@ -11,6 +11,7 @@
 #include "FlatPlane.h"
 #include "LeafBoxes.h"
 #include "CrossingGrid.h"
+#include "WideTop.h"
 
 #include <glm/matrix.hpp>
 
@@ -172,12 +173,11 @@ inline bool replacesBest(float t_hit, std::uint32_t id, float t_best, std::uint3
   return t_hit < t_best || (t_hit == t_best && id < best_id);
 }
 
-// Asks blocking instance `rec` for a hit; on one that replacesBest() (t, best_id: the best so far,
-// kInvalidId for none) overwrites `best` (object-space normal, instance id not set), t and best_id and
-// returns true. The leaf step of every closest-hit traversal (intersect and the crossing query).
-inline bool closerHit(const Record& rec, const WorldRay& w, Hit& best, float& t, std::uint32_t& best_id,
-                      QueryContext& ctx) {
-  Ray ray_os = toObject(rec, w);
+// Asks blocking instance `rec` for a hit along `ray_os` (the world ray in its object space,
+// toObject); on one that replacesBest() (t, best_id: the best so far, kInvalidId for none)
+// overwrites `best` (object-space normal, instance id not set), t and best_id and returns true. The
+// leaf step of every closest-hit traversal (intersect and the crossing query).
+inline bool closerHit(const Record& rec, Ray ray_os, Hit& best, float& t, std::uint32_t& best_id, QueryContext& ctx) {
   ray_os.tfar = askBound(t);
   Hit h;
   h.t = ray_os.tfar;
@@ -190,9 +190,9 @@ inline bool closerHit(const Record& rec, const WorldRay& w, Hit& best, float& t,
   return true;
 }
 
-// Whether anything of blocking instance `rec` blocks the world ray within [tnear, tfar].
-inline bool occludes(const Record& rec, const WorldRay& w, QueryContext& ctx) {
-  const Ray ray_os = toObject(rec, w);
+// Whether anything of blocking instance `rec` blocks `ray_os` (the world ray in its object space,
+// toObject) within [tnear, tfar].
+inline bool occludes(const Record& rec, const Ray& ray_os, QueryContext& ctx) {
   return rec.entry.occluded ? rec.entry.occluded(rec.entry.data, ray_os) : rec.object->occluded(ray_os, ctx);
 }
 
@@ -342,6 +342,14 @@ struct InstanceTree::State {
   bool needs_rebuild = false;  // a commit failed half way: the records are ahead of the tree
 
   std::vector<LeafVisit> scratch_old, scratch_new;
+
+  // Blocking trees only: the 8-wide traversal form of the tree (WideTop.h), refreshed after every
+  // commit and build: what lies on the paths of the boxes an incremental commit edited
+  // (`wide_edited`: the old and new world boxes of the instances it moved, added or removed), or
+  // all of it after a full build or a compaction (`wide_full`).
+  toplevel_detail::WideTop wide;
+  std::vector<Box> wide_edited;
+  bool wide_full = false;
 
   // Crossing trees only (InstanceTree::Kind::Crossing): the boxes in leaf order (LeafBoxes.h), refreshed after every
   // commit and build (O(references)); a count that differs from tree.prim_indices (a failed commit) means "not

@@ -165,6 +165,11 @@ TopLevelStats TopLevel::stats() const {
     st.last_commit_edits = s->last_edits;
     st.last_commit_full_rebuild = s->last_full;
     st.garbage_nodes = s->garbage_nodes;
+    if (s->wide.usable) {
+      st.wide_nodes = s->wide.liveNodes();
+      st.wide_garbage_nodes = s->wide.garbage();
+    }
+    st.wide_bytes = s->wide.bytes();
   }
   if (crossing_) {
     st.crossing_instances = crossing_->size();

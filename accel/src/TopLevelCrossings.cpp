@@ -104,7 +104,7 @@ SegmentEnd TopLevel::intersectWithCrossings(const Ray& ray_ws, std::vector<Cross
         const Record& rec = records[slot];
         ++ctx.stats.instance_visits;
         if (rec.role == ObjectRole::Surface) {
-          if (closerHit(rec, w, best, t, best_id, ctx)) {
+          if (closerHit(rec, toObject(rec, w), best, t, best_id, ctx)) {
             winner = &rec;
             found = true;
           }

@@ -7,6 +7,7 @@
 #include "MeshChecks.h"
 #include "Reference.h"
 #include "TestSupport.h"
+#include "TwoLevelChecks.h"
 
 #include "duplex/accel/Affine.h"
 #include "duplex/accel/Error.h"
@@ -18,6 +19,7 @@
 #include <gtest/gtest.h>
 #include <glm/matrix.hpp>
 
+#include <array>
 #include <limits>
 #include <map>
 #include <random>
@@ -193,6 +195,58 @@ TEST(TopLevel, InstancesFarFromTheOrigin) {
   buildTopChecked(top, w.instances);
   const auto s = expectTopLevelAgrees(top, w, worldRays(top.bounds(), 76), true, "far world");
   EXPECT_GT(s.hits, s.rays / 8);
+}
+
+// The wide traversal form (the default) and the kd-tree walk give the same hits bit for bit, single
+// and packet, closest and any hit, with the brute force as the reference; axis-aligned rays (zero
+// direction components) and rays starting on instance box faces included.
+TEST(TopLevel, WideAndKdTraversalsAgree) {
+  const Library lib;
+  const World w = randomWorld(lib, 40, glm::dvec3(0.5, -1.0, 2.0), 6.0, 91, true);
+  TopLevelConfig kd_config;
+  kd_config.wide_traversal = false;
+  TopLevel wide, kd(kd_config);
+  buildTopChecked(wide, w.instances);
+  buildTopChecked(kd, w.instances);
+  std::vector<Ray> rays = worldRays(wide.bounds(), 92);
+  rays.resize(3000);
+  for (std::size_t i = 0; i < 600; ++i) {  // axis-aligned, some from a box corner
+    Ray r = rays[i];
+    r.dir = glm::vec3(0.0f);
+    r.dir[i % 3] = i % 2 ? 1.0f : -1.0f;
+    if (i % 3 == 0) r.origin = glm::vec3(w.instances[i % w.instances.size()].world_from_object.translation);
+    rays.push_back(r);
+  }
+  expectTopLevelAgrees(wide, w, rays, true, "wide");
+  QueryContext ctx;
+  std::size_t hits = 0;
+  for (std::size_t start = 0; start + kMaxPacketRays <= rays.size(); start += kMaxPacketRays) {
+    const std::span<const Ray> packet(rays.data() + start, kMaxPacketRays);
+    std::array<Hit, kMaxPacketRays> a{}, b{};
+    const std::uint32_t found_a = wide.intersectPacket(packet, a, ctx);
+    const std::uint32_t found_b = kd.intersectPacket(packet, b, ctx);
+    EXPECT_EQ(found_a, found_b) << "packet at " << start;
+    EXPECT_EQ(wide.occludedPacket(packet, ctx), kd.occludedPacket(packet, ctx)) << "packet at " << start;
+    for (int j = 0; j < kMaxPacketRays; ++j) {
+      const Ray& r = packet[static_cast<std::size_t>(j)];
+      const Hit single_wide = wide.intersect(r, ctx), single_kd = kd.intersect(r, ctx);
+      EXPECT_TRUE(sameHitBits(single_wide, single_kd))
+          << "ray " << start + j << ": " << sameHit(single_wide, single_kd).message();
+      EXPECT_TRUE(sameHitBits(a[static_cast<std::size_t>(j)], single_wide)) << "ray " << start + j;
+      EXPECT_TRUE(sameHitBits(b[static_cast<std::size_t>(j)], single_kd)) << "ray " << start + j;
+      EXPECT_EQ(wide.occluded(r, ctx), kd.occluded(r, ctx)) << "ray " << start + j;
+      hits += single_wide.valid();
+    }
+  }
+  EXPECT_GT(hits, rays.size() / 10);
+  // Switching the form off and on through setConfig takes effect at once, with the same hits.
+  TopLevelConfig c = wide.config();
+  c.wide_traversal = false;
+  wide.setConfig(c);
+  c.wide_traversal = true;
+  wide.setConfig(c);
+  for (std::size_t i = 0; i < 300; ++i)
+    EXPECT_TRUE(sameHitBits(wide.intersect(rays[i], ctx), kd.intersect(rays[i], ctx)));
 }
 
 TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {

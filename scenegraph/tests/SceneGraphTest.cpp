@@ -905,7 +905,8 @@ TEST(SceneGraph, BytesPerInstanceAccountsForWhatAnInstanceAllocates) {
   const double measured = double(in_use() - before) / n;
   const double documented = double(SceneGraph::bytesPerInstance() + TopLevel::bytesPerInstance());
   const TopLevelStats st = tracer.stats();
-  const double tree = (4.0 * double(st.tree.references) + 8.0 * double(st.tree.nodes)) / double(st.instances);
+  const double tree =
+      (4.0 * double(st.tree.references) + 8.0 * double(st.tree.nodes) + double(st.wide_bytes)) / double(st.instances);
   EXPECT_GE(measured, 0.95 * documented) << "graph " << SceneGraph::bytesPerInstance() << " + top level "
                                          << TopLevel::bytesPerInstance() << " bytes documented";
   EXPECT_LE(measured, 2.0 * (documented + tree)) << "graph " << SceneGraph::bytesPerInstance() << " + top level "

@@ -91,6 +91,13 @@ struct TopLevelConfig {
   /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
   /// "The crossing query"). false: always the kd-tree (for comparisons).
   bool crossing_grid = true;
+  /// Closest-hit, any-hit and packet queries of the blocking instances walk an 8-wide form derived
+  /// from the kd-tree after every build and commit (tight boxes tested 8 at a time; a commit
+  /// derives again only what its edits' paths cross): fewer steps and mispredictions per ray than
+  /// the kd-tree's node steps, for a little more memory and commit time (docs/two-level.md, "The
+  /// wide form"). false: the kd-tree itself (for comparisons). Same hits either way. Unlike the
+  /// other fields, a change through setConfig() takes effect at once.
+  bool wide_traversal = true;
   TopLevelUpdate update = TopLevelUpdate::Incremental;  ///< how commit() brings the trees up to date
   /// Full rebuild when (current SAH cost) > rebuild_ratio * (SAH cost after the last full build,
   /// scaled to the current instance count).
@@ -202,7 +209,7 @@ class InstanceTree {
                                std::vector<InstanceTriangle>& out) const;
   void fullRebuild();
   void install(KdTree&& tree);
-  void refreshCrossingIndex();
+  void refreshTraversalForms();
   void commitEdits();
   void applyRemoval(CommitPass& pass, std::uint32_t id);
   void applySet(CommitPass& pass, std::uint32_t id, toplevel_detail::Prepared&& edit);

@@ -49,6 +49,12 @@ struct TopLevelStats {
   /// dropped when the tree is compacted (InstanceTreeRefine.cpp).
   std::size_t garbage_nodes = 0;
   bool last_commit_full_rebuild = false;  ///< whether the last commit or build built the whole tree
+  /// The wide traversal form (TopLevelConfig::wide_traversal): its nodes reachable from its root
+  /// (0 when the kd-tree is walked instead), nodes that replaced parts left behind until the next
+  /// full derivation, and the bytes it holds (nodes and what it keeps per kd node for refreshes).
+  std::size_t wide_nodes = 0;
+  std::size_t wide_garbage_nodes = 0;  ///< see wide_nodes
+  std::size_t wide_bytes = 0;          ///< see wide_nodes
   /// The crossing level (non-blocking instances, see TopLevel): its instances and figures.
   /// `instances` and `tree` above count the other instances only.
   std::size_t crossing_instances = 0;

@@ -1,0 +1,49 @@
+#pragma once
+// Private to accel/src: the walks of a blocking instance tree's wide form (WideTop.h), one set per
+// instruction set (InstanceTreeWide.cpp), chosen once per process by widestSimdIsa().
+
+#include "duplex/accel/SimdIsa.h"
+
+#include "InstanceTreeState.h"
+#include "WideTop.h"
+
+#include <cstdint>
+#include <functional>
+
+namespace duplex::toplevel_detail {
+
+// What the walks read of an instance tree, and the instance mask of the query.
+struct WideQuery {
+  const WideTop* top;
+  const Record* records;      // by slot
+  const SlotFilter* filters;  // by slot
+  std::uint32_t mask;
+};
+
+struct WideKernels {
+  SimdIsa isa;
+  // The closest hit of world ray `w` (`k`: its prepared values, KdTraversal.h) among the blocking
+  // instances passing the mask: returns the winner's record (null: no hit) with its hit in `best`
+  // (object-space normal, instance id not set), as InstanceTree::intersect.
+  const Record* (*closest)(const WideQuery& q, const WorldRay& w, const KdRay& k, Hit& best, QueryContext& ctx);
+  // Whether any blocking instance passing the mask blocks `w` within [tnear, tfar].
+  bool (*occluded)(const WideQuery& q, const WorldRay& w, const KdRay& k, QueryContext& ctx);
+  // Packets: the rays `rays[j]` of the lanes `lanes` (all of one octant: the same direction signs,
+  // each queryable) walk the form together: each child box is tested against all of them at once,
+  // and each instance is asked once with the lanes that reach it (Object::intersectPacket). Closest:
+  // returns the lanes with a hit, their winners' records in `winner` and hits in `best` (object-space
+  // normal, instance id not set), the same as closest() ray by ray. Any hit: returns the blocked lanes.
+  std::uint32_t (*closestPacket)(const WideQuery& q, const Ray* rays, std::uint32_t lanes, Hit* best,
+                                 const Record** winner, QueryContext& ctx);
+  std::uint32_t (*occludedPacket)(const WideQuery& q, const Ray* rays, std::uint32_t lanes, QueryContext& ctx);
+  // The bare walk, for tests: visit(slot, t_best) for each reference met no later than t_best, as
+  // the two queries walk (closest: nearest first, stopping behind t_best; any hit: at the first
+  // visit returning true).
+  bool (*walk)(const WideTop& top, const KdRay& k, bool any_hit, float& t_best,
+               const std::function<bool(std::uint32_t, float&)>& visit);
+};
+
+// The kernels of the widest instruction set the CPU runs (capped by DUPLEX_ISA).
+const WideKernels& wideKernels();
+
+}  // namespace duplex::toplevel_detail

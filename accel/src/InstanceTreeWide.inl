@@ -1,0 +1,260 @@
+// The wide walks, included by InstanceTreeWide.cpp once per instruction set inside a namespace
+// that defines `WideRay`, `setup(origin, inv_dir, tnear, WideRay&)`,
+// `wideHits(ray, node, t_max, t_enter[8]) -> mask`, `packetChildHits(packet, node, child, lanes,
+// key) -> lanes` and `objectRay(record, world_ray)` (toObject's values, InstanceTreeState.h) for
+// that set.
+
+// Walks the form front to back: nodes and references in the order of their box entry, each node's
+// children sorted nearest first (for AnyHit, in any order). Calls visit(slot, t_best) for each
+// reference whose clipped box the ray meets no later than t_best; visit returns whether it found a
+// hit (lowering t_best for a closest-hit walk). With AnyHit the walk returns at the first such
+// visit. Returns whether any visit found a hit.
+template <bool AnyHit, class Visit>
+inline bool walk(const WideTop& top, const WideRay& r, float& t_best, Visit&& visit) {
+  struct Entry {
+    std::uint32_t child;
+    float t;
+  };
+  Entry stack[kWideStackSize];
+  int depth = 0;
+  const WideNode* nodes = top.nodes.data();
+  std::uint32_t cur = top.root;
+  float cur_t = r.tnear;
+  bool found = false;
+  while (true) {
+    if (cur & kWideRef) {
+      if (cur_t <= t_best && visit(cur & ~kWideRef, t_best)) {
+        found = true;
+        if constexpr (AnyHit) return true;
+      }
+    } else {
+      alignas(32) float t_enter[8];
+      std::uint32_t mask = wideHits(r, nodes[cur], t_best, t_enter);
+      if (mask != 0) {
+        const WideNode& node = nodes[cur];
+        const int first = std::countr_zero(mask);
+        mask &= mask - 1;
+        if (mask == 0) {  // one child met: no sorting, no push
+          cur = node.child[first];
+          cur_t = t_enter[first];
+          continue;
+        }
+        // Several: pushed sorted by entry, the nearest last (popped, that is taken, at once).
+        const int base = depth;
+        stack[depth++] = {node.child[first], t_enter[first]};
+        do {
+          const int c = std::countr_zero(mask);
+          mask &= mask - 1;
+          const Entry e{node.child[c], t_enter[c]};
+          int j = depth++;
+          if constexpr (!AnyHit) {
+            for (; j > base && stack[j - 1].t < e.t; --j) stack[j] = stack[j - 1];
+          }
+          stack[j] = e;
+        } while (mask != 0);
+        --depth;
+        cur = stack[depth].child;
+        cur_t = stack[depth].t;
+        continue;
+      }
+    }
+    // The next entry that can still hold a closer hit.
+    do {
+      if (depth == 0) return found;
+      --depth;
+      cur = stack[depth].child;
+      cur_t = stack[depth].t;
+    } while (cur_t > t_best);
+  }
+}
+
+// A blocking instance the query's mask selects, not asked before for this ray.
+inline bool selected(const WideQuery& q, std::uint32_t slot, Mailbox& mailbox) {
+  const SlotFilter f = q.filters[slot];
+  return (f.mask & q.mask) != 0 && f.role == ObjectRole::Surface && !mailbox.seen(slot);
+}
+
+const Record* closestEntry(const WideQuery& q, const WorldRay& w, const KdRay& k, Hit& best, QueryContext& ctx) {
+  WideRay r;
+  setup(k.origin, k.inv_dir, k.tnear, r);
+  float t_best = k.tfar;
+  std::uint32_t best_id = kInvalidId;
+  const Record* winner = nullptr;
+  Mailbox mailbox;
+  walk<false>(*q.top, r, t_best, [&](std::uint32_t slot, float& t) {
+    if (!selected(q, slot, mailbox)) return false;
+    ++ctx.stats.instance_visits;
+    const Record& rec = q.records[slot];
+    if (!closerHit(rec, objectRay(rec, w), best, t, best_id, ctx)) return false;
+    winner = &rec;
+    return true;
+  });
+  return winner;
+}
+
+bool occludedEntry(const WideQuery& q, const WorldRay& w, const KdRay& k, QueryContext& ctx) {
+  WideRay r;
+  setup(k.origin, k.inv_dir, k.tnear, r);
+  float t_best = k.tfar;
+  Mailbox mailbox;
+  return walk<true>(*q.top, r, t_best, [&](std::uint32_t slot, float&) {
+    if (!selected(q, slot, mailbox)) return false;
+    ++ctx.stats.instance_visits;
+    return occludes(q.records[slot], objectRay(q.records[slot], w), ctx);
+  });
+}
+
+// The packet walk: like walk(), with a lane mask per entry. A node tests each child's box against
+// the entry's lanes at once (packetChildHits); children are taken nearest first by their nearest
+// lane's entry. An entry waiting on the stack is tested again when popped, against the lanes' best
+// distances by then (its box, from its parent node, against the lanes that still need it), so a
+// lane visits no instance that it would skip alone. Each instance is asked once per visit with the
+// lanes that reach it and have not asked it before (a mailbox per lane).
+template <bool AnyHit>
+std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, std::uint32_t lanes, Hit* best,
+                         std::uint32_t* best_id, const Record** winner, QueryContext& ctx) {
+  struct Entry {
+    const WideNode* parent;
+    std::uint32_t child;  // index in parent
+    std::uint32_t lanes;
+    float key;
+  };
+  Entry stack[kWideStackSize];
+  int depth = 0;
+  Mailbox mailbox[kMaxPacketRays];
+  Ray rays_os[kMaxPacketRays];
+  Hit hits_os[kMaxPacketRays];
+  const WideNode* nodes = q.top->nodes.data();
+  std::uint32_t done = 0;  // any hit: blocked lanes; closest hit: lanes that found something
+  std::uint32_t cur = q.top->root;
+  std::uint32_t m = lanes;
+  while (true) {
+    if (cur & kWideRef) {
+      const std::uint32_t slot = cur & ~kWideRef;
+      const SlotFilter f = q.filters[slot];
+      std::uint32_t sub = 0;
+      if ((f.mask & q.mask) != 0 && f.role == ObjectRole::Surface)
+        for (std::uint32_t l = m; l != 0; l &= l - 1) {
+          const int j = std::countr_zero(l);
+          if (!mailbox[j].seen(slot)) sub |= 1u << j;
+        }
+      if (sub != 0) {
+        const Record& rec = q.records[slot];
+        ctx.stats.instance_visits += static_cast<std::uint64_t>(std::popcount(sub));
+        for (std::uint32_t l = sub; l != 0; l &= l - 1) {
+          const int j = std::countr_zero(l);
+          rays_os[j] = objectRay(rec, w[j]);
+          if constexpr (!AnyHit) {
+            // As closerHit (InstanceTreeState.h): asked a few ulps beyond the best hit, decided by replacesBest.
+            rays_os[j].tfar = askBound(p.t[j]);
+            hits_os[j] = Hit{};
+            hits_os[j].t = rays_os[j].tfar;
+          }
+        }
+        if constexpr (AnyHit) {
+          done |= rec.object->occludedPacket(rays_os, sub, ctx);
+          if ((done & lanes) == lanes) return done;
+        } else {
+          const std::uint32_t found = rec.object->intersectPacket(rays_os, hits_os, sub, ctx);
+          for (std::uint32_t l = found; l != 0; l &= l - 1) {
+            const int j = std::countr_zero(l);
+            if (!replacesBest(hits_os[j].t, rec.id, p.t[j], best_id[j])) continue;
+            best[j] = hits_os[j];
+            p.t[j] = hits_os[j].t;
+            best_id[j] = rec.id;
+            winner[j] = &rec;
+            done |= 1u << j;
+          }
+        }
+      }
+    } else {
+      const WideNode& node = nodes[cur];
+      Entry met[8];
+      int n = 0;
+      for (std::uint32_t v = node.valid; v != 0; v &= v - 1) {
+        const int c = std::countr_zero(v);
+        float key;
+        const std::uint32_t hit = packetChildHits(p, node, c, m, key);
+        if (hit == 0) continue;
+        Entry e{&node, static_cast<std::uint32_t>(c), hit, key};
+        int j = n++;
+        if constexpr (!AnyHit) {
+          for (; j > 0 && met[j - 1].key < key; --j) met[j] = met[j - 1];
+        }
+        met[j] = e;
+      }
+      if (n != 0) {
+        for (int i = 0; i + 1 < n; ++i) stack[depth++] = met[i];
+        cur = node.child[met[n - 1].child];
+        m = met[n - 1].lanes;
+        continue;
+      }
+    }
+    // The next entry with lanes that still reach its box.
+    while (true) {
+      if (depth == 0) return done;
+      const Entry e = stack[--depth];
+      std::uint32_t want = e.lanes;
+      if constexpr (AnyHit) want &= ~done;
+      if (want == 0) continue;
+      float key;
+      want = packetChildHits(p, *e.parent, static_cast<int>(e.child), want, key);
+      if (want == 0) continue;
+      cur = e.parent->child[e.child];
+      m = want;
+      break;
+    }
+  }
+}
+
+// Fills the packet rows of the lanes (unused lanes never meet a box).
+inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p, WorldRay* w) {
+  for (int j = 0; j < kMaxPacketRays; ++j) {
+    for (int a = 0; a < 3; ++a) p.org[a][j] = p.inv[a][j] = 0.0f;
+    p.tnear[j] = std::numeric_limits<float>::infinity();
+    p.t[j] = -std::numeric_limits<float>::infinity();
+  }
+  const int first = std::countr_zero(lanes);
+  for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
+    const int j = std::countr_zero(l);
+    const Ray& r = rays[j];
+    const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
+    const float o[3] = {r.origin.x, r.origin.y, r.origin.z};
+    for (int a = 0; a < 3; ++a) {
+      p.org[a][j] = o[a];
+      p.inv[a][j] = 1.0f / d[a];  // +-inf for a zero (or denormal) component, as prepareKdRay's
+    }
+    p.tnear[j] = r.tnear;
+    p.t[j] = r.tfar;
+    w[j] = fromFloat(r);
+  }
+  for (int a = 0; a < 3; ++a) p.near_row[a] = 2 * a + (std::signbit(p.inv[a][first]) ? 1 : 0);
+}
+
+std::uint32_t closestPacketEntry(const WideQuery& q, const Ray* rays, std::uint32_t lanes, Hit* best,
+                                 const Record** winner, QueryContext& ctx) {
+  PacketRays p;
+  WorldRay w[kMaxPacketRays];
+  setupPacket(rays, lanes, p, w);
+  std::uint32_t best_id[kMaxPacketRays];
+  for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
+    const int j = std::countr_zero(l);
+    best_id[j] = kInvalidId;
+    winner[j] = nullptr;
+  }
+  return packetWalk<false>(q, p, w, lanes, best, best_id, winner, ctx);
+}
+
+std::uint32_t occludedPacketEntry(const WideQuery& q, const Ray* rays, std::uint32_t lanes, QueryContext& ctx) {
+  PacketRays p;
+  WorldRay w[kMaxPacketRays];
+  setupPacket(rays, lanes, p, w);
+  return packetWalk<true>(q, p, w, lanes, nullptr, nullptr, nullptr, ctx) & lanes;
+}
+
+bool walkEntry(const WideTop& top, const KdRay& k, bool any_hit, float& t_best,
+               const std::function<bool(std::uint32_t, float&)>& visit) {
+  WideRay r;
+  setup(k.origin, k.inv_dir, k.tnear, r);
+  return any_hit ? walk<true>(top, r, t_best, visit) : walk<false>(top, r, t_best, visit);
+}
