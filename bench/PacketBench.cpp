@@ -47,6 +47,7 @@
 #include <functional>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -279,6 +280,8 @@ Ray shadowRay(const Ray& r, float t, const glm::vec3& light) {
 /// instrumented and dumped under "<mesh or scene>/<set>/<tracer>" (run the program under
 /// `valgrind --tool=callgrind --instr-atstart=no`); no timing.
 std::size_t g_callgrind_rays = 0;
+// --kd-walk: the two-level scenes also through the kd-tree walk.
+bool g_kd_walk = false;
 /// --sets: the ray sets measured (empty: all).
 std::vector<std::string> g_sets;
 /// Writes the JSON with the rows measured so far.
@@ -400,6 +403,12 @@ void benchScene(const std::filesystem::path& path, std::uint32_t side, std::size
   SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
   SceneGraph& graph = *doc.graph;
   SceneTracer tracer(graph);
+  // The same scene walked through the kd-tree instead of the wide form (TopLevelConfig::wide_traversal),
+  // when --kd-walk asks for it.
+  TopLevelConfig kd_config;
+  kd_config.wide_traversal = false;
+  std::optional<SceneTracer> kd_tracer;
+  if (g_kd_walk) kd_tracer.emplace(graph, kd_config);
   const Box bounds = tracer.bounds();
   auto sets = raySets(bounds, side, random_count);
   {
@@ -424,7 +433,7 @@ void benchScene(const std::filesystem::path& path, std::uint32_t side, std::size
   EmbreeDevice device(*std::max_element(threads.begin(), threads.end()), "");
   const EmbreeTwoLevel embree(device, meshes, instances, EmbreeTopLevelMode::Default);
 #endif
-  auto batch = [&tracer](bool packets, bool closest) -> Tracer {
+  auto batch = [](SceneTracer& tracer, bool packets, bool closest) -> Tracer {
     return [&tracer, packets, closest](std::span<const Ray> rays) {
       tracer.setBatchPackets(packets);
       std::uint64_t n = 0;
@@ -442,8 +451,12 @@ void benchScene(const std::filesystem::path& path, std::uint32_t side, std::size
   };
   auto make = [&](bool closest) {
     std::map<std::string, Tracer> tracers;
-    tracers["ours_single"] = batch(false, closest);
-    tracers["ours_packet"] = batch(true, closest);
+    tracers["ours_single"] = batch(tracer, false, closest);
+    tracers["ours_packet"] = batch(tracer, true, closest);
+    if (kd_tracer) {
+      tracers["ours_kd_single"] = batch(*kd_tracer, false, closest);
+      tracers["ours_kd_packet"] = batch(*kd_tracer, true, closest);
+    }
 #if DUPLEX_BENCH_HAVE_EMBREE
     tracers.merge(embreeTracers(embree.scene(), closest));
 #endif
@@ -499,6 +512,9 @@ int run(int argc, char** argv) {
   std::vector<std::string> only_sets;
   app.add_option("--sets", only_sets, "ray sets to run (primary, primary_jittered, random, shadow; default: all)");
   app.add_option("--out", out, "JSON output");
+  app.add_flag("--kd-walk", g_kd_walk,
+               "two-level scenes: also trace through the kd-tree walk (TopLevelConfig::wide_traversal off), "
+               "as ours_kd_single and ours_kd_packet");
   app.add_option("--callgrind", g_callgrind_rays,
                  "instead of timing: count each tracer over the first N rays of each set (under valgrind "
                  "--tool=callgrind --instr-atstart=no)");

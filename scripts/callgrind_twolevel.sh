@@ -4,7 +4,8 @@
 # a shared machine where wall-clock times are not. Writes docs/bench/twolevel_callgrind.json and
 # prints a table (docs/bench.md, "Two-level traces: instructions per ray").
 #
-# Runs duplex_bench_packets --callgrind (one dump per tracer, only the trace loops instrumented) on
+# Runs duplex_bench_packets --callgrind --kd-walk (one dump per tracer, only the trace loops
+# instrumented; ours through the wide form and through the kd-tree walk) on
 # 256 x 256 primary rays of koala1 (the koala as one instance), paper-1, paper-2 and hammer1k
 # (scripts/paper_scenes.sh). valgrind has no AVX-512: both libraries run their AVX2 kernels, and
 # Embree's rtcIntersect16 runs as two 8-ray halves. The branch simulator is callgrind's simple
@@ -38,7 +39,7 @@ for name in $SCENES; do
   fi
   valgrind --tool=callgrind --instr-atstart=no --branch-sim=yes --callgrind-out-file="$work/$name.%p" \
     "$BENCH" --meshes '' --scenes "$SCENE_DIR/$name.json" --side 256 --random 1024 --threads 1 --reps 1 \
-    --sets primary --callgrind 65536 --out "$work/$name.json" >/dev/null 2>"$work/$name.log"
+    --sets primary --kd-walk --callgrind 65536 --out "$work/$name.json" >/dev/null 2>"$work/$name.log"
 done
 /usr/bin/python3 - "$work" "$OUT" $SCENES <<'PY'
 import glob, json, os, re, subprocess, sys
