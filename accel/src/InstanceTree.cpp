@@ -554,15 +554,16 @@ void InstanceTree::shrinkRootIfDue(bool periodic) {
 Hit InstanceTree::intersectImpl(const Ray& ray_f, const RayD* ray_d, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
   if (tree_.empty()) return Hit{};
-  const WorldRay w{ray_f, ray_d};
   const State& s = *state_;
+  if (s.wide.usable) {
+    Hit out;
+    wideKernels().closest({&s.wide, s.records.data(), s.filters.data(), mask}, ray_f, ray_d, out, ctx);
+    return out;
+  }
+  const WorldRay w{ray_f, ray_d};
   Hit best;
   const Record* winner = nullptr;
-  if (s.wide.usable) {
-    KdRay kray;
-    if (!prepareKdRay(ray_f, kray)) return Hit{};
-    winner = wideKernels().closest({&s.wide, s.records.data(), s.filters.data(), mask}, w, kray, best, ctx);
-  } else {
+  {
     KdRay kray;
     BoxTestRay box_ray;
     float tmin, tmax;
@@ -607,11 +608,7 @@ bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t 
   if (tree_.empty()) return false;
   const WorldRay w = fromFloat(ray_ws);
   const State& s = *state_;
-  if (s.wide.usable) {
-    KdRay kray;
-    return prepareKdRay(ray_ws, kray) &&
-           wideKernels().occluded({&s.wide, s.records.data(), s.filters.data(), mask}, w, kray, ctx);
-  }
+  if (s.wide.usable) return wideKernels().occluded({&s.wide, s.records.data(), s.filters.data(), mask}, ray_ws, ctx);
   KdRay kray;
   BoxTestRay box_ray;
   float tmin, tmax;

@@ -73,13 +73,22 @@ inline std::uint32_t wideHits(const WideRay& r, const WideNode& node, float t_ma
   return mask & node.valid;
 }
 
-inline void setup(const float origin[3], const float inv_dir[3], float tnear, WideRay& w) {
-  for (int a = 0; a < 3; ++a) {
-    w.org[a] = _mm_set1_ps(origin[a]);
-    w.inv[a] = _mm_set1_ps(inv_dir[a]);
-    w.near_row[a] = 2 * a + (std::signbit(inv_dir[a]) ? 1 : 0);
-  }
-  w.tnear = tnear;
+// Sets `w` up for `ray` (false: not queryable): the origin and 1 / direction broadcast per axis,
+// from registers (1 / d is +-inf with the sign of d for a zero component).
+inline bool setupRay(const Ray& ray, WideRay& w) {
+  const __m128 o = _mm_loadu_ps(&ray.origin.x), d = _mm_loadu_ps(&ray.dir.x);
+  if (!kd_detail::queryableSse(o, d, ray)) return false;
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
+  w.org[0] = _mm_shuffle_ps(o, o, _MM_SHUFFLE(0, 0, 0, 0));
+  w.org[1] = _mm_shuffle_ps(o, o, _MM_SHUFFLE(1, 1, 1, 1));
+  w.org[2] = _mm_shuffle_ps(o, o, _MM_SHUFFLE(2, 2, 2, 2));
+  w.inv[0] = _mm_shuffle_ps(inv, inv, _MM_SHUFFLE(0, 0, 0, 0));
+  w.inv[1] = _mm_shuffle_ps(inv, inv, _MM_SHUFFLE(1, 1, 1, 1));
+  w.inv[2] = _mm_shuffle_ps(inv, inv, _MM_SHUFFLE(2, 2, 2, 2));
+  const int neg = _mm_movemask_ps(inv);
+  for (int a = 0; a < 3; ++a) w.near_row[a] = 2 * a + ((neg >> a) & 1);
+  w.tnear = ray.tnear;
+  return true;
 }
 
 inline Ray objectRay(const Record& rec, const WorldRay& w) { return toObject(rec, w); }
@@ -161,13 +170,20 @@ inline std::uint32_t wideHits(const WideRay& r, const WideNode& node, float t_ma
   return static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ))) & node.valid;
 }
 
-inline void setup(const float origin[3], const float inv_dir[3], float tnear, WideRay& w) {
-  for (int a = 0; a < 3; ++a) {
-    w.org[a] = _mm256_set1_ps(origin[a]);
-    w.inv[a] = _mm256_set1_ps(inv_dir[a]);
-    w.near_row[a] = 2 * a + (std::signbit(inv_dir[a]) ? 1 : 0);
-  }
-  w.tnear = tnear;
+inline bool setupRay(const Ray& ray, WideRay& w) {
+  const __m128 o = _mm_loadu_ps(&ray.origin.x), d = _mm_loadu_ps(&ray.dir.x);
+  if (!kd_detail::queryableSse(o, d, ray)) return false;
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
+  w.org[0] = _mm256_broadcastss_ps(o);
+  w.org[1] = _mm256_broadcastss_ps(_mm_shuffle_ps(o, o, _MM_SHUFFLE(1, 1, 1, 1)));
+  w.org[2] = _mm256_broadcastss_ps(_mm_movehl_ps(o, o));
+  w.inv[0] = _mm256_broadcastss_ps(inv);
+  w.inv[1] = _mm256_broadcastss_ps(_mm_shuffle_ps(inv, inv, _MM_SHUFFLE(1, 1, 1, 1)));
+  w.inv[2] = _mm256_broadcastss_ps(_mm_movehl_ps(inv, inv));
+  const int neg = _mm_movemask_ps(inv);
+  for (int a = 0; a < 3; ++a) w.near_row[a] = 2 * a + ((neg >> a) & 1);
+  w.tnear = ray.tnear;
+  return true;
 }
 
 inline std::uint32_t packetChildHits(const PacketRays& p, const WideNode& node, int c, std::uint32_t lanes,

@@ -22,12 +22,12 @@ struct WideQuery {
 
 struct WideKernels {
   SimdIsa isa;
-  // The closest hit of world ray `w` (`k`: its prepared values, KdTraversal.h) among the blocking
-  // instances passing the mask: returns the winner's record (null: no hit) with its hit in `best`
-  // (object-space normal, instance id not set), as InstanceTree::intersect.
-  const Record* (*closest)(const WideQuery& q, const WorldRay& w, const KdRay& k, Hit& best, QueryContext& ctx);
-  // Whether any blocking instance passing the mask blocks `w` within [tnear, tfar].
-  bool (*occluded)(const WideQuery& q, const WorldRay& w, const KdRay& k, QueryContext& ctx);
+  // The closest hit of world ray `ray_f` (`ray_d`: the same ray in double when the caller gave one,
+  // else null) among the blocking instances passing the mask, as InstanceTree::intersect: returns
+  // false for none (or a ray that is not queryable), else the hit in `out` (world normal, instance id).
+  bool (*closest)(const WideQuery& q, const Ray& ray_f, const RayD* ray_d, Hit& out, QueryContext& ctx);
+  // Whether any blocking instance passing the mask blocks `ray` within [tnear, tfar].
+  bool (*occluded)(const WideQuery& q, const Ray& ray, QueryContext& ctx);
   // Packets: the rays `rays[j]` of the lanes `lanes` (all of one octant: the same direction signs,
   // each queryable) walk the form together: each child box is tested against all of them at once,
   // and each instance is asked once with the lanes that reach it (Object::intersectPacket). Closest:
@@ -39,7 +39,7 @@ struct WideKernels {
   // The bare walk, for tests: visit(slot, t_best) for each reference met no later than t_best, as
   // the two queries walk (closest: nearest first, stopping behind t_best; any hit: at the first
   // visit returning true).
-  bool (*walk)(const WideTop& top, const KdRay& k, bool any_hit, float& t_best,
+  bool (*walk)(const WideTop& top, const Ray& ray, bool any_hit, float& t_best,
                const std::function<bool(std::uint32_t, float&)>& visit);
 };
 

@@ -1,5 +1,5 @@
 // The wide walks, included by InstanceTreeWide.cpp once per instruction set inside a namespace
-// that defines `WideRay`, `setup(origin, inv_dir, tnear, WideRay&)`,
+// that defines `WideRay`, `setupRay(ray, WideRay&) -> queryable`,
 // `wideHits(ray, node, t_max, t_enter[8]) -> mask`, `packetChildHits(packet, node, child, lanes,
 // key) -> lanes` and `objectRay(record, world_ray)` (toObject's values, InstanceTreeState.h) for
 // that set.
@@ -74,13 +74,15 @@ inline bool selected(const WideQuery& q, std::uint32_t slot, Mailbox& mailbox) {
   return (f.mask & q.mask) != 0 && f.role == ObjectRole::Surface && !mailbox.seen(slot);
 }
 
-const Record* closestEntry(const WideQuery& q, const WorldRay& w, const KdRay& k, Hit& best, QueryContext& ctx) {
+bool closestEntry(const WideQuery& q, const Ray& ray_f, const RayD* ray_d, Hit& out, QueryContext& ctx) {
   WideRay r;
-  setup(k.origin, k.inv_dir, k.tnear, r);
-  float t_best = k.tfar;
+  if (!setupRay(ray_f, r)) return false;
+  const WorldRay w{ray_f, ray_d};
+  float t_best = ray_f.tfar;
   std::uint32_t best_id = kInvalidId;
   const Record* winner = nullptr;
   Mailbox mailbox;
+  Hit best;
   walk<false>(*q.top, r, t_best, [&](std::uint32_t slot, float& t) {
     if (!selected(q, slot, mailbox)) return false;
     ++ctx.stats.instance_visits;
@@ -89,13 +91,18 @@ const Record* closestEntry(const WideQuery& q, const WorldRay& w, const KdRay& k
     winner = &rec;
     return true;
   });
-  return winner;
+  if (!winner) return false;
+  out = best;
+  out.instance_id = winner->id;
+  out.ng = normalToWorld(*winner, best.ng);
+  return true;
 }
 
-bool occludedEntry(const WideQuery& q, const WorldRay& w, const KdRay& k, QueryContext& ctx) {
+bool occludedEntry(const WideQuery& q, const Ray& ray, QueryContext& ctx) {
   WideRay r;
-  setup(k.origin, k.inv_dir, k.tnear, r);
-  float t_best = k.tfar;
+  if (!setupRay(ray, r)) return false;
+  const WorldRay w = fromFloat(ray);
+  float t_best = ray.tfar;
   Mailbox mailbox;
   return walk<true>(*q.top, r, t_best, [&](std::uint32_t slot, float&) {
     if (!selected(q, slot, mailbox)) return false;
@@ -104,12 +111,9 @@ bool occludedEntry(const WideQuery& q, const WorldRay& w, const KdRay& k, QueryC
   });
 }
 
-// The packet walk: like walk(), with a lane mask per entry. A node tests each child's box against
-// the entry's lanes at once (packetChildHits); children are taken nearest first by their nearest
-// lane's entry. An entry waiting on the stack is tested again when popped, against the lanes' best
-// distances by then (its box, from its parent node, against the lanes that still need it), so a
-// lane visits no instance that it would skip alone. Each instance is asked once per visit with the
-// lanes that reach it and have not asked it before (a mailbox per lane).
+// Sub-packets of at most this many lanes enter an object through its single-ray entry.
+constexpr int kAloneLanes = 4;
+
 template <bool AnyHit>
 std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, std::uint32_t lanes, Hit* best,
                          std::uint32_t* best_id, const Record** winner, QueryContext& ctx) {
@@ -151,11 +155,29 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
             hits_os[j].t = rays_os[j].tfar;
           }
         }
+        // A sub-packet of a few lanes costs less through the single-ray entry (an object's
+        // packet set-up is paid per visit, its savings per lane).
+        const bool alone = std::popcount(sub) <= kAloneLanes && rec.entry.intersect && rec.entry.occluded;
         if constexpr (AnyHit) {
-          done |= rec.object->occludedPacket(rays_os, sub, ctx);
+          if (alone) {
+            for (std::uint32_t l = sub; l != 0; l &= l - 1) {
+              const int j = std::countr_zero(l);
+              if (rec.entry.occluded(rec.entry.data, rays_os[j])) done |= 1u << j;
+            }
+          } else {
+            done |= rec.object->occludedPacket(rays_os, sub, ctx);
+          }
           if ((done & lanes) == lanes) return done;
         } else {
-          const std::uint32_t found = rec.object->intersectPacket(rays_os, hits_os, sub, ctx);
+          std::uint32_t found = 0;
+          if (alone) {
+            for (std::uint32_t l = sub; l != 0; l &= l - 1) {
+              const int j = std::countr_zero(l);
+              if (rec.entry.intersect(rec.entry.data, rays_os[j], hits_os[j])) found |= 1u << j;
+            }
+          } else {
+            found = rec.object->intersectPacket(rays_os, hits_os, sub, ctx);
+          }
           for (std::uint32_t l = found; l != 0; l &= l - 1) {
             const int j = std::countr_zero(l);
             if (!replacesBest(hits_os[j].t, rec.id, p.t[j], best_id[j])) continue;
@@ -252,9 +274,9 @@ std::uint32_t occludedPacketEntry(const WideQuery& q, const Ray* rays, std::uint
   return packetWalk<true>(q, p, w, lanes, nullptr, nullptr, nullptr, ctx) & lanes;
 }
 
-bool walkEntry(const WideTop& top, const KdRay& k, bool any_hit, float& t_best,
+bool walkEntry(const WideTop& top, const Ray& ray, bool any_hit, float& t_best,
                const std::function<bool(std::uint32_t, float&)>& visit) {
   WideRay r;
-  setup(k.origin, k.inv_dir, k.tnear, r);
+  if (!setupRay(ray, r)) return false;
   return any_hit ? walk<true>(top, r, t_best, visit) : walk<false>(top, r, t_best, visit);
 }

@@ -176,7 +176,7 @@ TEST(WideTop, WalkVisitsEveryBoxTheRayMeets) {
     const auto& kernels = toplevel_detail::wideKernels();
     std::set<std::uint32_t> visited;
     float t = ray.tfar;
-    kernels.walk(top, k, false, t, [&](std::uint32_t slot, float&) {
+    kernels.walk(top, ray, false, t, [&](std::uint32_t slot, float&) {
       visited.insert(slot);
       return false;
     });
@@ -195,7 +195,7 @@ TEST(WideTop, WalkVisitsEveryBoxTheRayMeets) {
       float t0 = ray.tnear, t1 = ray.tfar;
       entries[s] = clipIntervalToBox(k, boxes[s], t0, t1) ? t0 : std::numeric_limits<float>::infinity();
     }
-    kernels.walk(top, k, false, best, [&](std::uint32_t slot, float& t_best) {
+    kernels.walk(top, ray, false, best, [&](std::uint32_t slot, float& t_best) {
       if (!(entries[slot] < t_best)) return false;
       t_best = entries[slot];
       return true;
@@ -205,7 +205,7 @@ TEST(WideTop, WalkVisitsEveryBoxTheRayMeets) {
     // meets some box.
     float t_any = ray.tfar;
     int visits = 0;
-    const bool any = kernels.walk(top, k, true, t_any, [&](std::uint32_t, float&) { return ++visits, true; });
+    const bool any = kernels.walk(top, ray, true, t_any, [&](std::uint32_t, float&) { return ++visits, true; });
     EXPECT_TRUE(any || expected.empty()) << "ray " << i;
     EXPECT_LE(visits, 1);
   }

@@ -82,6 +82,18 @@ inline bool clipRayToBox(const KdRay& ray, const Box& box, float& tmin, float& t
 }
 
 namespace kd_detail {
+// isQueryable(ray) with one branch, from o = (origin, tnear) and d = (dir, tfar) as loaded from the
+// ray: origin and direction finite (|x| < inf is false for NaN and inf), some direction component
+// non-zero, tnear <= tfar.
+[[gnu::always_inline]] inline bool queryableSse(__m128 o, __m128 d, const Ray& ray) {
+  const __m128 sign_bit = _mm_set1_ps(-0.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const int finite = _mm_movemask_ps(
+      _mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf), _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
+  const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
+  return !(((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar));
+}
+
 // prepareKdRay, with the vectors it computed for callers that go on in registers: o = (origin,
 // tnear), d = (dir, tfar), inv = 1 / dir (lane 3: 1 / tfar, unused), zero = KdRay::zero as bits.
 [[gnu::always_inline]] inline bool prepareSse(const Ray& ray, KdRay& k, __m128& o, __m128& d, __m128& inv, int& zero) {
@@ -93,12 +105,7 @@ namespace kd_detail {
   d = _mm_loadu_ps(&ray.dir.x);
   const __m128 sign_bit = _mm_set1_ps(-0.0f);
   const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
-  // isQueryable with one branch: origin and direction finite (|x| < inf is false for NaN and inf),
-  // some direction component non-zero, tnear <= tfar.
-  const int finite = _mm_movemask_ps(
-      _mm_and_ps(_mm_cmplt_ps(_mm_andnot_ps(sign_bit, o), inf), _mm_cmplt_ps(_mm_andnot_ps(sign_bit, d), inf)));
-  const int nonzero = _mm_movemask_ps(_mm_cmpneq_ps(d, _mm_setzero_ps()));
-  if (((finite & 7) != 7) | ((nonzero & 7) == 0) | !(ray.tnear <= ray.tfar)) return false;
+  if (!queryableSse(o, d, ray)) return false;
   // 1/d is already +-inf with the sign of d for a zero (or denormal) component, which is what
   // KdRay stores for them.
   inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
