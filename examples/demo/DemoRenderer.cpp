@@ -53,20 +53,35 @@ glm::vec3 facingNormal(const Hit& h, const Ray& r) {
 
 DemoRenderer::DemoRenderer(const SceneTracer& tracer, const PinholeCamera& camera, const RenderSettings& settings)
     : tracer_(tracer), settings_(settings) {
-  const std::size_t n = static_cast<std::size_t>(settings.width) * settings.height;
+  setView(camera, settings.width, settings.height, 0, settings.height);
+}
+
+DemoRenderer::DemoRenderer(const SceneTracer& tracer, const RenderSettings& settings)
+    : tracer_(tracer), settings_(settings) {}
+
+void DemoRenderer::setView(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height,
+                           std::uint32_t row_begin, std::uint32_t row_end) {
+  settings_.width = width;
+  settings_.height = row_end - row_begin;
+  const std::size_t n = static_cast<std::size_t>(width) * (row_end - row_begin);
+  primary_.clear();
+  pixel_of_.clear();
   primary_.reserve(n);
   pixel_of_.reserve(n);
+  ray_of_pixel_.resize(n);
   const glm::vec3 eye(camera.eye);
   // In tiles of 4 x 4 pixels: the batch queries trace 16 consecutive rays as one packet, and
   // neighbouring pixels' rays (and their shadow rays, made in the same order) are coherent.
   constexpr std::uint32_t kTile = 4;
-  for (std::uint32_t ty = 0; ty < settings.height; ty += kTile)
-    for (std::uint32_t tx = 0; tx < settings.width; tx += kTile)
-      for (std::uint32_t y = ty; y < std::min(ty + kTile, settings.height); ++y)
-        for (std::uint32_t x = tx; x < std::min(tx + kTile, settings.width); ++x) {
-          primary_.push_back(Ray{eye, 0.0f, camera.direction(x, y, settings.width, settings.height),
-                                 std::numeric_limits<float>::infinity()});
-          pixel_of_.push_back(static_cast<std::size_t>(y) * settings.width + x);
+  for (std::uint32_t ty = row_begin; ty < row_end; ty += kTile)
+    for (std::uint32_t tx = 0; tx < width; tx += kTile)
+      for (std::uint32_t y = ty; y < std::min(ty + kTile, row_end); ++y)
+        for (std::uint32_t x = tx; x < std::min(tx + kTile, width); ++x) {
+          const std::size_t pixel = static_cast<std::size_t>(y - row_begin) * width + x;
+          ray_of_pixel_[pixel] = primary_.size();
+          primary_.push_back(
+              Ray{eye, 0.0f, camera.direction(x, y, width, height), std::numeric_limits<float>::infinity()});
+          pixel_of_.push_back(pixel);
         }
   hits_.resize(n);
 }
@@ -133,6 +148,8 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
       const glm::vec3 base =
           h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
       colour = base * (ambient + 0.85f * direct[i]);
+      // The highlighted part: pulled towards a bright cyan that no palette colour is close to.
+      if (h.instance_id == settings_.highlight) colour = glm::mix(colour, glm::vec3(0.1f, 0.85f, 1.0f), 0.55f);
     }
     for (int c = 0; c < 3; ++c) image.pixels[pixel_of_[i] * 3 + c] = toSrgb8(colour[c]);
   }
