@@ -5,7 +5,8 @@
   (primary and shadow rays, JPEG), as the page does while a part is dragged; frames per second over
   FRAMES frames, the server's trace and update times, and whether each frame shows its commit
   (X-Duplex-Commit).
-- Hover picks: PICKS picks with a 5-pixel radius at pixels spread over the frame; the server's own
+- Hover picks: PICKS picks with a 5-pixel radius at pixels spread over the parts (every pixel whose
+  primary hit is not the floor, in steps); the server's own
   pick time (pick_ms: SceneTracer::pickElement plus the face under the cursor) and the round trip.
 
 Writes one JSON object (stdout, and --out FILE). Run it 3 times on a quiet machine and give the load
@@ -43,7 +44,9 @@ def main():
         scene = server.json("GET", "/api/scene")
         camera = dict(scene["camera"], width=640, height=400)
         nodes = {n["path"]: n for n in scene["nodes"]}
-        node = a.node or next(n["path"] for n in scene["nodes"] if n["kind"] != "group" and n["path"].count("/") >= 2)
+        # Default: the middle robot of the robot cell, else the first node below a top-level group.
+        node = a.node or ("/cell/robot_2" if "/cell/robot_2" in nodes else
+                          next(n["path"] for n in scene["nodes"] if n["kind"] != "group" and n["path"].count("/") >= 2))
         local = nodes[node]["local"]
         extent = max(h - l for h, l in zip(scene["bounds"]["max"], scene["bounds"]["min"]))
         for _ in range(5):  # warm-up
@@ -65,10 +68,19 @@ def main():
         drag_seconds = time.perf_counter() - start
         server.json("POST", "/api/undo")
 
+        # Hover picks where the parts are: pixels whose primary hit is not the most common instance
+        # (the floor), spread evenly over them.
+        ids, _ = server.ids(camera)
+        counts = {}
+        for inst, _prim in ids:
+            counts[inst] = counts.get(inst, 0) + 1
+        floor = max((c, i) for i, c in counts.items() if i != 0xFFFFFFFF)[1]
+        parts = [i for i, (inst, _prim) in enumerate(ids) if inst not in (floor, 0xFFFFFFFF)]
+        expect(parts, "no part in the frame")
         pick_ms, round_ms, hits = [], [], 0
         for k in range(a.picks):
-            x = 20 + (k * 37) % 600 + 0.5
-            y = 20 + (k * 53) % 360 + 0.5
+            pixel = parts[(k * len(parts)) // a.picks]
+            x, y = pixel % 640 + 0.5, pixel // 640 + 0.5
             t0 = time.perf_counter()
             p = server.json("POST", "/api/pick", {"camera": camera, "x": x, "y": y, "radius_px": 5})
             round_ms.append(1000 * (time.perf_counter() - t0))

@@ -72,8 +72,8 @@ class DemoRenderer {
  private:
   const SceneTracer& tracer_;
   RenderSettings settings_;
-  std::vector<Ray> primary_;           ///< one per pixel, in tiles of 4 x 4 pixels
-  std::vector<std::size_t> pixel_of_;  ///< the pixel (row-major from the top left) of primary_[i]
+  std::vector<Ray> primary_;               ///< one per pixel, in tiles of 4 x 4 pixels
+  std::vector<std::size_t> pixel_of_;      ///< the pixel (row-major from the top left) of primary_[i]
   std::vector<std::size_t> ray_of_pixel_;  ///< inverse of pixel_of_
   std::vector<Hit> hits_;
   std::vector<Ray> shadow_;  ///< towards the light, for the lit pixels listed in shadow_pixel_

@@ -184,16 +184,15 @@ void runView(const ViewOptions& options) {
   });
   // What the library answers by itself (no route, a body over the limit) becomes the interface's
   // 400 with a message; answers that have a body already are left alone.
-  server.set_error_handler(httplib::Server::HandlerWithResponse([](const httplib::Request& req,
-                                                                   httplib::Response& res) {
-    if (!res.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
-    if (res.status == 413)
-      sendError(res, 400, "request body over the limit of " + std::to_string(kMaxBodyBytes) + " bytes (1 MB)");
-    else if (res.status == 404)
-      sendError(res, 400, "unknown path: " + req.method + " " + req.path);
-    else sendError(res, res.status, "HTTP status " + std::to_string(res.status));
-    return httplib::Server::HandlerResponse::Handled;
-  }));
+  server.set_error_handler(
+      httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
+        if (!res.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+        if (res.status == 413)
+          sendError(res, 400, "request body over the limit of " + std::to_string(kMaxBodyBytes) + " bytes (1 MB)");
+        else if (res.status == 404) sendError(res, 400, "unknown path: " + req.method + " " + req.path);
+        else sendError(res, res.status, "HTTP status " + std::to_string(res.status));
+        return httplib::Server::HandlerResponse::Handled;
+      }));
   server.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
     try {
       if (ep) std::rethrow_exception(ep);
@@ -224,63 +223,60 @@ void runView(const ViewOptions& options) {
   };
 
   server.Get("/", guarded([](const httplib::Request&, httplib::Response& res) {
-    res.set_header("Cache-Control", "no-store");
-    res.set_content(viewPage(), "text/html; charset=utf-8");
-  }));
-  server.Get("/api/scene", guarded([&](const httplib::Request&, httplib::Response& res) {
-    sendJson(res, session.scene());
-  }));
+               res.set_header("Cache-Control", "no-store");
+               res.set_content(viewPage(), "text/html; charset=utf-8");
+             }));
+  server.Get("/api/scene",
+             guarded([&](const httplib::Request&, httplib::Response& res) { sendJson(res, session.scene()); }));
   server.Post("/api/render", guarded([&](const httplib::Request& req, httplib::Response& res) {
-    const json body = parseBody(req);
-    std::string format = "png";
-    if (body.is_object() && body.contains("format")) {
-      if (!body["format"].is_string()) throw RequestError("format: expected \"png\", \"jpeg\" or \"ids\"");
-      format = body["format"].get<std::string>();
-    }
-    if (format != "png" && format != "jpeg" && format != "ids")
-      throw RequestError("format: expected \"png\", \"jpeg\" or \"ids\", got \"" + format + "\"");
-    std::string bytes;
-    const ViewFrame frame = renders.run([&] {
-      ViewFrame f = session.render(body, format == "ids");
-      std::vector<unsigned char> encoded;
-      if (format == "png") encoded = demo::encodePng(f.image);
-      else if (format == "jpeg") encoded = demo::encodeJpeg(f.image, kJpegQuality);
-      else {
-        const auto* p = reinterpret_cast<const unsigned char*>(f.ids.data());
-        encoded.assign(p, p + f.ids.size() * sizeof(std::uint32_t));
-      }
-      bytes.assign(encoded.begin(), encoded.end());
-      return f;
-    });
-    res.set_header("X-Duplex-Trace-Ms", fixed3(frame.trace_ms));
-    res.set_header("X-Duplex-Rays", std::to_string(frame.rays));
-    res.set_header("X-Duplex-Commit", std::to_string(frame.commit));
-    res.set_header("Cache-Control", "no-store");
-    res.set_content(std::move(bytes), format == "png"    ? "image/png"
-                                      : format == "jpeg" ? "image/jpeg"
-                                                         : "application/octet-stream");
-  }));
+                const json body = parseBody(req);
+                std::string format = "png";
+                if (body.is_object() && body.contains("format")) {
+                  if (!body["format"].is_string()) throw RequestError("format: expected \"png\", \"jpeg\" or \"ids\"");
+                  format = body["format"].get<std::string>();
+                }
+                if (format != "png" && format != "jpeg" && format != "ids")
+                  throw RequestError("format: expected \"png\", \"jpeg\" or \"ids\", got \"" + format + "\"");
+                std::string bytes;
+                const ViewFrame frame = renders.run([&] {
+                  ViewFrame f = session.render(body, format == "ids");
+                  std::vector<unsigned char> encoded;
+                  if (format == "png") encoded = demo::encodePng(f.image);
+                  else if (format == "jpeg") encoded = demo::encodeJpeg(f.image, kJpegQuality);
+                  else {
+                    const auto* p = reinterpret_cast<const unsigned char*>(f.ids.data());
+                    encoded.assign(p, p + f.ids.size() * sizeof(std::uint32_t));
+                  }
+                  bytes.assign(encoded.begin(), encoded.end());
+                  return f;
+                });
+                res.set_header("X-Duplex-Trace-Ms", fixed3(frame.trace_ms));
+                res.set_header("X-Duplex-Rays", std::to_string(frame.rays));
+                res.set_header("X-Duplex-Commit", std::to_string(frame.commit));
+                res.set_header("Cache-Control", "no-store");
+                res.set_content(std::move(bytes), format == "png"    ? "image/png"
+                                                  : format == "jpeg" ? "image/jpeg"
+                                                                     : "application/octet-stream");
+              }));
   server.Post("/api/pick", guarded([&](const httplib::Request& req, httplib::Response& res) {
-    sendJson(res, session.pick(parseBody(req)));
-  }));
+                sendJson(res, session.pick(parseBody(req)));
+              }));
   server.Post("/api/edits", guarded([&](const httplib::Request& req, httplib::Response& res) {
-    sendJson(res, session.edits(parseBody(req)));
-  }));
-  server.Post("/api/undo", guarded([&](const httplib::Request&, httplib::Response& res) {
-    sendJson(res, session.undo());
-  }));
+                sendJson(res, session.edits(parseBody(req)));
+              }));
+  server.Post("/api/undo",
+              guarded([&](const httplib::Request&, httplib::Response& res) { sendJson(res, session.undo()); }));
   server.Post("/api/time", guarded([&](const httplib::Request& req, httplib::Response& res) {
-    sendJson(res, session.time(parseBody(req)));
-  }));
+                sendJson(res, session.time(parseBody(req)));
+              }));
   server.Post("/api/sensors/run", guarded([&](const httplib::Request& req, httplib::Response& res) {
-    sendJson(res, session.sensorsRun(parseBody(req)));
-  }));
-  server.Get("/api/sensors/status", guarded([&](const httplib::Request&, httplib::Response& res) {
-    sendJson(res, session.sensorsStatus());
-  }));
+                sendJson(res, session.sensorsRun(parseBody(req)));
+              }));
+  server.Get("/api/sensors/status",
+             guarded([&](const httplib::Request&, httplib::Response& res) { sendJson(res, session.sensorsStatus()); }));
   server.Post("/api/sensors/cancel", guarded([&](const httplib::Request&, httplib::Response& res) {
-    sendJson(res, session.sensorsCancel());
-  }));
+                sendJson(res, session.sensorsCancel());
+              }));
 
   int port = options.port;
   if (port == 0) {
@@ -293,8 +289,7 @@ void runView(const ViewOptions& options) {
   if (options.bind != "127.0.0.1" && options.bind != "localhost" && options.bind != "::1")
     std::cerr << "duplex view: warning: listening on " << options.bind
               << ", reachable from other machines; requests still need the token\n";
-  const std::string host =
-      options.bind == "0.0.0.0" || options.bind == "::" ? "127.0.0.1" : options.bind;
+  const std::string host = options.bind == "0.0.0.0" || options.bind == "::" ? "127.0.0.1" : options.bind;
   const std::string url_host = host.find(':') != std::string::npos ? "[" + host + "]" : host;
   std::cout << json{{"url", "http://" + url_host + ":" + std::to_string(port) + "/?token=" + token},
                     {"port", port},

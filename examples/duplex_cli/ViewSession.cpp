@@ -1,5 +1,7 @@
 #include "ViewSession.h"
 
+#include "DemoCamera.h"
+
 #include <duplex/accel/MemoryLimit.h>
 #include <duplex/sensors/SensorObject.h>
 
@@ -51,8 +53,7 @@ glm::dvec3 vec3(const json& v, const std::string& what) {
 
 std::uint32_t imageSide(const json& v, const std::string& what) {
   const double d = number(v, what);
-  if (d != std::floor(d) || d < 1.0)
-    refuse(what + ": expected a whole number of pixels >= 1, got " + json(v).dump());
+  if (d != std::floor(d) || d < 1.0) refuse(what + ": expected a whole number of pixels >= 1, got " + json(v).dump());
   if (d > kMaxImageSide)
     refuse(what + ": " + json(v).dump() + " pixels is over the limit of " + std::to_string(kMaxImageSide));
   return static_cast<std::uint32_t>(d);
@@ -196,8 +197,10 @@ json sensorResults(const SensorScene& scene, const SensorRunResults& r) {
 }  // namespace
 
 ViewCamera readCamera(const json& value, const std::string& what) {
-  if (!value.is_object()) refuse(what + ": expected a camera object {\"eye\", \"target\", \"up\", \"fov_deg\", "
-                                        "\"width\", \"height\"}");
+  if (!value.is_object())
+    refuse(what +
+           ": expected a camera object {\"eye\", \"target\", \"up\", \"fov_deg\", "
+           "\"width\", \"height\"}");
   const glm::dvec3 eye = vec3(member(value, what, "eye"), what + ".eye");
   const glm::dvec3 target = vec3(member(value, what, "target"), what + ".target");
   const glm::dvec3 up = vec3(member(value, what, "up"), what + ".up");
@@ -287,13 +290,24 @@ json ViewSession::scene() const {
   const Box bounds = visibleWorldBounds(*doc_);
   if (!bounds.empty()) {
     out["bounds"] = {{"min", vec(glm::dvec3(bounds.lo))}, {"max", vec(glm::dvec3(bounds.hi))}};
-    const PinholeCamera cam = PinholeCamera::looking_at_box(bounds);
-    const glm::dvec3 centre = 0.5 * (glm::dvec3(bounds.lo) + glm::dvec3(bounds.hi));
-    out["camera"] = {{"eye", vec(cam.eye)},      {"target", vec(centre)}, {"up", json::array({0.0, 1.0, 0.0})},
-                     {"fov_deg", cam.vertical_fov_deg}, {"width", 640},          {"height", 400}};
+    // The default view frames the parts as the demo does (flat instances such as a floor left out,
+    // 0.7 diagonals away); "rays_camera" is the camera of `duplex rays --primary` for the bounds.
+    const auto cameraJson = [](const PinholeCamera& cam, const glm::dvec3& target) {
+      return json{{"eye", vec(cam.eye)},
+                  {"target", vec(target)},
+                  {"up", json::array({0.0, 1.0, 0.0})},
+                  {"fov_deg", cam.vertical_fov_deg},
+                  {"width", 640},
+                  {"height", 400}};
+    };
+    const Box subject = demo::subjectBounds(g);
+    out["camera"] = cameraJson(demo::frameCamera(subject, 0.7), glm::dvec3(subject.center()));
+    out["rays_camera"] = cameraJson(PinholeCamera::looking_at_box(bounds),
+                                    0.5 * (glm::dvec3(bounds.lo) + glm::dvec3(bounds.hi)));
   } else {
     out["bounds"] = nullptr;
     out["camera"] = nullptr;
+    out["rays_camera"] = nullptr;
   }
   if (!doc_->edits.empty()) {
     json times = json::array();
@@ -379,8 +393,8 @@ json ViewSession::pick(const json& body) const {
   std::shared_lock lock(mutex_);
   const SceneTracer& tracer = scene_->tracer();
   const auto t0 = Clock::now();
-  const ElementPick e = arena_->execute(
-      [&] { return tracer.pickElement(cam.camera, x, y, cam.width, cam.height, options); });
+  const ElementPick e =
+      arena_->execute([&] { return tracer.pickElement(cam.camera, x, y, cam.width, cam.height, options); });
   if (!e.valid()) return {{"path", nullptr}, {"pick_ms", msSince(t0)}};
   // The surface normal: the face under the cursor when it belongs to the picked instance.
   json normal = nullptr;
@@ -576,8 +590,8 @@ json ViewSession::sensorsRun(const json& body) {
     std::string state, error;
     json results;
     try {
-      const SensorRunStatus status = run_->runUntil(
-          sensor_target_, [this](const SensorProgress& p) { sensor_done_ = p.rays_done; });
+      const SensorRunStatus status =
+          run_->runUntil(sensor_target_, [this](const SensorProgress& p) { sensor_done_ = p.rays_done; });
       state = status == SensorRunStatus::Cancelled ? "cancelled" : "completed";
       results = sensorResults(*scene_, run_->results());
     } catch (const std::exception& e) {

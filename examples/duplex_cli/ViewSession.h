@@ -63,9 +63,9 @@ struct ViewFrame {
   /// Per pixel (row-major), the hit file's instance id and the triangle of the primary hit
   /// (0xFFFFFFFF for a miss; 0xFFFFFFFE for an instance that is not one of the file's, added by an edit).
   std::vector<std::uint32_t> ids;
-  double trace_ms = 0.0;      ///< primary and shadow queries, wall-clock milliseconds
-  std::size_t rays = 0;       ///< primary + shadow rays
-  std::uint64_t commit = 0;   ///< the graph's commit count the frame shows
+  double trace_ms = 0.0;     ///< primary and shadow queries, wall-clock milliseconds
+  std::size_t rays = 0;      ///< primary + shadow rays
+  std::uint64_t commit = 0;  ///< the graph's commit count the frame shows
 };
 
 /// See the file comment.
@@ -118,9 +118,7 @@ class ViewSession {
   /// The hit file's instance id per node id (kInvalidId for nodes that are not the file's
   /// instances); instances that undo adds back take over their predecessors' ids.
   std::vector<std::uint32_t> hit_ids_;
-  [[nodiscard]] std::uint32_t hitId(NodeId node) const {
-    return node < hit_ids_.size() ? hit_ids_[node] : kInvalidId;
-  }
+  [[nodiscard]] std::uint32_t hitId(NodeId node) const { return node < hit_ids_.size() ? hit_ids_[node] : kInvalidId; }
   mutable WriterPreferringMutex mutex_;
 
   std::vector<std::vector<Inverse>> undo_;      ///< commits made through edits(), oldest first

@@ -326,7 +326,9 @@ int main(int argc, char** argv) {
       ->transform(kDecimal)
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
-  view_cmd->add_option("--bind", view.bind, "Address to listen on (other than 127.0.0.1: a warning; the token is still required)")
+  view_cmd
+      ->add_option("--bind", view.bind,
+                   "Address to listen on (other than 127.0.0.1: a warning; the token is still required)")
       ->capture_default_str();
   duplex::cli::addThreadsOption(*view_cmd, view.threads);
 

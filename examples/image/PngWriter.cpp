@@ -23,11 +23,12 @@ void appendBytes(void* context, void* data, int size) {
 
 std::vector<unsigned char> encodePng(const RgbImage& image) {
   std::vector<unsigned char> png;
-  const int ok = stbi_write_png_to_func(appendBytes, &png, static_cast<int>(image.width),
-                                        static_cast<int>(image.height), 3, image.pixels.data(),
-                                        static_cast<int>(image.width * 3));
-  if (!ok) throw InvalidArgument("cannot encode a " + std::to_string(image.width) + " x " +
-                                 std::to_string(image.height) + " image as PNG");
+  const int ok =
+      stbi_write_png_to_func(appendBytes, &png, static_cast<int>(image.width), static_cast<int>(image.height), 3,
+                             image.pixels.data(), static_cast<int>(image.width * 3));
+  if (!ok)
+    throw InvalidArgument("cannot encode a " + std::to_string(image.width) + " x " + std::to_string(image.height) +
+                          " image as PNG");
   return png;
 }
 
@@ -35,8 +36,9 @@ std::vector<unsigned char> encodeJpeg(const RgbImage& image, int quality) {
   std::vector<unsigned char> jpeg;
   const int ok = stbi_write_jpg_to_func(appendBytes, &jpeg, static_cast<int>(image.width),
                                         static_cast<int>(image.height), 3, image.pixels.data(), quality);
-  if (!ok) throw InvalidArgument("cannot encode a " + std::to_string(image.width) + " x " +
-                                 std::to_string(image.height) + " image as JPEG");
+  if (!ok)
+    throw InvalidArgument("cannot encode a " + std::to_string(image.width) + " x " + std::to_string(image.height) +
+                          " image as JPEG");
   return jpeg;
 }
 

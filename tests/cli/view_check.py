@@ -123,7 +123,9 @@ def check(server, cli, scene_path, work):
     expect(scene["timeline"] == [1, 2], f"timeline {scene.get('timeline')}")
     lo, hi = scene["bounds"]["min"], scene["bounds"]["max"]
     expect(lo[0] <= -5 and hi[0] >= 5 and hi[2] >= 1, f"bounds {scene['bounds']}")
-    camera = dict(scene["camera"], width=W, height=H)
+    camera = dict(scene["rays_camera"], width=W, height=H)
+    expect(scene["camera"]["target"] != camera["target"] or scene["camera"]["eye"] != camera["eye"],
+           "the default camera frames the parts, not the floor")
 
     # Renders: PNG and JPEG of the asked size, with their figures.
     status, headers, data = server.request("POST", "/api/render", {"camera": camera, "format": "png"})

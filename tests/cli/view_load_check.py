@@ -61,7 +61,7 @@ def main():
     lock = threading.Lock()
     try:
         scene = server.json("GET", "/api/scene")
-        camera = dict(scene["camera"], width=160, height=100)
+        camera = dict(scene["rays_camera"], width=160, height=100)
         for _ in range(20):  # warm-up: allocator pools, thread stacks
             server.request("POST", "/api/render", {"camera": camera, "format": "jpeg"})
         rss0 = rss_kb(server.proc.pid)
