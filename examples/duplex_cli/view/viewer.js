@@ -357,7 +357,11 @@ function setupMouse() {
     state.drag = null;
     if (!m) return;
     if (!m.moved) { try { await select(m.x0, m.y0); } catch (err) { say("pick: " + err.message); } return; }
-    if (wasDrag) { await reloadScene(); }
+    if (wasDrag) {
+      state.hover = null;  // it marked the part where it was
+      drawOverlay();
+      await reloadScene();
+    }
     requestFrame(false);
   });
   box.addEventListener("wheel", (e) => {
