@@ -216,6 +216,8 @@ void runView(const ViewOptions& options) {
         h(req, res);
       } catch (const Error& e) {  // RequestError, and a render over the memory limit
         sendError(res, 400, e.what());
+      } catch (const json::exception& e) {  // a value of the wrong JSON type met by a lookup
+        sendError(res, 400, std::string("request body: ") + e.what());
       } catch (const std::bad_alloc&) {
         sendError(res, 400, "not enough memory for this request");
       }
@@ -297,18 +299,17 @@ void runView(const ViewOptions& options) {
                    .dump()
             << std::endl;
 
+  std::atomic<bool> signalled{false};
   std::thread stopper([&] {
     int sig = 0;
     sigwait(&stop_signals, &sig);
+    signalled = true;
     server.stop();
   });
   const bool ok = server.listen_after_bind();
-  if (stopper.joinable()) {
-    // listen ended by itself (an error): wake the stopper so that it can end too.
-    if (server.is_running()) server.stop();
-    pthread_kill(stopper.native_handle(), SIGTERM);
-    stopper.join();
-  }
+  // listen ended by itself (an error): wake the stopper with a signal of its set so that it ends too.
+  if (!signalled.load()) pthread_kill(stopper.native_handle(), SIGTERM);
+  stopper.join();
   if (!ok) throw InvalidArgument("duplex view: the server stopped with an error");
 }
 

@@ -229,6 +229,7 @@ ViewSession::ViewSession(const std::filesystem::path& scene, int threads)
     : threads_(threads), workers_(std::make_unique<WorkerThreads>(threads)), arena_(&workers_->arena) {
   arena_->execute([&] { scene_.emplace(SensorScene::load(scene)); });
   doc_ = scene_->document();
+  deriveSensorScene();
   const InstanceIds ids(*doc_);
   for (const NodeId node : doc_->instances) {
     if (node >= hit_ids_.size()) hit_ids_.resize(static_cast<std::size_t>(node) + 1, kInvalidId);
@@ -302,8 +303,8 @@ json ViewSession::scene() const {
     };
     const Box subject = demo::subjectBounds(g);
     out["camera"] = cameraJson(demo::frameCamera(subject, 0.7), glm::dvec3(subject.center()));
-    out["rays_camera"] = cameraJson(PinholeCamera::looking_at_box(bounds),
-                                    0.5 * (glm::dvec3(bounds.lo) + glm::dvec3(bounds.hi)));
+    out["rays_camera"] =
+        cameraJson(PinholeCamera::looking_at_box(bounds), 0.5 * (glm::dvec3(bounds.lo) + glm::dvec3(bounds.hi)));
   } else {
     out["bounds"] = nullptr;
     out["camera"] = nullptr;
@@ -428,6 +429,16 @@ json ViewSession::pick(const json& body) const {
   return j;
 }
 
+void ViewSession::deriveSensorScene() {
+  // SensorScene derives its lights and sensors lazily on the first call after a commit: done here,
+  // under the exclusive lock, so that readers sharing the lock never derive at the same time.
+  try {
+    (void)scene_->revision();
+  } catch (const Error&) {
+    // A scene the commit made invalid for light transport: /api/scene and sensor runs say so.
+  }
+}
+
 void ViewSession::refuseWhileSensorsRun(const char* what) const {
   if (sensor_running_.load())
     refuse(std::string(what) + ": refused while a sensor run traces the scene (POST /api/sensors/cancel first)");
@@ -453,6 +464,7 @@ json ViewSession::applyAndCommit(const std::vector<SceneEdit>& edits, std::vecto
     refuse(e.what());
   }
   const double ms = msSince(t0);
+  deriveSensorScene();
   return {{"update_ms", ms}, {"top_update_ms", scene_->tracer().lastUpdateMs()}, {"changes", changesJson(changes)}};
 }
 
@@ -467,6 +479,7 @@ json ViewSession::revert(const std::vector<Inverse>& inverses) {
     g.rollback();
     refuse(e.what());
   }
+  deriveSensorScene();
   return {{"update_ms", msSince(t0)},
           {"top_update_ms", scene_->tracer().lastUpdateMs()},
           {"changes", changesJson(changes)}};

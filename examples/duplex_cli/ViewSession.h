@@ -108,6 +108,8 @@ class ViewSession {
   /// Applies the inverses (last first) and commits; rolls back and rethrows on failure.
   nlohmann::json revert(const std::vector<Inverse>& inverses);
   void refuseWhileSensorsRun(const char* what) const;
+  /// Brings the sensor scene's derived state up to date (after a commit, under the exclusive lock).
+  void deriveSensorScene();
   void joinSensorThread();
 
   int threads_;

@@ -59,9 +59,24 @@ def screenshot_only(cli, work, scene, out):
     server = Server(cli, scene)
     driver = browser()
     try:
+        from selenium.webdriver.common.action_chains import ActionChains
+        scene = server.json("GET", "/api/scene")
+        camera = dict(scene["camera"], width=640, height=400)
+        ids, _ = server.ids(camera)
+        counts = {}
+        for inst, _prim in ids:
+            counts[inst] = counts.get(inst, 0) + 1
+        floor = max((c, i) for i, c in counts.items() if i != 0xFFFFFFFF)[1]
+        # A part to select: the pixel nearest the frame's centre that shows neither sky nor floor.
+        part = min((i for i, v in enumerate(ids) if v[0] not in (floor, 0xFFFFFFFF)),
+                   key=lambda i: (i % 640 - 320) ** 2 + (i // 640 - 200) ** 2)
         driver.get(server.ready["url"])
         wait_for(lambda: frames(driver) >= 1, 60, "the first frame")
-        time.sleep(1.0)  # the full-resolution frame and the plot
+        box_el = driver.find_element("id", "frame-box")
+        ActionChains(driver).move_to_element_with_offset(box_el, part % 640 - 320, part // 640 - 200).click().perform()
+        wait_for(lambda: driver.find_element("id", "pick").text != "(none)", 20, "a selection")
+        ActionChains(driver).move_by_offset(1, 0).perform()
+        time.sleep(1.5)  # the full-resolution frame, the hover pick and the plot
         driver.save_screenshot(out)
         print(f"view_browser_check: wrote {out}")
     finally:
