@@ -79,6 +79,7 @@ class DemoRenderer {
   std::vector<Ray> shadow_;  ///< towards the light, for the lit pixels listed in shadow_pixel_
   std::vector<std::size_t> shadow_pixel_;
   std::vector<std::uint8_t> blocked_;
+  std::vector<float> direct_;              ///< light arriving per primary ray (n.l where the shadow ray is free)
   std::vector<glm::vec3> colour_of_node_;  ///< base colour per node id (instances of the last commit)
 };
 

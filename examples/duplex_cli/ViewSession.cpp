@@ -29,6 +29,8 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 // Rows per strip of a render: bounds the rays and hits held at once (about 100 bytes per pixel)
 // for the largest images a request may ask for.
 constexpr std::uint32_t kStripPixels = 1u << 20;
+// Renderers kept for reuse: as many as frames are traced at once (the server's render pool).
+constexpr std::size_t kPooledRenderers = 2;
 
 [[noreturn]] void refuse(const std::string& message) { throw RequestError(message); }
 
@@ -350,10 +352,25 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
     highlight = *id;
   }
   frame.commit = g.commitCount();
-  demo::RenderSettings settings;
-  settings.width = cam.width;
-  settings.height = cam.height;
-  demo::DemoRenderer renderer(scene_->tracer(), settings);
+  // A renderer of the pool: its ray, hit and shading buffers are reused from frame to frame.
+  std::unique_ptr<demo::DemoRenderer> taken;
+  {
+    std::lock_guard pool_lock(pool_mutex_);
+    if (!renderers_.empty()) {
+      taken = std::move(renderers_.back());
+      renderers_.pop_back();
+    }
+  }
+  if (!taken) taken = std::make_unique<demo::DemoRenderer>(scene_->tracer(), demo::RenderSettings{});
+  struct GiveBack {
+    const ViewSession& session;
+    std::unique_ptr<demo::DemoRenderer>& renderer;
+    ~GiveBack() {
+      std::lock_guard pool_lock(session.pool_mutex_);
+      if (session.renderers_.size() < kPooledRenderers) session.renderers_.push_back(std::move(renderer));
+    }
+  } give_back{*this, taken};
+  demo::DemoRenderer& renderer = *taken;
   renderer.setHighlight(highlight);
   const std::uint32_t strip_rows = std::max<std::uint32_t>(1, kStripPixels / cam.width);
   for (std::uint32_t r0 = 0; r0 < cam.height; r0 += strip_rows) {
@@ -598,13 +615,18 @@ json ViewSession::sensorsRun(const json& body) {
   sensor_state_ = "running";
   sensor_error_.clear();
   sensor_results_ = nullptr;
+  sensor_cancel_ = false;
   sensor_running_ = true;
   sensor_thread_ = std::thread([this] {
     std::string state, error;
     json results;
     try {
-      const SensorRunStatus status =
-          run_->runUntil(sensor_target_, [this](const SensorProgress& p) { sensor_done_ = p.rays_done; });
+      // runUntil forgets a cancel() that came before it started: a cancel asked for then is
+      // passed on after the first batch.
+      const SensorRunStatus status = run_->runUntil(sensor_target_, [this](const SensorProgress& p) {
+        sensor_done_ = p.rays_done;
+        if (sensor_cancel_.load()) run_->cancel();
+      });
       state = status == SensorRunStatus::Cancelled ? "cancelled" : "completed";
       results = sensorResults(*scene_, run_->results());
     } catch (const std::exception& e) {
@@ -636,6 +658,7 @@ json ViewSession::sensorsStatus() const {
 json ViewSession::sensorsCancel() {
   std::lock_guard lock(sensor_mutex_);
   if (!sensor_running_.load()) refuse("sensors/cancel: no run in progress");
+  sensor_cancel_ = true;
   run_->cancel();
   return {{"state", "cancelling"}};
 }

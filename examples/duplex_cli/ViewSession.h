@@ -122,6 +122,8 @@ class ViewSession {
   std::vector<std::uint32_t> hit_ids_;
   [[nodiscard]] std::uint32_t hitId(NodeId node) const { return node < hit_ids_.size() ? hit_ids_[node] : kInvalidId; }
   mutable WriterPreferringMutex mutex_;
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<std::unique_ptr<demo::DemoRenderer>> renderers_;  ///< idle renderers, for reuse
 
   std::vector<std::vector<Inverse>> undo_;      ///< commits made through edits(), oldest first
   std::string undo_group_;                      ///< the "group" of the last edits() commit
@@ -134,6 +136,7 @@ class ViewSession {
   std::unique_ptr<SensorRun> run_;
   std::thread sensor_thread_;
   std::atomic<bool> sensor_running_{false};
+  std::atomic<bool> sensor_cancel_{false};  ///< /api/sensors/cancel was asked during this run
   std::atomic<std::uint64_t> sensor_done_{0};
   std::uint64_t sensor_target_ = 0;
   std::string sensor_state_ = "idle";  ///< idle, running, completed, cancelled, failed

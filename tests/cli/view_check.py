@@ -269,7 +269,8 @@ def check(server, cli, scene_path, work):
     server.json("POST", "/api/sensors/cancel")
     status = wait_for(lambda: (lambda s: s if s["state"] != "running" else None)(
         server.json("GET", "/api/sensors/status")), 30, "the cancelled run")
-    expect(status["state"] == "cancelled" and 0 < status["rays_done"] < 10 ** 10, f"cancelled: {status}")
+    # Cancelled after the batches in flight (none may have finished yet).
+    expect(status["state"] == "cancelled" and 0 <= status["rays_done"] < 10 ** 10, f"cancelled: {status}")
     server.refused("POST", "/api/sensors/cancel", needle="no run")
     server.refused("POST", "/api/sensors/run", {"rays": 0}, needle="rays")
     server.json("POST", "/api/edits", {"edits": [{"node": "/parts/box", "visible": False}]})
