@@ -7,9 +7,11 @@
 
 #include <glm/geometric.hpp>
 
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -196,6 +198,18 @@ json sensorResults(const SensorScene& scene, const SensorRunResults& r) {
   return out;
 }
 
+// False colour of t in [0, 1]: dark blue, cyan, yellow, red (the page's map colours).
+std::array<std::uint8_t, 3> falseColour(double t) {
+  static constexpr double kStops[4][3] = {{0, 0, 0.3}, {0, 0.8, 1}, {1, 1, 0}, {1, 0.1, 0}};
+  const double x = std::clamp(t, 0.0, 0.9999) * 3.0;
+  const int i = static_cast<int>(x);
+  const double f = x - i;
+  std::array<std::uint8_t, 3> c{};
+  for (int k = 0; k < 3; ++k)
+    c[k] = static_cast<std::uint8_t>(std::lround(255.0 * (kStops[i][k] + (kStops[i + 1][k] - kStops[i][k]) * f)));
+  return c;
+}
+
 }  // namespace
 
 ViewCamera readCamera(const json& value, const std::string& what) {
@@ -303,8 +317,15 @@ json ViewSession::scene() const {
                   {"width", 640},
                   {"height", 400}};
     };
-    const Box subject = demo::subjectBounds(g);
-    out["camera"] = cameraJson(demo::frameCamera(subject, 0.7), glm::dvec3(subject.center()));
+    // A subject much smaller than the scene (a block in a room of sensors) would fill the view
+    // alone: then the whole scene is framed, as `duplex rays --primary` does.
+    Box subject = demo::subjectBounds(g);
+    double distance = 0.7;
+    if (glm::length(subject.extent()) < 0.25f * glm::length(bounds.extent())) {
+      subject = bounds;
+      distance = 1.0;
+    }
+    out["camera"] = cameraJson(demo::frameCamera(subject, distance), glm::dvec3(subject.center()));
     out["rays_camera"] =
         cameraJson(PinholeCamera::looking_at_box(bounds), 0.5 * (glm::dvec3(bounds.lo) + glm::dvec3(bounds.hi)));
   } else {
@@ -352,6 +373,15 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
     highlight = *id;
   }
   frame.commit = g.commitCount();
+  // "sensors": true draws the last sensor run's maps on the sensors' surfaces.
+  std::vector<SensorOverlay> overlays;
+  if (body.contains("sensors") && !body["sensors"].is_null()) {
+    if (!body["sensors"].is_boolean()) refuse("sensors: expected true or false");
+    if (body["sensors"].get<bool>()) {
+      std::lock_guard sensor_lock(sensor_mutex_);
+      overlays = overlays_;
+    }
+  }
   // A renderer of the pool: its ray, hit and shading buffers are reused from frame to frame.
   std::unique_ptr<demo::DemoRenderer> taken;
   {
@@ -382,6 +412,7 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
     frame.rays += stats.rays();
     std::copy(strip.pixels.begin(), strip.pixels.end(),
               frame.image.pixels.begin() + static_cast<std::ptrdiff_t>(r0) * cam.width * 3);
+    if (!overlays.empty()) drawOverlays(overlays, cam, renderer, r0, r1, frame.image);
     if (!ids) continue;
     const std::size_t n = static_cast<std::size_t>(cam.width) * (r1 - r0);
     for (std::size_t p = 0; p < n; ++p) {
@@ -397,6 +428,62 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
     }
   }
   return frame;
+}
+
+std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const SensorRunResults& r) {
+  std::vector<SensorOverlay> out;
+  for (std::size_t k = 0; k < r.sensors.size(); ++k) {
+    const SensorResult& s = r.sensors[k];
+    if (s.shape != SensorShape::Rectangle && s.shape != SensorShape::Disk) continue;  // planar maps only
+    SensorOverlay o;
+    const SensorInstance& inst = scene.sensors()[k];
+    o.object_from_world = inst.world_from_object.inverse();
+    o.disk = s.shape == SensorShape::Disk;
+    o.width = inst.object->spec().width;
+    o.height = inst.object->spec().height;
+    o.nx = s.nx;
+    o.ny = s.ny;
+    o.values = s.irradiance_w_m2;
+    o.max = 0.0;
+    for (const double v : o.values)
+      if (std::isfinite(v)) o.max = std::max(o.max, v);
+    if (o.max > 0.0) out.push_back(std::move(o));
+  }
+  return out;
+}
+
+void drawOverlays(const std::vector<SensorOverlay>& overlays, const ViewCamera& cam, const demo::DemoRenderer& renderer,
+                  std::uint32_t r0, std::uint32_t r1, demo::RgbImage& image) {
+  // Per pixel, the nearest sensor plane the primary ray crosses before its hit (sensors never block
+  // rays, so the frame shows what lies behind them): its bin's irradiance in false colour, 75%
+  // over the shaded pixel.
+  tbb::parallel_for(r0, r1, [&](std::uint32_t y) {
+    for (std::uint32_t x = 0; x < cam.width; ++x) {
+      const Hit& h = renderer.hitOfPixel(static_cast<std::size_t>(y - r0) * cam.width + x);
+      const glm::dvec3 dir = cam.camera.directionAt(x + 0.5, y + 0.5, cam.width, cam.height);
+      double best = h.valid() ? static_cast<double>(h.t) : std::numeric_limits<double>::infinity();
+      double value = -1.0;
+      for (const SensorOverlay& o : overlays) {
+        const glm::dvec3 org = o.object_from_world.point(cam.camera.eye);
+        const glm::dvec3 d = o.object_from_world.linear * dir;
+        if (!(std::abs(d.z) > 0.0)) continue;
+        const double t = -org.z / d.z;
+        if (!(t > 0.0 && t < best)) continue;
+        const glm::dvec3 p = org + t * d;
+        const double u = (p.x + 0.5 * o.width) / o.width, v = (p.y + 0.5 * o.height) / o.height;
+        if (!(u >= 0.0 && u < 1.0 && v >= 0.0 && v < 1.0)) continue;
+        if (o.disk && (2 * u - 1) * (2 * u - 1) + (2 * v - 1) * (2 * v - 1) > 1.0) continue;
+        const auto ix = std::min(o.nx - 1, static_cast<std::uint32_t>(u * o.nx));
+        const auto iy = std::min(o.ny - 1, static_cast<std::uint32_t>(v * o.ny));
+        best = t;
+        value = o.values[static_cast<std::size_t>(iy) * o.nx + ix] / o.max;
+      }
+      if (value < 0.0) continue;
+      const std::array<std::uint8_t, 3> c = falseColour(value);
+      std::uint8_t* px = &image.pixels[(static_cast<std::size_t>(y) * cam.width + x) * 3];
+      for (int k = 0; k < 3; ++k) px[k] = static_cast<std::uint8_t>((px[k] + 3 * c[k] + 2) / 4);
+    }
+  });
 }
 
 json ViewSession::pick(const json& body) const {
@@ -620,6 +707,7 @@ json ViewSession::sensorsRun(const json& body) {
   sensor_thread_ = std::thread([this] {
     std::string state, error;
     json results;
+    std::vector<SensorOverlay> overlays;
     try {
       // runUntil forgets a cancel() that came before it started: a cancel asked for then is
       // passed on after the first batch.
@@ -628,7 +716,9 @@ json ViewSession::sensorsRun(const json& body) {
         if (sensor_cancel_.load()) run_->cancel();
       });
       state = status == SensorRunStatus::Cancelled ? "cancelled" : "completed";
-      results = sensorResults(*scene_, run_->results());
+      const SensorRunResults r = run_->results();
+      results = sensorResults(*scene_, r);
+      overlays = sensorOverlays(*scene_, r);
     } catch (const std::exception& e) {
       state = "failed";
       error = e.what();
@@ -637,6 +727,7 @@ json ViewSession::sensorsRun(const json& body) {
     sensor_state_ = state;
     sensor_error_ = error;
     sensor_results_ = std::move(results);
+    overlays_ = std::move(overlays);
     sensor_done_ = run_->raysDone();
     sensor_running_ = false;
   });

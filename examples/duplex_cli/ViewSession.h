@@ -57,6 +57,25 @@ inline constexpr std::uint32_t kMaxImageSide = 8192;
 /// a field of view outside (0, 180) degrees, eye == target, or up parallel to the view direction.
 [[nodiscard]] ViewCamera readCamera(const nlohmann::json& value, const std::string& what);
 
+/// A planar sensor's map from the last run, to draw on its surface in frames (object space: the
+/// sensor's plane z = 0, centred, width x height, bins row-major with x fastest).
+struct SensorOverlay {
+  Affine object_from_world;
+  bool disk = false;
+  double width = 1.0, height = 1.0;
+  std::uint32_t nx = 1, ny = 1;
+  std::vector<double> values;  ///< irradiance per bin
+  double max = 0.0;            ///< the largest finite value (> 0)
+};
+
+/// The planar (rectangle and disk) sensors' maps of a run's results on `scene`.
+[[nodiscard]] std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const SensorRunResults& r);
+
+/// Draws `overlays` into rows [r0, r1) of `image` (the frame of `cam`) where the primary ray of
+/// `renderer`'s last strip (rows r0..r1) crosses a sensor before its hit.
+void drawOverlays(const std::vector<SensorOverlay>& overlays, const ViewCamera& cam, const demo::DemoRenderer& renderer,
+                  std::uint32_t r0, std::uint32_t r1, demo::RgbImage& image);
+
 /// A rendered frame and its figures.
 struct ViewFrame {
   demo::RgbImage image;
@@ -142,6 +161,7 @@ class ViewSession {
   std::string sensor_state_ = "idle";  ///< idle, running, completed, cancelled, failed
   std::string sensor_error_;
   nlohmann::json sensor_results_;
+  std::vector<SensorOverlay> overlays_;  ///< the last run's planar maps
 };
 
 }  // namespace duplex::cli

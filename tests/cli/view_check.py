@@ -30,7 +30,7 @@ import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from view_support import Server, expect, wait_for, write_scene  # noqa: E402
+from view_support import Server, decode_png, expect, wait_for, write_scene  # noqa: E402
 
 W, H = 128, 80
 
@@ -255,6 +255,16 @@ def check(server, cli, scene_path, work):
         expect(ours == theirs, f"t = {at}: viewer fluxes {ours} != duplex sensor --at {at}: {theirs}")
         seen[at] = ours["pad"]
     expect(seen[1.0] == seen[1.5] and seen[0.0] == seen[0.5], "equal scenes, equal fluxes")
+    # The last run's map on the sensor's surface: only pixels whose primary hit lies behind the pad
+    # (the floor under it) change, and some do.
+    at_1, _ = server.ids(camera)
+    plain = decode_png(server.request("POST", "/api/render", {"camera": camera, "format": "png"})[2])[2]
+    mapped = decode_png(server.request("POST", "/api/render", {"camera": camera, "format": "png",
+                                                               "sensors": True})[2])[2]
+    changed = [(x, y) for y in range(H) for x in range(W) if plain[y][3 * x:3 * x + 3] != mapped[y][3 * x:3 * x + 3]]
+    expect(len(changed) > 20, f"the pad's map drawn on {len(changed)} pixels")
+    expect(all(at_1[y * W + x][0] == 0 for x, y in changed), "the map drawn where the pad is not")
+    server.refused("POST", "/api/render", {"camera": camera, "sensors": 1}, needle="sensors")
     expect(seen[1.0] != seen[0.0], "the box's shadow at t = 1 changes the pad's flux")
     server.json("POST", "/api/time", {"t": 0})
     scene_at_0 = server.ids(camera)[0]

@@ -99,7 +99,7 @@ async function pumpFrames() {
   const t0 = performance.now();
   try {
     const res = await api("POST", "/api/render",
-      { camera: cameraJson(w, h), format: "jpeg", highlight: state.selected });
+      { camera: cameraJson(w, h), format: "jpeg", highlight: state.selected, sensors: $("sensor-overlay").checked });
     const blob = await res.blob();
     const url = URL.createObjectURL(blob);
     const img = $("view");
@@ -553,7 +553,10 @@ function setupSensors() {
       $("sensor-cancel").disabled = !running;
       if (!running) {
         clearInterval(timer); timer = null;
-        if (s.sensors.length) showSensorResults(s.sensors);
+        if (s.sensors.length) {
+          showSensorResults(s.sensors);
+          if (s.state === "completed" && !$("sensor-overlay").checked) { $("sensor-overlay").checked = true; requestFrame(false); }
+        }
       }
     } catch (e) { say("sensors: " + e.message); }
   };
@@ -564,6 +567,7 @@ function setupSensors() {
       poll();
     } catch (e) { say("sensors: " + e.message); }
   });
+  $("sensor-overlay").addEventListener("change", () => requestFrame(false));
   $("sensor-cancel").addEventListener("click", async () => {
     try { await postJson("/api/sensors/cancel"); } catch (e) { say("sensors: " + e.message); }
   });
