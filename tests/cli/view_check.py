@@ -30,7 +30,8 @@ import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from view_support import Server, decode_png, expect, wait_for, write_scene  # noqa: E402
+from demo_check import decode_png  # noqa: E402
+from view_support import Server, expect, wait_for, write_scene  # noqa: E402
 
 W, H = 128, 80
 

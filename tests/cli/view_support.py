@@ -116,42 +116,6 @@ class Server:
         return [(flat[2 * i], flat[2 * i + 1]) for i in range(n)], headers
 
 
-def decode_png(data):
-    """(width, height, rows of RGB bytes) of an 8-bit RGB PNG (as stb writes them)."""
-    import struct
-    import zlib
-    expect(data[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG")
-    pos, idat, width, height = 8, b"", 0, 0
-    while pos < len(data):
-        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
-        chunk = data[pos + 8:pos + 8 + length]
-        if kind == b"IHDR":
-            width, height, depth, colour = struct.unpack(">IIBB", chunk[:10])
-            expect(depth == 8 and colour == 2, "an 8-bit RGB PNG")
-        elif kind == b"IDAT":
-            idat += chunk
-        pos += 12 + length
-    raw, stride, rows, prev = zlib.decompress(idat), 3 * width, [], bytearray(3 * width)
-    for y in range(height):
-        f, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
-        for i in range(stride):
-            a = line[i - 3] if i >= 3 else 0
-            b, c = prev[i], prev[i - 3] if i >= 3 else 0
-            if f == 1:
-                line[i] = (line[i] + a) & 255
-            elif f == 2:
-                line[i] = (line[i] + b) & 255
-            elif f == 3:
-                line[i] = (line[i] + (a + b) // 2) & 255
-            elif f == 4:
-                p = a + b - c
-                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
-        rows.append(bytes(line))
-        prev = line
-    return width, height, rows
-
-
 def wait_for(predicate, seconds, what):
     end = time.time() + seconds
     while time.time() < end:
