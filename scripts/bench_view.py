@@ -9,11 +9,12 @@
   primary hit is not the floor, in steps); the server's own
   pick time (pick_ms: SceneTracer::pickElement plus the face under the cursor) and the round trip.
 
-Writes one JSON object (stdout, and --out FILE). Run it 3 times on a quiet machine and give the load
-(`uptime`) beside the figures; they are only meaningful then.
+Writes one JSON object (stdout, and --out FILE) with one entry per run (--runs, default 3, each on
+a server of its own) and the load average beside each; the figures are only meaningful on a quiet
+machine.
 
 Usage: scripts/bench_view.py [--cli build/bin/duplex] [--scene examples/scenes/robot_cell.json]
-                             [--threads 2] [--frames 100] [--picks 400] [--node PATH] [--out FILE]
+                             [--threads 2] [--frames 100] [--picks 400] [--node PATH] [--runs 3] [--out FILE]
 """
 
 import argparse
@@ -36,8 +37,19 @@ def main():
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--picks", type=int, default=400)
     ap.add_argument("--node", default=None, help="the node dragged (default: the first instance under a group)")
+    ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
+    runs = [run(a, root) for _ in range(a.runs)]
+    result = {"command": "scripts/bench_view.py " + " ".join(sys.argv[1:]), "runs": runs}
+    text = json.dumps(result, indent=1)
+    print(text)
+    if a.out:
+        with open(a.out, "w") as f:
+            f.write(text + "\n")
+
+
+def run(a, root):
 
     server = Server(a.cli, a.scene, threads=a.threads)
     try:
@@ -108,11 +120,7 @@ def main():
         }
     finally:
         server.stop()
-    text = json.dumps(result, indent=1)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(text + "\n")
+    return result
 
 
 if __name__ == "__main__":
