@@ -22,11 +22,13 @@ ensure_packages() {
   "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
 }
 
-# The packages every build needs.
+# The packages every build needs (chromium, chromium-driver and python3-selenium: the browser test of
+# `duplex view`'s page).
 build_packages=(build-essential cmake ninja-build libopenmesh-dev libopenvdb-dev libboost-iostreams-dev libblosc-dev zlib1g-dev libglm-dev
                 libspdlog-dev libtbb-dev libgtest-dev nlohmann-json3-dev libcli11-dev libstb-dev libpng-dev
                 python3-matplotlib libembree-dev libopenexr-dev libxxhash-dev libtinyxml2-dev
-                pybind11-dev python3-dev python3-numpy python3-pytest libopenmpi-dev openmpi-bin)
+                pybind11-dev python3-dev python3-numpy python3-pytest libopenmpi-dev openmpi-bin
+                libcpp-httplib-dev chromium chromium-driver python3-selenium)
 
 # generator_args DIR: prints "-G Ninja" for a new build directory when ninja is installed (it starts
 # a target's compiles before its dependencies have linked, which keeps both cores busy), nothing for

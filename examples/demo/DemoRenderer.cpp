@@ -53,21 +53,41 @@ glm::vec3 facingNormal(const Hit& h, const Ray& r) {
 
 DemoRenderer::DemoRenderer(const SceneTracer& tracer, const PinholeCamera& camera, const RenderSettings& settings)
     : tracer_(tracer), settings_(settings) {
-  const std::size_t n = static_cast<std::size_t>(settings.width) * settings.height;
-  primary_.reserve(n);
-  pixel_of_.reserve(n);
+  setView(camera, settings.width, settings.height, 0, settings.height);
+}
+
+DemoRenderer::DemoRenderer(const SceneTracer& tracer, const RenderSettings& settings)
+    : tracer_(tracer), settings_(settings) {}
+
+void DemoRenderer::setView(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height,
+                           std::uint32_t row_begin, std::uint32_t row_end) {
+  settings_.width = width;
+  settings_.height = row_end - row_begin;
+  const std::size_t n = static_cast<std::size_t>(width) * (row_end - row_begin);
+  primary_.resize(n);
+  pixel_of_.resize(n);
+  ray_of_pixel_.resize(n);
   const glm::vec3 eye(camera.eye);
   // In tiles of 4 x 4 pixels: the batch queries trace 16 consecutive rays as one packet, and
-  // neighbouring pixels' rays (and their shadow rays, made in the same order) are coherent.
+  // neighbouring pixels' rays (and their shadow rays, made in the same order) are coherent. A band
+  // of tiles (4 rows) starts at ray (its first row - row_begin) x width: bands are made in parallel.
   constexpr std::uint32_t kTile = 4;
-  for (std::uint32_t ty = 0; ty < settings.height; ty += kTile)
-    for (std::uint32_t tx = 0; tx < settings.width; tx += kTile)
-      for (std::uint32_t y = ty; y < std::min(ty + kTile, settings.height); ++y)
-        for (std::uint32_t x = tx; x < std::min(tx + kTile, settings.width); ++x) {
-          primary_.push_back(Ray{eye, 0.0f, camera.direction(x, y, settings.width, settings.height),
-                                 std::numeric_limits<float>::infinity()});
-          pixel_of_.push_back(static_cast<std::size_t>(y) * settings.width + x);
-        }
+  const std::uint32_t bands = (row_end - row_begin + kTile - 1) / kTile;
+  tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, bands), [&](const tbb::blocked_range<std::uint32_t>& r) {
+    for (std::uint32_t band = r.begin(); band != r.end(); ++band) {
+      const std::uint32_t ty = row_begin + band * kTile;
+      std::size_t ray = static_cast<std::size_t>(ty - row_begin) * width;
+      for (std::uint32_t tx = 0; tx < width; tx += kTile)
+        for (std::uint32_t y = ty; y < std::min(ty + kTile, row_end); ++y)
+          for (std::uint32_t x = tx; x < std::min(tx + kTile, width); ++x, ++ray) {
+            const std::size_t pixel = static_cast<std::size_t>(y - row_begin) * width + x;
+            ray_of_pixel_[pixel] = ray;
+            primary_[ray] =
+                Ray{eye, 0.0f, camera.direction(x, y, width, height), std::numeric_limits<float>::infinity()};
+            pixel_of_[ray] = pixel;
+          }
+    }
+  });
   hits_.resize(n);
 }
 
@@ -112,7 +132,8 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
   stats.shadowed = static_cast<std::size_t>(std::count(blocked_.begin(), blocked_.end(), std::uint8_t{1}));
 
   // Light arriving per pixel: n.l where the shadow ray is free, else 0.
-  std::vector<float> direct(n, 0.0f);
+  std::vector<float>& direct = direct_;
+  direct.assign(n, 0.0f);
   for (std::size_t k = 0; k < shadow_pixel_.size(); ++k) {
     const std::size_t i = shadow_pixel_[k];
     if (!blocked_[k]) direct[i] = glm::dot(facingNormal(hits_[i], primary_[i]), to_light);
@@ -120,22 +141,27 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
 
   // Shade: sky for misses, ambient (brighter towards +y) plus Lambert.
   RgbImage image{settings_.width, settings_.height, std::vector<std::uint8_t>(n * 3)};
-  std::size_t primary_hits = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Hit& h = hits_[i];
-    glm::vec3 colour;
-    if (!h.valid()) {
-      colour = sky(primary_[i].dir);
-    } else {
-      ++primary_hits;
-      const glm::vec3 nrm = facingNormal(h, primary_[i]);
-      const float ambient = 0.12f + 0.14f * (0.5f + 0.5f * nrm.y);
-      const glm::vec3 base =
-          h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
-      colour = base * (ambient + 0.85f * direct[i]);
+  // Pixels are independent: shaded in parallel (the sRGB encoding is the costly part).
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const Hit& h = hits_[i];
+      glm::vec3 colour;
+      if (!h.valid()) {
+        colour = sky(primary_[i].dir);
+      } else {
+        const glm::vec3 nrm = facingNormal(h, primary_[i]);
+        const float ambient = 0.12f + 0.14f * (0.5f + 0.5f * nrm.y);
+        const glm::vec3 base =
+            h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
+        colour = base * (ambient + 0.85f * direct[i]);
+        // The highlighted part: pulled towards a bright cyan that no palette colour is close to.
+        if (h.instance_id == settings_.highlight) colour = glm::mix(colour, glm::vec3(0.1f, 0.85f, 1.0f), 0.55f);
+      }
+      for (int c = 0; c < 3; ++c) image.pixels[pixel_of_[i] * 3 + c] = toSrgb8(colour[c]);
     }
-    for (int c = 0; c < 3; ++c) image.pixels[pixel_of_[i] * 3 + c] = toSrgb8(colour[c]);
-  }
+  });
+  const auto primary_hits = static_cast<std::size_t>(std::count_if(
+      hits_.begin(), hits_.begin() + static_cast<std::ptrdiff_t>(n), [](const Hit& h) { return h.valid(); }));
   stats.primary_hits = primary_hits;
   return image;
 }

@@ -10,6 +10,7 @@
 #include <duplex/accel/Hit.h>
 #include <duplex/accel/Ray.h>
 #include <duplex/accel/RayGenerator.h>
+#include <duplex/scenegraph/NodeId.h>
 #include <duplex/scenegraph/SceneTracer.h>
 
 #include <glm/vec3.hpp>
@@ -25,6 +26,8 @@ struct RenderSettings {
   std::uint32_t height = 400;
   /// Direction towards the (distant) light, world space; need not be unit length.
   glm::vec3 to_light{-0.35f, 1.0f, 0.45f};
+  /// An instance node drawn tinted (a selection or the part under the cursor); kInvalidNode: none.
+  NodeId highlight = kInvalidNode;
 };
 
 /// Figures of one frame. Times are wall-clock milliseconds of the batch queries alone.
@@ -40,26 +43,43 @@ struct FrameStats {
   [[nodiscard]] double traceMs() const { return primary_ms + shadow_ms; }
 };
 
-/// Renders frames of the scene a tracer sees. The camera and the primary rays are fixed at
-/// construction; buffers are reused from frame to frame. Call render() between commits of the
-/// graph (it reads the graph for colours), from one thread; the queries run in parallel on the
-/// calling TBB arena.
+/// Renders frames of the scene a tracer sees. The camera and the primary rays are set at
+/// construction (or by setView); buffers are reused from frame to frame. Call render() between
+/// commits of the graph (it reads the graph for colours), from one thread; the queries run in
+/// parallel on the calling TBB arena.
 class DemoRenderer {
  public:
   DemoRenderer(const SceneTracer& tracer, const PinholeCamera& camera, const RenderSettings& settings);
+  /// No rays until setView().
+  DemoRenderer(const SceneTracer& tracer, const RenderSettings& settings);
+
+  /// Aims the renderer at rows [row_begin, row_end) of a width x height image seen by `camera`
+  /// (world space; pixel rays as `duplex rays --primary` makes them: origin the eye, direction
+  /// PinholeCamera::direction). render() then returns those rows only (a strip of a large image).
+  /// The caller has checked the camera (SceneTracer::pick's rules) and the sizes.
+  void setView(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height, std::uint32_t row_begin,
+               std::uint32_t row_end);
+  /// The tinted instance of the next frames (kInvalidNode: none).
+  void setHighlight(NodeId instance) { settings_.highlight = instance; }
 
   /// Traces and shades the scene as of the graph's last commit.
   [[nodiscard]] RgbImage render(FrameStats& stats);
 
+  /// The primary hit of pixel (x, y - row_begin) of the last render (row-major index into the
+  /// strip): instance_id is the node id, invalid for a miss.
+  [[nodiscard]] const Hit& hitOfPixel(std::size_t pixel) const { return hits_[ray_of_pixel_[pixel]]; }
+
  private:
   const SceneTracer& tracer_;
   RenderSettings settings_;
-  std::vector<Ray> primary_;           ///< one per pixel, in tiles of 4 x 4 pixels
-  std::vector<std::size_t> pixel_of_;  ///< the pixel (row-major from the top left) of primary_[i]
+  std::vector<Ray> primary_;               ///< one per pixel, in tiles of 4 x 4 pixels
+  std::vector<std::size_t> pixel_of_;      ///< the pixel (row-major from the top left) of primary_[i]
+  std::vector<std::size_t> ray_of_pixel_;  ///< inverse of pixel_of_
   std::vector<Hit> hits_;
   std::vector<Ray> shadow_;  ///< towards the light, for the lit pixels listed in shadow_pixel_
   std::vector<std::size_t> shadow_pixel_;
   std::vector<std::uint8_t> blocked_;
+  std::vector<float> direct_;              ///< light arriving per primary ray (n.l where the shadow ray is free)
   std::vector<glm::vec3> colour_of_node_;  ///< base colour per node id (instances of the last commit)
 };
 

@@ -21,6 +21,7 @@
 //                 [--roulette R] [--failure-threshold F] [--progress MODE] [--checkpoint SECONDS] [--at T]
 //                 [--text-map-limit N]
 //                 [--batch-rays B]; under `mpirun -np N` the ranks share the batches
+//   duplex view SCENE [--port N] [--bind ADDR] [--threads N]   (serves the scene to a browser until stopped)
 // Scenes are read by loadSceneDocument: scene-json-v1 and duplex-scene-v1 (docs/scene-format.md).
 // Each command prints one JSON object on stdout; diagnostics go to stderr. Bad input gives a
 // message naming the file and the problem and a non-zero exit status.
@@ -40,6 +41,7 @@
 #include "SensorRanks.h"
 #include "StructureOption.h"
 #include "TraceCommand.h"
+#include "ViewCommand.h"
 
 #include <duplex/accel/Error.h>
 #include <duplex/accel/Log.h>
@@ -313,10 +315,27 @@ int main(int argc, char** argv) {
       "Files are described in docs/sensors.md; the run is bit-identical for any --threads, and for any number of "
       "ranks under mpirun (docs/distributed.md).");
 
+  // duplex view
+  duplex::cli::ViewOptions view;
+  CLI::App* view_cmd = app.add_subcommand(
+      "view",
+      "Serve the scene to a browser: ray-traced view, picking, edits, timeline and sensor runs (docs/viewer.md). "
+      "Prints {\"url\", \"port\", \"token\"} when ready; runs until Ctrl-C");
+  view_cmd->add_option("scene", view.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  view_cmd->add_option("--port", view.port, "TCP port (0: a free port)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+  view_cmd
+      ->add_option("--bind", view.bind,
+                   "Address to listen on (other than 127.0.0.1: a warning; the token is still required)")
+      ->capture_default_str();
+  duplex::cli::addThreadsOption(*view_cmd, view.threads);
+
   // --max-memory of the commands that load scenes, meshes or ray files, or run (all of them).
   std::uint64_t max_memory = 0;
   for (CLI::App* cmd : {trace_cmd, rays_cmd, split_cmd, instances_cmd, robot_cmd, prepare_cmd, closest_cmd, update_cmd,
-                        frame_cmd, deform_cmd, sensor_cmd})
+                        frame_cmd, deform_cmd, sensor_cmd, view_cmd})
     duplex::cli::addMaxMemoryOption(*cmd, max_memory);
 
   try {
@@ -337,6 +356,7 @@ int main(int argc, char** argv) {
                         : *closest_cmd   ? "duplex closest"
                         : *deform_cmd    ? "duplex bench deform"
                         : *frame_cmd     ? "duplex bench frame"
+                        : *view_cmd      ? "duplex view"
                                          : "duplex bench update";
   try {
     nlohmann::ordered_json result;
@@ -348,6 +368,8 @@ int main(int argc, char** argv) {
       result = duplex::cli::runSceneInstances(scatter);
     } else if (*sensor_cmd) {
       result = duplex::cli::runSensor(sensor);
+    } else if (*view_cmd) {
+      duplex::cli::runView(view);  // prints its ready line itself and serves until stopped
     } else if (*prepare_cmd) {
       result = duplex::cli::runPrepare(prepare);
     } else if (*closest_cmd) {

@@ -175,12 +175,23 @@ class DocumentReader {
   }
 
   /// An edit; `added_object` is the library id of an "add_object" edit's entry (read before).
-  SceneEdit edit(const json& v, const std::string& p, ObjectId added_object) const {
+  /// `timed`: a file's edit, which needs a "time"; else an edit given at run time
+  /// (parseLiveEdits), which has none and may not read files.
+  SceneEdit edit(const json& v, const std::string& p, ObjectId added_object, bool timed = true) const {
     if (!v.is_object()) ctx_.fail(p, "expected an edit (an object)");
     SceneEdit e;
     e.pointer = p;
-    e.time = ctx_.number(ctx_.member(v, p, "time"), at(p, "time"));
-    if (e.time < 0.0) ctx_.fail(at(p, "time"), "expected a time >= 0 (seconds)");
+    if (timed) {
+      e.time = ctx_.number(ctx_.member(v, p, "time"), at(p, "time"));
+      if (e.time < 0.0) ctx_.fail(at(p, "time"), "expected a time >= 0 (seconds)");
+    } else {
+      if (v.contains("time")) ctx_.fail(at(p, "time"), "an edit applied now has no \"time\"");
+      // Reading files is the scene file's privilege: an edit from outside (a browser) never
+      // reaches the file system.
+      if (v.contains("add_object")) ctx_.fail(at(p, "add_object"), "\"add_object\" reads files: not accepted here");
+      if (v.contains("deform") && v.contains("file"))
+        ctx_.fail(at(p, "file"), "a \"deform\" edit from a file reads files: not accepted here (give \"positions\")");
+    }
     static constexpr std::array<std::pair<const char*, SceneEditKind>, 8> kinds = {{
         {"set_transform", SceneEditKind::SetTransform},
         {"add", SceneEditKind::Add},
@@ -649,6 +660,21 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
   f.instances = doc.instances.size();
   f.nodes = graph.nodeCount();
   return doc;
+}
+
+std::vector<SceneEdit> parseLiveEdits(const SceneDocument& doc, const nlohmann::json& edits, const std::string& source,
+                                      const ObjectTypeRegistry& registry) {
+  ObjectSpecContext ctx;
+  ctx.scene_file = source;
+  ctx.strict = true;
+  ctx.cache = std::make_shared<SceneLoadCache>();
+  if (!edits.is_array()) ctx.fail("", "expected an array of edits");
+  DocumentReader reader(ctx, *doc.graph, registry);
+  std::vector<SceneEdit> out;
+  out.reserve(edits.size());
+  for (std::size_t i = 0; i < edits.size(); ++i)
+    out.push_back(reader.edit(edits[i], at("", i), kInvalidObject, /*timed=*/false));
+  return out;
 }
 
 std::vector<NodeId> applyEdit(SceneDocument& doc, const SceneEdit& edit) {

@@ -413,6 +413,45 @@ TEST(SceneDocumentOwn, EditsUntilATimeArePlayedGroupByGroup) {
   EXPECT_TRUE(again.graph->isVisibleInstance(again.instances[0]));
 }
 
+// Edits given at run time (parseLiveEdits): the file's vocabulary without "time"; applied like the
+// file's; edits that read files, a "time", unknown objects and non-finite numbers are refused naming
+// the source and the pointer, and nothing is parsed then.
+TEST(SceneDocumentOwn, LiveEditsUseTheFilesVocabularyAndNeverReadFiles) {
+  SceneDir d;
+  const auto path = d.write(own(
+      kCube + "," + kTetra,
+      R"({"group": "arm", "matrix": )" + kIdentity + R"(, "children": [{"instance": "tip", "object": "tetra"}]})", ""));
+  SceneDocument doc = loadSceneDocument(path, builtinObjectTypes());
+  const auto live = [&](const std::string& text) {
+    return parseLiveEdits(doc, nlohmann::json::parse(text), "request", builtinObjectTypes());
+  };
+  const std::vector<SceneEdit> edits = live(R"([
+    {"node": "/arm", "set_transform": {"translate": [0, 0, 5]}},
+    {"add": {"instance": "x", "object": "cube"}, "parent": "/arm"},
+    {"node": "/arm/tip", "mask": 3}])");
+  ASSERT_EQ(edits.size(), 3u);
+  EXPECT_EQ(edits[0].pointer, "/0");
+  EXPECT_EQ(edits[0].kind, SceneEditKind::SetTransform);
+  for (const SceneEdit& e : edits) (void)applyEdit(doc, e);
+  (void)doc.graph->commit();
+  EXPECT_TRUE(sameAffine(doc.graph->worldTransform(*doc.graph->find("/arm/x")),
+                         Affine::fromRowMajor3x4({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 5})));
+  EXPECT_EQ(doc.graph->node(doc.instances[0]).mask, 3u);
+  expectErrorNaming<FileError>(
+      [&] { (void)live(R"([{"node": "/arm", "visible": true}, {"time": 1, "remove": "/arm"}])"); },
+      "request: /1/time: an edit applied now has no \"time\"");
+  expectErrorNaming<FileError>([&] { (void)live(R"([{"add_object": {"name": "m", "mesh": {"file": "a.obj"}}}])"); },
+                               "request: /0/add_object: \"add_object\" reads files");
+  expectErrorNaming<FileError>([&] { (void)live(R"([{"deform": "cube", "file": "a.obj"}])"); },
+                               "request: /0/file: a \"deform\" edit from a file reads files");
+  expectErrorNaming<FileError>([&] { (void)live(R"([{"node": "/arm", "object": "nothing"}])"); },
+                               "request: /0/object: no object named \"nothing\"");
+  expectErrorNaming<FileError>(
+      [&] { (void)live(R"([{"node": "/arm", "set_transform": [1, 0, 0, "x", 0, 1, 0, 0, 0, 0, 1, 0]}])"); },
+      "request: /0/set_transform/3: expected a number");
+  expectErrorNaming<FileError>([&] { (void)live(R"({"node": "/arm"})"); }, "request: /: expected an array of edits");
+}
+
 // The complete example of docs/scene-format.md loads and all its edits apply (mesh files replaced by
 // a fixture, the prepared structure dropped).
 TEST(SceneDocumentOwn, TheDocumentedExampleLoadsAndPlays) {

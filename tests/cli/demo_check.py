@@ -37,7 +37,11 @@ def expect(condition, message):
 def read_png(path):
     """(width, height, rows of RGB bytes) of an 8-bit RGB, non-interlaced PNG."""
     with open(path, "rb") as f:
-        data = f.read()
+        return decode_png(f.read(), path)
+
+
+def decode_png(data, path="the image"):
+    """read_png of PNG bytes; `path` names them in messages."""
     expect(data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG")
     pos, idat, header = 8, b"", None
     while pos < len(data):

@@ -134,6 +134,16 @@ struct SceneDocument {
 [[nodiscard]] SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectTypeRegistry& registry,
                                               const SceneDocumentOptions& options = {});
 
+/// Reads edits given at run time (an editor, a viewer's requests) in the vocabulary of the file's
+/// "edits" (duplex-scene-v1, docs/scene-format.md), without "time": `edits` is a JSON array; node
+/// paths and object names are resolved when applied (applyEdit) and at parse time against doc's
+/// library respectively. Edits that read files ("add_object", "deform" with "file") and edits with a
+/// "time" are refused. Throws FileError naming `source` (e.g. "request body") and the JSON pointer
+/// of the first problem ("request body: /2/set_transform/3: expected a number"), NaN and infinite
+/// numbers included; nothing is applied.
+[[nodiscard]] std::vector<SceneEdit> parseLiveEdits(const SceneDocument& doc, const nlohmann::json& edits,
+                                                    const std::string& source, const ObjectTypeRegistry& registry);
+
 /// Applies `edit` to doc.graph (without committing). Returns the nodes an Add created (its subtree,
 /// depth first), else nothing. Throws FileError naming doc.file and edit.pointer when the node path
 /// does not exist (now) or the graph refuses the edit; the graph is then unchanged.
