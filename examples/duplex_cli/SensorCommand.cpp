@@ -477,6 +477,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     cfg.seed = o.seed;
     cfg.threads = static_cast<unsigned>(workers.count);
     cfg.max_depth = o.max_depth;
+    cfg.roulette_depth = o.roulette_depth;
     cfg.max_scatterings = o.max_scatterings;
     cfg.roulette_threshold = o.roulette;
     cfg.batch_rays = o.batch_rays;
@@ -547,7 +548,9 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   report["seed"] = r.seed;
   report["threads"] = workers.count;
   report["ranks"] = ranks.size();
-  report["max_depth"] = o.max_depth;
+  report["max_depth"] =
+      o.max_depth == kNoDepthLimit ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(o.max_depth);
+  report["roulette_depth"] = o.roulette_depth;
   report["max_scatterings"] = o.max_scatterings;
   report["roulette_threshold"] = o.roulette;
   report["batch_rays"] = o.batch_rays;
@@ -576,6 +579,15 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
               << " paths, carrying " << e.failed_w << " W, " << 100.0 * e.failed_w / e.emitted_w
               << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
               << "%): the results miss that power\n";
+  // A cap on the path length loses what the cut paths would still have deposited: a bias that the
+  // standard errors do not show, so it is said whenever it is not negligible.
+  if (e.depth_limited_rays != 0 && e.depth_limited_w > o.failure_threshold * e.emitted_w)
+    std::cerr << "duplex sensor: warning: the path limits cut " << e.depth_limited_rays << " of " << r.rays
+              << " paths, carrying " << e.depth_limited_w << " W, " << 100.0 * e.depth_limited_w / e.emitted_w
+              << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
+              << "%): the results miss what those paths would still have deposited; "
+              << (scene.scatters() ? "--max-depth none (the default) and a larger --max-scatterings remove it\n"
+                                   : "--max-depth none (the default) removes it\n");
   if (!r.bands.empty()) {
     report["bands"] = r.bands;
     report["band_emitted_w"] = r.band_emitted_w;

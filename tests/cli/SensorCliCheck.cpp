@@ -409,7 +409,9 @@ void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
 
   // --roulette and --max-scatterings act on fog paths: VolumeCliCheck. Here: they are reported,
   // and a threshold outside [0, 1) is refused with a message naming the option.
-  expect(report["roulette_threshold"] == 0.05 && report["max_scatterings"] == 100000 && report["max_depth"] == 32,
+  // No depth cap by default (null), the deep roulette after 32 interactions.
+  expect(report["roulette_threshold"] == 0.05 && report["max_scatterings"] == 100000 && report["max_depth"].is_null() &&
+             report["roulette_depth"] == 32,
          "run.json lacks the default path limits: " + report.dump());
   for (const char* bad_value : {"1", "-0.1", "nan"}) {
     std::vector<std::string> args = sensorArgs(duplex, dir / "bands.json", "100", "1", dir / "bad_roulette");
