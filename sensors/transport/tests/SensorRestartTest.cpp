@@ -138,5 +138,46 @@ TEST(SensorRestart, OffsetBoundsFollowTheTriangleNotTheMesh) {
   EXPECT_LT(tr.offset, 8.0 * 0x1p-24 * 1e5 + at_origin.offset);
 }
 
+TEST(SensorRestart, RebuiltPointIsTheHitOnTheTriangle) {
+  // The point rebuilt from the hit's triangle and barycentrics is where the ray met it (o + t d, to
+  // float precision), on a rotated, scaled and moved instance, and lies on the far side of the
+  // offset: a ray from origin + offset along the normal does not meet the same triangle again.
+  Fixture f;
+  Affine placed = facing(glm::normalize(glm::dvec3(0.3, -0.5, 0.8)), {120.0, -40.0, 7.0});
+  placed.linear *= 2.5;
+  f.add(boxAt({1.0, 2.0, 3.0}, {0.1, 0.2, -0.3}, "box"), placed, "box", Material{MaterialType::Mirror, 1.0});
+  f.add(sensor(1.0, 1.0, 1, 1), translate(0, 0, -50), "s");
+  const SensorScene scene = f.scene({pointLight({0, 0, 0}, 1.0)});
+  const TopLevel& top = scene.tracer().topLevel();
+  QueryContext ctx;
+  int hits = 0;
+  for (int k = 0; k < 200; ++k) {
+    const glm::dvec3 target =
+        placed.point({0.1 + 0.4 * std::sin(k * 1.3), 0.2 + 0.9 * std::cos(k * 0.7), -0.3 + 1.4 * std::sin(k * 0.31)});
+    const glm::dvec3 o(120.0 + 30.0 * std::cos(k * 0.9), -40.0 + 30.0 * std::sin(k * 0.9), 40.0);
+    Ray ray;
+    ray.origin = glm::vec3(o);
+    ray.dir = glm::vec3(glm::normalize(target - o));
+    const Hit hit = top.intersect(ray, ctx);
+    if (!hit.valid()) continue;
+    ++hits;
+    const SurfaceInstance* si = scene.surfaceOf(hit.instance_id);
+    ASSERT_NE(si, nullptr);
+    const glm::dvec3 n = glm::normalize(glm::dvec3(hit.ng));
+    const detail::RestartPoint rp =
+        detail::restartFromTriangle(si->mesh->mesh().vertices(hit.prim_id), hit.u, hit.v, *si, n);
+    const glm::dvec3 traced = glm::dvec3(ray.origin) + double(hit.t) * glm::dvec3(ray.dir);
+    EXPECT_LT(glm::length(rp.p_ws - traced), 1e-4) << k;
+    // Leaving to the side the ray came from, the same triangle is not met again.
+    const glm::dvec3 back = glm::dot(glm::dvec3(ray.dir), n) < 0.0 ? n : -n;
+    Ray again;
+    again.origin = glm::vec3(rp.p_ws + back * rp.offset);
+    again.dir = glm::vec3(glm::normalize(glm::dvec3(ray.dir) - 2.0 * glm::dot(glm::dvec3(ray.dir), n) * n));
+    const Hit second = top.intersect(again, ctx);
+    EXPECT_FALSE(second.valid() && second.prim_id == hit.prim_id && second.instance_id == hit.instance_id) << k;
+  }
+  EXPECT_GT(hits, 150);
+}
+
 }  // namespace
 }  // namespace duplex
