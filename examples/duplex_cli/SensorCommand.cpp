@@ -28,6 +28,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <numbers>
 #include <optional>
 #include <span>
 #include <sstream>
@@ -395,8 +396,11 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
       writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
     return;
   }
-  std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count\n";
-  char row[256];
+  // The bin centre in the sensor's local coordinates (x, y), and in world coordinates (world_x,
+  // world_y, world_z: on the sensor's surface, scene units), appended so the earlier columns keep
+  // their places.
+  std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count,world_x,world_y,world_z\n";
+  char row[384];
   for (std::uint32_t iy = 0; iy < s.ny; ++iy) {
     for (std::uint32_t ix = 0; ix < s.nx; ++ix) {
       const std::size_t b = static_cast<std::size_t>(iy) * s.nx + ix;
@@ -404,14 +408,52 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
       const bool sphere = spec.shape == SensorShape::Sphere;
       const double x = sphere ? (ix + 0.5) * 360.0 / s.nx : -0.5 * spec.width + (ix + 0.5) * spec.width / s.nx;
       const double y = sphere ? -1.0 + (iy + 0.5) * 2.0 / s.ny : -0.5 * spec.height + (iy + 0.5) * spec.height / s.ny;
-      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu\n", ix, iy, x, y, s.flux_w[b],
-                    s.irradiance_w_m2[b], s.stderr_w_m2[b], static_cast<unsigned long long>(s.ray_count[b]));
+      glm::dvec3 local(x, y, 0.0);
+      if (sphere) {
+        const double phi = x * std::numbers::pi / 180.0, rho = std::sqrt(std::max(0.0, 1.0 - y * y));
+        local = 0.5 * spec.width * glm::dvec3(rho * std::cos(phi), rho * std::sin(phi), y);
+      }
+      const glm::dvec3 world = inst.world_from_object.point(local);
+      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu,%.9g,%.9g,%.9g\n", ix, iy, x, y,
+                    s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b],
+                    static_cast<unsigned long long>(s.ray_count[b]), world.x, world.y, world.z);
       csv += row;
     }
   }
   writeText(dir / (base + ".csv"), csv);
   demo::writePng(dir / (base + ".png"), falseColourImage(s.irradiance_w_m2, s.nx, s.ny));
   if (sensorExrAvailable()) writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
+}
+
+// Whether light from `l` can arrive at the front (the side its normal points to) of the plane
+// through `centre` with unit normal `normal`, ignoring what lies between: a point source in front
+// of it, a beam travelling against the normal, an area light with a corner in front.
+bool reachesFront(const Light& l, const glm::dvec3& centre, const glm::dvec3& normal) {
+  if (l.type == LightType::Directional) return glm::dot(l.direction, normal) < 0.0;
+  if (l.type != LightType::Area) return glm::dot(l.position - centre, normal) > 0.0;
+  for (const double x : {-0.5 * l.width, 0.5 * l.width})
+    for (const double y : {-0.5 * l.height, 0.5 * l.height})
+      if (glm::dot(l.world_from_light.point({x, y, 0.0}) - centre, normal) > 0.0) return true;
+  return false;
+}
+
+// One-sided flat sensors that recorded nothing while every light is behind them: most likely
+// turned the wrong way, which the results alone would not show.
+void warnBackFacingSensors(const SensorScene& scene, const SensorRunResults& r) {
+  for (std::size_t k = 0; k < r.sensors.size(); ++k) {
+    const SensorResult& s = r.sensors[k];
+    const SensorInstance& inst = scene.sensors()[k];
+    if (s.two_sided || s.shape == SensorShape::FarField || s.shape == SensorShape::Sphere || s.total_flux_w != 0.0)
+      continue;
+    const glm::dvec3 centre = inst.world_from_object.translation;
+    bool any = false;
+    for (const Light& l : scene.lights()) any = any || reachesFront(l, centre, inst.normal);
+    if (!any)
+      std::cerr << "duplex sensor: warning: one-sided sensor '" << s.name
+                << "' recorded nothing: it records light arriving on its front (normal " << inst.normal.x << ", "
+                << inst.normal.y << ", " << inst.normal.z
+                << ") and every light is behind it; turn it round or make it two-sided (\"two_sided\": true)\n";
+  }
 }
 
 nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
@@ -477,6 +519,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     cfg.seed = o.seed;
     cfg.threads = static_cast<unsigned>(workers.count);
     cfg.max_depth = o.max_depth;
+    cfg.roulette_depth = o.roulette_depth;
     cfg.max_scatterings = o.max_scatterings;
     cfg.roulette_threshold = o.roulette;
     cfg.batch_rays = o.batch_rays;
@@ -547,7 +590,9 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   report["seed"] = r.seed;
   report["threads"] = workers.count;
   report["ranks"] = ranks.size();
-  report["max_depth"] = o.max_depth;
+  report["max_depth"] =
+      o.max_depth == kNoDepthLimit ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(o.max_depth);
+  report["roulette_depth"] = o.roulette_depth;
   report["max_scatterings"] = o.max_scatterings;
   report["roulette_threshold"] = o.roulette;
   report["batch_rays"] = o.batch_rays;
@@ -576,6 +621,16 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
               << " paths, carrying " << e.failed_w << " W, " << 100.0 * e.failed_w / e.emitted_w
               << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
               << "%): the results miss that power\n";
+  // A cap on the path length loses what the cut paths would still have deposited: a bias that the
+  // standard errors do not show, so it is said whenever it is not negligible.
+  if (e.depth_limited_rays != 0 && e.depth_limited_w > o.failure_threshold * e.emitted_w)
+    std::cerr << "duplex sensor: warning: the path limits cut " << e.depth_limited_rays << " of " << r.rays
+              << " paths, carrying " << e.depth_limited_w << " W, " << 100.0 * e.depth_limited_w / e.emitted_w
+              << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
+              << "%): the results miss what those paths would still have deposited; "
+              << (scene.scatters() ? "--max-depth none (the default) and a larger --max-scatterings remove it\n"
+                                   : "--max-depth none (the default) removes it\n");
+  warnBackFacingSensors(scene, r);
   if (!r.bands.empty()) {
     report["bands"] = r.bands;
     report["band_emitted_w"] = r.band_emitted_w;

@@ -48,7 +48,8 @@ struct SensorOptions {
   std::string target_sensor;  ///< the sensor of target_error (default: the first)
   // Path limits: SensorRunConfig's fields and defaults (surface interactions; fog collisions; the
   // Russian-roulette threshold, a fraction of a ray's emitted power in [0, 1)).
-  std::uint32_t max_depth = SensorRunConfig{}.max_depth;
+  std::uint32_t max_depth = SensorRunConfig{}.max_depth;  ///< kNoDepthLimit ("none"): no cap
+  std::uint32_t roulette_depth = SensorRunConfig{}.roulette_depth;
   std::uint32_t max_scatterings = SensorRunConfig{}.max_scatterings;
   double roulette = SensorRunConfig{}.roulette_threshold;
   /// "auto": a progress bar when stderr is a terminal, plain lines otherwise; "bar", "lines", "none".

@@ -17,7 +17,8 @@
 //   duplex bench deform --scene S.json --object NAME [--steps K] [--seed X] [--amplitude A] [--threads N]
 //                       [--primary W] [--trace-rounds R]
 //   duplex sensor --scene S.json --rays N [--threads T] [--seed X] [--out DIR] [--resume]
-//                 [--target-error E [--target-sensor NAME]] [--max-depth D] [--max-scatterings S]
+//                 [--target-error E [--target-sensor NAME]] [--max-depth D|none] [--roulette-depth K]
+//                 [--max-scatterings S]
 //                 [--roulette R] [--failure-threshold F] [--progress MODE] [--checkpoint SECONDS] [--at T]
 //                 [--text-map-limit N]
 //                 [--batch-rays B]; under `mpirun -np N` the ranks share the batches
@@ -278,9 +279,16 @@ int main(int argc, char** argv) {
           ->check(CLI::Range(0.0, 1.0));
   sensor_cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)")
       ->needs(target_error_opt);
-  sensor_cmd->add_option("--max-depth", sensor.max_depth, "Surface interactions per path (default 32)")
-      ->transform(kDecimal)
-      ->check(CLI::Range(0, 1000));
+  sensor_cmd
+      ->add_option("--max-depth", sensor.max_depth,
+                   "Surface interactions after which a path is cut, a bias (default none: unbiased)")
+      ->transform(CLI::Transformer(std::map<std::string, std::string>{{"none", std::to_string(duplex::kNoDepthLimit)}}))
+      ->transform(kDecimal);
+  sensor_cmd
+      ->add_option("--roulette-depth", sensor.roulette_depth,
+                   "Surface interactions after which each further one continues with probability 0.95, the "
+                   "survivor's power divided by it (unbiased; default 32)")
+      ->transform(kDecimal);
   sensor_cmd
       ->add_option("--max-scatterings", sensor.max_scatterings,
                    "Fog collisions per path before it is cut (default 100000; 1: single scattering)")
@@ -288,9 +296,10 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option(
       "--roulette", sensor.roulette,
       "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
-  sensor_cmd->add_option("--failure-threshold", sensor.failure_threshold,
-                         "Warn on stderr when numerical failures carry more than this fraction of the emitted "
-                         "power, in [0, 1] (default 0.001)");
+  sensor_cmd->add_option(
+      "--failure-threshold", sensor.failure_threshold,
+      "Warn on stderr when numerical failures, or the path limits, carry more than this fraction of the emitted "
+      "power, in [0, 1] (default 0.001)");
   sensor_cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
       ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
   sensor_cmd

@@ -318,13 +318,13 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
   m.def(
       "run_sensors",
       [](const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
-         const py::object& progress, std::uint32_t max_depth, std::uint32_t max_scatterings, double roulette,
-         double target_error, const std::string& target_sensor, const std::string& structure, std::optional<double> at,
-         double failure_threshold) {
+         const py::object& progress, std::optional<std::uint32_t> max_depth, std::uint32_t max_scatterings,
+         double roulette, double target_error, const std::string& target_sensor, const std::string& structure,
+         std::optional<double> at, double failure_threshold) {
         SensorRunOptions o;
         o.at = at;
         o.failure_threshold = failure_threshold;
-        o.max_depth = max_depth;
+        o.max_depth = max_depth.value_or(kNoDepthLimit);
         o.max_scatterings = max_scatterings;
         o.roulette_threshold = roulette;
         o.target_error = target_error;
@@ -333,7 +333,7 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
         return runSensors(scene_file, rays, seed, threads, progress, o);
       },
       "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0, "progress"_a = py::none(),
-      "max_depth"_a = SensorRunOptions{}.max_depth, "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
+      "max_depth"_a = py::none(), "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
       "roulette"_a = SensorRunOptions{}.roulette_threshold, "target_error"_a = 0.0, "target_sensor"_a = "",
       "structure"_a = "", "at"_a = py::none(), "failure_threshold"_a = SensorRunOptions{}.failure_threshold,
       R"doc(A light-tracing run of a scene file's lights and sensors, as `duplex sensor` runs it:
@@ -343,8 +343,9 @@ the same seed gives the same numbers, for any thread count. progress: None or a 
 relative standard error is at most it. at: None, or a time (seconds): the scene's timed edits
 with time <= at are applied before the run (`duplex sensor --at`); the result's "edits_applied"
 counts them, and a UserWarning says how many edits the run leaves out. failure_threshold: a
-UserWarning when numerical failures ("energy"'s "failed_w") carry more than this fraction of the
-emitted power (`duplex sensor --failure-threshold`).
+UserWarning when numerical failures ("energy"'s "failed_w"), or the path limits ("depth_limited_w"),
+carry more than this fraction of the emitted power (`duplex sensor --failure-threshold`). max_depth:
+None (no cap, unbiased) or the surface interactions after which a path is cut.
 Returns a dict sensor name -> dict: "irradiance", "stderr" (W per square scene unit), "flux",
 "flux_stderr" (W), "ray_count", "bin_area", each (ny, nx) with bin (0, 0) at local (-w/2, -h/2);
 "total_flux", "total_flux_stderr" (W), "relative_stderr" (None before any power arrived),

@@ -128,6 +128,15 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
          << "% of the emitted power (above failure_threshold " << 100.0 * options.failure_threshold << "%)";
     if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
   }
+  if (r.energy.depth_limited_rays != 0 && r.energy.depth_limited_w > options.failure_threshold * r.energy.emitted_w) {
+    std::ostringstream note;
+    note << "the path limits cut " << r.energy.depth_limited_rays << " of " << r.rays << " paths, carrying "
+         << r.energy.depth_limited_w << " W, " << 100.0 * r.energy.depth_limited_w / r.energy.emitted_w
+         << "% of the emitted power (above failure_threshold " << 100.0 * options.failure_threshold
+         << "%): the results miss what they would still have deposited; max_depth=None (the default)"
+         << " and a larger max_scatterings remove it";
+    if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
+  }
   py::dict energy;
   energy["emitted_w"] = r.energy.emitted_w;
   for (const EnergyEnding& k : kEnergyEndings) {

@@ -19,7 +19,8 @@ namespace py = pybind11;
 /// The options of run_sensors() beyond the rays, the seed, the threads and the progress callback:
 /// SensorRunConfig's path limits and the stop rule of `duplex sensor --target-error`.
 struct SensorRunOptions {
-  std::uint32_t max_depth = SensorRunConfig{}.max_depth;  ///< surface interactions after which a path is cut
+  /// Surface interactions after which a path is cut (kNoDepthLimit, the default: none)
+  std::uint32_t max_depth = SensorRunConfig{}.max_depth;
   std::uint32_t max_scatterings = SensorRunConfig{}.max_scatterings;  ///< fog collisions after which a path is cut
   double roulette_threshold = SensorRunConfig{}.roulette_threshold;   ///< fraction of a ray's power, [0, 1)
   double target_error = 0.0;  ///< > 0: stop once the target sensor's relative error is at most this
@@ -28,8 +29,8 @@ struct SensorRunOptions {
   /// Apply the scene's timed edits with time <= at (seconds) before the run, as `duplex sensor
   /// --at`; unset: none.
   std::optional<double> at;
-  /// A UserWarning when numerical failures carry more than this fraction of the emitted power
-  /// (`duplex sensor --failure-threshold`).
+  /// A UserWarning when numerical failures, or the path limits, carry more than this fraction of
+  /// the emitted power (`duplex sensor --failure-threshold`).
   double failure_threshold = 0.001;
 };
 

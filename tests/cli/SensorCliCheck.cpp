@@ -175,7 +175,28 @@ int check(const std::string& duplex, const fs::path& dir) {
     std::ifstream csv(dir / "one" / (name + ".csv"));
     std::string line;
     int lines = 0;
-    while (std::getline(csv, line)) ++lines;
+    while (std::getline(csv, line)) {
+      if (++lines == 1) {
+        expect(line == "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count,world_x,world_y,world_z",
+               name + ".csv: header " + line);
+        continue;
+      }
+      // The bin centre in world coordinates lies on the face of the cube [-1, 1]^3 (one coordinate
+      // +-1) and the other two are the local centre's, up to sign and order.
+      std::vector<double> v;
+      std::stringstream ss(line);
+      for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+      if (v.size() != 11) {
+        expect(false, name + ".csv: row of " + std::to_string(v.size()) + " cells: " + line);
+        continue;
+      }
+      std::vector<double> world = {std::abs(v[8]), std::abs(v[9]), std::abs(v[10])},
+                          local = {std::abs(v[2]), std::abs(v[3]), 1.0};
+      std::sort(world.begin(), world.end());
+      std::sort(local.begin(), local.end());
+      for (int c = 0; c < 3; ++c)
+        expect(std::abs(world[c] - local[c]) < 1e-6, name + ".csv: world centre not on the face: " + line);
+    }
     expect(lines == 13, name + ".csv: expected a header and 12 rows, got " + std::to_string(lines) + " lines");
     std::ifstream png(dir / "one" / (name + ".png"), std::ios::binary);
     char sig[8] = {};
@@ -409,7 +430,9 @@ void checkBandsAndAngles(const std::string& duplex, const fs::path& dir) {
 
   // --roulette and --max-scatterings act on fog paths: VolumeCliCheck. Here: they are reported,
   // and a threshold outside [0, 1) is refused with a message naming the option.
-  expect(report["roulette_threshold"] == 0.05 && report["max_scatterings"] == 100000 && report["max_depth"] == 32,
+  // No depth cap by default (null), the deep roulette after 32 interactions.
+  expect(report["roulette_threshold"] == 0.05 && report["max_scatterings"] == 100000 && report["max_depth"].is_null() &&
+             report["roulette_depth"] == 32,
          "run.json lacks the default path limits: " + report.dump());
   for (const char* bad_value : {"1", "-0.1", "nan"}) {
     std::vector<std::string> args = sensorArgs(duplex, dir / "bands.json", "100", "1", dir / "bad_roulette");
@@ -635,6 +658,25 @@ void checkOutputFolderRules(const std::string& duplex, const fs::path& dir) {
 
 }  // namespace
 
+// A one-sided sensor turned away from the only light records nothing and stderr says so; the same
+// sensor facing the light records it and nothing is said.
+void checkBackFacingWarning(const std::string& duplex, const fs::path& dir) {
+  fs::create_directories(dir);
+  const std::string head = R"({"format": "scene-json-v1", "objects": [], "instances": [],
+    "lights": [{"type": "point", "position": [0, 0, 1], "power": 5}], "sensors": [{"name": "desk", "size": [1, 1],
+    "bins": [2, 2], "two_sided": false, "transform": )";
+  write(dir / "away.json", head + R"([1,0,0,0, 0,-1,0,0, 0,0,-1,0]}]})");
+  write(dir / "facing.json", head + R"([1,0,0,0, 0,1,0,0, 0,0,1,0]}]})");
+  const RunResult away = runOk(sensorArgs(duplex, dir / "away.json", "2000", "1", dir / "away"), dir);
+  expect(away.err.find("one-sided sensor 'desk' recorded nothing") != std::string::npos &&
+             away.err.find("two_sided") != std::string::npos,
+         "a one-sided sensor facing away from every light: no warning:\n" + away.err);
+  const RunResult facing = runOk(sensorArgs(duplex, dir / "facing.json", "2000", "1", dir / "facing"), dir);
+  expect(facing.err.find("recorded nothing") == std::string::npos &&
+             nlohmann::json::parse(facing.out)["sensors"][0]["total_flux_w"].get<double>() > 0.0,
+         "a one-sided sensor facing the light: " + facing.out + facing.err);
+}
+
 int main(int argc, char** argv) {
   if (argc != 3) {
     std::cerr << "usage: duplex_sensor_cli_check DUPLEX DIR\n";
@@ -645,6 +687,7 @@ int main(int argc, char** argv) {
     checkBandsAndAngles(argv[1], fs::path(argv[2]) / "spectral");
     checkFarFieldAndEdits(argv[1], fs::path(argv[2]) / "farfield");
     checkOutputFolderRules(argv[1], fs::path(argv[2]) / "output");
+    checkBackFacingWarning(argv[1], fs::path(argv[2]) / "back_facing");
     return status;
   });
 }

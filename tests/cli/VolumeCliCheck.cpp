@@ -271,7 +271,24 @@ int check(const std::string& duplex, const fs::path& dir) {
   expect(rr["roulette_threshold"] == 0.5 && rr["energy"]["roulette_w"].get<double>() != 0.0,
          "--roulette 0.5 played no roulette in the fog: " + rr.dump());
   sensorScene(dir / "fog_scatter.json", R"(, "material": {"type": "medium", "albedo": 0.9})");
-  const nlohmann::json cut = sensorRun(dir / "fog_scatter.json", {"--max-scatterings", "0"});
+  // A cut above --failure-threshold of the emitted power is said on stderr, with the options that remove it.
+  const RunResult cut_run =
+      runOk({duplex, "sensor", "--scene", (dir / "fog_scatter.json").string(), "--rays", "4000", "--threads", "1",
+             "--progress", "none", "--out", (dir / "sensor_out").string(), "--overwrite", "--max-scatterings", "0"},
+            dir);
+  const nlohmann::json cut = nlohmann::json::parse(cut_run.out);
+  expect(cut_run.err.find("path limits cut") != std::string::npos &&
+             cut_run.err.find("% of the emitted power") != std::string::npos &&
+             cut_run.err.find("--max-scatterings") != std::string::npos,
+         "--max-scatterings 0: no warning of the cut energy on stderr:\n" + cut_run.err);
+  // A depth cap likewise names --max-depth none; the default (no cap) says nothing.
+  const RunResult capped =
+      runOk({duplex, "sensor", "--scene", (dir / "fog_sensor.json").string(), "--rays", "4000", "--threads", "1",
+             "--progress", "none", "--out", (dir / "sensor_out").string(), "--overwrite", "--max-depth", "0"},
+            dir);
+  expect(
+      nlohmann::json::parse(capped.out)["max_depth"] == 0 && capped.err.find("--max-depth none") != std::string::npos,
+      "--max-depth 0: no warning naming --max-depth none:\n" + capped.err);
   const nlohmann::json full = sensorRun(dir / "fog_scatter.json", {});
   expect(cut["max_scatterings"] == 0 && cut["energy"]["depth_limited_w"].get<double>() > 0.1,
          "--max-scatterings 0 did not cut the paths at their first collision: " + cut.dump());

@@ -4,6 +4,7 @@
 /// with per-object materials, a closed box of sensors, and comparisons of run results.
 
 #include "MeshChecks.h"
+#include "OpticsReference.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/objects/MeshObject.h"
@@ -69,8 +70,7 @@ inline Affine facing(const glm::dvec3& n_in, const glm::dvec3& at) {
 
 // Solid angle of the rectangle [x0, x1] x [y0, y1] in the plane z = 0 seen from (0, 0, h).
 inline double rectangleSolidAngle(double x0, double x1, double y0, double y1, double h) {
-  auto f = [h](double x, double y) { return std::atan(x * y / (h * std::sqrt(x * x + y * y + h * h))); };
-  return f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0);
+  return rectangleSolidAngleFrom(x0, x1, y0, y1, h);
 }
 
 // Writes `text` to the file `name` in a folder of this process's own in the temporary directory.

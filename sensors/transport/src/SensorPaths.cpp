@@ -7,6 +7,7 @@
 #include "duplex/sensors/SensorRun.h"
 
 #include "OrthonormalBasis.h"
+#include "Polarisation.h"
 #include "SurfaceScatter.h"
 #include "SensorRunChunk.h"
 
@@ -65,6 +66,43 @@ bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_m
 bool isFinite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 }  // namespace
+
+detail::RestartPoint detail::restartFromTriangle(const std::array<glm::vec3, 3>& tri, float u, float v,
+                                                 const SurfaceInstance& si, const glm::dvec3& n_ws) {
+  constexpr double kUnit = 0x1p-24;  // float's unit roundoff
+  auto gamma = [](double k) { return k * kUnit / (1.0 - k * kUnit); };
+  const glm::dvec3 v0(tri[0]), v1(tri[1]), v2(tri[2]);
+  const double b1 = u, b2 = v, b0 = 1.0 - b1 - b2;
+  const glm::dvec3 p_os = b0 * v0 + b1 * v1 + b2 * v2;
+  RestartPoint out;
+  out.p_ws = si.identity ? p_os : si.world_from_object.point(p_os);
+  const glm::dvec3 n_os = glm::normalize(glm::cross(v1 - v0, v2 - v0));
+  // The next ray's origin per object-space axis: rounded to float in world space, and for a
+  // transformed instance mapped through object_from_world (whose absolute entries spread each
+  // world error over the object axes) and rounded to float again.
+  const glm::dvec3 world_err = kUnit * glm::abs(out.p_ws);
+  glm::dvec3 err = world_err;
+  double per_unit = std::abs(glm::dot(n_os, n_ws));  // object-space distance per world distance along n_ws
+  if (!si.identity) {
+    const glm::dmat3& m = si.object_from_world.linear;
+    glm::dmat3 abs_m;
+    for (int c = 0; c < 3; ++c) abs_m[c] = glm::abs(m[c]);
+    err = abs_m * world_err + kUnit * glm::abs(p_os);
+    per_unit = std::abs(glm::dot(n_os, m * n_ws));
+  }
+  // The watertight test works on the vertices minus the origin; those differences (and all that
+  // follows from them) are rounded relative to the triangle's extent about the hit.
+  double extent = 0.0;
+  for (const glm::dvec3& w : {v0, v1, v2}) {
+    const glm::dvec3 d = glm::abs(w - p_os);
+    extent = std::max({extent, d.x, d.y, d.z});
+  }
+  const double across = glm::dot(glm::abs(n_os), err) + gamma(12) * extent;
+  // Twice the bound; a plane seen edge-on by the transform (per_unit ~ 0) cannot occur for a
+  // non-singular transform, but is kept finite.
+  out.offset = 2.0 * across / std::max(per_unit, 1e-6);
+  return out;
+}
 
 bool detail::leavesSurface(const glm::dvec3& next, const glm::dvec3& n_in, bool transmits) {
   const double side = glm::dot(next, n_in);
@@ -146,6 +184,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     const EmittedRay emitted = sampleLight(lights[li], u);
     glm::dvec3 origin = emitted.origin, dir = emitted.dir;
     double w = power * emitted.weight;
+    detail::Polarisation pol;  // the lights emit unpolarised light
     path_bins.clear();
 
     std::uint32_t depth = 0, scatterings = 0;
@@ -204,6 +243,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         // an order each compiler picks, and a run must give the same paths whichever built it.
         const double u1 = rng.uniform(), u2 = rng.uniform();
         dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, u1, u2);
+        pol = {};  // the scalar phase function: scattered light is taken as unpolarised
         if (!isFinite(dir)) {
           e.failed_w += w;
           ++e.failed_rays;
@@ -252,9 +292,12 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         }
         if (m.type == MaterialType::Mirror) {
           next = reflect(d, nf);
+          detail::enterPlaneOfIncidence(pol, d, nf);
+          detail::afterIdealReflection(pol);
         } else {
           const double u1 = rng.uniform(), u2 = rng.uniform();
           next = cosineDirection(nf, u1, u2);
+          pol = {};  // diffuse reflection depolarises
         }
       } else if (m.type == MaterialType::Coating) {  // reflect, pass undeviated, or absorb
         const double u = rng.uniform(), r = m.reflectanceIn(band);
@@ -265,7 +308,11 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         }
         transmits = u >= r;
         next = transmits ? d : reflect(d, nf);
-      } else {  // dielectric: exact Fresnel for unpolarised light, reflect or refract by it
+        if (!transmits) {  // an ideal coating treats s and p alike; passing through changes nothing
+          detail::enterPlaneOfIncidence(pol, d, nf);
+          detail::afterIdealReflection(pol);
+        }
+      } else {  // dielectric: exact Fresnel for the path's s and p powers, reflect or refract by it
         // A ray reaching the surface from inside crossed the glass from its last surface: Beer-Lambert.
         if (const double a = m.absorptionIn(band); !front && a > 0.0) {
           const double keep = std::exp(-a * static_cast<double>(end.hit.t));
@@ -274,22 +321,19 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         }
         const double eta_i = front ? 1.0 : m.ior, eta_t = front ? m.ior : 1.0;
         const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
-        const double sin_t2 = (eta_i / eta_t) * (eta_i / eta_t) * (1.0 - cos_i * cos_i);
-        double fresnel = 1.0, cos_t = 0.0;
-        if (sin_t2 < 1.0) {
-          cos_t = std::sqrt(1.0 - sin_t2);
-          const double rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
-          const double rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
-          fresnel = 0.5 * (rs * rs + rp * rp);
-        }
-        transmits = !(rng.uniform() < fresnel);
-        next = transmits ? (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - cos_t) * nf : reflect(d, nf);
+        const detail::FresnelInterface f = detail::fresnelInterface(eta_i, eta_t, cos_i);
+        detail::enterPlaneOfIncidence(pol, d, n);
+        const double reflectance = detail::reflectanceFor(pol, f);
+        transmits = !(rng.uniform() < reflectance);
+        detail::afterInterface(pol, f, transmits);
+        next = transmits ? (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - f.cos_t) * nf : reflect(d, nf);
       }
       // Rough surfaces spread a fraction of the specular light about the specular direction; a
       // material whose lobe yields no direction refuses the path (a numerical failure below).
       if (m.scatter != ScatterModel::None && rng.uniform() < m.scatter_fraction) {
         const glm::dvec3 specular = glm::normalize(next);
         if (!detail::scatterAbout(m, specular, transmits ? -nf : nf, rng, next)) next = glm::dvec3(0.0);
+        else detail::followDirection(pol, glm::normalize(next));
       }
       // A direction that does not leave the surface to the side the material sends it (tangent,
       // on the wrong side, not finite) would be traced from the wrong side of the offset: the
@@ -298,6 +342,16 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         e.failed_w += w;
         ++e.failed_rays;
         break;
+      }
+      // Deep paths: roulette at every interaction, so that paths that lose nothing end too.
+      if (depth > config_.roulette_depth) {
+        if (rng.uniform() >= kDeepSurvival) {
+          e.roulette_w += w;
+          ++e.roulette_rays;
+          break;
+        }
+        e.roulette_w -= w * (1.0 / kDeepSurvival - 1.0);
+        w /= kDeepSurvival;
       }
       // Russian roulette on power lost to media (materials keep a surviving path's power).
       if (w < rr_level) {
@@ -309,15 +363,23 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         e.roulette_w -= rr_level - w;
         w = rr_level;
       }
-      // Leave the surface on the side the new direction points to. The float hit's error grows
-      // with the magnitude of the primitive's coordinates (a few ulps of them, not of the hit
-      // point: a large triangle hit near the origin is off by ulps of its far vertices), so the
-      // offset scales with the hit instance's world box as well as with the point.
-      const Box box = top.instanceBounds(end.hit.instance_id);
-      const double scale = std::max({1.0, std::abs(p.x), std::abs(p.y), std::abs(p.z), std::abs(double(box.lo.x)),
-                                     std::abs(double(box.lo.y)), std::abs(double(box.lo.z)), std::abs(double(box.hi.x)),
-                                     std::abs(double(box.hi.y)), std::abs(double(box.hi.z))});
-      origin = p + (glm::dot(next, n) >= 0.0 ? n : -n) * (1e-5 * scale);
+      // Leave the surface on the side the new direction points to, by no more than the hit's
+      // rounding error: on a mesh, the point rebuilt from its triangle and the error bound of the
+      // next ray across that triangle's plane (restartFromTriangle). Other types report a float t
+      // only: the offset then follows the magnitudes of the point and of the instance's box.
+      const glm::dvec3 side = glm::dot(next, n) >= 0.0 ? n : -n;
+      if (const SurfaceInstance* si = scene_.surfaceOf(end.hit.instance_id)) {
+        const detail::RestartPoint rp =
+            detail::restartFromTriangle(si->mesh->mesh().vertices(end.hit.prim_id), end.hit.u, end.hit.v, *si, n);
+        origin = rp.p_ws + side * rp.offset;
+      } else {
+        const Box box = top.instanceBounds(end.hit.instance_id);
+        const double scale =
+            std::max({1.0, std::abs(p.x), std::abs(p.y), std::abs(p.z), std::abs(double(box.lo.x)),
+                      std::abs(double(box.lo.y)), std::abs(double(box.lo.z)), std::abs(double(box.hi.x)),
+                      std::abs(double(box.hi.y)), std::abs(double(box.hi.z))});
+        origin = p + side * (1e-5 * scale);
+      }
       dir = glm::normalize(next);
     }
 

@@ -39,7 +39,6 @@ struct SensorRun::Workers {
 SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : scene_(scene), config_(config) {
   if (config_.chunk_rays == 0 || config_.batch_rays == 0)
     throw InvalidArgument("SensorRun: chunk_rays and batch_rays must be > 0");
-  if (config_.max_depth > 1000) throw InvalidArgument("SensorRun: max_depth above 1000");
   // TBB's arena takes an int; more workers than that are a mistake, not a wish.
   if (config_.threads > 4096)
     throw InvalidArgument("SensorRun: threads above 4096 (" + std::to_string(config_.threads) + ")");

@@ -7,6 +7,7 @@
 #include <glm/vec3.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -62,6 +63,21 @@ namespace detail {
 // ray: to the front (reflection) or, when `transmits`, to the back; false for a tangent or
 // non-finite direction. A path whose next direction fails this is a numerical failure.
 bool leavesSurface(const glm::dvec3& next, const glm::dvec3& n_in, bool transmits);
+
+// Where a path restarts from a hit on triangle `tri` (object-space vertices) of mesh instance `si`
+// at barycentrics (u, v), and how far along the hit's world-space unit normal it must leave: the
+// point is rebuilt from the vertices in double (so it lies on the triangle's plane to rounding,
+// however far the ray travelled: a float t would be off by ulps of t), and the offset bounds the
+// rounding error of the next ray across that plane: its origin rounded to float in world space,
+// mapped to object space and rounded again (transformed instances), and the triangle test's own
+// arithmetic on the vertices relative to that origin. The bound follows the vertices' magnitudes
+// and the transform, never the size of the object or the scene.
+struct RestartPoint {
+  glm::dvec3 p_ws{0.0};  // world space, scene units
+  double offset = 0.0;   // world-space distance along the normal, scene units
+};
+[[nodiscard]] RestartPoint restartFromTriangle(const std::array<glm::vec3, 3>& tri, float u, float v,
+                                               const SurfaceInstance& si, const glm::dvec3& n_ws);
 
 // Adds the energy tallies of `from` (sums over rays; emitted_w unused) into `to`.
 inline void addEnergy(EnergyBalance& to, const EnergyBalance& from) {

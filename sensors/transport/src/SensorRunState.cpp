@@ -45,6 +45,11 @@ std::uint64_t SensorRun::computeFingerprint() const {
   add(&config_.seed, sizeof config_.seed);
   add(&config_.batch_rays, sizeof config_.batch_rays);  // the grouping of the sums
   add(&config_.max_depth, sizeof config_.max_depth);
+  add(&config_.roulette_depth, sizeof config_.roulette_depth);
+  // The transport model: a state traced by another (unpolarised Fresnel, other restart offsets)
+  // must not be mixed into this run's sums.
+  static constexpr char kModel[] = "polarised-fresnel, triangle-error restarts, deep roulette";
+  add(kModel, sizeof kModel);
   add(&config_.roulette_threshold, sizeof config_.roulette_threshold);
   // Bands, angular bins and free flights are added only where a scene uses them.
   for (std::size_t l = 0; !scene_.bands().empty() && l < scene_.lights().size(); ++l) {

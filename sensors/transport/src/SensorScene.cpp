@@ -210,6 +210,7 @@ std::unique_ptr<SensorScene::Derived> SensorScene::derive() const {
   std::sort(instances.begin(), instances.end());
   const NodeId max_node = instances.empty() ? 0 : instances.back();
   d.material_of_node.assign(instances.empty() ? 0 : max_node + 1, Material{});
+  d.surface_of_node.assign(d.material_of_node.size(), SurfaceInstance{});
   const ObjectLibrary& library = graph_->library();
   std::unordered_set<std::string> names;
   bool scatters = false;
@@ -234,6 +235,18 @@ std::unique_ptr<SensorScene::Derived> SensorScene::derive() const {
     else if (info.object < materials_.size()) d.material_of_node[node] = materials_[info.object];
     const Material& m = d.material_of_node[node];
     const ObjectRole role = library.get(info.object)->role();
+    // Paths restart from surfaces that do not absorb: the bound on a hit's rounding error there
+    // needs the triangle's object-space vertices and the transform the top level applies.
+    if (role == ObjectRole::Surface && m.type != MaterialType::Absorber && m.type != MaterialType::Medium) {
+      if (auto mesh = std::dynamic_pointer_cast<const MeshObject>(library.get(info.object))) {
+        SurfaceInstance& si = d.surface_of_node[node];
+        si.mesh = std::move(mesh);
+        si.world_from_object = graph_->worldTransform(node);
+        si.object_from_world = si.world_from_object.inverse();
+        si.identity =
+            si.world_from_object.linear == glm::dmat3(1.0) && si.world_from_object.translation == glm::dvec3(0.0);
+      }
+    }
     if (role == ObjectRole::Medium) {
       if (m.type != MaterialType::Absorber && m.type != MaterialType::Medium)
         throw InvalidArgument("object '" + std::string(library.name(info.object)) +

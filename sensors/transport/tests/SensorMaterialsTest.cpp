@@ -10,6 +10,7 @@
 #include "duplex/sensors/SensorRun.h"
 #include "duplex/sensors/SensorScene.h"
 #include "SensorFixture.h"
+#include "SlabRuns.h"
 #include "SurfaceScatter.h"
 
 #include <gtest/gtest.h>
@@ -27,17 +28,6 @@ namespace {
 
 using namespace test;
 
-Light beam(const glm::dvec3& at, const glm::dvec3& dir, double radius, double power) {
-  Light l;
-  l.type = LightType::Directional;
-  l.name = "beam";
-  l.position = at;
-  l.direction = dir;
-  l.radius = radius;
-  l.power_w = power;
-  return l;
-}
-
 TEST(SensorMaterials, GlassSlabTransmitsTheClosedFormWithInternalReflectionsAndAbsorption) {
   // A slab of thickness d, index n, absorption alpha, lit at normal incidence. With R the
   // interface's Fresnel reflectance and tau = exp(-alpha d): T = (1-R)^2 tau / (1 - R^2 tau^2),
@@ -49,7 +39,7 @@ TEST(SensorMaterials, GlassSlabTransmitsTheClosedFormWithInternalReflectionsAndA
   f.add(buildChecked(makeBox({6.0, 6.0, d}, "slab")), Affine::identity(), "slab", glass);
   f.add(sensor(2.0, 2.0, 1, 1, false, "below"), translate(0, 0, -1.0), "below");            // records rays going down
   f.add(sensor(2.0, 2.0, 1, 1, false, "above"), facing({0, 0, -1}, {0, 0, 1.0}), "above");  // rays going up
-  const SensorScene scene = f.scene({beam({0, 0, 2.0}, {0, 0, -1}, 0.5, 1.0)});
+  const SensorScene scene = f.scene({beamLight({0, 0, 2.0}, {0, 0, -1}, 0.5, 1.0)});
   SensorRunConfig cfg;
   cfg.seed = 31;
   SensorRun run(scene, cfg);
@@ -210,7 +200,7 @@ TEST(SensorMaterials, CoatingsSplitEachBandByTheirFractions) {
   f.add(quad(2.0, "coating"), Affine::identity(), "coating", coat);
   f.add(sensor(2.0, 2.0, 1, 1, false, "below"), translate(0, 0, -0.5), "below");
   f.add(sensor(2.0, 2.0, 1, 1, false, "above"), facing({0, 0, -1}, {0, 0, 0.5}), "above");
-  Light l = beam({0, 0, 1.0}, {0, 0, -1}, 0.3, 2.0);
+  Light l = beamLight({0, 0, 1.0}, {0, 0, -1}, 0.3, 2.0);
   l.spectrum = {1.0, 1.0};
   const SensorScene scene = f.scene({l}, {"a", "b"});
   SensorRun run(scene);
@@ -242,7 +232,7 @@ TEST(SensorMaterials, BallLensFocusesAtTheParaxialBackFocalDistance) {
     fx.add(sensor(0.01, 0.01, 100, 100, true, "s" + std::to_string(k + 6)), translate(0, 0, z),
            "s" + std::to_string(k + 6));
   }
-  const SensorScene scene = fx.scene({beam({0, 0, 3.0}, {0, 0, -1}, 0.02 * radius, 1.0)});
+  const SensorScene scene = fx.scene({beamLight({0, 0, 3.0}, {0, 0, -1}, 0.02 * radius, 1.0)});
   SensorRunConfig cfg;
   cfg.seed = 3;
   cfg.max_depth = 4;

@@ -4,7 +4,9 @@
 ///
 /// Rays start at the lights (chosen in proportion to their power), are traced with the top level's
 /// crossing query (closest blocking hit + every sensor crossing before it, media transmittance),
-/// and scatter at surfaces by their material with Russian roulette and a depth limit. In a scene
+/// and scatter at surfaces by their material with Russian roulette (and a depth limit on request);
+/// smooth dielectrics carry each path's polarisation (s and p, a Stokes vector) from interface to
+/// interface, lights emit unpolarised light, diffuse surfaces and fogs depolarise. In a scene
 /// whose fogs scatter (SensorScene::scatters), free flights are sampled through the fogs and rays
 /// scatter inside them by the Henyey-Greenstein phase function, or are absorbed by the albedo.
 ///
@@ -38,11 +40,25 @@
 
 namespace duplex {
 
+/// SensorRunConfig::max_depth: no cap on a path's surface interactions (the default).
+inline constexpr std::uint32_t kNoDepthLimit = 0xFFFFFFFFu;
+/// Beyond SensorRunConfig::roulette_depth surface interactions, the probability that a path goes
+/// on at each further one (its power then divided by it).
+inline constexpr double kDeepSurvival = 0.95;
+
 /// Parameters of a sensor run (validated by SensorRun's constructor).
 struct SensorRunConfig {
-  std::uint64_t seed = 1;        ///< seed of every ray's random stream (CounterRng)
-  unsigned threads = 0;          ///< worker threads; 0 = all hardware threads
-  std::uint32_t max_depth = 32;  ///< surface interactions after which a path is cut (depth_limited_w)
+  std::uint64_t seed = 1;  ///< seed of every ray's random stream (CounterRng)
+  unsigned threads = 0;    ///< worker threads; 0 = all hardware threads
+  /// Surface interactions after which a path is cut, its power counted in depth_limited_w (a bias:
+  /// what it would still have deposited is lost). kNoDepthLimit (the default): no cap, a path ends
+  /// only by absorption, escape or Russian roulette, and the results are unbiased.
+  std::uint32_t max_depth = kNoDepthLimit;
+  /// Surface interactions after which each further one lets the path go on with probability
+  /// kDeepSurvival, its power divided by it (Russian roulette: unbiased). Materials that absorb
+  /// end paths by their albedo already; this ends those that lose nothing (glass trapping light by
+  /// total internal reflection, ideal mirrors facing each other) in finite time.
+  std::uint32_t roulette_depth = 32;
   /// Scattering fogs: collisions after which a path is cut (depth_limited_w); 1 keeps single
   /// scattering only.
   std::uint32_t max_scatterings = 100000;
@@ -120,7 +136,7 @@ class SensorRun {
   /// sensors, lights and materials SensorScene derives from it); once the graph is committed again
   /// the run refuses to go on (runUntil, results, relativeStderr, saveState and loadState throw
   /// InvalidArgument): make a new run. Throws InvalidArgument for a bad config (chunk_rays or
-  /// batch_rays 0, max_depth > 1000, roulette_threshold outside [0, 1)), and as the scene's
+  /// batch_rays 0, roulette_threshold outside [0, 1)), and as the scene's
   /// accessors for a committed graph that makes no valid scene.
   SensorRun(const SensorScene& scene, const SensorRunConfig& config = {});
   ~SensorRun();

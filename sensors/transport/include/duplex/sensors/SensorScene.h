@@ -17,6 +17,7 @@
 /// accessor describes the committed graph as it is now, and a SensorRun takes the scene as it is
 /// when the run is made (a run refuses to go on once the graph was committed again).
 
+#include "duplex/objects/MeshObject.h"
 #include "duplex/objects/VolumeObject.h"
 #include "duplex/scenegraph/SceneDocument.h"
 #include "duplex/scenegraph/SceneGraph.h"
@@ -89,6 +90,16 @@ struct MediumInstance {
   Material material;
 };
 
+/// A blocking mesh instance whose material sends rays on (anything but an absorber): what a path
+/// restarting from its surface needs to bound the rounding error of the hit (its triangles, in
+/// object space, and the transform the top level applies to rays, as it holds it).
+struct SurfaceInstance {
+  std::shared_ptr<const MeshObject> mesh;  ///< null: the instance is not a mesh (or absorbs)
+  Affine world_from_object;                ///< the instance's world transform (last commit)
+  Affine object_from_world;                ///< its inverse, as the top level maps world rays
+  bool identity = true;                    ///< object space is world space (rays are not transformed)
+};
+
 /// A scene prepared for light transport (see the file comment): graph and tracer, lights, materials, sensors and
 /// scattering media.
 class SensorScene {
@@ -159,6 +170,12 @@ class SensorScene {
     const Derived& d = current();
     return node < d.material_of_node.size() ? d.material_of_node[node] : kAbsorber;
   }
+  /// The mesh of instance `node` and its transforms, or nullptr when the instance is not a mesh
+  /// or its material absorbs (no path restarts from it).
+  [[nodiscard]] const SurfaceInstance* surfaceOf(NodeId node) const {
+    const Derived& d = current();
+    return node < d.surface_of_node.size() && d.surface_of_node[node].mesh ? &d.surface_of_node[node] : nullptr;
+  }
   /// The graph's revision (SceneGraph::revision: its commits that applied edits) that the accessors
   /// describe, derived now if needed.
   [[nodiscard]] std::uint64_t revision() const { return current().revision; }
@@ -212,6 +229,7 @@ class SensorScene {
     std::uint32_t bin_count = 0;
     std::uint32_t angle_bin_count = 0;
     std::vector<Material> material_of_node;
+    std::vector<SurfaceInstance> surface_of_node;
     std::vector<MediumInstance> media;
   };
   struct Cache;

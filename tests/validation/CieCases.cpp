@@ -1,0 +1,226 @@
+// The CIE 171:2006 cases Duplex can express, built as sensor scenes and compared with exact
+// references (see CieCases.h for each case's geometry and reference).
+
+#include "CieCases.h"
+
+#include "OpticsReference.h"
+#include "SensorFixture.h"
+#include "SlabRuns.h"
+
+#include "duplex/objects/ProceduralMesh.h"
+
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+namespace duplex::validation {
+
+using namespace duplex::test;
+
+namespace {
+
+constexpr double kLumens = 1000.0;
+
+std::uint64_t scaled(std::uint64_t rays, const CaseOptions& o) {
+  return std::max<std::uint64_t>(1000, static_cast<std::uint64_t>(static_cast<double>(rays) * o.scale));
+}
+
+// A sensor frame: local x along ex, local y along ey, its normal (the side it records rays
+// arriving on) ex x ey, the plane's centre at `at`.
+Affine frame(const glm::dvec3& at, const glm::dvec3& ex, const glm::dvec3& ey) {
+  Affine a;
+  a.linear = glm::dmat3(ex, ey, glm::cross(ex, ey));
+  a.translation = at;
+  return a;
+}
+
+struct Timed {
+  SensorRunResults results;
+  double seconds = 0.0;
+};
+
+Timed run(const SensorScene& scene, std::uint64_t rays, const CaseOptions& o, SensorRunConfig cfg = {}) {
+  cfg.seed = 171;
+  cfg.threads = o.threads;
+  const auto t0 = std::chrono::steady_clock::now();
+  SensorRun r(scene, cfg);
+  (void)r.runUntil(rays);
+  Timed t{r.results(), 0.0};
+  t.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return t;
+}
+
+// A case's description, its rays scaled by the options.
+CaseResult describe(std::string name, std::string title, std::string reference, std::string unit, std::uint64_t rays,
+                    const CaseOptions& o) {
+  CaseResult c;
+  c.name = std::move(name);
+  c.title = std::move(title);
+  c.reference = std::move(reference);
+  c.unit = std::move(unit);
+  c.rays = scaled(rays, o);
+  return c;
+}
+
+// Rows of a grid sensor of w x h (nx x ny cells) against `exact(x0, x1, y0, y1)`, the exact mean
+// illuminance of the cell [x0, x1] x [y0, y1] in the sensor's local coordinates.
+template <class Exact>
+void gridRows(CaseResult& out, const std::string& what, const SensorResult& s, double w, double h, Exact exact) {
+  for (std::uint32_t iy = 0; iy < s.ny; ++iy)
+    for (std::uint32_t ix = 0; ix < s.nx; ++ix) {
+      const std::size_t b = std::size_t{iy} * s.nx + ix;
+      const double x0 = -w / 2 + w * ix / s.nx, x1 = -w / 2 + w * (ix + 1) / s.nx;
+      const double y0 = -h / 2 + h * iy / s.ny, y1 = -h / 2 + h * (iy + 1) / s.ny;
+      CaseRow row;
+      row.label = what + " (" + std::to_string(ix) + ", " + std::to_string(iy) + ")";
+      row.reference = exact(x0, x1, y0, y1);
+      row.value = s.irradiance_w_m2[b];
+      row.stderr_value = s.stderr_w_m2[b];
+      row.other = std::nan("");
+      out.rows.push_back(row);
+    }
+}
+
+}  // namespace
+
+double CaseRow::z() const { return stderr_value > 0.0 ? (value - reference) / stderr_value : 0.0; }
+
+bool CaseRow::passes() const {
+  return std::abs(value - reference) <= 4.0 * stderr_value + relative_tolerance * std::abs(reference);
+}
+
+CaseResult pointSourceCase(const CaseOptions& o) {
+  const double h = 3.0, half = 2.0;
+  Fixture f;
+  // The source at (0, 0, 3); the floor z = 0 seen from above; the wall x = 2 (from z = 0 to 3) seen
+  // from the room (local x along -y, local y along +z, normal -x).
+  f.add(sensor(4.0, 4.0, 8, 8, false, "floor"), frame({0, 0, 0}, {1, 0, 0}, {0, 1, 0}), "floor");
+  f.add(sensor(4.0, 3.0, 8, 6, false, "wall"), frame({half, 0, 1.5}, {0, -1, 0}, {0, 0, 1}), "wall");
+  const SensorScene scene = f.scene({pointLight({0, 0, h}, kLumens)});
+  CaseResult c = describe(
+      "point-source", "Isotropic point source of 1000 lm 3 m above a 4 m x 4 m floor and a 4 m x 3 m wall 2 m away",
+      "I x solid angle of each cell / its area (inverse-square cosine law integrated over the cell)", "lx", 400000, o);
+  const Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  const double intensity = kLumens / (4.0 * std::numbers::pi);
+  gridRows(c, "floor", t.results.sensors[scene.findSensor("floor")], 4.0, 4.0,
+           [&](double x0, double x1, double y0, double y1) {
+             return intensity * rectangleSolidAngleFrom(x0, x1, y0, y1, h) / ((x1 - x0) * (y1 - y0));
+           });
+  // Wall cell: local x = -y_world, local y = z_world - 1.5; the source's foot on the wall plane is at
+  // local (0, 1.5), distance 2.
+  gridRows(c, "wall", t.results.sensors[scene.findSensor("wall")], 4.0, 3.0,
+           [&](double x0, double x1, double y0, double y1) {
+             return intensity * rectangleSolidAngleFrom(x0, x1, y0 - 1.5, y1 - 1.5, half) / ((x1 - x0) * (y1 - y0));
+           });
+  return c;
+}
+
+CaseResult areaSourceCase(const CaseOptions& o) {
+  const double h = 3.0, luminance = 1000.0;
+  Fixture f;
+  f.add(sensor(4.0, 4.0, 8, 8, false, "floor"), frame({0, 0, 0}, {1, 0, 0}, {0, 1, 0}), "floor");
+  Light panel;
+  panel.type = LightType::Area;
+  panel.name = "panel";
+  panel.width = 1.0;
+  panel.height = 1.0;
+  panel.world_from_light = frame({0, 0, h}, {1, 0, 0}, {0, -1, 0});  // emits towards -z
+  panel.power_w = std::numbers::pi * luminance * 1.0;                // M = pi L over 1 m^2
+  const SensorScene scene = f.scene({panel});
+  CaseResult c =
+      describe("area-source", "Lambertian panel of 1 m^2 and 1000 cd/m^2, 3 m above a 4 m x 4 m floor",
+               "pi L x exchange area between the cell and the panel (parallel rectangles, closed form) / cell area",
+               "lx", 400000, o);
+  const Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  gridRows(c, "floor", t.results.sensors[0], 4.0, 4.0, [&](double x0, double x1, double y0, double y1) {
+    return std::numbers::pi * luminance * parallelRectanglesExchange(x0, x1, y0, y1, -0.5, 0.5, -0.5, 0.5, h) /
+           ((x1 - x0) * (y1 - y0));
+  });
+  return c;
+}
+
+CaseResult diffuseCubeCase(double rho, const CaseOptions& o, bool also_capped) {
+  const double a = 4.0, inset = 1e-3;
+  Fixture f;
+  f.add(std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(makeBox({a, a, a}, "room"))),
+        Affine::identity(), "room", Material{MaterialType::Lambertian, rho});
+  // One sensor per face, just inside it, recording the light arriving at the face.
+  const glm::dvec3 axes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const char* names[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
+  for (int k = 0; k < 6; ++k) {
+    const glm::dvec3 n = axes[k / 2] * (k % 2 ? -1.0 : 1.0);  // outward normal of the face
+    const glm::dvec3 ex = axes[(k / 2 + 1) % 3], ey = glm::cross(-n, ex);
+    f.add(sensor(a, a, 1, 1, false, names[k]), frame(n * (a / 2 - inset), ex, ey), names[k]);
+  }
+  const SensorScene scene = f.scene({pointLight({0, 0, 0}, kLumens)});
+  CaseResult c = describe("diffuse-cube-" + std::to_string(static_cast<int>(std::lround(rho * 100))),
+                          "Closed 4 m cube of Lambertian reflectance " + std::to_string(rho).substr(0, 4) +
+                              ", 1000 lm isotropic source at its centre",
+                          "Phi / (6 a^2 (1 - rho)) per face (closed-enclosure balance and the cube's symmetry)", "lx",
+                          rho > 0.9 ? 60000 : 100000, o);
+  const Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  const double expected = kLumens / (6.0 * a * a * (1.0 - rho));
+  for (int k = 0; k < 6; ++k) {
+    const SensorResult& s = t.results.sensors[scene.findSensor(names[k])];
+    c.rows.push_back(
+        {std::string("face ") + names[k], expected, s.irradiance_w_m2[0], s.stderr_w_m2[0], std::nan(""), 0.005});
+  }
+  const EnergyBalance& e = t.results.energy;
+  c.notes.push_back("energy cut by path limits: " + std::to_string(e.depth_limited_w / e.emitted_w * 100.0) +
+                    "% of the emitted flux; failures " + std::to_string(e.failed_rays) + " paths");
+  if (also_capped) {
+    SensorRunConfig capped;
+    capped.max_depth = 1000;
+    const Timed u = run(scene, c.rays, o, capped);
+    c.notes.push_back("seconds, default options: " + std::to_string(t.seconds) + "; with max_depth 1000: " +
+                      std::to_string(u.seconds) + "; ratio: " + std::to_string(t.seconds / u.seconds));
+  }
+  return c;
+}
+
+CaseResult clearGlassCase(const CaseOptions& o) {
+  const double n = 1.52, d = 0.006;
+  // The absorption that makes the slab transmit the CIE curve's value at normal incidence.
+  const double t0 = cieClearGlassTransmittance(1.0);
+  double lo = 0.0, hi = 100.0;
+  for (int k = 0; k < 200; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (slabUnpolarised(n, d, mid, 0.0).t > t0 ? lo : hi) = mid;
+  }
+  const double alpha = 0.5 * (lo + hi);
+  Material glass{MaterialType::Dielectric, 0.0, n};
+  glass.absorption = alpha;
+  CaseResult c = describe("clear-glass",
+                          "6 mm clear glass (n = 1.52, absorption " + std::to_string(alpha).substr(0, 6) +
+                              " /m: the CIE curve's 0.8788 at normal incidence), collimated beam at 0-85 degrees",
+                          "two-polarisation slab formulas with all internal reflections (s and p averaged); "
+                          "'other' = the CIE 171 clear-glass curve (a fit)",
+                          "fraction", 100000, o);
+  const auto start = std::chrono::steady_clock::now();
+  for (const double deg : {0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 75.0, 80.0, 85.0}) {
+    const double th = deg * std::numbers::pi / 180.0;
+    const Measured m = slabRun({{0, 0, 0}, {0, 0, 1}, {1, 0, 0}}, d, glass, th, false, {}, c.rays, 171);
+    const SlabResponse ref = slabUnpolarised(n, d, alpha, th);
+    const std::string at = std::to_string(static_cast<int>(deg)) + " deg";
+    c.rows.push_back({"T at " + at, ref.t, m.value.t, m.se.t, cieClearGlassTransmittance(std::cos(th)), 0.002});
+    c.rows.push_back({"R at " + at, ref.r, m.value.r, m.se.r, std::nan(""), 0.002});
+  }
+  c.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return c;
+}
+
+std::vector<CaseResult> allCases(const CaseOptions& o) {
+  std::vector<CaseResult> all;
+  all.push_back(pointSourceCase(o));
+  all.push_back(areaSourceCase(o));
+  for (const double rho : {0.2, 0.5, 0.8}) all.push_back(diffuseCubeCase(rho, o));
+  all.push_back(diffuseCubeCase(0.95, o, true));
+  all.push_back(clearGlassCase(o));
+  return all;
+}
+
+}  // namespace duplex::validation
