@@ -169,8 +169,15 @@ struct WideTop::Deriver {
       items[best] = items[--count];
       open(it, items, count);
     }
-    const auto index = static_cast<std::uint32_t>(top.nodes.size());
-    top.nodes.emplace_back();
+    // A node slot freed by the refresh (its subtree's paths were edited), else a new one.
+    std::uint32_t index;
+    if (!top.free_.empty()) {
+      index = top.free_.back();
+      top.free_.pop_back();
+    } else {
+      index = static_cast<std::uint32_t>(top.nodes.size());
+      top.nodes.emplace_back();
+    }
     WideNode node;
     for (std::size_t c = 0; c < 8; ++c) {
       node.child[c] = kWideNone;
@@ -227,6 +234,7 @@ void WideTop::derive(const KdTree& tree, const std::vector<Box>& boxes) {
 
 void WideTop::build(const KdTree& tree, const std::vector<Box>& boxes) {
   nodes.clear();
+  free_.clear();
   cache_.assign(tree.nodes.size(), Cached{});
   derive(tree, boxes);
   // A full derivation's slack (vector growth) and scratch are dropped: refreshes append little.
@@ -253,6 +261,9 @@ void WideTop::refresh(const KdTree& tree, const std::vector<Box>& boxes, const s
     while (!stack.empty()) {
       const Entry e = stack.back();
       stack.pop_back();
+      // The node's wide node (if it was a subtree's root) is reached only through the node's
+      // ancestors, which are all forgotten too: its slot can be reused at once.
+      if (cache_[e.node].wide != kWideNone) free_.push_back(cache_[e.node].wide);
       cache_[e.node] = Cached{};
       const KdNode& n = tree.nodes[e.node];
       if (n.isJump()) {

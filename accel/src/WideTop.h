@@ -56,7 +56,7 @@ struct WideTop {
 
   // Nodes reachable from the root, and nodes no walk reaches (replaced by refreshes).
   [[nodiscard]] std::size_t liveNodes() const { return live_; }
-  [[nodiscard]] std::size_t garbage() const { return nodes.size() - live_; }
+  [[nodiscard]] std::size_t garbage() const { return nodes.size() - live_; }  // free slots included
   // Bytes held: the nodes and what is kept per kd node (capacities).
   [[nodiscard]] std::size_t bytes() const {
     return nodes.capacity() * sizeof(WideNode) + cache_.capacity() * sizeof(Cached) +
@@ -77,7 +77,8 @@ struct WideTop {
   };
   void derive(const KdTree& tree, const std::vector<Box>& boxes);
 
-  std::vector<Cached> cache_;  // by kd node
+  std::vector<Cached> cache_;        // by kd node
+  std::vector<std::uint32_t> free_;  // node slots a refresh freed, reused by its derivation
   std::size_t live_ = 0;
   std::vector<std::pair<std::uint32_t, Box>> refs_;  // scratch: clipped references of opened leaves
 };
