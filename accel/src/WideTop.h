@@ -50,7 +50,8 @@ struct WideTop {
   void build(const KdTree& tree, const std::vector<Box>& boxes);
   // After an incremental commit of `tree` whose edits changed the references of the leaves meeting
   // the world boxes `edited` (the old and new boxes of moved, added and removed instances):
-  // derives again what lies on their paths and keeps the rest. The kd nodes must have kept their
+  // derives again the wide nodes that opened those leaves (or nodes rebuilt since), refits the
+  // boxes on their paths and keeps the rest. The kd nodes must have kept their
   // indices since the last derivation (new nodes appended): after a compaction, call build().
   void refresh(const KdTree& tree, const std::vector<Box>& boxes, const std::vector<Box>& edited);
 
@@ -60,25 +61,48 @@ struct WideTop {
   // Bytes held: the nodes and what is kept per kd node (capacities).
   [[nodiscard]] std::size_t bytes() const {
     return nodes.capacity() * sizeof(WideNode) + cache_.capacity() * sizeof(Cached) +
-           refs_.capacity() * sizeof(refs_[0]);
+           refs_.capacity() * sizeof(refs_[0]) + side_.capacity() * sizeof(Side);
   }
 
  private:
   struct Item;
   struct Deriver;
-  // What a derivation leaves for the next one, by kd node: valid until an edit's box meets the
-  // node's cell (the node's references, or those below it, may have changed).
+  // What a derivation leaves for the next one, by kd node. The tight box and the wide node of a
+  // subtree hold until an edit's box meets the node's cell (`touched`); what a wide node opened
+  // (owner, word) tells a refresh whether that node can keep its children and only refit their
+  // boxes.
   struct Cached {
-    Box tight;                       // the tight box of the node's subtree
-    std::uint32_t wide = kWideNone;  // the wide node derived for the subtree, if any
-    std::uint32_t wide_nodes = 0;    // wide nodes under it (itself included)
-    std::uint16_t wide_depth = 0;    // wide levels under it (itself included)
+    Box tight;                            // the tight box of the node's subtree
+    Box cell;                             // touched nodes: the cell, as of this refresh
+    KdNode word;                          // the node as the wide node `owner` opened it
+    std::uint32_t wide = kWideNone;       // the wide node derived for the subtree, if any
+    std::uint32_t owner = kWideNone;      // the wide node that opened this node, if any
+    std::uint32_t owner_gen = 0;          // Side::gen of `owner` then (a slot reused since is not it)
+    std::uint32_t last_wide = kWideNone;  // the wide node a refresh forgot for the subtree, and
+    std::uint32_t last_gen = 0;           // its Side::gen: derived again along the same lines
+    std::uint32_t wide_nodes = 0;         // wide nodes under it (itself included)
+    std::uint16_t wide_depth = 0;         // wide levels under it (itself included)
     bool tight_ok = false;
+    bool touched = false;  // its cell met an edited box since the last derivation
+    bool dropped = false;  // `owner` left it out as empty (an edit that fills it changes `owner`)
   };
+  // Per wide node: what its children are made of, so that a refresh can refit it in place.
+  struct Side {
+    std::uint32_t kd[8];                // a subtree child: its kd node; else kSideRef or kSideRefs
+    std::uint32_t kd_root = kWideNone;  // the kd node whose subtree it was derived for, if any
+    std::uint32_t own_nodes = 1;        // itself and its reference-group nodes
+    std::uint16_t own_depth = 1;        // levels of itself and its reference-group nodes
+    std::uint32_t gen = 0;              // counts the slot's uses
+  };
+  static constexpr std::uint32_t kSideRef = 0xFFFFFFFFu;   // an instance reference (or unused)
+  static constexpr std::uint32_t kSideRefs = 0xFFFFFFFEu;  // a node of references of opened leaves
+  void forget(std::uint32_t wide);                         // returns a node and its reference-group nodes to free_
   void derive(const KdTree& tree, const std::vector<Box>& boxes);
 
-  std::vector<Cached> cache_;        // by kd node
-  std::vector<std::uint32_t> free_;  // node slots a refresh freed, reused by its derivation
+  std::vector<Cached> cache_;           // by kd node
+  std::vector<Side> side_;              // by wide node
+  std::vector<std::uint32_t> free_;     // node slots a refresh freed, reused by its derivation
+  std::vector<std::uint32_t> touched_;  // scratch: the kd nodes a refresh marked
   std::size_t live_ = 0;
   std::vector<std::pair<std::uint32_t, Box>> refs_;  // scratch: clipped references of opened leaves
 };
