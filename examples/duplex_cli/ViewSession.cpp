@@ -33,6 +33,8 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 constexpr std::uint32_t kStripPixels = 1u << 20;
 // Renderers kept for reuse: as many as frames are traced at once (the server's render pool).
 constexpr std::size_t kPooledRenderers = 2;
+// Picks count the edges of CAD parts' design, not those of their tessellation (as the demo).
+constexpr double kPickFeatureAngleDeg = 30.0;
 
 [[noreturn]] void refuse(const std::string& message) { throw RequestError(message); }
 
@@ -251,6 +253,8 @@ ViewSession::ViewSession(const std::filesystem::path& scene, int threads)
     if (node >= hit_ids_.size()) hit_ids_.resize(static_cast<std::size_t>(node) + 1, kInvalidId);
     hit_ids_[node] = ids.of(node);
   }
+  // The picks' feature-edge indices now, so that the first hover over a large part does not wait.
+  arena_->execute([&] { scene_->tracer().preparePicking(kPickFeatureAngleDeg); });
 }
 
 ViewSession::~ViewSession() {
@@ -491,7 +495,7 @@ json ViewSession::pick(const json& body) const {
   const double x = number(member(body, "request body", "x"), "x");
   const double y = number(member(body, "request body", "y"), "y");
   PickOptions options;
-  options.feature_angle_deg = 30.0;  // CAD parts: their design edges, not the tessellation's (as the demo)
+  options.feature_angle_deg = kPickFeatureAngleDeg;
   if (body.contains("radius_px")) options.radius_px = number(body["radius_px"], "radius_px");
   if (options.radius_px < 0.0 || options.radius_px > 1000.0)
     refuse("radius_px: expected pixels in [0, 1000], got " + std::to_string(options.radius_px));
