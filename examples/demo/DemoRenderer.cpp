@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 namespace duplex::demo {
 
@@ -63,6 +64,7 @@ void DemoRenderer::setView(const PinholeCamera& camera, std::uint32_t width, std
                            std::uint32_t row_begin, std::uint32_t row_end) {
   settings_.width = width;
   settings_.height = row_end - row_begin;
+  pixel_size_ = static_cast<float>(2.0 * std::tan(0.5 * camera.vertical_fov_deg * std::numbers::pi / 180.0) / height);
   const std::size_t n = static_cast<std::size_t>(width) * (row_end - row_begin);
   primary_.resize(n);
   pixel_of_.resize(n);
@@ -139,6 +141,35 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
     if (!blocked_[k]) direct[i] = glm::dot(facingNormal(hits_[i], primary_[i]), to_light);
   }
 
+  // Edges: a pixel on a different surface than one of its four neighbours, when it is the nearer
+  // of the two (so that a line is one pixel wide and lies on the front surface).
+  const float cos_edge = static_cast<float>(std::cos(settings_.edge_angle_deg * std::numbers::pi / 180.0));
+  const std::uint32_t w = settings_.width, h_rows = settings_.height;
+  const auto onEdge = [&](std::size_t i) {
+    const Hit& h = hits_[i];
+    const std::size_t pixel = pixel_of_[i];
+    const auto x = static_cast<std::uint32_t>(pixel % w), y = static_cast<std::uint32_t>(pixel / w);
+    const glm::vec3 n = facingNormal(h, primary_[i]);
+    const glm::vec3 p = primary_[i].origin + h.t * primary_[i].dir;
+    // Two surfaces apart in depth: the neighbour's point lies off this pixel's tangent plane by
+    // more than a few pixel widths at this distance.
+    const float apart = 3.0f * pixel_size_ * h.t;
+    const std::size_t around[4] = {x > 0 ? pixel - 1 : pixel, x + 1 < w ? pixel + 1 : pixel,
+                                   y > 0 ? pixel - w : pixel, y + 1 < h_rows ? pixel + w : pixel};
+    for (const std::size_t q : around) {
+      if (q == pixel) continue;
+      const std::size_t j = ray_of_pixel_[q];
+      const Hit& o = hits_[j];
+      if (!o.valid()) return true;
+      if (o.t < h.t) continue;  // the neighbour is nearer: the line goes there
+      if (o.instance_id != h.instance_id) return true;
+      if (o.prim_id == h.prim_id) continue;
+      if (glm::dot(n, facingNormal(o, primary_[j])) < cos_edge) return true;
+      if (std::abs(glm::dot(n, primary_[j].origin + o.t * primary_[j].dir - p)) > apart) return true;
+    }
+    return false;
+  };
+
   // Shade: sky for misses, ambient (brighter towards +y) plus Lambert.
   RgbImage image{settings_.width, settings_.height, std::vector<std::uint8_t>(n * 3)};
   // Pixels are independent: shaded in parallel (the sRGB encoding is the costly part).
@@ -156,6 +187,7 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
         colour = base * (ambient + 0.85f * direct[i]);
         // The highlighted part: pulled towards a bright cyan that no palette colour is close to.
         if (h.instance_id == settings_.highlight) colour = glm::mix(colour, glm::vec3(0.1f, 0.85f, 1.0f), 0.55f);
+        if (settings_.edges && onEdge(i)) colour = glm::mix(colour, glm::vec3(0.01f), 0.8f);
       }
       for (int c = 0; c < 3; ++c) image.pixels[pixel_of_[i] * 3 + c] = toSrgb8(colour[c]);
     }

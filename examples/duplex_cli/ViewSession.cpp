@@ -376,6 +376,12 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
     if (!id) refuse("highlight: no node at path " + body["highlight"].dump());
     highlight = *id;
   }
+  // "edges" (default true): feature edges and silhouettes drawn as lines.
+  bool edges = true;
+  if (body.contains("edges") && !body["edges"].is_null()) {
+    if (!body["edges"].is_boolean()) refuse("edges: expected true or false");
+    edges = body["edges"].get<bool>();
+  }
   frame.commit = g.commitCount();
   // "sensors": true draws the last sensor run's maps on the sensors' surfaces.
   std::vector<SensorOverlay> overlays;
@@ -406,6 +412,7 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
   } give_back{*this, taken};
   demo::DemoRenderer& renderer = *taken;
   renderer.setHighlight(highlight);
+  renderer.setEdges(edges);
   const std::uint32_t strip_rows = std::max<std::uint32_t>(1, kStripPixels / cam.width);
   for (std::uint32_t r0 = 0; r0 < cam.height; r0 += strip_rows) {
     const std::uint32_t r1 = std::min(cam.height, r0 + strip_rows);

@@ -95,6 +95,48 @@ def main():
     print("view_check: all checks passed")
 
 
+def check_edges(server, camera, ids, box_id):
+    """Feature edges in the frame ("edges", default true): what they add is darker pixels, only where a
+    4-neighbour shows another instance, another face or the sky; every hit pixel beside the sky gets
+    one; box pixels among pixels of their own face (its diagonal included) get none."""
+    def rgb(edges):
+        body = {"camera": camera, "format": "png"}
+        if edges is not None:
+            body["edges"] = edges
+        status, _, data = server.request("POST", "/api/render", body)
+        expect(status == 200, f"render with edges={edges}: {status}")
+        return b"".join(decode_png(data)[2])
+
+    plain, lined, default = rgb(False), rgb(True), rgb(None)
+    expect(lined == default, "edges are drawn by default")
+
+    def neighbours(i):
+        x, y = i % W, i // W
+        return [j for j, ok in ((i - 1, x > 0), (i + 1, x + 1 < W), (i - W, y > 0), (i + W, y + 1 < H)) if ok]
+
+    def face(v):  # the box's faces are two triangles each; anything else is its own surface
+        return (v[0], v[1] // 2) if v[0] == box_id else v
+
+    drawn = 0
+    for i in range(W * H):
+        before, after = plain[3 * i:3 * i + 3], lined[3 * i:3 * i + 3]
+        around = [face(ids[j]) for j in neighbours(i)]
+        changed = before != after
+        if changed:
+            drawn += 1
+            expect(sum(after) < sum(before), f"an edge pixel {i} is not darker: {list(before)} -> {list(after)}")
+            expect(any(f != face(ids[i]) for f in around),
+                   f"pixel {i} drawn as an edge with every neighbour on its own surface {face(ids[i])}")
+        if ids[i][0] != 0xFFFFFFFF and any(ids[j][0] == 0xFFFFFFFF for j in neighbours(i)):
+            expect(changed, f"pixel {i} beside the sky is not drawn as an edge")
+        if ids[i][0] == box_id and all(f == face(ids[i]) for f in around):
+            expect(not changed, f"box pixel {i} inside its face drawn as an edge")
+    box_crease = sum(1 for i in range(W * H) if ids[i][0] == box_id and plain[3 * i:3 * i + 3] != lined[3 * i:3 * i + 3]
+                     and any(ids[j][0] == box_id and face(ids[j]) != face(ids[i]) for j in neighbours(i)))
+    expect(box_crease >= 3, f"the box's creases are drawn ({box_crease} pixels)")
+    expect(drawn > 0, "no edge drawn")
+
+
 def check(server, cli, scene_path, work):
     ready = server.ready
     expect(set(ready) == {"url", "port", "token"}, f"ready line keys {sorted(ready)}")
@@ -146,6 +188,8 @@ def check(server, cli, scene_path, work):
     box_id = 1  # position of /parts/box among the file's instances (depth-first)
     expect(sum(1 for v in ids if v[0] == box_id) > 20, "the box covers pixels")
     expect(sum(1 for v in ids if v[0] == 0xFFFFFFFF) > 0, "some sky")
+
+    check_edges(server, camera, ids, box_id)
 
     # Pick at a box pixel: the box, its face there; radius 0: faces only.
     bx, by = pixel_of(ids, lambda v: v[0] == box_id)

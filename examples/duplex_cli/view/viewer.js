@@ -99,7 +99,8 @@ async function pumpFrames() {
   const t0 = performance.now();
   try {
     const res = await api("POST", "/api/render",
-      { camera: cameraJson(w, h), format: "jpeg", highlight: state.selected, sensors: $("sensor-overlay").checked });
+      { camera: cameraJson(w, h), format: "jpeg", highlight: state.selected, sensors: $("sensor-overlay").checked,
+        edges: $("edges").checked });
     const blob = await res.blob();
     const url = URL.createObjectURL(blob);
     const img = $("view");
@@ -597,6 +598,7 @@ async function start() {
   setupSensors();
   $("undo").addEventListener("click", undo);
   $("fit").addEventListener("click", fitAll);
+  $("edges").addEventListener("change", () => requestFrame(false));
   requestFrame(false);
 }
 
