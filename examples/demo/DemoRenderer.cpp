@@ -154,8 +154,8 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
     // Two surfaces apart in depth: the neighbour's point lies off this pixel's tangent plane by
     // more than a few pixel widths at this distance.
     const float apart = 3.0f * pixel_size_ * h.t;
-    const std::size_t around[4] = {x > 0 ? pixel - 1 : pixel, x + 1 < w ? pixel + 1 : pixel,
-                                   y > 0 ? pixel - w : pixel, y + 1 < h_rows ? pixel + w : pixel};
+    const std::size_t around[4] = {x > 0 ? pixel - 1 : pixel, x + 1 < w ? pixel + 1 : pixel, y > 0 ? pixel - w : pixel,
+                                   y + 1 < h_rows ? pixel + w : pixel};
     for (const std::size_t q : around) {
       if (q == pixel) continue;
       const std::size_t j = ray_of_pixel_[q];

@@ -51,6 +51,28 @@ def box_translation(server):
     return [node["local"][3], node["local"][7], node["local"][11]]
 
 
+def view_pixel(driver, x, y):
+    """The RGB of pixel (x, y) of the image the page shows in #view (read back through a canvas)."""
+    return driver.execute_script(
+        "const img = document.getElementById('view'), c = document.createElement('canvas');"
+        "c.width = img.naturalWidth; c.height = img.naturalHeight;"
+        "const g = c.getContext('2d'); g.drawImage(img, 0, 0);"
+        "return Array.from(g.getImageData(arguments[0], arguments[1], 1, 1).data).slice(0, 3);", x, y)
+
+
+def edge_pixel(server, camera):
+    """A pixel that the server's feature edges darken most (among those with edge pixels around)."""
+    from demo_check import decode_png
+    w, h = camera["width"], camera["height"]
+    plain, lined = [b"".join(decode_png(server.request("POST", "/api/render", {"camera": camera, "format": "png",
+                                                                            "edges": e})[2])[2])
+                    for e in (False, True)]
+    dark = [sum(plain[3 * i:3 * i + 3]) - sum(lined[3 * i:3 * i + 3]) > 60 for i in range(w * h)]
+    best = max(((sum(dark[(y + dy) * w + x + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)), x, y)
+                for y in range(1, h - 1) for x in range(1, w - 1) if dark[y * w + x]))
+    return best[1], best[2]
+
+
 def frames(driver):
     return int(driver.find_element("id", "view").get_attribute("data-frames") or 0)
 
@@ -147,6 +169,23 @@ def main():
         driver.find_element("tag name", "body").send_keys("u")
         wait_for(lambda: box_translation(server) == before, 20, "undo to restore the box")
         driver.save_screenshot(os.path.join(shots, "4_undone.png"))
+
+        # Feature edges: the page draws them (checkbox #edges, on by default); off, the frame
+        # there is lighter. Read at a pixel the server's edges darken most.
+        ex, ey = edge_pixel(server, camera)
+        ActionChains(driver).move_to_element_with_offset(box_el, 300, 190).perform()  # away from the parts
+        time.sleep(0.8)
+        wait_for(lambda: driver.find_element("id", "view").get_attribute("naturalWidth") == "640", 20,
+                 "a full-resolution frame")
+        with_edges = view_pixel(driver, ex, ey)
+        n = frames(driver)
+        driver.find_element("id", "edges").click()
+        wait_for(lambda: frames(driver) > n, 20, "the frame without edges")
+        time.sleep(0.3)
+        without = view_pixel(driver, ex, ey)
+        driver.save_screenshot(os.path.join(shots, "5_no_edges.png"))
+        expect(sum(without) - sum(with_edges) > 60,
+               f"pixel ({ex}, {ey}): with edges {with_edges}, without {without}: the edges are not drawn")
         logs = [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
         expect(not logs, f"browser console errors: {logs[:3]}")
         print(f"view_browser_check: all checks passed; screenshots in {shots}")
