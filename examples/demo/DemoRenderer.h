@@ -86,10 +86,15 @@ class DemoRenderer {
   std::vector<Ray> shadow_;  ///< towards the light, for the lit pixels listed in shadow_pixel_
   std::vector<std::size_t> shadow_pixel_;
   std::vector<std::uint8_t> blocked_;
+  std::vector<glm::vec3> normal_;          ///< per primary ray: the hit's unit normal facing the viewer
   std::vector<float> direct_;              ///< light arriving per primary ray (n.l where the shadow ray is free)
   std::vector<glm::vec3> colour_of_node_;  ///< base colour per node id (instances of the last commit)
   /// Width of a pixel at unit distance along the view direction (the edges' depth test).
   float pixel_size_ = 0.0f;
+  // The view the rays were made for (setView skips remaking them for the same one).
+  bool view_valid_ = false;
+  PinholeCamera view_camera_;
+  std::uint32_t view_height_ = 0, view_row_begin_ = 0;
 };
 
 }  // namespace duplex::demo
