@@ -445,11 +445,12 @@ std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const Sensor
   std::vector<SensorOverlay> out;
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];
-    if (s.shape != SensorShape::Rectangle && s.shape != SensorShape::Disk) continue;  // planar maps only
+    if (s.shape == SensorShape::FarField) continue;  // no surface: a polar plot on the page
     SensorOverlay o;
     const SensorInstance& inst = scene.sensors()[k];
     o.object_from_world = inst.world_from_object.inverse();
     o.disk = s.shape == SensorShape::Disk;
+    if (s.shape == SensorShape::Sphere) o.sphere = inst.object;
     o.width = inst.object->spec().width;
     o.height = inst.object->spec().height;
     o.nx = s.nx;
@@ -465,9 +466,9 @@ std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const Sensor
 
 void drawOverlays(const std::vector<SensorOverlay>& overlays, const ViewCamera& cam, const demo::DemoRenderer& renderer,
                   std::uint32_t r0, std::uint32_t r1, demo::RgbImage& image) {
-  // Per pixel, the nearest sensor plane the primary ray crosses before its hit (sensors never block
-  // rays, so the frame shows what lies behind them): its bin's irradiance in false colour, 75%
-  // over the shaded pixel.
+  // Per pixel, the nearest sensor surface the primary ray crosses before its hit (sensors never
+  // block rays, so the frame shows what lies behind them): its bin's irradiance in false colour,
+  // 75% over the shaded pixel.
   tbb::parallel_for(r0, r1, [&](std::uint32_t y) {
     for (std::uint32_t x = 0; x < cam.width; ++x) {
       const Hit& h = renderer.hitOfPixel(static_cast<std::size_t>(y - r0) * cam.width + x);
@@ -477,6 +478,21 @@ void drawOverlays(const std::vector<SensorOverlay>& overlays, const ViewCamera& 
       for (const SensorOverlay& o : overlays) {
         const glm::dvec3 org = o.object_from_world.point(cam.camera.eye);
         const glm::dvec3 d = o.object_from_world.linear * dir;
+        if (o.sphere) {
+          // The first crossing in front of the eye of the sphere |p| = width / 2 (t in units of the
+          // world direction, as the hit's: the object-space ray is its image).
+          const double r = 0.5 * o.width, a = glm::dot(d, d), b = glm::dot(org, d);
+          const double disc = b * b - a * (glm::dot(org, org) - r * r);
+          if (!(disc > 0.0)) continue;
+          const double root = std::sqrt(disc), t0 = (-b - root) / a, t1 = (-b + root) / a;
+          const double t = t0 > 0.0 ? t0 : t1;
+          if (!(t > 0.0 && t < best)) continue;
+          const std::uint32_t bin = o.sphere->sphereBinAt(glm::normalize(org + t * d));
+          if (bin >= o.values.size()) continue;
+          best = t;
+          value = o.values[bin] / o.max;
+          continue;
+        }
         if (!(std::abs(d.z) > 0.0)) continue;
         const double t = -org.z / d.z;
         if (!(t > 0.0 && t < best)) continue;

@@ -21,6 +21,7 @@ Usage: view_check.py DUPLEX_CLI WORK_DIR
 """
 
 import json
+import math
 import os
 import socket
 import struct
@@ -92,7 +93,68 @@ def main():
     finally:
         code = server.stop()
     expect(code == 0, f"duplex view exited {code} on SIGTERM")
+    check_sphere_map(cli, work)
     print("view_check: all checks passed")
+
+
+SPHERE_SCENE = {
+    "format": "duplex-scene-v1",
+    "objects": [
+        {"name": "floor", "plane": {"size": 10}, "material": {"type": "lambertian", "reflectance": 0.5}},
+        {"name": "globe", "sensor": {"shape": "sphere", "size": [3, 3], "bins": [12, 8]}},
+    ],
+    "nodes": [
+        {"instance": "floor", "object": "floor"},
+        {"instance": "globe", "object": "globe", "transform": {"translate": [0.5, -0.3, 1.8]}},
+    ],
+    "lights": [{"type": "point", "position": [1, 1, 5], "power": 10}],
+}
+
+
+def check_sphere_map(cli, work):
+    """A sphere sensor's map on its surface: after a run, "sensors": true changes exactly the pixels
+    whose primary ray crosses the sphere (computed here from the camera, up to the rim), in more
+    than one colour (the lit top and the shaded bottom differ)."""
+    server = Server(cli, write_scene(work, SPHERE_SCENE, name="view_sphere_scene.json"))
+    try:
+        camera = dict(server.json("GET", "/api/scene")["rays_camera"], width=W, height=H)
+        viewer_fluxes(server, 20000)
+        plain, mapped = [b"".join(decode_png(server.request("POST", "/api/render", {
+            "camera": camera, "format": "png", "sensors": on})[2])[2]) for on in (False, True)]
+        eye, target, up = camera["eye"], camera["target"], camera["up"]
+        sub = lambda a, b: [a[k] - b[k] for k in range(3)]  # noqa: E731
+        dot = lambda a, b: sum(a[k] * b[k] for k in range(3))  # noqa: E731
+        cross = lambda a, b: [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]  # noqa
+        unit = lambda a: [c / dot(a, a) ** 0.5 for c in a]  # noqa: E731
+        fwd = unit(sub(target, eye))
+        right = unit(cross(fwd, up))
+        upv = cross(right, fwd)
+        half_h = math.tan(math.radians(camera["fov_deg"]) / 2)
+        half_w = half_h * W / H
+        centre, radius = [0.5, -0.3, 1.8], 1.5
+        oc = sub(eye, centre)
+        changed = crossing = rim = 0
+        for y in range(H):
+            for x in range(W):
+                sx = (2 * (x + 0.5) / W - 1) * half_w
+                sy = (1 - 2 * (y + 0.5) / H) * half_h
+                d = unit([fwd[k] + sx * right[k] + sy * upv[k] for k in range(3)])
+                b = dot(oc, d)
+                disc = b * b - (dot(oc, oc) - radius * radius)
+                inside = disc > 0 and -b + disc ** 0.5 > 0
+                near_rim = abs(disc) < 2e-3 * radius * radius
+                i = 3 * (y * W + x)
+                differs = plain[i:i + 3] != mapped[i:i + 3]
+                changed += differs
+                crossing += inside
+                rim += near_rim
+                if not near_rim:
+                    expect(differs == inside, f"pixel ({x}, {y}): crosses the sphere {inside}, map drawn {differs}")
+        expect(crossing > 100, f"the sphere covers {crossing} pixels")
+        colours = {mapped[3 * i:3 * i + 3] for i in range(W * H) if plain[3 * i:3 * i + 3] != mapped[3 * i:3 * i + 3]}
+        expect(len(colours) > 3, f"the sphere's map in {len(colours)} colours")
+    finally:
+        server.stop()
 
 
 def check_edges(server, camera, ids, box_id):
