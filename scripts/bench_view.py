@@ -13,8 +13,13 @@ Writes one JSON object (stdout, and --out FILE) with one entry per run (--runs, 
 a server of its own) and the load average beside each; the figures are only meaningful on a quiet
 machine.
 
+With --baseline OTHER_CLI each run of --cli is followed by one of OTHER_CLI (a build of another
+commit) and "ratios" gives --cli's figures over the baseline's, pair by pair: on a shared machine
+those hold better than either figure alone.
+
 Usage: scripts/bench_view.py [--cli build/bin/duplex] [--scene examples/scenes/robot_cell.json]
-                             [--threads 2] [--frames 100] [--picks 400] [--node PATH] [--runs 3] [--out FILE]
+                             [--threads 2] [--frames 100] [--picks 400] [--node PATH] [--runs 3]
+                             [--baseline OTHER_CLI] [--out FILE]
 """
 
 import argparse
@@ -39,9 +44,24 @@ def main():
     ap.add_argument("--node", default=None, help="the node dragged (default: the first instance under a group)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--baseline", default=None,
+                    help="another duplex binary (e.g. main's) run interleaved with --cli, run for run, for ratios "
+                         "that hold on a loaded machine")
     a = ap.parse_args()
-    runs = [run(a, root) for _ in range(a.runs)]
+    runs, baseline = [], []
+    for _ in range(a.runs):
+        runs.append(run(a, root, a.cli))
+        if a.baseline:
+            baseline.append(run(a, root, a.baseline))
     result = {"command": "scripts/bench_view.py " + " ".join(sys.argv[1:]), "runs": runs}
+    if a.baseline:
+        result["baseline_runs"] = baseline
+        # Per pair of neighbouring runs (same load, give or take): --cli's figure over the baseline's.
+        result["ratios"] = [{
+            "drag_frames_per_s": round(r["drag_frames_per_s"] / b["drag_frames_per_s"], 3),
+            "pick_ms_p90": round(r["pick_ms_p90"] / b["pick_ms_p90"], 4),
+            "pick_ms_median": round(r["pick_ms_median"] / b["pick_ms_median"], 4),
+        } for r, b in zip(runs, baseline)]
     text = json.dumps(result, indent=1)
     print(text)
     if a.out:
@@ -49,9 +69,8 @@ def main():
             f.write(text + "\n")
 
 
-def run(a, root):
-
-    server = Server(a.cli, a.scene, threads=a.threads)
+def run(a, root, cli):
+    server = Server(cli, a.scene, threads=a.threads)
     try:
         scene = server.json("GET", "/api/scene")
         camera = dict(scene["camera"], width=640, height=400)
@@ -99,6 +118,7 @@ def run(a, root):
             pick_ms.append(p["pick_ms"])
             hits += p["path"] is not None
         result = {
+            "cli": os.path.relpath(cli, root) if cli.startswith(root) else cli,
             "scene": os.path.relpath(a.scene, root),
             "threads": a.threads,
             "width": 640,

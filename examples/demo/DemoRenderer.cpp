@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 namespace duplex::demo {
 
@@ -38,9 +39,46 @@ glm::vec3 sky(const glm::vec3& dir) {
   return glm::mix(glm::vec3(0.92f, 0.94f, 1.0f), glm::vec3(0.42f, 0.58f, 0.88f), a);
 }
 
-std::uint8_t toSrgb8(float linear) {
+std::uint8_t toSrgb8Exact(float linear) {
   const float encoded = std::pow(glm::clamp(linear, 0.0f, 1.0f), 1.0f / 2.2f);
   return static_cast<std::uint8_t>(encoded * 255.0f + 0.5f);
+}
+
+// toSrgb8Exact without a pow per channel (the frame's costliest shading step), to the same byte:
+// a table over 4096 buckets of [0, 1] gives the code at a bucket's start, and the exact thresholds
+// between codes (found by bisection on toSrgb8Exact, which is monotonic) step it up within the bucket.
+class SrgbEncoder {
+ public:
+  SrgbEncoder() {
+    first_[0] = 0.0f;
+    for (int k = 1; k < 256; ++k) {
+      float lo = 0.0f, hi = 1.0f;  // toSrgb8Exact(lo) < k <= toSrgb8Exact(hi)
+      while (std::nextafter(lo, 1.0f) < hi) {
+        const float mid = 0.5f * (lo + hi);
+        if (mid <= lo || mid >= hi) break;
+        (toSrgb8Exact(mid) >= k ? hi : lo) = mid;
+      }
+      first_[k] = toSrgb8Exact(lo) >= k ? lo : hi;
+    }
+    for (int b = 0; b < kBuckets; ++b) bucket_[b] = toSrgb8Exact(static_cast<float>(b) / kBuckets);
+  }
+  [[nodiscard]] std::uint8_t operator()(float linear) const {
+    if (!(linear > 0.0f)) return toSrgb8Exact(linear);  // 0, negatives and NaN as the exact form
+    if (linear >= 1.0f) return 255;
+    int code = bucket_[std::min(kBuckets - 1, static_cast<int>(linear * kBuckets))];
+    while (code < 255 && linear >= first_[code + 1]) ++code;
+    return static_cast<std::uint8_t>(code);
+  }
+
+ private:
+  static constexpr int kBuckets = 4096;
+  std::array<float, 256> first_{};  ///< the smallest linear value encoded as each code
+  std::array<std::uint8_t, kBuckets> bucket_{};
+};
+
+std::uint8_t toSrgb8(float linear) {
+  static const SrgbEncoder encoder;
+  return encoder(linear);
 }
 
 // The normal of a hit, unit length and facing the viewer (surfaces are two-sided).
@@ -61,8 +99,21 @@ DemoRenderer::DemoRenderer(const SceneTracer& tracer, const RenderSettings& sett
 
 void DemoRenderer::setView(const PinholeCamera& camera, std::uint32_t width, std::uint32_t height,
                            std::uint32_t row_begin, std::uint32_t row_end) {
+  // The same view as the last frame (a drag moves the scene, not the camera): its rays are there.
+  const auto same = [](const PinholeCamera& a, const PinholeCamera& b) {
+    return a.eye == b.eye && a.forward == b.forward && a.right == b.right && a.up == b.up &&
+           a.vertical_fov_deg == b.vertical_fov_deg;
+  };
+  if (view_valid_ && same(camera, view_camera_) && width == settings_.width && height == view_height_ &&
+      row_begin == view_row_begin_ && row_end - row_begin == settings_.height)
+    return;
+  view_valid_ = true;
+  view_camera_ = camera;
+  view_height_ = height;
+  view_row_begin_ = row_begin;
   settings_.width = width;
   settings_.height = row_end - row_begin;
+  pixel_size_ = static_cast<float>(2.0 * std::tan(0.5 * camera.vertical_fov_deg * std::numbers::pi / 180.0) / height);
   const std::size_t n = static_cast<std::size_t>(width) * (row_end - row_begin);
   primary_.resize(n);
   pixel_of_.resize(n);
@@ -112,13 +163,20 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
   stats.primary_ms = msSince(t0);
   stats.primary_rays = n;
 
+  // Each hit's unit normal facing the viewer, once (shadow rays, light, edges and shading use it).
+  normal_.resize(n);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i)
+      if (hits_[i].valid()) normal_[i] = facingNormal(hits_[i], primary_[i]);
+  });
+
   // Shadow rays of the hits that face the light, compacted into one batch.
   shadow_.clear();
   shadow_pixel_.clear();
   for (std::size_t i = 0; i < n; ++i) {
     const Hit& h = hits_[i];
     if (!h.valid()) continue;
-    const glm::vec3 nrm = facingNormal(h, primary_[i]);
+    const glm::vec3& nrm = normal_[i];
     if (glm::dot(nrm, to_light) <= 0.0f) continue;
     const glm::vec3 p = primary_[i].origin + h.t * primary_[i].dir;
     shadow_.push_back(Ray{p + offset * nrm, 0.0f, to_light, std::numeric_limits<float>::infinity()});
@@ -136,8 +194,37 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
   direct.assign(n, 0.0f);
   for (std::size_t k = 0; k < shadow_pixel_.size(); ++k) {
     const std::size_t i = shadow_pixel_[k];
-    if (!blocked_[k]) direct[i] = glm::dot(facingNormal(hits_[i], primary_[i]), to_light);
+    if (!blocked_[k]) direct[i] = glm::dot(normal_[i], to_light);
   }
+
+  // Edges: a pixel on a different surface than one of its four neighbours, when it is the nearer
+  // of the two (so that a line is one pixel wide and lies on the front surface).
+  const float cos_edge = static_cast<float>(std::cos(settings_.edge_angle_deg * std::numbers::pi / 180.0));
+  const std::uint32_t w = settings_.width, h_rows = settings_.height;
+  const auto onEdge = [&](std::size_t i) {
+    const Hit& h = hits_[i];
+    const std::size_t pixel = pixel_of_[i];
+    const auto x = static_cast<std::uint32_t>(pixel % w), y = static_cast<std::uint32_t>(pixel / w);
+    const glm::vec3& n = normal_[i];
+    const glm::vec3 p = primary_[i].origin + h.t * primary_[i].dir;
+    // Two surfaces apart in depth: the neighbour's point lies off this pixel's tangent plane by
+    // more than a few pixel widths at this distance.
+    const float apart = 3.0f * pixel_size_ * h.t;
+    const std::size_t around[4] = {x > 0 ? pixel - 1 : pixel, x + 1 < w ? pixel + 1 : pixel, y > 0 ? pixel - w : pixel,
+                                   y + 1 < h_rows ? pixel + w : pixel};
+    for (const std::size_t q : around) {
+      if (q == pixel) continue;
+      const std::size_t j = ray_of_pixel_[q];
+      const Hit& o = hits_[j];
+      if (!o.valid()) return true;
+      if (o.t < h.t) continue;  // the neighbour is nearer: the line goes there
+      if (o.instance_id != h.instance_id) return true;
+      if (o.prim_id == h.prim_id) continue;
+      if (glm::dot(n, normal_[j]) < cos_edge) return true;
+      if (std::abs(glm::dot(n, primary_[j].origin + o.t * primary_[j].dir - p)) > apart) return true;
+    }
+    return false;
+  };
 
   // Shade: sky for misses, ambient (brighter towards +y) plus Lambert.
   RgbImage image{settings_.width, settings_.height, std::vector<std::uint8_t>(n * 3)};
@@ -149,13 +236,14 @@ RgbImage DemoRenderer::render(FrameStats& stats) {
       if (!h.valid()) {
         colour = sky(primary_[i].dir);
       } else {
-        const glm::vec3 nrm = facingNormal(h, primary_[i]);
+        const glm::vec3& nrm = normal_[i];
         const float ambient = 0.12f + 0.14f * (0.5f + 0.5f * nrm.y);
         const glm::vec3 base =
             h.instance_id < colour_of_node_.size() ? colour_of_node_[h.instance_id] : glm::vec3(1.0f, 0.0f, 1.0f);
         colour = base * (ambient + 0.85f * direct[i]);
         // The highlighted part: pulled towards a bright cyan that no palette colour is close to.
         if (h.instance_id == settings_.highlight) colour = glm::mix(colour, glm::vec3(0.1f, 0.85f, 1.0f), 0.55f);
+        if (settings_.edges && onEdge(i)) colour = glm::mix(colour, glm::vec3(0.01f), 0.8f);
       }
       for (int c = 0; c < 3; ++c) image.pixels[pixel_of_[i] * 3 + c] = toSrgb8(colour[c]);
     }

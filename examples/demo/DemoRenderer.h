@@ -28,6 +28,11 @@ struct RenderSettings {
   glm::vec3 to_light{-0.35f, 1.0f, 0.45f};
   /// An instance node drawn tinted (a selection or the part under the cursor); kInvalidNode: none.
   NodeId highlight = kInvalidNode;
+  /// Feature edges drawn as dark lines, found on the image's hits (the nearer pixel of two
+  /// neighbours whose hits lie on different instances, on faces whose normals differ by more than
+  /// edge_angle_deg, or on surfaces apart in depth), silhouettes against the sky included.
+  bool edges = false;
+  double edge_angle_deg = 30.0;  ///< degrees, as SceneTracer's pick feature angle
 };
 
 /// Figures of one frame. Times are wall-clock milliseconds of the batch queries alone.
@@ -61,6 +66,8 @@ class DemoRenderer {
                std::uint32_t row_end);
   /// The tinted instance of the next frames (kInvalidNode: none).
   void setHighlight(NodeId instance) { settings_.highlight = instance; }
+  /// Whether the next frames draw feature edges (RenderSettings::edges).
+  void setEdges(bool edges) { settings_.edges = edges; }
 
   /// Traces and shades the scene as of the graph's last commit.
   [[nodiscard]] RgbImage render(FrameStats& stats);
@@ -79,8 +86,15 @@ class DemoRenderer {
   std::vector<Ray> shadow_;  ///< towards the light, for the lit pixels listed in shadow_pixel_
   std::vector<std::size_t> shadow_pixel_;
   std::vector<std::uint8_t> blocked_;
+  std::vector<glm::vec3> normal_;          ///< per primary ray: the hit's unit normal facing the viewer
   std::vector<float> direct_;              ///< light arriving per primary ray (n.l where the shadow ray is free)
   std::vector<glm::vec3> colour_of_node_;  ///< base colour per node id (instances of the last commit)
+  /// Width of a pixel at unit distance along the view direction (the edges' depth test).
+  float pixel_size_ = 0.0f;
+  // The view the rays were made for (setView skips remaking them for the same one).
+  bool view_valid_ = false;
+  PinholeCamera view_camera_;
+  std::uint32_t view_height_ = 0, view_row_begin_ = 0;
 };
 
 }  // namespace duplex::demo

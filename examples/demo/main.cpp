@@ -276,6 +276,9 @@ int main(int argc, char** argv) {
       const auto t0 = Clock::now();
       tracer.emplace(*doc.graph);
       top_build_ms = msSince(t0);
+      // The tolerance picks' feature-edge indices now, so that the first frame's pick does not
+      // build them (its pick_ms would count it).
+      tracer->preparePicking(opt.pick.feature_angle_deg);
     });
     duplex::SceneGraph& graph = *doc.graph;
     if (graph.visibleInstances().empty())

@@ -33,6 +33,8 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 constexpr std::uint32_t kStripPixels = 1u << 20;
 // Renderers kept for reuse: as many as frames are traced at once (the server's render pool).
 constexpr std::size_t kPooledRenderers = 2;
+// Picks count the edges of CAD parts' design, not those of their tessellation (as the demo).
+constexpr double kPickFeatureAngleDeg = 30.0;
 
 [[noreturn]] void refuse(const std::string& message) { throw RequestError(message); }
 
@@ -251,6 +253,8 @@ ViewSession::ViewSession(const std::filesystem::path& scene, int threads)
     if (node >= hit_ids_.size()) hit_ids_.resize(static_cast<std::size_t>(node) + 1, kInvalidId);
     hit_ids_[node] = ids.of(node);
   }
+  // The picks' feature-edge indices now, so that the first hover over a large part does not wait.
+  arena_->execute([&] { scene_->tracer().preparePicking(kPickFeatureAngleDeg); });
 }
 
 ViewSession::~ViewSession() {
@@ -372,6 +376,12 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
     if (!id) refuse("highlight: no node at path " + body["highlight"].dump());
     highlight = *id;
   }
+  // "edges" (default true): feature edges and silhouettes drawn as lines.
+  bool edges = true;
+  if (body.contains("edges") && !body["edges"].is_null()) {
+    if (!body["edges"].is_boolean()) refuse("edges: expected true or false");
+    edges = body["edges"].get<bool>();
+  }
   frame.commit = g.commitCount();
   // "sensors": true draws the last sensor run's maps on the sensors' surfaces.
   std::vector<SensorOverlay> overlays;
@@ -402,6 +412,7 @@ ViewFrame ViewSession::render(const json& body, bool ids) const {
   } give_back{*this, taken};
   demo::DemoRenderer& renderer = *taken;
   renderer.setHighlight(highlight);
+  renderer.setEdges(edges);
   const std::uint32_t strip_rows = std::max<std::uint32_t>(1, kStripPixels / cam.width);
   for (std::uint32_t r0 = 0; r0 < cam.height; r0 += strip_rows) {
     const std::uint32_t r1 = std::min(cam.height, r0 + strip_rows);
@@ -434,11 +445,12 @@ std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const Sensor
   std::vector<SensorOverlay> out;
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];
-    if (s.shape != SensorShape::Rectangle && s.shape != SensorShape::Disk) continue;  // planar maps only
+    if (s.shape == SensorShape::FarField) continue;  // no surface: a polar plot on the page
     SensorOverlay o;
     const SensorInstance& inst = scene.sensors()[k];
     o.object_from_world = inst.world_from_object.inverse();
     o.disk = s.shape == SensorShape::Disk;
+    if (s.shape == SensorShape::Sphere) o.sphere = inst.object;
     o.width = inst.object->spec().width;
     o.height = inst.object->spec().height;
     o.nx = s.nx;
@@ -454,9 +466,9 @@ std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const Sensor
 
 void drawOverlays(const std::vector<SensorOverlay>& overlays, const ViewCamera& cam, const demo::DemoRenderer& renderer,
                   std::uint32_t r0, std::uint32_t r1, demo::RgbImage& image) {
-  // Per pixel, the nearest sensor plane the primary ray crosses before its hit (sensors never block
-  // rays, so the frame shows what lies behind them): its bin's irradiance in false colour, 75%
-  // over the shaded pixel.
+  // Per pixel, the nearest sensor surface the primary ray crosses before its hit (sensors never
+  // block rays, so the frame shows what lies behind them): its bin's irradiance in false colour,
+  // 75% over the shaded pixel.
   tbb::parallel_for(r0, r1, [&](std::uint32_t y) {
     for (std::uint32_t x = 0; x < cam.width; ++x) {
       const Hit& h = renderer.hitOfPixel(static_cast<std::size_t>(y - r0) * cam.width + x);
@@ -466,6 +478,21 @@ void drawOverlays(const std::vector<SensorOverlay>& overlays, const ViewCamera& 
       for (const SensorOverlay& o : overlays) {
         const glm::dvec3 org = o.object_from_world.point(cam.camera.eye);
         const glm::dvec3 d = o.object_from_world.linear * dir;
+        if (o.sphere) {
+          // The first crossing in front of the eye of the sphere |p| = width / 2 (t in units of the
+          // world direction, as the hit's: the object-space ray is its image).
+          const double r = 0.5 * o.width, a = glm::dot(d, d), b = glm::dot(org, d);
+          const double disc = b * b - a * (glm::dot(org, org) - r * r);
+          if (!(disc > 0.0)) continue;
+          const double root = std::sqrt(disc), t0 = (-b - root) / a, t1 = (-b + root) / a;
+          const double t = t0 > 0.0 ? t0 : t1;
+          if (!(t > 0.0 && t < best)) continue;
+          const std::uint32_t bin = o.sphere->sphereBinAt(glm::normalize(org + t * d));
+          if (bin >= o.values.size()) continue;
+          best = t;
+          value = o.values[bin] / o.max;
+          continue;
+        }
         if (!(std::abs(d.z) > 0.0)) continue;
         const double t = -org.z / d.z;
         if (!(t > 0.0 && t < best)) continue;
@@ -491,7 +518,7 @@ json ViewSession::pick(const json& body) const {
   const double x = number(member(body, "request body", "x"), "x");
   const double y = number(member(body, "request body", "y"), "y");
   PickOptions options;
-  options.feature_angle_deg = 30.0;  // CAD parts: their design edges, not the tessellation's (as the demo)
+  options.feature_angle_deg = kPickFeatureAngleDeg;
   if (body.contains("radius_px")) options.radius_px = number(body["radius_px"], "radius_px");
   if (options.radius_px < 0.0 || options.radius_px > 1000.0)
     refuse("radius_px: expected pixels in [0, 1000], got " + std::to_string(options.radius_px));

@@ -57,18 +57,20 @@ inline constexpr std::uint32_t kMaxImageSide = 8192;
 /// a field of view outside (0, 180) degrees, eye == target, or up parallel to the view direction.
 [[nodiscard]] ViewCamera readCamera(const nlohmann::json& value, const std::string& what);
 
-/// A planar sensor's map from the last run, to draw on its surface in frames (object space: the
-/// sensor's plane z = 0, centred, width x height, bins row-major with x fastest).
+/// A sensor's map from the last run, to draw on its surface in frames (object space: a flat
+/// sensor's plane z = 0, centred, width x height, bins row-major with x fastest; a sphere of
+/// diameter width centred at the origin, bins by outward normal as SensorObject::sphereBinAt).
 struct SensorOverlay {
   Affine object_from_world;
   bool disk = false;
+  std::shared_ptr<const SensorObject> sphere;  ///< a sphere sensor (its bins); null for flat ones
   double width = 1.0, height = 1.0;
   std::uint32_t nx = 1, ny = 1;
   std::vector<double> values;  ///< irradiance per bin
   double max = 0.0;            ///< the largest finite value (> 0)
 };
 
-/// The planar (rectangle and disk) sensors' maps of a run's results on `scene`.
+/// The maps of a run's results on `scene` of the sensors with a surface (rectangles, disks, spheres).
 [[nodiscard]] std::vector<SensorOverlay> sensorOverlays(const SensorScene& scene, const SensorRunResults& r);
 
 /// Draws `overlays` into rows [r0, r1) of `image` (the frame of `cam`) where the primary ray of

@@ -1,5 +1,7 @@
 #include "duplex/scenegraph/SceneTracer.h"
 
+#include "FeatureEdges.h"
+
 #include "duplex/accel/Error.h"
 #include "duplex/accel/Log.h"
 #include "duplex/accel/WriterPreferringMutex.h"
@@ -31,8 +33,50 @@ struct SceneTracer::Impl {
   SceneGraph::ObserverId observer = 0;
   double last_update_ms = 0.0;
   std::atomic<bool> packets{true};  // batch queries trace packets (setBatchPackets)
+  // The object of each instance in the top level, by node id (written under `mutex` alone): what
+  // tolerance picks look up feature edges for.
+  std::vector<std::shared_ptr<const Object>> object_of;
+  // Feature edges per object and feature angle, built on first use. An entry keeps only a weak
+  // reference, so that a replaced or deformed object is freed; its address may then be reused,
+  // which the weak reference tells apart.
+  struct FeatureEntry {
+    const Object* object;
+    std::weak_ptr<const Object> alive;
+    double feature_angle_deg;
+    std::shared_ptr<const FeatureEdges> edges;
+  };
+  std::mutex feature_mutex;
+  std::vector<FeatureEntry> features;
 
   explicit Impl(const TopLevelConfig& config) : top(config) {}
+
+  void setObject(NodeId id, std::shared_ptr<const Object> object) {
+    if (id >= object_of.size()) object_of.resize(id + 1);
+    object_of[id] = std::move(object);
+  }
+  // The feature edges of instance id's object (nullptr: none to pick). The caller holds `mutex`.
+  std::shared_ptr<const FeatureEdges> featureEdges(NodeId id, double feature_angle_deg) {
+    if (id >= object_of.size() || !object_of[id]) return nullptr;
+    return featureEdgesOf(object_of[id], feature_angle_deg);
+  }
+  std::shared_ptr<const FeatureEdges> featureEdgesOf(const std::shared_ptr<const Object>& object,
+                                                     double feature_angle_deg) {
+    {
+      std::lock_guard lock(feature_mutex);
+      for (const FeatureEntry& e : features)
+        if (e.object == object.get() && e.feature_angle_deg == feature_angle_deg && e.alive.lock() == object)
+          return e.edges;
+    }
+    // Built outside the cache's lock (a large mesh takes a while; other objects' picks go on). Two
+    // picks may build the same one at once: both results are equal, the first stored wins.
+    std::shared_ptr<const FeatureEdges> built = FeatureEdges::build(*object, feature_angle_deg);
+    std::lock_guard lock(feature_mutex);
+    std::erase_if(features, [](const FeatureEntry& e) { return e.alive.expired(); });
+    for (const FeatureEntry& e : features)
+      if (e.object == object.get() && e.feature_angle_deg == feature_angle_deg) return e.edges;
+    features.push_back({object.get(), object, feature_angle_deg, built});
+    return built;
+  }
 };
 
 namespace {
@@ -55,6 +99,7 @@ SceneTracer::SceneTracer(SceneGraph& graph, const TopLevelConfig& config)
   std::vector<InstanceDesc> instances;
   for (const NodeId id : graph.visibleInstances()) instances.push_back(describeInstance(graph, id));
   impl_->top.build(instances);
+  for (const InstanceDesc& d : instances) impl_->setObject(d.id, d.object);
   Impl* impl = impl_.get();
   SceneGraph* g = &graph_;
   impl_->observer = graph_.subscribe([impl, g](const ChangeSet& changes) {
@@ -63,15 +108,20 @@ SceneTracer::SceneTracer(SceneGraph& graph, const TopLevelConfig& config)
     std::string failures;
     // Disappeared first, so that nothing is both removed and set.
     // (An instance left out earlier, see below, is not in the top level.)
-    for (const NodeId id : changes.disappeared)
+    for (const NodeId id : changes.disappeared) {
       if (impl->top.contains(id)) impl->top.remove(id);
+      impl->setObject(id, nullptr);
+    }
     auto set = [&](NodeId id) {
       try {
-        impl->top.set(describeInstance(*g, id));
+        const InstanceDesc d = describeInstance(*g, id);
+        impl->top.set(d);
+        impl->setObject(id, d.object);
       } catch (const Error& e) {
         // A world transform can turn non-finite or singular as a product of valid local ones.
         failures += std::string(failures.empty() ? "" : "; ") + g->path(id) + ": " + e.what();
         if (impl->top.contains(id)) impl->top.remove(id);
+        impl->setObject(id, nullptr);
       }
     };
     for (const NodeId id : changes.appeared) set(id);
@@ -460,13 +510,8 @@ bool closerOnScreen(const ElementCandidate& a, const ElementCandidate& b) {
   if (a.distance_px != b.distance_px) return a.distance_px < b.distance_px;
   if (a.depth != b.depth) return a.depth < b.depth;
   if (a.instance != b.instance) return a.instance < b.instance;
-  return a.vertices < b.vertices;
-}
-
-glm::dvec3 unitNormal(const InstanceTriangle& t) {
-  const glm::dvec3 n = glm::cross(t.position_ws[1] - t.position_ws[0], t.position_ws[2] - t.position_ws[0]);
-  const double len = glm::length(n);
-  return len > 0.0 ? n / len : n;
+  if (a.vertices != b.vertices) return a.vertices < b.vertices;
+  return a.prim_id < b.prim_id;
 }
 
 }  // namespace
@@ -543,44 +588,28 @@ ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, dou
   };
 
   if (r > 0.0 && (options.vertices || options.edges)) {
-    const std::vector<InstanceTriangle> tris =
-        top.trianglesInRegion(frustumPlanes(camera, px - r, py - r, px + r, py + r, width, height), options.mask);
-    // Each candidate triangle's corners on screen, once (CAD parts give thousands of long slivers
-    // through a small pick frustum, each with all three edges near the cursor).
-    struct Corner {
-      glm::dvec2 px{0.0};
-      double z = 0.0;  // depth along forward; the pixel is valid only for z > 0
-    };
-    std::vector<std::array<Corner, 3>> corners(tris.size());
-    for (std::size_t i = 0; i < tris.size(); ++i)
-      for (int k = 0; k < 3; ++k) {
-        Corner& c = corners[i][k];
-        c.z = screen.depth(tris[i].position_ws[k]);
-        if (c.z > 0.0) c.px = screen.pixel(tris[i].position_ws[k]);
-      }
-    // The near edges: those whose projection comes within r of the cursor, each with its point
-    // nearest the cursor on screen. An edge is listed once per triangle around it; a triangle with
-    // an edge meeting the pick frustum meets it too, so all of an edge's triangles are here.
+    // The instances whose boxes meet the pick frustum, and in each the feature edges that meet it
+    // (the object's edge index, object space): the only edges that can come within r of the cursor.
+    const std::vector<glm::dvec4> planes = frustumPlanes(camera, px - r, py - r, px + r, py + r, width, height);
+    const ConvexRegion region(planes);
+    // A near edge: its projection comes within r of the cursor. Ends as the object gives them
+    // (a: the lower vertex index), their depths along forward, their pixels where in front of the eye.
     struct NearEdge {
-      std::uint64_t instance_and_low;  // instance id << 32 | the lower vertex index: the sort key
-      std::uint32_t high;              // the higher vertex index
-      std::uint32_t triangle;          // index into tris
-      double s;                        // where along the projected edge (from its lower vertex) it is nearest
-      double d;                        // the distance there, pixels
-      [[nodiscard]] bool sameEdge(const NearEdge& o) const {
-        return instance_and_low == o.instance_and_low && high == o.high;
-      }
+      std::uint32_t instance, low, high, prim;
+      glm::dvec3 a, b;
+      double za, zb;
+      glm::dvec2 sa{0.0}, sb{0.0};
+      double s = 0.0;  // where along the projected (clipped) edge it is nearest the cursor
+      double d = 0.0;  // the distance there, pixels
     };
-    // The segment of triangle t's edge from vertex `from` to vertex `to` (corner indices) that lies
-    // in front of the eye, with its depths and pixels; false when none does.
+    // The part of [a, b] in front of the eye with its depths and pixels; false when none is.
     struct Segment {
       glm::dvec3 a, b;
       double za, zb;
       glm::dvec2 sa, sb;
     };
-    const auto segment = [&](std::uint32_t t, int from, int to, Segment& out) {
-      out = {tris[t].position_ws[from], tris[t].position_ws[to], corners[t][from].z,
-             corners[t][to].z,          corners[t][from].px,     corners[t][to].px};
+    const auto segment = [&](const NearEdge& e, Segment& out) {
+      out = {e.a, e.b, e.za, e.zb, e.sa, e.sb};
       if (out.za > 0.0 && out.zb > 0.0) return true;
       // Only the part in front of the eye projects; cut a little in front of the eye plane.
       const double z_min = 1e-9 * std::max(std::abs(out.za), std::abs(out.zb));
@@ -597,58 +626,38 @@ ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, dou
       return true;
     };
     std::vector<NearEdge> near;
-    near.reserve(3 * tris.size());
-    for (std::uint32_t i = 0; i < tris.size(); ++i) {
-      const InstanceTriangle& t = tris[i];
-      for (int k = 0; k < 3; ++k) {
-        // Oriented from the lower vertex index, so that both triangles of an edge measure alike.
-        int from = k, to = (k + 1) % 3;
-        if (t.vertex[from] > t.vertex[to]) std::swap(from, to);
+    std::vector<std::uint32_t> found_edges;
+    for (const std::uint32_t id : top.instancesInRegion(planes, options.mask, RegionMode::Boxes)) {
+      const std::shared_ptr<const FeatureEdges> features = impl_->featureEdges(id, options.feature_angle_deg);
+      if (!features || features->size() == 0) continue;
+      const Affine world_from_object = top.objectFromWorld(id).inverse();
+      found_edges.clear();
+      features->query(region.transformed(world_from_object), found_edges);
+      for (const std::uint32_t i : found_edges) {
+        const FeatureEdges::Edge& edge = features->edge(i);
+        NearEdge e{id,
+                   edge.low,
+                   edge.high,
+                   edge.prim,
+                   world_from_object.point(glm::dvec3(edge.p[0])),
+                   world_from_object.point(glm::dvec3(edge.p[1])),
+                   0.0,
+                   0.0};
+        e.za = screen.depth(e.a);
+        e.zb = screen.depth(e.b);
+        if (e.za > 0.0) e.sa = screen.pixel(e.a);
+        if (e.zb > 0.0) e.sb = screen.pixel(e.b);
         Segment g;
-        if (!segment(i, from, to, g)) continue;
+        if (!segment(e, g)) continue;
         const glm::dvec2 ab = g.sb - g.sa;
         const double len2 = glm::dot(ab, ab);
-        const double s = len2 > 0.0 ? std::clamp(glm::dot(cursor - g.sa, ab) / len2, 0.0, 1.0) : 0.0;
-        const double d = glm::length(g.sa + s * ab - cursor);
-        if (!(d <= r)) continue;
-        near.push_back({(std::uint64_t{t.instance_id} << 32) | t.vertex[from], t.vertex[to], i, s, d});
+        e.s = len2 > 0.0 ? std::clamp(glm::dot(cursor - g.sa, ab) / len2, 0.0, 1.0) : 0.0;
+        e.d = glm::length(g.sa + e.s * ab - cursor);
+        if (e.d <= r) near.push_back(e);
       }
-    }
-    // The 3D point a near edge shows at its nearest screen point (perspective: 1/depth is linear
-    // along the projected segment).
-    const auto edgeCandidate = [&](const NearEdge& e) {
-      const InstanceTriangle& t = tris[e.triangle];
-      const int from = t.vertex[0] == static_cast<std::uint32_t>(e.instance_and_low)   ? 0
-                       : t.vertex[1] == static_cast<std::uint32_t>(e.instance_and_low) ? 1
-                                                                                       : 2;
-      const int to = t.vertex[0] == e.high ? 0 : (t.vertex[1] == e.high ? 1 : 2);
-      Segment g;
-      (void)segment(e.triangle, from, to, g);
-      const double u = e.s * g.za / ((1.0 - e.s) * g.zb + e.s * g.za);
-      const glm::dvec3 p = g.a + u * (g.b - g.a);
-      return ElementCandidate{
-          t.instance_id, t.prim_id, {t.vertex[from], t.vertex[to]}, p, e.d, glm::length(p - camera.eye)};
-    };
-    // The feature filter: an edge's triangles side by side, one entry kept per feature edge.
-    if (options.feature_angle_deg > 0.0) {
-      std::sort(near.begin(), near.end(), [](const NearEdge& x, const NearEdge& y) {
-        if (x.instance_and_low != y.instance_and_low) return x.instance_and_low < y.instance_and_low;
-        return x.high != y.high ? x.high < y.high : x.triangle < y.triangle;
-      });
-      const double cos_feature = std::cos(options.feature_angle_deg * std::numbers::pi / 180.0);
-      std::size_t kept = 0;
-      for (std::size_t i = 0; i < near.size();) {
-        std::size_t j = i + 1;
-        while (j < near.size() && near[j].sameEdge(near[i])) ++j;
-        const bool feature = j - i != 2 || glm::dot(unitNormal(tris[near[i].triangle]),
-                                                    unitNormal(tris[near[i + 1].triangle])) < cos_feature;
-        if (feature) near[kept++] = near[i];
-        i = j;
-      }
-      near.resize(kept);
     }
     // Candidates in screen-distance order, built as a heap: the first visible one is usually among
-    // the first few, so a full sort of thousands would be wasted.
+    // the first few, so a full sort would be wasted.
     const auto later = [](const ElementCandidate& x, const ElementCandidate& y) { return closerOnScreen(y, x); };
     const auto firstVisible = [&](std::vector<ElementCandidate>& found) -> const ElementCandidate* {
       std::make_heap(found.begin(), found.end(), later);
@@ -656,7 +665,7 @@ ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, dou
       for (auto end = found.end(); end != found.begin(); --end) {
         std::pop_heap(found.begin(), end, later);
         const ElementCandidate& c = *(end - 1);
-        // The same element again (from another triangle around it): already tested.
+        // The same element again (from another edge at it): already tested.
         if (last && c.instance == last->instance && c.vertices == last->vertices) continue;
         if (visible(c.point_ws)) return &c;
         last = &c;
@@ -668,25 +677,31 @@ ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, dou
       // A vertex within r of the cursor makes every edge at it a near edge: the ends of the
       // (feature) near edges are all the vertices that can count.
       std::vector<ElementCandidate> found;
-      for (const NearEdge& e : near) {
-        const InstanceTriangle& t = tris[e.triangle];
-        for (int k = 0; k < 3; ++k) {
-          if (t.vertex[k] != static_cast<std::uint32_t>(e.instance_and_low) && t.vertex[k] != e.high) continue;
-          const Corner& c = corners[e.triangle][k];
-          if (!(c.z > 0.0)) continue;
-          const double d = glm::length(c.px - cursor);
+      for (const NearEdge& e : near)
+        for (int k = 0; k < 2; ++k) {
+          const double z = k == 0 ? e.za : e.zb;
+          if (!(z > 0.0)) continue;
+          const double d = glm::length((k == 0 ? e.sa : e.sb) - cursor);
           if (!(d <= r)) continue;
-          const glm::dvec3& p = t.position_ws[k];
-          found.push_back({t.instance_id, t.prim_id, {t.vertex[k], kInvalidId}, p, d, glm::length(p - camera.eye)});
+          const glm::dvec3& p = k == 0 ? e.a : e.b;
+          found.push_back(
+              {e.instance, e.prim, {k == 0 ? e.low : e.high, kInvalidId}, p, d, glm::length(p - camera.eye)});
         }
-      }
       if (const ElementCandidate* c = firstVisible(found)) return finish(PickElement::Vertex, *c);
     }
 
     if (options.edges) {
+      // Each near edge's point nearest the cursor on screen (perspective: 1/depth is linear along
+      // the projected segment).
       std::vector<ElementCandidate> found;
       found.reserve(near.size());
-      for (const NearEdge& e : near) found.push_back(edgeCandidate(e));
+      for (const NearEdge& e : near) {
+        Segment g;
+        (void)segment(e, g);
+        const double u = e.s * g.za / ((1.0 - e.s) * g.zb + e.s * g.za);
+        const glm::dvec3 p = g.a + u * (g.b - g.a);
+        found.push_back({e.instance, e.prim, {e.low, e.high}, p, e.d, glm::length(p - camera.eye)});
+      }
       if (const ElementCandidate* c = firstVisible(found)) return finish(PickElement::Edge, *c);
     }
   }
@@ -705,6 +720,20 @@ ElementPick SceneTracer::pickElement(const PinholeCamera& camera, double px, dou
   pick.point_ws = h.position_ws;
   pick.depth = glm::length(h.position_ws - camera.eye);
   return pick;
+}
+
+void SceneTracer::preparePicking(double feature_angle_deg) const {
+  if (!(feature_angle_deg >= 0.0 && feature_angle_deg < 180.0))
+    throw InvalidArgument("SceneTracer::preparePicking: feature_angle_deg " + std::to_string(feature_angle_deg) +
+                          " (must lie in [0, 180))");
+  std::shared_lock lock(impl_->mutex);
+  std::vector<std::shared_ptr<const Object>> objects;
+  for (const std::shared_ptr<const Object>& o : impl_->object_of)
+    if (o) objects.push_back(o);
+  std::sort(objects.begin(), objects.end());
+  objects.erase(std::unique(objects.begin(), objects.end()), objects.end());
+  tbb::parallel_for(std::size_t{0}, objects.size(),
+                    [&](std::size_t i) { (void)impl_->featureEdgesOf(objects[i], feature_angle_deg); });
 }
 
 std::vector<NodeId> SceneTracer::selectRectangle(const PinholeCamera& camera, double x0, double y0, double x1,

@@ -20,9 +20,11 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <optional>
 #include <random>
+#include <set>
 #include <tuple>
 #include <vector>
 
@@ -265,19 +267,48 @@ TEST_P(SceneTracerPick, FeatureAngleKeepsOnlyDesignEdges) {
   EXPECT_EQ(p.instance, ball);
 }
 
-TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
-  const ObjectId sphere = add("sphere", icosphere(1));
-  const ObjectId box = add("box", boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f)));
-  std::mt19937_64 rng(21);
-  for (int i = 0; i < 24; ++i) graph.addInstance(kRootNode, i % 2 ? sphere : box, randomPlacement(rng, 10.0));
-  graph.commit();
-  SceneTracer tracer(graph);
-  const PinholeCamera cam = PinholeCamera::looking_at_box(tracer.bounds());
+/// The feature edges of every visible instance's mesh as PickOptions::feature_angle_deg defines
+/// them, by brute force over the object's own (object-space) triangles: keys (instance, low, high).
+std::set<std::tuple<NodeId, std::uint32_t, std::uint32_t>> featureEdges(const SceneGraph& g, double feature_angle_deg) {
+  std::set<std::tuple<NodeId, std::uint32_t, std::uint32_t>> out;
+  for (const NodeId id : g.visibleInstances()) {
+    const auto* mesh_object = dynamic_cast<const MeshObject*>(g.library().get(g.node(id).object).get());
+    if (!mesh_object) continue;
+    const TriangleMesh& m = mesh_object->mesh();
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<glm::dvec3>> faces;
+    for (std::uint32_t t = 0; t < m.triangleCount(); ++t) {
+      if (!m.isValid(t)) continue;
+      const auto& v = m.triangles()[t];
+      const glm::dvec3 a(m.positions()[v[0]]), b(m.positions()[v[1]]), c(m.positions()[v[2]]);
+      const glm::dvec3 n = glm::normalize(glm::cross(b - a, c - a));
+      for (int k = 0; k < 3; ++k) faces[{std::min(v[k], v[(k + 1) % 3]), std::max(v[k], v[(k + 1) % 3])}].push_back(n);
+    }
+    for (const auto& [edge, normals] : faces) {
+      const bool feature = feature_angle_deg == 0.0 || normals.size() != 2 ||
+                           std::acos(std::clamp(glm::dot(normals[0], normals[1]), -1.0, 1.0)) >
+                               feature_angle_deg * std::numbers::pi / 180.0;
+      if (feature) out.insert({id, edge.first, edge.second});
+    }
+  }
+  return out;
+}
+
+/// 150 random picks with radius r against a screen-space brute force over every triangle (vertices
+/// within r by screen distance and depth, the first visible one; then the nearest visible edge;
+/// then the face under the cursor), only feature edges and their ends counting when
+/// feature_angle_deg > 0. Counts the kinds found.
+void expectRandomPicksAgree(const SceneTracer& tracer, const SceneGraph& graph, const PinholeCamera& cam,
+                            double feature_angle_deg, std::mt19937_64& rng, int& vertices, int& edges, int& faces) {
+  const auto features = featureEdges(graph, feature_angle_deg);
+  const auto isFeature = [&](NodeId id, std::uint32_t a, std::uint32_t b) {
+    return features.count({id, std::min(a, b), std::max(a, b)}) > 0;
+  };
+  PickOptions options{3.0};
+  options.feature_angle_deg = feature_angle_deg;
   const std::vector<WorldTriangle> tris = worldTriangles(graph);
-  const double r = 3.0;
+  const double r = options.radius_px;
   std::uniform_real_distribution<double> ux(0.0, kW), uy(0.0, kH), jitter(-3.0, 3.0), u01(0.0, 1.0);
   std::uniform_int_distribution<std::size_t> pick_tri(0, tris.size() - 1);
-  int vertices = 0, edges = 0, faces = 0;
   for (int q = 0; q < 150; ++q) {
     // A third of the cursors near a projected vertex, a third inside a projected triangle, a
     // third anywhere.
@@ -297,6 +328,7 @@ TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
     std::vector<Cand> vc, ec;
     for (const WorldTriangle& t : tris)
       for (int k = 0; k < 3; ++k) {
+        if (!isFeature(t.instance, t.v[k], t.v[(k + 1) % 3])) continue;
         const Projection a = project(cam, t.p[k]), b = project(cam, t.p[(k + 1) % 3]);
         if (a.z <= 0 || b.z <= 0) continue;
         const double dv = glm::length(a.px - c);
@@ -319,7 +351,7 @@ TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
       want.vertex = std::get<3>(v);
       break;
     }
-    const ElementPick got = tracer.pickElement(cam, c.x, c.y, kW, kH, PickOptions{r});
+    const ElementPick got = tracer.pickElement(cam, c.x, c.y, kW, kH, options);
     if (want.kind == PickElement::Vertex) {
       ASSERT_EQ(got.kind, PickElement::Vertex) << "cursor " << c.x << ", " << c.y;
       EXPECT_EQ(got.instance, want.instance);
@@ -372,9 +404,46 @@ TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
       ++faces;
     }
   }
+}
+
+TEST_P(SceneTracerPick, RandomPicksAgreeWithABruteForceOverEveryTriangle) {
+  const ObjectId sphere = add("sphere", icosphere(1));
+  const ObjectId box = add("box", boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f)));
+  std::mt19937_64 rng(21);
+  for (int i = 0; i < 24; ++i) graph.addInstance(kRootNode, i % 2 ? sphere : box, randomPlacement(rng, 10.0));
+  graph.commit();
+  SceneTracer tracer(graph);
+  int vertices = 0, edges = 0, faces = 0;
+  expectRandomPicksAgree(tracer, graph, PinholeCamera::looking_at_box(tracer.bounds()), 0.0, rng, vertices, edges,
+                         faces);
   EXPECT_GT(vertices, 20);
   EXPECT_GT(edges, 5);
   EXPECT_GT(faces, 5);
+}
+
+// The feature filter through each object's feature-edge index: boxes (diagonals filtered out),
+// coarse and finer spheres (some neighbours above the angle, some below), an open grid (its border
+// counts, its inside does not), under non-uniform scales, against the brute force.
+TEST_P(SceneTracerPick, RandomFeaturePicksAgreeWithABruteForceOverEveryTriangle) {
+  const ObjectId objects[] = {add("box", boxMesh(glm::vec3(-1.0f), glm::vec3(1.0f))), add("ico", icosphere(1)),
+                              add("uv", uvSphere(10, 7)), add("grid", flatGrid(4))};
+  std::mt19937_64 rng(22);
+  for (int i = 0; i < 28; ++i) graph.addInstance(kRootNode, objects[i % 4], randomPlacement(rng, 10.0));
+  graph.commit();
+  SceneTracer tracer(graph);
+  const PinholeCamera cam = PinholeCamera::looking_at_box(tracer.bounds());
+  int vertices = 0, edges = 0, faces = 0;
+  expectRandomPicksAgree(tracer, graph, cam, 30.0, rng, vertices, edges, faces);
+  EXPECT_GT(vertices, 10);
+  EXPECT_GT(edges, 5);
+  EXPECT_GT(faces, 5);
+  // After an edit (a moved instance and a replaced object: a new index, the old one let go).
+  graph.setTransform(graph.visibleInstances().front(), randomPlacement(rng, 10.0));
+  graph.replaceObject(objects[1], buildChecked(std::make_shared<const TriangleMesh>(icosphere(0)), GetParam().config));
+  graph.commit();
+  vertices = edges = faces = 0;
+  expectRandomPicksAgree(tracer, graph, cam, 30.0, rng, vertices, edges, faces);
+  EXPECT_GT(vertices + edges, 10);
 }
 
 TEST_P(SceneTracerPick, RectangleSelectionByGeometryAgreesWithAScreenSpaceReference) {

@@ -14,6 +14,7 @@ Usage: view_browser_check.py DUPLEX_CLI WORK_DIR
        view_browser_check.py DUPLEX_CLI WORK_DIR --screenshot SCENE OUT.png   (a picture of SCENE's page)
 """
 
+import math
 import os
 import re
 import shutil
@@ -49,6 +50,33 @@ def browser():
 def box_translation(server):
     node = next(n for n in server.json("GET", "/api/scene")["nodes"] if n["path"] == "/parts/box")
     return [node["local"][3], node["local"][7], node["local"][11]]
+
+
+def box_local(server):
+    """/parts/box's local transform (row-major 3x4)."""
+    return next(n["local"] for n in server.json("GET", "/api/scene")["nodes"] if n["path"] == "/parts/box")
+
+
+def view_pixel(driver, x, y):
+    """The RGB of pixel (x, y) of the image the page shows in #view (read back through a canvas)."""
+    return driver.execute_script(
+        "const img = document.getElementById('view'), c = document.createElement('canvas');"
+        "c.width = img.naturalWidth; c.height = img.naturalHeight;"
+        "const g = c.getContext('2d'); g.drawImage(img, 0, 0);"
+        "return Array.from(g.getImageData(arguments[0], arguments[1], 1, 1).data).slice(0, 3);", x, y)
+
+
+def edge_pixel(server, camera):
+    """A pixel that the server's feature edges darken most (among those with edge pixels around)."""
+    from demo_check import decode_png
+    w, h = camera["width"], camera["height"]
+    plain, lined = [b"".join(decode_png(server.request("POST", "/api/render", {"camera": camera, "format": "png",
+                                                                            "edges": e})[2])[2])
+                    for e in (False, True)]
+    dark = [sum(plain[3 * i:3 * i + 3]) - sum(lined[3 * i:3 * i + 3]) > 60 for i in range(w * h)]
+    best = max(((sum(dark[(y + dy) * w + x + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)), x, y)
+                for y in range(1, h - 1) for x in range(1, w - 1) if dark[y * w + x]))
+    return best[1], best[2]
 
 
 def frames(driver):
@@ -116,9 +144,9 @@ def main():
         # Selenium 4 offsets are from the element's centre.
         ActionChains(driver).move_to_element_with_offset(box_el, bx - 320, by - 200).perform()
         wait_for(lambda: "/parts/box" in driver.find_element("id", "hover").text, 20, "the hover pick of the box")
+        n = frames(driver)  # before the click: the frame with the selection may be quick
         ActionChains(driver).click().perform()
         wait_for(lambda: driver.find_element("id", "pick").text == "/parts/box", 20, "#pick to show /parts/box")
-        n = frames(driver)
         wait_for(lambda: frames(driver) > n, 20, "the frame with the selection")
         time.sleep(0.3)
         before_png = view.screenshot_as_png
@@ -147,6 +175,48 @@ def main():
         driver.find_element("tag name", "body").send_keys("u")
         wait_for(lambda: box_translation(server) == before, 20, "undo to restore the box")
         driver.save_screenshot(os.path.join(shots, "4_undone.png"))
+
+        # Ctrl-drag turns the selected part (a turntable about the image's up through the grabbed
+        # point, half a degree per pixel): 60 px right give a rotation of about 30 degrees, and
+        # undo takes it back.
+        from selenium.webdriver.common.keys import Keys
+        ActionChains(driver).move_to_element_with_offset(box_el, bx - 320, by - 200).perform()
+        wait_for(lambda: "/parts/box" in driver.find_element("id", "hover").text, 20, "hover before the turn")
+        chain = ActionChains(driver).key_down(Keys.CONTROL).click_and_hold()
+        for _ in range(6):
+            chain = chain.move_by_offset(10, 0).pause(0.05)
+        chain.release().key_up(Keys.CONTROL).perform()
+        wait_for(lambda: box_local(server)[0] != 1.0, 20, "the turn's edit to reach the scene")
+        time.sleep(0.5)  # the last step of the turn
+        m = box_local(server)
+        rows = [m[0:3], m[4:7], m[8:11]]
+        for i in range(3):
+            for j in range(3):
+                d = sum(rows[i][k] * rows[j][k] for k in range(3))
+                expect(abs(d - (i == j)) < 1e-6, f"the turned box's linear part is a rotation: {rows}")
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, (rows[0][0] + rows[1][1] + rows[2][2] - 1) / 2))))
+        expect(20 < angle < 35, f"the box turned by {angle:.1f} degrees for a 60 px Ctrl-drag")
+        driver.save_screenshot(os.path.join(shots, "5_turned.png"))
+        driver.find_element("tag name", "body").send_keys("u")
+        wait_for(lambda: box_local(server)[0] == 1.0 and box_translation(server) == before, 20,
+                 "undo to take the turn back")
+
+        # Feature edges: the page draws them (checkbox #edges, on by default); off, the frame
+        # there is lighter. Read at a pixel the server's edges darken most.
+        ex, ey = edge_pixel(server, camera)
+        ActionChains(driver).move_to_element_with_offset(box_el, 300, 190).perform()  # away from the parts
+        time.sleep(0.8)
+        wait_for(lambda: driver.find_element("id", "view").get_attribute("naturalWidth") == "640", 20,
+                 "a full-resolution frame")
+        with_edges = view_pixel(driver, ex, ey)
+        n = frames(driver)
+        driver.find_element("id", "edges").click()
+        wait_for(lambda: frames(driver) > n, 20, "the frame without edges")
+        time.sleep(0.3)
+        without = view_pixel(driver, ex, ey)
+        driver.save_screenshot(os.path.join(shots, "6_no_edges.png"))
+        expect(sum(without) - sum(with_edges) > 60,
+               f"pixel ({ex}, {ey}): with edges {with_edges}, without {without}: the edges are not drawn")
         logs = [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
         expect(not logs, f"browser console errors: {logs[:3]}")
         print(f"view_browser_check: all checks passed; screenshots in {shots}")

@@ -21,6 +21,7 @@ Usage: view_check.py DUPLEX_CLI WORK_DIR
 """
 
 import json
+import math
 import os
 import socket
 import struct
@@ -92,7 +93,110 @@ def main():
     finally:
         code = server.stop()
     expect(code == 0, f"duplex view exited {code} on SIGTERM")
+    check_sphere_map(cli, work)
     print("view_check: all checks passed")
+
+
+SPHERE_SCENE = {
+    "format": "duplex-scene-v1",
+    "objects": [
+        {"name": "floor", "plane": {"size": 10}, "material": {"type": "lambertian", "reflectance": 0.5}},
+        {"name": "globe", "sensor": {"shape": "sphere", "size": [3, 3], "bins": [12, 8]}},
+    ],
+    "nodes": [
+        {"instance": "floor", "object": "floor"},
+        {"instance": "globe", "object": "globe", "transform": {"translate": [0.5, -0.3, 1.8]}},
+    ],
+    "lights": [{"type": "point", "position": [1, 1, 5], "power": 10}],
+}
+
+
+def check_sphere_map(cli, work):
+    """A sphere sensor's map on its surface: after a run, "sensors": true changes exactly the pixels
+    whose primary ray crosses the sphere (computed here from the camera, up to the rim), in more
+    than one colour (the lit top and the shaded bottom differ)."""
+    server = Server(cli, write_scene(work, SPHERE_SCENE, name="view_sphere_scene.json"))
+    try:
+        camera = dict(server.json("GET", "/api/scene")["rays_camera"], width=W, height=H)
+        viewer_fluxes(server, 20000)
+        plain, mapped = [b"".join(decode_png(server.request("POST", "/api/render", {
+            "camera": camera, "format": "png", "sensors": on})[2])[2]) for on in (False, True)]
+        eye, target, up = camera["eye"], camera["target"], camera["up"]
+        sub = lambda a, b: [a[k] - b[k] for k in range(3)]  # noqa: E731
+        dot = lambda a, b: sum(a[k] * b[k] for k in range(3))  # noqa: E731
+        cross = lambda a, b: [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]  # noqa
+        unit = lambda a: [c / dot(a, a) ** 0.5 for c in a]  # noqa: E731
+        fwd = unit(sub(target, eye))
+        right = unit(cross(fwd, up))
+        upv = cross(right, fwd)
+        half_h = math.tan(math.radians(camera["fov_deg"]) / 2)
+        half_w = half_h * W / H
+        centre, radius = [0.5, -0.3, 1.8], 1.5
+        oc = sub(eye, centre)
+        changed = crossing = rim = 0
+        for y in range(H):
+            for x in range(W):
+                sx = (2 * (x + 0.5) / W - 1) * half_w
+                sy = (1 - 2 * (y + 0.5) / H) * half_h
+                d = unit([fwd[k] + sx * right[k] + sy * upv[k] for k in range(3)])
+                b = dot(oc, d)
+                disc = b * b - (dot(oc, oc) - radius * radius)
+                inside = disc > 0 and -b + disc ** 0.5 > 0
+                near_rim = abs(disc) < 2e-3 * radius * radius
+                i = 3 * (y * W + x)
+                differs = plain[i:i + 3] != mapped[i:i + 3]
+                changed += differs
+                crossing += inside
+                rim += near_rim
+                if not near_rim:
+                    expect(differs == inside, f"pixel ({x}, {y}): crosses the sphere {inside}, map drawn {differs}")
+        expect(crossing > 100, f"the sphere covers {crossing} pixels")
+        colours = {mapped[3 * i:3 * i + 3] for i in range(W * H) if plain[3 * i:3 * i + 3] != mapped[3 * i:3 * i + 3]}
+        expect(len(colours) > 3, f"the sphere's map in {len(colours)} colours")
+    finally:
+        server.stop()
+
+
+def check_edges(server, camera, ids, box_id):
+    """Feature edges in the frame ("edges", default true): what they add is darker pixels, only where a
+    4-neighbour shows another instance, another face or the sky; every hit pixel beside the sky gets
+    one; box pixels among pixels of their own face (its diagonal included) get none."""
+    def rgb(edges):
+        body = {"camera": camera, "format": "png"}
+        if edges is not None:
+            body["edges"] = edges
+        status, _, data = server.request("POST", "/api/render", body)
+        expect(status == 200, f"render with edges={edges}: {status}")
+        return b"".join(decode_png(data)[2])
+
+    plain, lined, default = rgb(False), rgb(True), rgb(None)
+    expect(lined == default, "edges are drawn by default")
+
+    def neighbours(i):
+        x, y = i % W, i // W
+        return [j for j, ok in ((i - 1, x > 0), (i + 1, x + 1 < W), (i - W, y > 0), (i + W, y + 1 < H)) if ok]
+
+    def face(v):  # the box's faces are two triangles each; anything else is its own surface
+        return (v[0], v[1] // 2) if v[0] == box_id else v
+
+    drawn = 0
+    for i in range(W * H):
+        before, after = plain[3 * i:3 * i + 3], lined[3 * i:3 * i + 3]
+        around = [face(ids[j]) for j in neighbours(i)]
+        changed = before != after
+        if changed:
+            drawn += 1
+            expect(sum(after) < sum(before), f"an edge pixel {i} is not darker: {list(before)} -> {list(after)}")
+            expect(any(f != face(ids[i]) for f in around),
+                   f"pixel {i} drawn as an edge with every neighbour on its own surface {face(ids[i])}")
+        if ids[i][0] != 0xFFFFFFFF and any(ids[j][0] == 0xFFFFFFFF for j in neighbours(i)):
+            expect(changed, f"pixel {i} beside the sky is not drawn as an edge")
+        if ids[i][0] == box_id and all(f == face(ids[i]) for f in around):
+            expect(not changed, f"box pixel {i} inside its face drawn as an edge")
+    box_crease = sum(1 for i in range(W * H) if ids[i][0] == box_id and plain[3 * i:3 * i + 3] != lined[3 * i:3 * i + 3]
+                     and any(ids[j][0] == box_id and face(ids[j]) != face(ids[i]) for j in neighbours(i)))
+    expect(box_crease >= 3, f"the box's creases are drawn ({box_crease} pixels)")
+    expect(drawn > 0, "no edge drawn")
 
 
 def check(server, cli, scene_path, work):
@@ -146,6 +250,8 @@ def check(server, cli, scene_path, work):
     box_id = 1  # position of /parts/box among the file's instances (depth-first)
     expect(sum(1 for v in ids if v[0] == box_id) > 20, "the box covers pixels")
     expect(sum(1 for v in ids if v[0] == 0xFFFFFFFF) > 0, "some sky")
+
+    check_edges(server, camera, ids, box_id)
 
     # Pick at a box pixel: the box, its face there; radius 0: faces only.
     bx, by = pixel_of(ids, lambda v: v[0] == box_id)

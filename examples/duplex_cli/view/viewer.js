@@ -99,7 +99,8 @@ async function pumpFrames() {
   const t0 = performance.now();
   try {
     const res = await api("POST", "/api/render",
-      { camera: cameraJson(w, h), format: "jpeg", highlight: state.selected, sensors: $("sensor-overlay").checked });
+      { camera: cameraJson(w, h), format: "jpeg", highlight: state.selected, sensors: $("sensor-overlay").checked,
+        edges: $("edges").checked });
     const blob = await res.blob();
     const url = URL.createObjectURL(blob);
     const img = $("view");
@@ -252,6 +253,36 @@ function dragTo(x, y) {
   sendEdit({ edits: [{ node: d.path, set_transform: m }], group: d.group });
 }
 
+// Affine maps as row-major 3x4 arrays (the interface's form): a after b, and the inverse.
+function compose(a, b) {
+  const out = new Array(12);
+  for (let i = 0; i < 3; i++) {
+    for (let j = 0; j < 4; j++) {
+      out[4 * i + j] = a[4 * i] * b[j] + a[4 * i + 1] * b[4 + j] + a[4 * i + 2] * b[8 + j] + (j === 3 ? a[4 * i + 3] : 0);
+    }
+  }
+  return out;
+}
+function inverseAffine(m) {
+  const l = inv3(lin(m)), t = mv(l, [m[3], m[7], m[11]]);
+  return [l[0][0], l[0][1], l[0][2], -t[0], l[1][0], l[1][1], l[1][2], -t[1], l[2][0], l[2][1], l[2][2], -t[2]];
+}
+
+// A Ctrl-drag of the selected part: turns it about the axis through the grabbed point along the
+// image's up direction (a turntable), 0.5 degree per pixel of horizontal motion. The new world
+// transform is M * world with M that rotation, so local' = local * world^-1 * M * world.
+function rotateTo(x) {
+  const d = state.drag, { u } = frame(state.camera);
+  const a = norm(u), angle = (x - d.x0) * 0.5 * Math.PI / 180, c = Math.cos(angle), s = Math.sin(angle), k = 1 - c;
+  const r = [[c + a[0] * a[0] * k, a[0] * a[1] * k - a[2] * s, a[0] * a[2] * k + a[1] * s],
+             [a[1] * a[0] * k + a[2] * s, c + a[1] * a[1] * k, a[1] * a[2] * k - a[0] * s],
+             [a[2] * a[0] * k - a[1] * s, a[2] * a[1] * k + a[0] * s, c + a[2] * a[2] * k]];
+  const t = sub(d.point, mv(r, d.point));  // the grabbed point stays where it is
+  const m = [r[0][0], r[0][1], r[0][2], t[0], r[1][0], r[1][1], r[1][2], t[1], r[2][0], r[2][1], r[2][2], t[2]];
+  const local = compose(d.local, compose(inverseAffine(d.world), compose(m, d.world)));
+  sendEdit({ edits: [{ node: d.path, set_transform: local }], group: d.group });
+}
+
 // One edit request in flight; a newer one replaces a waiting one (drags send absolute transforms).
 function sendEdit(body) {
   state.pendingEdit = body;
@@ -329,7 +360,7 @@ function setupMouse() {
       if (n && n.local) {
         state.dragGroup += 1;
         state.drag = { path: n.path, local: n.local, world: n.world, point: state.hover.point, x0: x, y0: y,
-          group: `drag-${Date.now()}-${state.dragGroup}` };
+          group: `drag-${Date.now()}-${state.dragGroup}`, rotate: e.ctrlKey || e.metaKey };
         state.mouse.mode = "drag";
       }
     }
@@ -346,7 +377,7 @@ function setupMouse() {
     m.x = x; m.y = y;
     if (!m.moved) return;
     state.lastMove = performance.now();
-    if (m.mode === "drag") { dragTo(x, y); return; }
+    if (m.mode === "drag") { if (state.drag.rotate) rotateTo(x); else dragTo(x, y); return; }
     if (m.mode === "pan") pan(dx, dy); else orbit(dx, dy);
     requestFrame(true);
   });
@@ -597,6 +628,7 @@ async function start() {
   setupSensors();
   $("undo").addEventListener("click", undo);
   $("fit").addEventListener("click", fitAll);
+  $("edges").addEventListener("change", () => requestFrame(false));
   requestFrame(false);
 }
 

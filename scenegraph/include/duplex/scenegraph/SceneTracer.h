@@ -88,7 +88,8 @@ struct PickOptions {
   /// Feature filter, degrees in [0, 180): an edge counts only where its two faces' normals differ
   /// by more than this angle, or where it bounds the mesh (one face) or is shared by more than two;
   /// a vertex only at an end of such an edge. 0: every edge and vertex (the tessellation's own).
-  /// CAD parts read as meshes show their design edges at 20-40 degrees.
+  /// The angle is that of the object's own (object-space) faces, so an instance's scale does not
+  /// change which edges count. CAD parts read as meshes show their design edges at 20-40 degrees.
   double feature_angle_deg = 0.0;
   std::uint32_t mask = 0xFFFFFFFFu;  ///< instances whose mask meets it (also what can hide an element)
 };
@@ -231,6 +232,12 @@ class SceneTracer {
   /// negative or non-finite radius or a feature angle outside [0, 180).
   [[nodiscard]] ElementPick pickElement(const PinholeCamera& camera, double px, double py, std::uint32_t width,
                                         std::uint32_t height, const PickOptions& options = {}) const;
+  /// pickElement() looks vertices and edges up in an index of each object's feature edges (per
+  /// feature angle, object space), built by the first pick that meets the object and kept while
+  /// the object lives. This builds them now, in parallel, for every visible instance's object at
+  /// `feature_angle_deg` (degrees in [0, 180), else InvalidArgument), so that the first picks do
+  /// not wait (an interactive viewer calls it after loading).
+  void preparePicking(double feature_angle_deg) const;
   /// Rectangle selection: the visible instances (mask meeting `mask`, sensors included) selected by
   /// the frustum through the pixel rectangle [x0, x1] x [y0, y1] (continuous pixel coordinates),
   /// sorted by node id. RegionMode::Touching (the default): some of the instance's geometry meets
