@@ -9,6 +9,7 @@
 #include "duplex/accel/Hit.h"
 
 #include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -43,6 +44,15 @@ struct PointQuery {
   /// is at most d * stretch_os in object space, so an object-space distance e means a world
   /// distance of at least e / stretch_os.
   double stretch_os = 1.0;
+  /// Whether world_from_object is a similarity (a rotation, possibly with a reflection, times one
+  /// scale, and a translation; identity included): then world distances are object-space distances
+  /// times scale_ws, and an object may search in object space.
+  bool similarity = false;
+  /// For a similarity, the world length of a unit object-space length.
+  double scale_ws = 1.0;
+  /// For a similarity, +1 or -1: the sign of det(world_from_object), which flips a triangle's
+  /// normal (the cross product of its edges) when the transform reflects.
+  double orientation = 1.0;
 
   /// The query for `point_ws` and an instance with these transforms.
   static PointQuery make(const glm::dvec3& point_ws, const Affine& world_from_object, const Affine& object_from_world) {
@@ -61,6 +71,20 @@ struct PointQuery {
     double row_max = 0.0;
     for (int i = 0; i < 3; ++i) row_max = std::max(row_max, std::abs(g[0][i]) + std::abs(g[1][i]) + std::abs(g[2][i]));
     q.stretch_os = std::sqrt(row_max) * (1.0 + 1e-12) + 1e-300;
+    // A similarity's columns are orthogonal and of one length: w^T w = s^2 I. The tolerance (far
+    // below float rounding of the vertices) lets rotations computed in double count as one.
+    const glm::dmat3& w = world_from_object.linear;
+    const glm::dmat3 ww = glm::transpose(w) * w;
+    const double s2 = ww[0][0];
+    bool similar = s2 > 0.0 && std::isfinite(s2);
+    for (int i = 0; i < 3 && similar; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (std::abs(ww[i][j] - (i == j ? s2 : 0.0)) > 1e-13 * s2) similar = false;
+    if (similar) {
+      q.similarity = true;
+      q.scale_ws = std::sqrt(s2);
+      q.orientation = glm::determinant(w) < 0.0 ? -1.0 : 1.0;
+    }
     return q;
   }
 
