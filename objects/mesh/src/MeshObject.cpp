@@ -680,9 +680,10 @@ bool closestPointSimilar(const WideBvh& bvh, const detail::TriangleBlock4* block
   if (found_block == nullptr) return false;
   best.distance = std::sqrt(best2) * q.scale_ws;
   best.point_ws = q.world_from_object.point(found_point);
-  const glm::dvec3 a(found_block->vertex(found_lane, 0));
-  const glm::dvec3 normal_os = glm::cross(glm::dvec3(found_block->vertex(found_lane, 1)) - a,
-                                          glm::dvec3(found_block->vertex(found_lane, 2)) - a);
+  const glm::dvec3 a(found_block->vertex(found_lane, 0)), b(found_block->vertex(found_lane, 1)),
+      c(found_block->vertex(found_lane, 2));
+  const glm::dvec3 normal_os = glm::cross(b - a, c - a);
+  best.uv = barycentricUv(found_point, a, b, c);
   const glm::dvec3 normal = q.orientation * q.world_from_object.vector(normal_os);
   const double len = glm::length(normal);
   best.normal_ws = len > 0.0 ? normal / len : glm::dvec3(0.0);
@@ -713,6 +714,7 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
       const glm::dvec3 n = glm::cross(v1 - a, v2 - a);
       const double len = glm::length(n);
       best.normal_ws = len > 0.0 ? n / len : glm::dvec3(0.0);
+      best.uv = barycentricUv(c, a, v1, v2);
       best.prim_id = b.prim[k];
       improved = true;
     }

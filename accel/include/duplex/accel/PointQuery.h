@@ -10,6 +10,7 @@
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
+#include <glm/vec2.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -22,8 +23,11 @@ namespace duplex {
 struct ClosestPoint {
   /// World-space distance from the query point; starts at the query's maximum distance.
   double distance = std::numeric_limits<double>::infinity();
-  glm::dvec3 point_ws{0.0};                ///< the point on the surface, world space
-  glm::dvec3 normal_ws{0.0};               ///< unit geometric normal there (meshes: the triangle's), world space
+  glm::dvec3 point_ws{0.0};   ///< the point on the surface, world space
+  glm::dvec3 normal_ws{0.0};  ///< unit geometric normal there (meshes: the triangle's), world space
+  /// Meshes: the point's barycentric coordinates (u, v) on its triangle (a, b, c) in the mesh's
+  /// vertex order, point = (1 - u - v) a + u b + v c; 0 for other objects.
+  glm::dvec2 uv{0.0};
   std::uint32_t prim_id = kInvalidId;      ///< primitive of the object (a triangle); kInvalidId: none found
   std::uint32_t instance_id = kInvalidId;  ///< set by scene queries (objects leave it)
 
@@ -140,6 +144,17 @@ Vec closestPointOnTriangle(const Vec& p, const Vec& a, const Vec& b, const Vec& 
   const T sum = va + vb + vc;
   if (!(sum > zero)) return a;  // degenerate: every region test above failed by rounding
   return a + (vb / sum) * ab + (vc / sum) * ac;
+}
+
+/// The barycentric coordinates (u, v) of p on triangle (a, b, c): p = (1 - u - v) a + u b + v c
+/// for p in the triangle's plane (else those of its projection); (0, 0) for a degenerate triangle.
+inline glm::dvec2 barycentricUv(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  const glm::dvec3 e1 = b - a, e2 = c - a, w = p - a;
+  const double d11 = glm::dot(e1, e1), d12 = glm::dot(e1, e2), d22 = glm::dot(e2, e2);
+  const double w1 = glm::dot(w, e1), w2 = glm::dot(w, e2);
+  const double det = d11 * d22 - d12 * d12;
+  if (!(det != 0.0)) return glm::dvec2(0.0);
+  return {(d22 * w1 - d12 * w2) / det, (d11 * w2 - d12 * w1) / det};
 }
 
 }  // namespace duplex
