@@ -205,6 +205,8 @@ class RaycastingScene:
     def test_occlusions(self, rays, tnear=0.0, tfar=math.inf, nthreads=0):
         """Whether anything meets each ray within [tnear, tfar] (bool, shaped like rays[..., 0])."""
         r = _floats(rays, "rays", 6)
+        if tnear == 0.0 and tfar == math.inf:  # the (..., 6) form already means [0, inf): no copy
+            return self.scene.test_occlusions(r, nthreads=self._threads(nthreads)).view(Array)
         full = np.empty(r.shape[:-1] + (8,), dtype=r.dtype)
         full[..., :6] = r
         full[..., 6] = tnear
@@ -238,12 +240,11 @@ class RaycastingScene:
         (..., 2), "primitive_normals" (..., 3); float32 and uint32. Computed in double."""
         q = _floats(query_points, "query_points", 3)
         c = self.scene.compute_closest_points(q, nthreads=self._threads(nthreads))
-        uvs = self._barycentrics(c["points"], c["instance_ids"], c["primitive_ids"])
         out = {
             "points": c["points"].astype(np.float32),
             "geometry_ids": c["instance_ids"],
             "primitive_ids": c["primitive_ids"],
-            "primitive_uvs": uvs.astype(np.float32),
+            "primitive_uvs": c["primitive_uvs"].astype(np.float32),
             "primitive_normals": c["primitive_normals"].astype(np.float32),
         }
         return _wrap(out)
@@ -305,25 +306,6 @@ class RaycastingScene:
             corners = vertices[triangles[prim_ids[sel]]]  # (k, 3, 3) object space
             out[sel] = corners @ m[:, :3].T + m[:, 3]
         return out
-
-    def _barycentrics(self, points, instance_ids, prim_ids):
-        shape = points.shape[:-1]
-        p = points.reshape(-1, 3)
-        ids = instance_ids.reshape(-1)
-        prims = prim_ids.reshape(-1)
-        uv = np.zeros((len(p), 2))
-        ok = ids != INVALID_ID
-        if ok.any():
-            tri = self._triangles_world(ids[ok], prims[ok])
-            a, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-            w = p[ok] - a
-            d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-            w1, w2 = (w * e1).sum(1), (w * e2).sum(1)
-            det = d11 * d22 - d12 * d12
-            det = np.where(det == 0, 1, det)
-            uv[ok, 0] = (d22 * w1 - d12 * w2) / det
-            uv[ok, 1] = (d11 * w2 - d12 * w1) / det
-        return uv.reshape(shape + (2,))
 
     def _inside(self, query_points, distances, nsamples, nthreads):
         if not isinstance(nsamples, numbers.Integral) or nsamples < 1:

@@ -218,7 +218,8 @@ array broadcasting to points[..., 0] (world units, inclusive). Meshes answer wit
 level sets with their zero crossing; fog volumes and sensors are not surfaces and are ignored.
 Returns a dict: "points" (..., 3 float64), "distances" (float64, +inf when nothing is within
 reach), "instance_ids", "primitive_ids" (uint32, duplex.INVALID_ID when none), "primitive_normals"
-(..., 3 float64, unit, world space).)doc");
+(..., 3 float64, unit, world space), "primitive_uvs" (..., 2 float64: the point's barycentric (u, v)
+on its triangle, point = (1 - u - v) a + u b + v c; 0 for level sets and misses).)doc");
   scene.def(
       "pick",
       [](const PyScene& s, const Vec& eye, const Vec& target, const Vec& up, double fov_deg, std::uint32_t width,

@@ -546,11 +546,13 @@ py::dict PyScene::computeClosestPoints(const PointsArray& points, const Distance
   auto inst = newArray<std::uint32_t>(rows.shape);
   auto prim = newArray<std::uint32_t>(rows.shape);
   auto normals = newArray<double>(withAxis(rows.shape, 3));
+  auto uvs = newArray<double>(withAxis(rows.shape, 2));
   double* op = out_points.mutable_data();
   double* dp = distances.mutable_data();
   std::uint32_t* ip = inst.mutable_data();
   std::uint32_t* pp = prim.mutable_data();
   double* np_ = normals.mutable_data();
+  double* up = uvs.mutable_data();
   shared(mutex_, [&] {
     withThreads(nthreads, [&] {
       std::vector<ClosestPointRequest> requests(rows.rows);
@@ -564,6 +566,7 @@ py::dict PyScene::computeClosestPoints(const PointsArray& points, const Distance
           op[3 * i + k] = ok ? c.point_ws[k] : 0.0;
           np_[3 * i + k] = ok ? c.normal_ws[k] : 0.0;
         }
+        for (int k = 0; k < 2; ++k) up[2 * i + k] = ok ? c.uv[k] : 0.0;
         dp[i] = ok ? c.distance : INFINITY;
         ip[i] = ok ? idOf(c.instance_id) : kInvalidId;
         pp[i] = ok ? c.prim_id : kInvalidId;
@@ -576,6 +579,7 @@ py::dict PyScene::computeClosestPoints(const PointsArray& points, const Distance
   d["instance_ids"] = inst;
   d["primitive_ids"] = prim;
   d["primitive_normals"] = normals;
+  d["primitive_uvs"] = uvs;
   return d;
 }
 

@@ -159,6 +159,13 @@ def test_closest_points_against_brute_force():
     assert np.allclose(np.linalg.norm(got["points"] - points, axis=1), got["distances"], rtol=1e-9, atol=1e-12)
     assert np.allclose(np.linalg.norm(got["primitive_normals"], axis=1), 1.0)
     assert np.all(got["instance_ids"] < 3)
+    # The barycentric (u, v) rebuild each point from its triangle's world corners.
+    t = np.array(transforms)[got["instance_ids"]]
+    corners = np.einsum("nij,nkj->nki", t[:, :3, :3], p32[triangles[got["primitive_ids"]]]) + t[:, None, :3, 3]
+    u, v = got["primitive_uvs"][:, 0], got["primitive_uvs"][:, 1]
+    rebuilt = (1 - u - v)[:, None] * corners[:, 0] + u[:, None] * corners[:, 1] + v[:, None] * corners[:, 2]
+    assert np.allclose(rebuilt, got["points"], rtol=0, atol=1e-9)
+    assert np.all((u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9))
     # A limit: nothing farther than it, ids invalid.
     limited = scene.compute_closest_points(points, max_distance=0.5)
     far = best > 0.5

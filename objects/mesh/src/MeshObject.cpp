@@ -604,7 +604,97 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit, QueryContext&) const { return intersect(ray_os, hit); }
 
+namespace {
+
+// MeshObject::closestPoint on a BVH under a similarity transform (identity included): the search
+// runs in object space with squared distances, so no vertex is transformed and no square root is
+// taken per box or triangle; the world distance is the object-space one times the transform's
+// scale. A triangle's own box is checked before the exact test: most triangles of a reached leaf
+// are farther than the best. Boxes are pruned against the best squared distance grown by a
+// relative 1e-10, so that the rounding of a box's distance never prunes the box of a triangle
+// that ties the best.
+bool closestPointSimilar(const WideBvh& bvh, const detail::TriangleBlock4* blocks, const PointQuery& q,
+                         ClosestPoint& best) {
+  if (bvh.root == BvhRef::kEmpty) return false;
+  constexpr double kSlack = 1.0 + 1e-10;
+  const glm::dvec3 p = q.point_os;
+  const double radius_os = best.distance / q.scale_ws;
+  double best2 = radius_os * radius_os;  // +inf for an unbounded query
+  double prune2 = best2 * kSlack;
+  const detail::TriangleBlock4* found_block = nullptr;
+  int found_lane = 0;
+  glm::dvec3 found_point{0.0};
+  struct Entry {
+    std::uint32_t ref;
+    double d2;  // squared object-space distance from p to the entry's box
+  };
+  // Bounded: a path holds at most 7 pending siblings per level.
+  Entry stack[1 + (BvhNode8::kWidth - 1) * WideBvh::kMaxDepth];
+  std::size_t size = 0;
+  stack[size++] = {bvh.root, distanceSquared(bvh.bounds, p)};
+  while (size > 0) {
+    const Entry e = stack[--size];
+    if (!(e.d2 < prune2)) continue;
+    if (BvhRef::isLeaf(e.ref)) {
+      const detail::TriangleBlock4* first = blocks + BvhRef::leafBlock(e.ref);
+      const std::uint32_t count = BvhRef::leafCount(e.ref);
+      for (std::uint32_t i = 0; i < count; ++i) {
+        const detail::TriangleBlock4& b = first[i / 4];
+        const int k = static_cast<int>(i % 4);
+        double box2 = 0.0;
+        for (int a = 0; a < 3; ++a) {
+          const double x0 = b.v[a][k], x1 = b.v[3 + a][k], x2 = b.v[6 + a][k];
+          const double lo = std::min(x0, std::min(x1, x2)), hi = std::max(x0, std::max(x1, x2));
+          const double g = std::max(std::max(lo - p[a], p[a] - hi), 0.0);
+          box2 += g * g;
+        }
+        if (!(box2 < prune2)) continue;
+        const glm::dvec3 c = closestPointOnTriangle(p, glm::dvec3(b.vertex(k, 0)), glm::dvec3(b.vertex(k, 1)),
+                                                    glm::dvec3(b.vertex(k, 2)));
+        const glm::dvec3 off = c - p;
+        const double d2 = glm::dot(off, off);
+        if (!(d2 < best2)) continue;
+        best2 = d2;
+        prune2 = d2 * kSlack;
+        found_block = &b;
+        found_lane = k;
+        found_point = c;
+      }
+      continue;
+    }
+    const BvhNode8& node = bvh.nodes[e.ref];
+    std::pair<double, std::uint32_t> order[BvhNode8::kWidth];
+    int n = 0;
+    for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k) {
+      double d2 = 0.0;
+      for (int a = 0; a < 3; ++a) {
+        const double g = std::max(std::max(double{node.lo[a][k]} - p[a], p[a] - double{node.hi[a][k]}), 0.0);
+        d2 += g * g;
+      }
+      if (d2 < prune2) order[n++] = {d2, node.child[k]};
+    }
+    for (int i = 1; i < n; ++i)  // descending by distance (at most 8): the nearest ends on top
+      for (int j = i; j > 0 && order[j - 1].first < order[j].first; --j) std::swap(order[j - 1], order[j]);
+    for (int i = 0; i < n; ++i) stack[size++] = {order[i].second, order[i].first};
+  }
+  if (found_block == nullptr) return false;
+  best.distance = std::sqrt(best2) * q.scale_ws;
+  best.point_ws = q.world_from_object.point(found_point);
+  const glm::dvec3 a(found_block->vertex(found_lane, 0)), b(found_block->vertex(found_lane, 1)),
+      c(found_block->vertex(found_lane, 2));
+  const glm::dvec3 normal_os = glm::cross(b - a, c - a);
+  best.uv = barycentricUv(found_point, a, b, c);
+  const glm::dvec3 normal = q.orientation * q.world_from_object.vector(normal_os);
+  const double len = glm::length(normal);
+  best.normal_ws = len > 0.0 ? normal / len : glm::dvec3(0.0);
+  best.prim_id = found_block->prim[found_lane];
+  return true;
+}
+
+}  // namespace
+
 bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryContext&) const {
+  if (structure_ == MeshStructure::Bvh && q.similarity) return closestPointSimilar(bvh_, blocks_.data(), q, best);
   bool improved = false;
   // Every triangle of a leaf's blocks, mapped to world space: the distance is a world distance
   // whatever the instance's scale.
@@ -624,6 +714,7 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
       const glm::dvec3 n = glm::cross(v1 - a, v2 - a);
       const double len = glm::length(n);
       best.normal_ws = len > 0.0 ? n / len : glm::dvec3(0.0);
+      best.uv = barycentricUv(c, a, v1, v2);
       best.prim_id = b.prim[k];
       improved = true;
     }

@@ -135,6 +135,10 @@ Affine placement(int which) {
   }
   if (which >= 2) a.linear = a.linear * glm::dmat3(3.0, 0.0, 0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 1.5);  // uneven scale
   if (which >= 3) a.translation = glm::dvec3(1e6, -1e6, 1e6);  // far from the origin
+  if (which == 4) {  // a similarity with a reflection: rotated, mirrored and scaled by 2.5 alike on every axis
+    a = placement(1);
+    a.linear = a.linear * glm::dmat3(-2.5, 0.0, 0.0, 0.0, 2.5, 0.0, 0.0, 0.0, 2.5);
+  }
   return a;
 }
 
@@ -146,7 +150,7 @@ TEST_P(MeshClosestPoint, AgreesWithTheBruteForceUnderEveryTransform) {
                                    {"soup", std::make_shared<const TriangleMesh>(triangleSoup(300, 5))},
                                    {"grid", std::make_shared<const TriangleMesh>(flatGrid(8, 2, 0.0f, 0.25f))}}) {
     const auto object = buildChecked(mesh, GetParam().config);
-    for (int which = 0; which < 4; ++which) {
+    for (int which = 0; which < 5; ++which) {
       const Affine world = placement(which);
       const Affine object_from_world = world.inverse();
       const std::vector<RefInstance> ref{{mesh.get(), world, 0}};

@@ -9,6 +9,8 @@
 #include "duplex/accel/Hit.h"
 
 #include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
+#include <glm/vec2.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -21,8 +23,11 @@ namespace duplex {
 struct ClosestPoint {
   /// World-space distance from the query point; starts at the query's maximum distance.
   double distance = std::numeric_limits<double>::infinity();
-  glm::dvec3 point_ws{0.0};                ///< the point on the surface, world space
-  glm::dvec3 normal_ws{0.0};               ///< unit geometric normal there (meshes: the triangle's), world space
+  glm::dvec3 point_ws{0.0};   ///< the point on the surface, world space
+  glm::dvec3 normal_ws{0.0};  ///< unit geometric normal there (meshes: the triangle's), world space
+  /// Meshes: the point's barycentric coordinates (u, v) on its triangle (a, b, c) in the mesh's
+  /// vertex order, point = (1 - u - v) a + u b + v c; 0 for other objects.
+  glm::dvec2 uv{0.0};
   std::uint32_t prim_id = kInvalidId;      ///< primitive of the object (a triangle); kInvalidId: none found
   std::uint32_t instance_id = kInvalidId;  ///< set by scene queries (objects leave it)
 
@@ -43,6 +48,15 @@ struct PointQuery {
   /// is at most d * stretch_os in object space, so an object-space distance e means a world
   /// distance of at least e / stretch_os.
   double stretch_os = 1.0;
+  /// Whether world_from_object is a similarity (a rotation, possibly with a reflection, times one
+  /// scale, and a translation; identity included): then world distances are object-space distances
+  /// times scale_ws, and an object may search in object space.
+  bool similarity = false;
+  /// For a similarity, the world length of a unit object-space length.
+  double scale_ws = 1.0;
+  /// For a similarity, +1 or -1: the sign of det(world_from_object), which flips a triangle's
+  /// normal (the cross product of its edges) when the transform reflects.
+  double orientation = 1.0;
 
   /// The query for `point_ws` and an instance with these transforms.
   static PointQuery make(const glm::dvec3& point_ws, const Affine& world_from_object, const Affine& object_from_world) {
@@ -61,6 +75,20 @@ struct PointQuery {
     double row_max = 0.0;
     for (int i = 0; i < 3; ++i) row_max = std::max(row_max, std::abs(g[0][i]) + std::abs(g[1][i]) + std::abs(g[2][i]));
     q.stretch_os = std::sqrt(row_max) * (1.0 + 1e-12) + 1e-300;
+    // A similarity's columns are orthogonal and of one length: w^T w = s^2 I. The tolerance (far
+    // below float rounding of the vertices) lets rotations computed in double count as one.
+    const glm::dmat3& w = world_from_object.linear;
+    const glm::dmat3 ww = glm::transpose(w) * w;
+    const double s2 = ww[0][0];
+    bool similar = s2 > 0.0 && std::isfinite(s2);
+    for (int i = 0; i < 3 && similar; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (std::abs(ww[i][j] - (i == j ? s2 : 0.0)) > 1e-13 * s2) similar = false;
+    if (similar) {
+      q.similarity = true;
+      q.scale_ws = std::sqrt(s2);
+      q.orientation = glm::determinant(w) < 0.0 ? -1.0 : 1.0;
+    }
     return q;
   }
 
@@ -116,6 +144,17 @@ Vec closestPointOnTriangle(const Vec& p, const Vec& a, const Vec& b, const Vec& 
   const T sum = va + vb + vc;
   if (!(sum > zero)) return a;  // degenerate: every region test above failed by rounding
   return a + (vb / sum) * ab + (vc / sum) * ac;
+}
+
+/// The barycentric coordinates (u, v) of p on triangle (a, b, c): p = (1 - u - v) a + u b + v c
+/// for p in the triangle's plane (else those of its projection); (0, 0) for a degenerate triangle.
+inline glm::dvec2 barycentricUv(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  const glm::dvec3 e1 = b - a, e2 = c - a, w = p - a;
+  const double d11 = glm::dot(e1, e1), d12 = glm::dot(e1, e2), d22 = glm::dot(e2, e2);
+  const double w1 = glm::dot(w, e1), w2 = glm::dot(w, e2);
+  const double det = d11 * d22 - d12 * d12;
+  if (!(det != 0.0)) return glm::dvec2(0.0);
+  return {(d22 * w1 - d12 * w2) / det, (d11 * w2 - d12 * w1) / det};
 }
 
 }  // namespace duplex
