@@ -155,6 +155,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   chunk.sensors.clear();
   chunk.sensor_end.clear();
   chunk.band.assign(bands > 1 ? chunk.count : 0, 0);
+  chunk.light.assign(config_.per_light ? chunk.count : 0, 0);
   chunk.energy.assign(chunk.count, EnergyBalance{});
   chunk.counters = {};
 
@@ -181,6 +182,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       chunk.band[k] = static_cast<std::uint16_t>(band);
     }
     double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
+    if (config_.per_light) chunk.light[k] = static_cast<std::uint32_t>(li);
     const EmittedRay emitted = sampleLight(lights[li], u);
     glm::dvec3 origin = emitted.origin, dir = emitted.dir;
     double w = power * emitted.weight;

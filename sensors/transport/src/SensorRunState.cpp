@@ -57,6 +57,10 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(cdf.data(), cdf.size() * sizeof(double));
   }
   for (const std::string& b : scene_.bands()) add(b.data(), b.size() + 1);
+  if (config_.per_light) {  // the state then holds per-light sums
+    static constexpr char kPerLight[] = "per-light";
+    add(kPerLight, sizeof kPerLight);
+  }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();
     if (spec.theta_bins != 0) {
@@ -175,6 +179,10 @@ void putTally(std::vector<char>& bytes, const Tally& t) {
   put(t.band_bin_sum2);
   put(t.band_sensor_sum);
   put(t.band_sensor_sum2);
+  put(t.light_bin_sum);  // empty unless the run keeps per-light results
+  put(t.light_bin_sum2);
+  put(t.light_sensor_sum);
+  put(t.light_sensor_sum2);
 }
 
 // The bytes putTally writes for a tally shaped like `t`.
@@ -182,7 +190,8 @@ template <class Tally>
 std::size_t tallyBytes(const Tally& t) {
   return t.bins.size() * (2 * sizeof(double) + sizeof(std::uint64_t)) + t.sensors.size() * 2 * sizeof(double) +
          sizeof(detail::EnergyWords) +
-         (t.band_bin_sum.size() + t.band_bin_sum2.size() + t.band_sensor_sum.size() + t.band_sensor_sum2.size()) *
+         (t.band_bin_sum.size() + t.band_bin_sum2.size() + t.band_sensor_sum.size() + t.band_sensor_sum2.size() +
+          t.light_bin_sum.size() + t.light_bin_sum2.size() + t.light_sensor_sum.size() + t.light_sensor_sum2.size()) *
              sizeof(double);
 }
 
@@ -210,6 +219,10 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
   get(t.band_bin_sum2);
   get(t.band_sensor_sum);
   get(t.band_sensor_sum2);
+  get(t.light_bin_sum);
+  get(t.light_bin_sum2);
+  get(t.light_sensor_sum);
+  get(t.light_sensor_sum2);
   const auto valid = [](std::span<const double> v) {
     return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
   };
@@ -217,7 +230,8 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
   EnergyBalance e;
   const bool energy_ok = detail::energyFromWords(energy[0], rays, e);
   if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(t.band_bin_sum) || !valid(t.band_bin_sum2) ||
-      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !energy_ok || !counts_ok)
+      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !valid(t.light_bin_sum) || !valid(t.light_bin_sum2) ||
+      !valid(t.light_sensor_sum) || !valid(t.light_sensor_sum2) || !energy_ok || !counts_ok)
     return false;
   t.touched.clear();
   for (std::size_t i = 0; i < nb; ++i) {

@@ -76,6 +76,8 @@ struct SensorResult {
   /// the luminous intensity (cd) and illuminance_stderr_lx its standard error.
   double luminous_flux_lm = 0.0;              ///< over all bins, lm
   double luminous_flux_stderr_lm = 0.0;       ///< standard error of luminous_flux_lm
+  std::vector<double> flux_lm;                ///< [bin], lm (far field: the cell's luminous flux)
+  std::vector<double> flux_stderr_lm;         ///< [bin], standard error of flux_lm
   std::vector<double> illuminance_lx;         ///< [bin], lm per square scene unit (far field: cd)
   std::vector<double> illuminance_stderr_lx;  ///< [bin], standard error of illuminance_lx
   /// Colorimetric scenes (the bands have wavelengths): per bin the CIE 1931 tristimulus values X, Y,
@@ -85,6 +87,22 @@ struct SensorResult {
   std::vector<double> chromaticity_xy;        ///< [2 * bin + c], x, y
   std::vector<double> total_cie_xyz;          ///< [3], X, Y, Z of the total flux (Y = luminous_flux_lm)
   std::vector<double> total_chromaticity_xy;  ///< [2], or NaN when no light arrived
+  /// Runs with per-light results (SensorRunConfig::per_light): what each light contributed, index
+  /// [light][bin] in the order of SensorRunResults::light_names, estimated from the same rays as
+  /// the totals (a ray's deposits are its light's samples, zeros for the others), so that the
+  /// per-light values sum to the totals above. Units as flux_w, irradiance_w_m2 (far field: W/sr).
+  std::vector<std::vector<double>> light_flux_w;           ///< [light][bin], W
+  std::vector<std::vector<double>> light_flux_stderr_w;    ///< [light][bin], W
+  std::vector<std::vector<double>> light_irradiance_w_m2;  ///< [light][bin]
+  std::vector<std::vector<double>> light_stderr_w_m2;      ///< [light][bin]
+  std::vector<double> light_total_flux_w;                  ///< [light], W
+  std::vector<double> light_total_flux_stderr_w;           ///< [light], W
+  /// Per-light luminous quantities, in photometric runs without bands of different weights (every
+  /// ray's luminous weight the same); empty otherwise.
+  std::vector<std::vector<double>> light_illuminance_lx;         ///< [light][bin] (far field: cd)
+  std::vector<std::vector<double>> light_illuminance_stderr_lx;  ///< [light][bin]
+  std::vector<double> light_luminous_flux_lm;                    ///< [light], lm
+  std::vector<double> light_luminous_flux_stderr_lm;             ///< [light], lm
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
@@ -140,8 +158,18 @@ struct SensorRunResults {
   /// Whether the photometric quantities of the sensors are filled (a light given in lumens, or
   /// bands with wavelengths); then emitted_lm is the lights' luminous flux (exact, from their spectra).
   bool photometric = false;
-  bool colorimetric = false;                   ///< whether the sensors' CIE XYZ and chromaticities are filled
-  double emitted_lm = 0.0;                     ///< the lights' luminous flux, lm (photometric runs)
+  bool colorimetric = false;  ///< whether the sensors' CIE XYZ and chromaticities are filled
+  double emitted_lm = 0.0;    ///< the lights' luminous flux, lm (photometric runs)
+  /// Photometric runs without wavelengths (every light in lumens): the transported unit is the
+  /// lumen, so the "_w" quantities above and in the sensors hold lumens and no radiometric value is
+  /// known; outputs then give the photometric keys and leave the radiometric ones empty.
+  bool luminous_transport = false;
+  /// Runs with per-light results: the lights' names (Light::name), their power (W, lumens when
+  /// luminous_transport) and, in photometric runs, their luminous flux (lm), in the order of the
+  /// sensors' per-light arrays.
+  std::vector<std::string> light_names;
+  std::vector<double> light_emitted_w;
+  std::vector<double> light_emitted_lm;
   std::vector<std::array<double, 2>> band_nm;  ///< the bands' wavelengths [lo, hi] nm (colorimetric runs)
   std::vector<SensorResult> sensors;           ///< in the scene's sensor order
 };
