@@ -378,6 +378,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["seed"] = r.seed;
   j["shape"] = spec.shape == SensorShape::Disk ? "disk" : spec.shape == SensorShape::Sphere ? "sphere" : "rectangle";
   j["size"] = {spec.width, spec.height};
+  if (spec.shape != SensorShape::Rectangle) j["radius"] = 0.5 * spec.width;  // beside "size" (the diameter)
   j["bins"] = {s.nx, s.ny};
   j["two_sided"] = s.two_sided;
   putTotals(j, s, r);
