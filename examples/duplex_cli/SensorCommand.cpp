@@ -246,6 +246,44 @@ std::string csvFields(double a, double b, double c, bool empty = false) {
   return text;
 }
 
+// run.json's "meters": per meter its points and normals (world space) and per point the
+// irradiance on the plane of its normal, its standard error and the rays that connected, with
+// the luminous and per-light values where the run has them.
+nlohmann::ordered_json meterReport(const SensorRunResults& r) {
+  const auto xyz = [](const std::vector<glm::dvec3>& v) {
+    nlohmann::ordered_json out = nlohmann::ordered_json::array();
+    for (const glm::dvec3& p : v) out.push_back({p.x, p.y, p.z});
+    return out;
+  };
+  nlohmann::ordered_json meters = nlohmann::ordered_json::array();
+  for (const MeterResult& m : r.meters) {
+    nlohmann::ordered_json j;
+    j["name"] = m.name;
+    j["points"] = xyz(m.points);
+    j["normals"] = xyz(m.normals);
+    j["irradiance_w_m2"] = radiometric(m.irradiance_w_m2, r);
+    j["stderr_w_m2"] = radiometric(m.stderr_w_m2, r);
+    j["ray_count"] = m.ray_count;
+    if (r.photometric) {
+      j["illuminance_lx"] = m.illuminance_lx;
+      j["illuminance_stderr_lx"] = m.illuminance_stderr_lx;
+    }
+    if (!m.light_irradiance_w_m2.empty()) {
+      nlohmann::ordered_json lights = nlohmann::ordered_json::array();
+      for (std::size_t l = 0; l < m.light_irradiance_w_m2.size(); ++l) {
+        nlohmann::ordered_json e{{"name", r.light_names[l]},
+                                 {"irradiance_w_m2", radiometric(m.light_irradiance_w_m2[l], r)},
+                                 {"stderr_w_m2", radiometric(m.light_stderr_w_m2[l], r)}};
+        if (!m.light_illuminance_lx.empty()) e["illuminance_lx"] = m.light_illuminance_lx[l];
+        lights.push_back(std::move(e));
+      }
+      j["lights"] = std::move(lights);
+    }
+    meters.push_back(std::move(j));
+  }
+  return meters;
+}
+
 // Per-bin pairs or triples of a flat array (index n * bin + c) as JSON rows, NaN as null.
 nlohmann::ordered_json rows(const std::vector<double>& flat, std::size_t n) {
   nlohmann::ordered_json out = nlohmann::ordered_json::array();
@@ -584,7 +622,9 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
       std::cerr << note.str() << '\n' << std::flush;
     }
     if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
-    if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
+    if (scene.sensors().empty() && scene.meters().empty())
+      throw FileError(o.scene.string() +
+                      ": the scene has no sensors (\"sensors\": [...]) or meters (\"meters\": [...])");
     checkOutputNames(scene, o.scene);
     for (const SensorInstance& s : scene.sensors()) stems.push_back(sensorFileStem(s.name));
     if (files) checkOutputFolder(o.out, stems, o.resume, o.overwrite);
@@ -744,6 +784,7 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     sensors.push_back(std::move(entry));
   }
   report["sensors"] = sensors;
+  if (!r.meters.empty()) report["meters"] = meterReport(r);
   if (ranks.shared()) report["mpi"] = ranks.report();
   // All result files or none: written into a staging folder, moved into --out when complete.
   try {

@@ -688,7 +688,8 @@ void checkPhotometricKeysAndPerLight(const std::string& duplex, const fs::path& 
     return R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [
       {"type": "point", "name": "left", "position": [-0.5, 0, 1.5], ")" +
            unit + R"(": 400}, {"type": "point", "name": "right", "position": [0.5, 0.2, 2], ")" + unit +
-           R"(": 1200}], "sensors": [{"name": "desk", "size": [1, 1], "bins": [2, 2], "two_sided": false}]})";
+           R"(": 1200}], "sensors": [{"name": "desk", "size": [1, 1], "bins": [2, 2], "two_sided": false}],
+      "meters": [{"name": "grid", "points": [[0, 0, 0], [0, 0, 0]], "normals": [[0, 0, 1], [0, 0, -1]]}]})";
   };
   write(dir / "lumens.json", scene("lumens"));
   write(dir / "watts.json", scene("power"));
@@ -707,6 +708,16 @@ void checkPhotometricKeysAndPerLight(const std::string& duplex, const fs::path& 
   expect(r["lights"].size() == 2 && r["lights"][0]["name"] == "left" && r["lights"][1]["emitted_flux_lm"] == 1200.0 &&
              r["lights"][1]["emitted_power_w"].is_null(),
          "lumens: run.json lights " + r["lights"].dump());
+  // The meter's first point (facing up) against the inverse-square cosine law of both lights; the
+  // second faces away from them.
+  const double pi = 3.14159265358979323846;
+  const double exact = 400 / (4 * pi) * (1.5 / std::sqrt(2.5)) / 2.5 + 1200 / (4 * pi) * (2 / std::sqrt(4.29)) / 4.29;
+  const nlohmann::json& meter = r["meters"][0];
+  expect(meter["name"] == "grid" && meter["irradiance_w_m2"].is_null() &&
+             std::abs(meter["illuminance_lx"][0].get<double>() - exact) <=
+                 4.5 * meter["illuminance_stderr_lx"][0].get<double>() + 1e-9 * exact &&
+             meter["illuminance_lx"][1] == 0.0 && meter["lights"].size() == 2,
+         "lumens: meter " + meter.dump() + ", expected " + std::to_string(exact) + " lx at the first point");
   const nlohmann::json j = readJson(dir / "lumens" / "desk.json");
   expect(j["irradiance_w_m2"].is_null() && j["flux_w"].is_null() && j["total_flux_w"].is_null(),
          "lumens: desk.json holds lumens under a \"_w\" key");
@@ -740,6 +751,8 @@ void checkPhotometricKeysAndPerLight(const std::string& duplex, const fs::path& 
            "lumens: desk.csv row " + line);
   }
   const nlohmann::json w = runJson(sensorArgs(duplex, dir / "watts.json", "20000", "2", dir / "watts"), dir);
+  expect(w["meters"][0]["irradiance_w_m2"][0].get<double>() > 0.0 && !w["meters"][0].contains("illuminance_lx"),
+         "watts: meter " + w["meters"].dump());
   expect(w["emitted_power_w"] == 1600.0 && !w.contains("emitted_flux_lm") && !w["energy"].contains("escaped_lm") &&
              !w.contains("lights") && w["sensors"][0]["total_flux_w"].get<double>() > 0.0,
          "watts: " + w.dump());

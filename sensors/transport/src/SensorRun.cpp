@@ -45,11 +45,13 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
   if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
   revision_ = scene_.revision();  // the scene as of the graph's last commit (derived now if it changed)
+  scene_.checkMeterMaterials();
   double acc = 0.0;
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
   {
     // Spatial bins, then the angular bins, in one index space; the run's tallies and the open batch's.
-    const std::uint64_t all_bins = std::uint64_t{scene_.binCount()} + scene_.angleBinCount();
+    // Spatial bins, angular bins and meter points.
+    const std::uint64_t all_bins = std::uint64_t{scene_.binCount()} + scene_.angleBinCount() + scene_.meterPointCount();
     const std::uint64_t nb = scene_.bands().empty() ? 0 : scene_.bandCount();
     const std::uint64_t cells = all_bins + scene_.sensors().size();
     const std::uint64_t nl = config_.per_light ? scene_.lights().size() : 0;
@@ -115,7 +117,8 @@ SensorRun::~SensorRun() = default;
 
 std::unique_ptr<SensorRun::Tally> SensorRun::makeTally() const {
   auto t = std::make_unique<Tally>();
-  t->bins.assign(static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount(), BinSums{});
+  t->bins.assign(static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount() + scene_.meterPointCount(),
+                 BinSums{});
   t->sensors.assign(scene_.sensors().size(), SensorSums{});
   if (!scene_.bands().empty()) {
     const std::size_t nb = scene_.bandCount();
@@ -421,7 +424,67 @@ SensorRunResults SensorRun::results() const {
     out.efficiency = scene_.totalPower() > 0.0 ? out.total_flux_w / scene_.totalPower() : 0.0;
     r.sensors.push_back(std::move(out));
   }
+  meterResults(all, light_lm, r);
   return r;
+}
+
+double SensorRun::luminousSamples(const Tally& all, std::size_t bin, double& sum2) const {
+  // A ray carries one band: its luminous sample is its deposit times that band's weight, so the
+  // samples' sums and squares follow from the per-band ones (zeros in the other bands).
+  if (all.band_bin_sum.empty()) {
+    const double w = scene_.luminousWeight(0);
+    sum2 = w * w * all.bins[bin].sum2;
+    return w * all.bins[bin].sum;
+  }
+  const std::size_t nb = scene_.bandCount();
+  double y = 0.0;
+  sum2 = 0.0;
+  for (std::size_t k = 0; k < nb; ++k) {
+    const double w = scene_.luminousWeight(static_cast<std::uint32_t>(k));
+    y += w * all.band_bin_sum[bin * nb + k];
+    sum2 += w * w * all.band_bin_sum2[bin * nb + k];
+  }
+  return y;
+}
+
+void SensorRun::meterResults(const Tally& all, bool light_lm, SensorRunResults& r) const {
+  std::size_t bin = static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount();
+  const std::size_t nl = all.light_bin_sum.empty() ? 0 : scene_.lights().size();
+  for (const PointMeter& m : scene_.meters()) {
+    MeterResult out;
+    out.name = m.name;
+    out.points = m.points;
+    out.normals = m.normals;
+    if (nl) {
+      out.light_irradiance_w_m2.assign(nl, {});
+      out.light_stderr_w_m2.assign(nl, {});
+    }
+    for (std::size_t i = 0; i < m.points.size(); ++i, ++bin) {
+      double mean, se;
+      meanAndStderr(all.bins[bin].sum, all.bins[bin].sum2, rays_done_, mean, se);
+      out.irradiance_w_m2.push_back(mean);
+      out.stderr_w_m2.push_back(se);
+      out.ray_count.push_back(all.bins[bin].count);
+      if (r.photometric) {
+        double y2;
+        const double y = luminousSamples(all, bin, y2);
+        meanAndStderr(y, y2, rays_done_, mean, se);
+        out.illuminance_lx.push_back(mean);
+        out.illuminance_stderr_lx.push_back(se);
+      }
+      for (std::size_t l = 0; l < nl; ++l) {
+        meanAndStderr(all.light_bin_sum[bin * nl + l], all.light_bin_sum2[bin * nl + l], rays_done_, mean, se);
+        out.light_irradiance_w_m2[l].push_back(mean);
+        out.light_stderr_w_m2[l].push_back(se);
+      }
+    }
+    if (light_lm) {  // one luminous weight for every ray
+      out.light_illuminance_lx = out.light_irradiance_w_m2;
+      for (auto& v : out.light_illuminance_lx)
+        for (double& x : v) x *= scene_.luminousWeight(0);
+    }
+    r.meters.push_back(std::move(out));
+  }
 }
 
 void SensorRun::perLightResults(const Tally& all, const SensorInstance& s, std::size_t sensor, bool luminous,
@@ -477,10 +540,9 @@ void SensorRun::photometricResults(const Tally& all, const SensorInstance& s, st
     meanAndStderr(y, y2, rays_done_, mean, se);
   };
   for (std::uint32_t b = 0; b < bins; ++b) {
-    const std::size_t i = s.first_bin + b;
-    double mean, se;
-    luminous(spectral ? &all.band_bin_sum[i * nb] : nullptr, spectral ? &all.band_bin_sum2[i * nb] : nullptr,
-             &all.bins[i].sum, &all.bins[i].sum2, mean, se);
+    double mean, se, y2;
+    const double y = luminousSamples(all, s.first_bin + b, y2);
+    meanAndStderr(y, y2, rays_done_, mean, se);
     const double area = out.bin_area_m2[b];
     out.flux_lm.push_back(mean);
     out.flux_stderr_lm.push_back(se);

@@ -57,6 +57,11 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(cdf.data(), cdf.size() * sizeof(double));
   }
   for (const std::string& b : scene_.bands()) add(b.data(), b.size() + 1);
+  for (const PointMeter& m : scene_.meters()) {  // meters: their points are bins of the state
+    add(m.name.data(), m.name.size() + 1);
+    add(m.points.data(), m.points.size() * sizeof(glm::dvec3));
+    add(m.normals.data(), m.normals.size() * sizeof(glm::dvec3));
+  }
   if (config_.per_light) {  // the state then holds per-light sums
     static constexpr char kPerLight[] = "per-light";
     add(kPerLight, sizeof kPerLight);

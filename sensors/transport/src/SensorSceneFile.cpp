@@ -442,9 +442,40 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     }
     (void)graph.commit();
   }
+  // Illuminance meters: {"name", "points": [[x, y, z], ...], "normal": [x, y, z] (all points) or
+  // "normals": [[x, y, z], ...] (one per point)}, world space.
+  std::vector<PointMeter> meters;
+  if (root.contains("meters")) {
+    const json& list = root["meters"];
+    if (!list.is_array()) ctx.fail("/meters", "expected an array of meters");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string p = at("/meters", i);
+      const json& e = list[i];
+      if (!e.is_object()) ctx.fail(p, "expected an object");
+      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals"});
+      PointMeter m;
+      m.name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
+      const json& pts = ctx.member(e, p, "points");
+      if (!pts.is_array() || pts.empty()) ctx.fail(at(p, "points"), "expected a non-empty array of [x, y, z]");
+      requireMemory(arrayBytes(pts.size(), 2 * sizeof(glm::dvec3)), path.string() + ": " + p + ": meter points");
+      for (std::size_t k = 0; k < pts.size(); ++k) m.points.push_back(vec3(pts[k], at(at(p, "points"), k), ctx));
+      if (e.contains("normal") == e.contains("normals"))
+        ctx.fail(p, "expected \"normal\" (one for all points) or \"normals\" (one per point)");
+      if (e.contains("normal")) {
+        m.normals.assign(m.points.size(), direction(e["normal"], at(p, "normal"), ctx));
+      } else {
+        const json& ns = e["normals"];
+        if (!ns.is_array() || ns.size() != pts.size())
+          ctx.fail(at(p, "normals"), "expected one [x, y, z] per point (" + std::to_string(pts.size()) + ")");
+        for (std::size_t k = 0; k < ns.size(); ++k) m.normals.push_back(direction(ns[k], at(at(p, "normals"), k), ctx));
+      }
+      meters.push_back(std::move(m));
+    }
+  }
   try {
     SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field),
                       std::move(band_nm), std::move(instance_materials));
+    scene.setMeters(std::move(meters));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {

@@ -11,6 +11,7 @@
 #include "duplex/sensors/SensorRun.h"
 #include "duplex/sensors/SensorScene.h"
 #include "SensorFixture.h"
+#include "SlabRuns.h"
 #include "SlabMedium.h"
 #include "SensorRunChunk.h"
 
@@ -95,13 +96,7 @@ TEST(SensorRun, DirectionalLightFluxIsItsPowerTimesProjectedArea) {
   const double side = 0.5, tilt = 60.0 * kPi / 180.0;
   f.add(sensor(side, side, 2, 2, true, "tilted"), facing({0.0, std::sin(tilt), std::cos(tilt)}, {0.1, 0.0, 0.0}),
         "tilted");
-  Light sun;
-  sun.type = LightType::Directional;
-  sun.name = "sun";
-  sun.position = {0, 0, 5};
-  sun.direction = {0, 0, -1};
-  sun.radius = 1.0;
-  sun.power_w = 3.0;
+  const Light sun = beamLight({0, 0, 5}, {0, 0, -1}, 1.0, 3.0);
   SensorScene scene = f.scene({sun});
   SensorRun run(scene);
   (void)run.runUntil(100000);

@@ -14,6 +14,8 @@
 #include "duplex/sensors/IesProfile.h"
 #include "duplex/sensors/SensorObject.h"
 
+#include <glm/vec3.hpp>
+
 #include <array>
 #include <cstdint>
 #include <string>
@@ -105,6 +107,25 @@ struct SensorResult {
   std::vector<double> light_luminous_flux_stderr_lm;             ///< [light], lm
 };
 
+/// What one illuminance meter (PointMeter) measured: per point the irradiance on the plane of its
+/// normal (W per square scene unit) by next-event connections from every emission and diffuse
+/// reflection, each ray's connections one sample, so the standard errors are of a mean of the rays.
+struct MeterResult {
+  std::string name;                           ///< the meter's name
+  std::vector<glm::dvec3> points;             ///< world space, as given
+  std::vector<glm::dvec3> normals;            ///< world space, unit length
+  std::vector<double> irradiance_w_m2;        ///< [point]
+  std::vector<double> stderr_w_m2;            ///< [point]
+  std::vector<std::uint64_t> ray_count;       ///< [point]: emitted rays that connected to it
+  std::vector<double> illuminance_lx;         ///< [point], photometric runs
+  std::vector<double> illuminance_stderr_lx;  ///< [point], photometric runs
+  /// Runs with per-light results: [light][point], and the luminous values where they exist (as
+  /// SensorResult's light_illuminance_lx).
+  std::vector<std::vector<double>> light_irradiance_w_m2;
+  std::vector<std::vector<double>> light_stderr_w_m2;
+  std::vector<std::vector<double>> light_illuminance_lx;
+};
+
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
 /// emitted = escaped + absorbed + medium_absorbed + depth_limited + roulette + failed up to rounding.
 /// medium_absorbed counts attenuation (fogs that do not scatter) and absorbing collisions (fogs
@@ -172,6 +193,7 @@ struct SensorRunResults {
   std::vector<double> light_emitted_lm;
   std::vector<std::array<double, 2>> band_nm;  ///< the bands' wavelengths [lo, hi] nm (colorimetric runs)
   std::vector<SensorResult> sensors;           ///< in the scene's sensor order
+  std::vector<MeterResult> meters;             ///< in the scene's meter order (SensorScene::meters)
 };
 
 /// The IES type C table of a far-field sensor's result (shape FarField): vertical angles gamma_g =

@@ -221,6 +221,12 @@ class SensorRun {
   // luminous values when `luminous` (one luminous weight for every ray); bin areas already in `out`.
   void perLightResults(const Tally& all, const SensorInstance& s, std::size_t sensor, bool luminous,
                        SensorResult& out) const;
+  // Photometric scenes: the sum of bin `bin`'s luminous samples (over all rays), and in `sum2` the
+  // sum of their squares.
+  double luminousSamples(const Tally& all, std::size_t bin, double& sum2) const;
+  // The meters' results into r.meters (per-light arrays when the tallies keep them; their luminous
+  // values when `light_lm`).
+  void meterResults(const Tally& all, bool light_lm, SensorRunResults& r) const;
   [[nodiscard]] std::unique_ptr<Tally> makeTally() const;
   /// The first collision in the scene's scattering fogs along world-space origin + t dir, t in
   /// [0, t_max] (t_max infinite: the whole ray): the medium, with t_collision, or nullptr.
