@@ -89,10 +89,31 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   }
   l.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  // Watts or lumens, never both; an "ies" light with neither takes its lumens from its file.
+  // Watts or lumens, never both; an "ies" light with neither takes its lumens from its file. Area
+  // lights may give their luminance (cd/m^2) or luminous exitance (lm/m^2) and directional lights
+  // their illuminance across the beam (lx) instead: lumens follow from their size below.
+  const char* photometric_amount = nullptr;
+  for (const char* key : {"luminance", "exitance", "illuminance"})
+    if (v.contains(key)) {
+      if (photometric_amount || v.contains("power") || v.contains("lumens"))
+        ctx.fail(p, std::string("a light has one of \"power\" (W), \"lumens\" (lm), \"luminance\" (cd/m^2, area), "
+                                "\"exitance\" (lm/m^2, area) or \"illuminance\" (lx, directional); \"") +
+                        key + "\" is not the only one");
+      photometric_amount = key;
+    }
+  if (photometric_amount) {
+    const bool fits = type == "area" ? std::string_view(photometric_amount) != "illuminance"
+                                     : type == "directional" && std::string_view(photometric_amount) == "illuminance";
+    if (!fits)
+      ctx.fail(at(p, photometric_amount),
+               std::string("\"") + photometric_amount + "\" is not a key of a \"" + type +
+                   "\" light (luminance and exitance: area lights; illuminance: directional)");
+  }
   if (v.contains("power") && v.contains("lumens"))
     ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
-  if (v.contains("lumens")) {
+  if (photometric_amount) {
+    // Set from the light's size once it is read.
+  } else if (v.contains("lumens")) {
     l.lumens = ctx.number(v["lumens"], at(p, "lumens"));
     if (!(l.lumens > 0.0)) ctx.fail(at(p, "lumens"), "lumens must be > 0 lm (got " + std::to_string(l.lumens) + ")");
   } else if (v.contains("power") || type != "ies") {
@@ -113,13 +134,20 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
     l.cone_angle = deg * std::numbers::pi / 180.0;
   } else if (type == "directional") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position", "direction", "radius"});
+    ctx.onlyKeys(
+        v, p,
+        {"type", "name", "power", "lumens", "illuminance", "spectrum", "node", "position", "direction", "radius"});
     l.type = LightType::Directional;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
     l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
+    // Illuminance E (lx) on a plane across the beam: E pi r^2 lumens.
+    if (photometric_amount)
+      l.lumens = ctx.positiveNumber(v["illuminance"], at(p, "illuminance")) * std::numbers::pi * l.radius * l.radius;
   } else if (type == "area") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "size", "transform", "two_sided"});
+    ctx.onlyKeys(v, p,
+                 {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node", "size", "transform",
+                  "two_sided"});
     l.type = LightType::Area;
     const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
     l.width = size[0];
@@ -128,6 +156,16 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (v.contains("two_sided")) {
       if (!v["two_sided"].is_boolean()) ctx.fail(at(p, "two_sided"), "expected true or false");
       l.two_sided = v["two_sided"].get<bool>();
+    }
+    if (photometric_amount) {
+      // Per emitting face: a Lambertian face of luminance L has exitance M = pi L, and emits M A
+      // (A: the rectangle's area as its transform places it).
+      const glm::dmat3& m = l.world_from_light.linear;
+      const double area = glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0)));
+      const double faces = l.two_sided ? 2.0 : 1.0;
+      const double value = ctx.positiveNumber(v[photometric_amount], at(p, photometric_amount));
+      l.lumens =
+          (std::string_view(photometric_amount) == "luminance" ? std::numbers::pi * value : value) * area * faces;
     }
   } else if (type == "ies") {
     ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "file", "position", "transform"});

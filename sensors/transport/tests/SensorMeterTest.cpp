@@ -163,5 +163,41 @@ TEST(SensorMeter, SceneFileMeters) {
       {"/meters/0/normal"});
 }
 
+TEST(SensorMeter, LightsGivenByLuminanceExitanceAndIlluminance) {
+  // CIE 171's 1 m^2 panel of 1000 cd/m^2, 1 m above the meter and facing it: E = pi L 4 F_corner
+  // (0.5, 0.5, 1); the same panel by its exitance pi 1000 lm/m^2; a beam of 500 lx.
+  const auto scene = [](const std::string& panel) {
+    return R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [
+      {"type": "area", "size": [2, 0.5], "transform": [1,0,0,0, 0,-1,0,0, 0,0,-1,1], )" +
+           panel + R"(},
+      {"type": "directional", "position": [5, 0, 3], "direction": [0, 0, -1], "radius": 0.5, "illuminance": 500}],
+      "meters": [{"name": "m", "points": [[0, 0, 0], [5, 0, 0]], "normal": [0, 0, 1]}]})";
+  };
+  const double l = 1000.0, expected = kPi * l * 4 * cornerFactor(1.0, 0.25, 1.0);
+  for (const std::string panel : {R"("luminance": 1000)", R"("exitance": 3141.592653589793)"}) {
+    const SensorScene s = SensorScene::load(writeTestFile("luminance.json", scene(panel)));
+    EXPECT_NEAR(s.lights()[0].power_w, kPi * l * 1.0, 1e-9);  // lumens over the 1 m^2 face
+    EXPECT_NEAR(s.lights()[1].power_w, 500 * kPi * 0.25, 1e-9);
+    SensorRun run(s);
+    (void)run.runUntil(200000);
+    const SensorRunResults r = run.results();
+    ASSERT_TRUE(r.luminous_transport);
+    const MeterResult& m = r.meters[0];
+    EXPECT_LT(std::abs(m.illuminance_lx[0] - expected), 4.5 * m.illuminance_stderr_lx[0])
+        << panel << ": " << m.illuminance_lx[0] << " vs " << expected;
+    EXPECT_LT(std::abs(m.illuminance_lx[1] - 500.0), 4.5 * m.illuminance_stderr_lx[1]) << panel;
+  }
+  const std::string head = R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [)";
+  expectLoadError(writeTestFile("lum_point.json", head + R"({"type": "point", "position": [0,0,0], "luminance": 1}]})"),
+                  {"/lights/0/luminance", "area"});
+  expectLoadError(
+      writeTestFile("lum_both.json", head + R"({"type": "area", "size": [1, 1], "luminance": 1, "power": 2}]})"),
+      {"/lights/0", "luminance"});
+  expectLoadError(
+      writeTestFile("lum_neg.json", head + R"({"type": "directional", "position": [0,0,0], "direction": [0,0,-1],
+        "radius": 1, "illuminance": -3}]})"),
+      {"/lights/0/illuminance"});
+}
+
 }  // namespace
 }  // namespace duplex
