@@ -213,10 +213,81 @@ CaseResult clearGlassCase(const CaseOptions& o) {
   return c;
 }
 
+namespace {
+
+// The 8 x 8 centres of the 0.5 m cells of the 4 m x 4 m floor, facing up.
+PointMeter floorPoints() {
+  PointMeter m{"floor", {}, {}};
+  for (int iy = 0; iy < 8; ++iy)
+    for (int ix = 0; ix < 8; ++ix) {
+      m.points.push_back({-1.75 + 0.5 * ix, -1.75 + 0.5 * iy, 0.0});
+      m.normals.push_back({0, 0, 1});
+    }
+  return m;
+}
+
+// Rows of a meter against `exact(point)`.
+template <class Exact>
+void meterRows(CaseResult& out, const MeterResult& m, Exact exact) {
+  for (std::size_t i = 0; i < m.points.size(); ++i) {
+    CaseRow row;
+    row.label = m.name + " point (" + std::to_string(m.points[i].x).substr(0, 5) + ", " +
+                std::to_string(m.points[i].y).substr(0, 5) + ")";
+    row.reference = exact(m.points[i]);
+    row.value = m.irradiance_w_m2[i];
+    row.stderr_value = m.stderr_w_m2[i];
+    row.other = std::nan("");
+    out.rows.push_back(row);
+  }
+}
+
+}  // namespace
+
+CaseResult areaSourcePointsCase(const CaseOptions& o) {
+  const double h = 3.0, luminance = 1000.0;
+  Fixture f;
+  SensorScene scene = f.scene({areaLight(1.0, 1.0, frame({0, 0, h}, {1, 0, 0}, {0, -1, 0}),
+                                         std::numbers::pi * luminance * 1.0)});  // M = pi L over 1 m^2
+  scene.setMeters({floorPoints()});
+  CaseResult c = describe("area-source-points",
+                          "Lambertian panel of 1 m^2 and 1000 cd/m^2, 3 m above the floor: illuminance at 64 points",
+                          "pi L x configuration factor from the point to the panel (closed form)", "lx", 100000, o);
+  const Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  meterRows(c, t.results.meters[0], [&](const glm::dvec3& p) {
+    return std::numbers::pi * luminance * pointToParallelRectangle(-0.5 - p.x, 0.5 - p.x, -0.5 - p.y, 0.5 - p.y, h);
+  });
+  return c;
+}
+
+CaseResult obstructionCase(const CaseOptions& o) {
+  const double h = 3.0, zo = 1.5;
+  Fixture f;
+  f.add(quad(0.5, "obstruction"), translate(0, 0, zo), "obstruction");  // black: an absorber
+  SensorScene scene = f.scene({pointLight({0, 0, h}, kLumens)});
+  scene.setMeters({floorPoints()});
+  CaseResult c =
+      describe("obstruction",
+               "Point source of 1000 lm 3 m above the floor, a black 1 m x 1 m square 1.5 m above the floor's centre: "
+               "illuminance at 64 points",
+               "I cos / d^2 outside the obstruction's shadow (|x|, |y| > 1 m), 0 inside", "lx", 20000, o);
+  const Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  const double intensity = kLumens / (4.0 * std::numbers::pi), shadow = 0.5 * h / (h - zo);
+  meterRows(c, t.results.meters[0], [&](const glm::dvec3& p) {
+    if (std::abs(p.x) < shadow && std::abs(p.y) < shadow) return 0.0;
+    const double d2 = p.x * p.x + p.y * p.y + h * h;
+    return intensity * h / (d2 * std::sqrt(d2));
+  });
+  return c;
+}
+
 std::vector<CaseResult> allCases(const CaseOptions& o) {
   std::vector<CaseResult> all;
   all.push_back(pointSourceCase(o));
   all.push_back(areaSourceCase(o));
+  all.push_back(areaSourcePointsCase(o));
+  all.push_back(obstructionCase(o));
   for (const double rho : {0.2, 0.5, 0.8}) all.push_back(diffuseCubeCase(rho, o));
   all.push_back(diffuseCubeCase(0.95, o, true));
   all.push_back(clearGlassCase(o));

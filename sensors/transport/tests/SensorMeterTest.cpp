@@ -6,6 +6,7 @@
 #include "duplex/accel/Error.h"
 #include "duplex/sensors/SensorRun.h"
 #include "duplex/sensors/SensorScene.h"
+#include "OpticsReference.h"
 #include "SensorFixture.h"
 #include "SlabRuns.h"
 
@@ -18,15 +19,6 @@ namespace duplex {
 namespace {
 
 using namespace test;
-
-// Configuration factor from a differential area to a parallel rectangle a x b at distance h, the
-// area below one of its corners (Howell's catalogue, B-3).
-double cornerFactor(double a, double b, double h) {
-  const double x = a / h, y = b / h;
-  return (x / std::sqrt(1 + x * x) * std::atan(y / std::sqrt(1 + x * x)) +
-          y / std::sqrt(1 + y * y) * std::atan(x / std::sqrt(1 + y * y))) /
-         (2 * kPi);
-}
 
 TEST(SensorMeter, PointAndDirectionalLightsGiveTheirExactIrradiance) {
   Fixture f;
@@ -75,7 +67,8 @@ TEST(SensorMeter, AreaLightMatchesTheConfigurationFactor) {
   (void)run.runUntil(200000);
   const MeterResult m = run.results().meters[0];
   const double exitance = 3.0 / 0.6;
-  const double centre = exitance * 4 * cornerFactor(0.5, 0.3, 0.8), corner = exitance * cornerFactor(1.0, 0.6, 0.8);
+  const double centre = exitance * 4 * pointToParallelRectangleCorner(0.5, 0.3, 0.8),
+               corner = exitance * pointToParallelRectangleCorner(1.0, 0.6, 0.8);
   EXPECT_LT(std::abs(m.irradiance_w_m2[0] - centre), 4.5 * m.stderr_w_m2[0])
       << m.irradiance_w_m2[0] << " vs " << centre;
   EXPECT_LT(std::abs(m.irradiance_w_m2[1] - corner), 4.5 * m.stderr_w_m2[1])
@@ -173,7 +166,7 @@ TEST(SensorMeter, LightsGivenByLuminanceExitanceAndIlluminance) {
       {"type": "directional", "position": [5, 0, 3], "direction": [0, 0, -1], "radius": 0.5, "illuminance": 500}],
       "meters": [{"name": "m", "points": [[0, 0, 0], [5, 0, 0]], "normal": [0, 0, 1]}]})";
   };
-  const double l = 1000.0, expected = kPi * l * 4 * cornerFactor(1.0, 0.25, 1.0);
+  const double l = 1000.0, expected = kPi * l * 4 * pointToParallelRectangleCorner(1.0, 0.25, 1.0);
   for (const std::string panel : {R"("luminance": 1000)", R"("exitance": 3141.592653589793)"}) {
     const SensorScene s = SensorScene::load(writeTestFile("luminance.json", scene(panel)));
     EXPECT_NEAR(s.lights()[0].power_w, kPi * l * 1.0, 1e-9);  // lumens over the 1 m^2 face
