@@ -82,7 +82,9 @@ void connectLight(const Light& light, const EmittedRay& emitted, double scale, C
               [&](const glm::dvec3& v, double) { return scale * light.intensity(v); });
       break;
     case LightType::Area: {
-      const glm::dvec3 n = glm::normalize(light.world_from_light.linear * glm::dvec3(0.0, 0.0, 1.0));
+      // The face sampleLight emits from: the cross product of the mapped local axes.
+      const glm::dvec3 n = glm::normalize(glm::cross(light.world_from_light.vector(glm::dvec3(1, 0, 0)),
+                                                     light.world_from_light.vector(glm::dvec3(0, 1, 0))));
       const double sides = light.two_sided ? 2.0 : 1.0;
       connect([&](const glm::dvec3&) { return emitted.origin; },
               [&](const glm::dvec3& v, double) {

@@ -102,12 +102,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       photometric_amount = key;
     }
   if (photometric_amount) {
-    const bool fits = type == "area" ? std::string_view(photometric_amount) != "illuminance"
-                                     : type == "directional" && std::string_view(photometric_amount) == "illuminance";
+    const bool fits = type == "area" || type == "disk"
+                          ? std::string_view(photometric_amount) != "illuminance"
+                          : type == "directional" && std::string_view(photometric_amount) == "illuminance";
     if (!fits)
       ctx.fail(at(p, photometric_amount),
                std::string("\"") + photometric_amount + "\" is not a key of a \"" + type +
-                   "\" light (luminance and exitance: area lights; illuminance: directional)");
+                   "\" light (luminance and exitance: area and disk lights; illuminance: directional)");
   }
   if (v.contains("power") && v.contains("lumens"))
     ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
@@ -144,14 +145,19 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // Illuminance E (lx) on a plane across the beam: E pi r^2 lumens.
     if (photometric_amount)
       l.lumens = ctx.positiveNumber(v["illuminance"], at(p, "illuminance")) * std::numbers::pi * l.radius * l.radius;
-  } else if (type == "area") {
+  } else if (type == "area" || type == "disk") {
     ctx.onlyKeys(v, p,
-                 {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node", "size", "transform",
-                  "two_sided"});
+                 {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node",
+                  type == "disk" ? "radius" : "size", "transform", "two_sided"});
     l.type = LightType::Area;
-    const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
-    l.width = size[0];
-    l.height = size[1];
+    l.disk = type == "disk";
+    if (l.disk) {
+      l.width = l.height = 2.0 * ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
+    } else {
+      const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
+      l.width = size[0];
+      l.height = size[1];
+    }
     if (v.contains("transform")) l.world_from_light = transform12(v["transform"], at(p, "transform"), ctx);
     if (v.contains("two_sided")) {
       if (!v["two_sided"].is_boolean()) ctx.fail(at(p, "two_sided"), "expected true or false");
@@ -161,7 +167,8 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       // Per emitting face: a Lambertian face of luminance L has exitance M = pi L, and emits M A
       // (A: the rectangle's area as its transform places it).
       const glm::dmat3& m = l.world_from_light.linear;
-      const double area = glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0)));
+      const double area = glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
+                          (l.disk ? std::numbers::pi / 4.0 : 1.0);  // the inscribed disk's share
       const double faces = l.two_sided ? 2.0 : 1.0;
       const double value = ctx.positiveNumber(v[photometric_amount], at(p, photometric_amount));
       l.lumens =
@@ -189,7 +196,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
     ctx.fail(at(p, "type"), "unknown light type \"" + type +
-                                "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
+                                "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\" or \"ies\")");
   }
   if (v.contains("spectrum"))
     l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)

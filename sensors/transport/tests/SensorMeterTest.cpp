@@ -192,5 +192,29 @@ TEST(SensorMeter, LightsGivenByLuminanceExitanceAndIlluminance) {
       {"/lights/0/illuminance"});
 }
 
+TEST(SensorMeter, DiskLightMatchesThePointToDiskFactor) {
+  // A disk of radius R = 0.6 and 1000 cd/m^2 facing down 1 m above the meter: at offset r from its
+  // axis E = pi L F, F = (1 - (h^2 + r^2 - R^2) / sqrt((h^2 + r^2 + R^2)^2 - 4 r^2 R^2)) / 2.
+  const SensorScene scene = SensorScene::load(writeTestFile("disk_light.json", R"({"format": "scene-json-v1",
+    "objects": [], "instances": [], "lights": [{"type": "disk", "radius": 0.6, "luminance": 1000,
+      "transform": [1,0,0,0, 0,-1,0,0, 0,0,-1,1]}],
+    "meters": [{"name": "m", "points": [[0, 0, 0], [0.5, 0, 0], [0, 1.5, 0]], "normal": [0, 0, 1]}]})"));
+  const double big_r = 0.6, h = 1.0, l = 1000.0;
+  EXPECT_NEAR(scene.lights()[0].power_w, kPi * l * kPi * big_r * big_r, 1e-9);  // lumens: pi L x pi R^2
+  SensorRun run(scene);
+  (void)run.runUntil(200000);
+  const MeterResult m = run.results().meters[0];
+  for (int k = 0; k < 3; ++k) {
+    const double r = glm::length(m.points[k]);
+    const double f = 0.5 * (1 - (h * h + r * r - big_r * big_r) /
+                                    std::sqrt(std::pow(h * h + r * r + big_r * big_r, 2) - 4 * r * r * big_r * big_r));
+    EXPECT_LT(std::abs(m.illuminance_lx[k] - kPi * l * f), 4.5 * m.illuminance_stderr_lx[k])
+        << "r = " << r << ": " << m.illuminance_lx[k] << " vs " << kPi * l * f;
+  }
+  expectLoadError(writeTestFile("disk_size.json", R"({"format": "scene-json-v1", "objects": [], "instances": [],
+    "lights": [{"type": "disk", "size": [1, 1], "power": 1}]})"),
+                  {"/lights/0", "size"});
+}
+
 }  // namespace
 }  // namespace duplex
