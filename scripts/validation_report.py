@@ -50,6 +50,9 @@ Every reference here is computed from a closed form, not copied from the report'
   (area source) and I cos / d^2 outside the obstruction's sharp shadow, 0 inside (obstruction; its
   estimate has no variance, one light and one connection per ray, so it checks the geometry and
   the occlusion exactly). No point lies on the shadow's edge.
+- **Black cube**: a closed cube whose faces absorb, the source off its centre: only direct light
+  arrives, so each cell's mean is the point-source formula in the face's own frame (the sensors lie
+  1 mm inside the faces).
 - **Diffuse cubes** (reflectance 0.2 to 0.95): in a closed enclosure of uniform reflectance rho
   with nothing escaping, the flux incident on all the surfaces is exactly Phi / (1 - rho); with the
   source at the cube's centre each face receives a sixth of it. This is exact for the face means,
@@ -73,9 +76,9 @@ NOT_MODELLED = """## What Duplex does not model (and the cases left out)
 - **IES-source cases**: Duplex reads LM-63 profiles (goniometric lights), but the report's
   luminaire files and tables are not reproduced here; a point light with an IES table is checked
   against its intensity table by the unit tests (`IesProfileTest`, `SensorPhotometryTest`).
-- **Obstructions and the black cube**: the obstruction case reads points (above); cell means behind
+- **Obstructions**: the obstruction case reads points (above); cell means behind
   an obstruction (the shadow boundary clipped against each cell), an area source behind an
-  obstruction (the visible part of the panel per point) and the black cube are not yet written.
+  obstruction (the visible part of the panel per point) are not yet written.
 - **Per-cell inter-reflected illuminance** in rooms: no closed form exists for a cube's
   distribution within a face; only the face means are exact (above).
 - **Walls for the area source** (perpendicular rectangles): not yet written.

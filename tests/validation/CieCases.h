@@ -71,6 +71,11 @@ struct CaseOptions {
 /// square) and 0 inside (no point lies on the shadow's edge).
 [[nodiscard]] CaseResult obstructionCase(const CaseOptions& o);
 
+/// A closed cube of edge 4 m with black (absorbing) faces, an isotropic 1000 lm source off its
+/// centre at (0.5, -0.3, 0.2): each face in 4 x 4 cells, each cell's mean illuminance I times its
+/// solid angle seen from the source over its area (no inter-reflection).
+[[nodiscard]] CaseResult blackCubeCase(const CaseOptions& o);
+
 /// A closed cube of edge 4 m, every face Lambertian of reflectance `rho`, an isotropic 1000 lm
 /// source at its centre: by symmetry each face receives a sixth of the flux incident on all the
 /// faces, which is exactly Phi / (1 - rho) (every incidence reflects rho, nothing escapes), so the

@@ -31,6 +31,8 @@ TEST(CieValidation, AreaSourceAtPoints) { expectRows(areaSourcePointsCase({})); 
 
 TEST(CieValidation, ObstructionShadowsThePointSource) { expectRows(obstructionCase({})); }
 
+TEST(CieValidation, BlackCubeGetsDirectLightOnly) { expectRows(blackCubeCase({})); }
+
 TEST(CieValidation, DiffuseCubesInterReflectWithoutBias) {
   for (const double rho : {0.2, 0.5, 0.8, 0.95}) expectRows(diffuseCubeCase(rho, {}));
 }
