@@ -15,8 +15,10 @@ CIE 171:2006, "Test cases to assess the accuracy of lighting computer programs",
 whose illuminances are known exactly. These are the cases Duplex can express, each written from
 the case's geometry and an exact formula (`tests/validation/CieCases.h`), run by `duplex_validate`
 and compared value by value: every cell of a sensor grid against the exact mean illuminance over
-that cell, every face of a room, every angle of the glass. A value passes when it lies within 4
-standard errors plus 0.5% of its reference (glass: 0.2%). The short versions of the same cases run
+that cell, every meter point against the exact illuminance at that point, every face of a room,
+every angle of the glass. A value passes when it lies within 4 standard errors plus 0.5% of its
+reference (glass: 0.2%). The values of one case share their rays, so their errors are correlated:
+a case's mean z^2 varies more between runs than that of independent values would. The short versions of the same cases run
 in CTest (`duplex_tests_validation`); this page is their full-length run.
 
 Regenerate (writes this page, `docs/validation/validation.json` and the charts):
@@ -42,6 +44,15 @@ Every reference here is computed from a closed form, not copied from the report'
   closed form for parallel rectangles (Howell's catalogue, C-11), over the cell's area; checked in
   CTest against the tabulated 0.19982 of two unit squares 1 apart, its additivity, and the point
   factor integrated over a cell.
+- **Area source at points** and **obstruction** (illuminance at points, as the report tabulates
+  it): meters at the 64 cell centres read the illuminance at the point by next-event connections,
+  against pi L times the closed-form configuration factor from a point to a parallel rectangle
+  (area source) and I cos / d^2 outside the obstruction's sharp shadow, 0 inside (obstruction; its
+  estimate has no variance, one light and one connection per ray, so it checks the geometry and
+  the occlusion exactly). No point lies on the shadow's edge.
+- **Black cube**: a closed cube whose faces absorb, the source off its centre: only direct light
+  arrives, so each cell's mean is the point-source formula in the face's own frame (the sensors lie
+  1 mm inside the faces).
 - **Diffuse cubes** (reflectance 0.2 to 0.95): in a closed enclosure of uniform reflectance rho
   with nothing escaping, the flux incident on all the surfaces is exactly Phi / (1 - rho); with the
   source at the cube's centre each face receives a sixth of it. This is exact for the face means,
@@ -65,8 +76,9 @@ NOT_MODELLED = """## What Duplex does not model (and the cases left out)
 - **IES-source cases**: Duplex reads LM-63 profiles (goniometric lights), but the report's
   luminaire files and tables are not reproduced here; a point light with an IES table is checked
   against its intensity table by the unit tests (`IesProfileTest`, `SensorPhotometryTest`).
-- **Obstructions and the black cube**: expressible, not yet written as cases (their exact cell
-  means need the shadow boundary clipped against each cell).
+- **Obstructions**: the obstruction case reads points (above); cell means behind
+  an obstruction (the shadow boundary clipped against each cell), an area source behind an
+  obstruction (the visible part of the panel per point) are not yet written.
 - **Per-cell inter-reflected illuminance** in rooms: no closed form exists for a cube's
   distribution within a face; only the face means are exact (above).
 - **Walls for the area source** (perpendicular rectangles): not yet written.
@@ -108,6 +120,8 @@ def chart(case, chart_dir):
         ax.set_xlabel("angle of incidence (degrees)")
         ax.set_ylabel("fraction")
     else:
+        # Values whose reference is 0 (in a shadow) have no relative error: the table lists them.
+        rows = [r for r in rows if r["reference"] != 0]
         x = list(range(len(rows)))
         ax.plot(x, [(r["value"] - r["reference"]) / r["reference"] * 100 for r in rows], "o", ms=3,
                 label="Duplex - exact")
@@ -115,7 +129,7 @@ def chart(case, chart_dir):
                         [(4 * r["stderr"] / r["reference"] + r["relative_tolerance"]) * 100 for r in rows],
                         color="tab:green", alpha=0.2, label="4 SE + tolerance")
         ax.axhline(0, color="black", lw=0.5)
-        ax.set_xlabel("value (in table order)")
+        ax.set_xlabel("value (in table order, those of reference 0 left out)")
         ax.set_ylabel("error (%)")
     ax.set_title(case["title"], fontsize=9)
     ax.legend(fontsize=7)

@@ -184,10 +184,17 @@ class ProgressPrinter {
 };
 
 // The keys every sensor file has after its shape: the emitted power and the sensor's totals.
+// A radiometric value or array, or null in a run that transports lumens (SensorRunResults::
+// luminous_transport): its "_w" quantities hold lumens, which a "_w" key must never show.
+template <class T>
+nlohmann::ordered_json radiometric(const T& value, const SensorRunResults& r) {
+  return r.luminous_transport ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(value);
+}
+
 void putTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r) {
-  j["emitted_power_w"] = r.energy.emitted_w;
-  j["total_flux_w"] = s.total_flux_w;
-  j["total_flux_stderr_w"] = s.total_flux_stderr_w;
+  j["emitted_power_w"] = radiometric(r.energy.emitted_w, r);
+  j["total_flux_w"] = radiometric(s.total_flux_w, r);
+  j["total_flux_stderr_w"] = radiometric(s.total_flux_stderr_w, r);
   j["relative_stderr"] = finiteOrNull(s.relative_stderr);
   j["efficiency"] = s.efficiency;
 }
@@ -195,8 +202,86 @@ void putTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRun
 // Spectral scenes: the band names and the sensor's per-band totals, before its per-band arrays.
 void putBandTotals(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r) {
   j["bands"] = r.bands;
-  j["band_total_flux_w"] = s.band_total_flux_w;
-  j["band_total_flux_stderr_w"] = s.band_total_flux_stderr_w;
+  j["band_total_flux_w"] = radiometric(s.band_total_flux_w, r);
+  j["band_total_flux_stderr_w"] = radiometric(s.band_total_flux_stderr_w, r);
+}
+
+// Runs with per-light results: "lights", one entry per light with its totals and, with `maps`, its
+// per-bin arrays under the sensor's own key names (`value`, `value_stderr`: irradiance or, for a
+// far field, intensity; `lum`, `lum_stderr`: their luminous keys).
+void putPerLight(nlohmann::ordered_json& j, const SensorResult& s, const SensorRunResults& r, const char* value,
+                 const char* value_stderr, const char* lum, const char* lum_stderr, bool maps) {
+  if (r.light_names.empty()) return;
+  nlohmann::ordered_json lights = nlohmann::ordered_json::array();
+  for (std::size_t l = 0; l < r.light_names.size(); ++l) {
+    nlohmann::ordered_json e;
+    e["name"] = r.light_names[l];
+    e["total_flux_w"] = radiometric(s.light_total_flux_w[l], r);
+    e["total_flux_stderr_w"] = radiometric(s.light_total_flux_stderr_w[l], r);
+    if (maps) {
+      e[value] = radiometric(s.light_irradiance_w_m2[l], r);
+      e[value_stderr] = radiometric(s.light_stderr_w_m2[l], r);
+      e["flux_w"] = radiometric(s.light_flux_w[l], r);
+      e["flux_stderr_w"] = radiometric(s.light_flux_stderr_w[l], r);
+    }
+    if (!s.light_luminous_flux_lm.empty()) {
+      e["total_flux_lm"] = s.light_luminous_flux_lm[l];
+      e["total_flux_stderr_lm"] = s.light_luminous_flux_stderr_lm[l];
+      if (maps) {
+        e[lum] = s.light_illuminance_lx[l];
+        e[lum_stderr] = s.light_illuminance_stderr_lx[l];
+      }
+    }
+    lights.push_back(std::move(e));
+  }
+  j["lights"] = std::move(lights);
+}
+
+// Three values of a CSV row ("a,b,c", 17 significant digits), or ",," when `empty` (a run that
+// transports lumens leaves its "_w" columns empty).
+std::string csvFields(double a, double b, double c, bool empty = false) {
+  if (empty) return ",,";
+  char text[96];
+  std::snprintf(text, sizeof text, "%.17g,%.17g,%.17g", a, b, c);
+  return text;
+}
+
+// run.json's "meters": per meter its points and normals (world space) and per point the
+// irradiance on the plane of its normal, its standard error and the rays that connected, with
+// the luminous and per-light values where the run has them.
+nlohmann::ordered_json meterReport(const SensorRunResults& r) {
+  const auto xyz = [](const std::vector<glm::dvec3>& v) {
+    nlohmann::ordered_json out = nlohmann::ordered_json::array();
+    for (const glm::dvec3& p : v) out.push_back({p.x, p.y, p.z});
+    return out;
+  };
+  nlohmann::ordered_json meters = nlohmann::ordered_json::array();
+  for (const MeterResult& m : r.meters) {
+    nlohmann::ordered_json j;
+    j["name"] = m.name;
+    j["points"] = xyz(m.points);
+    j["normals"] = xyz(m.normals);
+    j["irradiance_w_m2"] = radiometric(m.irradiance_w_m2, r);
+    j["stderr_w_m2"] = radiometric(m.stderr_w_m2, r);
+    j["ray_count"] = m.ray_count;
+    if (r.photometric) {
+      j["illuminance_lx"] = m.illuminance_lx;
+      j["illuminance_stderr_lx"] = m.illuminance_stderr_lx;
+    }
+    if (!m.light_irradiance_w_m2.empty()) {
+      nlohmann::ordered_json lights = nlohmann::ordered_json::array();
+      for (std::size_t l = 0; l < m.light_irradiance_w_m2.size(); ++l) {
+        nlohmann::ordered_json e{{"name", r.light_names[l]},
+                                 {"irradiance_w_m2", radiometric(m.light_irradiance_w_m2[l], r)},
+                                 {"stderr_w_m2", radiometric(m.light_stderr_w_m2[l], r)}};
+        if (!m.light_illuminance_lx.empty()) e["illuminance_lx"] = m.light_illuminance_lx[l];
+        lights.push_back(std::move(e));
+      }
+      j["lights"] = std::move(lights);
+    }
+    meters.push_back(std::move(j));
+  }
+  return meters;
 }
 
 // Per-bin pairs or triples of a flat array (index n * bin + c) as JSON rows, NaN as null.
@@ -218,9 +303,14 @@ void putPhotometry(nlohmann::ordered_json& j, const SensorResult& s, const Senso
   if (!r.photometric) return;
   j["luminous_flux_lm"] = s.luminous_flux_lm;
   j["luminous_flux_stderr_lm"] = s.luminous_flux_stderr_lm;
+  j["emitted_flux_lm"] = r.emitted_lm;
+  j["total_flux_lm"] = s.luminous_flux_lm;
+  j["total_flux_stderr_lm"] = s.luminous_flux_stderr_lm;
   if (maps) {
     j[value] = s.illuminance_lx;
     j[value_stderr] = s.illuminance_stderr_lx;
+    j["flux_lm"] = s.flux_lm;
+    j["flux_stderr_lm"] = s.flux_stderr_lm;
   }
   if (!r.colorimetric) return;
   j["total_cie_xyz"] = rows(s.total_cie_xyz, 3)[0];
@@ -252,29 +342,34 @@ void writeFarFieldFiles(const std::filesystem::path& dir, const SensorResult& s,
   j["c_deg"] = c_deg;
   j["gamma_deg"] = gamma_deg;
   // The run's "irradiance" of a far-field cell is its flux per unit solid angle: the intensity.
-  j["intensity_w_sr"] = s.irradiance_w_m2;
-  j["intensity_stderr_w_sr"] = s.stderr_w_m2;
-  j["flux_w"] = s.flux_w;
+  j["intensity_w_sr"] = radiometric(s.irradiance_w_m2, r);
+  j["intensity_stderr_w_sr"] = radiometric(s.stderr_w_m2, r);
+  j["flux_w"] = radiometric(s.flux_w, r);
   j["ray_count"] = s.ray_count;
   j["solid_angle_sr"] = s.bin_area_m2;
   if (!r.bands.empty()) {
     putBandTotals(j, s, r);
-    j["band_intensity_w_sr"] = s.band_irradiance_w_m2;
-    j["band_intensity_stderr_w_sr"] = s.band_stderr_w_m2;
-    j["band_flux_w"] = s.band_flux_w;
+    j["band_intensity_w_sr"] = radiometric(s.band_irradiance_w_m2, r);
+    j["band_intensity_stderr_w_sr"] = radiometric(s.band_stderr_w_m2, r);
+    j["band_flux_w"] = radiometric(s.band_flux_w, r);
   }
   putPhotometry(j, s, r, "intensity_cd", "intensity_stderr_cd", true);
+  putPerLight(j, s, r, "intensity_w_sr", "intensity_stderr_w_sr", "intensity_cd", "intensity_stderr_cd", true);
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
-  std::string csv = "ic,ig,c_deg,gamma_deg,flux_w,intensity_w_sr,intensity_stderr_w_sr,ray_count\n";
-  char row[256];
+  // Photometric runs append the luminous columns, so the earlier ones keep their places.
+  std::string csv = "ic,ig,c_deg,gamma_deg,flux_w,intensity_w_sr,intensity_stderr_w_sr,ray_count";
+  csv += r.photometric ? ",flux_lm,intensity_cd,intensity_stderr_cd\n" : "\n";
+  char row[128];
   for (std::uint32_t ic = 0; ic < nc; ++ic) {
     for (std::uint32_t ig = 0; ig < ng; ++ig) {
       const std::size_t b = static_cast<std::size_t>(ic) * ng + ig;
-      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu\n", ic, ig, c_deg[ic], gamma_deg[ig],
-                    s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b],
-                    static_cast<unsigned long long>(s.ray_count[b]));
+      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,", ic, ig, c_deg[ic], gamma_deg[ig]);
       csv += row;
+      csv += csvFields(s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b], r.luminous_transport);
+      csv += "," + std::to_string(s.ray_count[b]);
+      if (r.photometric) csv += "," + csvFields(s.flux_lm[b], s.illuminance_lx[b], s.illuminance_stderr_lx[b]);
+      csv += '\n';
     }
   }
   writeText(dir / (base + ".csv"), csv);
@@ -321,15 +416,16 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   j["seed"] = r.seed;
   j["shape"] = spec.shape == SensorShape::Disk ? "disk" : spec.shape == SensorShape::Sphere ? "sphere" : "rectangle";
   j["size"] = {spec.width, spec.height};
+  if (spec.shape != SensorShape::Rectangle) j["radius"] = 0.5 * spec.width;  // beside "size" (the diameter)
   j["bins"] = {s.nx, s.ny};
   j["two_sided"] = s.two_sided;
   putTotals(j, s, r);
   // Large maps: binary files instead of JSON arrays and CSV rows (--text-map-limit).
   const bool text_maps = static_cast<std::uint64_t>(s.nx) * s.ny <= text_map_limit;
   if (text_maps) {
-    j["irradiance_w_m2"] = s.irradiance_w_m2;
-    j["stderr_w_m2"] = s.stderr_w_m2;
-    j["flux_w"] = s.flux_w;
+    j["irradiance_w_m2"] = radiometric(s.irradiance_w_m2, r);
+    j["stderr_w_m2"] = radiometric(s.stderr_w_m2, r);
+    j["flux_w"] = radiometric(s.flux_w, r);
     j["ray_count"] = s.ray_count;
     j["bin_area_m2"] = s.bin_area_m2;
   } else {
@@ -341,9 +437,14 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
       writeNpy(dir / file, std::span(values.data(), values.size()), dims, descr);
       files[key] = file;
     };
-    map("irradiance_w_m2", s.irradiance_w_m2, "<f8", shape.str());
-    map("stderr_w_m2", s.stderr_w_m2, "<f8", shape.str());
-    map("flux_w", s.flux_w, "<f8", shape.str());
+    // A run that transports lumens knows no radiometric value: its "_w" maps are NaN.
+    auto rad = [&r](const std::vector<double>& values) {
+      return r.luminous_transport ? std::vector<double>(values.size(), std::numeric_limits<double>::quiet_NaN())
+                                  : values;
+    };
+    map("irradiance_w_m2", rad(s.irradiance_w_m2), "<f8", shape.str());
+    map("stderr_w_m2", rad(s.stderr_w_m2), "<f8", shape.str());
+    map("flux_w", rad(s.flux_w), "<f8", shape.str());
     map("ray_count", s.ray_count, "<u8", shape.str());
     map("bin_area_m2", s.bin_area_m2, "<f8", shape.str());
     if (!r.bands.empty()) {  // [band][row][column]
@@ -355,13 +456,14 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
         for (const auto& b : per_band) all.insert(all.end(), b.begin(), b.end());
         return all;
       };
-      map("band_irradiance_w_m2", flat(s.band_irradiance_w_m2), "<f8", dims);
-      map("band_stderr_w_m2", flat(s.band_stderr_w_m2), "<f8", dims);
-      map("band_flux_w", flat(s.band_flux_w), "<f8", dims);
+      map("band_irradiance_w_m2", rad(flat(s.band_irradiance_w_m2)), "<f8", dims);
+      map("band_stderr_w_m2", rad(flat(s.band_stderr_w_m2)), "<f8", dims);
+      map("band_flux_w", rad(flat(s.band_flux_w)), "<f8", dims);
     }
     if (r.photometric) {
       map("illuminance_lx", s.illuminance_lx, "<f8", shape.str());
       map("illuminance_stderr_lx", s.illuminance_stderr_lx, "<f8", shape.str());
+      map("flux_lm", s.flux_lm, "<f8", shape.str());
     }
     if (r.colorimetric) {  // [row][column][component]
       map("cie_xyz", s.cie_xyz, "<f8", shape.str() + ", 3");
@@ -373,20 +475,25 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   if (!r.bands.empty()) {
     putBandTotals(j, s, r);
     if (text_maps) {
-      j["band_irradiance_w_m2"] = s.band_irradiance_w_m2;
-      j["band_stderr_w_m2"] = s.band_stderr_w_m2;
-      j["band_flux_w"] = s.band_flux_w;
+      j["band_irradiance_w_m2"] = radiometric(s.band_irradiance_w_m2, r);
+      j["band_stderr_w_m2"] = radiometric(s.band_stderr_w_m2, r);
+      j["band_flux_w"] = radiometric(s.band_flux_w, r);
     }
   }
   if (s.theta_bins != 0) {
     j["angular_bins"] = {s.theta_bins, s.phi_bins};
-    j["angular_flux_w"] = s.angular_flux_w;
-    j["angular_stderr_w"] = s.angular_stderr_w;
+    j["angular_flux_w"] = radiometric(s.angular_flux_w, r);
+    j["angular_stderr_w"] = radiometric(s.angular_stderr_w, r);
     j["angular_solid_angle_sr"] = s.angular_solid_angle_sr;
     j["angular_ray_count"] = s.angular_ray_count;
-    if (!r.bands.empty()) j["band_angular_flux_w"] = s.band_angular_flux_w;
+    if (!r.bands.empty()) j["band_angular_flux_w"] = radiometric(s.band_angular_flux_w, r);
+    if (r.luminous_transport) {  // the angular flux is then luminous flux
+      j["angular_flux_lm"] = s.angular_flux_w;
+      j["angular_stderr_lm"] = s.angular_stderr_w;
+    }
   }
   putPhotometry(j, s, r, "illuminance_lx", "illuminance_stderr_lx", text_maps);
+  putPerLight(j, s, r, "irradiance_w_m2", "stderr_w_m2", "illuminance_lx", "illuminance_stderr_lx", text_maps);
   writeText(dir / (base + ".json"), j.dump() + "\n");
 
   // CSV: one row per bin with its centre in sensor-local coordinates (a sphere: its direction).
@@ -399,7 +506,8 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   // The bin centre in the sensor's local coordinates (x, y), and in world coordinates (world_x,
   // world_y, world_z: on the sensor's surface, scene units), appended so the earlier columns keep
   // their places.
-  std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count,world_x,world_y,world_z\n";
+  std::string csv = "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count,world_x,world_y,world_z";
+  csv += r.photometric ? ",flux_lm,illuminance_lx,illuminance_stderr_lx\n" : "\n";
   char row[384];
   for (std::uint32_t iy = 0; iy < s.ny; ++iy) {
     for (std::uint32_t ix = 0; ix < s.nx; ++ix) {
@@ -414,10 +522,14 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
         local = 0.5 * spec.width * glm::dvec3(rho * std::cos(phi), rho * std::sin(phi), y);
       }
       const glm::dvec3 world = inst.world_from_object.point(local);
-      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,%.17g,%.17g,%.17g,%llu,%.9g,%.9g,%.9g\n", ix, iy, x, y,
-                    s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b],
-                    static_cast<unsigned long long>(s.ray_count[b]), world.x, world.y, world.z);
+      std::snprintf(row, sizeof row, "%u,%u,%.9g,%.9g,", ix, iy, x, y);
       csv += row;
+      csv += csvFields(s.flux_w[b], s.irradiance_w_m2[b], s.stderr_w_m2[b], r.luminous_transport);
+      std::snprintf(row, sizeof row, ",%llu,%.9g,%.9g,%.9g", static_cast<unsigned long long>(s.ray_count[b]), world.x,
+                    world.y, world.z);
+      csv += row;
+      if (r.photometric) csv += "," + csvFields(s.flux_lm[b], s.illuminance_lx[b], s.illuminance_stderr_lx[b]);
+      csv += '\n';
     }
   }
   writeText(dir / (base + ".csv"), csv);
@@ -510,7 +622,9 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
       std::cerr << note.str() << '\n' << std::flush;
     }
     if (scene.lights().empty()) throw FileError(o.scene.string() + ": the scene has no lights (\"lights\": [...])");
-    if (scene.sensors().empty()) throw FileError(o.scene.string() + ": the scene has no sensors (\"sensors\": [...])");
+    if (scene.sensors().empty() && scene.meters().empty())
+      throw FileError(o.scene.string() +
+                      ": the scene has no sensors (\"sensors\": [...]) or meters (\"meters\": [...])");
     checkOutputNames(scene, o.scene);
     for (const SensorInstance& s : scene.sensors()) stems.push_back(sensorFileStem(s.name));
     if (files) checkOutputFolder(o.out, stems, o.resume, o.overwrite);
@@ -523,6 +637,9 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     cfg.max_scatterings = o.max_scatterings;
     cfg.roulette_threshold = o.roulette;
     cfg.batch_rays = o.batch_rays;
+    cfg.per_light = o.per_light;
+    if (o.per_light && ranks.shared())
+      throw InvalidArgument("--per-light: per-light results are kept in one process only, not under mpirun");
     running.emplace(scene, cfg);
     if (!files) return;
     std::error_code ec;
@@ -607,25 +724,29 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   }
   report["seconds"] = seconds;
   report["rays_per_s"] = seconds > 0 ? static_cast<double>(r.rays - start) / seconds : 0.0;
-  report["emitted_power_w"] = r.energy.emitted_w;
+  report["emitted_power_w"] = radiometric(r.energy.emitted_w, r);
   const EnergyBalance& e = r.energy;
   nlohmann::ordered_json energy = nlohmann::ordered_json::object();
   for (const EnergyEnding& k : kEnergyEndings) {
-    energy[std::string(k.name) + "_w"] = e.*k.power;
+    energy[std::string(k.name) + "_w"] = radiometric(e.*k.power, r);
     energy[std::string(k.name) + "_rays"] = e.*k.rays;
   }
+  // A run that transports lumens: the same balance in lumens, after the existing keys.
+  for (const EnergyEnding& k : kEnergyEndings)
+    if (r.luminous_transport) energy[std::string(k.name) + "_lm"] = e.*k.power;
   report["energy"] = std::move(energy);
   report["failure_threshold"] = o.failure_threshold;
+  const char* unit = r.luminous_transport ? " lm, " : " W, ";  // what the run transports
   if (e.failed_rays != 0 && e.failed_w > o.failure_threshold * e.emitted_w)
     std::cerr << "duplex sensor: warning: numerical failures ended " << e.failed_rays << " of " << r.rays
-              << " paths, carrying " << e.failed_w << " W, " << 100.0 * e.failed_w / e.emitted_w
+              << " paths, carrying " << e.failed_w << unit << 100.0 * e.failed_w / e.emitted_w
               << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
               << "%): the results miss that power\n";
   // A cap on the path length loses what the cut paths would still have deposited: a bias that the
   // standard errors do not show, so it is said whenever it is not negligible.
   if (e.depth_limited_rays != 0 && e.depth_limited_w > o.failure_threshold * e.emitted_w)
     std::cerr << "duplex sensor: warning: the path limits cut " << e.depth_limited_rays << " of " << r.rays
-              << " paths, carrying " << e.depth_limited_w << " W, " << 100.0 * e.depth_limited_w / e.emitted_w
+              << " paths, carrying " << e.depth_limited_w << unit << 100.0 * e.depth_limited_w / e.emitted_w
               << "% of the emitted power (above --failure-threshold " << 100.0 * o.failure_threshold
               << "%): the results miss what those paths would still have deposited; "
               << (scene.scatters() ? "--max-depth none (the default) and a larger --max-scatterings remove it\n"
@@ -633,21 +754,37 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
   warnBackFacingSensors(scene, r);
   if (!r.bands.empty()) {
     report["bands"] = r.bands;
-    report["band_emitted_w"] = r.band_emitted_w;
+    report["band_emitted_w"] = radiometric(r.band_emitted_w, r);
   }
   if (r.colorimetric) report["band_nm"] = r.band_nm;
-  if (r.photometric) report["emitted_luminous_flux_lm"] = r.emitted_lm;
+  if (r.photometric) {
+    report["emitted_luminous_flux_lm"] = r.emitted_lm;
+    report["emitted_flux_lm"] = r.emitted_lm;
+  }
+  if (!r.light_names.empty()) {
+    nlohmann::ordered_json lights = nlohmann::ordered_json::array();
+    for (std::size_t l = 0; l < r.light_names.size(); ++l) {
+      nlohmann::ordered_json entry{{"name", r.light_names[l]},
+                                   {"emitted_power_w", radiometric(r.light_emitted_w[l], r)}};
+      if (r.photometric) entry["emitted_flux_lm"] = r.light_emitted_lm[l];
+      lights.push_back(std::move(entry));
+    }
+    report["lights"] = std::move(lights);
+  }
   if (scene.scatters()) report["scatterings"] = run.counters().scatterings;
   nlohmann::ordered_json sensors = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < r.sensors.size(); ++k) {
     const SensorResult& s = r.sensors[k];
-    sensors.push_back({{"name", s.name},
-                       {"file", (o.out / (sensorFileStem(s.name) + ".json")).string()},
-                       {"total_flux_w", s.total_flux_w},
-                       {"relative_stderr", finiteOrNull(s.relative_stderr)},
-                       {"efficiency", s.efficiency}});
+    nlohmann::ordered_json entry{{"name", s.name},
+                                 {"file", (o.out / (sensorFileStem(s.name) + ".json")).string()},
+                                 {"total_flux_w", radiometric(s.total_flux_w, r)},
+                                 {"relative_stderr", finiteOrNull(s.relative_stderr)},
+                                 {"efficiency", s.efficiency}};
+    if (r.photometric) entry["total_flux_lm"] = s.luminous_flux_lm;
+    sensors.push_back(std::move(entry));
   }
   report["sensors"] = sensors;
+  if (!r.meters.empty()) report["meters"] = meterReport(r);
   if (ranks.shared()) report["mpi"] = ranks.report();
   // All result files or none: written into a staging folder, moved into --out when complete.
   try {

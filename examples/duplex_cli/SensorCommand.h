@@ -73,6 +73,9 @@ struct SensorOptions {
   /// --failure-threshold F: a run whose numerical failures (EnergyBalance::failed_w) carry more than
   /// this fraction of the emitted power says so on stderr (the results are written all the same).
   double failure_threshold = 0.001;
+  /// --per-light: each light's contribution beside the totals (SensorRunConfig::per_light): run.json
+  /// "lights", each sensor file's "lights"; refused under mpirun.
+  bool per_light = false;
 };
 
 /// Thrown when SIGINT or SIGTERM stopped the command before the run started (while the scene
@@ -95,7 +98,10 @@ class Interrupted : public std::runtime_error {
 /// seconds, rays_per_s, emitted_power_w, energy {escaped_w, escaped_rays, absorbed_w, absorbed_rays,
 /// medium_absorbed_w, medium_absorbed_rays, depth_limited_w, depth_limited_rays, roulette_w,
 /// roulette_rays, failed_w, failed_rays}, failure_threshold, bands and band_emitted_w (spectral scenes only),
-/// scatterings (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr, efficiency}],
+/// scatterings (scenes whose fog scatters only), sensors [{name, file, total_flux_w, relative_stderr, efficiency}
+/// and in photometric runs total_flux_lm], in photometric runs emitted_luminous_flux_lm and emitted_flux_lm (the
+/// same value), in runs whose lights are all in lumens without wavelengths the "_w" keys null and the energy's
+/// "_lm" keys beside them, with --per-light lights [{name, emitted_power_w, emitted_flux_lm}],
 /// with --at also at and edits_applied, and for a run under mpirun mpi {ranks, batches, rank0_batches,
 /// tally_bytes_received, tally_bytes_max, rank0_trace_seconds, rank0_comm_seconds, rank0_reduce_seconds,
 /// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and

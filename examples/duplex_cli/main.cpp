@@ -296,6 +296,9 @@ int main(int argc, char** argv) {
   sensor_cmd->add_option(
       "--roulette", sensor.roulette,
       "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
+  sensor_cmd->add_flag("--per-light", sensor.per_light,
+                       "Also report each light's contribution (run.json and each sensor file's \"lights\"); "
+                       "one process only");
   sensor_cmd->add_option(
       "--failure-threshold", sensor.failure_threshold,
       "Warn on stderr when numerical failures, or the path limits, carry more than this fraction of the emitted "

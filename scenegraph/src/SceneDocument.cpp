@@ -460,9 +460,9 @@ SceneDocument loadSceneDocument(const std::filesystem::path& path, const ObjectT
              "unknown format \"" + doc.format + "\" (this version reads \"" + kV1 + "\" and \"" + kOwn + "\")");
   const bool v1 = doc.format == kV1;
   ctx.strict = !v1;  // v1: unknown keys are ignored; own format: they are errors (typos)
-  // "lights", "sensors", "bands" (and an object's "material") belong to duplex::sensors, which reads them
+  // "lights", "sensors", "bands", "meters" (and an object's "material") belong to duplex::sensors, which reads them
   // from doc.parsed.
-  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors", "bands"});
+  ctx.onlyKeys(root, "", {"format", "objects", "nodes", "edits", "lights", "sensors", "bands", "meters"});
   DocumentReader reader(ctx, graph, registry);
   // The instances (scene-json-v1) or nodes (duplex-scene-v1) against the memory limit, before any
   // object is read or built.

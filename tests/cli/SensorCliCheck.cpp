@@ -677,6 +677,87 @@ void checkBackFacingWarning(const std::string& duplex, const fs::path& dir) {
          "a one-sided sensor facing the light: " + facing.out + facing.err);
 }
 
+// Lights in lumens (no wavelengths): run.json and the sensor files give the photometric keys
+// (emitted_flux_lm, total_flux_lm, the energy's "_lm" keys, flux_lm, illuminance_lx, the CSV's
+// appended luminous columns) and leave the "_w" keys null or empty, since the transported unit is the
+// lumen; --per-light gives each light's share, which adds up to the totals. The same scene in
+// watts keeps its "_w" keys and gets no "_lm" key.
+void checkPhotometricKeysAndPerLight(const std::string& duplex, const fs::path& dir) {
+  fs::create_directories(dir);
+  const auto scene = [](const std::string& unit) {
+    return R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [
+      {"type": "point", "name": "left", "position": [-0.5, 0, 1.5], ")" +
+           unit + R"(": 400}, {"type": "point", "name": "right", "position": [0.5, 0.2, 2], ")" + unit +
+           R"(": 1200}], "sensors": [{"name": "desk", "size": [1, 1], "bins": [2, 2], "two_sided": false}],
+      "meters": [{"name": "grid", "points": [[0, 0, 0], [0, 0, 0]], "normals": [[0, 0, 1], [0, 0, -1]]}]})";
+  };
+  write(dir / "lumens.json", scene("lumens"));
+  write(dir / "watts.json", scene("power"));
+  std::vector<std::string> args = sensorArgs(duplex, dir / "lumens.json", "20000", "2", dir / "lumens");
+  args.push_back("--per-light");
+  const nlohmann::json r = runJson(args, dir);
+  expect(r["emitted_flux_lm"] == 1600.0 && r["emitted_luminous_flux_lm"] == 1600.0,
+         "lumens: emitted_flux_lm " + r.dump());
+  expect(
+      r["emitted_power_w"].is_null() && r["energy"]["escaped_w"].is_null() && r["sensors"][0]["total_flux_w"].is_null(),
+      "lumens: a \"_w\" key holds lumens: " + r.dump());
+  // Sensors absorb nothing: every lumen escapes this scene.
+  expect(std::abs(r["energy"]["escaped_lm"].get<double>() - 1600.0) < 1e-9 &&
+             r["sensors"][0]["total_flux_lm"].get<double>() > 0.0,
+         "lumens: escaped_lm is not the emitted 1600 lm, or the desk got nothing: " + r.dump());
+  expect(r["lights"].size() == 2 && r["lights"][0]["name"] == "left" && r["lights"][1]["emitted_flux_lm"] == 1200.0 &&
+             r["lights"][1]["emitted_power_w"].is_null(),
+         "lumens: run.json lights " + r["lights"].dump());
+  // The meter's first point (facing up) against the inverse-square cosine law of both lights; the
+  // second faces away from them.
+  const double pi = 3.14159265358979323846;
+  const double exact = 400 / (4 * pi) * (1.5 / std::sqrt(2.5)) / 2.5 + 1200 / (4 * pi) * (2 / std::sqrt(4.29)) / 4.29;
+  const nlohmann::json& meter = r["meters"][0];
+  expect(meter["name"] == "grid" && meter["irradiance_w_m2"].is_null() &&
+             std::abs(meter["illuminance_lx"][0].get<double>() - exact) <=
+                 4.5 * meter["illuminance_stderr_lx"][0].get<double>() + 1e-9 * exact &&
+             meter["illuminance_lx"][1] == 0.0 && meter["lights"].size() == 2,
+         "lumens: meter " + meter.dump() + ", expected " + std::to_string(exact) + " lx at the first point");
+  const nlohmann::json j = readJson(dir / "lumens" / "desk.json");
+  expect(j["irradiance_w_m2"].is_null() && j["flux_w"].is_null() && j["total_flux_w"].is_null(),
+         "lumens: desk.json holds lumens under a \"_w\" key");
+  expect(j["illuminance_lx"].size() == 4 && j["flux_lm"].size() == 4 && j["total_flux_lm"] == j["luminous_flux_lm"],
+         "lumens: desk.json's luminous keys");
+  expect(j["lights"].size() == 2, "lumens: desk.json has no per-light entries");
+  double total = 0.0;
+  for (int b = 0; b < 4; ++b) {
+    double sum = 0.0;
+    for (int l = 0; l < 2; ++l) sum += j["lights"][l]["illuminance_lx"][b].get<double>();
+    const double all = j["illuminance_lx"][b].get<double>();
+    expect(all > 0.0 && std::abs(sum - all) <= 1e-9 * all,
+           "lumens: per-light illuminances do not sum to bin " + std::to_string(b) + "'s");
+  }
+  for (int l = 0; l < 2; ++l) total += j["lights"][l]["total_flux_lm"].get<double>();
+  expect(std::abs(total - j["total_flux_lm"].get<double>()) <= 1e-9 * total, "lumens: per-light totals");
+  std::ifstream csv(dir / "lumens" / "desk.csv");
+  std::string line;
+  std::getline(csv, line);
+  expect(line ==
+             "ix,iy,x,y,flux_w,irradiance_w_m2,stderr_w_m2,ray_count,world_x,world_y,world_z,flux_lm,illuminance_lx,"
+             "illuminance_stderr_lx",
+         "lumens: desk.csv header " + line);
+  for (int b = 0; std::getline(csv, line); ++b) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
+    expect(cells.size() == 14 && cells[4].empty() && cells[5].empty() && cells[6].empty() &&
+               std::abs(std::stod(cells[12]) - j["illuminance_lx"][b].get<double>()) <=
+                   1e-12 * j["illuminance_lx"][b].get<double>(),
+           "lumens: desk.csv row " + line);
+  }
+  const nlohmann::json w = runJson(sensorArgs(duplex, dir / "watts.json", "20000", "2", dir / "watts"), dir);
+  expect(w["meters"][0]["irradiance_w_m2"][0].get<double>() > 0.0 && !w["meters"][0].contains("illuminance_lx"),
+         "watts: meter " + w["meters"].dump());
+  expect(w["emitted_power_w"] == 1600.0 && !w.contains("emitted_flux_lm") && !w["energy"].contains("escaped_lm") &&
+             !w.contains("lights") && w["sensors"][0]["total_flux_w"].get<double>() > 0.0,
+         "watts: " + w.dump());
+}
+
 int main(int argc, char** argv) {
   if (argc != 3) {
     std::cerr << "usage: duplex_sensor_cli_check DUPLEX DIR\n";
@@ -688,6 +769,7 @@ int main(int argc, char** argv) {
     checkFarFieldAndEdits(argv[1], fs::path(argv[2]) / "farfield");
     checkOutputFolderRules(argv[1], fs::path(argv[2]) / "output");
     checkBackFacingWarning(argv[1], fs::path(argv[2]) / "back_facing");
+    checkPhotometricKeysAndPerLight(argv[1], fs::path(argv[2]) / "photometric");
     return status;
   });
 }

@@ -26,16 +26,24 @@ def test_run_equals_cli_output(cli, tmp_path, name, at):
         nx, ny = ref["bins"]
         far = ref["shape"] == "farfield"
         assert got["bins"] == (nx, ny) and got["flux"].shape == ((nx, ny) if far else (ny, nx))
-        keys = ((("intensity", "intensity_w_sr"), ("intensity_stderr", "intensity_stderr_w_sr"),
+        # A scene whose lights are all in lumens (no wavelengths) transports lumens: the tool's "_w"
+        # keys are null and its photometric keys hold what the module's unit-less entries hold.
+        lumens = report["emitted_power_w"] is None
+        keys = ((("intensity", "intensity_cd" if lumens else "intensity_w_sr"),
+                 ("intensity_stderr", "intensity_stderr_cd" if lumens else "intensity_stderr_w_sr"),
                  ("solid_angle", "solid_angle_sr")) if far else
-                (("irradiance", "irradiance_w_m2"), ("stderr", "stderr_w_m2"), ("bin_area", "bin_area_m2")))
-        for key, ref_key in keys + (("flux", "flux_w"), ("ray_count", "ray_count")):
+                (("irradiance", "illuminance_lx" if lumens else "irradiance_w_m2"),
+                 ("stderr", "illuminance_stderr_lx" if lumens else "stderr_w_m2"), ("bin_area", "bin_area_m2")))
+        for key, ref_key in keys + (("flux", "flux_lm" if lumens else "flux_w"), ("ray_count", "ray_count")):
             assert np.array_equal(got[key].ravel(), np.array(ref[ref_key])), key
-        assert got["total_flux"] == ref["total_flux_w"] and got["efficiency"] == ref["efficiency"]
+        assert got["total_flux"] == ref["total_flux_lm" if lumens else "total_flux_w"]
+        assert got["efficiency"] == ref["efficiency"]
         assert got["rays"] == RAYS and got["seed"] == 3 and got["status"] == "completed"
-        assert got["emitted_power"] == report["emitted_power_w"]
-        assert got["energy"]["escaped_w"] == report["energy"]["escaped_w"]
-        for key in ("escaped_rays", "absorbed_rays", "depth_limited_rays", "roulette_rays", "failed_w", "failed_rays"):
+        assert got["emitted_power"] == report["emitted_flux_lm" if lumens else "emitted_power_w"]
+        unit = "_lm" if lumens else "_w"
+        assert got["energy"]["escaped_w"] == report["energy"]["escaped" + unit]
+        assert got["energy"]["failed_w"] == report["energy"]["failed" + unit]
+        for key in ("escaped_rays", "absorbed_rays", "depth_limited_rays", "roulette_rays", "failed_rays"):
             assert got["energy"][key] == report["energy"][key], key
         if "luminous_flux_lm" in ref:  # photometric scenes: the same luminous keys
             assert got["luminous_flux"] == ref["luminous_flux_lm"]

@@ -103,6 +103,18 @@ inline Light pointLight(glm::dvec3 p, double power) {
   return l;
 }
 
+// A one-sided Lambertian rectangle width x height, placed by `world` (emitting towards its local +z).
+inline Light areaLight(double width, double height, const Affine& world, double power) {
+  Light l;
+  l.type = LightType::Area;
+  l.name = "panel";
+  l.width = width;
+  l.height = height;
+  l.world_from_light = world;
+  l.power_w = power;
+  return l;
+}
+
 // A graph built by the test, kept alive with the scene.
 struct Fixture {
   SceneGraph graph;

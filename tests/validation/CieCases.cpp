@@ -51,6 +51,13 @@ Timed run(const SensorScene& scene, std::uint64_t rays, const CaseOptions& o, Se
   return t;
 }
 
+// Runs case c's scene for its rays and records the run's seconds in it.
+Timed runCase(CaseResult& c, const SensorScene& scene, const CaseOptions& o) {
+  Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  return t;
+}
+
 // A case's description, its rays scaled by the options.
 CaseResult describe(std::string name, std::string title, std::string reference, std::string unit, std::uint64_t rays,
                     const CaseOptions& o) {
@@ -82,6 +89,24 @@ void gridRows(CaseResult& out, const std::string& what, const SensorResult& s, d
     }
 }
 
+// The faces of a cube centred at the origin: their names, outward normals and sensor frames.
+constexpr const char* kFaceNames[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
+glm::dvec3 faceNormal(int k) {
+  const glm::dvec3 axes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  return axes[k / 2] * (k % 2 ? -1.0 : 1.0);
+}
+Affine faceFrame(int k, double a, double inset) {
+  const glm::dvec3 axes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const glm::dvec3 n = faceNormal(k), ex = axes[(k / 2 + 1) % 3], ey = glm::cross(-n, ex);
+  return frame(n * (a / 2 - inset), ex, ey);  // recording the light arriving from inside
+}
+
+// One sensor of bins x bins cells per face of a cube of edge a, `inset` inside it.
+void addFaceSensors(Fixture& f, double a, double inset, std::uint32_t bins) {
+  for (int k = 0; k < 6; ++k)
+    f.add(sensor(a, a, bins, bins, false, kFaceNames[k]), faceFrame(k, a, inset), kFaceNames[k]);
+}
+
 }  // namespace
 
 double CaseRow::z() const { return stderr_value > 0.0 ? (value - reference) / stderr_value : 0.0; }
@@ -101,8 +126,7 @@ CaseResult pointSourceCase(const CaseOptions& o) {
   CaseResult c = describe(
       "point-source", "Isotropic point source of 1000 lm 3 m above a 4 m x 4 m floor and a 4 m x 3 m wall 2 m away",
       "I x solid angle of each cell / its area (inverse-square cosine law integrated over the cell)", "lx", 400000, o);
-  const Timed t = run(scene, c.rays, o);
-  c.seconds = t.seconds;
+  const Timed t = runCase(c, scene, o);
   const double intensity = kLumens / (4.0 * std::numbers::pi);
   gridRows(c, "floor", t.results.sensors[scene.findSensor("floor")], 4.0, 4.0,
            [&](double x0, double x1, double y0, double y1) {
@@ -133,8 +157,7 @@ CaseResult areaSourceCase(const CaseOptions& o) {
       describe("area-source", "Lambertian panel of 1 m^2 and 1000 cd/m^2, 3 m above a 4 m x 4 m floor",
                "pi L x exchange area between the cell and the panel (parallel rectangles, closed form) / cell area",
                "lx", 400000, o);
-  const Timed t = run(scene, c.rays, o);
-  c.seconds = t.seconds;
+  const Timed t = runCase(c, scene, o);
   gridRows(c, "floor", t.results.sensors[0], 4.0, 4.0, [&](double x0, double x1, double y0, double y1) {
     return std::numbers::pi * luminance * parallelRectanglesExchange(x0, x1, y0, y1, -0.5, 0.5, -0.5, 0.5, h) /
            ((x1 - x0) * (y1 - y0));
@@ -147,27 +170,19 @@ CaseResult diffuseCubeCase(double rho, const CaseOptions& o, bool also_capped) {
   Fixture f;
   f.add(std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(makeBox({a, a, a}, "room"))),
         Affine::identity(), "room", Material{MaterialType::Lambertian, rho});
-  // One sensor per face, just inside it, recording the light arriving at the face.
-  const glm::dvec3 axes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  const char* names[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
-  for (int k = 0; k < 6; ++k) {
-    const glm::dvec3 n = axes[k / 2] * (k % 2 ? -1.0 : 1.0);  // outward normal of the face
-    const glm::dvec3 ex = axes[(k / 2 + 1) % 3], ey = glm::cross(-n, ex);
-    f.add(sensor(a, a, 1, 1, false, names[k]), frame(n * (a / 2 - inset), ex, ey), names[k]);
-  }
+  addFaceSensors(f, a, inset, 1);
   const SensorScene scene = f.scene({pointLight({0, 0, 0}, kLumens)});
   CaseResult c = describe("diffuse-cube-" + std::to_string(static_cast<int>(std::lround(rho * 100))),
                           "Closed 4 m cube of Lambertian reflectance " + std::to_string(rho).substr(0, 4) +
                               ", 1000 lm isotropic source at its centre",
                           "Phi / (6 a^2 (1 - rho)) per face (closed-enclosure balance and the cube's symmetry)", "lx",
                           rho > 0.9 ? 60000 : 100000, o);
-  const Timed t = run(scene, c.rays, o);
-  c.seconds = t.seconds;
+  const Timed t = runCase(c, scene, o);
   const double expected = kLumens / (6.0 * a * a * (1.0 - rho));
   for (int k = 0; k < 6; ++k) {
-    const SensorResult& s = t.results.sensors[scene.findSensor(names[k])];
+    const SensorResult& s = t.results.sensors[scene.findSensor(kFaceNames[k])];
     c.rows.push_back(
-        {std::string("face ") + names[k], expected, s.irradiance_w_m2[0], s.stderr_w_m2[0], std::nan(""), 0.005});
+        {std::string("face ") + kFaceNames[k], expected, s.irradiance_w_m2[0], s.stderr_w_m2[0], std::nan(""), 0.005});
   }
   const EnergyBalance& e = t.results.energy;
   c.notes.push_back("energy cut by path limits: " + std::to_string(e.depth_limited_w / e.emitted_w * 100.0) +
@@ -213,10 +228,107 @@ CaseResult clearGlassCase(const CaseOptions& o) {
   return c;
 }
 
+namespace {
+
+// The 8 x 8 centres of the 0.5 m cells of the 4 m x 4 m floor, facing up.
+PointMeter floorPoints() {
+  PointMeter m{"floor", {}, {}};
+  for (int iy = 0; iy < 8; ++iy)
+    for (int ix = 0; ix < 8; ++ix) {
+      m.points.push_back({-1.75 + 0.5 * ix, -1.75 + 0.5 * iy, 0.0});
+      m.normals.push_back({0, 0, 1});
+    }
+  return m;
+}
+
+// Rows of a meter against `exact(point)`.
+template <class Exact>
+void meterRows(CaseResult& out, const MeterResult& m, Exact exact) {
+  for (std::size_t i = 0; i < m.points.size(); ++i) {
+    CaseRow row;
+    row.label = m.name + " point (" + std::to_string(m.points[i].x).substr(0, 5) + ", " +
+                std::to_string(m.points[i].y).substr(0, 5) + ")";
+    row.reference = exact(m.points[i]);
+    row.value = m.irradiance_w_m2[i];
+    row.stderr_value = m.stderr_w_m2[i];
+    row.other = std::nan("");
+    out.rows.push_back(row);
+  }
+}
+
+}  // namespace
+
+CaseResult areaSourcePointsCase(const CaseOptions& o) {
+  const double h = 3.0, luminance = 1000.0;
+  Fixture f;
+  SensorScene scene = f.scene({areaLight(1.0, 1.0, frame({0, 0, h}, {1, 0, 0}, {0, -1, 0}),
+                                         std::numbers::pi * luminance * 1.0)});  // M = pi L over 1 m^2
+  scene.setMeters({floorPoints()});
+  CaseResult c = describe("area-source-points",
+                          "Lambertian panel of 1 m^2 and 1000 cd/m^2, 3 m above the floor: illuminance at 64 points",
+                          "pi L x configuration factor from the point to the panel (closed form)", "lx", 100000, o);
+  const Timed t = runCase(c, scene, o);
+  meterRows(c, t.results.meters[0], [&](const glm::dvec3& p) {
+    return std::numbers::pi * luminance * pointToParallelRectangle(-0.5 - p.x, 0.5 - p.x, -0.5 - p.y, 0.5 - p.y, h);
+  });
+  return c;
+}
+
+CaseResult obstructionCase(const CaseOptions& o) {
+  const double h = 3.0, zo = 1.5;
+  Fixture f;
+  f.add(quad(0.5, "obstruction"), translate(0, 0, zo), "obstruction");  // black: an absorber
+  SensorScene scene = f.scene({pointLight({0, 0, h}, kLumens)});
+  scene.setMeters({floorPoints()});
+  CaseResult c =
+      describe("obstruction",
+               "Point source of 1000 lm 3 m above the floor, a black 1 m x 1 m square 1.5 m above the floor's centre: "
+               "illuminance at 64 points",
+               "I cos / d^2 outside the obstruction's shadow (|x|, |y| > 1 m), 0 inside", "lx", 20000, o);
+  const Timed t = runCase(c, scene, o);
+  const double intensity = kLumens / (4.0 * std::numbers::pi), shadow = 0.5 * h / (h - zo);
+  meterRows(c, t.results.meters[0], [&](const glm::dvec3& p) {
+    if (std::abs(p.x) < shadow && std::abs(p.y) < shadow) return 0.0;
+    const double d2 = p.x * p.x + p.y * p.y + h * h;
+    return intensity * h / (d2 * std::sqrt(d2));
+  });
+  return c;
+}
+
+CaseResult blackCubeCase(const CaseOptions& o) {
+  const double a = 4.0, inset = 1e-3;
+  const glm::dvec3 source{0.5, -0.3, 0.2};
+  Fixture f;
+  f.add(std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(makeBox({a, a, a}, "room"))),
+        Affine::identity(), "room");  // black: an absorber
+  addFaceSensors(f, a, inset, 4);
+  const SensorScene scene = f.scene({pointLight(source, kLumens)});
+  CaseResult c = describe(
+      "black-cube", "Closed 4 m cube with black (absorbing) faces, 1000 lm isotropic source at (0.5, -0.3, 0.2) m",
+      "I x solid angle of each cell seen from the source / its area (direct light only)", "lx", 200000, o);
+  const Timed t = runCase(c, scene, o);
+  const double intensity = kLumens / (4.0 * std::numbers::pi);
+  for (int k = 0; k < 6; ++k) {
+    // The source in the face's sensor frame: local x, y and its height above the face.
+    const Affine fr = faceFrame(k, a, inset);
+    const glm::dvec3 d = source - fr.translation;
+    const double sx = glm::dot(d, fr.linear[0]), sy = glm::dot(d, fr.linear[1]), hz = glm::dot(d, fr.linear[2]);
+    gridRows(c, std::string("face ") + kFaceNames[k], t.results.sensors[scene.findSensor(kFaceNames[k])], a, a,
+             [&](double x0, double x1, double y0, double y1) {
+               return intensity * rectangleSolidAngleFrom(x0 - sx, x1 - sx, y0 - sy, y1 - sy, hz) /
+                      ((x1 - x0) * (y1 - y0));
+             });
+  }
+  return c;
+}
+
 std::vector<CaseResult> allCases(const CaseOptions& o) {
   std::vector<CaseResult> all;
   all.push_back(pointSourceCase(o));
   all.push_back(areaSourceCase(o));
+  all.push_back(areaSourcePointsCase(o));
+  all.push_back(obstructionCase(o));
+  all.push_back(blackCubeCase(o));
   for (const double rho : {0.2, 0.5, 0.8}) all.push_back(diffuseCubeCase(rho, o));
   all.push_back(diffuseCubeCase(0.95, o, true));
   all.push_back(clearGlassCase(o));

@@ -61,6 +61,21 @@ struct CaseOptions {
 /// between the cell and the panel (parallel rectangles, closed form) over the cell's area.
 [[nodiscard]] CaseResult areaSourceCase(const CaseOptions& o);
 
+/// The same panel with the illuminance read at 64 points of the floor (the centres of the 8 x 8
+/// cells, meters by next-event connections): pi L times the configuration factor from the point
+/// to the panel (closed form), the values the report tabulates at points.
+[[nodiscard]] CaseResult areaSourcePointsCase(const CaseOptions& o);
+
+/// The point source of pointSourceCase with an opaque, black 1 m x 1 m square obstruction 1.5 m
+/// above the floor's centre: at 64 floor points, I cos / d^2 outside its shadow (a 2 m x 2 m
+/// square) and 0 inside (no point lies on the shadow's edge).
+[[nodiscard]] CaseResult obstructionCase(const CaseOptions& o);
+
+/// A closed cube of edge 4 m with black (absorbing) faces, an isotropic 1000 lm source off its
+/// centre at (0.5, -0.3, 0.2): each face in 4 x 4 cells, each cell's mean illuminance I times its
+/// solid angle seen from the source over its area (no inter-reflection).
+[[nodiscard]] CaseResult blackCubeCase(const CaseOptions& o);
+
 /// A closed cube of edge 4 m, every face Lambertian of reflectance `rho`, an isotropic 1000 lm
 /// source at its centre: by symmetry each face receives a sixth of the flux incident on all the
 /// faces, which is exactly Phi / (1 - rho) (every incidence reflects rho, nothing escapes), so the

@@ -27,6 +27,12 @@ TEST(CieValidation, PointSourceOverFloorAndWall) { expectRows(pointSourceCase({}
 
 TEST(CieValidation, AreaSourceOverFloor) { expectRows(areaSourceCase({})); }
 
+TEST(CieValidation, AreaSourceAtPoints) { expectRows(areaSourcePointsCase({})); }
+
+TEST(CieValidation, ObstructionShadowsThePointSource) { expectRows(obstructionCase({})); }
+
+TEST(CieValidation, BlackCubeGetsDirectLightOnly) { expectRows(blackCubeCase({})); }
+
 TEST(CieValidation, DiffuseCubesInterReflectWithoutBias) {
   for (const double rho : {0.2, 0.5, 0.8, 0.95}) expectRows(diffuseCubeCase(rho, {}));
 }

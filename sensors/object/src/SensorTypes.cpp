@@ -29,7 +29,8 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx,
   if (!spec.is_object()) ctx.fail(p, "expected an object");
   if (ctx.strict) {
     for (const auto& [key, value] : spec.items()) {
-      bool known = key == "shape" || key == "size" || key == "bins" || key == "two_sided" || key == "angular_bins";
+      bool known = key == "shape" || key == "size" || key == "radius" || key == "bins" || key == "two_sided" ||
+                   key == "angular_bins";
       for (const std::string_view k : extra_keys) known = known || key == k;
       if (!known) ctx.fail(p + "/" + key, "unknown key \"" + key + "\"");
     }
@@ -51,7 +52,7 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx,
   if (s.shape == SensorShape::FarField) {
     // Directions only: no size, sides or angular bins; "bins" [n_c, n_gamma] (n_gamma >= 2:
     // the grid includes gamma 0 and 180).
-    for (const char* key : {"size", "two_sided", "angular_bins"})
+    for (const char* key : {"size", "radius", "two_sided", "angular_bins"})
       if (spec.contains(key)) ctx.fail(p + "/" + key, std::string("a far-field sensor takes no \"") + key + "\"");
     const json& b = ctx.member(spec, p, "bins");
     if (!b.is_array() || b.size() != 2) ctx.fail(p + "/bins", "expected [n_c, n_gamma] (C-planes, vertical angles)");
@@ -61,9 +62,18 @@ SensorSpec readSensorSpec(const json& spec, const ObjectSpecContext& ctx,
     if (static_cast<std::uint64_t>(s.nx) * s.ny > (1u << 26)) ctx.fail(p + "/bins", "more than 2^26 bins");
     return s;
   }
-  const std::vector<double> size = ctx.positiveSizes(ctx.member(spec, p, "size"), p + "/size", 2);
-  s.width = size[0];
-  s.height = size[1];
+  // Disks and spheres take their radius (the convention of lights and shapes) or, as before, their
+  // diameter as "size"; never both.
+  if (spec.contains("radius")) {
+    if (s.shape == SensorShape::Rectangle)
+      ctx.fail(p + "/radius", "a rectangle has no radius: give \"size\" [w, h] (or \"shape\": \"disk\")");
+    if (spec.contains("size")) ctx.fail(p + "/radius", "give \"radius\" or \"size\" (the diameter), not both");
+    s.width = s.height = 2.0 * ctx.positiveNumber(spec["radius"], p + "/radius");
+  } else {
+    const std::vector<double> size = ctx.positiveSizes(ctx.member(spec, p, "size"), p + "/size", 2);
+    s.width = size[0];
+    s.height = size[1];
+  }
   if (s.shape != SensorShape::Rectangle && s.width != s.height)
     ctx.fail(p + "/size", std::string("a ") + (s.shape == SensorShape::Disk ? "disk" : "sphere") +
                               " has one diameter: a number or [d, d]");

@@ -65,6 +65,7 @@ void Light::validate() const {
     case LightType::Area:
       if (!(std::isfinite(width) && width > 0.0 && std::isfinite(height) && height > 0.0))
         bad("size must be finite and > 0");
+      if (disk && width != height) bad("a disk light has one diameter (width == height)");
       if (!world_from_light.isFinite() || world_from_light.isSingular()) bad("transform is not finite or singular");
       break;
   }
@@ -149,8 +150,10 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
       break;
     }
     case LightType::Area: {
-      // Uniform over the (affinely mapped) rectangle, cosine-weighted about its world normal.
-      const glm::dvec3 p_ls((u[0] - 0.5) * light.width, (u[1] - 0.5) * light.height, 0.0);
+      // Uniform over the (affinely mapped) rectangle or disk, cosine-weighted about its world normal.
+      const double rad = 0.5 * light.width * std::sqrt(u[0]), phi_d = kTwoPi * u[1];
+      const glm::dvec3 p_ls = light.disk ? glm::dvec3(rad * std::cos(phi_d), rad * std::sin(phi_d), 0.0)
+                                         : glm::dvec3((u[0] - 0.5) * light.width, (u[1] - 0.5) * light.height, 0.0);
       r.origin = light.world_from_light.point(p_ls);
       const glm::dvec3 ex = light.world_from_light.vector(glm::dvec3(1, 0, 0));
       const glm::dvec3 ey = light.world_from_light.vector(glm::dvec3(0, 1, 0));

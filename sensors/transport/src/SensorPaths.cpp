@@ -65,6 +65,54 @@ bool segmentMeetsBox(const glm::dvec3& origin, const glm::dvec3& dir, double t_m
 
 bool isFinite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
+// The meters' next-event connection from the emission of `light`, picked with probability
+// power_w / P (`scale` = P / power_w undoes it): `connect(from_of, radiance)` as in traceChunk.
+// Point-like lights send their radiant intensity towards the meter; an area light's sampled point
+// (uniform over its area A, so the estimate of the integral of L cos_l dA is L A cos_l) sends
+// power_w cos_l / (pi sides); a directional light lights a point inside its beam's cylinder
+// (downstream of its disk, the light coming from the disk along the beam) with the irradiance
+// power_w / (pi r^2) on a plane across the beam, whichever ray was emitted.
+template <class Connect>
+void connectLight(const Light& light, const EmittedRay& emitted, double scale, Connect&& connect) {
+  switch (light.type) {
+    case LightType::Point:
+    case LightType::Spot:
+    case LightType::Goniometric:
+      connect([&](const glm::dvec3&) { return light.position; },
+              [&](const glm::dvec3& v, double) { return scale * light.intensity(v); });
+      break;
+    case LightType::Area: {
+      // The face sampleLight emits from: the cross product of the mapped local axes.
+      const glm::dvec3 n = glm::normalize(glm::cross(light.world_from_light.vector(glm::dvec3(1, 0, 0)),
+                                                     light.world_from_light.vector(glm::dvec3(0, 1, 0))));
+      const double sides = light.two_sided ? 2.0 : 1.0;
+      connect([&](const glm::dvec3&) { return emitted.origin; },
+              [&](const glm::dvec3& v, double) {
+                const double c = glm::dot(v, n);
+                return scale * light.power_w * (light.two_sided ? std::abs(c) : std::max(0.0, c)) /
+                       (std::numbers::pi * sides);
+              });
+      break;
+    }
+    case LightType::Directional: {
+      const glm::dvec3 b = glm::normalize(light.direction);
+      const double e = scale * light.power_w / (std::numbers::pi * light.radius * light.radius);
+      // The disk's point upstream of x; outside the cylinder or upstream of the disk: nothing.
+      connect(
+          [&](const glm::dvec3& x) {
+            const double along = glm::dot(x - light.position, b);
+            const glm::dvec3 across = x - light.position - along * b;
+            const bool lit = along > 0.0 && glm::dot(across, across) <= light.radius * light.radius;
+            return lit ? x - along * b : x;  // x itself: distance 0, no connection
+          },
+          [&](const glm::dvec3&, double d) {
+            return d > 0.0 ? e * d * d : 0.0;  // irradiance e across the beam: radiance e d^2 / cos
+          });
+      break;
+    }
+  }
+}
+
 }  // namespace
 
 detail::RestartPoint detail::restartFromTriangle(const std::array<glm::vec3, 3>& tri, float u, float v,
@@ -148,13 +196,48 @@ void SensorRun::traceChunk(Chunk& chunk) const {
     for (std::size_t s = 0; s < sensors.size(); ++s)
       if (sensors[s].object->spec().shape == SensorShape::FarField) far_field.push_back(static_cast<std::uint32_t>(s));
   QueryContext ctx;
-  std::vector<Crossing> crossings;
+  std::vector<Crossing> crossings, no_crossings;
   std::vector<BinEvent> path_bins;  // this path's deposits before merging
+  // Meters: next-event connections from every emission and diffuse reflection to every meter point
+  // (their bins follow the angular ones). For each meter point x, `from_of(x)` is where the event
+  // sends light to it from and `radiance(u, d)` the power per unit solid angle it sends along unit
+  // direction u to a point at distance d (W/sr of the ray's estimate): its irradiance at x, if
+  // visible, is radiance cos_meter / d^2, times the media's transmittance between.
+  const std::vector<PointMeter>& meters = scene_.meters();
+  const std::uint32_t meter_base = scene_.binCount() + scene_.angleBinCount();
+  CrossingQuery shadow_query = query;
+  shadow_query.crossing_mask = 0;
+  const auto connect = [&](auto&& from_of, auto&& radiance) {
+    std::uint32_t bin = meter_base;
+    for (const PointMeter& mt : meters) {
+      for (std::size_t i = 0; i < mt.points.size(); ++i, ++bin) {
+        const glm::dvec3 from = from_of(mt.points[i]);
+        const glm::dvec3 to = mt.points[i] - from;
+        const double d = glm::length(to);
+        if (!(d > 0.0)) continue;
+        const glm::dvec3 u = to / d;
+        const double cos_m = -glm::dot(u, mt.normals[i]);
+        if (cos_m <= 0.0) continue;
+        const double value = radiance(u, d);
+        if (!(value > 0.0)) continue;
+        Ray shadow;
+        shadow.origin = glm::vec3(from);
+        shadow.dir = glm::vec3(u);
+        // Stop short of the point by more than float's rounding of t, so that a meter lying on a
+        // surface is not hidden by that surface.
+        shadow.tfar = static_cast<float>(d * (1.0 - 1e-5));
+        const SegmentEnd end = top.intersectWithCrossings(shadow, no_crossings, ctx, shadow_query);
+        if (end.hit.valid()) continue;
+        path_bins.push_back({bin, kInvalidId, value * cos_m / (d * d) * end.transmittance});
+      }
+    }
+  };
   chunk.bins.clear();
   chunk.bin_end.clear();
   chunk.sensors.clear();
   chunk.sensor_end.clear();
   chunk.band.assign(bands > 1 ? chunk.count : 0, 0);
+  chunk.light.assign(config_.per_light ? chunk.count : 0, 0);
   chunk.energy.assign(chunk.count, EnergyBalance{});
   chunk.counters = {};
 
@@ -181,11 +264,13 @@ void SensorRun::traceChunk(Chunk& chunk) const {
       chunk.band[k] = static_cast<std::uint16_t>(band);
     }
     double u[4] = {rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform()};
+    if (config_.per_light) chunk.light[k] = static_cast<std::uint32_t>(li);
     const EmittedRay emitted = sampleLight(lights[li], u);
     glm::dvec3 origin = emitted.origin, dir = emitted.dir;
     double w = power * emitted.weight;
     detail::Polarisation pol;  // the lights emit unpolarised light
     path_bins.clear();
+    if (!meters.empty()) connectLight(lights[li], emitted, power / lights[li].power_w, connect);
 
     std::uint32_t depth = 0, scatterings = 0;
     for (;;) {
@@ -297,7 +382,18 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         } else {
           const double u1 = rng.uniform(), u2 = rng.uniform();
           next = cosineDirection(nf, u1, u2);
-          pol = {};  // diffuse reflection depolarises
+          pol = {};               // diffuse reflection depolarises
+          if (!meters.empty()) {  // the reflected power w leaves with radiant intensity w cos / pi
+            const SurfaceInstance* si = scene_.surfaceOf(end.hit.instance_id);
+            const glm::dvec3 from = si ? detail::restartFromTriangle(si->mesh->mesh().vertices(end.hit.prim_id),
+                                                                     end.hit.u, end.hit.v, *si, n)
+                                             .p_ws
+                                       : p;
+            const double offset = 1e-5 * std::max({1.0, std::abs(from.x), std::abs(from.y), std::abs(from.z)});
+            const glm::dvec3 start = from + nf * offset;
+            connect([&](const glm::dvec3&) { return start; },
+                    [&](const glm::dvec3& v, double) { return w * std::max(0.0, glm::dot(v, nf)) / std::numbers::pi; });
+          }
         }
       } else if (m.type == MaterialType::Coating) {  // reflect, pass undeviated, or absorb
         const double u = rng.uniform(), r = m.reflectanceIn(band);

@@ -45,18 +45,22 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
   if (!(config_.roulette_threshold >= 0.0 && config_.roulette_threshold < 1.0))
     throw InvalidArgument("SensorRun: roulette_threshold must be in [0, 1)");
   revision_ = scene_.revision();  // the scene as of the graph's last commit (derived now if it changed)
+  scene_.checkMeterMaterials();
   double acc = 0.0;
   for (const Light& l : scene_.lights()) light_cdf_.push_back(acc += l.power_w);
   {
     // Spatial bins, then the angular bins, in one index space; the run's tallies and the open batch's.
-    const std::uint64_t all_bins = std::uint64_t{scene_.binCount()} + scene_.angleBinCount();
+    // Spatial bins, angular bins and meter points.
+    const std::uint64_t all_bins = std::uint64_t{scene_.binCount()} + scene_.angleBinCount() + scene_.meterPointCount();
     const std::uint64_t nb = scene_.bands().empty() ? 0 : scene_.bandCount();
     const std::uint64_t cells = all_bins + scene_.sensors().size();
-    const std::uint64_t bytes = 2 * cells * (3 * sizeof(double) + 2 * sizeof(double) * nb);
+    const std::uint64_t nl = config_.per_light ? scene_.lights().size() : 0;
+    const std::uint64_t bytes = 2 * cells * (3 * sizeof(double) + 2 * sizeof(double) * (nb + nl));
     if (bytes > config_.max_accumulator_bytes)
       throw InvalidArgument("SensorRun: the sensors' " + std::to_string(scene_.binCount()) + " bins and " +
                             std::to_string(scene_.angleBinCount()) + " angular bins" +
-                            (nb ? " in " + std::to_string(nb) + " bands" : std::string()) + " need " +
+                            (nb ? " in " + std::to_string(nb) + " bands" : std::string()) +
+                            (nl ? " for " + std::to_string(nl) + " lights each" : std::string()) + " need " +
                             std::to_string(bytes >> 20) + " MiB of accumulators, more than max_accumulator_bytes (" +
                             std::to_string(config_.max_accumulator_bytes >> 20) + " MiB)");
     // What the run will hold, against the process's memory limit: the run's tallies, the open
@@ -67,16 +71,17 @@ SensorRun::SensorRun(const SensorScene& scene, const SensorRunConfig& config) : 
     const std::uint64_t spatial = scene_.binCount(), angular = scene_.angleBinCount();
     std::uint64_t need = arrayBytes(all_bins, sizeof(BinSums) + sizeof(std::uint32_t));
     need = saturatingAdd(need, arrayBytes(scene_.sensors().size(), sizeof(SensorSums)));
-    need = saturatingAdd(need, arrayBytes(arrayBytes(cells, nb), 2 * sizeof(double)));
+    need = saturatingAdd(need, arrayBytes(arrayBytes(cells, nb + nl), 2 * sizeof(double)));
     need = arrayBytes(need, 3);
     need = saturatingAdd(need, arrayBytes(spatial, 5 * sizeof(double) + sizeof(std::uint64_t)));
     need = saturatingAdd(need, arrayBytes(angular, 3 * sizeof(double) + sizeof(std::uint64_t)));
     need = saturatingAdd(need, arrayBytes(arrayBytes(spatial, 3 * sizeof(double)), nb));
     need = saturatingAdd(need, arrayBytes(arrayBytes(angular, sizeof(double)), nb));
+    need = saturatingAdd(need, arrayBytes(arrayBytes(spatial, 4 * sizeof(double)), nl));
     const std::uint64_t chunks = config_.batch_rays / config_.chunk_rays + 1;
     need = saturatingAdd(need, arrayBytes(chunks, sizeof(Chunk)));
-    const std::uint64_t per_ray =
-        2 * sizeof(std::uint32_t) + sizeof(EnergyBalance) + (nb > 1 ? sizeof(std::uint16_t) : 0);
+    const std::uint64_t per_ray = 2 * sizeof(std::uint32_t) + sizeof(EnergyBalance) +
+                                  (nb > 1 ? sizeof(std::uint16_t) : 0) + (nl ? sizeof(std::uint32_t) : 0);
     need = saturatingAdd(need, arrayBytes(config_.batch_rays, per_ray));
     std::size_t largest = 0;
     for (std::size_t k = 1; k < scene_.sensors().size(); ++k)
@@ -112,7 +117,8 @@ SensorRun::~SensorRun() = default;
 
 std::unique_ptr<SensorRun::Tally> SensorRun::makeTally() const {
   auto t = std::make_unique<Tally>();
-  t->bins.assign(static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount(), BinSums{});
+  t->bins.assign(static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount() + scene_.meterPointCount(),
+                 BinSums{});
   t->sensors.assign(scene_.sensors().size(), SensorSums{});
   if (!scene_.bands().empty()) {
     const std::size_t nb = scene_.bandCount();
@@ -120,6 +126,13 @@ std::unique_ptr<SensorRun::Tally> SensorRun::makeTally() const {
     t->band_bin_sum2.assign(t->bins.size() * nb, 0.0);
     t->band_sensor_sum.assign(t->sensors.size() * nb, 0.0);
     t->band_sensor_sum2.assign(t->sensors.size() * nb, 0.0);
+  }
+  if (config_.per_light) {
+    const std::size_t nl = scene_.lights().size();
+    t->light_bin_sum.assign(t->bins.size() * nl, 0.0);
+    t->light_bin_sum2.assign(t->bins.size() * nl, 0.0);
+    t->light_sensor_sum.assign(t->sensors.size() * nl, 0.0);
+    t->light_sensor_sum2.assign(t->sensors.size() * nl, 0.0);
   }
   return t;
 }
@@ -136,11 +149,13 @@ constexpr std::size_t kReduceAhead = 16;
 
 void SensorRun::reduce(const Chunk& chunk, Tally& into) const {
   std::size_t b = 0, s = 0;
-  const bool spectral = !into.band_bin_sum.empty();
-  const std::size_t nb = scene_.bandCount();
+  const bool spectral = !into.band_bin_sum.empty(), per_light = !into.light_bin_sum.empty();
+  const std::size_t nb = scene_.bandCount(), nl = scene_.lights().size();
   for (std::uint64_t k = 0; k < chunk.count; ++k) {
-    // A ray carries one band: its deposits are also that band's samples (zeros in the others).
+    // A ray carries one band and comes from one light: its deposits are also that band's and that
+    // light's samples (zeros in the others).
     const std::size_t band = chunk.band.empty() ? 0 : chunk.band[k];
+    const std::size_t light = chunk.light.empty() ? 0 : chunk.light[k];
     for (; b < chunk.bin_end[k]; ++b) {
       // The bins a chunk deposits in are scattered over the accumulators (far more than the
       // caches hold with 10,000 sensors): ask for a later deposit's line now.
@@ -154,6 +169,10 @@ void SensorRun::reduce(const Chunk& chunk, Tally& into) const {
         into.band_bin_sum[ev.bin * nb + band] += ev.value;
         into.band_bin_sum2[ev.bin * nb + band] += ev.value * ev.value;
       }
+      if (per_light) {
+        into.light_bin_sum[ev.bin * nl + light] += ev.value;
+        into.light_bin_sum2[ev.bin * nl + light] += ev.value * ev.value;
+      }
     }
     for (; s < chunk.sensor_end[k]; ++s) {
       if (s + kReduceAhead < chunk.sensors.size())
@@ -166,6 +185,10 @@ void SensorRun::reduce(const Chunk& chunk, Tally& into) const {
         into.band_sensor_sum[ev.sensor * nb + band] += ev.value;
         into.band_sensor_sum2[ev.sensor * nb + band] += ev.value * ev.value;
       }
+      if (per_light) {
+        into.light_sensor_sum[ev.sensor * nl + light] += ev.value;
+        into.light_sensor_sum2[ev.sensor * nl + light] += ev.value * ev.value;
+      }
     }
     detail::addEnergy(into.energy, chunk.energy[k]);
   }
@@ -176,8 +199,8 @@ void SensorRun::reduce(const Chunk& chunk, Tally& into) const {
 }
 
 void SensorRun::closeBatch() {
-  detail::addTally(*closed_, *open_, scene_.bandCount());
-  detail::clearTally(*open_, scene_.bandCount());
+  detail::addTally(*closed_, *open_, scene_.bandCount(), scene_.lights().size());
+  detail::clearTally(*open_, scene_.bandCount(), scene_.lights().size());
 }
 
 std::uint64_t SensorRun::traceRange(std::uint64_t first, std::uint64_t end, Tally& into) {
@@ -255,6 +278,25 @@ void meanAndStderr(double sum, double sum2, std::uint64_t n, double& mean, doubl
   se = n > 1 ? std::sqrt(std::max(0.0, (sum2 - sum * sum / nd) / (nd * (nd - 1.0)))) : 0.0;
 }
 
+// One channel's (a band's or a light's) per-bin results of a sensor: from the per-(bin, channel)
+// sums (index bin * channels + channel, the sensor's bins from first_bin), appended to flux, its
+// standard error (when flux_se is not null), and the irradiance and its standard error over the bins'
+// world areas.
+void channelBins(const std::vector<double>& sum, const std::vector<double>& sum2, std::size_t first_bin,
+                 std::size_t channels, std::size_t channel, std::uint64_t rays, const std::vector<double>& area,
+                 std::vector<double>& flux, std::vector<double>* flux_se, std::vector<double>& irradiance,
+                 std::vector<double>& irradiance_se) {
+  for (std::size_t b = 0; b < area.size(); ++b) {
+    const std::size_t i = (first_bin + b) * channels + channel;
+    double mean, se;
+    meanAndStderr(sum[i], sum2[i], rays, mean, se);
+    flux.push_back(mean);
+    if (flux_se) flux_se->push_back(se);
+    irradiance.push_back(area[b] > 0.0 ? mean / area[b] : 0.0);
+    irradiance_se.push_back(area[b] > 0.0 ? se / area[b] : 0.0);
+  }
+}
+
 }  // namespace
 
 double SensorRun::relativeStderr(int sensor) const {
@@ -273,7 +315,7 @@ SensorRunResults SensorRun::results() const {
   checkScene();
   // The finished batches and the open one (empty at batch boundaries: adding its zeros changes nothing).
   Tally all = *closed_;
-  detail::addTally(all, *open_, scene_.bandCount());
+  detail::addTally(all, *open_, scene_.bandCount(), scene_.lights().size());
   SensorRunResults r;
   r.rays = rays_done_;
   r.seed = config_.seed;
@@ -302,6 +344,26 @@ SensorRunResults SensorRun::results() const {
       for (std::size_t k = 0; k < nb; ++k)
         r.emitted_lm += r.band_emitted_w[k] * scene_.luminousWeight(static_cast<std::uint32_t>(k));
     else r.emitted_lm = scene_.totalPower() * scene_.luminousWeight(0);
+  }
+  r.luminous_transport = r.photometric && !r.colorimetric;
+  const bool per_light = !all.light_bin_sum.empty();
+  const std::size_t nl = scene_.lights().size();
+  // Per-light luminous values need one luminous weight for every ray: no bands of different weights.
+  const bool light_lm = per_light && r.photometric && !spectral;
+  for (std::size_t l = 0; per_light && l < nl; ++l) {
+    const Light& light = scene_.lights()[l];
+    r.light_names.push_back(light.name);
+    r.light_emitted_w.push_back(rays_done_ ? light.power_w : 0.0);
+    if (!r.photometric) continue;
+    double lm = 0.0;
+    if (spectral) {
+      const std::vector<double>& cdf = scene_.bandCdf(l);
+      for (std::size_t k = 0; k < nb; ++k)
+        lm += light.power_w * (cdf[k] - (k ? cdf[k - 1] : 0.0)) * scene_.luminousWeight(static_cast<std::uint32_t>(k));
+    } else {
+      lm = light.power_w * scene_.luminousWeight(0);
+    }
+    r.light_emitted_lm.push_back(rays_done_ ? lm : 0.0);
   }
   for (std::size_t k = 0; k < scene_.sensors().size(); ++k) {
     const SensorInstance& s = scene_.sensors()[k];
@@ -346,15 +408,8 @@ SensorRunResults SensorRun::results() const {
       out.band_total_flux_w.assign(nb, 0.0);
       out.band_total_flux_stderr_w.assign(nb, 0.0);
       for (std::size_t band = 0; band < nb; ++band) {
-        for (std::uint32_t b = 0; b < bins; ++b) {
-          const std::size_t i = (s.first_bin + b) * nb + band;
-          double mean, se;
-          meanAndStderr(all.band_bin_sum[i], all.band_bin_sum2[i], rays_done_, mean, se);
-          const double area = out.bin_area_m2[b];
-          out.band_flux_w[band].push_back(mean);
-          out.band_irradiance_w_m2[band].push_back(area > 0.0 ? mean / area : 0.0);
-          out.band_stderr_w_m2[band].push_back(area > 0.0 ? se / area : 0.0);
-        }
+        channelBins(all.band_bin_sum, all.band_bin_sum2, s.first_bin, nb, band, rays_done_, out.bin_area_m2,
+                    out.band_flux_w[band], nullptr, out.band_irradiance_w_m2[band], out.band_stderr_w_m2[band]);
         if (spec.angleBinCount() != 0) out.band_angular_flux_w.resize(nb);
         for (std::uint32_t a = 0; a < spec.angleBinCount(); ++a)
           out.band_angular_flux_w[band].push_back(all.band_bin_sum[(angle_first + a) * nb + band] / n);
@@ -362,13 +417,103 @@ SensorRunResults SensorRun::results() const {
                       out.band_total_flux_w[band], out.band_total_flux_stderr_w[band]);
       }
     }
+    if (per_light) perLightResults(all, s, k, light_lm, out);
     if (r.photometric) photometricResults(all, s, k, out);
     out.relative_stderr =
         out.total_flux_w > 0.0 ? out.total_flux_stderr_w / out.total_flux_w : std::numeric_limits<double>::infinity();
     out.efficiency = scene_.totalPower() > 0.0 ? out.total_flux_w / scene_.totalPower() : 0.0;
     r.sensors.push_back(std::move(out));
   }
+  meterResults(all, light_lm, r);
   return r;
+}
+
+double SensorRun::luminousSamples(const Tally& all, std::size_t bin, double& sum2) const {
+  // A ray carries one band: its luminous sample is its deposit times that band's weight, so the
+  // samples' sums and squares follow from the per-band ones (zeros in the other bands).
+  if (all.band_bin_sum.empty()) {
+    const double w = scene_.luminousWeight(0);
+    sum2 = w * w * all.bins[bin].sum2;
+    return w * all.bins[bin].sum;
+  }
+  const std::size_t nb = scene_.bandCount();
+  double y = 0.0;
+  sum2 = 0.0;
+  for (std::size_t k = 0; k < nb; ++k) {
+    const double w = scene_.luminousWeight(static_cast<std::uint32_t>(k));
+    y += w * all.band_bin_sum[bin * nb + k];
+    sum2 += w * w * all.band_bin_sum2[bin * nb + k];
+  }
+  return y;
+}
+
+void SensorRun::meterResults(const Tally& all, bool light_lm, SensorRunResults& r) const {
+  std::size_t bin = static_cast<std::size_t>(scene_.binCount()) + scene_.angleBinCount();
+  const std::size_t nl = all.light_bin_sum.empty() ? 0 : scene_.lights().size();
+  for (const PointMeter& m : scene_.meters()) {
+    MeterResult out;
+    out.name = m.name;
+    out.points = m.points;
+    out.normals = m.normals;
+    if (nl) {
+      out.light_irradiance_w_m2.assign(nl, {});
+      out.light_stderr_w_m2.assign(nl, {});
+    }
+    for (std::size_t i = 0; i < m.points.size(); ++i, ++bin) {
+      double mean, se;
+      meanAndStderr(all.bins[bin].sum, all.bins[bin].sum2, rays_done_, mean, se);
+      out.irradiance_w_m2.push_back(mean);
+      out.stderr_w_m2.push_back(se);
+      out.ray_count.push_back(all.bins[bin].count);
+      if (r.photometric) {
+        double y2;
+        const double y = luminousSamples(all, bin, y2);
+        meanAndStderr(y, y2, rays_done_, mean, se);
+        out.illuminance_lx.push_back(mean);
+        out.illuminance_stderr_lx.push_back(se);
+      }
+      for (std::size_t l = 0; l < nl; ++l) {
+        meanAndStderr(all.light_bin_sum[bin * nl + l], all.light_bin_sum2[bin * nl + l], rays_done_, mean, se);
+        out.light_irradiance_w_m2[l].push_back(mean);
+        out.light_stderr_w_m2[l].push_back(se);
+      }
+    }
+    if (light_lm) {  // one luminous weight for every ray
+      out.light_illuminance_lx = out.light_irradiance_w_m2;
+      for (auto& v : out.light_illuminance_lx)
+        for (double& x : v) x *= scene_.luminousWeight(0);
+    }
+    r.meters.push_back(std::move(out));
+  }
+}
+
+void SensorRun::perLightResults(const Tally& all, const SensorInstance& s, std::size_t sensor, bool luminous,
+                                SensorResult& out) const {
+  const std::size_t nl = scene_.lights().size();
+  const double w = luminous ? scene_.luminousWeight(0) : 0.0;
+  for (auto* v : {&out.light_flux_w, &out.light_flux_stderr_w, &out.light_irradiance_w_m2, &out.light_stderr_w_m2})
+    v->assign(nl, {});
+  out.light_total_flux_w.assign(nl, 0.0);
+  out.light_total_flux_stderr_w.assign(nl, 0.0);
+  for (std::size_t l = 0; l < nl; ++l) {
+    channelBins(all.light_bin_sum, all.light_bin_sum2, s.first_bin, nl, l, rays_done_, out.bin_area_m2,
+                out.light_flux_w[l], &out.light_flux_stderr_w[l], out.light_irradiance_w_m2[l],
+                out.light_stderr_w_m2[l]);
+    meanAndStderr(all.light_sensor_sum[sensor * nl + l], all.light_sensor_sum2[sensor * nl + l], rays_done_,
+                  out.light_total_flux_w[l], out.light_total_flux_stderr_w[l]);
+  }
+  if (!luminous) return;
+  // One luminous weight for every ray: the luminous values are the radiometric ones scaled by it.
+  auto scaled = [w](const std::vector<std::vector<double>>& per_light) {
+    std::vector<std::vector<double>> to = per_light;
+    for (auto& v : to)
+      for (double& x : v) x *= w;
+    return to;
+  };
+  out.light_illuminance_lx = scaled(out.light_irradiance_w_m2);
+  out.light_illuminance_stderr_lx = scaled(out.light_stderr_w_m2);
+  out.light_luminous_flux_lm = scaled({out.light_total_flux_w})[0];
+  out.light_luminous_flux_stderr_lm = scaled({out.light_total_flux_stderr_w})[0];
 }
 
 void SensorRun::photometricResults(const Tally& all, const SensorInstance& s, std::size_t sensor,
@@ -395,11 +540,12 @@ void SensorRun::photometricResults(const Tally& all, const SensorInstance& s, st
     meanAndStderr(y, y2, rays_done_, mean, se);
   };
   for (std::uint32_t b = 0; b < bins; ++b) {
-    const std::size_t i = s.first_bin + b;
-    double mean, se;
-    luminous(spectral ? &all.band_bin_sum[i * nb] : nullptr, spectral ? &all.band_bin_sum2[i * nb] : nullptr,
-             &all.bins[i].sum, &all.bins[i].sum2, mean, se);
+    double mean, se, y2;
+    const double y = luminousSamples(all, s.first_bin + b, y2);
+    meanAndStderr(y, y2, rays_done_, mean, se);
     const double area = out.bin_area_m2[b];
+    out.flux_lm.push_back(mean);
+    out.flux_stderr_lm.push_back(se);
     out.illuminance_lx.push_back(area > 0.0 ? mean / area : 0.0);
     out.illuminance_stderr_lx.push_back(area > 0.0 ? se / area : 0.0);
   }

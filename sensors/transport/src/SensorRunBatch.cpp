@@ -38,6 +38,10 @@ void put(std::vector<std::byte>& out, const T* data, std::size_t count) {
 SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_rays) {
   checkScene();
   if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
+  if (config_.per_light)
+    throw InvalidArgument(
+        "SensorRun::traceBatch: per-light results (SensorRunConfig::per_light) are not carried by "
+        "batch tallies: run in one process");
   const std::uint64_t first = batch * config_.batch_rays;
   if (batch > total_rays / config_.batch_rays || first >= total_rays)
     throw InvalidArgument("SensorRun::traceBatch: batch " + std::to_string(batch) + " starts after the run's " +
@@ -81,13 +85,15 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
   put(b, t.band_sensor_sum2.data(), t.band_sensor_sum2.size());
   const detail::EnergyWords energy = detail::energyWords(t.energy);
   put(b, &energy, 1);
-  detail::clearTally(t, nb);  // for the next batch: only what this one reached
+  detail::clearTally(t, nb, 0);  // for the next batch: only what this one reached
   return out;
 }
 
 void SensorRun::addBatch(std::span<const std::byte> tally) {
   checkScene();
   const auto refuse = [](const std::string& why) { throw InvalidArgument("SensorRun::addBatch: " + why); };
+  if (config_.per_light)
+    refuse("per-light results (SensorRunConfig::per_light) are not carried by batch tallies: run in one process");
   if (tally.size() < kBatchHead || std::memcmp(tally.data(), kBatchMagic, sizeof kBatchMagic) != 0)
     refuse("not a batch tally of this version (" + std::to_string(tally.size()) + " bytes)");
   std::uint64_t h[10];
@@ -162,7 +168,7 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
     // Empty the spare tallies again: the bins written so far (the others are zero).
     t.touched.resize(std::min(filled + 1, reached));
     std::erase_if(t.touched, [&t](std::uint32_t i) { return i >= t.bins.size(); });
-    detail::clearTally(t, nb);
+    detail::clearTally(t, nb, 0);
     refuse("batch tally holds repeated or out-of-range bins, or negative, non-finite or impossible values");
   }
   rays_done_ += rays;

@@ -40,6 +40,7 @@ struct SensorRun::Chunk {
   std::vector<std::uint32_t> sensor_end;
   std::vector<EnergyBalance> energy;  // per ray (emitted_w unused)
   std::vector<std::uint16_t> band;    // per ray, when the scene has several bands
+  std::vector<std::uint32_t> light;   // per ray: the light that emitted it (runs with per-light results)
   SensorRunCounters counters;
 };
 
@@ -49,6 +50,8 @@ struct SensorRun::Tally {
   std::vector<SensorSums> sensors;  // per sensor
   // Spectral scenes only: the same per (bin, band) and (sensor, band), index * bands + band.
   std::vector<double> band_bin_sum, band_bin_sum2, band_sensor_sum, band_sensor_sum2;
+  // Runs with per-light results only: the same per (bin, light) and (sensor, light).
+  std::vector<double> light_bin_sum, light_bin_sum2, light_sensor_sum, light_sensor_sum2;
   EnergyBalance energy;  // sums over rays (emitted_w unused)
   SensorRunCounters counters;
   // A batch's tallies: the bins whose count is not zero, in order of first deposit (so that adding
@@ -119,31 +122,45 @@ inline bool energyFromWords(const EnergyWords& w, std::uint64_t rays, EnergyBala
   return true;
 }
 
+// Adds the per-(bin, channel) sums of the touched bins and all per-(sensor, channel) sums of one
+// kind of channel (bands or lights; index * channels + channel; empty vectors: none).
+inline void addChannels(std::vector<double>& bin_sum, std::vector<double>& bin_sum2, std::vector<double>& sensor_sum,
+                        std::vector<double>& sensor_sum2, const std::vector<double>& from_bin_sum,
+                        const std::vector<double>& from_bin_sum2, const std::vector<double>& from_sensor_sum,
+                        const std::vector<double>& from_sensor_sum2, const std::vector<std::uint32_t>& touched,
+                        std::size_t channels) {
+  for (std::size_t k = 0; !from_bin_sum.empty() && k < touched.size(); ++k)
+    for (std::size_t c = 0; c < channels; ++c) {
+      const std::size_t j = std::size_t{touched[k]} * channels + c;
+      bin_sum[j] += from_bin_sum[j];
+      bin_sum2[j] += from_bin_sum2[j];
+    }
+  for (std::size_t j = 0; j < from_sensor_sum.size(); ++j) {
+    sensor_sum[j] += from_sensor_sum[j];
+    sensor_sum2[j] += from_sensor_sum2[j];
+  }
+}
+
 // Adds batch tallies `from` (its bins listed in from.touched: the others are zero, and adding a
-// zero changes no sum) into `to`.
+// zero changes no sum) into `to`; `bands` and `lights` are the channels of its per-band and
+// per-light sums.
 template <class Tally>
-void addTally(Tally& to, const Tally& from, std::size_t bands) {
-  const bool spectral = !from.band_bin_sum.empty();
+void addTally(Tally& to, const Tally& from, std::size_t bands, std::size_t lights) {
   for (const std::uint32_t i : from.touched) {
     auto& t = to.bins[i];
     const auto& f = from.bins[i];
     t.sum += f.sum;
     t.sum2 += f.sum2;
     t.count += f.count;
-    for (std::size_t k = 0; spectral && k < bands; ++k) {
-      const std::size_t j = std::size_t{i} * bands + k;
-      to.band_bin_sum[j] += from.band_bin_sum[j];
-      to.band_bin_sum2[j] += from.band_bin_sum2[j];
-    }
   }
   for (std::size_t i = 0; i < from.sensors.size(); ++i) {
     to.sensors[i].sum += from.sensors[i].sum;
     to.sensors[i].sum2 += from.sensors[i].sum2;
   }
-  for (std::size_t j = 0; j < from.band_sensor_sum.size(); ++j) {
-    to.band_sensor_sum[j] += from.band_sensor_sum[j];
-    to.band_sensor_sum2[j] += from.band_sensor_sum2[j];
-  }
+  addChannels(to.band_bin_sum, to.band_bin_sum2, to.band_sensor_sum, to.band_sensor_sum2, from.band_bin_sum,
+              from.band_bin_sum2, from.band_sensor_sum, from.band_sensor_sum2, from.touched, bands);
+  addChannels(to.light_bin_sum, to.light_bin_sum2, to.light_sensor_sum, to.light_sensor_sum2, from.light_bin_sum,
+              from.light_bin_sum2, from.light_sensor_sum, from.light_sensor_sum2, from.touched, lights);
   addEnergy(to.energy, from.energy);
   to.counters.segments += from.counters.segments;
   to.counters.crossings += from.counters.crossings;
@@ -153,16 +170,19 @@ void addTally(Tally& to, const Tally& from, std::size_t bands) {
 
 // Empties batch tallies (their bins listed in touched).
 template <class Tally>
-void clearTally(Tally& t, std::size_t bands) {
+void clearTally(Tally& t, std::size_t bands, std::size_t lights) {
   for (const std::uint32_t i : t.touched) {
     t.bins[i] = {};
     if (!t.band_bin_sum.empty())
       for (std::size_t k = 0; k < bands; ++k)
         t.band_bin_sum[std::size_t{i} * bands + k] = t.band_bin_sum2[std::size_t{i} * bands + k] = 0.0;
+    if (!t.light_bin_sum.empty())
+      for (std::size_t k = 0; k < lights; ++k)
+        t.light_bin_sum[std::size_t{i} * lights + k] = t.light_bin_sum2[std::size_t{i} * lights + k] = 0.0;
   }
   std::fill(t.sensors.begin(), t.sensors.end(), typename decltype(t.sensors)::value_type{});
-  std::fill(t.band_sensor_sum.begin(), t.band_sensor_sum.end(), 0.0);
-  std::fill(t.band_sensor_sum2.begin(), t.band_sensor_sum2.end(), 0.0);
+  for (std::vector<double>* v : {&t.band_sensor_sum, &t.band_sensor_sum2, &t.light_sensor_sum, &t.light_sensor_sum2})
+    std::fill(v->begin(), v->end(), 0.0);
   t.touched.clear();
   t.energy = {};
   t.counters = {};

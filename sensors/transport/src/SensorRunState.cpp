@@ -57,6 +57,15 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(cdf.data(), cdf.size() * sizeof(double));
   }
   for (const std::string& b : scene_.bands()) add(b.data(), b.size() + 1);
+  for (const PointMeter& m : scene_.meters()) {  // meters: their points are bins of the state
+    add(m.name.data(), m.name.size() + 1);
+    add(m.points.data(), m.points.size() * sizeof(glm::dvec3));
+    add(m.normals.data(), m.normals.size() * sizeof(glm::dvec3));
+  }
+  if (config_.per_light) {  // the state then holds per-light sums
+    static constexpr char kPerLight[] = "per-light";
+    add(kPerLight, sizeof kPerLight);
+  }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();
     if (spec.theta_bins != 0) {
@@ -175,6 +184,10 @@ void putTally(std::vector<char>& bytes, const Tally& t) {
   put(t.band_bin_sum2);
   put(t.band_sensor_sum);
   put(t.band_sensor_sum2);
+  put(t.light_bin_sum);  // empty unless the run keeps per-light results
+  put(t.light_bin_sum2);
+  put(t.light_sensor_sum);
+  put(t.light_sensor_sum2);
 }
 
 // The bytes putTally writes for a tally shaped like `t`.
@@ -182,7 +195,8 @@ template <class Tally>
 std::size_t tallyBytes(const Tally& t) {
   return t.bins.size() * (2 * sizeof(double) + sizeof(std::uint64_t)) + t.sensors.size() * 2 * sizeof(double) +
          sizeof(detail::EnergyWords) +
-         (t.band_bin_sum.size() + t.band_bin_sum2.size() + t.band_sensor_sum.size() + t.band_sensor_sum2.size()) *
+         (t.band_bin_sum.size() + t.band_bin_sum2.size() + t.band_sensor_sum.size() + t.band_sensor_sum2.size() +
+          t.light_bin_sum.size() + t.light_bin_sum2.size() + t.light_sensor_sum.size() + t.light_sensor_sum2.size()) *
              sizeof(double);
 }
 
@@ -210,6 +224,10 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
   get(t.band_bin_sum2);
   get(t.band_sensor_sum);
   get(t.band_sensor_sum2);
+  get(t.light_bin_sum);
+  get(t.light_bin_sum2);
+  get(t.light_sensor_sum);
+  get(t.light_sensor_sum2);
   const auto valid = [](std::span<const double> v) {
     return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x) && x >= 0.0; });
   };
@@ -217,7 +235,8 @@ bool getTally(const std::vector<char>& bytes, std::size_t& at, Tally& t, std::ui
   EnergyBalance e;
   const bool energy_ok = detail::energyFromWords(energy[0], rays, e);
   if (!valid(b1) || !valid(b2) || !valid(s1) || !valid(s2) || !valid(t.band_bin_sum) || !valid(t.band_bin_sum2) ||
-      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !energy_ok || !counts_ok)
+      !valid(t.band_sensor_sum) || !valid(t.band_sensor_sum2) || !valid(t.light_bin_sum) || !valid(t.light_bin_sum2) ||
+      !valid(t.light_sensor_sum) || !valid(t.light_sensor_sum2) || !energy_ok || !counts_ok)
     return false;
   t.touched.clear();
   for (std::size_t i = 0; i < nb; ++i) {

@@ -324,6 +324,50 @@ bool SensorScene::isSimilarity(const glm::dmat3& linear) {
   return off <= 1e-9 * s2;  // false for NaN
 }
 
+void SensorScene::setMeters(std::vector<PointMeter> meters) {
+  std::unordered_set<std::string> names;
+  std::uint64_t points = 0;
+  const auto finite = [](const glm::dvec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
+  for (PointMeter& m : meters) {
+    const std::string what = "meter '" + m.name + "'";
+    if (m.name.empty()) throw InvalidArgument("a meter has an empty name");
+    if (!names.insert(m.name).second) throw InvalidArgument("two meters named '" + m.name + "'");
+    if (m.points.empty()) throw InvalidArgument(what + ": no points");
+    if (m.normals.size() != m.points.size())
+      throw InvalidArgument(what + ": " + std::to_string(m.normals.size()) + " normals for " +
+                            std::to_string(m.points.size()) + " points (one per point)");
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+      const double len = glm::length(m.normals[i]);
+      if (!finite(m.points[i]) || !finite(m.normals[i]) || !(len > 0.0) || !std::isfinite(len))
+        throw InvalidArgument(what + ": point " + std::to_string(i) +
+                              " has a non-finite position or a zero or non-finite normal");
+      m.normals[i] /= len;
+    }
+    points += m.points.size();
+    if (points > (std::uint64_t{1} << 24)) throw InvalidArgument(what + ": more than 2^24 meter points in all");
+  }
+  meters_ = std::move(meters);
+  meter_points_ = static_cast<std::uint32_t>(points);
+}
+
+void SensorScene::checkMeterMaterials() const {
+  if (meters_.empty()) return;
+  const Derived& d = current();
+  for (std::size_t node = 0; node < d.material_of_node.size(); ++node) {
+    const Material& m = d.material_of_node[node];
+    const bool connectable =
+        (m.type == MaterialType::Absorber || m.type == MaterialType::Lambertian) && m.scatter == ScatterModel::None;
+    if (connectable) continue;
+    const NodeId id = static_cast<NodeId>(node);
+    throw InvalidArgument("meters: the material of instance " +
+                          (graph_->contains(id) ? "'" + graph_->path(id) + "'" : "node " + std::to_string(node)) +
+                          " is not an absorber or Lambertian: meters connect to the lights and to diffuse "
+                          "reflections only, and would miss the light it sends (use sensors there)");
+  }
+}
+
 int SensorScene::findSensor(const std::string& name) const {
   const std::vector<SensorInstance>& list = sensors();
   for (std::size_t k = 0; k < list.size(); ++k)

@@ -89,10 +89,32 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
   }
   l.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
   const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  // Watts or lumens, never both; an "ies" light with neither takes its lumens from its file.
+  // Watts or lumens, never both; an "ies" light with neither takes its lumens from its file. Area
+  // lights may give their luminance (cd/m^2) or luminous exitance (lm/m^2) and directional lights
+  // their illuminance across the beam (lx) instead: lumens follow from their size below.
+  const char* photometric_amount = nullptr;
+  for (const char* key : {"luminance", "exitance", "illuminance"})
+    if (v.contains(key)) {
+      if (photometric_amount || v.contains("power") || v.contains("lumens"))
+        ctx.fail(p, std::string("a light has one of \"power\" (W), \"lumens\" (lm), \"luminance\" (cd/m^2, area), "
+                                "\"exitance\" (lm/m^2, area) or \"illuminance\" (lx, directional); \"") +
+                        key + "\" is not the only one");
+      photometric_amount = key;
+    }
+  if (photometric_amount) {
+    const bool fits = type == "area" || type == "disk"
+                          ? std::string_view(photometric_amount) != "illuminance"
+                          : type == "directional" && std::string_view(photometric_amount) == "illuminance";
+    if (!fits)
+      ctx.fail(at(p, photometric_amount),
+               std::string("\"") + photometric_amount + "\" is not a key of a \"" + type +
+                   "\" light (luminance and exitance: area and disk lights; illuminance: directional)");
+  }
   if (v.contains("power") && v.contains("lumens"))
     ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
-  if (v.contains("lumens")) {
+  if (photometric_amount) {
+    // Set from the light's size once it is read.
+  } else if (v.contains("lumens")) {
     l.lumens = ctx.number(v["lumens"], at(p, "lumens"));
     if (!(l.lumens > 0.0)) ctx.fail(at(p, "lumens"), "lumens must be > 0 lm (got " + std::to_string(l.lumens) + ")");
   } else if (v.contains("power") || type != "ies") {
@@ -113,21 +135,44 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!(deg > 0.0 && deg <= 180.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 180] degrees");
     l.cone_angle = deg * std::numbers::pi / 180.0;
   } else if (type == "directional") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "position", "direction", "radius"});
+    ctx.onlyKeys(
+        v, p,
+        {"type", "name", "power", "lumens", "illuminance", "spectrum", "node", "position", "direction", "radius"});
     l.type = LightType::Directional;
     l.position = vec3(ctx.member(v, p, "position"), at(p, "position"), ctx);
     l.direction = direction(ctx.member(v, p, "direction"), at(p, "direction"), ctx);
     l.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
-  } else if (type == "area") {
-    ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "size", "transform", "two_sided"});
+    // Illuminance E (lx) on a plane across the beam: E pi r^2 lumens.
+    if (photometric_amount)
+      l.lumens = ctx.positiveNumber(v["illuminance"], at(p, "illuminance")) * std::numbers::pi * l.radius * l.radius;
+  } else if (type == "area" || type == "disk") {
+    ctx.onlyKeys(v, p,
+                 {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node",
+                  type == "disk" ? "radius" : "size", "transform", "two_sided"});
     l.type = LightType::Area;
-    const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
-    l.width = size[0];
-    l.height = size[1];
+    l.disk = type == "disk";
+    if (l.disk) {
+      l.width = l.height = 2.0 * ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
+    } else {
+      const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
+      l.width = size[0];
+      l.height = size[1];
+    }
     if (v.contains("transform")) l.world_from_light = transform12(v["transform"], at(p, "transform"), ctx);
     if (v.contains("two_sided")) {
       if (!v["two_sided"].is_boolean()) ctx.fail(at(p, "two_sided"), "expected true or false");
       l.two_sided = v["two_sided"].get<bool>();
+    }
+    if (photometric_amount) {
+      // Per emitting face: a Lambertian face of luminance L has exitance M = pi L, and emits M A
+      // (A: the rectangle's area as its transform places it).
+      const glm::dmat3& m = l.world_from_light.linear;
+      const double area = glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
+                          (l.disk ? std::numbers::pi / 4.0 : 1.0);  // the inscribed disk's share
+      const double faces = l.two_sided ? 2.0 : 1.0;
+      const double value = ctx.positiveNumber(v[photometric_amount], at(p, photometric_amount));
+      l.lumens =
+          (std::string_view(photometric_amount) == "luminance" ? std::numbers::pi * value : value) * area * faces;
     }
   } else if (type == "ies") {
     ctx.onlyKeys(v, p, {"type", "name", "power", "lumens", "spectrum", "node", "file", "position", "transform"});
@@ -151,7 +196,7 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
     ctx.fail(at(p, "type"), "unknown light type \"" + type +
-                                "\" (expected \"point\", \"spot\", \"directional\", \"area\" or \"ies\")");
+                                "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\" or \"ies\")");
   }
   if (v.contains("spectrum"))
     l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
@@ -442,9 +487,40 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     }
     (void)graph.commit();
   }
+  // Illuminance meters: {"name", "points": [[x, y, z], ...], "normal": [x, y, z] (all points) or
+  // "normals": [[x, y, z], ...] (one per point)}, world space.
+  std::vector<PointMeter> meters;
+  if (root.contains("meters")) {
+    const json& list = root["meters"];
+    if (!list.is_array()) ctx.fail("/meters", "expected an array of meters");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string p = at("/meters", i);
+      const json& e = list[i];
+      if (!e.is_object()) ctx.fail(p, "expected an object");
+      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals"});
+      PointMeter m;
+      m.name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
+      const json& pts = ctx.member(e, p, "points");
+      if (!pts.is_array() || pts.empty()) ctx.fail(at(p, "points"), "expected a non-empty array of [x, y, z]");
+      requireMemory(arrayBytes(pts.size(), 2 * sizeof(glm::dvec3)), path.string() + ": " + p + ": meter points");
+      for (std::size_t k = 0; k < pts.size(); ++k) m.points.push_back(vec3(pts[k], at(at(p, "points"), k), ctx));
+      if (e.contains("normal") == e.contains("normals"))
+        ctx.fail(p, "expected \"normal\" (one for all points) or \"normals\" (one per point)");
+      if (e.contains("normal")) {
+        m.normals.assign(m.points.size(), direction(e["normal"], at(p, "normal"), ctx));
+      } else {
+        const json& ns = e["normals"];
+        if (!ns.is_array() || ns.size() != pts.size())
+          ctx.fail(at(p, "normals"), "expected one [x, y, z] per point (" + std::to_string(pts.size()) + ")");
+        for (std::size_t k = 0; k < ns.size(); ++k) m.normals.push_back(direction(ns[k], at(at(p, "normals"), k), ctx));
+      }
+      meters.push_back(std::move(m));
+    }
+  }
   try {
     SensorScene scene(graph, std::move(lights), std::move(materials), std::move(bands), std::move(far_field),
                       std::move(band_nm), std::move(instance_materials));
+    scene.setMeters(std::move(meters));
     scene.doc_ = std::move(doc);  // the graph lives in the document (a stable address)
     return scene;
   } catch (const InvalidArgument& ex) {

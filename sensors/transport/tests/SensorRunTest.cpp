@@ -11,6 +11,7 @@
 #include "duplex/sensors/SensorRun.h"
 #include "duplex/sensors/SensorScene.h"
 #include "SensorFixture.h"
+#include "SlabRuns.h"
 #include "SlabMedium.h"
 #include "SensorRunChunk.h"
 
@@ -95,13 +96,7 @@ TEST(SensorRun, DirectionalLightFluxIsItsPowerTimesProjectedArea) {
   const double side = 0.5, tilt = 60.0 * kPi / 180.0;
   f.add(sensor(side, side, 2, 2, true, "tilted"), facing({0.0, std::sin(tilt), std::cos(tilt)}, {0.1, 0.0, 0.0}),
         "tilted");
-  Light sun;
-  sun.type = LightType::Directional;
-  sun.name = "sun";
-  sun.position = {0, 0, 5};
-  sun.direction = {0, 0, -1};
-  sun.radius = 1.0;
-  sun.power_w = 3.0;
+  const Light sun = beamLight({0, 0, 5}, {0, 0, -1}, 1.0, 3.0);
   SensorScene scene = f.scene({sun});
   SensorRun run(scene);
   (void)run.runUntil(100000);
@@ -207,6 +202,38 @@ TEST(SensorRun, GoniometricLightFollowsItsTableAndOrientation) {
 std::shared_ptr<const Object> disk(double diameter, std::uint32_t bins, const std::string& name) {
   return std::make_shared<const SensorObject>(
       name, SensorSpec{.shape = SensorShape::Disk, .width = diameter, .height = diameter, .nx = bins, .ny = bins});
+}
+
+TEST(SensorRun, DisksAndSpheresTakeTheirRadius) {
+  // The file's "radius" (the convention of lights and shapes): a disk of radius R gets the flux
+  // I 2 pi (1 - h / sqrt(h^2 + R^2)) and equals, bit for bit, the same disk given by its diameter.
+  const auto file = [](const std::string& disk_size) {
+    return R"({"format": "scene-json-v1", "objects": [], "instances": [],
+      "lights": [{"type": "point", "position": [0, 0, 0], "power": 12.566370614359172}],
+      "sensors": [{"name": "disk", "shape": "disk", )" +
+           disk_size + R"(, "bins": 4, "transform": [1,0,0,0, 0,1,0,0, 0,0,1,1.5]},
+                  {"name": "ball", "shape": "sphere", "radius": 3, "bins": [4, 2]}]})";
+  };
+  const SensorScene by_radius = SensorScene::load(writeTestFile("radius.json", file(R"("radius": 0.75)")));
+  const SensorScene by_size = SensorScene::load(writeTestFile("diameter.json", file(R"("size": 1.5)")));
+  EXPECT_EQ(by_radius.sensors()[0].object->spec().width, 1.5);
+  EXPECT_EQ(by_radius.sensors()[1].object->spec().width, 6.0);
+  SensorRun a(by_radius), b(by_size);
+  (void)a.runUntil(200000);
+  (void)b.runUntil(200000);
+  const SensorRunResults ra = a.results(), rb = b.results();
+  const double h = 1.5, radius = 0.75, expected = 2.0 * kPi * (1.0 - h / std::sqrt(h * h + radius * radius));
+  EXPECT_LT(std::abs(ra.sensors[0].total_flux_w - expected), 4.0 * ra.sensors[0].total_flux_stderr_w);
+  EXPECT_EQ(ra.sensors[0].flux_w, rb.sensors[0].flux_w);
+  EXPECT_NEAR(ra.sensors[1].total_flux_w, 4.0 * kPi, 1e-9);  // the sphere around the source records it all
+  // A rectangle has no radius; radius and size together are ambiguous.
+  const std::string rect = R"({"format": "scene-json-v1", "objects": [], "instances": [],
+      "lights": [{"type": "point", "position": [0, 0, 0], "power": 1}], "sensors": [{"name": "s", )";
+  expectLoadError(writeTestFile("rect_radius.json", rect + R"("radius": 1}]})"), {"/sensors/0/radius", "rectangle"});
+  expectLoadError(writeTestFile("both.json", rect + R"("shape": "disk", "radius": 1, "size": 2}]})"),
+                  {"/sensors/0/radius", "not both"});
+  expectLoadError(writeTestFile("bad_radius.json", rect + R"("shape": "sphere", "radius": -1}]})"),
+                  {"/sensors/0/radius"});
 }
 
 TEST(SensorRun, PointSourceThroughACoaxialDisk) {

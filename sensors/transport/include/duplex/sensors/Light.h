@@ -44,6 +44,9 @@ struct Light {
   Affine world_from_light;  ///< Area: placement of the local rectangle; Goniometric: its rotation orients the luminaire
   std::shared_ptr<const IesProfile> profile;  ///< Goniometric: the intensity table (its shape; power_w scales it)
   bool two_sided = false;                     ///< Area: also emits towards -z (half the power each side)
+  /// Area: the disk of radius width / 2 (width == height) inscribed in the rectangle instead of the
+  /// rectangle itself (a scene file's "disk" light).
+  bool disk = false;
   /// Spectral scenes: relative power per band (>= 0, not all 0; normalised by the scene); empty:
   /// the power is shared equally among the bands. Its length must be the scene's band count.
   std::vector<double> spectrum;

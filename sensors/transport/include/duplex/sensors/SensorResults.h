@@ -14,6 +14,8 @@
 #include "duplex/sensors/IesProfile.h"
 #include "duplex/sensors/SensorObject.h"
 
+#include <glm/vec3.hpp>
+
 #include <array>
 #include <cstdint>
 #include <string>
@@ -76,6 +78,8 @@ struct SensorResult {
   /// the luminous intensity (cd) and illuminance_stderr_lx its standard error.
   double luminous_flux_lm = 0.0;              ///< over all bins, lm
   double luminous_flux_stderr_lm = 0.0;       ///< standard error of luminous_flux_lm
+  std::vector<double> flux_lm;                ///< [bin], lm (far field: the cell's luminous flux)
+  std::vector<double> flux_stderr_lm;         ///< [bin], standard error of flux_lm
   std::vector<double> illuminance_lx;         ///< [bin], lm per square scene unit (far field: cd)
   std::vector<double> illuminance_stderr_lx;  ///< [bin], standard error of illuminance_lx
   /// Colorimetric scenes (the bands have wavelengths): per bin the CIE 1931 tristimulus values X, Y,
@@ -85,6 +89,41 @@ struct SensorResult {
   std::vector<double> chromaticity_xy;        ///< [2 * bin + c], x, y
   std::vector<double> total_cie_xyz;          ///< [3], X, Y, Z of the total flux (Y = luminous_flux_lm)
   std::vector<double> total_chromaticity_xy;  ///< [2], or NaN when no light arrived
+  /// Runs with per-light results (SensorRunConfig::per_light): what each light contributed, index
+  /// [light][bin] in the order of SensorRunResults::light_names, estimated from the same rays as
+  /// the totals (a ray's deposits are its light's samples, zeros for the others), so that the
+  /// per-light values sum to the totals above. Units as flux_w, irradiance_w_m2 (far field: W/sr).
+  std::vector<std::vector<double>> light_flux_w;           ///< [light][bin], W
+  std::vector<std::vector<double>> light_flux_stderr_w;    ///< [light][bin], W
+  std::vector<std::vector<double>> light_irradiance_w_m2;  ///< [light][bin]
+  std::vector<std::vector<double>> light_stderr_w_m2;      ///< [light][bin]
+  std::vector<double> light_total_flux_w;                  ///< [light], W
+  std::vector<double> light_total_flux_stderr_w;           ///< [light], W
+  /// Per-light luminous quantities, in photometric runs without bands of different weights (every
+  /// ray's luminous weight the same); empty otherwise.
+  std::vector<std::vector<double>> light_illuminance_lx;         ///< [light][bin] (far field: cd)
+  std::vector<std::vector<double>> light_illuminance_stderr_lx;  ///< [light][bin]
+  std::vector<double> light_luminous_flux_lm;                    ///< [light], lm
+  std::vector<double> light_luminous_flux_stderr_lm;             ///< [light], lm
+};
+
+/// What one illuminance meter (PointMeter) measured: per point the irradiance on the plane of its
+/// normal (W per square scene unit) by next-event connections from every emission and diffuse
+/// reflection, each ray's connections one sample, so the standard errors are of a mean of the rays.
+struct MeterResult {
+  std::string name;                           ///< the meter's name
+  std::vector<glm::dvec3> points;             ///< world space, as given
+  std::vector<glm::dvec3> normals;            ///< world space, unit length
+  std::vector<double> irradiance_w_m2;        ///< [point]
+  std::vector<double> stderr_w_m2;            ///< [point]
+  std::vector<std::uint64_t> ray_count;       ///< [point]: emitted rays that connected to it
+  std::vector<double> illuminance_lx;         ///< [point], photometric runs
+  std::vector<double> illuminance_stderr_lx;  ///< [point], photometric runs
+  /// Runs with per-light results: [light][point], and the luminous values where they exist (as
+  /// SensorResult's light_illuminance_lx).
+  std::vector<std::vector<double>> light_irradiance_w_m2;
+  std::vector<std::vector<double>> light_stderr_w_m2;
+  std::vector<std::vector<double>> light_illuminance_lx;
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
@@ -140,10 +179,21 @@ struct SensorRunResults {
   /// Whether the photometric quantities of the sensors are filled (a light given in lumens, or
   /// bands with wavelengths); then emitted_lm is the lights' luminous flux (exact, from their spectra).
   bool photometric = false;
-  bool colorimetric = false;                   ///< whether the sensors' CIE XYZ and chromaticities are filled
-  double emitted_lm = 0.0;                     ///< the lights' luminous flux, lm (photometric runs)
+  bool colorimetric = false;  ///< whether the sensors' CIE XYZ and chromaticities are filled
+  double emitted_lm = 0.0;    ///< the lights' luminous flux, lm (photometric runs)
+  /// Photometric runs without wavelengths (every light in lumens): the transported unit is the
+  /// lumen, so the "_w" quantities above and in the sensors hold lumens and no radiometric value is
+  /// known; outputs then give the photometric keys and leave the radiometric ones empty.
+  bool luminous_transport = false;
+  /// Runs with per-light results: the lights' names (Light::name), their power (W, lumens when
+  /// luminous_transport) and, in photometric runs, their luminous flux (lm), in the order of the
+  /// sensors' per-light arrays.
+  std::vector<std::string> light_names;
+  std::vector<double> light_emitted_w;
+  std::vector<double> light_emitted_lm;
   std::vector<std::array<double, 2>> band_nm;  ///< the bands' wavelengths [lo, hi] nm (colorimetric runs)
   std::vector<SensorResult> sensors;           ///< in the scene's sensor order
+  std::vector<MeterResult> meters;             ///< in the scene's meter order (SensorScene::meters)
 };
 
 /// The IES type C table of a far-field sensor's result (shape FarField): vertical angles gamma_g =

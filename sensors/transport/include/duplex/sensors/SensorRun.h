@@ -80,6 +80,11 @@ struct SensorRunConfig {
   /// batch's): a run above it is refused at construction rather than failing to allocate (or being
   /// killed) part-way.
   std::uint64_t max_accumulator_bytes = std::uint64_t{4} << 30;
+  /// Results per light beside the totals (SensorResult::light_flux_w, ...): each ray's deposits are
+  /// also tallied under the light that emitted it, which costs two sums per bin, sensor and light.
+  /// The per-light results of one run add up to its totals. Not with batches traced in other
+  /// processes (traceBatch / addBatch refuse it).
+  bool per_light = false;
 };
 
 /// Passed to runUntil()'s progress callback after each batch.
@@ -212,6 +217,16 @@ class SensorRun {
   // Photometric scenes: sensor `sensor`'s (s's) luminous and colorimetric quantities, from `all`
   // (the run's tallies) and the radiometric ones already in `out`.
   void photometricResults(const Tally& all, const SensorInstance& s, std::size_t sensor, SensorResult& out) const;
+  // Runs with per-light results: sensor `sensor`'s (s's) per-light arrays from `all`, with their
+  // luminous values when `luminous` (one luminous weight for every ray); bin areas already in `out`.
+  void perLightResults(const Tally& all, const SensorInstance& s, std::size_t sensor, bool luminous,
+                       SensorResult& out) const;
+  // Photometric scenes: the sum of bin `bin`'s luminous samples (over all rays), and in `sum2` the
+  // sum of their squares.
+  double luminousSamples(const Tally& all, std::size_t bin, double& sum2) const;
+  // The meters' results into r.meters (per-light arrays when the tallies keep them; their luminous
+  // values when `light_lm`).
+  void meterResults(const Tally& all, bool light_lm, SensorRunResults& r) const;
   [[nodiscard]] std::unique_ptr<Tally> makeTally() const;
   /// The first collision in the scene's scattering fogs along world-space origin + t dir, t in
   /// [0, t_max] (t_max infinite: the whole ray): the medium, with t_collision, or nullptr.

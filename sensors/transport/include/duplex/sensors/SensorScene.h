@@ -100,6 +100,16 @@ struct SurfaceInstance {
   bool identity = true;                    ///< object space is world space (rays are not transformed)
 };
 
+/// Illuminance meters at points: each point with the unit normal of the surface it measures
+/// (world space, scene units). A run estimates the irradiance at each point by connecting every
+/// emission and every diffuse reflection to it (next-event estimation), not by averaging over an
+/// area, so the points may be placed anywhere, also on a surface.
+struct PointMeter {
+  std::string name;                 ///< unique among the scene's meters, non-empty
+  std::vector<glm::dvec3> points;   ///< world space
+  std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point
+};
+
 /// A scene prepared for light transport (see the file comment): graph and tracer, lights, materials, sensors and
 /// scattering media.
 class SensorScene {
@@ -159,6 +169,19 @@ class SensorScene {
   [[nodiscard]] double totalPower() const { return current().total_power; }
   /// Sensor instances, sorted by node id, then the far-field sensors in their given order.
   [[nodiscard]] const std::vector<SensorInstance>& sensors() const { return current().sensors; }
+  /// The illuminance meters (setMeters), in their given order.
+  [[nodiscard]] const std::vector<PointMeter>& meters() const { return meters_; }
+  /// The meters' points over all meters.
+  [[nodiscard]] std::uint32_t meterPointCount() const { return meter_points_; }
+  /// Sets the illuminance meters. Throws InvalidArgument naming the meter for an empty or repeated
+  /// name, no points, a point or normal that is not finite, a zero normal (normals are normalised),
+  /// normals not one per point, or more than 2^24 points in all.
+  void setMeters(std::vector<PointMeter> meters);
+  /// Throws InvalidArgument naming the first material a run with meters cannot connect through:
+  /// meters see the lights and diffuse (Lambertian) reflections directly, so a mirror, coating,
+  /// dielectric, rough lobe or fog, whose light would reach a meter only along paths a connection
+  /// cannot make, is refused rather than silently missed.
+  void checkMeterMaterials() const;
   /// Index into sensors() of the sensor with this name, or -1.
   [[nodiscard]] int findSensor(const std::string& name) const;
   /// Total number of bins over all sensors.
@@ -254,6 +277,8 @@ class SensorScene {
   std::vector<double> band_lm_;       // per band: lumens per transported unit (photometric scenes)
   std::vector<glm::dvec3> band_xyz_;  // per band: 683 x (mean x-bar, y-bar, z-bar) (colorimetric scenes)
   std::unique_ptr<Cache> cache_;      // the Derived of the last commit (a mutex guards its renewal)
+  std::vector<PointMeter> meters_;
+  std::uint32_t meter_points_ = 0;
 };
 
 }  // namespace duplex
