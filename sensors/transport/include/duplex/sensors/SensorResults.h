@@ -122,8 +122,8 @@ struct MeterResult {
   /// Runs with per-light results: [light][point], and the luminous values where they exist (as
   /// SensorResult's light_illuminance_lx).
   std::vector<std::vector<double>> light_irradiance_w_m2;
-  std::vector<std::vector<double>> light_stderr_w_m2;
-  std::vector<std::vector<double>> light_illuminance_lx;
+  std::vector<std::vector<double>> light_stderr_w_m2;     ///< [light][point], as stderr_w_m2
+  std::vector<std::vector<double>> light_illuminance_lx;  ///< [light][point], photometric runs
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so
@@ -189,8 +189,8 @@ struct SensorRunResults {
   /// luminous_transport) and, in photometric runs, their luminous flux (lm), in the order of the
   /// sensors' per-light arrays.
   std::vector<std::string> light_names;
-  std::vector<double> light_emitted_w;
-  std::vector<double> light_emitted_lm;
+  std::vector<double> light_emitted_w;         ///< [light] W (lumens when luminous_transport)
+  std::vector<double> light_emitted_lm;        ///< [light] lm, photometric runs
   std::vector<std::array<double, 2>> band_nm;  ///< the bands' wavelengths [lo, hi] nm (colorimetric runs)
   std::vector<SensorResult> sensors;           ///< in the scene's sensor order
   std::vector<MeterResult> meters;             ///< in the scene's meter order (SensorScene::meters)
