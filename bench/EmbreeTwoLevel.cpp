@@ -25,8 +25,9 @@ std::array<float, 12> rowMajor3x4(const Affine& a) {
 }
 
 // One object scene of the given build quality (Embree's default: medium).
-RTCScene newObjectScene(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality) {
+RTCScene newObjectScene(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuildQuality quality, RTCSceneFlags flags) {
   RTCScene scene = rtcNewScene(device.get());
+  rtcSetSceneFlags(scene, flags);
   rtcSetSceneBuildQuality(scene, quality);
   attachTriangleMesh(device, scene, mesh, quality);
   rtcCommitScene(scene);
@@ -36,17 +37,24 @@ RTCScene newObjectScene(EmbreeDevice& device, const TriangleMesh& mesh, RTCBuild
 }  // namespace
 
 const char* toString(EmbreeTopLevelMode mode) {
-  return mode == EmbreeTopLevelMode::Default ? "default" : "dynamic_low";
+  switch (mode) {
+    case EmbreeTopLevelMode::Default: return "default";
+    case EmbreeTopLevelMode::DynamicLow: return "dynamic_low";
+    case EmbreeTopLevelMode::Robust: return "robust";
+  }
+  return "?";
 }
 
 EmbreeTwoLevel::EmbreeTwoLevel(EmbreeDevice& device, std::span<const TriangleMesh* const> meshes,
                                std::span<const EmbreeInstanceDesc> instances, EmbreeTopLevelMode mode,
                                RTCBuildQuality object_quality)
     : device_(device) {
+  const RTCSceneFlags flags = mode == EmbreeTopLevelMode::Robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE;
   const auto start = std::chrono::steady_clock::now();
   object_scenes_.assign(meshes.size(), nullptr);
-  tbb::parallel_for(std::size_t{0}, meshes.size(),
-                    [&](std::size_t i) { object_scenes_[i] = newObjectScene(device, *meshes[i], object_quality); });
+  tbb::parallel_for(std::size_t{0}, meshes.size(), [&](std::size_t i) {
+    object_scenes_[i] = newObjectScene(device, *meshes[i], object_quality, flags);
+  });
   device.check("object scenes");
   build_times_.objects_ms = msSince(start);
 
@@ -56,6 +64,7 @@ EmbreeTwoLevel::EmbreeTwoLevel(EmbreeDevice& device, std::span<const TriangleMes
     rtcSetSceneFlags(top_, RTC_SCENE_FLAG_DYNAMIC);
     rtcSetSceneBuildQuality(top_, RTC_BUILD_QUALITY_LOW);
   } else {
+    rtcSetSceneFlags(top_, flags);
     rtcSetSceneBuildQuality(top_, RTC_BUILD_QUALITY_MEDIUM);
   }
   instances_.reserve(instances.size());

@@ -29,6 +29,7 @@ namespace duplex::bench {
 enum class EmbreeTopLevelMode : std::uint8_t {
   Default,     ///< RTC_BUILD_QUALITY_MEDIUM, no scene flags (Embree's defaults)
   DynamicLow,  ///< RTC_SCENE_FLAG_DYNAMIC + RTC_BUILD_QUALITY_LOW (Embree's advice for scenes that change)
+  Robust,      ///< RTC_SCENE_FLAG_ROBUST on the top level and every object scene (Embree's watertight mode)
 };
 
 [[nodiscard]] const char* toString(EmbreeTopLevelMode mode);

@@ -282,6 +282,8 @@ Ray shadowRay(const Ray& r, float t, const glm::vec3& light) {
 std::size_t g_callgrind_rays = 0;
 // --kd-walk: the two-level scenes also through the kd-tree walk.
 bool g_kd_walk = false;
+// --embree-robust: the two-level scenes also through Embree's robust (watertight) mode.
+bool g_embree_robust = false;
 /// --sets: the ray sets measured (empty: all).
 std::vector<std::string> g_sets;
 /// Writes the JSON with the rows measured so far.
@@ -432,6 +434,8 @@ void benchScene(const std::filesystem::path& path, std::uint32_t side, std::size
     instances.push_back({graph.node(node).object, graph.worldTransform(node)});
   EmbreeDevice device(*std::max_element(threads.begin(), threads.end()), "");
   const EmbreeTwoLevel embree(device, meshes, instances, EmbreeTopLevelMode::Default);
+  std::optional<EmbreeTwoLevel> robust;
+  if (g_embree_robust) robust.emplace(device, meshes, instances, EmbreeTopLevelMode::Robust);
 #endif
   auto batch = [](SceneTracer& tracer, bool packets, bool closest) -> Tracer {
     return [&tracer, packets, closest](std::span<const Ray> rays) {
@@ -459,6 +463,9 @@ void benchScene(const std::filesystem::path& path, std::uint32_t side, std::size
     }
 #if DUPLEX_BENCH_HAVE_EMBREE
     tracers.merge(embreeTracers(embree.scene(), closest));
+    if (robust)  // embree_robust_1, embree_robust_4, ...
+      for (auto& [name, t] : embreeTracers(robust->scene(), closest))
+        tracers["embree_robust" + name.substr(std::string("embree").size())] = std::move(t);
 #endif
     return tracers;
   };
@@ -515,6 +522,9 @@ int run(int argc, char** argv) {
   app.add_flag("--kd-walk", g_kd_walk,
                "two-level scenes: also trace through the kd-tree walk (TopLevelConfig::wide_traversal off), "
                "as ours_kd_single and ours_kd_packet");
+  app.add_flag("--embree-robust", g_embree_robust,
+               "two-level scenes: also Embree's scene built with RTC_SCENE_FLAG_ROBUST (top level and objects), "
+               "as embree_robust_1, embree_robust_4, ...");
   app.add_option("--callgrind", g_callgrind_rays,
                  "instead of timing: count each tracer over the first N rays of each set (under valgrind "
                  "--tool=callgrind --instr-atstart=no)");
