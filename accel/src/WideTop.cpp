@@ -131,8 +131,8 @@ struct WideTop::Deriver {
       }
       it.kind = Item::Refs;
       it.begin = static_cast<std::uint32_t>(top.refs_.size());
-      for (std::uint32_t k2 = 0; k2 < n.primCount(); ++k2) {
-        const std::uint32_t slot = tree.prim_indices[n.primOffset() + k2];
+      for (std::uint32_t k = 0; k < n.primCount(); ++k) {
+        const std::uint32_t slot = tree.prim_indices[n.primOffset() + k];
         const Box c = intersection(boxes[slot], it.cell);
         if (!c.empty()) top.refs_.emplace_back(slot, c);
       }
@@ -181,16 +181,21 @@ struct WideTop::Deriver {
   // subtree children whose cells met an edit, refitting their boxes. False (nothing changed yet):
   // such a child's subtree is empty now, and `w` must be derived afresh.
   bool refit(std::uint32_t w) {
-    for (std::uint32_t k : top.side_[w].kd)
-      if (k < kSideRefs && top.cache_[k].touched && kdItem(k, top.cache_[k].cell).box.empty()) return false;
+    // `kd[c]` stays what the child was derived from: a subtree rebuilt in place there since turned
+    // it into a jump, which is followed afresh at every refit.
+    std::array<Item, 8> items;
+    for (int c = 0; c < 8; ++c) {
+      const std::uint32_t k = top.side_[w].kd[c];
+      if (k >= kSideRefs) continue;
+      items[c] = kdItem(k, top.cache_[k].cell);
+      if (top.cache_[k].touched && items[c].box.empty()) return false;
+    }
     std::uint32_t below = 0;
     int below_depth = 0;
     for (int c = 0; c < 8; ++c) {
       const std::uint32_t k = top.side_[w].kd[c];
       if (k >= kSideRefs) continue;
-      // `k` stays what the child was derived from: a subtree rebuilt in place at `k` since
-      // turned it into a jump, which is followed afresh at every refit.
-      const Item it = kdItem(k, top.cache_[k].cell);
+      const Item& it = items[c];
       if (!top.cache_[k].touched) {
         below += top.cache_[it.index].wide_nodes;
         below_depth = std::max(below_depth, static_cast<int>(top.cache_[it.index].wide_depth));
