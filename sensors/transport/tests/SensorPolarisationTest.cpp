@@ -24,7 +24,7 @@ using namespace test;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 TEST(Polarisation, InterfaceMatchesTheFresnelEquationsForBothPolarisations) {
-  for (const auto [n1, n2] : {std::pair{1.0, 1.52}, std::pair{1.52, 1.0}, std::pair{1.0, 2.4}}) {
+  for (const auto& [n1, n2] : {std::pair{1.0, 1.52}, std::pair{1.52, 1.0}, std::pair{1.0, 2.4}}) {
     for (double deg = 0.0; deg < 90.0; deg += 1.0) {
       const double th = deg * kDeg;
       const FresnelPair ref = fresnelReflectance(n1, n2, th);
@@ -40,7 +40,9 @@ TEST(Polarisation, InterfaceMatchesTheFresnelEquationsForBothPolarisations) {
       detail::Polarisation pol;
       EXPECT_NEAR(detail::reflectanceFor(pol, f), 0.5 * (ref.rs + ref.rp), 1e-14);
       detail::afterInterface(pol, f, false);
-      if (ref.rs + ref.rp > 0.0) EXPECT_NEAR(pol.q, (ref.rs - ref.rp) / (ref.rs + ref.rp), 1e-12);
+      if (ref.rs + ref.rp > 0.0) {
+        EXPECT_NEAR(pol.q, (ref.rs - ref.rp) / (ref.rs + ref.rp), 1e-12);
+      }
     }
   }
 }
