@@ -12,7 +12,13 @@
 #include <filesystem>
 #include <vector>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct SceneSplitOptions {
   std::filesystem::path mesh;  ///< any format duplex::loadMesh reads
@@ -37,5 +43,9 @@ struct SceneSplitOptions {
 /// of degenerate triangles is written anyway (the rule counts them) but a scene-json-v1 reader
 /// refuses it; it is counted and warned about on stderr. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSceneSplit(const SceneSplitOptions& options);
+
+/// Adds `duplex scene split` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSceneSplitCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -9,7 +9,13 @@
 #include <filesystem>
 #include <string>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct ClosestOptions {
   std::filesystem::path scene;   ///< scene-json-v1 or duplex-scene-v1 (timed edits are not applied)
@@ -27,5 +33,9 @@ struct ClosestOptions {
 /// are ignored (they have no closest-point query). Times are wall-clock milliseconds. Throws
 /// duplex::Error naming the file for bad input.
 [[nodiscard]] nlohmann::ordered_json runClosest(const ClosestOptions& options);
+
+/// Adds `duplex closest` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addClosestCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -25,6 +25,8 @@ class App;
 
 namespace duplex::cli {
 
+struct ChosenCommand;
+
 struct BenchDeformOptions {
   std::filesystem::path scene;
   std::string structure;        ///< --structure for the scene's entries that choose none
@@ -55,5 +57,9 @@ struct BenchDeformOptions {
 
 /// Adds the command line of the benchmark to `cmd` (the tool's `bench deform`).
 void addBenchDeformOptions(CLI::App& cmd, BenchDeformOptions& options);
+
+/// Adds `duplex bench deform` to the tool's `bench` group with its options; when it is the command
+/// given, its callback sets `chosen` to run it (tools/support/Command.h).
+void addBenchDeformCommand(CLI::App& bench, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -10,7 +10,13 @@
 #include <filesystem>
 #include <string>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct TraceOptions {
   /// scene-json-v1 or duplex-scene-v1 file (read by loadSceneDocument; the latter's timed edits
@@ -59,5 +65,9 @@ struct TraceOptions {
 /// Throws duplex::Error (naming the file) for bad input, and InvalidArgument when neither or both
 /// of hits and transmittance are given, or transmittance with any_hit.
 [[nodiscard]] nlohmann::ordered_json runTrace(const TraceOptions& options);
+
+/// Adds `duplex trace` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addTraceCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

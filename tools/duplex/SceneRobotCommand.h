@@ -9,7 +9,13 @@
 #include <optional>
 #include <vector>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct SceneRobotOptions {
   std::filesystem::path urdf;
@@ -34,5 +40,9 @@ struct SceneRobotOptions {
 /// {"copies", "links", "objects", "instances", "movable_joints", "spacing", "out"}.
 /// Throws duplex::Error naming the file for bad input.
 [[nodiscard]] nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options);
+
+/// Adds `duplex scene robot` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSceneRobotCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -10,7 +10,13 @@
 #include <filesystem>
 #include <string>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct PrepareOptions {
   std::filesystem::path scene;  ///< scene-json-v1 or duplex-scene-v1 file
@@ -38,5 +44,9 @@ struct PrepareOptions {
 /// relative path exists). Throws duplex::Error for bad input, an unwritable folder, or an output
 /// file that would overwrite the source scene.
 [[nodiscard]] nlohmann::ordered_json runPrepare(const PrepareOptions& options);
+
+/// Adds `duplex prepare` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addPrepareCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

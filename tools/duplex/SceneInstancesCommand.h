@@ -8,7 +8,13 @@
 #include <cstdint>
 #include <filesystem>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct SceneInstancesOptions {
   std::filesystem::path mesh;  ///< any format duplex::loadMesh reads (loaded for its bounds)
@@ -26,5 +32,9 @@ struct SceneInstancesOptions {
 /// u = (x >> 11) * 2^-53 of consecutive std::mt19937_64(seed) outputs x. Returns {"instances",
 /// "grid", "cell", "mesh", "out"}. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSceneInstances(const SceneInstancesOptions& options);
+
+/// Adds `duplex scene instances` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSceneInstancesCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -37,6 +37,8 @@ class App;
 
 namespace duplex::cli {
 
+struct ChosenCommand;
+
 struct BenchUpdateOptions {
   std::filesystem::path scene;
   /// --structure: the structure choice of the entries that choose none (SceneDocumentOptions::structure),
@@ -86,5 +88,9 @@ struct BenchUpdateOptions {
 /// Adds the command line of the benchmark to `cmd` (the tool's `bench update`, or the whole command
 /// line of duplex_bench_update), parsed into `options`.
 void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options);
+
+/// Adds `duplex bench update` to the tool's `bench` group with its options; when it is the command
+/// given, its callback sets `chosen` to run it (tools/support/Command.h).
+void addBenchUpdateCommand(CLI::App& bench, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

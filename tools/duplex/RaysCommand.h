@@ -9,7 +9,13 @@
 #include <string>
 #include <optional>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct RaysOptions {
   /// scene-json-v1 or duplex-scene-v1 file; only its world bounds (the union of its visible
@@ -28,5 +34,9 @@ struct RaysOptions {
 /// Writes the ray file and returns {"rays": N, "out": PATH}. Throws duplex::Error for bad input
 /// (including a scene without visible instances, which has no bounds to aim at).
 [[nodiscard]] nlohmann::ordered_json runRays(const RaysOptions& options);
+
+/// Adds `duplex rays` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addRaysCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -7,7 +7,13 @@
 #include <filesystem>
 #include <string>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct ViewOptions {
   std::filesystem::path scene;     ///< scene-json-v1 or duplex-scene-v1
@@ -19,5 +25,9 @@ struct ViewOptions {
 /// Runs the server until SIGINT / SIGTERM. Throws duplex::Error naming the file for a bad scene,
 /// and InvalidArgument naming the option when the address cannot be bound.
 void runView(const ViewOptions& options);
+
+/// Adds `duplex view` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addViewCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -47,6 +47,8 @@ class App;
 
 namespace duplex::cli {
 
+struct ChosenCommand;
+
 struct BenchFrameOptions {
   std::filesystem::path scene;
   /// --structure: the structure choice of the entries that choose none; empty: each type's default.
@@ -87,5 +89,9 @@ struct BenchFrameOptions {
 /// Adds the command line of the benchmark to `cmd` (the tool's `bench frame`, or the whole command
 /// line of duplex_bench_frame), parsed into `options`.
 void addBenchFrameOptions(CLI::App& cmd, BenchFrameOptions& options);
+
+/// Adds `duplex bench frame` to the tool's `bench` group with its options; when it is the command
+/// given, its callback sets `chosen` to run it (tools/support/Command.h).
+void addBenchFrameCommand(CLI::App& bench, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

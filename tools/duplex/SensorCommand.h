@@ -29,7 +29,13 @@
 #include <stdexcept>
 #include <string>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace duplex::cli {
+
+struct ChosenCommand;
 
 struct SensorOptions {
   std::filesystem::path scene;
@@ -107,5 +113,9 @@ class Interrupted : public std::runtime_error {
 /// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
 /// returns the report, the others return null. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
+
+/// Adds `duplex sensor` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSensorCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli
