@@ -13,19 +13,15 @@
 /// (its position after step k-1) by amplitude * d * sin(4 pi / d * dot(p - c, w_a) + phi_a) along
 /// axis a: a random wave of wavelength d / 2 per axis, the steps adding up.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
 
-namespace CLI {
-class App;
-}
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct BenchDeformOptions {
   std::filesystem::path scene;

@@ -34,6 +34,8 @@
 /// (n - j)]); then for each of ids[0..k) in that order, world translation += delta(). An instance
 /// below transform nodes gets the local transform that gives it the moved world transform.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -41,13 +43,7 @@
 #include <string>
 #include <vector>
 
-namespace CLI {
-class App;
-}
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct BenchFrameOptions {
   std::filesystem::path scene;

@@ -25,19 +25,15 @@
 /// A moved instance below transform nodes gets the local transform that gives it the moved world
 /// transform (parents do not move).
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
 
-namespace CLI {
-class App;
-}
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct BenchUpdateOptions {
   std::filesystem::path scene;

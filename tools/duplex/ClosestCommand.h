@@ -4,18 +4,14 @@
 /// point of each record (SceneTracer::closestPoints), write a closest file, report the figures as
 /// one JSON object.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <string>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct ClosestOptions {
   std::filesystem::path scene;   ///< scene-json-v1 or duplex-scene-v1 (timed edits are not applied)

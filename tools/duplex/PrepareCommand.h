@@ -5,18 +5,14 @@
 /// their "structure" files, so that loading the copy reads the structures instead of building them
 /// (the paper's point: objects from a prepared library need no build).
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <string>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct PrepareOptions {
   std::filesystem::path scene;  ///< scene-json-v1 or duplex-scene-v1 file

@@ -2,6 +2,8 @@
 /// \file RaysCommand.h
 /// `duplex rays`: write the contract's ray sets (primary camera rays or random rays) for a scene.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -9,13 +11,7 @@
 #include <string>
 #include <optional>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct RaysOptions {
   /// scene-json-v1 or duplex-scene-v1 file; only its world bounds (the union of its visible

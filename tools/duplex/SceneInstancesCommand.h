@@ -3,18 +3,14 @@
 /// `duplex scene instances`: N randomly rotated copies of one mesh on a grid (the paper-style
 /// "1,000 instances of the hammer" scene), deterministic for a seed.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct SceneInstancesOptions {
   std::filesystem::path mesh;  ///< any format duplex::loadMesh reads (loaded for its bounds)

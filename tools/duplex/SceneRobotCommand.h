@@ -3,19 +3,15 @@
 /// `duplex scene robot`: the links of a URDF robot (the ABB IRB 6640 of the paper-style robot
 /// scene) placed by forward kinematics, in several copies side by side, as scene-json-v1.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <optional>
 #include <vector>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct SceneRobotOptions {
   std::filesystem::path urdf;

@@ -4,6 +4,8 @@
 /// scenes: koala in 19, 6,804 and 20,968 objects; docs/cli.md), written as scene-json-v1
 /// with inline arrays and one identity instance per object.
 
+#include "Command.h"
+
 #include <duplex/objects/TriangleMesh.h>
 
 #include <nlohmann/json.hpp>
@@ -12,13 +14,7 @@
 #include <filesystem>
 #include <vector>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct SceneSplitOptions {
   std::filesystem::path mesh;  ///< any format duplex::loadMesh reads

@@ -19,6 +19,8 @@
 /// run_state.bin and written out as usual, the report's status is "interrupted", and the process
 /// exits with 128 + the signal (a second signal kills it at once).
 
+#include "Command.h"
+
 #include "duplex/sensors/SensorRun.h"
 
 #include <nlohmann/json.hpp>
@@ -29,13 +31,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct SensorOptions {
   std::filesystem::path scene;

@@ -4,19 +4,15 @@
 /// levels (SceneTracer), trace a ray file with the tracer's batch queries, write a hit file, and
 /// report the figures as one JSON object.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct TraceOptions {
   /// scene-json-v1 or duplex-scene-v1 file (read by loadSceneDocument; the latter's timed edits

@@ -4,16 +4,12 @@
 /// interface of docs/viewer.md (cpp-httplib) on --bind:--port, prints one JSON line on stdout when
 /// ready ({"url", "port", "token"}) and serves until SIGINT or SIGTERM.
 
+#include "Command.h"
+
 #include <filesystem>
 #include <string>
 
-namespace CLI {
-class App;
-}  // namespace CLI
-
 namespace duplex::cli {
-
-struct ChosenCommand;
 
 struct ViewOptions {
   std::filesystem::path scene;     ///< scene-json-v1 or duplex-scene-v1
