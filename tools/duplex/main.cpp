@@ -9,6 +9,7 @@
 #include "BenchFrameCommand.h"
 #include "BenchUpdateCommand.h"
 #include "ClosestCommand.h"
+#include "InfoCommand.h"
 #include "PrepareCommand.h"
 #include "RaysCommand.h"
 #include "SceneInstancesCommand.h"
@@ -83,6 +84,7 @@ int main(int argc, char** argv) {
   addBenchFrameCommand(*bench, chosen);
   addBenchDeformCommand(*bench, chosen);
   addSensorCommand(app, chosen);
+  addInfoCommand(app, chosen);
   addViewCommand(app, chosen);
 
   std::uint64_t max_memory = 0;
