@@ -36,6 +36,13 @@ struct PacketRays {
   alignas(32) float tnear[kMaxPacketRays];
   alignas(32) float t[kMaxPacketRays];  // best distance so far (closest hit), tfar (any hit)
   int near_row[3];                      // as WideRay's: the packet's rays share their direction signs
+  // Bounds of the lanes' rays per axis, for one test of a node's children that stands for all of
+  // them (packetBounds): the origin that enters latest and exits earliest, the range of the
+  // inverse direction, the smallest tnear. With the lanes' own slab operations, monotonic
+  // rounding makes the bound entry no later and the bound exit no earlier than any lane's; a
+  // 0 * inf (NaN) drops the axis, as a lane's own NaN does.
+  float near_o[3], far_o[3], inv_lo[3], inv_hi[3];
+  float t_lo;
 };
 }  // namespace
 
@@ -92,6 +99,29 @@ inline bool setupRay(const Ray& ray, WideRay& w) {
 }
 
 inline Ray objectRay(const Record& rec, const WorldRay& w) { return toObject(rec, w); }
+
+// The children of `node` that some lane of `p` (bounded by p's bounds) may meet before t_hi, as a
+// bit mask: the per-lane tests (packetChildHits) are needed only for these.
+inline std::uint32_t packetBoundsHits(const PacketRays& p, const WideNode& node, float t_hi) {
+  const __m128 widen = _mm_set1_ps(kWiden), sign = _mm_set1_ps(-0.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  std::uint32_t mask = 0;
+  for (int half = 0; half < 2; ++half) {
+    const int o = 4 * half;
+    __m128 tn = _mm_xor_ps(inf, sign), tf = inf;
+    for (int a = 0; a < 3; ++a) {
+      const __m128 lo = _mm_set1_ps(p.inv_lo[a]), hi = _mm_set1_ps(p.inv_hi[a]);
+      const __m128 d = _mm_sub_ps(_mm_load_ps(node.bounds[p.near_row[a]] + o), _mm_set1_ps(p.near_o[a]));
+      const __m128 e = _mm_sub_ps(_mm_load_ps(node.bounds[p.near_row[a] ^ 1] + o), _mm_set1_ps(p.far_o[a]));
+      tn = _mm_max_ps(_mm_min_ps(_mm_mul_ps(d, lo), _mm_mul_ps(d, hi)), tn);
+      tf = _mm_min_ps(_mm_max_ps(_mm_mul_ps(e, lo), _mm_mul_ps(e, hi)), tf);
+    }
+    const __m128 enter = _mm_max_ps(_mm_set1_ps(p.t_lo), _mm_sub_ps(tn, _mm_mul_ps(_mm_andnot_ps(sign, tn), widen)));
+    const __m128 leave = _mm_min_ps(_mm_set1_ps(t_hi), _mm_add_ps(tf, _mm_mul_ps(_mm_andnot_ps(sign, tf), widen)));
+    mask |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(enter, leave))) << o;
+  }
+  return mask & node.valid;
+}
 
 // The lanes of `lanes` whose ray meets child `c` of `node` within [tnear, t], and the smallest of
 // their widened entries in `key`: the same bounds as wideHits, four lanes at a time.
@@ -221,6 +251,25 @@ inline std::uint32_t packetChildHits(const PacketRays& p, const WideNode& node, 
   h = _mm_min_ps(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(2, 3, 0, 1)));
   key = _mm_cvtss_f32(h);
   return mask;
+}
+
+// As sse2's packetBoundsHits, the 8 children at once.
+inline std::uint32_t packetBoundsHits(const PacketRays& p, const WideNode& node, float t_hi) {
+  const __m256 widen = _mm256_set1_ps(kWiden), sign = _mm256_set1_ps(-0.0f);
+  const __m256 inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
+  __m256 tn = _mm256_xor_ps(inf, sign), tf = inf;
+  for (int a = 0; a < 3; ++a) {
+    const __m256 lo = _mm256_set1_ps(p.inv_lo[a]), hi = _mm256_set1_ps(p.inv_hi[a]);
+    const __m256 d = _mm256_sub_ps(_mm256_load_ps(node.bounds[p.near_row[a]]), _mm256_set1_ps(p.near_o[a]));
+    const __m256 e = _mm256_sub_ps(_mm256_load_ps(node.bounds[p.near_row[a] ^ 1]), _mm256_set1_ps(p.far_o[a]));
+    tn = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(d, lo), _mm256_mul_ps(d, hi)), tn);
+    tf = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(e, lo), _mm256_mul_ps(e, hi)), tf);
+  }
+  const __m256 enter =
+      _mm256_max_ps(_mm256_set1_ps(p.t_lo), _mm256_sub_ps(tn, _mm256_mul_ps(_mm256_andnot_ps(sign, tn), widen)));
+  const __m256 leave =
+      _mm256_min_ps(_mm256_set1_ps(t_hi), _mm256_add_ps(tf, _mm256_mul_ps(_mm256_andnot_ps(sign, tf), widen)));
+  return static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(enter, leave, _CMP_LE_OQ))) & node.valid;
 }
 
 // toObject with the three columns and the translation as 4-wide double vectors: the same

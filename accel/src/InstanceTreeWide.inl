@@ -132,6 +132,14 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
   std::uint32_t done = 0;  // any hit: blocked lanes; closest hit: lanes that found something
   std::uint32_t cur = q.top->root;
   std::uint32_t m = lanes;
+  // The furthest any lane still looks (unused lanes hold -inf).
+  const auto reachOf = [&p] {
+    __m128 r = _mm_max_ps(_mm_max_ps(_mm_load_ps(p.t), _mm_load_ps(p.t + 4)),
+                          _mm_max_ps(_mm_load_ps(p.t + 8), _mm_load_ps(p.t + 12)));
+    r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
+    return _mm_cvtss_f32(_mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1))));
+  };
+  float reach = reachOf();
   while (true) {
     if (cur & kWideRef) {
       const std::uint32_t slot = cur & ~kWideRef;
@@ -187,13 +195,14 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
             winner[j] = &rec;
             done |= 1u << j;
           }
+          if (found != 0) reach = reachOf();
         }
       }
     } else {
       const WideNode& node = nodes[cur];
       Entry met[8];
       int n = 0;
-      for (std::uint32_t v = node.valid; v != 0; v &= v - 1) {
+      for (std::uint32_t v = packetBoundsHits(p, node, reach); v != 0; v &= v - 1) {
         const int c = std::countr_zero(v);
         float key;
         const std::uint32_t hit = packetChildHits(p, node, c, m, key);
@@ -231,16 +240,21 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
 
 // Fills the packet rows of the lanes (unused lanes never meet a box).
 inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p, WorldRay* w) {
+  // Unused lanes repeat the first lane's origin and direction, so that the bounds are reductions
+  // over whole rows, and never meet a box (tnear +inf, t -inf).
   alignas(32) float dir[3][kMaxPacketRays];
+  const int first = std::countr_zero(lanes);
+  const Ray& r0 = rays[first];
   for (int j = 0; j < kMaxPacketRays; ++j) {
-    for (int a = 0; a < 3; ++a) {
-      p.org[a][j] = 0.0f;
-      dir[a][j] = 1.0f;
-    }
+    p.org[0][j] = r0.origin.x;
+    p.org[1][j] = r0.origin.y;
+    p.org[2][j] = r0.origin.z;
+    dir[0][j] = r0.dir.x;
+    dir[1][j] = r0.dir.y;
+    dir[2][j] = r0.dir.z;
     p.tnear[j] = std::numeric_limits<float>::infinity();
     p.t[j] = -std::numeric_limits<float>::infinity();
   }
-  const int first = std::countr_zero(lanes);
   for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
     const int j = std::countr_zero(l);
     const Ray& r = rays[j];
@@ -259,6 +273,22 @@ inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p, Wor
     for (int k = 0; k < kMaxPacketRays; k += 4)
       _mm_store_ps(p.inv[a] + k, _mm_div_ps(_mm_set1_ps(1.0f), _mm_load_ps(dir[a] + k)));
   for (int a = 0; a < 3; ++a) p.near_row[a] = 2 * a + (std::signbit(p.inv[a][first]) ? 1 : 0);
+  const auto reduce = [](const float* row, auto op) {
+    __m128 r = op(op(_mm_load_ps(row), _mm_load_ps(row + 4)), op(_mm_load_ps(row + 8), _mm_load_ps(row + 12)));
+    r = op(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
+    return _mm_cvtss_f32(op(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1))));
+  };
+  const auto vmin = [](__m128 a, __m128 b) { return _mm_min_ps(a, b); };
+  const auto vmax = [](__m128 a, __m128 b) { return _mm_max_ps(a, b); };
+  for (int a = 0; a < 3; ++a) {
+    const bool neg = (p.near_row[a] & 1) != 0;
+    const float o_lo = reduce(p.org[a], vmin), o_hi = reduce(p.org[a], vmax);
+    p.near_o[a] = neg ? o_lo : o_hi;
+    p.far_o[a] = neg ? o_hi : o_lo;
+    p.inv_lo[a] = reduce(p.inv[a], vmin);
+    p.inv_hi[a] = reduce(p.inv[a], vmax);
+  }
+  p.t_lo = reduce(p.tnear, vmin);
 }
 
 std::uint32_t closestPacketEntry(const WideQuery& q, const Ray* rays, std::uint32_t lanes, Hit* best,

@@ -249,6 +249,60 @@ TEST(TopLevel, WideAndKdTraversalsAgree) {
     EXPECT_TRUE(sameHitBits(wide.intersect(rays[i], ctx), kd.intersect(rays[i], ctx)));
 }
 
+// The packet walk drops a node's children by one test against bounds of all the packet's rays:
+// packets whose origins spread over up to a third of the scene (shadow rays from surface points),
+// whose directions differ by up to 0.3 (still mostly one octant), some starting inside the scene
+// (tnear > 0), some with zero direction components (+0 and -0), against single rays bit for bit.
+TEST(TopLevel, PacketsOfSpreadOriginsAndDirectionsEqualSingleRays) {
+  const Library lib;
+  const World w = randomWorld(lib, 60, glm::dvec3(0.5, -1.0, 2.0), 6.0, 93, true);
+  TopLevel top;
+  buildTopChecked(top, w.instances);
+  const Box b = top.bounds();
+  const glm::vec3 size = b.hi - b.lo;
+  const float diagonal = glm::length(size);
+  std::mt19937_64 rng(94);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f), sym(-1.0f, 1.0f);
+  QueryContext ctx;
+  std::size_t hits = 0, blocked = 0, mismatches = 0, rays = 0;
+  for (int packet = 0; packet < 300; ++packet) {
+    const float spread = packet % 4 == 0 ? 0.0f : 0.33f * u01(rng);
+    const float turn = packet % 3 == 0 ? 0.0f : 0.3f * u01(rng);
+    const glm::vec3 centre = b.lo + glm::vec3(u01(rng), u01(rng), u01(rng)) * size;
+    glm::vec3 axis(sym(rng), sym(rng), sym(rng));
+    if (packet % 5 == 1) axis = glm::vec3(0.0f, 0.0f, packet % 10 == 1 ? -1.0f : 1.0f);
+    const glm::vec3 origin = centre - 1.5f * diagonal * glm::normalize(axis);
+    std::array<Ray, kMaxPacketRays> rs;
+    for (int j = 0; j < kMaxPacketRays; ++j) {
+      Ray& r = rs[static_cast<std::size_t>(j)];
+      r.origin = origin + spread * glm::vec3(sym(rng), sym(rng), sym(rng)) * size;
+      r.dir = axis + turn * glm::vec3(sym(rng), sym(rng), sym(rng));
+      if (packet % 5 == 1 && j % 3 != 0) r.dir = glm::vec3(j % 2 == 0 ? 0.0f : -0.0f, 0.0f, axis.z);
+      if (packet % 7 == 3) r.tnear = (1.0f + 0.5f * u01(rng)) * diagonal / glm::length(r.dir);
+    }
+    std::array<Hit, kMaxPacketRays> got{};
+    const std::uint32_t found = top.intersectPacket(rs, got, ctx);
+    const std::uint32_t occluded = top.occludedPacket(rs, ctx);
+    for (int j = 0; j < kMaxPacketRays; ++j) {
+      const Ray& r = rs[static_cast<std::size_t>(j)];
+      const Hit want = top.intersect(r, ctx);
+      const bool want_blocked = top.occluded(r, ctx);
+      ++rays;
+      hits += want.valid() ? 1 : 0;
+      blocked += want_blocked ? 1 : 0;
+      const bool ok = sameHitBits(got[static_cast<std::size_t>(j)], want) && ((found >> j & 1u) != 0) == want.valid() &&
+                      ((occluded >> j & 1u) != 0) == want_blocked;
+      if (!ok && ++mismatches <= 5)
+        ADD_FAILURE() << "packet " << packet << ", lane " << j << ", " << r << ": packet "
+                      << got[static_cast<std::size_t>(j)] << ", single " << want;
+    }
+  }
+  EXPECT_EQ(mismatches, 0u);
+  EXPECT_GT(hits, rays / 10);
+  EXPECT_LT(hits, rays);
+  EXPECT_GT(blocked, rays / 10);
+}
+
 TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {
   // 60 instances of one sphere around one spot: the top-level leaves hold many instances and the
   // traversal's mailbox (8 entries) overflows.
