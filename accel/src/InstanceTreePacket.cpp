@@ -207,9 +207,9 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
   std::uint32_t by_octant[8] = {};
   for (int i = 0; i < n; ++i) {
     const Ray& r = rays_ws[static_cast<std::size_t>(i)];
-    if (!isQueryable(r)) continue;
-    by_octant[static_cast<int>(std::signbit(r.dir.x)) | static_cast<int>(std::signbit(r.dir.y)) << 1 |
-              static_cast<int>(std::signbit(r.dir.z)) << 2] |= 1u << i;
+    const __m128 o = _mm_loadu_ps(&r.origin.x), d = _mm_loadu_ps(&r.dir.x);
+    if (!kd_detail::queryableSse(o, d, r)) continue;
+    by_octant[_mm_movemask_ps(d) & 7] |= 1u << i;  // the direction's sign bits
   }
   int octants = 0;
   for (const std::uint32_t lanes : by_octant) octants += lanes != 0 ? 1 : 0;
