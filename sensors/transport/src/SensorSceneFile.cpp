@@ -6,8 +6,6 @@
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 
-#include "SurfaceScatter.h"
-
 #include <glm/matrix.hpp>
 #include <nlohmann/json.hpp>
 
@@ -213,124 +211,67 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
 Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx,
                       const std::vector<std::string>& bands) {
   if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
-  Material m;
-  const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  // A number in [lo, hi], or one per band into `per_band` (then the result is their mean, for messages).
-  auto perBand = [&](const char* key, double hi, std::vector<double>& per_band) {
-    const json& x = ctx.member(v, p, key);
-    const std::vector<double> values =
-        x.is_object() ? namedBandValues(x, at(p, key), ctx, bands)
-                      : (x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))});
-    double sum = 0.0;
-    for (std::size_t k = 0; k < values.size(); ++k) {
-      if (!(values[k] >= 0.0 && values[k] <= hi))
-        ctx.fail(x.is_array()    ? at(at(p, key), k)
-                 : x.is_object() ? at(at(p, key), bands[k])
-                                 : at(p, key),
-                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key +
-                     (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
-      sum += values[k];
-    }
-    if (x.is_array() || x.is_object()) per_band = values;
-    return sum / static_cast<double>(values.size());
-  };
-  auto fraction = [&](const char* key) { return perBand(key, 1.0, m.band_reflectance); };
-  auto reflectance = [&] { return fraction("reflectance"); };
-  // "scatter": {"model": "gaussian", "sigma": s, "fraction": f} or {"model": "abg", "A", "B", "g"}.
-  auto scatter = [&] {
-    if (!v.contains("scatter")) return;
-    const std::string q = at(p, "scatter");
-    const json& sv = v["scatter"];
-    if (!sv.is_object()) ctx.fail(q, "expected a scatter model (an object with \"model\")");
-    const std::string model = ctx.string(ctx.member(sv, q, "model"), at(q, "model"));
-    if (model == "gaussian") {
-      ctx.onlyKeys(sv, q, {"model", "sigma", "fraction"});
-      m.scatter = ScatterModel::Gaussian;
-      m.sigma = ctx.number(ctx.member(sv, q, "sigma"), at(q, "sigma"));
-      if (!(m.sigma > 0.0 && std::isfinite(m.sigma)))
-        ctx.fail(at(q, "sigma"), "a Gaussian scatter's sigma must be > 0 (got " + std::to_string(m.sigma) + ")");
-      m.scatter_fraction = sv.contains("fraction") ? ctx.number(sv["fraction"], at(q, "fraction")) : 1.0;
-      if (!(m.scatter_fraction >= 0.0 && m.scatter_fraction <= 1.0))
-        ctx.fail(at(q, "fraction"), "expected a scattered fraction in [0, 1]");
-    } else if (model == "abg") {
-      ctx.onlyKeys(sv, q, {"model", "A", "B", "g"});
-      m.scatter = ScatterModel::ABg;
-      m.abg_a = ctx.number(ctx.member(sv, q, "A"), at(q, "A"));
-      m.abg_b = ctx.number(ctx.member(sv, q, "B"), at(q, "B"));
-      m.abg_g = ctx.number(ctx.member(sv, q, "g"), at(q, "g"));
-      if (!(m.abg_a >= 0.0)) ctx.fail(at(q, "A"), "ABg's A must be >= 0");
-      if (!(m.abg_b > 0.0)) ctx.fail(at(q, "B"), "ABg's B must be > 0");
-      if (!(m.abg_g > 0.0 && m.abg_g <= 8.0)) ctx.fail(at(q, "g"), "ABg's g must be in (0, 8]");
-      m.scatter_fraction = detail::abgTotalIntegratedScatter(m.abg_a, m.abg_b, m.abg_g);
-      if (!(m.scatter_fraction <= 1.0))
-        ctx.fail(q, "ABg parameters scatter more than all the light (total integrated scatter " +
-                        std::to_string(m.scatter_fraction) + " > 1): not energy conserving");
-    } else {
-      ctx.fail(at(q, "model"), "unknown scatter model \"" + model + "\" (expected \"gaussian\" or \"abg\")");
-    }
-  };
-  if (type == "absorber") {
-    ctx.onlyKeys(v, p, {"type"});
-  } else if (type == "lambertian") {
-    ctx.onlyKeys(v, p, {"type", "reflectance"});
-    m.type = MaterialType::Lambertian;
-    m.reflectance = reflectance();
-  } else if (type == "mirror") {
-    ctx.onlyKeys(v, p, {"type", "reflectance", "scatter"});
-    m.type = MaterialType::Mirror;
-    m.reflectance = v.contains("reflectance") ? reflectance() : 1.0;
-    scatter();
-  } else if (type == "dielectric") {
-    ctx.onlyKeys(v, p, {"type", "ior", "absorption", "scatter"});
-    m.type = MaterialType::Dielectric;
-    m.ior = ctx.positiveNumber(ctx.member(v, p, "ior"), at(p, "ior"));
-    if (v.contains("absorption"))
-      m.absorption = perBand("absorption", std::numeric_limits<double>::max(), m.band_absorption);
-    scatter();
-  } else if (type == "coating") {
-    // Fractions reflected, transmitted and absorbed: any of the three may be left out (0, or for
-    // "absorb" what the others leave); given, they sum to 1.
-    ctx.onlyKeys(v, p, {"type", "reflect", "transmit", "absorb"});
-    m.type = MaterialType::Coating;
-    if (v.contains("reflect")) m.reflectance = perBand("reflect", 1.0, m.band_reflectance);
-    if (v.contains("transmit")) m.transmittance = perBand("transmit", 1.0, m.band_transmittance);
-    std::vector<double> absorb;
-    if (v.contains("absorb")) (void)perBand("absorb", 1.0, absorb);
-    const std::size_t n =
-        std::max({m.band_reflectance.size(), m.band_transmittance.size(), absorb.size(), std::size_t{1}});
-    for (std::size_t k = 0; k < n; ++k) {
-      auto pick = [k](const std::vector<double>& bands, double one) {
-        return bands.empty() ? one : bands[std::min(k, bands.size() - 1)];
-      };
-      const double r = pick(m.band_reflectance, m.reflectance), t = pick(m.band_transmittance, m.transmittance);
-      if (r + t > 1.0 + 1e-12)
-        ctx.fail(p, "a coating reflects and transmits more than all the light (reflect + transmit = " +
-                        std::to_string(r + t) + (n > 1 ? " in band " + std::to_string(k) : "") + ")");
-      if (v.contains("absorb")) {
-        const double a =
-            absorb.empty() ? ctx.number(v["absorb"], at(p, "absorb")) : absorb[std::min(k, absorb.size() - 1)];
-        if (std::abs(r + t + a - 1.0) > 1e-9)
-          ctx.fail(at(p, "absorb"), "reflect + transmit + absorb must be 1 (got " + std::to_string(r + t + a) +
-                                        (n > 1 ? " in band " + std::to_string(k) : "") + ")");
-      }
-    }
-  } else if (type == "medium") {
-    ctx.onlyKeys(v, p, {"type", "albedo", "g"});
-    m.type = MaterialType::Medium;
-    m.reflectance = fraction("albedo");
-    if (v.contains("g")) {
-      m.g = ctx.number(v["g"], at(p, "g"));
-      if (!(m.g > -1.0 && m.g < 1.0)) ctx.fail(at(p, "g"), "expected a Henyey-Greenstein g in (-1, 1)");
-    }
-  } else {
-    ctx.fail(at(p, "type"), "unknown material \"" + type +
-                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\", \"coating\" or "
-                                "\"medium\")");
-  }
-  return m;
+  return Material::read(MaterialReader(v, p, ctx, bands));
 }
 
 }  // namespace
+
+MaterialReader::MaterialReader(const json& v, std::string pointer, const ObjectSpecContext& ctx,
+                               const std::vector<std::string>& bands)
+    : v_(&v), pointer_(std::move(pointer)), ctx_(&ctx), bands_(&bands) {}
+
+void MaterialReader::onlyKeys(std::initializer_list<std::string_view> allowed) const {
+  ctx_->onlyKeys(*v_, pointer_, allowed);
+}
+
+bool MaterialReader::has(const char* key) const { return v_->contains(key); }
+
+double MaterialReader::number(const char* key) const {
+  return ctx_->number(ctx_->member(*v_, pointer_, key), at(pointer_, key));
+}
+
+double MaterialReader::positiveNumber(const char* key) const {
+  return ctx_->positiveNumber(ctx_->member(*v_, pointer_, key), at(pointer_, key));
+}
+
+std::string MaterialReader::string(const char* key) const {
+  return ctx_->string(ctx_->member(*v_, pointer_, key), at(pointer_, key));
+}
+
+BandValue MaterialReader::perBand(const char* key, double hi) const {
+  const json& x = ctx_->member(*v_, pointer_, key);
+  const std::string p = at(pointer_, key);
+  const std::vector<double> values =
+      x.is_object() ? namedBandValues(x, p, *ctx_, *bands_)
+                    : (x.is_array() ? numbers(x, p, *ctx_) : std::vector<double>{ctx_->number(x, p)});
+  double sum = 0.0;
+  for (std::size_t k = 0; k < values.size(); ++k) {
+    if (!(values[k] >= 0.0 && values[k] <= hi))
+      ctx_->fail(x.is_array()    ? at(p, k)
+                 : x.is_object() ? at(p, (*bands_)[k])
+                                 : p,
+                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key +
+                     (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
+    sum += values[k];
+  }
+  // The mean, for messages; per-band values are one per band of the scene.
+  const double mean = sum / static_cast<double>(values.size());
+  if (!x.is_array() && !x.is_object()) return BandValue(mean);
+  if (values.size() != std::max<std::size_t>(1, bands_->size()))
+    ctx_->fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
+                      (bands_->empty() ? std::string("no \"bands\"") : std::to_string(bands_->size()) + " bands"));
+  return BandValue(mean, values);
+}
+
+MaterialReader MaterialReader::child(const char* key) const {
+  const json& x = ctx_->member(*v_, pointer_, key);
+  if (!x.is_object()) ctx_->fail(at(pointer_, key), std::string("expected an object (\"") + key + "\")");
+  return MaterialReader(x, at(pointer_, key), *ctx_, *bands_);
+}
+
+void MaterialReader::fail(std::string_view key, const std::string& problem) const {
+  ctx_->fail(key.empty() ? pointer_ : at(pointer_, key), problem);
+}
 
 SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocumentOptions& options,
                               const ObjectTypeRegistry& registry) {
@@ -418,22 +359,6 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       ctx.fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
                       (bands.empty() ? std::string("no \"bands\"") : std::to_string(bands.size()) + " bands"));
   };
-  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
-    const Material& m = materials[doc->objects[i]];
-    const std::string q = at(at("/objects", i), "material");
-    bandCount(m.band_reflectance, at(q, m.type == MaterialType::Medium    ? "albedo"
-                                        : m.type == MaterialType::Coating ? "reflect"
-                                                                          : "reflectance"));
-    bandCount(m.band_transmittance, at(q, "transmit"));
-    bandCount(m.band_absorption, at(q, "absorption"));
-  }
-  for (const auto& [node, m] : instance_materials) {
-    const std::string q = graph.path(node) + " material";  // the node, as JSON pointers of nodes are not kept
-    bandCount(m.band_reflectance, q);
-    bandCount(m.band_transmittance, q);
-    bandCount(m.band_absorption, q);
-  }
-
   std::vector<Light> lights;
   if (root.contains("lights")) {
     const json& list = root["lights"];

@@ -83,7 +83,7 @@ TEST(SensorMeter, LambertianFloorReflectionMatchesItsRadialIntegral) {
   // u = r^2 (the square's corners beyond r = 200 add less than 1e-9 of it).
   Fixture f;
   const double rho = 0.5, H = 2.0, h = 1.0, power = 100.0;
-  f.add(quad(200.0, "floor"), Affine::identity(), "floor", Material{MaterialType::Lambertian, rho});
+  f.add(quad(200.0, "floor"), Affine::identity(), "floor", Material{Lambertian{rho}});
   SensorScene scene = f.scene({pointLight({0, 0, H}, power)});
   scene.setMeters({{"up", {{0, 0, h}, {0.7, 0, h}}, {{0, 0, -1}, {0, 0, 1}}}});
   SensorRun run(scene);
@@ -120,7 +120,7 @@ TEST(SensorMeter, AnOccluderHidesTheLight) {
 
 TEST(SensorMeter, RefusesWhatItCannotConnectThrough) {
   Fixture f;
-  f.add(quad(1.0, "mirror"), Affine::identity(), "mirror", Material{MaterialType::Mirror, 0.9});
+  f.add(quad(1.0, "mirror"), Affine::identity(), "mirror", Material{Mirror{0.9}});
   SensorScene scene = f.scene({pointLight({0, 0, 2}, 1.0)});
   scene.setMeters({{"m", {{0, 0, 1}}, {{0, 0, -1}}}});
   try {
