@@ -281,6 +281,34 @@ TEST(SensorMaterials, InstancesMayHaveMaterialsOfTheirOwn) {
   EXPECT_EQ(b.materialOf(*g.find("/glass")).as<Dielectric>()->absorption.value, 0.2);
 }
 
+TEST(SensorMaterials, ADiffuserSplitsABeamIntoLambertianReflectionAndTransmission) {
+  // A narrow beam straight down onto a diffuser sheet at z = 0: the transmitted part leaves
+  // cosine-distributed downwards, so a square sensor of half-width a at depth h under the spot
+  // receives P t F, F the configuration factor from a point to a parallel square (exact); the
+  // reflected part escapes upwards with the transmitted part that misses the sensor, the rest is
+  // absorbed.
+  const double r = 0.3, t = 0.5, a = 0.5, h = 1.0, power = 2.0;
+  const std::uint64_t rays = 200000;
+  Fixture f;
+  f.add(quad(50.0, "sheet"), Affine::identity(), "sheet", Material{Diffuser{r, t}});
+  f.add(sensor(2.0 * a, 2.0 * a, 1, 1, false, "below"), translate(0, 0, -h), "below");  // records rays going down
+  const SensorScene scene = f.scene({beamLight({0, 0, 1.0}, {0, 0, -1}, 1e-4, power)});
+  SensorRunConfig cfg;
+  cfg.seed = 3;
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(rays);
+  const SensorRunResults res = run.results();
+  const SensorResult& below = res.sensors[0];
+  const double expected = power * t * pointToParallelRectangle(-a, a, -a, a, h);
+  std::printf("diffuser: %.5f +- %.5f W below (exact %.5f)\n", below.total_flux_w, below.total_flux_stderr_w, expected);
+  EXPECT_LT(std::abs(below.total_flux_w - expected), 4.0 * below.total_flux_stderr_w + 5e-3 * expected);
+  // Absorbed: each ray is absorbed with probability 1 - r - t, its power P (binomial error).
+  const double p_abs = 1.0 - r - t, se_abs = power * std::sqrt(p_abs * (1.0 - p_abs) / static_cast<double>(rays));
+  EXPECT_LT(std::abs(res.energy.absorbed_w - power * p_abs), 4.0 * se_abs);
+  EXPECT_NEAR(res.energy.absorbed_w + res.energy.escaped_w, power, 1e-9);
+  EXPECT_EQ(res.energy.failed_rays, 0u);
+}
+
 void expectError(const std::string& name, const std::string& body, const std::vector<std::string>& needles) {
   const auto path = writeTestFile(name, std::string(R"({"format": "duplex-scene-v1", )") + body +
                                             R"(, "lights": [{"type": "point", "position": [0,0,1], "power": 1}]})");
@@ -321,6 +349,8 @@ TEST(SensorMaterials, MalformedMaterialsNameTheFileAndTheObject) {
   expectError("lambert_scatter.json", object(R"({"type": "lambertian", "reflectance": 1, "scatter": {}})"),
               {"/objects/0/material", "scatter"});
   expectError("coating_sum.json", object(R"({"type": "coating", "reflect": 0.6, "transmit": 0.6})"),
+              {"/objects/0/material", "reflect + transmit"});
+  expectError("diffuser_sum.json", object(R"({"type": "diffuser", "reflect": 0.6, "transmit": 0.5})"),
               {"/objects/0/material", "reflect + transmit"});
   expectError("coating_absorb.json", object(R"({"type": "coating", "reflect": 0.2, "transmit": 0.3, "absorb": 0.4})"),
               {"/objects/0/material/absorb", "must be 1"});

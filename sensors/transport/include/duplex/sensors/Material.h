@@ -9,6 +9,7 @@
 #include "duplex/sensors/materials/Absorber.h"
 #include "duplex/sensors/materials/Coating.h"
 #include "duplex/sensors/materials/Dielectric.h"
+#include "duplex/sensors/materials/Diffuser.h"
 #include "duplex/sensors/materials/Lambertian.h"
 #include "duplex/sensors/materials/MaterialModel.h"
 #include "duplex/sensors/materials/Medium.h"
@@ -29,7 +30,7 @@ using MaterialsOf = std::variant<M...>;
 
 /// Every material type; the first is the default (an object without "material" absorbs). Their
 /// order is the order of the scene file's "type" names in messages.
-using MaterialVariant = MaterialsOf<Absorber, Lambertian, Mirror, Dielectric, Coating, Medium>;
+using MaterialVariant = MaterialsOf<Absorber, Lambertian, Mirror, Dielectric, Coating, Medium, Diffuser>;
 
 /// The material of an object (a scene file's "material" key): one of the types, with its parameters.
 struct Material {

@@ -69,12 +69,8 @@ struct Coating {
   /// One random number: reflected (specular), passed undeviated, or absorbed.
   template <class Event>
   SurfaceStep step(Event& ev) const {
-    const double u = ev.uniform(), r = reflect.in(ev.band);
-    if (u >= r + transmit.in(ev.band)) return {};
-    SurfaceStep s;
-    s.absorbed = false;
-    s.transmits = u >= r;
-    s.next = s.transmits ? ev.straight() : ev.mirror();
+    SurfaceStep s = splitByFractions(ev, reflect, transmit);
+    if (!s.absorbed) s.next = s.transmits ? ev.straight() : ev.mirror();
     return s;
   }
 };

@@ -133,6 +133,18 @@ struct SurfaceStep {
   bool diffuse = false;    ///< a Lambertian reflection, which meters connect to
 };
 
+/// The split of a ray by fractions reflected and transmitted (per band) with one random number of
+/// the event: `absorbed` beyond both, else `transmits` beyond the reflected fraction; the caller
+/// sets the direction.
+template <class Event>
+SurfaceStep splitByFractions(Event& ev, const BandValue& reflect, const BandValue& transmit) {
+  const double u = ev.uniform(), r = reflect.in(ev.band);
+  SurfaceStep s;
+  s.absorbed = u >= r + transmit.in(ev.band);
+  s.transmits = !s.absorbed && u >= r;
+  return s;
+}
+
 /// A material type: parameters, reader, validation, hash and printing (the path step is checked
 /// where the path loop instantiates it). See the file comment.
 template <class M>
