@@ -110,8 +110,9 @@ std::uint64_t SensorRun::computeFingerprint() const {
     for (const glm::dvec3& v : {l.position, l.direction}) addDouble(v.x), addDouble(v.y), addDouble(v.z);
     for (const double x : {l.cone_angle, l.radius, l.width, l.height}) addDouble(x);
     addAffine(l.world_from_light);
-    const std::uint8_t two_sided = l.two_sided ? 1 : 0;
-    add(&two_sided, 1);
+    const std::uint8_t shape[2] = {static_cast<std::uint8_t>(l.two_sided ? 1 : 0),
+                                   static_cast<std::uint8_t>(l.disk ? 1 : 0)};  // a disk or its square
+    add(shape, sizeof shape);
     if (l.profile) addDouble(l.profile->integral());
   }
   return h.value;

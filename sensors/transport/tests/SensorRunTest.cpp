@@ -867,5 +867,21 @@ TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {
   expectFileError("sensors_not_array.json", R"("sensors": {"name": "s"})", "/sensors");
 }
 
+TEST(SensorRun, FingerprintTellsADiskLightFromItsSquare) {
+  // A disk light emits from the disk inscribed in its width x width square: a state traced with
+  // one must not resume with the other.
+  auto fingerprint = [](bool disk) {
+    Fixture f;
+    f.add(quad(1.0, "floor"), translate(0, 0, -1), "floor", Material{Lambertian{0.5}});
+    f.add(sensor(1.0, 1.0, 2, 2), translate(0, 0, 0.5), "sensor");
+    Light l = areaLight(0.4, 0.4, Affine::identity(), 1.0);
+    l.disk = disk;
+    const SensorScene scene = f.scene({l});
+    return SensorRun(scene, SensorRunConfig{}).fingerprint();
+  };
+  EXPECT_NE(fingerprint(false), fingerprint(true));
+  EXPECT_EQ(fingerprint(true), fingerprint(true));
+}
+
 }  // namespace
 }  // namespace duplex
