@@ -113,6 +113,7 @@ std::uint64_t SensorRun::computeFingerprint() const {
     const std::uint8_t shape[2] = {static_cast<std::uint8_t>(l.two_sided ? 1 : 0),
                                    static_cast<std::uint8_t>(l.disk ? 1 : 0)};  // a disk or its square
     add(shape, sizeof shape);
+    add(l.polygon.data(), l.polygon.size() * sizeof(glm::dvec2));
     if (l.profile) addDouble(l.profile->integral());
   }
   return h.value;

@@ -100,13 +100,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       photometric_amount = key;
     }
   if (photometric_amount) {
-    const bool fits = type == "area" || type == "disk"
+    const bool fits = type == "area" || type == "disk" || type == "polygon"
                           ? std::string_view(photometric_amount) != "illuminance"
                           : type == "directional" && std::string_view(photometric_amount) == "illuminance";
     if (!fits)
       ctx.fail(at(p, photometric_amount),
                std::string("\"") + photometric_amount + "\" is not a key of a \"" + type +
-                   "\" light (luminance and exitance: area and disk lights; illuminance: directional)");
+                   "\" light (luminance and exitance: area, disk and polygon lights; illuminance: directional)");
   }
   if (v.contains("power") && v.contains("lumens"))
     ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
@@ -143,13 +143,28 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // Illuminance E (lx) on a plane across the beam: E pi r^2 lumens.
     if (photometric_amount)
       l.lumens = ctx.positiveNumber(v["illuminance"], at(p, "illuminance")) * std::numbers::pi * l.radius * l.radius;
-  } else if (type == "area" || type == "disk") {
+  } else if (type == "area" || type == "disk" || type == "polygon") {
     ctx.onlyKeys(v, p,
                  {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node",
-                  type == "disk" ? "radius" : "size", "transform", "two_sided"});
+                  type == "disk" ? "radius" : (type == "polygon" ? "vertices" : "size"), "transform", "two_sided"});
     l.type = LightType::Area;
     l.disk = type == "disk";
-    if (l.disk) {
+    if (type == "polygon") {
+      // [[x, y], ...]: the polygon in the light's z = 0 plane, placed by "transform".
+      const std::string q = at(p, "vertices");
+      const json& list = ctx.member(v, p, "vertices");
+      if (!list.is_array()) ctx.fail(q, "expected an array of [x, y] vertices");
+      std::vector<glm::dvec2> vertices;
+      for (std::size_t k = 0; k < list.size(); ++k) {
+        if (!list[k].is_array() || list[k].size() != 2) ctx.fail(at(q, k), "expected [x, y]");
+        vertices.emplace_back(ctx.number(list[k][0], at(at(q, k), 0)), ctx.number(list[k][1], at(at(q, k), 1)));
+      }
+      try {
+        l.setPolygon(std::move(vertices));
+      } catch (const InvalidArgument& e) {
+        ctx.fail(q, e.what());
+      }
+    } else if (l.disk) {
       l.width = l.height = 2.0 * ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
     } else {
       const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
@@ -165,8 +180,10 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       // Per emitting face: a Lambertian face of luminance L has exitance M = pi L, and emits M A
       // (A: the rectangle's area as its transform places it).
       const glm::dmat3& m = l.world_from_light.linear;
-      const double area = glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
-                          (l.disk ? std::numbers::pi / 4.0 : 1.0);  // the inscribed disk's share
+      const double area =
+          l.polygon.empty() ? glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
+                                  (l.disk ? std::numbers::pi / 4.0 : 1.0)  // the inscribed disk's share
+                            : glm::length(glm::cross(m * glm::dvec3(1, 0, 0), m * glm::dvec3(0, 1, 0))) * l.localArea();
       const double faces = l.two_sided ? 2.0 : 1.0;
       const double value = ctx.positiveNumber(v[photometric_amount], at(p, photometric_amount));
       l.lumens =
@@ -193,8 +210,9 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // so the light emits their integral.
     if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
-    ctx.fail(at(p, "type"), "unknown light type \"" + type +
-                                "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\" or \"ies\")");
+    ctx.fail(at(p, "type"),
+             "unknown light type \"" + type +
+                 "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\", \"polygon\" or \"ies\")");
   }
   if (v.contains("spectrum"))
     l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
