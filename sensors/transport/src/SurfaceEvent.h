@@ -20,6 +20,8 @@
 
 namespace duplex::detail {
 
+// The methods are forced inline: the path loop used to hold this code, and a call per surface
+// event for each of them costs more than the material's own decisions.
 struct SurfaceEvent {
   // World space, unit length: the incoming direction, the geometric normal and the normal facing
   // the incoming ray.
@@ -32,17 +34,17 @@ struct SurfaceEvent {
   CounterRng& rng;        // the path's random numbers
   EnergyBalance& energy;  // where the path's power went
 
-  double uniform() { return rng.uniform(); }
+  [[gnu::always_inline]] double uniform() { return rng.uniform(); }
 
   // Keeps a fraction `keep` of the power; the rest is absorbed.
-  void attenuate(double keep) {
+  [[gnu::always_inline]] void attenuate(double keep) {
     energy.absorbed_w += w * (1.0 - keep);
     w *= keep;
   }
 
   // Specular reflection about the facing normal (an ideal, polarisation-blind reflection: a mirror
   // or a coating treats s and p alike).
-  glm::dvec3 mirror() {
+  [[gnu::always_inline]] glm::dvec3 mirror() {
     enterPlaneOfIncidence(pol, d, nf);
     afterIdealReflection(pol);
     return reflect(d, nf);
@@ -50,7 +52,7 @@ struct SurfaceEvent {
 
   // A cosine-distributed direction about the facing normal (two random numbers); diffuse
   // reflection depolarises.
-  glm::dvec3 diffuse() {
+  [[gnu::always_inline]] glm::dvec3 diffuse() {
     // Random numbers are drawn in statements of their own: a call's arguments are evaluated in
     // an order each compiler picks, and a run must give the same paths whichever built it.
     const double u0 = rng.uniform(), u1 = rng.uniform();
@@ -62,12 +64,12 @@ struct SurfaceEvent {
   }
 
   // The incoming direction, undeviated (passing through changes no polarisation).
-  [[nodiscard]] glm::dvec3 straight() const { return d; }
+  [[gnu::always_inline, nodiscard]] glm::dvec3 straight() const { return d; }
 
   // A smooth interface from index eta_i (the incoming side) to eta_t: the exact Fresnel equations
   // for the path's s and p powers decide (one random number) between reflection and refraction
   // (`transmits`), and the polarisation follows the part taken.
-  glm::dvec3 refractOrReflect(double eta_i, double eta_t, bool& transmits) {
+  [[gnu::always_inline]] glm::dvec3 refractOrReflect(double eta_i, double eta_t, bool& transmits) {
     const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
     const FresnelInterface f = fresnelInterface(eta_i, eta_t, cos_i);
     enterPlaneOfIncidence(pol, d, n);
@@ -80,13 +82,15 @@ struct SurfaceEvent {
   // The step's direction redrawn from a rough lobe about it (the specular direction), to the side
   // the step sends the ray; zero when the lobe yields none (a numerical failure).
   template <class Lobe>
-  void scatterAbout(const Lobe& lobe, SurfaceStep& step) {
+  [[gnu::always_inline]] void scatterAbout(const Lobe& lobe, SurfaceStep& step) {
     const glm::dvec3 specular = glm::normalize(step.next);
     if (!detail::scatterAbout(lobe, specular, step.transmits ? -nf : nf, rng, step.next)) step.next = glm::dvec3(0.0);
     else followDirection(pol, glm::normalize(step.next));
   }
 
-  static glm::dvec3 reflect(const glm::dvec3& v, const glm::dvec3& m) { return v - 2.0 * glm::dot(v, m) * m; }
+  [[gnu::always_inline]] static glm::dvec3 reflect(const glm::dvec3& v, const glm::dvec3& m) {
+    return v - 2.0 * glm::dot(v, m) * m;
+  }
 };
 
 }  // namespace duplex::detail
