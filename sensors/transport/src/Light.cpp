@@ -82,6 +82,9 @@ void Light::validate() const {
       break;
     }
     case LightType::Area:
+      if (!triangles.empty() &&
+          (!polygon.empty() || disk || polygon_cdf.size() != triangles.size() || polygon_cdf.back() != 1.0))
+        bad("an emissive mesh's area shares are not set (Light::setTriangles)");
       if (!polygon.empty() && (polygon.size() < 3 || polygon_triangles.size() != polygon.size() - 2 ||
                                polygon_cdf.size() != polygon_triangles.size() || polygon_cdf.back() != 1.0 || disk))
         bad("a polygon light's triangles are not set (Light::setPolygon)");
@@ -164,7 +167,35 @@ void Light::setPolygon(std::vector<glm::dvec2> vertices) {
   height = 2.0 * half_h;
 }
 
+void Light::setTriangles(std::vector<std::array<glm::dvec3, 3>> tris) {
+  auto bad = [this](const std::string& what) { throw InvalidArgument("light '" + name + "': " + what); };
+  if (tris.empty()) bad("an emissive mesh without triangles");
+  std::vector<double> cdf(tris.size());
+  double acc = 0.0, extent = 0.0;
+  for (std::size_t t = 0; t < tris.size(); ++t) {
+    for (const glm::dvec3& v : tris[t]) {
+      if (!finite(v)) bad("emissive mesh triangle " + std::to_string(t) + " has a non-finite vertex");
+      extent = std::max({extent, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+    }
+    cdf[t] = (acc += 0.5 * glm::length(glm::cross(tris[t][1] - tris[t][0], tris[t][2] - tris[t][0])));
+  }
+  if (!(acc > 0.0) || !std::isfinite(acc)) bad("the emissive mesh has no area");
+  for (double& c : cdf) c /= acc;
+  cdf.back() = 1.0;
+  triangles = std::move(tris);
+  polygon.clear();
+  polygon_triangles.clear();
+  polygon_cdf = std::move(cdf);
+  disk = false;
+  width = height = 2.0 * extent;
+}
+
 double Light::localArea() const {
+  if (!triangles.empty()) {
+    double a = 0.0;
+    for (const auto& t : triangles) a += 0.5 * glm::length(glm::cross(t[1] - t[0], t[2] - t[0]));
+    return a;
+  }
   if (!polygon.empty()) {
     double a = 0.0;
     for (std::size_t i = 0; i < polygon.size(); ++i) a += 0.5 * cross2(polygon[i], polygon[(i + 1) % polygon.size()]);
@@ -212,6 +243,20 @@ Light placeLight(const Light& light, const Affine& world_from_node) {
   return out;
 }
 
+namespace {
+
+// A triangle of a polygon or mesh by its share of the area (`cdf`: the cumulative shares), from
+// uniform u0, and sqrt of u0's place inside that share (uniform again): the point (1 - s) a +
+// s (1 - u1) b + s u1 c is then uniform over the triangle for another uniform u1.
+std::pair<std::size_t, double> triangleByArea(const std::vector<double>& cdf, double u0) {
+  const std::size_t k =
+      std::min(cdf.size() - 1, static_cast<std::size_t>(std::upper_bound(cdf.begin(), cdf.end(), u0) - cdf.begin()));
+  const double lo = k ? cdf[k - 1] : 0.0;
+  return {k, std::sqrt(std::clamp((u0 - lo) / (cdf[k] - lo), 0.0, 1.0))};
+}
+
+}  // namespace
+
 EmittedRay sampleLight(const Light& light, const double u[4]) {
   EmittedRay r;
   switch (light.type) {
@@ -257,13 +302,7 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
       glm::dvec3 p_ls = light.disk ? glm::dvec3(rad * std::cos(phi_d), rad * std::sin(phi_d), 0.0)
                                    : glm::dvec3((u[0] - 0.5) * light.width, (u[1] - 0.5) * light.height, 0.0);
       if (!light.polygon.empty()) {
-        // A triangle by its share of the area (u[0]'s place inside its share is uniform again),
-        // then a uniform point of it.
-        const std::vector<double>& cdf = light.polygon_cdf;
-        const std::size_t k = std::min(
-            cdf.size() - 1, static_cast<std::size_t>(std::upper_bound(cdf.begin(), cdf.end(), u[0]) - cdf.begin()));
-        const double lo = k ? cdf[k - 1] : 0.0;
-        const double s = std::sqrt(std::clamp((u[0] - lo) / (cdf[k] - lo), 0.0, 1.0));
+        const auto [k, s] = triangleByArea(light.polygon_cdf, u[0]);
         const auto& tri = light.polygon_triangles[k];
         const glm::dvec2 p = (1.0 - s) * light.polygon[tri[0]] + s * (1.0 - u[1]) * light.polygon[tri[1]] +
                              s * u[1] * light.polygon[tri[2]];
@@ -273,6 +312,16 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
       const glm::dvec3 ex = light.world_from_light.vector(glm::dvec3(1, 0, 0));
       const glm::dvec3 ey = light.world_from_light.vector(glm::dvec3(0, 1, 0));
       glm::dvec3 n = glm::normalize(glm::cross(ex, ey));
+      if (!light.triangles.empty()) {
+        // Its front face.
+        const auto [k, s] = triangleByArea(light.polygon_cdf, u[0]);
+        const glm::dvec3 a = light.world_from_light.point(light.triangles[k][0]),
+                         b = light.world_from_light.point(light.triangles[k][1]),
+                         c = light.world_from_light.point(light.triangles[k][2]);
+        r.origin = (1.0 - s) * a + s * (1.0 - u[1]) * b + s * u[1] * c;
+        n = glm::normalize(glm::cross(b - a, c - a));
+        r.normal = n;
+      }
       double v = u[2];
       if (light.two_sided) {  // half the rays from each face
         if (v < 0.5) {
@@ -282,7 +331,8 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
           v = 2.0 * v - 1.0;
         }
       }
-      const glm::dvec3 t = glm::normalize(ex), b = glm::cross(n, t);
+      glm::dvec3 t = glm::normalize(ex), b = glm::cross(n, t);
+      if (!light.triangles.empty()) detail::orthonormalBasis(n, t, b);  // the face is not the local plane
       const double s = std::sqrt(v), phi = kTwoPi * u[3];
       r.dir = s * std::cos(phi) * t + s * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - v)) * n;
       break;

@@ -74,8 +74,11 @@ void connectLight(const Light& light, const EmittedRay& emitted, double scale, C
       break;
     case LightType::Area: {
       // The face sampleLight emits from: the cross product of the mapped local axes.
-      const glm::dvec3 n = glm::normalize(glm::cross(light.world_from_light.vector(glm::dvec3(1, 0, 0)),
-                                                     light.world_from_light.vector(glm::dvec3(0, 1, 0))));
+      // (An emissive mesh: the sampled triangle's front face.)
+      const glm::dvec3 n = !light.triangles.empty()
+                               ? emitted.normal
+                               : glm::normalize(glm::cross(light.world_from_light.vector(glm::dvec3(1, 0, 0)),
+                                                           light.world_from_light.vector(glm::dvec3(0, 1, 0))));
       const double sides = light.two_sided ? 2.0 : 1.0;
       connect([&](const glm::dvec3&) { return emitted.origin; },
               [&](const glm::dvec3& v, double) {

@@ -114,6 +114,7 @@ std::uint64_t SensorRun::computeFingerprint() const {
                                    static_cast<std::uint8_t>(l.disk ? 1 : 0)};  // a disk or its square
     add(shape, sizeof shape);
     add(l.polygon.data(), l.polygon.size() * sizeof(glm::dvec2));
+    add(l.triangles.data(), l.triangles.size() * sizeof(l.triangles[0]));
     if (l.profile) addDouble(l.profile->integral());
   }
   return h.value;

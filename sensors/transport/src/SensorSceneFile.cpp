@@ -100,13 +100,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       photometric_amount = key;
     }
   if (photometric_amount) {
-    const bool fits = type == "area" || type == "disk" || type == "polygon"
+    const bool fits = type == "area" || type == "disk" || type == "polygon" || type == "mesh"
                           ? std::string_view(photometric_amount) != "illuminance"
                           : type == "directional" && std::string_view(photometric_amount) == "illuminance";
     if (!fits)
       ctx.fail(at(p, photometric_amount),
                std::string("\"") + photometric_amount + "\" is not a key of a \"" + type +
-                   "\" light (luminance and exitance: area, disk and polygon lights; illuminance: directional)");
+                   "\" light (luminance and exitance: area, disk, polygon and mesh lights; illuminance: directional)");
   }
   if (v.contains("power") && v.contains("lumens"))
     ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
@@ -143,13 +143,41 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // Illuminance E (lx) on a plane across the beam: E pi r^2 lumens.
     if (photometric_amount)
       l.lumens = ctx.positiveNumber(v["illuminance"], at(p, "illuminance")) * std::numbers::pi * l.radius * l.radius;
-  } else if (type == "area" || type == "disk" || type == "polygon") {
+  } else if (type == "area" || type == "disk" || type == "polygon" || type == "mesh") {
     ctx.onlyKeys(v, p,
                  {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node",
-                  type == "disk" ? "radius" : (type == "polygon" ? "vertices" : "size"), "transform", "two_sided"});
+                  type == "disk"      ? "radius"
+                  : type == "polygon" ? "vertices"
+                  : type == "mesh"    ? "object"
+                                      : "size",
+                  "transform", "two_sided"});
     l.type = LightType::Area;
     l.disk = type == "disk";
-    if (type == "polygon") {
+    if (type == "mesh") {
+      // The triangles of a mesh object of the scene (instanced or not), in its object space,
+      // placed by "transform"; each emits from its front face.
+      const std::string q = at(p, "object");
+      const std::string object = ctx.string(ctx.member(v, p, "object"), q);
+      const std::optional<ObjectId> id = graph.library().find(object);
+      if (!id) ctx.fail(q, "no object \"" + object + "\" in the scene");
+      std::shared_ptr<const MeshObject> mesh;
+      try {
+        mesh = std::dynamic_pointer_cast<const MeshObject>(graph.library().get(*id));
+      } catch (const Error& e) {
+        ctx.fail(q, e.what());
+      }
+      if (!mesh) ctx.fail(q, "object \"" + object + "\" is not a triangle mesh");
+      std::vector<std::array<glm::dvec3, 3>> tris(mesh->mesh().triangleCount());
+      for (std::size_t t = 0; t < tris.size(); ++t) {
+        const std::array<glm::vec3, 3> f = mesh->mesh().vertices(t);
+        tris[t] = {glm::dvec3(f[0]), glm::dvec3(f[1]), glm::dvec3(f[2])};
+      }
+      try {
+        l.setTriangles(std::move(tris));
+      } catch (const InvalidArgument& e) {
+        ctx.fail(q, e.what());
+      }
+    } else if (type == "polygon") {
       // [[x, y], ...]: the polygon in the light's z = 0 plane, placed by "transform".
       const std::string q = at(p, "vertices");
       const json& list = ctx.member(v, p, "vertices");
@@ -181,7 +209,12 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       // (A: the rectangle's area as its transform places it).
       const glm::dmat3& m = l.world_from_light.linear;
       const double area =
-          l.polygon.empty() ? glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
+          !l.triangles.empty() ? [&] {  // the triangles as the transform places them
+            double sum = 0.0;
+            for (const auto& t : l.triangles) sum += 0.5 * glm::length(glm::cross(m * (t[1] - t[0]), m * (t[2] - t[0])));
+            return sum;
+          }()
+          : l.polygon.empty() ? glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
                                   (l.disk ? std::numbers::pi / 4.0 : 1.0)  // the inscribed disk's share
                             : glm::length(glm::cross(m * glm::dvec3(1, 0, 0), m * glm::dvec3(0, 1, 0))) * l.localArea();
       const double faces = l.two_sided ? 2.0 : 1.0;
@@ -210,9 +243,10 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // so the light emits their integral.
     if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
-    ctx.fail(at(p, "type"),
-             "unknown light type \"" + type +
-                 "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\", \"polygon\" or \"ies\")");
+    ctx.fail(
+        at(p, "type"),
+        "unknown light type \"" + type +
+            "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\", \"polygon\", \"mesh\" or \"ies\")");
   }
   if (v.contains("spectrum"))
     l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)

@@ -58,8 +58,13 @@ struct Light {
   std::vector<glm::dvec2> polygon;
   /// Area polygons: the triangles that cover the polygon (indices into `polygon`) ...
   std::vector<std::array<std::uint32_t, 3>> polygon_triangles;
-  /// ... and their cumulative share of its area (the last is 1), for sampling by area.
+  /// ... and their cumulative share of its area (the last is 1), for sampling by area; for an
+  /// emissive mesh, the triangles' cumulative share of the mesh's area.
   std::vector<double> polygon_cdf;
+  /// Area: the triangles of an emissive mesh (light-local space; each emits from its front face,
+  /// the side of cross(b - a, c - a)) instead of the rectangle (a scene file's "mesh" light); set
+  /// with setTriangles.
+  std::vector<std::array<glm::dvec3, 3>> triangles;
   /// Spectral scenes: relative power per band (>= 0, not all 0; normalised by the scene); empty:
   /// the power is shared equally among the bands. Its length must be the scene's band count.
   std::vector<double> spectrum;
@@ -85,6 +90,11 @@ struct Light {
   /// fewer than 3 vertices, a non-finite one, edges that cross or touch other than at their shared
   /// vertex, or a zero area.
   void setPolygon(std::vector<glm::dvec2> vertices);
+  /// Makes the light an emissive mesh of `tris` (light-local space): keeps each triangle's
+  /// cumulative share of the area in polygon_cdf, and sets width = height to twice the largest
+  /// vertex coordinate (what the rectangle's corners stand for in outward checks). Throws
+  /// InvalidArgument naming the light for no triangles, a non-finite vertex or a zero area.
+  void setTriangles(std::vector<std::array<glm::dvec3, 3>> tris);
   /// Area: the emitting area in local units (the rectangle, the inscribed disk or the polygon);
   /// the transform scales it.
   [[nodiscard]] double localArea() const;
@@ -109,6 +119,9 @@ struct EmittedRay {
   /// Power of this ray relative to the light's mean ray power (1 for all but goniometric lights,
   /// whose directions are importance-sampled from the table with weights of mean 1).
   double weight = 1.0;
+  /// Emissive meshes: the world unit normal of the front face of the triangle the ray leaves
+  /// (before a two-sided light picks a face); zero for other lights.
+  glm::dvec3 normal{0.0};
 };
 
 /// Samples a ray leaving `light` from four uniform numbers in [0, 1) (power-proportional over the
