@@ -146,9 +146,11 @@ SurfaceStep splitByFractions(Event& ev, const BandValue& reflect, const BandValu
 }
 
 /// A material type: parameters, reader, validation, hash and printing (the path step is checked
-/// where the path loop instantiates it). See the file comment.
+/// where the path loop instantiates it). See the file comment. (No copy_constructible here: a
+/// Material's converting constructor asks whether Material itself is a material type while
+/// Material is being copied, and clang would recurse; the variant requires copies anyway.)
 template <class M>
-concept MaterialModel = std::default_initializable<M> && std::copy_constructible<M> &&
+concept MaterialModel = std::default_initializable<M> &&
     requires(M& m, const M& cm, const MaterialReader& r, StateHash& h, std::ostream& os, const std::string& what,
              std::uint32_t bands) {
   { M::kName } -> std::convertible_to<std::string_view>;
