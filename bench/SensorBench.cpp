@@ -132,8 +132,8 @@ std::vector<Affine> smallSensorPlacements(std::size_t count) {
 /// of 4 x 4 bins at random places and orientations.
 std::unique_ptr<Setup> roomScene(std::size_t sensors, const std::string& data_dir, std::string& meshes_used) {
   auto s = std::make_unique<Setup>();
-  const Material wall{MaterialType::Lambertian, 0.5, 1.5};
-  const Material body{MaterialType::Lambertian, 0.7, 1.5};
+  const Material wall = Lambertian{0.5};
+  const Material body = Lambertian{0.7};
   const ObjectId room = s->object(meshObject(makeBox({10.0, 10.0, 4.0}, "room")), "room", wall);
   s->place(room, translate({0, 0, 2}), "room");
   std::vector<std::pair<ObjectId, double>> shapes;  // object, scale to about 1.5 units

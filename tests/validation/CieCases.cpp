@@ -169,7 +169,7 @@ CaseResult diffuseCubeCase(double rho, const CaseOptions& o, bool also_capped) {
   const double a = 4.0, inset = 1e-3;
   Fixture f;
   f.add(std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(makeBox({a, a, a}, "room"))),
-        Affine::identity(), "room", Material{MaterialType::Lambertian, rho});
+        Affine::identity(), "room", Material{Lambertian{rho}});
   addFaceSensors(f, a, inset, 1);
   const SensorScene scene = f.scene({pointLight({0, 0, 0}, kLumens)});
   CaseResult c = describe("diffuse-cube-" + std::to_string(static_cast<int>(std::lround(rho * 100))),
@@ -207,8 +207,7 @@ CaseResult clearGlassCase(const CaseOptions& o) {
     (slabUnpolarised(n, d, mid, 0.0).t > t0 ? lo : hi) = mid;
   }
   const double alpha = 0.5 * (lo + hi);
-  Material glass{MaterialType::Dielectric, 0.0, n};
-  glass.absorption = alpha;
+  const Material glass = Dielectric{n, alpha};
   CaseResult c = describe("clear-glass",
                           "6 mm clear glass (n = 1.52, absorption " + std::to_string(alpha).substr(0, 6) +
                               " /m: the CIE curve's 0.8788 at normal incidence), collimated beam at 0-85 degrees",

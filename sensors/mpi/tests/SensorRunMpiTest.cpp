@@ -29,7 +29,7 @@ int worldRank() {
 
 SensorScene reflectingBox(Fixture& f) {
   closeBox(f);
-  Material white{MaterialType::Lambertian, 0.9, 1.5};
+  Material white = Lambertian{0.9};
   f.add(quad(0.5, "white"), translate(0, 0, -0.5), "white", white);
   return f.scene({pointLight({0, 0, 0.2}, 1.0)});
 }

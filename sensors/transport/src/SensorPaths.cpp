@@ -8,7 +8,7 @@
 
 #include "OrthonormalBasis.h"
 #include "Polarisation.h"
-#include "SurfaceScatter.h"
+#include "SurfaceEvent.h"
 #include "SensorRunChunk.h"
 
 #include <glm/geometric.hpp>
@@ -17,6 +17,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <variant>
 #include <vector>
 
 namespace duplex {
@@ -25,16 +26,6 @@ using detail::BinEvent;
 using detail::SensorEvent;
 
 namespace {
-
-// Cosine-weighted direction about unit normal n.
-glm::dvec3 cosineDirection(const glm::dvec3& n, double u0, double u1) {
-  glm::dvec3 t, b;
-  detail::orthonormalBasis(n, t, b);
-  const double r = std::sqrt(u0), phi = 2.0 * std::numbers::pi * u1;
-  return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - u0)) * n;
-}
-
-glm::dvec3 reflect(const glm::dvec3& d, const glm::dvec3& n) { return d - 2.0 * glm::dot(d, n) * n; }
 
 // A direction scattered from unit propagation direction d by phase function hg.
 glm::dvec3 phaseDirection(const glm::dvec3& d, const HenyeyGreenstein& hg, double u0, double u1) {
@@ -83,8 +74,11 @@ void connectLight(const Light& light, const EmittedRay& emitted, double scale, C
       break;
     case LightType::Area: {
       // The face sampleLight emits from: the cross product of the mapped local axes.
-      const glm::dvec3 n = glm::normalize(glm::cross(light.world_from_light.vector(glm::dvec3(1, 0, 0)),
-                                                     light.world_from_light.vector(glm::dvec3(0, 1, 0))));
+      // (An emissive mesh: the sampled triangle's front face.)
+      const glm::dvec3 n = !light.triangles.empty()
+                               ? emitted.normal
+                               : glm::normalize(glm::cross(light.world_from_light.vector(glm::dvec3(1, 0, 0)),
+                                                           light.world_from_light.vector(glm::dvec3(0, 1, 0))));
       const double sides = light.two_sided ? 2.0 : 1.0;
       connect([&](const glm::dvec3&) { return emitted.origin; },
               [&](const glm::dvec3& v, double) {
@@ -315,8 +309,9 @@ void SensorRun::traceChunk(Chunk& chunk) const {
           break;
         }
         ++scatterings;
-        const double albedo =
-            collided->material.type == MaterialType::Medium ? collided->material.reflectanceIn(band) : 0.0;
+        // A fog without a medium material absorbs at every collision.
+        const Medium* medium = collided->material.as<Medium>();
+        const double albedo = medium ? medium->albedo.in(band) : 0.0;
         if (!(rng.uniform() < albedo)) {
           e.medium_absorbed_w += w;
           ++e.medium_absorbed_rays;
@@ -327,7 +322,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         // Random numbers are drawn in statements of their own: a call's arguments are evaluated in
         // an order each compiler picks, and a run must give the same paths whichever built it.
         const double u1 = rng.uniform(), u2 = rng.uniform();
-        dir = phaseDirection(d, HenyeyGreenstein{collided->material.g}, u1, u2);
+        dir = phaseDirection(d, HenyeyGreenstein{medium->g}, u1, u2);
         pol = {};  // the scalar phase function: scattered light is taken as unpolarised
         if (!isFinite(dir)) {
           e.failed_w += w;
@@ -356,80 +351,32 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         break;
       }
       ++depth;
-      // Scatter by the material; a path ends in an absorber or by the albedo's roulette.
+      // The material's step, dispatched once per surface event: the path ends (absorbed) or goes on.
       const Material& m = scene_.materialOf(end.hit.instance_id);
       const glm::dvec3 p = origin + static_cast<double>(end.hit.t) * dir;
       glm::dvec3 n = glm::normalize(glm::dvec3(end.hit.ng));
       const glm::dvec3 d = glm::normalize(dir);
       const bool front = glm::dot(d, n) < 0.0;
       const glm::dvec3 nf = front ? n : -n;  // faces the incoming ray
-      glm::dvec3 next;
-      bool transmits = false;  // whether `next` must cross to the far side of the surface
-      if (m.type == MaterialType::Absorber || m.type == MaterialType::Medium) {
+      detail::SurfaceEvent event{d, n, nf, front, band, static_cast<double>(end.hit.t), w, pol, rng, e};
+      const SurfaceStep step = std::visit([&event](const auto& material) { return material.step(event); }, m.model);
+      if (step.absorbed) {
         e.absorbed_w += w;
         ++e.absorbed_rays;
         break;
-      } else if (m.type == MaterialType::Lambertian || m.type == MaterialType::Mirror) {
-        if (rng.uniform() >= m.reflectanceIn(band)) {
-          e.absorbed_w += w;
-          ++e.absorbed_rays;
-          break;
-        }
-        if (m.type == MaterialType::Mirror) {
-          next = reflect(d, nf);
-          detail::enterPlaneOfIncidence(pol, d, nf);
-          detail::afterIdealReflection(pol);
-        } else {
-          const double u1 = rng.uniform(), u2 = rng.uniform();
-          next = cosineDirection(nf, u1, u2);
-          pol = {};               // diffuse reflection depolarises
-          if (!meters.empty()) {  // the reflected power w leaves with radiant intensity w cos / pi
-            const SurfaceInstance* si = scene_.surfaceOf(end.hit.instance_id);
-            const glm::dvec3 from = si ? detail::restartFromTriangle(si->mesh->mesh().vertices(end.hit.prim_id),
-                                                                     end.hit.u, end.hit.v, *si, n)
-                                             .p_ws
-                                       : p;
-            const double offset = 1e-5 * std::max({1.0, std::abs(from.x), std::abs(from.y), std::abs(from.z)});
-            const glm::dvec3 start = from + nf * offset;
-            connect([&](const glm::dvec3&) { return start; },
-                    [&](const glm::dvec3& v, double) { return w * std::max(0.0, glm::dot(v, nf)) / std::numbers::pi; });
-          }
-        }
-      } else if (m.type == MaterialType::Coating) {  // reflect, pass undeviated, or absorb
-        const double u = rng.uniform(), r = m.reflectanceIn(band);
-        if (u >= r + m.transmittanceIn(band)) {
-          e.absorbed_w += w;
-          ++e.absorbed_rays;
-          break;
-        }
-        transmits = u >= r;
-        next = transmits ? d : reflect(d, nf);
-        if (!transmits) {  // an ideal coating treats s and p alike; passing through changes nothing
-          detail::enterPlaneOfIncidence(pol, d, nf);
-          detail::afterIdealReflection(pol);
-        }
-      } else {  // dielectric: exact Fresnel for the path's s and p powers, reflect or refract by it
-        // A ray reaching the surface from inside crossed the glass from its last surface: Beer-Lambert.
-        if (const double a = m.absorptionIn(band); !front && a > 0.0) {
-          const double keep = std::exp(-a * static_cast<double>(end.hit.t));
-          e.absorbed_w += w * (1.0 - keep);
-          w *= keep;
-        }
-        const double eta_i = front ? 1.0 : m.ior, eta_t = front ? m.ior : 1.0;
-        const double cos_i = std::min(1.0, std::abs(glm::dot(d, n)));
-        const detail::FresnelInterface f = detail::fresnelInterface(eta_i, eta_t, cos_i);
-        detail::enterPlaneOfIncidence(pol, d, n);
-        const double reflectance = detail::reflectanceFor(pol, f);
-        transmits = !(rng.uniform() < reflectance);
-        detail::afterInterface(pol, f, transmits);
-        next = transmits ? (eta_i / eta_t) * d + ((eta_i / eta_t) * cos_i - f.cos_t) * nf : reflect(d, nf);
       }
-      // Rough surfaces spread a fraction of the specular light about the specular direction; a
-      // material whose lobe yields no direction refuses the path (a numerical failure below).
-      if (m.scatter != ScatterModel::None && rng.uniform() < m.scatter_fraction) {
-        const glm::dvec3 specular = glm::normalize(next);
-        if (!detail::scatterAbout(m, specular, transmits ? -nf : nf, rng, next)) next = glm::dvec3(0.0);
-        else detail::followDirection(pol, glm::normalize(next));
+      const glm::dvec3 next = step.next;
+      const bool transmits = step.transmits;  // whether `next` must cross to the far side of the surface
+      if (step.diffuse && !meters.empty()) {  // the reflected power w leaves with radiant intensity w cos / pi
+        const SurfaceInstance* si = scene_.surfaceOf(end.hit.instance_id);
+        const glm::dvec3 from =
+            si ? detail::restartFromTriangle(si->mesh->mesh().vertices(end.hit.prim_id), end.hit.u, end.hit.v, *si, n)
+                     .p_ws
+               : p;
+        const double offset = 1e-5 * std::max({1.0, std::abs(from.x), std::abs(from.y), std::abs(from.z)});
+        const glm::dvec3 start = from + nf * offset;
+        connect([&](const glm::dvec3&) { return start; },
+                [&](const glm::dvec3& v, double) { return w * std::max(0.0, glm::dot(v, nf)) / std::numbers::pi; });
       }
       // A direction that does not leave the surface to the side the material sends it (tangent,
       // on the wrong side, not finite) would be traced from the wrong side of the offset: the

@@ -32,10 +32,8 @@ std::uint64_t SensorRun::fingerprint() const {
 
 std::uint64_t SensorRun::computeFingerprint() const {
   // FNV-1a over what the accumulators' meaning depends on.
-  std::uint64_t h = 1469598103934665603ull;
-  auto add = [&h](const void* p, std::size_t n) {
-    for (std::size_t i = 0; i < n; ++i) h = (h ^ static_cast<const unsigned char*>(p)[i]) * 1099511628211ull;
-  };
+  StateHash h;
+  auto add = [&h](const void* p, std::size_t n) { h.bytes(p, n); };
   for (const SensorInstance& s : scene_.sensors()) {
     add(s.name.data(), s.name.size());
     const std::uint32_t bins = s.object->binCount();
@@ -96,19 +94,8 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(&it->second, sizeof it->second);
     addAffine(scene_.graph().worldTransform(node));
     add(&info.mask, sizeof info.mask);
-    const Material& m = scene_.materialOf(node);
-    add(&m.type, sizeof m.type);
-    for (const double x : {m.reflectance, m.ior, m.g}) addDouble(x);
-    add(m.band_reflectance.data(), m.band_reflectance.size() * sizeof(double));
-    // Coatings, absorption and roughness, where a material has them.
-    if (m.type == MaterialType::Coating || m.absorption != 0.0 || m.scatter != ScatterModel::None ||
-        !m.band_absorption.empty()) {
-      add(&m.scatter, sizeof m.scatter);
-      for (const double x : {m.transmittance, m.absorption, m.scatter_fraction, m.sigma, m.abg_a, m.abg_b, m.abg_g})
-        addDouble(x);
-      add(m.band_transmittance.data(), m.band_transmittance.size() * sizeof(double));
-      add(m.band_absorption.data(), m.band_absorption.size() * sizeof(double));
-    }
+    // Each material adds its type and parameters (a type cannot leave out its hash: Material.h).
+    scene_.materialOf(node).hash(h);
   }
   for (const SensorInstance& s : scene_.sensors()) {
     const SensorSpec& spec = s.object->spec();
@@ -123,11 +110,14 @@ std::uint64_t SensorRun::computeFingerprint() const {
     for (const glm::dvec3& v : {l.position, l.direction}) addDouble(v.x), addDouble(v.y), addDouble(v.z);
     for (const double x : {l.cone_angle, l.radius, l.width, l.height}) addDouble(x);
     addAffine(l.world_from_light);
-    const std::uint8_t two_sided = l.two_sided ? 1 : 0;
-    add(&two_sided, 1);
+    const std::uint8_t shape[2] = {static_cast<std::uint8_t>(l.two_sided ? 1 : 0),
+                                   static_cast<std::uint8_t>(l.disk ? 1 : 0)};  // a disk or its square
+    add(shape, sizeof shape);
+    add(l.polygon.data(), l.polygon.size() * sizeof(glm::dvec2));
+    add(l.triangles.data(), l.triangles.size() * sizeof(l.triangles[0]));
     if (l.profile) addDouble(l.profile->integral());
   }
-  return h;
+  return h.value;
 }
 
 namespace {

@@ -3,8 +3,6 @@
 #include "duplex/accel/Error.h"
 #include "duplex/sensors/Photometry.h"
 
-#include "SurfaceScatter.h"
-
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
 
@@ -53,22 +51,7 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
   }
   resolvePhotometry();
   const ObjectLibrary& library = graph_->library();
-  auto checkMaterial = [nb](Material& m, const std::string& what) {
-    if (!m.band_reflectance.empty() && m.band_reflectance.size() != nb)
-      throw InvalidArgument(what + ": " + std::to_string(m.band_reflectance.size()) +
-                            " per-band values, the scene has " + std::to_string(nb) + " band(s)");
-    for (const double r : m.band_reflectance)
-      if (!(r >= 0.0 && r <= 1.0)) throw InvalidArgument(what + ": per-band values must be in [0, 1]");
-    // The file reader checks these too; a programmatic scene must not reach the run with a
-    // reflectance above 1 (acts as 1), a NaN one (never absorbs: a perfect mirror) or a NaN index.
-    if (!(m.reflectance >= 0.0 && m.reflectance <= 1.0))
-      throw InvalidArgument(what + ": reflectance (albedo) " + std::to_string(m.reflectance) + " must be in [0, 1]");
-    if (m.type == MaterialType::Dielectric && !(std::isfinite(m.ior) && m.ior > 0.0))
-      throw InvalidArgument(what + ": index of refraction " + std::to_string(m.ior) + " must be finite and positive");
-    if (m.type == MaterialType::Medium && !(m.g > -1.0 && m.g < 1.0))
-      throw InvalidArgument(what + ": g must be in (-1, 1)");
-    checkSurfaceMaterial(m, what, nb);
-  };
+  auto checkMaterial = [nb](Material& m, const std::string& what) { m.validate(what, nb); };
   for (std::size_t id = 0; id < materials_.size(); ++id)
     checkMaterial(materials_[id],
                   "material of object " +
@@ -89,37 +72,20 @@ SensorScene::SensorScene(SceneGraph& graph, std::vector<Light> lights, std::vect
   (void)current();  // validates the graph's sensors, media and lights now
 }
 
-void SensorScene::checkSurfaceMaterial(Material& m, const std::string& what, std::uint32_t nb) {
-  for (const std::vector<double>* v : {&m.band_transmittance, &m.band_absorption})
-    if (!v->empty() && v->size() != nb)
-      throw InvalidArgument(what + ": " + std::to_string(v->size()) + " per-band values, the scene has " +
-                            std::to_string(nb) + " band(s)");
-  if (m.type == MaterialType::Coating)
-    for (std::uint32_t k = 0; k < nb; ++k) {
-      const double r = m.reflectanceIn(k), t = m.transmittanceIn(k);
-      if (!(t >= 0.0 && r + t <= 1.0 + 1e-12))
-        throw InvalidArgument(what + ": a coating's transmittance must be >= 0 and reflect + transmit at most 1 (got " +
-                              std::to_string(r) + " + " + std::to_string(t) + ")");
-    }
-  for (std::uint32_t k = 0; k < nb; ++k)
-    if (!(std::isfinite(m.absorptionIn(k)) && m.absorptionIn(k) >= 0.0))
-      throw InvalidArgument(what + ": absorption must be finite and >= 0");
-  if (m.scatter == ScatterModel::None) return;
-  if (m.type != MaterialType::Mirror && m.type != MaterialType::Dielectric)
-    throw InvalidArgument(what + ": only mirrors and dielectrics scatter (a rough surface)");
-  if (m.scatter == ScatterModel::Gaussian &&
-      !(m.sigma > 0.0 && std::isfinite(m.sigma) && m.scatter_fraction >= 0.0 && m.scatter_fraction <= 1.0))
-    throw InvalidArgument(what + ": a Gaussian scatter needs sigma > 0 and a fraction in [0, 1] (got sigma " +
-                          std::to_string(m.sigma) + ", fraction " + std::to_string(m.scatter_fraction) + ")");
-  if (m.scatter == ScatterModel::ABg) {
-    if (!(m.abg_a >= 0.0 && m.abg_b > 0.0 && m.abg_g > 0.0 && m.abg_g <= 8.0 && std::isfinite(m.abg_a) &&
-          std::isfinite(m.abg_b)))
-      throw InvalidArgument(what + ": ABg needs A >= 0, B > 0 and g in (0, 8]");
-    m.scatter_fraction = detail::abgTotalIntegratedScatter(m.abg_a, m.abg_b, m.abg_g);
-    if (!(m.scatter_fraction <= 1.0))
-      throw InvalidArgument(what + ": ABg parameters scatter more than all the light (total integrated scatter " +
-                            std::to_string(m.scatter_fraction) + " > 1)");
-  }
+void BandValue::check(const std::string& what, const char* name, double lo, double hi,
+                      std::uint32_t scene_bands) const {
+  // A programmatic scene must not reach the run with a value out of range: a reflectance above 1
+  // acts as 1, a NaN one never absorbs (a perfect mirror).
+  const std::string range = hi == std::numeric_limits<double>::max()
+                                ? "finite and >= " + std::to_string(lo)
+                                : "in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+  if (!bands.empty() && bands.size() != scene_bands)
+    throw InvalidArgument(what + ": " + std::to_string(bands.size()) + " per-band values, the scene has " +
+                          std::to_string(scene_bands) + " band(s)");
+  for (const double x : bands)
+    if (!(x >= lo && x <= hi)) throw InvalidArgument(what + ": per-band " + name + " values must be " + range);
+  if (!(value >= lo && value <= hi))
+    throw InvalidArgument(what + ": " + name + " " + std::to_string(value) + " must be " + range);
 }
 
 void SensorScene::resolvePhotometry() {
@@ -237,7 +203,7 @@ std::unique_ptr<SensorScene::Derived> SensorScene::derive() const {
     const ObjectRole role = library.get(info.object)->role();
     // Paths restart from surfaces that do not absorb: the bound on a hit's rounding error there
     // needs the triangle's object-space vertices and the transform the top level applies.
-    if (role == ObjectRole::Surface && m.type != MaterialType::Absorber && m.type != MaterialType::Medium) {
+    if (role == ObjectRole::Surface && !m.endsPaths()) {
       if (auto mesh = std::dynamic_pointer_cast<const MeshObject>(library.get(info.object))) {
         SurfaceInstance& si = d.surface_of_node[node];
         si.mesh = std::move(mesh);
@@ -248,12 +214,12 @@ std::unique_ptr<SensorScene::Derived> SensorScene::derive() const {
       }
     }
     if (role == ObjectRole::Medium) {
-      if (m.type != MaterialType::Absorber && m.type != MaterialType::Medium)
+      if (!m.is<Absorber>() && !m.is<Medium>())
         throw InvalidArgument("object '" + std::string(library.name(info.object)) +
                               "' is a medium: its material must be \"medium\" (or none)");
-      scatters |= m.type == MaterialType::Medium;
+      scatters |= m.is<Medium>();
       media.push_back(node);
-    } else if (m.type == MaterialType::Medium) {
+    } else if (m.is<Medium>()) {
       throw InvalidArgument("object '" + std::string(library.name(info.object)) +
                             "' has a \"medium\" material but is not a fog volume");
     }
@@ -357,9 +323,7 @@ void SensorScene::checkMeterMaterials() const {
   const Derived& d = current();
   for (std::size_t node = 0; node < d.material_of_node.size(); ++node) {
     const Material& m = d.material_of_node[node];
-    const bool connectable =
-        (m.type == MaterialType::Absorber || m.type == MaterialType::Lambertian) && m.scatter == ScatterModel::None;
-    if (connectable) continue;
+    if (m.metersSeeAll()) continue;
     const NodeId id = static_cast<NodeId>(node);
     throw InvalidArgument("meters: the material of instance " +
                           (graph_->contains(id) ? "'" + graph_->path(id) + "'" : "node " + std::to_string(node)) +

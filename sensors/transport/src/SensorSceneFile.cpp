@@ -6,8 +6,6 @@
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 
-#include "SurfaceScatter.h"
-
 #include <glm/matrix.hpp>
 #include <nlohmann/json.hpp>
 
@@ -102,13 +100,13 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       photometric_amount = key;
     }
   if (photometric_amount) {
-    const bool fits = type == "area" || type == "disk"
+    const bool fits = type == "area" || type == "disk" || type == "polygon" || type == "mesh"
                           ? std::string_view(photometric_amount) != "illuminance"
                           : type == "directional" && std::string_view(photometric_amount) == "illuminance";
     if (!fits)
       ctx.fail(at(p, photometric_amount),
                std::string("\"") + photometric_amount + "\" is not a key of a \"" + type +
-                   "\" light (luminance and exitance: area and disk lights; illuminance: directional)");
+                   "\" light (luminance and exitance: area, disk, polygon and mesh lights; illuminance: directional)");
   }
   if (v.contains("power") && v.contains("lumens"))
     ctx.fail(p, "a light has \"power\" (W) or \"lumens\" (lm), not both");
@@ -145,13 +143,56 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // Illuminance E (lx) on a plane across the beam: E pi r^2 lumens.
     if (photometric_amount)
       l.lumens = ctx.positiveNumber(v["illuminance"], at(p, "illuminance")) * std::numbers::pi * l.radius * l.radius;
-  } else if (type == "area" || type == "disk") {
+  } else if (type == "area" || type == "disk" || type == "polygon" || type == "mesh") {
     ctx.onlyKeys(v, p,
                  {"type", "name", "power", "lumens", "luminance", "exitance", "spectrum", "node",
-                  type == "disk" ? "radius" : "size", "transform", "two_sided"});
+                  type == "disk"      ? "radius"
+                  : type == "polygon" ? "vertices"
+                  : type == "mesh"    ? "object"
+                                      : "size",
+                  "transform", "two_sided"});
     l.type = LightType::Area;
     l.disk = type == "disk";
-    if (l.disk) {
+    if (type == "mesh") {
+      // The triangles of a mesh object of the scene (instanced or not), in its object space,
+      // placed by "transform"; each emits from its front face.
+      const std::string q = at(p, "object");
+      const std::string object = ctx.string(ctx.member(v, p, "object"), q);
+      const std::optional<ObjectId> id = graph.library().find(object);
+      if (!id) ctx.fail(q, "no object \"" + object + "\" in the scene");
+      std::shared_ptr<const MeshObject> mesh;
+      try {
+        mesh = std::dynamic_pointer_cast<const MeshObject>(graph.library().get(*id));
+      } catch (const Error& e) {
+        ctx.fail(q, e.what());
+      }
+      if (!mesh) ctx.fail(q, "object \"" + object + "\" is not a triangle mesh");
+      std::vector<std::array<glm::dvec3, 3>> tris(mesh->mesh().triangleCount());
+      for (std::size_t t = 0; t < tris.size(); ++t) {
+        const std::array<glm::vec3, 3> f = mesh->mesh().vertices(t);
+        tris[t] = {glm::dvec3(f[0]), glm::dvec3(f[1]), glm::dvec3(f[2])};
+      }
+      try {
+        l.setTriangles(std::move(tris));
+      } catch (const InvalidArgument& e) {
+        ctx.fail(q, e.what());
+      }
+    } else if (type == "polygon") {
+      // [[x, y], ...]: the polygon in the light's z = 0 plane, placed by "transform".
+      const std::string q = at(p, "vertices");
+      const json& list = ctx.member(v, p, "vertices");
+      if (!list.is_array()) ctx.fail(q, "expected an array of [x, y] vertices");
+      std::vector<glm::dvec2> vertices;
+      for (std::size_t k = 0; k < list.size(); ++k) {
+        if (!list[k].is_array() || list[k].size() != 2) ctx.fail(at(q, k), "expected [x, y]");
+        vertices.emplace_back(ctx.number(list[k][0], at(at(q, k), 0)), ctx.number(list[k][1], at(at(q, k), 1)));
+      }
+      try {
+        l.setPolygon(std::move(vertices));
+      } catch (const InvalidArgument& e) {
+        ctx.fail(q, e.what());
+      }
+    } else if (l.disk) {
       l.width = l.height = 2.0 * ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
     } else {
       const auto size = ctx.positiveSizes(ctx.member(v, p, "size"), at(p, "size"), 2);
@@ -167,8 +208,15 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
       // Per emitting face: a Lambertian face of luminance L has exitance M = pi L, and emits M A
       // (A: the rectangle's area as its transform places it).
       const glm::dmat3& m = l.world_from_light.linear;
-      const double area = glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
-                          (l.disk ? std::numbers::pi / 4.0 : 1.0);  // the inscribed disk's share
+      const double area =
+          !l.triangles.empty() ? [&] {  // the triangles as the transform places them
+            double sum = 0.0;
+            for (const auto& t : l.triangles) sum += 0.5 * glm::length(glm::cross(m * (t[1] - t[0]), m * (t[2] - t[0])));
+            return sum;
+          }()
+          : l.polygon.empty() ? glm::length(glm::cross(m * glm::dvec3(l.width, 0, 0), m * glm::dvec3(0, l.height, 0))) *
+                                  (l.disk ? std::numbers::pi / 4.0 : 1.0)  // the inscribed disk's share
+                            : glm::length(glm::cross(m * glm::dvec3(1, 0, 0), m * glm::dvec3(0, 1, 0))) * l.localArea();
       const double faces = l.two_sided ? 2.0 : 1.0;
       const double value = ctx.positiveNumber(v[photometric_amount], at(p, photometric_amount));
       l.lumens =
@@ -195,8 +243,10 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // so the light emits their integral.
     if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
-    ctx.fail(at(p, "type"), "unknown light type \"" + type +
-                                "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\" or \"ies\")");
+    ctx.fail(
+        at(p, "type"),
+        "unknown light type \"" + type +
+            "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\", \"polygon\", \"mesh\" or \"ies\")");
   }
   if (v.contains("spectrum"))
     l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
@@ -213,124 +263,67 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
 Material readMaterial(const json& v, const std::string& p, const ObjectSpecContext& ctx,
                       const std::vector<std::string>& bands) {
   if (!v.is_object()) ctx.fail(p, "expected a material (an object with \"type\")");
-  Material m;
-  const std::string type = ctx.string(ctx.member(v, p, "type"), at(p, "type"));
-  // A number in [lo, hi], or one per band into `per_band` (then the result is their mean, for messages).
-  auto perBand = [&](const char* key, double hi, std::vector<double>& per_band) {
-    const json& x = ctx.member(v, p, key);
-    const std::vector<double> values =
-        x.is_object() ? namedBandValues(x, at(p, key), ctx, bands)
-                      : (x.is_array() ? numbers(x, at(p, key), ctx) : std::vector<double>{ctx.number(x, at(p, key))});
-    double sum = 0.0;
-    for (std::size_t k = 0; k < values.size(); ++k) {
-      if (!(values[k] >= 0.0 && values[k] <= hi))
-        ctx.fail(x.is_array()    ? at(at(p, key), k)
-                 : x.is_object() ? at(at(p, key), bands[k])
-                                 : at(p, key),
-                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key +
-                     (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
-      sum += values[k];
-    }
-    if (x.is_array() || x.is_object()) per_band = values;
-    return sum / static_cast<double>(values.size());
-  };
-  auto fraction = [&](const char* key) { return perBand(key, 1.0, m.band_reflectance); };
-  auto reflectance = [&] { return fraction("reflectance"); };
-  // "scatter": {"model": "gaussian", "sigma": s, "fraction": f} or {"model": "abg", "A", "B", "g"}.
-  auto scatter = [&] {
-    if (!v.contains("scatter")) return;
-    const std::string q = at(p, "scatter");
-    const json& sv = v["scatter"];
-    if (!sv.is_object()) ctx.fail(q, "expected a scatter model (an object with \"model\")");
-    const std::string model = ctx.string(ctx.member(sv, q, "model"), at(q, "model"));
-    if (model == "gaussian") {
-      ctx.onlyKeys(sv, q, {"model", "sigma", "fraction"});
-      m.scatter = ScatterModel::Gaussian;
-      m.sigma = ctx.number(ctx.member(sv, q, "sigma"), at(q, "sigma"));
-      if (!(m.sigma > 0.0 && std::isfinite(m.sigma)))
-        ctx.fail(at(q, "sigma"), "a Gaussian scatter's sigma must be > 0 (got " + std::to_string(m.sigma) + ")");
-      m.scatter_fraction = sv.contains("fraction") ? ctx.number(sv["fraction"], at(q, "fraction")) : 1.0;
-      if (!(m.scatter_fraction >= 0.0 && m.scatter_fraction <= 1.0))
-        ctx.fail(at(q, "fraction"), "expected a scattered fraction in [0, 1]");
-    } else if (model == "abg") {
-      ctx.onlyKeys(sv, q, {"model", "A", "B", "g"});
-      m.scatter = ScatterModel::ABg;
-      m.abg_a = ctx.number(ctx.member(sv, q, "A"), at(q, "A"));
-      m.abg_b = ctx.number(ctx.member(sv, q, "B"), at(q, "B"));
-      m.abg_g = ctx.number(ctx.member(sv, q, "g"), at(q, "g"));
-      if (!(m.abg_a >= 0.0)) ctx.fail(at(q, "A"), "ABg's A must be >= 0");
-      if (!(m.abg_b > 0.0)) ctx.fail(at(q, "B"), "ABg's B must be > 0");
-      if (!(m.abg_g > 0.0 && m.abg_g <= 8.0)) ctx.fail(at(q, "g"), "ABg's g must be in (0, 8]");
-      m.scatter_fraction = detail::abgTotalIntegratedScatter(m.abg_a, m.abg_b, m.abg_g);
-      if (!(m.scatter_fraction <= 1.0))
-        ctx.fail(q, "ABg parameters scatter more than all the light (total integrated scatter " +
-                        std::to_string(m.scatter_fraction) + " > 1): not energy conserving");
-    } else {
-      ctx.fail(at(q, "model"), "unknown scatter model \"" + model + "\" (expected \"gaussian\" or \"abg\")");
-    }
-  };
-  if (type == "absorber") {
-    ctx.onlyKeys(v, p, {"type"});
-  } else if (type == "lambertian") {
-    ctx.onlyKeys(v, p, {"type", "reflectance"});
-    m.type = MaterialType::Lambertian;
-    m.reflectance = reflectance();
-  } else if (type == "mirror") {
-    ctx.onlyKeys(v, p, {"type", "reflectance", "scatter"});
-    m.type = MaterialType::Mirror;
-    m.reflectance = v.contains("reflectance") ? reflectance() : 1.0;
-    scatter();
-  } else if (type == "dielectric") {
-    ctx.onlyKeys(v, p, {"type", "ior", "absorption", "scatter"});
-    m.type = MaterialType::Dielectric;
-    m.ior = ctx.positiveNumber(ctx.member(v, p, "ior"), at(p, "ior"));
-    if (v.contains("absorption"))
-      m.absorption = perBand("absorption", std::numeric_limits<double>::max(), m.band_absorption);
-    scatter();
-  } else if (type == "coating") {
-    // Fractions reflected, transmitted and absorbed: any of the three may be left out (0, or for
-    // "absorb" what the others leave); given, they sum to 1.
-    ctx.onlyKeys(v, p, {"type", "reflect", "transmit", "absorb"});
-    m.type = MaterialType::Coating;
-    if (v.contains("reflect")) m.reflectance = perBand("reflect", 1.0, m.band_reflectance);
-    if (v.contains("transmit")) m.transmittance = perBand("transmit", 1.0, m.band_transmittance);
-    std::vector<double> absorb;
-    if (v.contains("absorb")) (void)perBand("absorb", 1.0, absorb);
-    const std::size_t n =
-        std::max({m.band_reflectance.size(), m.band_transmittance.size(), absorb.size(), std::size_t{1}});
-    for (std::size_t k = 0; k < n; ++k) {
-      auto pick = [k](const std::vector<double>& bands, double one) {
-        return bands.empty() ? one : bands[std::min(k, bands.size() - 1)];
-      };
-      const double r = pick(m.band_reflectance, m.reflectance), t = pick(m.band_transmittance, m.transmittance);
-      if (r + t > 1.0 + 1e-12)
-        ctx.fail(p, "a coating reflects and transmits more than all the light (reflect + transmit = " +
-                        std::to_string(r + t) + (n > 1 ? " in band " + std::to_string(k) : "") + ")");
-      if (v.contains("absorb")) {
-        const double a =
-            absorb.empty() ? ctx.number(v["absorb"], at(p, "absorb")) : absorb[std::min(k, absorb.size() - 1)];
-        if (std::abs(r + t + a - 1.0) > 1e-9)
-          ctx.fail(at(p, "absorb"), "reflect + transmit + absorb must be 1 (got " + std::to_string(r + t + a) +
-                                        (n > 1 ? " in band " + std::to_string(k) : "") + ")");
-      }
-    }
-  } else if (type == "medium") {
-    ctx.onlyKeys(v, p, {"type", "albedo", "g"});
-    m.type = MaterialType::Medium;
-    m.reflectance = fraction("albedo");
-    if (v.contains("g")) {
-      m.g = ctx.number(v["g"], at(p, "g"));
-      if (!(m.g > -1.0 && m.g < 1.0)) ctx.fail(at(p, "g"), "expected a Henyey-Greenstein g in (-1, 1)");
-    }
-  } else {
-    ctx.fail(at(p, "type"), "unknown material \"" + type +
-                                "\" (expected \"absorber\", \"lambertian\", \"mirror\", \"dielectric\", \"coating\" or "
-                                "\"medium\")");
-  }
-  return m;
+  return Material::read(MaterialReader(v, p, ctx, bands));
 }
 
 }  // namespace
+
+MaterialReader::MaterialReader(const json& v, std::string pointer, const ObjectSpecContext& ctx,
+                               const std::vector<std::string>& bands)
+    : v_(&v), pointer_(std::move(pointer)), ctx_(&ctx), bands_(&bands) {}
+
+void MaterialReader::onlyKeys(std::initializer_list<std::string_view> allowed) const {
+  ctx_->onlyKeys(*v_, pointer_, allowed);
+}
+
+bool MaterialReader::has(const char* key) const { return v_->contains(key); }
+
+double MaterialReader::number(const char* key) const {
+  return ctx_->number(ctx_->member(*v_, pointer_, key), at(pointer_, key));
+}
+
+double MaterialReader::positiveNumber(const char* key) const {
+  return ctx_->positiveNumber(ctx_->member(*v_, pointer_, key), at(pointer_, key));
+}
+
+std::string MaterialReader::string(const char* key) const {
+  return ctx_->string(ctx_->member(*v_, pointer_, key), at(pointer_, key));
+}
+
+BandValue MaterialReader::perBand(const char* key, double hi) const {
+  const json& x = ctx_->member(*v_, pointer_, key);
+  const std::string p = at(pointer_, key);
+  const std::vector<double> values =
+      x.is_object() ? namedBandValues(x, p, *ctx_, *bands_)
+                    : (x.is_array() ? numbers(x, p, *ctx_) : std::vector<double>{ctx_->number(x, p)});
+  double sum = 0.0;
+  for (std::size_t k = 0; k < values.size(); ++k) {
+    if (!(values[k] >= 0.0 && values[k] <= hi))
+      ctx_->fail(x.is_array()    ? at(p, k)
+                 : x.is_object() ? at(p, (*bands_)[k])
+                                 : p,
+                 std::string("expected ") + (key[0] == 'a' ? "an " : "a ") + key +
+                     (hi == 1.0 ? " in [0, 1]" : " >= 0 (finite)"));
+    sum += values[k];
+  }
+  // The mean, for messages; per-band values are one per band of the scene.
+  const double mean = sum / static_cast<double>(values.size());
+  if (!x.is_array() && !x.is_object()) return BandValue(mean);
+  if (values.size() != std::max<std::size_t>(1, bands_->size()))
+    ctx_->fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
+                      (bands_->empty() ? std::string("no \"bands\"") : std::to_string(bands_->size()) + " bands"));
+  return BandValue(mean, values);
+}
+
+MaterialReader MaterialReader::child(const char* key) const {
+  const json& x = ctx_->member(*v_, pointer_, key);
+  if (!x.is_object()) ctx_->fail(at(pointer_, key), std::string("expected an object (\"") + key + "\")");
+  return MaterialReader(x, at(pointer_, key), *ctx_, *bands_);
+}
+
+void MaterialReader::fail(std::string_view key, const std::string& problem) const {
+  ctx_->fail(key.empty() ? pointer_ : at(pointer_, key), problem);
+}
 
 SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocumentOptions& options,
                               const ObjectTypeRegistry& registry) {
@@ -418,22 +411,6 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       ctx.fail(p, std::to_string(values.size()) + " per-band values, the scene has " +
                       (bands.empty() ? std::string("no \"bands\"") : std::to_string(bands.size()) + " bands"));
   };
-  for (std::size_t i = 0; i < objects.size() && i < doc->objects.size(); ++i) {
-    const Material& m = materials[doc->objects[i]];
-    const std::string q = at(at("/objects", i), "material");
-    bandCount(m.band_reflectance, at(q, m.type == MaterialType::Medium    ? "albedo"
-                                        : m.type == MaterialType::Coating ? "reflect"
-                                                                          : "reflectance"));
-    bandCount(m.band_transmittance, at(q, "transmit"));
-    bandCount(m.band_absorption, at(q, "absorption"));
-  }
-  for (const auto& [node, m] : instance_materials) {
-    const std::string q = graph.path(node) + " material";  // the node, as JSON pointers of nodes are not kept
-    bandCount(m.band_reflectance, q);
-    bandCount(m.band_transmittance, q);
-    bandCount(m.band_absorption, q);
-  }
-
   std::vector<Light> lights;
   if (root.contains("lights")) {
     const json& list = root["lights"];

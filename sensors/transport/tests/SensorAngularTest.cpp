@@ -126,8 +126,7 @@ TEST(SensorAngular, BitIdenticalForAnyThreadCountWithBandsAndSpheres) {
   ball.nx = 8;
   ball.ny = 4;
   f.add(std::make_shared<const SensorObject>("ball", ball), Affine::identity(), "ball");
-  Material floor{MaterialType::Lambertian, 0.5};
-  floor.band_reflectance = {0.9, 0.3};
+  const Material floor = Lambertian{{0.5, {0.9, 0.3}}};
   f.add(quad(1.0, "floor"), translate(0, 0, -0.5), "floor", floor);
   Light l = pointLight({0.1, 0, 0}, 2.0);
   l.spectrum = {1, 1};

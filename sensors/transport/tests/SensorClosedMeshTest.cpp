@@ -69,7 +69,7 @@ TEST_P(SensorClosedMesh, AbsorbingShellTakesEverything) {
 TEST_P(SensorClosedMesh, NoPathLeavesAWhiteShell) {
   const glm::dvec3 offset(GetParam(), -2.0 * GetParam(), 3.0 * GetParam());
   Fixture f;
-  const SensorScene scene = sphereAroundTheLight(f, Material{MaterialType::Lambertian, 0.9}, offset);
+  const SensorScene scene = sphereAroundTheLight(f, Material{Lambertian{0.9}}, offset);
   const SensorRunResults r = trace(scene, 100000);
   const EnergyBalance& e = r.energy;
   EXPECT_EQ(e.escaped_w, 0.0);
@@ -85,7 +85,7 @@ TEST_P(SensorClosedMesh, NoPathLeavesAWhiteShell) {
 TEST_P(SensorClosedMesh, MirrorShellEndsEveryPathAtTheDepthLimit) {
   const glm::dvec3 offset(GetParam(), -2.0 * GetParam(), 3.0 * GetParam());
   Fixture f;
-  const SensorScene scene = sphereAroundTheLight(f, Material{MaterialType::Mirror, 1.0}, offset);
+  const SensorScene scene = sphereAroundTheLight(f, Material{Mirror{1.0}}, offset);
   double previous_inside = 0.0;
   for (const std::uint32_t depth : {0u, 3u, 12u}) {
     SensorRunConfig cfg;

@@ -69,8 +69,8 @@ struct Room {
     };
     sensor_a = object(std::make_shared<const SensorObject>("a", spec(4, 4)), "sensor_a");
     sensor_b = object(std::make_shared<const SensorObject>("b", spec(2, 3)), "sensor_b");
-    floor = object(quad(3.0, "floor"), "floor", Material{MaterialType::Lambertian, 0.5});
-    white = object(quad(3.0, "white"), "white", Material{MaterialType::Lambertian, 0.9});
+    floor = object(quad(3.0, "floor"), "floor", Material{Lambertian{0.5}});
+    white = object(quad(3.0, "white"), "white", Material{Lambertian{0.9}});
     housing_a = object(quad(0.05, "housing_a", 0.3), "housing_a");
     housing_b = object(quad(0.05, "housing_b", -0.3), "housing_b");
     floor_node = graph.addInstance(kRootNode, floor, Affine::identity(), "floor");
@@ -296,8 +296,8 @@ TEST(SensorEdits, FileEditsBringTheirMaterialsAndMoveLightsAtNodes) {
   EXPECT_EQ(applyEditsUntil(*scene.document(), 2.0), 3u);
   const std::optional<NodeId> wall = scene.graph().find("/wall");
   ASSERT_TRUE(wall);
-  EXPECT_EQ(scene.materialOf(*wall).type, MaterialType::Mirror);
-  EXPECT_EQ(scene.materialOf(*wall).reflectance, 0.25);
+  ASSERT_TRUE(scene.materialOf(*wall).is<Mirror>());
+  EXPECT_EQ(scene.materialOf(*wall).as<Mirror>()->reflectance.value, 0.25);
   EXPECT_EQ(scene.lights()[0].position, glm::dvec3(0, 0, 3.5));
 }
 

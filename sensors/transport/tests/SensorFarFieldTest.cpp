@@ -222,7 +222,7 @@ TEST(SensorFarField, AGoniometricSourceReproducesItsTableAndItsFlux) {
 TEST(SensorFarField, ThreadsResumeAndTheStopRule) {
   const Light l = iesLight(std::make_shared<const IesProfile>(sourceTable()), {0, 0, 1});
   Fixture f;
-  f.add(quad(1.0, "floor"), Affine::identity(), "floor", Material{MaterialType::Lambertian, 0.7});
+  f.add(quad(1.0, "floor"), Affine::identity(), "floor", Material{Lambertian{0.7}});
   (void)f.graph.commit();
   const SensorScene scene(f.graph, {l}, f.materials, {}, {{"far", farField(6, 7), Affine::identity()}});
   SensorRunConfig cfg;

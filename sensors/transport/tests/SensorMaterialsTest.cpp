@@ -34,8 +34,7 @@ TEST(SensorMaterials, GlassSlabTransmitsTheClosedFormWithInternalReflectionsAndA
   // R_slab = R + (1-R)^2 R tau^2 / (1 - R^2 tau^2), the rest absorbed.
   const double n = 1.5, d = 0.5, alpha = -std::log(0.8) / d, tau = 0.8;
   Fixture f;
-  Material glass{MaterialType::Dielectric, 0.0, n};
-  glass.absorption = alpha;
+  const Material glass = Dielectric{n, alpha};
   f.add(buildChecked(makeBox({6.0, 6.0, d}, "slab")), Affine::identity(), "slab", glass);
   f.add(sensor(2.0, 2.0, 1, 1, false, "below"), translate(0, 0, -1.0), "below");            // records rays going down
   f.add(sensor(2.0, 2.0, 1, 1, false, "above"), facing({0, 0, -1}, {0, 0, 1.0}), "above");  // rays going up
@@ -79,20 +78,10 @@ SensorRunResults boxWithReflector(const Material& m, std::uint64_t rays) {
 }
 
 TEST(SensorMaterials, LambertianGaussianAndAbgReflectorsConserveEnergy) {
-  Material lambert{MaterialType::Lambertian, 1.0, 1.5};
-  Material gaussian{MaterialType::Mirror, 1.0, 1.5};
-  gaussian.scatter = ScatterModel::Gaussian;
-  gaussian.sigma = 0.4;
-  gaussian.scatter_fraction = 1.0;
-  Material abg{MaterialType::Mirror, 0.9, 1.5};
-  abg.scatter = ScatterModel::ABg;
-  abg.abg_a = 0.01;
-  abg.abg_b = 0.005;
-  abg.abg_g = 1.8;
-  Material rough_glass{MaterialType::Dielectric, 0.0, 1.5};
-  rough_glass.scatter = ScatterModel::Gaussian;
-  rough_glass.sigma = 0.2;
-  rough_glass.scatter_fraction = 0.7;
+  const Material lambert = Lambertian{1.0};
+  const Material gaussian = Mirror{1.0, {GaussianScatter{0.4, 1.0}}};
+  const Material abg = Mirror{0.9, {AbgScatter{0.01, 0.005, 1.8}}};  // the scene sets its scattered fraction
+  const Material rough_glass = Dielectric{1.5, 0.0, {GaussianScatter{0.2, 0.7}}};
   double reflected[2] = {0.0, 0.0};
   int k = 0;
   for (const Material& m : {lambert, gaussian, abg, rough_glass}) {
@@ -112,8 +101,8 @@ TEST(SensorMaterials, LambertianGaussianAndAbgReflectorsConserveEnergy) {
 
 // Chi-square of the radii |beta| of directions scattered about the normal (beta0 = 0) against the
 // lobe truncated to the unit disk, whose radial CDF is `cdf` (cdf(1) = 1).
-template <class Cdf>
-double lobeChiSquare(const Material& m, Cdf cdf, int bins, int samples) {
+template <class Lobe, class Cdf>
+double lobeChiSquare(const Lobe& m, Cdf cdf, int bins, int samples) {
   std::vector<int> count(static_cast<std::size_t>(bins), 0);
   const glm::dvec3 n(0.0, 0.0, 1.0);
   for (int i = 0; i < samples; ++i) {
@@ -136,23 +125,18 @@ double lobeChiSquare(const Material& m, Cdf cdf, int bins, int samples) {
 
 TEST(SensorMaterials, GaussianAndAbgLobesAreSampledExactly) {
   // 20 bins: 19 degrees of freedom, whose chi-square exceeds 43.8 with probability 0.001.
-  Material gaussian{MaterialType::Mirror, 1.0, 1.5};
-  gaussian.scatter = ScatterModel::Gaussian;
+  GaussianScatter gaussian;
   gaussian.sigma = 0.6;  // wide: the truncation to the unit disk matters
   const double s2 = gaussian.sigma * gaussian.sigma;
   const double chi_g = lobeChiSquare(
       gaussian, [s2](double r) { return (1.0 - std::exp(-r * r / s2)) / (1.0 - std::exp(-1.0 / s2)); }, 20, 100000);
   EXPECT_LT(chi_g, 43.8);
   std::printf("lobes: chi-square over 19 degrees of freedom, Gaussian %.1f", chi_g);
-  Material abg{MaterialType::Mirror, 1.0, 1.5};
-  abg.scatter = ScatterModel::ABg;
-  abg.abg_a = 0.05;
-  abg.abg_b = 0.01;
-  abg.abg_g = 1.5;
+  const AbgScatter abg{0.05, 0.01, 1.5};
   // The radial CDF of r / (B + r^g) on [0, 1], by Simpson's rule.
   auto integral = [&](double x) {
     const int n = 2000;
-    auto f = [&](double r) { return r / (abg.abg_b + std::pow(r, abg.abg_g)); };
+    auto f = [&](double r) { return r / (abg.b + std::pow(r, abg.g)); };
     double sum = f(0.0) + f(x);
     for (int i = 1; i < n; ++i) sum += (i % 2 ? 4.0 : 2.0) * f(x * i / n);
     return sum * x / (3.0 * n);
@@ -163,10 +147,10 @@ TEST(SensorMaterials, GaussianAndAbgLobesAreSampledExactly) {
   EXPECT_LT(chi_abg, 43.8);
   std::printf(", ABg %.1f\n", chi_abg);
   // The ABg total integrated scatter is 2 pi A times that integral.
-  EXPECT_NEAR(detail::abgTotalIntegratedScatter(0.05, 0.01, 1.5), 2.0 * std::numbers::pi * 0.05 * total, 1e-9);
+  EXPECT_NEAR(AbgScatter::totalIntegratedScatter(0.05, 0.01, 1.5), 2.0 * std::numbers::pi * 0.05 * total, 1e-9);
   // A lobe far wider than the disk is flat over it: never refused, directions uniform in beta
   // (the projected solid angle, a Lambertian), so |beta|^2 is uniform on [0, 1]: its mean is 1/2.
-  Material wide = gaussian;
+  GaussianScatter wide = gaussian;
   wide.sigma = 100.0;
   double mean_s2 = 0.0;
   for (int i = 0; i < 20000; ++i) {
@@ -177,7 +161,7 @@ TEST(SensorMaterials, GaussianAndAbgLobesAreSampledExactly) {
   }
   EXPECT_NEAR(mean_s2, 0.5, 4.5 * std::sqrt(1.0 / 12.0 / 20000.0));
   // A narrow lobe about an oblique specular direction stays around it (mean of beta = beta0).
-  Material narrow = gaussian;
+  GaussianScatter narrow = gaussian;
   narrow.sigma = 0.05;
   const glm::dvec3 spec = glm::normalize(glm::dvec3(0.5, 0.0, std::sqrt(0.75)));
   glm::dvec2 mean(0.0);
@@ -194,9 +178,7 @@ TEST(SensorMaterials, CoatingsSplitEachBandByTheirFractions) {
   // A beam onto a coating: band 0 reflects 0.3 and transmits 0.5, band 1 reflects 0.1 and
   // transmits 0.9 (absorbs nothing).
   Fixture f;
-  Material coat{MaterialType::Coating, 0.2, 1.5};
-  coat.band_reflectance = {0.3, 0.1};
-  coat.band_transmittance = {0.5, 0.9};
+  const Material coat = Coating{{0.2, {0.3, 0.1}}, {0.7, {0.5, 0.9}}};
   f.add(quad(2.0, "coating"), Affine::identity(), "coating", coat);
   f.add(sensor(2.0, 2.0, 1, 1, false, "below"), translate(0, 0, -0.5), "below");
   f.add(sensor(2.0, 2.0, 1, 1, false, "above"), facing({0, 0, -1}, {0, 0, 0.5}), "above");
@@ -224,7 +206,7 @@ TEST(SensorMaterials, BallLensFocusesAtTheParaxialBackFocalDistance) {
   const double radius = 1.0, n = 1.5, f_centre = n * radius / (2.0 * (n - 1.0));  // 1.5
   Fixture fx;
   fx.add(std::make_shared<const example::AnalyticSphere>("ball", radius), Affine::identity(), "ball",
-         Material{MaterialType::Dielectric, 0.0, n});
+         Material{Dielectric{n}});
   std::vector<double> zs;
   for (int k = -6; k <= 6; ++k) {
     const double z = -f_centre + 0.01 * k;  // the beam travels along -z
@@ -279,9 +261,9 @@ TEST(SensorMaterials, InstancesMayHaveMaterialsOfTheirOwn) {
     "lights": [{"type": "point", "position": [0, 0, 1], "power": 1}]})");
   const SensorScene a = SensorScene::load(v1);
   const SceneDocument& doc = *a.document();
-  EXPECT_EQ(a.materialOf(doc.instances[0]).type, MaterialType::Lambertian);
-  EXPECT_EQ(a.materialOf(doc.instances[1]).type, MaterialType::Mirror);
-  EXPECT_EQ(a.materialOf(doc.instances[1]).scatter, ScatterModel::Gaussian);
+  EXPECT_TRUE(a.materialOf(doc.instances[0]).is<Lambertian>());
+  ASSERT_TRUE(a.materialOf(doc.instances[1]).is<Mirror>());
+  EXPECT_TRUE(std::holds_alternative<GaussianScatter>(a.materialOf(doc.instances[1]).as<Mirror>()->rough.model));
   const auto own = writeTestFile("own.json", R"({"format": "duplex-scene-v1",
     "objects": [{"name": "part", "box": {"size": 1}, "material": {"type": "lambertian", "reflectance": 0.5}}],
     "nodes": [{"instance": "plain", "object": "part"},
@@ -292,10 +274,39 @@ TEST(SensorMaterials, InstancesMayHaveMaterialsOfTheirOwn) {
     "lights": [{"type": "point", "position": [0, 0, 3], "power": 1}]})");
   const SensorScene b = SensorScene::load(own);
   const SceneGraph& g = b.graph();
-  EXPECT_EQ(b.materialOf(*g.find("/plain")).type, MaterialType::Lambertian);
-  EXPECT_EQ(b.materialOf(*g.find("/g/coated")).type, MaterialType::Coating);
-  EXPECT_EQ(b.materialOf(*g.find("/g/coated")).transmittance, 0.7);
-  EXPECT_EQ(b.materialOf(*g.find("/glass")).absorption, 0.2);
+  EXPECT_TRUE(b.materialOf(*g.find("/plain")).is<Lambertian>());
+  ASSERT_TRUE(b.materialOf(*g.find("/g/coated")).is<Coating>());
+  EXPECT_EQ(b.materialOf(*g.find("/g/coated")).as<Coating>()->transmit.value, 0.7);
+  ASSERT_TRUE(b.materialOf(*g.find("/glass")).is<Dielectric>());
+  EXPECT_EQ(b.materialOf(*g.find("/glass")).as<Dielectric>()->absorption.value, 0.2);
+}
+
+TEST(SensorMaterials, ADiffuserSplitsABeamIntoLambertianReflectionAndTransmission) {
+  // A narrow beam straight down onto a diffuser sheet at z = 0: the transmitted part leaves
+  // cosine-distributed downwards, so a square sensor of half-width a at depth h under the spot
+  // receives P t F, F the configuration factor from a point to a parallel square (exact); the
+  // reflected part escapes upwards with the transmitted part that misses the sensor, the rest is
+  // absorbed.
+  const double r = 0.3, t = 0.5, a = 0.5, h = 1.0, power = 2.0;
+  const std::uint64_t rays = 200000;
+  Fixture f;
+  f.add(quad(50.0, "sheet"), Affine::identity(), "sheet", Material{Diffuser{r, t}});
+  f.add(sensor(2.0 * a, 2.0 * a, 1, 1, false, "below"), translate(0, 0, -h), "below");  // records rays going down
+  const SensorScene scene = f.scene({beamLight({0, 0, 1.0}, {0, 0, -1}, 1e-4, power)});
+  SensorRunConfig cfg;
+  cfg.seed = 3;
+  SensorRun run(scene, cfg);
+  (void)run.runUntil(rays);
+  const SensorRunResults res = run.results();
+  const SensorResult& below = res.sensors[0];
+  const double expected = power * t * pointToParallelRectangle(-a, a, -a, a, h);
+  std::printf("diffuser: %.5f +- %.5f W below (exact %.5f)\n", below.total_flux_w, below.total_flux_stderr_w, expected);
+  EXPECT_LT(std::abs(below.total_flux_w - expected), 4.0 * below.total_flux_stderr_w + 5e-3 * expected);
+  // Absorbed: each ray is absorbed with probability 1 - r - t, its power P (binomial error).
+  const double p_abs = 1.0 - r - t, se_abs = power * std::sqrt(p_abs * (1.0 - p_abs) / static_cast<double>(rays));
+  EXPECT_LT(std::abs(res.energy.absorbed_w - power * p_abs), 4.0 * se_abs);
+  EXPECT_NEAR(res.energy.absorbed_w + res.energy.escaped_w, power, 1e-9);
+  EXPECT_EQ(res.energy.failed_rays, 0u);
 }
 
 void expectError(const std::string& name, const std::string& body, const std::vector<std::string>& needles) {
@@ -312,8 +323,9 @@ TEST(SensorMaterials, PerBandValuesMayNameTheirBands) {
     "lights": [{"type": "point", "position": [0, 0, 2], "power": 1}]})");
   const SensorScene scene = SensorScene::load(path);
   const Material& m = scene.materialOf(*scene.graph().find("/f"));
-  EXPECT_EQ(m.band_reflectance, (std::vector<double>{0.05, 0.6}));
-  EXPECT_EQ(m.band_transmittance, (std::vector<double>{0.9, 0.3}));
+  ASSERT_TRUE(m.is<Coating>());
+  EXPECT_EQ(m.as<Coating>()->reflect.bands, (std::vector<double>{0.05, 0.6}));
+  EXPECT_EQ(m.as<Coating>()->transmit.bands, (std::vector<double>{0.9, 0.3}));
 }
 
 TEST(SensorMaterials, MalformedMaterialsNameTheFileAndTheObject) {
@@ -337,6 +349,8 @@ TEST(SensorMaterials, MalformedMaterialsNameTheFileAndTheObject) {
   expectError("lambert_scatter.json", object(R"({"type": "lambertian", "reflectance": 1, "scatter": {}})"),
               {"/objects/0/material", "scatter"});
   expectError("coating_sum.json", object(R"({"type": "coating", "reflect": 0.6, "transmit": 0.6})"),
+              {"/objects/0/material", "reflect + transmit"});
+  expectError("diffuser_sum.json", object(R"({"type": "diffuser", "reflect": 0.6, "transmit": 0.5})"),
               {"/objects/0/material", "reflect + transmit"});
   expectError("coating_absorb.json", object(R"({"type": "coating", "reflect": 0.2, "transmit": 0.3, "absorb": 0.4})"),
               {"/objects/0/material/absorb", "must be 1"});

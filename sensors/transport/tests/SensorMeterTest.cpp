@@ -12,8 +12,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
+#include <vector>
 
 namespace duplex {
 namespace {
@@ -83,7 +86,7 @@ TEST(SensorMeter, LambertianFloorReflectionMatchesItsRadialIntegral) {
   // u = r^2 (the square's corners beyond r = 200 add less than 1e-9 of it).
   Fixture f;
   const double rho = 0.5, H = 2.0, h = 1.0, power = 100.0;
-  f.add(quad(200.0, "floor"), Affine::identity(), "floor", Material{MaterialType::Lambertian, rho});
+  f.add(quad(200.0, "floor"), Affine::identity(), "floor", Material{Lambertian{rho}});
   SensorScene scene = f.scene({pointLight({0, 0, H}, power)});
   scene.setMeters({{"up", {{0, 0, h}, {0.7, 0, h}}, {{0, 0, -1}, {0, 0, 1}}}});
   SensorRun run(scene);
@@ -120,7 +123,7 @@ TEST(SensorMeter, AnOccluderHidesTheLight) {
 
 TEST(SensorMeter, RefusesWhatItCannotConnectThrough) {
   Fixture f;
-  f.add(quad(1.0, "mirror"), Affine::identity(), "mirror", Material{MaterialType::Mirror, 0.9});
+  f.add(quad(1.0, "mirror"), Affine::identity(), "mirror", Material{Mirror{0.9}});
   SensorScene scene = f.scene({pointLight({0, 0, 2}, 1.0)});
   scene.setMeters({{"m", {{0, 0, 1}}, {{0, 0, -1}}}});
   try {
@@ -214,6 +217,87 @@ TEST(SensorMeter, DiskLightMatchesThePointToDiskFactor) {
   expectLoadError(writeTestFile("disk_size.json", R"({"format": "scene-json-v1", "objects": [], "instances": [],
     "lights": [{"type": "disk", "size": [1, 1], "power": 1}]})"),
                   {"/lights/0", "size"});
+}
+
+// The configuration factor from a point x of unit normal n to a planar polygon (world vertices v),
+// by Lambert's contour integral: F = |sum_i angle(r_i, r_i+1) n . (r_i x r_i+1) / |r_i x r_i+1|| / 2 pi,
+// r_i = v_i - x (the polygon wholly in front of the point).
+double pointToPolygon(const glm::dvec3& x, const glm::dvec3& n, const std::vector<glm::dvec3>& v) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    const glm::dvec3 a = v[i] - x, b = v[(i + 1) % v.size()] - x, c = glm::cross(a, b);
+    const double angle = std::acos(std::clamp(glm::dot(glm::normalize(a), glm::normalize(b)), -1.0, 1.0));
+    sum += angle * glm::dot(n, c) / glm::length(c);
+  }
+  return std::abs(sum) / (2.0 * kPi);
+}
+
+// The L-shaped (non-convex) hexagon of the polygon and mesh lights, in the light's local plane.
+const std::vector<glm::dvec2> kLShape = {{-0.5, -0.5}, {0.5, -0.5}, {0.5, -0.1},
+                                         {-0.1, -0.1}, {-0.1, 0.5}, {-0.5, 0.5}};
+
+// Runs `scene` (one light of luminance `l`, the L shape placed by (x, y) -> (x, -y, 1), and one
+// meter) and checks every meter point against pi L F, F by the contour integral, within 4 SE + 0.5%.
+void expectLShapeIlluminance(const SensorScene& scene, double l, const char* what) {
+  std::vector<glm::dvec3> world;
+  for (const glm::dvec2& p : kLShape) world.emplace_back(p.x, -p.y, 1.0);
+  SensorRun run(scene);
+  (void)run.runUntil(400000);
+  const MeterResult m = run.results().meters[0];
+  for (std::size_t k = 0; k < m.points.size(); ++k) {
+    const double expected = kPi * l * pointToPolygon(m.points[k], {0, 0, 1}, world);
+    std::printf("%s, point %zu: %.3f +- %.3f lx (exact %.3f)\n", what, k, m.illuminance_lx[k],
+                m.illuminance_stderr_lx[k], expected);
+    EXPECT_LT(std::abs(m.illuminance_lx[k] - expected), 4.0 * m.illuminance_stderr_lx[k] + 5e-3 * expected)
+        << what << ", point " << k;
+  }
+}
+
+TEST(SensorMeter, PolygonLightMatchesLambertsContourIntegral) {
+  // An L-shaped (non-convex) hexagon of 1000 cd/m^2 facing down 1 m above the floor (the transform
+  // maps local (x, y) to world (x, -y, 1)): E = pi L F at points under it, under its notch and
+  // beside it, F by the contour integral; its lumens are pi L A.
+  const double l = 1000.0, area = 1.0 - 0.6 * 0.6;
+  const SensorScene scene = SensorScene::load(writeTestFile("polygon_light.json", R"({"format": "scene-json-v1",
+    "objects": [], "instances": [], "lights": [{"type": "polygon", "luminance": 1000,
+      "vertices": [[-0.5, -0.5], [0.5, -0.5], [0.5, -0.1], [-0.1, -0.1], [-0.1, 0.5], [-0.5, 0.5]],
+      "transform": [1,0,0,0, 0,-1,0,0, 0,0,-1,1]}],
+    "meters": [{"name": "m", "points": [[0, 0, 0], [-0.3, 0.3, 0], [0.3, -0.3, 0], [1.2, 0.4, 0]],
+                "normal": [0, 0, 1]}]})"));
+  EXPECT_NEAR(scene.lights()[0].power_w, kPi * l * area, 1e-9);
+  expectLShapeIlluminance(scene, l, "polygon light");
+  // The contour integral of the square agrees with the rectangle's closed form (the reference's check).
+  EXPECT_NEAR(pointToPolygon({0, 0, 0}, {0, 0, 1}, {{-0.5, -0.5, 1}, {0.5, -0.5, 1}, {0.5, 0.5, 1}, {-0.5, 0.5, 1}}),
+              4 * pointToParallelRectangleCorner(0.5, 0.5, 1.0), 1e-12);
+  const std::string head = R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [)";
+  expectLoadError(writeTestFile("bowtie.json", head + R"({"type": "polygon", "power": 1,
+    "vertices": [[0, 0], [1, 1], [1, 0], [0, 1]]}]})"),
+                  {"/lights/0/vertices", "not a simple polygon"});
+  expectLoadError(
+      writeTestFile("two.json", head + R"({"type": "polygon", "power": 1, "vertices": [[0, 0], [1, 1]]}]})"),
+      {"/lights/0/vertices", "at least 3"});
+}
+
+TEST(SensorMeter, EmissiveMeshEqualsThePolygonItSplits) {
+  // The L-shaped hexagon of the polygon test as a mesh object of four triangles (two per
+  // rectangle of the L, counter-clockwise: their front faces towards local +z, placed facing
+  // down), not instanced: the same illuminance, by the same contour integral, and lumens pi L A.
+  const SensorScene scene = SensorScene::load(writeTestFile("mesh_light.json", R"({"format": "scene-json-v1",
+    "objects": [{"name": "lamp", "mesh": {
+      "positions": [-0.5,-0.5,0, 0.5,-0.5,0, 0.5,-0.1,0, -0.5,-0.1,0, -0.1,-0.1,0, -0.1,0.5,0, -0.5,0.5,0],
+      "indices": [0,1,2, 0,2,3, 3,4,5, 3,5,6]}}],
+    "instances": [], "lights": [{"type": "mesh", "object": "lamp", "luminance": 1000,
+      "transform": [1,0,0,0, 0,-1,0,0, 0,0,-1,1]}],
+    "meters": [{"name": "m", "points": [[0, 0, 0], [-0.3, 0.3, 0], [0.3, -0.3, 0], [1.2, 0.4, 0]],
+                "normal": [0, 0, 1]}]})"));
+  const double l = 1000.0, area = 1.0 - 0.6 * 0.6;
+  EXPECT_NEAR(scene.lights()[0].power_w, kPi * l * area, 1e-6 * kPi * l * area);  // float vertices
+  expectLShapeIlluminance(scene, l, "emissive mesh");
+  const std::string head = R"({"format": "scene-json-v1", "objects": [{"name": "tri",
+    "mesh": {"positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}}],
+    "instances": [], "lights": [)";
+  expectLoadError(writeTestFile("mesh_missing.json", head + R"({"type": "mesh", "object": "lamp", "power": 1}]})"),
+                  {"/lights/0/object", "no object \"lamp\""});
 }
 
 }  // namespace

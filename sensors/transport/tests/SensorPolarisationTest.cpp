@@ -145,8 +145,7 @@ TEST(Polarisation, PaneFollowsTheTwoPolarisationSlabFormulasAtEveryAngle) {
   for (const double alpha : {0.0, 20.0}) {  // lossless; absorbing (exp(-0.12) per normal pass)
     for (const double deg : {0.0, 30.0, 56.66, 70.0, 80.0, 89.0}) {
       const double th = deg * kDeg;
-      Material glass{MaterialType::Dielectric, 0.0, n};
-      glass.absorption = alpha;
+      const Material glass = Dielectric{n, alpha};
       const Measured got = slabRun({{0, 0, 0}, {0, 0, 1}, {1, 0, 0}}, d, glass, th, false, {}, 60000, 7);
       const SlabResponse scalar = slabScalarFresnel(n, d, alpha, th);
       std::printf("(a scalar Fresnel calculation: T %.5f, R %.5f)\n", scalar.t, scalar.r);

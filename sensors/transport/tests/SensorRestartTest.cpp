@@ -28,7 +28,7 @@ TEST(SensorRestart, PaneTransmitsTheSameFarFromTheOrigin) {
   // A 6 mm pane of n = 1.52 (faces normal to z) at 60 degrees, moved along x: authored there and
   // placed by a translation.
   const double n = 1.52, d = 0.006, th = 60.0 * kDeg;
-  const Material glass{MaterialType::Dielectric, 0.0, n};
+  const Material glass = Dielectric{n};
   const SlabResponse ref = slabUnpolarised(n, d, 0.0, th);
   for (const double x : {0.0, 1e3, 1e5}) {
     const SlabFrame fr{{x, 0.0, 0.0}, {0, 0, 1}, {1, 0, 0}};
@@ -44,7 +44,7 @@ TEST(SensorRestart, PaneTransmitsTheSameFarFromTheOrigin) {
 TEST(SensorRestart, ThinLayersAlongTheirDistanceToTheOrigin) {
   // Layers whose thickness is 1e-4 of their distance to the origin, the distance along their normal.
   const double n = 1.52, th = 60.0 * kDeg;
-  const Material glass{MaterialType::Dielectric, 0.0, n};
+  const Material glass = Dielectric{n};
   for (const double dist : {1e3, 1e5}) {
     const double d = 1e-4 * dist;
     const SlabResponse ref = slabUnpolarised(n, d, 0.0, th);
@@ -81,18 +81,19 @@ void expectReflectorWithSensorAbove(const SlabFrame& fr, const Material& m, doub
   EXPECT_EQ(r.energy.failed_rays, 0u);
   const SensorResult& s = r.sensors[0];
   // The lit spot is the plate's centre, right below the sensor's.
-  const double factor = m.type == MaterialType::Lambertian ? pointToParallelRectangle(-a, a, -a, a, h) : 1.0;
-  const double expected = 1.0 + m.reflectance * factor;
-  const std::string what = std::string(m.type == MaterialType::Lambertian ? "lambertian" : "mirror") + " at " +
-                           std::to_string(glm::length(fr.centre)) + (placed ? " placed" : " authored") + ", sensor " +
-                           std::to_string(h) + " above";
+  const double factor = m.is<Lambertian>() ? pointToParallelRectangle(-a, a, -a, a, h) : 1.0;
+  const double reflectance =
+      m.is<Lambertian>() ? m.as<Lambertian>()->reflectance.value : m.as<Mirror>()->reflectance.value;
+  const double expected = 1.0 + reflectance * factor;
+  const std::string what = std::string(m.name()) + " at " + std::to_string(glm::length(fr.centre)) +
+                           (placed ? " placed" : " authored") + ", sensor " + std::to_string(h) + " above";
   std::printf("%s: %.5f +- %.5f (exact %.5f)\n", what.c_str(), s.total_flux_w, s.total_flux_stderr_w, expected);
   EXPECT_LT(std::abs(s.total_flux_w - expected), 4.0 * s.total_flux_stderr_w + 2e-3 * expected) << what;
 }
 
 TEST(SensorRestart, ReflectorsWithASensorJustAboveFarFromTheOrigin) {
-  const Material lambert{MaterialType::Lambertian, 0.6};
-  const Material mirror{MaterialType::Mirror, 0.8};
+  const Material lambert = Lambertian{0.6};
+  const Material mirror = Mirror{0.8};
   for (const bool placed : {false, true}) {
     // Normal across the displacement: a sensor 1 mm above a plate 100 km away.
     const SlabFrame across{{1e5, 0.0, 0.0}, {0, 0, 1}, {1, 0, 0}};
@@ -145,7 +146,7 @@ TEST(SensorRestart, RebuiltPointIsTheHitOnTheTriangle) {
   Fixture f;
   Affine placed = facing(glm::normalize(glm::dvec3(0.3, -0.5, 0.8)), {120.0, -40.0, 7.0});
   placed.linear *= 2.5;
-  f.add(boxAt({1.0, 2.0, 3.0}, {0.1, 0.2, -0.3}, "box"), placed, "box", Material{MaterialType::Mirror, 1.0});
+  f.add(boxAt({1.0, 2.0, 3.0}, {0.1, 0.2, -0.3}, "box"), placed, "box", Material{Mirror{1.0}});
   f.add(sensor(1.0, 1.0, 1, 1), translate(0, 0, -50), "s");
   const SensorScene scene = f.scene({pointLight({0, 0, 0}, 1.0)});
   const TopLevel& top = scene.tracer().topLevel();

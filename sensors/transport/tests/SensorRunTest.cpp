@@ -112,7 +112,7 @@ TEST(SensorRun, MirrorMakesAnImageSource) {
   // Point source at height 1 over a mirror (z = 0, reflectance 0.8); a one-sided sensor facing
   // down at height 2 sees the source (distance 1) and its image at z = -1 (distance 3).
   Fixture f;
-  Material mirror{MaterialType::Mirror, 0.8, 1.5};
+  Material mirror = Mirror{0.8};
   f.add(quad(50.0, "mirror"), Affine::identity(), "mirror", mirror);
   f.add(sensor(0.4, 0.4, 1, 1, /*two_sided=*/false, "up"), facing({0, 0, -1}, {0, 0, 2}), "up");
   SensorScene scene = f.scene({pointLight({0, 0, 1}, 4.0 * kPi)});
@@ -141,7 +141,7 @@ TEST(SensorRun, SensorCoplanarWithAMirrorCountsEachArrivingRayOnce) {
     (void)r.runUntil(200000);
     return r.results();
   };
-  const SensorRunResults absorbed = run(Material{}), mirrored = run(Material{MaterialType::Mirror, 1.0});
+  const SensorRunResults absorbed = run(Material{}), mirrored = run(Material{Mirror{1.0}});
   const SensorResult &a = absorbed.sensors[0], &m = mirrored.sensors[0];
   EXPECT_EQ(m.flux_w, a.flux_w);
   EXPECT_EQ(m.ray_count, a.ray_count);
@@ -294,7 +294,7 @@ TEST(SensorRun, DielectricReflectsTheFresnelFraction) {
   // light: 0.04 at normal incidence, 0.0892 at 60 degrees, 0.253 at 75.
   for (const double deg : {0.0, 30.0, 45.0, 60.0, 75.0}) {
     Fixture f;
-    f.add(quad(500.0, "glass"), Affine::identity(), "glass", Material{MaterialType::Dielectric, 0.0, 1.5});
+    f.add(quad(500.0, "glass"), Affine::identity(), "glass", Material{Dielectric{1.5}});
     f.add(sensor(1000.0, 1000.0, 1, 1, /*two_sided=*/false, "sky"), facing({0, 0, -1}, {0, 0, 1}), "sky");
     const double th = deg * kPi / 180.0;
     Light beam;
@@ -372,7 +372,7 @@ SensorScene fogUnderCeiling(Fixture& f) {
   slab.lo = glm::vec3(-0.9f, -0.9f, 0.25f);
   slab.hi = glm::vec3(0.9f, 0.9f, 0.75f);
   f.add(std::make_shared<const test::SlabMedium>(0.8, slab), Affine::identity(), "fog");
-  f.add(quad(0.8, "ceiling"), translate(0, 0, 0.9), "ceiling", Material{MaterialType::Lambertian, 0.9});
+  f.add(quad(0.8, "ceiling"), translate(0, 0, 0.9), "ceiling", Material{Lambertian{0.9}});
   closeBox(f);
   return f.scene({pointLight({0, 0, 0}, 2.0)});
 }
@@ -452,9 +452,9 @@ TEST(SensorRun, WithAnAbsorberInsideMissingPowerEqualsAbsorbedPower) {
   Fixture f;
   closeBox(f);
   f.add(quad(0.5, "absorber"), translate(0, 0, 0.5), "absorber");  // absorber (default material)
-  Material white{MaterialType::Lambertian, 0.7, 1.5};
+  Material white = Lambertian{0.7};
   f.add(quad(0.4, "white"), facing({1, 0, 0}, {-0.6, 0, 0}), "white", white);
-  Material glass{MaterialType::Dielectric, 0.0, 1.5};
+  Material glass = Dielectric{1.5};
   f.add(quad(0.3, "glass"), facing({0, 1, 0}, {0, -0.5, 0}), "glass", glass);
   SensorScene scene = f.scene({pointLight({0, 0, 0}, 2.0)});
   SensorRun run(scene);
@@ -527,7 +527,7 @@ SensorRunResults runWith(const SensorScene& scene, unsigned threads, std::uint32
 
 SensorScene reflectingBox(Fixture& f) {
   closeBox(f);
-  Material white{MaterialType::Lambertian, 0.9, 1.5};
+  Material white = Lambertian{0.9};
   f.add(quad(0.5, "white"), translate(0, 0, -0.5), "white", white);
   return f.scene({pointLight({0, 0, 0.2}, 1.0)});
 }
@@ -759,7 +759,7 @@ TEST(SensorSceneFile, ReadsLightsSensorsAndMaterials) {
   EXPECT_EQ(scene.sensors()[0].object->binCount(), 8u);
   EXPECT_EQ(scene.sensors()[1].area_scale, 4.0);
   EXPECT_EQ(scene.binCount(), 17u);
-  EXPECT_EQ(scene.materialOf(scene.document()->instances[0]).type, MaterialType::Absorber);
+  EXPECT_TRUE(scene.materialOf(scene.document()->instances[0]).is<Absorber>());
 }
 
 // scene-json-v1 ignores unknown keys (tools outside the project may add their own), also inside
@@ -799,8 +799,8 @@ TEST(SensorSceneFile, OwnFormatInstancesSensorObjectsAndReadsMaterials) {
   EXPECT_EQ(scene.sensors()[0].name, "a");
   EXPECT_EQ(scene.sensors()[1].name, "b");
   const Material& m = scene.materialOf(scene.document()->instances[0]);
-  EXPECT_EQ(m.type, MaterialType::Lambertian);
-  EXPECT_EQ(m.reflectance, 0.5);
+  ASSERT_TRUE(m.is<Lambertian>());
+  EXPECT_EQ(m.as<Lambertian>()->reflectance.value, 0.5);
 }
 
 // An LM-63 file next to the scenes: rotationally symmetric, 100 cd at the nadir, 50 at the horizon.
@@ -865,6 +865,22 @@ TEST(SensorSceneFile, MalformedEntriesNameTheFileAndPointer) {
       R"("lights": [{"type": "ies", "file": "lamp.ies", "transform": [2,0,0,0, 0,1,0,0, 0,0,1,0], "power": 1}])",
       "rotation");
   expectFileError("sensors_not_array.json", R"("sensors": {"name": "s"})", "/sensors");
+}
+
+TEST(SensorRun, FingerprintTellsADiskLightFromItsSquare) {
+  // A disk light emits from the disk inscribed in its width x width square: a state traced with
+  // one must not resume with the other.
+  auto fingerprint = [](bool disk) {
+    Fixture f;
+    f.add(quad(1.0, "floor"), translate(0, 0, -1), "floor", Material{Lambertian{0.5}});
+    f.add(sensor(1.0, 1.0, 2, 2), translate(0, 0, 0.5), "sensor");
+    Light l = areaLight(0.4, 0.4, Affine::identity(), 1.0);
+    l.disk = disk;
+    const SensorScene scene = f.scene({l});
+    return SensorRun(scene, SensorRunConfig{}).fingerprint();
+  };
+  EXPECT_NE(fingerprint(false), fingerprint(true));
+  EXPECT_EQ(fingerprint(true), fingerprint(true));
 }
 
 }  // namespace

@@ -97,13 +97,7 @@ std::shared_ptr<const VolumeObject> fogBlock(float sigma, double voxel, int lo, 
   return makeVolumeObject(grid, VolumeKind::Fog, name);
 }
 
-Material medium(double albedo, double g) {
-  Material m;
-  m.type = MaterialType::Medium;
-  m.reflectance = albedo;
-  m.g = g;
-  return m;
-}
+Material medium(double albedo, double g) { return Medium{albedo, g}; }
 
 // Escape probability from the cube [-h, h]^3 of density sigma for a source at p, by an independent
 // random walk: exponential distances, the phase function by rejection from its density.
@@ -343,12 +337,9 @@ TEST(SensorScattering, ResumeRefusesAStateWhoseFogGridChanged) {
 TEST(SensorScattering, EveryFeatureOnIsBitIdenticalForAnyThreadCount) {
   Fixture f;
   f.add(fogBlock(3.0f, 0.05, -10, 10, -10, 10, "fog"), Affine::identity(), "fog", [] {
-    Material m = medium(0.8, 0.4);
-    m.band_reflectance = {0.95, 0.5};
-    return m;
+    return Material{Medium{{0.8, {0.95, 0.5}}, 0.4}};
   }());
-  Material floor{MaterialType::Lambertian, 0.5};
-  floor.band_reflectance = {0.9, 0.3};
+  const Material floor = Lambertian{{0.5, {0.9, 0.3}}};
   f.add(quad(1.0, "floor"), translate(0, 0, -0.7), "floor", floor);
   SensorSpec angles;
   angles.width = angles.height = 1.5;
@@ -388,7 +379,7 @@ TEST(SensorScattering, ScenesThatCannotScatterAreRefused) {
   }
   {  // a surface material on a fog
     Fixture f;
-    f.add(fogBlock(1.0f, 0.1, -2, 2, -2, 2, "fog"), Affine::identity(), "fog", Material{MaterialType::Lambertian, 0.5});
+    f.add(fogBlock(1.0f, 0.1, -2, 2, -2, 2, "fog"), Affine::identity(), "fog", Material{Lambertian{0.5}});
     EXPECT_THROW((void)f.scene({pointLight({0, 0, 1}, 1.0)}), InvalidArgument);
   }
   {  // a scattering fog beside a medium that cannot sample free flights
@@ -436,8 +427,10 @@ TEST(SensorScattering, SceneFilesDeclareScatteringFogs) {
     const SensorScene scene = SensorScene::load(write(R"({"type": "medium", "albedo": 0.9, "g": 0.25})"));
     ASSERT_TRUE(scene.scatters());
     ASSERT_EQ(scene.scatteringMedia().size(), 1u);
-    EXPECT_EQ(scene.scatteringMedia()[0].material.reflectance, 0.9);
-    EXPECT_EQ(scene.scatteringMedia()[0].material.g, 0.25);
+    const Medium* medium = scene.scatteringMedia()[0].material.as<Medium>();
+    ASSERT_NE(medium, nullptr);
+    EXPECT_EQ(medium->albedo.value, 0.9);
+    EXPECT_EQ(medium->g, 0.25);
   }
   auto error = [&](const std::string& material) {
     try {

@@ -62,7 +62,7 @@ SensorRunResults run(const SensorScene& scene, std::uint64_t rays, unsigned thre
 }
 
 TEST(SensorSpectral, EqualReflectanceBandsSplitTheSingleBandRun) {
-  const Material white{MaterialType::Lambertian, 0.8};
+  const Material white = Lambertian{0.8};
   Fixture f1, f3;
   const SensorScene single = diffuseBox(f1, {}, white);
   const SensorScene spectral = diffuseBox(f3, {"b", "g", "r"}, white);
@@ -109,9 +109,8 @@ SensorScene mirrorScene(Fixture& f, Material mirror) {
 }
 
 TEST(SensorSpectral, ABandDependentMirrorRemovesExactlyItsBand) {
-  Material grey{MaterialType::Mirror, 1.0};
-  Material magenta{MaterialType::Mirror, 1.0};
-  magenta.band_reflectance = {1.0, 0.0, 1.0};
+  const Material grey = Mirror{1.0};
+  const Material magenta = Mirror{{1.0, {1.0, 0.0, 1.0}}};
   Fixture f1, f2;
   const SensorScene white_scene = mirrorScene(f1, grey), magenta_scene = mirrorScene(f2, magenta);
   const SensorRunResults w = run(white_scene, 60000), m = run(magenta_scene, 60000);
@@ -131,7 +130,7 @@ TEST(SensorSpectral, ABandDependentMirrorRemovesExactlyItsBand) {
 }
 
 TEST(SensorSpectral, BitIdenticalForAnyThreadCountAndResumable) {
-  const Material white{MaterialType::Lambertian, 0.8};
+  const Material white = Lambertian{0.8};
   Fixture f;
   const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, white);
   const SensorRunResults one = run(scene, 70000, 1);
@@ -159,7 +158,7 @@ TEST(SensorSpectral, BitIdenticalForAnyThreadCountAndResumable) {
 // another reflectance, per-band albedo, light position or sensor placement must be refused (it
 // would otherwise be silently mixed into the continued run).
 TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
-  const Material white{MaterialType::Lambertian, 0.8};
+  const Material white = Lambertian{0.8};
   const std::filesystem::path state = tempState("changed");
   SensorRunConfig cfg;
   cfg.seed = 21;
@@ -181,17 +180,16 @@ TEST(SensorSpectral, ResumeRefusesAStateOfAChangedScene) {
   };
   {
     Fixture f;  // another reflectance
-    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Lambertian, 0.5})));
+    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{Lambertian{0.5}})));
   }
   {
     Fixture f;  // the same mean, other per-band values
-    Material m = white;
-    m.band_reflectance = {0.8, 0.8, 0.5};
+    const Material m = Lambertian{{0.8, {0.8, 0.8, 0.5}}};
     EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, m)));
   }
   {
     Fixture f;  // a mirror instead of the Lambertian floor
-    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Mirror, 0.8})));
+    EXPECT_TRUE(refused(diffuseBox(f, {"b", "g", "r"}, Material{Mirror{0.8}})));
   }
   // diffuseBox with the floor at height z and the blue light at p (and the floor mesh of half size
   // `half`, under the same object name).
@@ -217,7 +215,7 @@ TEST(SensorSpectral, DamagedRunStatesAreRefusedAndSavesAreAtomic) {
   SensorRunConfig cfg;
   cfg.seed = 5;
   Fixture f;
-  const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, Material{MaterialType::Lambertian, 0.8});
+  const SensorScene scene = diffuseBox(f, {"b", "g", "r"}, Material{Lambertian{0.8}});
   const SensorRunResults saved = savedRun(scene, cfg, 3000, state);
   savedRun(scene, cfg, 3000, state);  // again, over an existing state
   EXPECT_FALSE(std::filesystem::exists(std::filesystem::path(state) += ".tmp"));
@@ -286,8 +284,7 @@ TEST(SensorSpectral, BandCountsMustAgree) {
   }
   {
     Fixture f;
-    Material m{MaterialType::Lambertian, 0.5};
-    m.band_reflectance = {0.5, 0.5};
+    const Material m = Lambertian{{0.5, {0.5, 0.5}}};
     f.add(quad(1.0, "wall"), Affine::identity(), "wall", m);
     EXPECT_THROW((void)f.scene({pointLight({0, 0, 1}, 1.0)}, {"a", "b", "c"}), InvalidArgument);
   }
@@ -316,16 +313,13 @@ TEST(SensorSpectral, MaterialsMadeInCodeAreCheckedAsFilesAre) {
       EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
     }
   };
-  refused(Material{MaterialType::Lambertian, 1.5}, "reflectance");
-  refused(Material{MaterialType::Mirror, std::nan("")}, "reflectance");
-  refused(Material{MaterialType::Lambertian, -0.1}, "reflectance");
-  Material glass{MaterialType::Dielectric, 0.0};
-  glass.ior = std::nan("");
-  refused(glass, "index of refraction");
-  glass.ior = -1.5;
-  refused(glass, "index of refraction");
+  refused(Material{Lambertian{1.5}}, "reflectance");
+  refused(Material{Mirror{std::nan("")}}, "reflectance");
+  refused(Material{Lambertian{-0.1}}, "reflectance");
+  refused(Material{Dielectric{std::nan("")}}, "index of refraction");
+  refused(Material{Dielectric{-1.5}}, "index of refraction");
   Fixture ok;
-  ok.add(quad(1.0, "wall"), Affine::identity(), "wall", Material{MaterialType::Lambertian, 1.0});
+  ok.add(quad(1.0, "wall"), Affine::identity(), "wall", Material{Lambertian{1.0}});
   EXPECT_NO_THROW((void)ok.scene({pointLight({0, 0, 1}, 1.0)}));
 }
 
@@ -356,8 +350,9 @@ TEST(SensorSpectral, SceneFilesDeclareBandsSpectraAndPerBandReflectance) {
     EXPECT_EQ(scene.bands(), (std::vector<std::string>{"400-500nm", "500-600nm"}));
     EXPECT_NEAR(scene.bandCdf(0)[0], 0.25, 1e-15);
     const Material& m = scene.materialOf(scene.graph().visibleInstances()[0]);
-    EXPECT_EQ(m.band_reflectance, (std::vector<double>{0.2, 0.9}));
-    EXPECT_EQ(m.reflectanceIn(1), 0.9);
+    ASSERT_TRUE(m.is<Lambertian>());
+    EXPECT_EQ(m.as<Lambertian>()->reflectance.bands, (std::vector<double>{0.2, 0.9}));
+    EXPECT_EQ(m.as<Lambertian>()->reflectance.in(1), 0.9);
   }
   {
     const SensorScene scene = load("", "", "0.5");  // no bands: one radiometric band

@@ -10,7 +10,10 @@
 #include "duplex/scenegraph/NodeId.h"
 #include "duplex/sensors/IesProfile.h"
 
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
+
+#include <array>
 
 #include <cstdint>
 #include <memory>
@@ -24,7 +27,9 @@ enum class LightType : std::uint8_t {
   Point,        ///< isotropic point: intensity P / (4 pi) W/sr in every direction
   Spot,         ///< point emitting uniformly into a cone of half-angle cone_angle about direction
   Directional,  ///< parallel rays along direction, uniform over a disk of `radius` centred at position
-  Area,         ///< Lambertian rectangle: local z = 0, width x height centred at the origin, emits towards +z
+  /// Lambertian rectangle (local z = 0, width x height centred at the origin), the disk inscribed in
+  /// it, or a polygon of that plane (Light::polygon); emits towards +z
+  Area,
   /// Point with a goniometric intensity table (IES LM-63): intensity P * profile(d_lf) / integral,
   /// d_lf the direction in the luminaire frame (world_from_light's rotation; nadir = local -z).
   Goniometric,
@@ -47,6 +52,19 @@ struct Light {
   /// Area: the disk of radius width / 2 (width == height) inscribed in the rectangle instead of the
   /// rectangle itself (a scene file's "disk" light).
   bool disk = false;
+  /// Area: a polygon of the local z = 0 plane (x, y in local units; at least 3 vertices, simple,
+  /// either winding, convex or not) instead of the rectangle (a scene file's "polygon" light);
+  /// empty: the rectangle or disk. Set with setPolygon, which also fills the two members below.
+  std::vector<glm::dvec2> polygon;
+  /// Area polygons: the triangles that cover the polygon (indices into `polygon`) ...
+  std::vector<std::array<std::uint32_t, 3>> polygon_triangles;
+  /// ... and their cumulative share of its area (the last is 1), for sampling by area; for an
+  /// emissive mesh, the triangles' cumulative share of the mesh's area.
+  std::vector<double> polygon_cdf;
+  /// Area: the triangles of an emissive mesh (light-local space; each emits from its front face,
+  /// the side of cross(b - a, c - a)) instead of the rectangle (a scene file's "mesh" light); set
+  /// with setTriangles.
+  std::vector<std::array<glm::dvec3, 3>> triangles;
   /// Spectral scenes: relative power per band (>= 0, not all 0; normalised by the scene); empty:
   /// the power is shared equally among the bands. Its length must be the scene's band count.
   std::vector<double> spectrum;
@@ -66,6 +84,20 @@ struct Light {
   /// spectrum with a negative or non-finite entry or without a positive one, lumens negative or
   /// not finite.
   void validate() const;
+  /// Makes the light a polygon area light of `vertices` (local x, y): triangulates it (ear
+  /// clipping) and sets width and height to the origin-centred box that holds it (what the
+  /// rectangle's corners stand for in outward checks). Throws InvalidArgument naming the light for
+  /// fewer than 3 vertices, a non-finite one, edges that cross or touch other than at their shared
+  /// vertex, or a zero area.
+  void setPolygon(std::vector<glm::dvec2> vertices);
+  /// Makes the light an emissive mesh of `tris` (light-local space): keeps each triangle's
+  /// cumulative share of the area in polygon_cdf, and sets width = height to twice the largest
+  /// vertex coordinate (what the rectangle's corners stand for in outward checks). Throws
+  /// InvalidArgument naming the light for no triangles, a non-finite vertex or a zero area.
+  void setTriangles(std::vector<std::array<glm::dvec3, 3>> tris);
+  /// Area: the emitting area in local units (the rectangle, the inscribed disk or the polygon);
+  /// the transform scales it.
+  [[nodiscard]] double localArea() const;
   /// Radiant intensity (W/sr) of a Point, Spot or Goniometric light towards world direction
   /// `dir_ws` (any length); 0 outside a spot's cone. For analytic checks.
   [[nodiscard]] double intensity(const glm::dvec3& dir_ws) const;
@@ -87,6 +119,9 @@ struct EmittedRay {
   /// Power of this ray relative to the light's mean ray power (1 for all but goniometric lights,
   /// whose directions are importance-sampled from the table with weights of mean 1).
   double weight = 1.0;
+  /// Emissive meshes: the world unit normal of the front face of the triangle the ray leaves
+  /// (before a two-sided light picks a face); zero for other lights.
+  glm::dvec3 normal{0.0};
 };
 
 /// Samples a ray leaving `light` from four uniform numbers in [0, 1) (power-proportional over the

@@ -261,9 +261,6 @@ class SensorScene {
   [[nodiscard]] std::unique_ptr<Derived> derive() const;
   // Photometric scenes: the bands' luminous and tristimulus weights, the power of lights in lumens.
   void resolvePhotometry();
-  // Coatings, absorption and scatter models of a material (`what` names it in errors); sets an
-  // ABg material's scattered fraction (its total integrated scatter).
-  static void checkSurfaceMaterial(Material& m, const std::string& what, std::uint32_t nb);
   std::unique_ptr<SceneDocument> doc_;
   SceneGraph* graph_ = nullptr;
   std::unique_ptr<SceneTracer> tracer_;
