@@ -1,4 +1,4 @@
-// duplex_bench_frame: `duplex bench frame` (examples/duplex_cli/BenchFrameCommand.h) with Embree's
+// duplex_bench_frame: `duplex bench frame` (BenchFrameCommand.h) with Embree's
 // two-level scenes as the baseline when the build found Embree 3, and the source revision in
 // machine. Same options (plus --embree-top and --embree-queries), same JSON on stdout (plus the
 // Embree sides, the ratios and the hit-count agreement), same exit statuses as the tool.

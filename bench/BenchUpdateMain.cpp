@@ -1,4 +1,4 @@
-// duplex_bench_update: `duplex bench update` (examples/duplex_cli/BenchUpdateCommand.h) with the
+// duplex_bench_update: `duplex bench update` (BenchUpdateCommand.h) with the
 // Embree baseline when the build found Embree 3, and the source revision in machine. Same options,
 // same JSON on stdout (plus the Embree figures and ratios), same exit statuses as the tool.
 //   duplex_bench_update --scene S.json [--moves M | --moves P%] [--repeat R] [--seed X] [--threads N]

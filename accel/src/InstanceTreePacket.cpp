@@ -223,8 +223,7 @@ std::uint32_t InstanceTree::packetQuery(std::span<const Ray> rays_ws, std::span<
     const State& s = *state_;
     const WideQuery q{&s.wide, s.records.data(), s.filters.data(), mask};
     const WideKernels& kernels = wideKernels();
-    Ray rays[kMaxPacketRays];
-    for (int i = 0; i < n; ++i) rays[i] = rays_ws[static_cast<std::size_t>(i)];
+    const Ray* rays = rays_ws.data();  // lanes index the span: only its first n rays are read
     for (const std::uint32_t lanes : by_octant) {
       if (lanes == 0) continue;
       if (std::popcount(lanes) <= kMinPacket) {

@@ -231,8 +231,12 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
 
 // Fills the packet rows of the lanes (unused lanes never meet a box).
 inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p, WorldRay* w) {
+  alignas(32) float dir[3][kMaxPacketRays];
   for (int j = 0; j < kMaxPacketRays; ++j) {
-    for (int a = 0; a < 3; ++a) p.org[a][j] = p.inv[a][j] = 0.0f;
+    for (int a = 0; a < 3; ++a) {
+      p.org[a][j] = 0.0f;
+      dir[a][j] = 1.0f;
+    }
     p.tnear[j] = std::numeric_limits<float>::infinity();
     p.t[j] = -std::numeric_limits<float>::infinity();
   }
@@ -240,16 +244,20 @@ inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p, Wor
   for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
     const int j = std::countr_zero(l);
     const Ray& r = rays[j];
-    const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
-    const float o[3] = {r.origin.x, r.origin.y, r.origin.z};
-    for (int a = 0; a < 3; ++a) {
-      p.org[a][j] = o[a];
-      p.inv[a][j] = 1.0f / d[a];  // +-inf for a zero (or denormal) component, as prepareKdRay's
-    }
+    p.org[0][j] = r.origin.x;
+    p.org[1][j] = r.origin.y;
+    p.org[2][j] = r.origin.z;
+    dir[0][j] = r.dir.x;
+    dir[1][j] = r.dir.y;
+    dir[2][j] = r.dir.z;
     p.tnear[j] = r.tnear;
     p.t[j] = r.tfar;
     w[j] = fromFloat(r);
   }
+  // Four lanes per division: +-inf for a zero (or denormal) component, as prepareKdRay's.
+  for (int a = 0; a < 3; ++a)
+    for (int k = 0; k < kMaxPacketRays; k += 4)
+      _mm_store_ps(p.inv[a] + k, _mm_div_ps(_mm_set1_ps(1.0f), _mm_load_ps(dir[a] + k)));
   for (int a = 0; a < 3; ++a) p.near_row[a] = 2 * a + (std::signbit(p.inv[a][first]) ? 1 : 0);
 }
 

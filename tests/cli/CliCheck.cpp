@@ -18,6 +18,7 @@
 //   duplex_cli_check bench-frame-embree BENCH DUPLEX DIR   the same by duplex_bench_frame; ours and Embree's hits agree
 //   duplex_cli_check bench-deform DUPLEX DIR           `duplex bench deform` keys and figures on the quad scene
 //   duplex_cli_check closest DUPLEX DIR                `duplex closest` records on the quad scene, the JSON line
+//   duplex_cli_check info DUPLEX DIR                   `duplex info` of the quad scene against its hand-worked figures
 //   duplex_cli_check disk-full DUPLEX DIR              record files on a full disk: an error, the old file kept
 //   duplex_cli_check memory-limit DUPLEX DIR           --max-memory refusals: exit 1, one line, nothing written
 // Exit status: 0 pass, 1 fail, 77 skipped.
@@ -996,6 +997,39 @@ int checkMemoryLimit(const std::string& duplex, const fs::path& dir) {
   return 0;
 }
 
+// `duplex info` of the quad scene: one object of 2 triangles, placed by 4 instances (QuadScene.cpp),
+// whose world boxes, worked out by hand from the transforms, span [0, 7] x [0, 2] x [-3, 1].
+int checkInfo(const std::string& duplex, const fs::path& dir) {
+  for (const char* threads : {"1", "2"}) {
+    const nlohmann::json j =
+        parseOneLine(runOk({duplex, "info", "--scene", (dir / "quad.json").string(), "--threads", threads}, dir).out);
+    expect(j.value("format", "") == "scene-json-v1", "\"format\" is not scene-json-v1: " + j.dump());
+    expect(number(j, "objects") == 1.0 && number(j, "instances") == 4.0 && number(j, "visible_instances") == 4.0,
+           "objects / instances wrong: " + j.dump());
+    expect(number(j, "triangles") == 2.0 && number(j, "instanced_triangles") == 8.0,
+           "triangle counts wrong: " + j.dump());
+    expect(j["mesh_structures"] == nlohmann::json{{"bvh", 1}}, "\"mesh_structures\" is not {bvh: 1}: " + j.dump());
+    expect(number(j, "edits") == 0.0 && number(j, "structures_loaded") == 0.0, "edits / loaded wrong: " + j.dump());
+    expect(number(j, "threads") == std::stod(threads), "threads not as given: " + j.dump());
+    // World boxes are rounded outward (conservative), so each bound may lie a few float ulps out.
+    const double want_min[3] = {0.0, 0.0, -3.0}, want_max[3] = {7.0, 2.0, 1.0};
+    const nlohmann::json& bounds = j["world_bounds"];
+    bool bounds_ok = bounds.is_object() && bounds.contains("min") && bounds.contains("max");
+    for (int a = 0; bounds_ok && a < 3; ++a) {
+      const double lo = bounds["min"].at(a).get<double>(), hi = bounds["max"].at(a).get<double>();
+      const double lo_slack = 1e-6 * std::max(1.0, std::abs(want_min[a]));
+      const double hi_slack = 1e-6 * std::max(1.0, std::abs(want_max[a]));
+      bounds_ok =
+          lo <= want_min[a] && lo >= want_min[a] - lo_slack && hi >= want_max[a] && hi <= want_max[a] + hi_slack;
+    }
+    expect(bounds_ok, "\"world_bounds\" is not [0, 7] x [0, 2] x [-3, 1] (rounded outward): " + j.dump());
+    for (const char* key : {"load_ms", "build_ms", "graph_ms"})
+      expect(number(j, key) >= 0.0, std::string("\"") + key + "\" is negative: " + j.dump());
+  }
+  std::cout << "info: the quad scene's counts and world bounds\n";
+  return 0;
+}
+
 int usage() {
   std::cerr
       << "usage: duplex_cli_check fixtures DIR | trace DUPLEX DIR | any-hit DUPLEX DIR | rays DUPLEX DIR |\n"
@@ -1004,7 +1038,7 @@ int usage() {
          "       prepare-koala DUPLEX DIR DATA_DIR |\n"
          "       bench-update DUPLEX DIR | bench-update-embree DUPLEX_BENCH_UPDATE DIR | bench-deform DUPLEX DIR |\n"
          "       bench-frame DUPLEX DIR | bench-frame-embree DUPLEX_BENCH_FRAME DUPLEX DIR |\n"
-         "       closest DUPLEX DIR | disk-full DUPLEX DIR | memory-limit DUPLEX DIR\n";
+         "       closest DUPLEX DIR | disk-full DUPLEX DIR | memory-limit DUPLEX DIR | info DUPLEX DIR\n";
   return 2;
 }
 
@@ -1037,6 +1071,7 @@ int main(int argc, char** argv) {
     if (args.size() == 4 && args[0] == "bench-frame-embree") return checkBenchFrame({args[1]}, args[2], args[3], true);
     if (args.size() == 3 && args[0] == "bench-deform") return checkBenchDeform(args[1], args[2]);
     if (args.size() == 3 && args[0] == "closest") return checkClosest(args[1], args[2]);
+    if (args.size() == 3 && args[0] == "info") return checkInfo(args[1], args[2]);
     if (args.size() == 3 && args[0] == "disk-full") return checkDiskFull(args[1], args[2]);
     if (args.size() == 3 && args[0] == "memory-limit") return checkMemoryLimit(args[1], args[2]);
     return usage();

@@ -65,6 +65,18 @@ constexpr std::array<std::uint32_t, 256> makeCompactTable() {
 }
 constexpr std::array<std::uint32_t, 256> kCompact = makeCompactTable();
 
+// The rays of a packet group bounded per axis (object space), for a node test that stands for all
+// of them at once: near_o / far_o are the origin bounds that give each axis's smallest entry and
+// largest exit (the largest origin on an axis the rays go up, the smallest on one they go down),
+// inv_lo / inv_hi bound the inverse directions (one sign per axis: the group shares an octant).
+// With the same slab arithmetic as a ray's, monotonic rounding makes every bound entry no later
+// and every bound exit no earlier than any of the rays' own: a child no bound enters, no ray
+// enters. A product 0 * inf (NaN) drops the axis, as a ray's own NaN does.
+struct PacketBounds {
+  float near_o[3], far_o[3], inv_lo[3], inv_hi[3];
+  float t_lo;  // the smallest tnear of the rays
+};
+
 namespace sse2 {
 namespace {
 
@@ -103,6 +115,31 @@ struct Node {
       _mm_store_ps(dist + h, tn);
     }
     return mask;
+  }
+  // The children that a ray bounded by `b` may enter before t_hi, as bits by rank in the node's
+  // order for kOct (bit 0: farthest).
+  template <int kOct>
+  static unsigned frustum(const BvhNode8& node, const PacketBounds& b, float t_hi) {
+    const __m128 sign = _mm_set1_ps(-0.0f), widen = _mm_set1_ps(kBoxWiden);
+    unsigned mask = 0;
+    for (int h = 0; h < 8; h += 4) {
+      const float* base = &node.lo[0][0] + h;
+      __m128 tn = _mm_set1_ps(b.t_lo), tf = _mm_set1_ps(t_hi);
+      for (int a = 2; a >= 0; --a) {
+        const __m128 lo = _mm_set1_ps(b.inv_lo[a]), hi = _mm_set1_ps(b.inv_hi[a]);
+        const bool neg = (kOct >> a & 1) != 0;
+        const __m128 d = _mm_sub_ps(_mm_load_ps(base + (neg ? hiRow(a) : loRow(a))), _mm_set1_ps(b.near_o[a]));
+        const __m128 e = _mm_sub_ps(_mm_load_ps(base + (neg ? loRow(a) : hiRow(a))), _mm_set1_ps(b.far_o[a]));
+        tn = _mm_max_ps(_mm_min_ps(_mm_mul_ps(d, lo), _mm_mul_ps(d, hi)), tn);
+        tf = _mm_min_ps(_mm_max_ps(_mm_mul_ps(e, lo), _mm_mul_ps(e, hi)), tf);
+      }
+      tn = _mm_sub_ps(tn, _mm_mul_ps(_mm_andnot_ps(sign, tn), widen));
+      tf = _mm_add_ps(tf, _mm_mul_ps(_mm_andnot_ps(sign, tf), widen));
+      mask |= static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(tn, tf))) << h;
+    }
+    unsigned ranked = 0;
+    for (int rank = 0; rank < 8; ++rank) ranked |= (mask >> node.orderedSlot(kOct, rank) & 1u) << rank;
+    return ranked;
   }
   // The entered children in the node's order for kOct, farthest first, at refs / dists; returns
   // their count. Writes 8 entries whatever the count (the stack has room).
@@ -153,6 +190,15 @@ struct PV {
   static V abs(V a) { return _mm_andnot_ps(_mm_set1_ps(-0.0f), a); }
   static unsigned le(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(a, b))); }
   static unsigned gt(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmpgt_ps(a, b))); }
+  // The smallest / largest of the lanes (none NaN).
+  static float hmin(V a) {
+    a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
+    return _mm_cvtss_f32(_mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2))));
+  }
+  static float hmax(V a) {
+    a = _mm_max_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
+    return _mm_cvtss_f32(_mm_max_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2))));
+  }
 };
 
 #include "MeshBvhTraversal.inl"
@@ -212,6 +258,26 @@ inline __m256i childOrder(const BvhNode8& node) {
   return _mm256_and_si256(_mm256_srli_epi32(packed, 3 * kOct), _mm256_set1_epi32(7));
 }
 
+// sse2::Node::frustum's test of the 8 children: lane k is whether a ray bounded by `b` may enter
+// child slot k before t_hi.
+template <int kOct>
+inline __m256 frustumEnters(const BvhNode8& node, const PacketBounds& b, float t_hi) {
+  const float* base = &node.lo[0][0];
+  const __m256 sign = _mm256_set1_ps(-0.0f), widen = _mm256_set1_ps(kBoxWiden);
+  __m256 tn = _mm256_set1_ps(b.t_lo), tf = _mm256_set1_ps(t_hi);
+  for (int a = 2; a >= 0; --a) {
+    const __m256 lo = _mm256_set1_ps(b.inv_lo[a]), hi = _mm256_set1_ps(b.inv_hi[a]);
+    const bool neg = (kOct >> a & 1) != 0;
+    const __m256 d = _mm256_sub_ps(_mm256_load_ps(base + (neg ? hiRow(a) : loRow(a))), _mm256_set1_ps(b.near_o[a]));
+    const __m256 e = _mm256_sub_ps(_mm256_load_ps(base + (neg ? loRow(a) : hiRow(a))), _mm256_set1_ps(b.far_o[a]));
+    tn = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(d, lo), _mm256_mul_ps(d, hi)), tn);
+    tf = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(e, lo), _mm256_mul_ps(e, hi)), tf);
+  }
+  tn = _mm256_sub_ps(tn, _mm256_mul_ps(_mm256_andnot_ps(sign, tn), widen));
+  tf = _mm256_add_ps(tf, _mm256_mul_ps(_mm256_andnot_ps(sign, tf), widen));
+  return _mm256_cmp_ps(tn, tf, _CMP_LE_OQ);
+}
+
 struct Node {
   // As sse2::Node::push: the entered children ordered, then compacted to the front through
   // kCompact, and stored with one 8-lane write each for references and distances.
@@ -230,6 +296,12 @@ struct Node {
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(refs), _mm256_permutevar8x32_epi32(child, idx));
     _mm256_storeu_ps(dists, _mm256_permutevar8x32_ps(tn, idx));
     return std::popcount(mask);
+  }
+  // As sse2::Node::frustum.
+  template <int kOct>
+  static unsigned frustum(const BvhNode8& node, const PacketBounds& b, float t_hi) {
+    return static_cast<unsigned>(
+        _mm256_movemask_ps(_mm256_permutevar8x32_ps(frustumEnters<kOct>(node, b, t_hi), childOrder<kOct>(node))));
   }
 };
 
@@ -305,14 +377,14 @@ struct Leaf {
     return r;
   }
 
-  /// closestInLeaf (MeshLeafTest.h) two blocks at a time; a last lone block takes the 4-wide test.
+  /// closestInLeaf (MeshLeafTest.h) two blocks at a time; a last lone block fills both halves with
+  /// itself, its upper lanes masked off (one code path: no second loop to mispredict into).
   static bool closest(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
                       float& t_max, ClosestHit& best) {
     bool found = false;
-    int left = static_cast<int>(count);
-    for (; left > 4; left -= 8, block += 2) {
+    for (int left = static_cast<int>(count); left > 0; left -= 8, block += 2) {
       const int lanes = left >= 8 ? 0xFF : (1 << left) - 1;
-      const Watertight8v r = test8(ray, c, block[0], block[1], lanes, t_max);
+      const Watertight8v r = test8(ray, c, block[0], block[left > 4 ? 1 : 0], lanes, t_max);
       if (r.fast != 0) {
         const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.0f), r.det);  // the scalar test's final step
         const __m256 t = _mm256_mul_ps(r.T, inv);
@@ -345,16 +417,15 @@ struct Leaf {
         found = true;
       }
     }
-    if (left > 0 && closestInLeaf(ray, block, static_cast<std::uint32_t>(left), t_max, best)) found = true;
     return found;
   }
 
-  /// anyInLeaf (MeshLeafTest.h) two blocks at a time.
+  /// anyInLeaf (MeshLeafTest.h) two blocks at a time, a last lone block as in closest().
   static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
                   float t_max) {
-    int left = static_cast<int>(count);
-    for (; left > 4; left -= 8, block += 2) {
-      const Watertight8v r = test8(ray, c, block[0], block[1], left >= 8 ? 0xFF : (1 << left) - 1, t_max);
+    for (int left = static_cast<int>(count); left > 0; left -= 8, block += 2) {
+      const Watertight8v r =
+          test8(ray, c, block[0], block[left > 4 ? 1 : 0], left >= 8 ? 0xFF : (1 << left) - 1, t_max);
       if (r.fast != 0) return true;
       for (int lanes_left = r.exact; lanes_left != 0; lanes_left &= lanes_left - 1) {
         const int k = std::countr_zero(static_cast<unsigned>(lanes_left));
@@ -364,7 +435,7 @@ struct Leaf {
           return true;
       }
     }
-    return left > 0 && anyInLeaf(ray, block, static_cast<std::uint32_t>(left), t_max);
+    return false;
   }
 };
 
@@ -385,6 +456,8 @@ struct PV {
   static V abs(V a) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), a); }
   static unsigned le(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }
   static unsigned gt(V a, V b) { return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_GT_OQ))); }
+  static float hmin(V a) { return sse2::PV::hmin(_mm_min_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1))); }
+  static float hmax(V a) { return sse2::PV::hmax(_mm_max_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1))); }
 };
 
 #include "MeshBvhTraversal.inl"
@@ -427,6 +500,10 @@ struct Node {
     _mm256_storeu_ps(dists, _mm256_maskz_compress_ps(mask, tn_ordered));
     return std::popcount(static_cast<unsigned>(mask));
   }
+  template <int kOct>
+  static unsigned frustum(const BvhNode8& node, const PacketBounds& b, float t_hi) {
+    return avx2::Node::frustum<kOct>(node, b, t_hi);
+  }
 };
 
 // The packet traversal's lanes (MeshBvhTraversal.inl): one ray each, 16 rays.
@@ -447,6 +524,8 @@ struct PV {
   static V abs(V a) { return _mm512_abs_ps(a); }
   static unsigned le(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_LE_OQ); }
   static unsigned gt(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ); }
+  static float hmin(V a) { return _mm512_reduce_min_ps(a); }
+  static float hmax(V a) { return _mm512_reduce_max_ps(a); }
 };
 
 #include "MeshBvhTraversal.inl"

@@ -148,16 +148,26 @@ inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhL
 // some ray enters are pushed in the node's order for the octant with the lanes that enter them and
 // their entry distances. So every ray meets the nodes and leaves it would meet alone, in the same
 // order, with the same best distance at each: the results are the single-ray path's bit for bit,
-// ties included. Leaves run the single-ray leaf test per active lane, and a subtree reached by at
-// most PV::kFallback rays is finished ray by ray by the single-ray walk (a diverged packet costs
-// the single path's price, not more).
+// ties included. Before the per-ray tests, one test of all 8 children against the bounds of the
+// packet's rays (PacketBounds) drops the children no ray can enter, so that a coherent packet pays
+// the per-ray tests only for the one to three children it meets. Leaves run the single-ray leaf
+// test per active lane, and a subtree reached by at most PV::kFallback rays is finished ray by ray
+// by the single-ray walk (a diverged packet costs the single path's price, not more).
 
 struct PacketRays {
   alignas(64) float o[3][PV::kWidth];
   alignas(64) float inv[3][PV::kWidth];
   alignas(64) float tnear[PV::kWidth];
   alignas(64) float t_best[PV::kWidth];  // closest hit so far (any hit: tfar)
+  PacketBounds bounds;                   // of the lanes in use
 };
+
+// The largest t_best of the lanes `active`: no ray of them looks further.
+inline float packetReach(const PacketRays& p, unsigned active) {
+  float t = -std::numeric_limits<float>::infinity();
+  for (; active != 0; active &= active - 1) t = std::max(t, p.t_best[std::countr_zero(active)]);
+  return t;
+}
 
 // The lanes of `active` that enter child slot k of `node` (as Node::push's box test), and their
 // widened entry distances in `tn_out`.
@@ -199,17 +209,20 @@ inline unsigned intersectPacketKernel(const MeshBvhView& bvh, const MeshRay* con
   int sp = 0;
   std::uint32_t cur = bvh.root;
   unsigned m = active;
+  float reach = packetReach(p, active);
   while (true) {
     if (std::popcount(m) <= PV::kFallback) {
       for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
         const int j = std::countr_zero(lanes);
-        if (closestSubtree<kOct>(bvh, cur, *rays[j], p.t_best[j], best[j])) found |= 1u << j;
+        if (closestSubtree<kOct>(bvh, cur, *rays[j], p.t_best[j], best[j])) {
+          found |= 1u << j;
+          reach = packetReach(p, active);
+        }
       }
     } else if (BvhRef::isInner(cur)) {
       const BvhNode8& node = bvh.nodes[cur];
-      for (int rank = 0; rank < 8; ++rank) {
-        const int k = node.orderedSlot(kOct, rank);
-        if (node.child[k] == BvhRef::kEmpty) continue;
+      for (unsigned ranks = Node::template frustum<kOct>(node, p.bounds, reach); ranks != 0; ranks &= ranks - 1) {
+        const int k = node.orderedSlot(kOct, std::countr_zero(ranks));
         typename PV::V tn;
         const unsigned enter = packetEnters<kOct>(node, k, p, m, tn);
         if (enter == 0) continue;
@@ -221,11 +234,15 @@ inline unsigned intersectPacketKernel(const MeshBvhView& bvh, const MeshRay* con
     } else {
       const TriangleBlock4* blocks = bvh.blocks + BvhRef::leafBlock(cur);
       const std::uint32_t count = BvhRef::leafCount(cur);
+      bool lowered = false;
       for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
         const int j = std::countr_zero(lanes);
-        if (Leaf::closest(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j], best[j]))
+        if (Leaf::closest(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j], best[j])) {
           found |= 1u << j;
+          lowered = true;
+        }
       }
+      if (lowered) reach = packetReach(p, active);
     }
     // Pop the next child with a lane not behind its closest hit.
     do {
@@ -247,6 +264,7 @@ inline unsigned occludedPacketKernel(const MeshBvhView& bvh, const MeshRay* cons
   int sp = 0;
   std::uint32_t cur = bvh.root;
   unsigned m = active;
+  const float reach = packetReach(p, active);
   while (true) {
     if (std::popcount(m) <= PV::kFallback) {
       for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
@@ -255,9 +273,8 @@ inline unsigned occludedPacketKernel(const MeshBvhView& bvh, const MeshRay* cons
       }
     } else if (BvhRef::isInner(cur)) {
       const BvhNode8& node = bvh.nodes[cur];
-      for (int rank = 0; rank < 8; ++rank) {
-        const int k = node.orderedSlot(kOct, rank);
-        if (node.child[k] == BvhRef::kEmpty) continue;
+      for (unsigned ranks = Node::template frustum<kOct>(node, p.bounds, reach); ranks != 0; ranks &= ranks - 1) {
+        const int k = node.orderedSlot(kOct, std::countr_zero(ranks));
         typename PV::V tn;
         const unsigned enter = packetEnters<kOct>(node, k, p, m, tn);
         if (enter == 0) continue;
@@ -322,11 +339,27 @@ inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepar
         p.tnear[j] = kd.tnear;
         p.t_best[j] = kd.tfar;
       }
+      // Unused lanes repeat lane 0 (lane masks keep them out of every result), so that the
+      // bounds below are reductions over whole vectors.
       for (int j = std::popcount(lanes); j < PV::kWidth; ++j) {
         group[j] = group[0];
-        for (int a = 0; a < 3; ++a) p.o[a][j] = p.inv[a][j] = 0.0f;
-        p.tnear[j] = p.t_best[j] = 0.0f;
+        for (int a = 0; a < 3; ++a) {
+          p.o[a][j] = p.o[a][0];
+          p.inv[a][j] = p.inv[a][0];
+        }
+        p.tnear[j] = p.tnear[0];
+        p.t_best[j] = 0.0f;
       }
+      PacketBounds& b = p.bounds;
+      for (int a = 0; a < 3; ++a) {
+        const typename PV::V o = PV::load(p.o[a]), inv = PV::load(p.inv[a]);
+        const bool neg = (oct >> a & 1) != 0;
+        b.near_o[a] = neg ? PV::hmin(o) : PV::hmax(o);
+        b.far_o[a] = neg ? PV::hmax(o) : PV::hmin(o);
+        b.inv_lo[a] = PV::hmin(inv);
+        b.inv_hi[a] = PV::hmax(inv);
+      }
+      b.t_lo = PV::hmin(PV::load(p.tnear));
       packet(oct, lanes, p, group);
     }
   }

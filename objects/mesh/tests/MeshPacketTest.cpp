@@ -206,6 +206,37 @@ TEST_F(MeshPacket, CoherentRaysThroughGridVerticesAndEdgesEqualSingleRays) {
   EXPECT_GT(hits, rays.size() / 2);
 }
 
+TEST_F(MeshPacket, PacketsOfSpreadOriginsAndDirectionsEqualSingleRays) {
+  // The packet walk drops a node's children by one test against bounds of all its rays (origins,
+  // inverse directions, tnear): packets here spread their origins over up to a third of the mesh,
+  // their directions by up to 0.3 (still mostly one octant), start some rays inside the mesh
+  // (tnear > 0) and zero some direction components (+0 and -0: infinite inverses), so that a bound
+  // that is not conservative shows as a lane that misses its own single-ray hit.
+  const auto object = buildChecked(triangleSoup(5000, 31), BvhBuildConfig{});
+  const Box b = object->bounds();
+  const glm::vec3 size = b.hi - b.lo;
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f), sym(-1.0f, 1.0f);
+  std::vector<Ray> rays;
+  for (int packet = 0; packet < 400; ++packet) {
+    const float spread = packet % 4 == 0 ? 0.0f : 0.33f * u01(rng);
+    const float turn = packet % 3 == 0 ? 0.0f : 0.3f * u01(rng);
+    const glm::vec3 centre = b.lo + glm::vec3(u01(rng), u01(rng), u01(rng)) * size;
+    glm::vec3 axis(sym(rng), sym(rng), sym(rng));
+    if (packet % 5 == 1) axis = glm::vec3(0.0f, 0.0f, packet % 10 == 1 ? -1.0f : 1.0f);
+    const glm::vec3 origin = centre - 1.5f * glm::length(size) * glm::normalize(axis);
+    for (int j = 0; j < kMaxPacketRays; ++j) {
+      Ray r;
+      r.origin = origin + spread * glm::vec3(sym(rng), sym(rng), sym(rng)) * size;
+      r.dir = axis + turn * glm::vec3(sym(rng), sym(rng), sym(rng));
+      if (packet % 5 == 1 && j % 3 != 0) r.dir = glm::vec3(j % 2 == 0 ? 0.0f : -0.0f, 0.0f, axis.z);
+      if (packet % 7 == 3) r.tnear = 0.5f * glm::length(size) * u01(rng) + glm::length(size);
+      rays.push_back(r);
+    }
+  }
+  runAll(object, rays, "spread packets");
+}
+
 TEST_F(MeshPacket, AwkwardRaysEqualSingleRays) {
   const auto object = buildChecked(icosphere(3), BvhBuildConfig{});
   const auto rays = awkwardRays(object->bounds());

@@ -1,5 +1,6 @@
 #include "BenchFrameCommand.h"
 
+#include "Command.h"
 #include "DecimalOption.h"
 #include "StructureOption.h"
 
@@ -8,7 +9,7 @@
 namespace duplex::cli {
 
 void addBenchFrameOptions(CLI::App& cmd, BenchFrameOptions& options) {
-  cmd.footer("The frames, camera and light are described in examples/duplex_cli/BenchFrameCommand.h.");
+  cmd.footer("The frames, camera and light are described in bench/BenchFrameCommand.h.");
   cmd.add_option("--scene", options.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
   addStructureOption(cmd, options.structure);
   cmd.add_option("--moves", options.moves,
@@ -48,6 +49,16 @@ void addBenchFrameOptions(CLI::App& cmd, BenchFrameOptions& options) {
       ->delimiter(',')
       ->check(CLI::IsMember({"1", "16"}));
 #endif
+}
+
+void addBenchFrameCommand(CLI::App& bench, ChosenCommand& chosen) {
+  auto options = std::make_shared<BenchFrameOptions>();
+  CLI::App* cmd = bench.add_subcommand(
+      "frame",
+      "Time interactive frames: move k instances, commit, trace a camera frame with shadow rays (the Embree "
+      "baseline is in the benchmark duplex_bench_frame)");
+  addBenchFrameOptions(*cmd, *options);
+  onParsed(*cmd, chosen, options, runBenchFrame);
 }
 
 }  // namespace duplex::cli

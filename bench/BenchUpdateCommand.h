@@ -25,15 +25,13 @@
 /// A moved instance below transform nodes gets the local transform that gives it the moved world
 /// transform (parents do not move).
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
-
-namespace CLI {
-class App;
-}
 
 namespace duplex::cli {
 
@@ -86,5 +84,9 @@ struct BenchUpdateOptions {
 /// Adds the command line of the benchmark to `cmd` (the tool's `bench update`, or the whole command
 /// line of duplex_bench_update), parsed into `options`.
 void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options);
+
+/// Adds `duplex bench update` to the tool's `bench` group with its options; when it is the command
+/// given, its callback sets `chosen` to run it (tools/support/Command.h).
+void addBenchUpdateCommand(CLI::App& bench, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

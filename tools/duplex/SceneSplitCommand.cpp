@@ -1,5 +1,7 @@
 #include "SceneSplitCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
 #include "SceneWriter.h"
 
 #include <duplex/accel/Error.h>
@@ -125,6 +127,30 @@ nlohmann::ordered_json runSceneSplit(const SceneSplitOptions& options) {
   summary["objects_without_valid_triangle"] = without_valid;
   summary["out"] = options.out.string();
   return summary;
+}
+
+void addSceneSplitCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<SceneSplitOptions>();
+  SceneSplitOptions& split = *options;
+  CLI::App* cmd =
+      parent.add_subcommand("split", "Split a mesh into K objects (the paper's scenes), one identity instance each");
+  cmd->footer(
+      "Rule: split(tris, k): k == 1 gives one object; else kl = k div 2, order the\n"
+      "triangles by (centroid on the longest axis of their centroid box, ties x, y, z; triangle index),\n"
+      "the first (2 n kl + k) div 2k go left with kl, the rest right with k - kl. Objects part0..part<K-1>\n"
+      "(depth-first, left to right) hold inline arrays: triangles in their original order, vertices\n"
+      "re-indexed in order of first use. Every triangle the loader returns counts, degenerate (zero-area)\n"
+      "ones included; they stay in their object (an object of degenerate triangles only is reported).");
+  cmd->add_option("--mesh", split.mesh, "Mesh file (OBJ, PLY, OFF, STL, OM)")->required();
+  cmd->add_option("--objects", split.objects, "K: number of objects (1 to the triangle count)")
+      ->required()
+      ->transform(kDecimal)
+      ->check(CLI::Range(1u, 0xFFFFFFFFu));
+  cmd->add_option("--loop", split.loop, "Loop-subdivide the mesh N times before splitting (default 0)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(0, 6));
+  cmd->add_option("--out", split.out, "scene-json-v1 file to write")->required();
+  onParsed(*cmd, chosen, options, runSceneSplit);
 }
 
 }  // namespace duplex::cli

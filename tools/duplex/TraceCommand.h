@@ -4,6 +4,8 @@
 /// levels (SceneTracer), trace a ray file with the tracer's batch queries, write a hit file, and
 /// report the figures as one JSON object.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -59,5 +61,9 @@ struct TraceOptions {
 /// Throws duplex::Error (naming the file) for bad input, and InvalidArgument when neither or both
 /// of hits and transmittance are given, or transmittance with any_hit.
 [[nodiscard]] nlohmann::ordered_json runTrace(const TraceOptions& options);
+
+/// Adds `duplex trace` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addTraceCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -1,5 +1,8 @@
 #include "ClosestCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
+#include "StructureOption.h"
 #include "LoadScene.h"
 #include "WorkerThreads.h"
 
@@ -86,6 +89,21 @@ nlohmann::ordered_json runClosest(const ClosestOptions& options) {
   report["instances"] = figures.instances;
   report["format"] = doc->format;
   return report;
+}
+
+void addClosestCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<ClosestOptions>();
+  ClosestOptions& closest = *options;
+  CLI::App* cmd = parent.add_subcommand(
+      "closest", "Nearest surface point to each point of a point file (16-byte records in, 24-byte records out)");
+  cmd->add_option("--scene", closest.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  cmd->add_option("--points", closest.points, "Point file: float x, y, z, max_distance per record")->required();
+  cmd->add_option("--out", closest.out,
+                  "Closest file to write: float x, y, z, distance; uint32 instance_id, prim_id per point")
+      ->required();
+  addStructureOption(*cmd, closest.structure);
+  addThreadsOption(*cmd, closest.threads);
+  onParsed(*cmd, chosen, options, runClosest);
 }
 
 }  // namespace duplex::cli

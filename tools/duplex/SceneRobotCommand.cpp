@@ -1,5 +1,7 @@
 #include "SceneRobotCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
 #include "SceneWriter.h"
 
 #include <duplex/accel/Error.h>
@@ -357,6 +359,35 @@ nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options) {
   summary["spacing"] = spacing;
   summary["out"] = options.out.string();
   return summary;
+}
+
+void addSceneRobotCommand(CLI::App& parent, ChosenCommand& chosen) {
+  // The options as given: --spacing is optional in SceneRobotOptions, set only when given.
+  struct Given {
+    SceneRobotOptions robot;
+    double spacing = 0.0;
+  };
+  auto given = std::make_shared<Given>();
+  SceneRobotOptions& robot = given->robot;
+  CLI::App* cmd = parent.add_subcommand(
+      "robot", "A URDF robot's link meshes placed by forward kinematics, in copies side by side along +y");
+  cmd->add_option("--urdf", robot.urdf, "URDF file (package:// mesh paths resolved near it)")->required();
+  cmd->add_option("--copies", robot.copies, "Number of robots (default 1)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(1, 1000000));
+  cmd->add_option("--joints", robot.joints,
+                  "Joint values a1,a2,... in radians (metres for prismatic), one per movable joint in file "
+                  "order (default: all zero)")
+      ->delimiter(',');
+  CLI::Option* spacing_opt =
+      cmd->add_option("--spacing", given->spacing,
+                      "Distance between copies (default 1.25 x the larger horizontal extent of one robot)");
+  cmd->add_option("--out", robot.out, "scene-json-v1 file to write")->required();
+  onParsed(*cmd, chosen, given, [spacing_opt](const Given& g) {
+    SceneRobotOptions options = g.robot;
+    if (*spacing_opt) options.spacing = g.spacing;
+    return runSceneRobot(options);
+  });
 }
 
 }  // namespace duplex::cli

@@ -19,6 +19,8 @@
 /// run_state.bin and written out as usual, the report's status is "interrupted", and the process
 /// exits with 128 + the signal (a second signal kills it at once).
 
+#include "Command.h"
+
 #include "duplex/sensors/SensorRun.h"
 
 #include <nlohmann/json.hpp>
@@ -107,5 +109,9 @@ class Interrupted : public std::runtime_error {
 /// max_trace_seconds}). Under mpirun every rank runs it; rank 0 reads and writes the files and
 /// returns the report, the others return null. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSensor(const SensorOptions& options);
+
+/// Adds `duplex sensor` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSensorCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

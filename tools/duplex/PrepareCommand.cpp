@@ -1,5 +1,8 @@
 #include "PrepareCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
+#include "StructureOption.h"
 #include "LoadScene.h"
 #include "WorkerThreads.h"
 
@@ -179,6 +182,19 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
   report["threads"] = threads;
   report["mesh_structures"] = meshStructureCounts(*doc);
   return report;
+}
+
+void addPrepareCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<PrepareOptions>();
+  PrepareOptions& prepare = *options;
+  CLI::App* cmd = parent.add_subcommand(
+      "prepare", "Save the bottom-level structure of every mesh object and a duplex-scene-v1 copy that names them");
+  cmd->add_option("--scene", prepare.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  cmd->add_option("--out", prepare.out, "Folder for <scene stem>.json and the .dbvh / .dkdt structure files")
+      ->required();
+  addStructureOption(*cmd, prepare.structure);
+  addThreadsOption(*cmd, prepare.threads);
+  onParsed(*cmd, chosen, options, runPrepare);
 }
 
 }  // namespace duplex::cli

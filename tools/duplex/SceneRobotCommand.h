@@ -3,6 +3,8 @@
 /// `duplex scene robot`: the links of a URDF robot (the ABB IRB 6640 of the paper-style robot
 /// scene) placed by forward kinematics, in several copies side by side, as scene-json-v1.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
@@ -34,5 +36,9 @@ struct SceneRobotOptions {
 /// {"copies", "links", "objects", "instances", "movable_joints", "spacing", "out"}.
 /// Throws duplex::Error naming the file for bad input.
 [[nodiscard]] nlohmann::ordered_json runSceneRobot(const SceneRobotOptions& options);
+
+/// Adds `duplex scene robot` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSceneRobotCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

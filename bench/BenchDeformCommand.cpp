@@ -1,5 +1,6 @@
 #include "BenchDeformCommand.h"
 
+#include "Command.h"
 #include "DecimalOption.h"
 #include "LoadScene.h"
 #include "StructureOption.h"
@@ -63,7 +64,7 @@ std::vector<Hit> traceAll(const SceneTracer& tracer, const std::vector<Ray>& ray
 }  // namespace
 
 void addBenchDeformOptions(CLI::App& cmd, BenchDeformOptions& options) {
-  cmd.footer("The seeded deformation is described in examples/duplex_cli/BenchDeformCommand.h.");
+  cmd.footer("The seeded deformation is described in bench/BenchDeformCommand.h.");
   cmd.add_option("--scene", options.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
   addStructureOption(cmd, options.structure);
   cmd.add_option("--object", options.object, "Name of the mesh object that deforms (the scene file's object name)")
@@ -204,6 +205,15 @@ nlohmann::ordered_json runBenchDeform(const BenchDeformOptions& options) {
   });
   out["machine"] = bench::machineInfo(bench::thisBuild());
   return out;
+}
+
+void addBenchDeformCommand(CLI::App& bench, ChosenCommand& chosen) {
+  auto options = std::make_shared<BenchDeformOptions>();
+  CLI::App* cmd = bench.add_subcommand(
+      "deform",
+      "Deform a mesh object step by step: refit against rebuild, trace after the refits against a fresh build");
+  addBenchDeformOptions(*cmd, *options);
+  onParsed(*cmd, chosen, options, runBenchDeform);
 }
 
 }  // namespace duplex::cli

@@ -3,6 +3,8 @@
 /// `duplex scene instances`: N randomly rotated copies of one mesh on a grid (the paper-style
 /// "1,000 instances of the hammer" scene), deterministic for a seed.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -26,5 +28,9 @@ struct SceneInstancesOptions {
 /// u = (x >> 11) * 2^-53 of consecutive std::mt19937_64(seed) outputs x. Returns {"instances",
 /// "grid", "cell", "mesh", "out"}. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSceneInstances(const SceneInstancesOptions& options);
+
+/// Adds `duplex scene instances` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSceneInstancesCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

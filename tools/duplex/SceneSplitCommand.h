@@ -4,6 +4,8 @@
 /// scenes: koala in 19, 6,804 and 20,968 objects; docs/cli.md), written as scene-json-v1
 /// with inline arrays and one identity instance per object.
 
+#include "Command.h"
+
 #include <duplex/objects/TriangleMesh.h>
 
 #include <nlohmann/json.hpp>
@@ -37,5 +39,9 @@ struct SceneSplitOptions {
 /// of degenerate triangles is written anyway (the rule counts them) but a scene-json-v1 reader
 /// refuses it; it is counted and warned about on stderr. Throws duplex::Error for bad input.
 [[nodiscard]] nlohmann::ordered_json runSceneSplit(const SceneSplitOptions& options);
+
+/// Adds `duplex scene split` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addSceneSplitCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -4,6 +4,8 @@
 /// point of each record (SceneTracer::closestPoints), write a closest file, report the figures as
 /// one JSON object.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
@@ -27,5 +29,9 @@ struct ClosestOptions {
 /// are ignored (they have no closest-point query). Times are wall-clock milliseconds. Throws
 /// duplex::Error naming the file for bad input.
 [[nodiscard]] nlohmann::ordered_json runClosest(const ClosestOptions& options);
+
+/// Adds `duplex closest` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addClosestCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -1,5 +1,8 @@
 #include "TraceCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
+#include "StructureOption.h"
 #include "LoadScene.h"
 #include "WorkerThreads.h"
 
@@ -168,6 +171,40 @@ nlohmann::ordered_json runTrace(const TraceOptions& options) {
     report["mean_transmittance"] = ray_count == 0 ? 0.0 : transmittance_sum / static_cast<double>(ray_count);
   }
   return report;
+}
+
+void addTraceCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<TraceOptions>();
+  TraceOptions& trace = *options;
+  CLI::App* cmd = parent.add_subcommand("trace", "Trace a ray file against a scene and write a hit file");
+  cmd->add_option("--scene", trace.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  addStructureOption(*cmd, trace.structure);
+  cmd->add_option("--rays", trace.rays, "Ray file: 32-byte records ox oy oz tnear dx dy dz tfar")->required();
+  CLI::Option* hits_opt =
+      cmd->add_option("--hits", trace.hits, "Hit file to write: 20-byte records t u v instance_id prim_id");
+  CLI::Option* transmittance_opt = cmd->add_option(
+      "--transmittance", trace.transmittance,
+      "Instead of hits: one float32 per ray, the transmittance along [tnear, tfar] through all fog volumes "
+      "(0 where a surface blocks the ray)");
+  hits_opt->excludes(transmittance_opt);
+  addThreadsOption(*cmd, trace.threads);
+  cmd->add_flag("--any-hit", trace.any_hit,
+                "Occlusion queries: blocked -> {0, 0, 0, instance 0, prim 0xFFFFFFFF}, free -> miss");
+  cmd->add_flag("--single", trace.single,
+                "Trace one ray at a time instead of in packets (same hits; for speed comparisons)");
+  cmd->add_option("--repeat", trace.repeat, "Trace R times and report the median time")
+      ->transform(kDecimal)
+      ->check(CLI::Range(1, 1000000));
+  cmd->add_option("--block-rays", trace.block_rays,
+                  "Rays read, traced and written per block (memory: about 100 bytes per ray of a block)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(std::int64_t{1}, std::int64_t{1} << 32))
+      ->capture_default_str();
+  cmd->footer(
+      "A hit's instance_id is the instance's position in the scene: in \"instances\" for scene-json-v1; in\n"
+      "depth-first file order of the node tree for duplex-scene-v1 (hidden instances keep their place).\n"
+      "The timed edits of a duplex-scene-v1 file are not applied.");
+  onParsed(*cmd, chosen, options, runTrace);
 }
 
 }  // namespace duplex::cli

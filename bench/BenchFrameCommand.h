@@ -34,16 +34,14 @@
 /// (n - j)]); then for each of ids[0..k) in that order, world translation += delta(). An instance
 /// below transform nodes gets the local transform that gives it the moved world transform.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
-
-namespace CLI {
-class App;
-}
 
 namespace duplex::cli {
 
@@ -87,5 +85,9 @@ struct BenchFrameOptions {
 /// Adds the command line of the benchmark to `cmd` (the tool's `bench frame`, or the whole command
 /// line of duplex_bench_frame), parsed into `options`.
 void addBenchFrameOptions(CLI::App& cmd, BenchFrameOptions& options);
+
+/// Adds `duplex bench frame` to the tool's `bench` group with its options; when it is the command
+/// given, its callback sets `chosen` to run it (tools/support/Command.h).
+void addBenchFrameCommand(CLI::App& bench, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -1,5 +1,7 @@
 #include "ViewCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
 #include "ViewPage.h"
 #include "ViewSession.h"
 
@@ -311,6 +313,29 @@ void runView(const ViewOptions& options) {
   if (!signalled.load()) pthread_kill(stopper.native_handle(), SIGTERM);
   stopper.join();
   if (!ok) throw InvalidArgument("duplex view: the server stopped with an error");
+}
+
+void addViewCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<ViewOptions>();
+  ViewOptions& view = *options;
+  CLI::App* cmd = parent.add_subcommand(
+      "view",
+      "Serve the scene to a browser: ray-traced view, picking, edits, timeline and sensor runs (docs/viewer.md). "
+      "Prints {\"url\", \"port\", \"token\"} when ready; runs until Ctrl-C");
+  cmd->add_option("scene", view.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
+  cmd->add_option("--port", view.port, "TCP port (0: a free port)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+  cmd->add_option("--bind", view.bind,
+                  "Address to listen on (other than 127.0.0.1: a warning; the token is still required)")
+      ->capture_default_str();
+  addThreadsOption(*cmd, view.threads);
+  // The server prints its ready line itself and serves until stopped: no report.
+  onParsed(*cmd, chosen, options, [](const ViewOptions& o) {
+    runView(o);
+    return nlohmann::ordered_json();
+  });
 }
 
 }  // namespace duplex::cli

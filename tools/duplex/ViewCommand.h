@@ -4,6 +4,8 @@
 /// interface of docs/viewer.md (cpp-httplib) on --bind:--port, prints one JSON line on stdout when
 /// ready ({"url", "port", "token"}) and serves until SIGINT or SIGTERM.
 
+#include "Command.h"
+
 #include <filesystem>
 #include <string>
 
@@ -19,5 +21,9 @@ struct ViewOptions {
 /// Runs the server until SIGINT / SIGTERM. Throws duplex::Error naming the file for a bad scene,
 /// and InvalidArgument naming the option when the address cannot be bound.
 void runView(const ViewOptions& options);
+
+/// Adds `duplex view` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addViewCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -1,5 +1,8 @@
 #include "SensorCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
+#include "StructureOption.h"
 #include "LoadScene.h"
 #include "SensorExr.h"
 #include "SensorImage.h"
@@ -817,6 +820,75 @@ nlohmann::ordered_json runSensor(const SensorOptions& o) {
     ranks.failed(e);  // shared: a failure of this rank alone ends every rank
     throw;
   }
+}
+
+void addSensorCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<SensorOptions>();
+  SensorOptions& sensor = *options;
+  CLI::App* cmd = parent.add_subcommand(
+      "sensor", "Light-tracing run: power from the scene's lights arriving at its sensors (irradiance maps)");
+  cmd->add_option("--scene", sensor.scene, "scene-json-v1 or duplex-scene-v1 file with \"lights\" and \"sensors\"")
+      ->required();
+  addStructureOption(*cmd, sensor.structure);
+  cmd->add_option("--rays", sensor.rays, "Total emitted rays (with --resume: including the saved ones)")
+      ->required()
+      ->transform(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 48));
+  addThreadsOption(*cmd, sensor.threads);
+  cmd->add_option("--seed", sensor.seed, "Seed (default 1); results do not depend on --threads")->transform(kDecimal);
+  cmd->add_option(
+      "--out", sensor.out,
+      "Folder for <sensor>.json/.csv/.png (and .exr when built with OpenEXR), run.json, run_state.bin (default .)");
+  CLI::Option* resume_opt = cmd->add_flag(
+      "--resume", sensor.resume, "Continue the run saved in DIR/run_state.bin (same scene and seed) up to --rays");
+  cmd->add_flag("--overwrite", sensor.overwrite,
+                "Replace an earlier run's results in DIR (without it, or --resume, such a folder is refused)")
+      ->excludes(resume_opt);
+  CLI::Option* target_error_opt =
+      cmd->add_option("--target-error", sensor.target_error,
+                      "Stop once the target sensor's total flux has this relative standard error (e.g. 0.01)")
+          ->check(CLI::Range(0.0, 1.0));
+  cmd->add_option("--target-sensor", sensor.target_sensor, "Sensor of --target-error (default: the first)")
+      ->needs(target_error_opt);
+  cmd->add_option("--max-depth", sensor.max_depth,
+                  "Surface interactions after which a path is cut, a bias (default none: unbiased)")
+      ->transform(CLI::Transformer(std::map<std::string, std::string>{{"none", std::to_string(kNoDepthLimit)}}))
+      ->transform(kDecimal);
+  cmd->add_option("--roulette-depth", sensor.roulette_depth,
+                  "Surface interactions after which each further one continues with probability 0.95, the "
+                  "survivor's power divided by it (unbiased; default 32)")
+      ->transform(kDecimal);
+  cmd->add_option("--max-scatterings", sensor.max_scatterings,
+                  "Fog collisions per path before it is cut (default 100000; 1: single scattering)")
+      ->transform(kDecimal);
+  cmd->add_option("--roulette", sensor.roulette,
+                  "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
+  cmd->add_flag("--per-light", sensor.per_light,
+                "Also report each light's contribution (run.json and each sensor file's \"lights\"); "
+                "one process only");
+  cmd->add_option("--failure-threshold", sensor.failure_threshold,
+                  "Warn on stderr when numerical failures, or the path limits, carry more than this fraction of the "
+                  "emitted power, in [0, 1] (default 0.001)");
+  cmd->add_option("--progress", sensor.progress, "auto (bar on a terminal, else lines), bar, lines or none")
+      ->check(CLI::IsMember({"auto", "bar", "lines", "none"}));
+  cmd->add_option("--checkpoint", sensor.checkpoint_s,
+                  "Seconds between saves of DIR/run_state.bin during the run (default 60; 0: only at the end)")
+      ->check(CLI::Range(0.0, 1e9));
+  cmd->add_option("--text-map-limit", sensor.text_map_limit,
+                  "Bins above which a sensor's maps go to .npy files instead of the JSON and CSV (default 1048576)")
+      ->transform(kDecimal);
+  cmd->add_option("--at", sensor.at,
+                  "Apply the scene's timed edits with time <= T (seconds) before the run (default: none)")
+      ->check(CLI::Range(0.0, std::numeric_limits<double>::max()));
+  cmd->add_option("--batch-rays", sensor.batch_rays,
+                  "Rays per batch: the unit of the ordered sums, of work dealt to MPI ranks, of checkpoints and "
+                  "--target-error checks (default 65536; results depend on it, not on --threads or ranks)")
+      ->transform(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+  cmd->footer(
+      "Files are described in docs/sensors.md; the run is bit-identical for any --threads, and for any number of "
+      "ranks under mpirun (docs/distributed.md).");
+  onParsed(*cmd, chosen, options, runSensor);
 }
 
 }  // namespace duplex::cli

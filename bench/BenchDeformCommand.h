@@ -13,15 +13,13 @@
 /// (its position after step k-1) by amplitude * d * sin(4 pi / d * dot(p - c, w_a) + phi_a) along
 /// axis a: a random wave of wavelength d / 2 per axis, the steps adding up.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
-
-namespace CLI {
-class App;
-}
 
 namespace duplex::cli {
 
@@ -55,5 +53,9 @@ struct BenchDeformOptions {
 
 /// Adds the command line of the benchmark to `cmd` (the tool's `bench deform`).
 void addBenchDeformOptions(CLI::App& cmd, BenchDeformOptions& options);
+
+/// Adds `duplex bench deform` to the tool's `bench` group with its options; when it is the command
+/// given, its callback sets `chosen` to run it (tools/support/Command.h).
+void addBenchDeformCommand(CLI::App& bench, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

@@ -1,5 +1,7 @@
 #include "SceneInstancesCommand.h"
 
+#include "Command.h"
+#include "DecimalOption.h"
 #include "SceneWriter.h"
 
 #include <duplex/accel/Error.h>
@@ -89,6 +91,24 @@ nlohmann::ordered_json runSceneInstances(const SceneInstancesOptions& options) {
   summary["mesh"] = objects[0].file;
   summary["out"] = options.out.string();
   return summary;
+}
+
+void addSceneInstancesCommand(CLI::App& parent, ChosenCommand& chosen) {
+  auto options = std::make_shared<SceneInstancesOptions>();
+  SceneInstancesOptions& scatter = *options;
+  CLI::App* cmd = parent.add_subcommand(
+      "instances", "N randomly rotated instances of one mesh on a grid (cells of the mesh's bounding diagonal)");
+  cmd->add_option("--mesh", scatter.mesh, "Mesh file (written relative to the output's folder when possible)")
+      ->required();
+  cmd->add_option("--count", scatter.count, "N: number of instances")
+      ->required()
+      ->transform(kDecimal)
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 32));
+  cmd->add_option("--seed", scatter.seed, "Seed of the rotations (std::mt19937_64, 0 to 2^64-1)")
+      ->required()
+      ->transform(kDecimal);
+  cmd->add_option("--out", scatter.out, "scene-json-v1 file to write")->required();
+  onParsed(*cmd, chosen, options, runSceneInstances);
 }
 
 }  // namespace duplex::cli

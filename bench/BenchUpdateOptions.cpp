@@ -1,5 +1,6 @@
 #include "BenchUpdateCommand.h"
 
+#include "Command.h"
 #include "DecimalOption.h"
 #include "StructureOption.h"
 
@@ -8,7 +9,7 @@
 namespace duplex::cli {
 
 void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options) {
-  cmd.footer("The seeded edit plan is described in examples/duplex_cli/BenchUpdateCommand.h.");
+  cmd.footer("The seeded edit plan is described in bench/BenchUpdateCommand.h.");
   cmd.add_option("--scene", options.scene, "scene-json-v1 or duplex-scene-v1 file")->required();
   addStructureOption(cmd, options.structure);
   cmd.add_option("--moves", options.moves,
@@ -27,6 +28,16 @@ void addBenchUpdateOptions(CLI::App& cmd, BenchUpdateOptions& options) {
                  "Rounds of full builds, ours and Embree's interleaved (default 7)")
       ->transform(kDecimal)
       ->check(CLI::Range(1, 100));
+}
+
+void addBenchUpdateCommand(CLI::App& bench, ChosenCommand& chosen) {
+  auto options = std::make_shared<BenchUpdateOptions>();
+  CLI::App* cmd = bench.add_subcommand(
+      "update",
+      "Time commits of moved, added and removed instances (ours incremental, ours full rebuild; the Embree "
+      "baseline is in the benchmark duplex_bench_update)");
+  addBenchUpdateOptions(*cmd, *options);
+  onParsed(*cmd, chosen, options, runBenchUpdate);
 }
 
 }  // namespace duplex::cli

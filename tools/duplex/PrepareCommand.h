@@ -5,6 +5,8 @@
 /// their "structure" files, so that loading the copy reads the structures instead of building them
 /// (the paper's point: objects from a prepared library need no build).
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
@@ -38,5 +40,9 @@ struct PrepareOptions {
 /// relative path exists). Throws duplex::Error for bad input, an unwritable folder, or an output
 /// file that would overwrite the source scene.
 [[nodiscard]] nlohmann::ordered_json runPrepare(const PrepareOptions& options);
+
+/// Adds `duplex prepare` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addPrepareCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli

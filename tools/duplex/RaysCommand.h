@@ -2,6 +2,8 @@
 /// \file RaysCommand.h
 /// `duplex rays`: write the contract's ray sets (primary camera rays or random rays) for a scene.
 
+#include "Command.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -28,5 +30,9 @@ struct RaysOptions {
 /// Writes the ray file and returns {"rays": N, "out": PATH}. Throws duplex::Error for bad input
 /// (including a scene without visible instances, which has no bounds to aim at).
 [[nodiscard]] nlohmann::ordered_json runRays(const RaysOptions& options);
+
+/// Adds `duplex rays` to `parent` (the tool, or its command group) with its options; when it is the
+/// command given, its callback sets `chosen` to run it (Command.h).
+void addRaysCommand(CLI::App& parent, ChosenCommand& chosen);
 
 }  // namespace duplex::cli
