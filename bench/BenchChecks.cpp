@@ -1,6 +1,7 @@
 #include "BenchChecks.h"
 
 #include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/KdTree.h"
 
 #include <tbb/parallel_reduce.h>
 

@@ -18,6 +18,8 @@
 #include "duplex/accel/Error.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/objects/MeshObject.h"
+#include "duplex/accel/WideBvh.h"
+#include "duplex/accel/KdTree.h"
 
 #include <algorithm>
 #include <iostream>

@@ -4,6 +4,8 @@
 #include "MainBenchParts.h"
 
 #include "duplex/accel/Error.h"
+#include "duplex/accel/WideBvh.h"
+#include "duplex/accel/KdTree.h"
 
 #include <algorithm>
 #include <cctype>

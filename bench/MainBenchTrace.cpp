@@ -6,6 +6,7 @@
 #include "MeshRay.h"
 
 #include "duplex/accel/KdTraversal.h"
+#include "duplex/accel/KdTree.h"
 
 #include <algorithm>
 #include <iomanip>

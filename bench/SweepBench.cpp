@@ -19,6 +19,7 @@
 #include "duplex/accel/KdBuildConfig.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/objects/MeshObject.h"
+#include "duplex/accel/KdTree.h"
 
 #include <cmath>
 #include <iostream>

@@ -18,6 +18,7 @@
 #include "duplex/objects/MeshLoader.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/VolumeObjectVdb.h"
+#include "duplex/accel/KdTree.h"
 
 #include <CLI/CLI.hpp>
 #include <glm/geometric.hpp>

@@ -13,20 +13,41 @@ set(DUPLEX_SHARED_DATA_DIR "${PROJECT_SOURCE_DIR}/../shared/data" CACHE PATH
     "Shared data folder with meshes/ (spot, koala, ...) used by the unit tests when present")
 
 # What every test may include: tests/support (fixtures, brute-force references, invariant checkers).
-add_library(duplex_test_support INTERFACE)
-target_include_directories(duplex_test_support INTERFACE ${PROJECT_SOURCE_DIR}/tests/support)
-target_compile_definitions(duplex_test_support INTERFACE
+# Its headers declare; the larger functions are compiled once, by layer, into static libraries
+# (duplex_test_support_objects: meshes, structure checkers, scratch folders;
+# duplex_test_support_sensors: the sensor-run fixture) instead of into every test file.
+add_library(duplex_test_support_headers INTERFACE)
+target_include_directories(duplex_test_support_headers INTERFACE ${PROJECT_SOURCE_DIR}/tests/support)
+target_compile_definitions(duplex_test_support_headers INTERFACE
   DUPLEX_SHARED_DATA="${DUPLEX_SHARED_DATA_DIR}"
   DUPLEX_TEST_DATA="${PROJECT_SOURCE_DIR}/objects/mesh/tests/data"
   DUPLEX_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+target_link_libraries(duplex_test_support_headers INTERFACE GTest::gtest duplex_warnings)
+# Compiled at -O1, as the tests' own code (see _duplex_add_to_test_executable).
+set(duplex_test_support_dir ${PROJECT_SOURCE_DIR}/tests/support)
+add_library(duplex_test_support_objects STATIC EXCLUDE_FROM_ALL
+  ${duplex_test_support_dir}/TestSupport.cpp ${duplex_test_support_dir}/KdTreeChecks.cpp
+  ${duplex_test_support_dir}/BvhChecks.cpp ${duplex_test_support_dir}/MeshChecks.cpp)
+target_link_libraries(duplex_test_support_objects PUBLIC duplex_test_support_headers duplex::objects)
+set(duplex_test_support_libraries duplex_test_support_objects)
 # The ThreadSanitizer build's tests (DUPLEX_TSAN_TESTS: a scene queried while another thread commits)
 # use meshes and the scene graph only; that build leaves duplex::sensors out (CMakeLists.txt).
+if(NOT DUPLEX_TSAN)
+  add_library(duplex_test_support_sensors STATIC EXCLUDE_FROM_ALL ${duplex_test_support_dir}/SensorFixture.cpp)
+  target_link_libraries(duplex_test_support_sensors PUBLIC duplex_test_support_objects duplex::sensors)
+  list(APPEND duplex_test_support_libraries duplex_test_support_sensors)
+endif()
+foreach(library IN LISTS duplex_test_support_libraries)
+  target_compile_options(${library} PRIVATE $<$<CONFIG:Release,RelWithDebInfo,MinSizeRel>:-O1>)
+endforeach()
+add_library(duplex_test_support INTERFACE)
 if(DUPLEX_TSAN)
   set(duplex_test_libraries duplex::accel duplex::scenegraph duplex::objects)
 else()
   set(duplex_test_libraries duplex::duplex)
 endif()
-target_link_libraries(duplex_test_support INTERFACE ${duplex_test_libraries} GTest::gtest GTest::gtest_main duplex_warnings)
+target_link_libraries(duplex_test_support INTERFACE ${duplex_test_support_libraries} ${duplex_test_libraries}
+                      GTest::gtest_main)
 
 # duplex_add_unit_tests(TESTS name... [DIR dir] [PRIVATE_INCLUDE dir...] [LIBS target...] [ISA_VARIANTS]
 #                       [OWN_EXECUTABLE])

@@ -15,6 +15,7 @@
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/accel/TopLevel.h"
 #include "duplex/objects/MeshObject.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 #include <glm/matrix.hpp>

@@ -19,6 +19,7 @@
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
 #include "duplex/scenegraph/SceneDocument.h"
 #include "duplex/scenegraph/SceneTracer.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>

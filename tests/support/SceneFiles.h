@@ -3,6 +3,7 @@
 // folder with the cube fixture, the two formats' skeletons, and checks that a load fails naming the
 // file and the JSON pointer.
 
+#include "KdTreeChecks.h"
 #include "MeshChecks.h"
 #include "TestSupport.h"
 
@@ -11,6 +12,7 @@
 #include "duplex/objects/MeshObject.h"
 #include "duplex/scenegraph/ObjectTypeRegistry.h"
 #include "duplex/scenegraph/SceneDocument.h"
+#include "duplex/accel/WideBvh.h"
 
 #include <gtest/gtest.h>
 

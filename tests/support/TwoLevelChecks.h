@@ -9,6 +9,7 @@
 #include "duplex/accel/QueryContext.h"
 #include "duplex/accel/Ray.h"
 #include "duplex/accel/TopLevel.h"
+#include "duplex/accel/KdTree.h"
 
 #include "TestSupport.h"
 

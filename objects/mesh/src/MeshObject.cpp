@@ -9,6 +9,7 @@
 #include "duplex/objects/WatertightTriangle.h"
 #include "MeshBvh.h"
 #include "MeshLeafTest.h"
+#include "MeshParts.h"
 #include "MeshRay.h"
 #include "TriangleBlock4.h"
 #include "WatertightTriangle4.h"
@@ -279,7 +280,8 @@ MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, const MeshBuild
     : Object(mesh ? mesh->name() : std::string()),
       mesh_(std::move(mesh)),
       structure_(config.structure),
-      config_(config) {
+      config_(config),
+      parts_(std::make_unique<detail::MeshParts>()) {
   if (!mesh_) throw InvalidArgument("MeshObject: null mesh");
   if (structure_ == MeshStructure::Bvh) buildBvh(config.bvh);
   else buildKd(config.kd);
@@ -311,7 +313,7 @@ void MeshObject::buildKd(const KdBuildConfig& config) {
   requireBuildMemory(m, "kd-tree");
   const std::vector<Box> bounds = triangleBounds(m);
   try {
-    tree_ = buildKdTree(
+    parts_->tree = buildKdTree(
         bounds,
         // A straddling triangle is clipped once per split, not once per child.
         [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
@@ -331,43 +333,47 @@ void MeshObject::buildBvh(const BvhBuildConfig& config) {
   requireBuildMemory(m, "BVH");
   const std::vector<Box> bounds = triangleBounds(m);
   try {
-    bvh_ = buildWideBvh(bounds, config,
-                        [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
-                          const auto v = m.vertices(prim);
-                          splitTriangleInBox(v[0], v[1], v[2], box, axis, pos, lower, upper);
-                        });
+    parts_->bvh = buildWideBvh(bounds, config,
+                               [&m](std::uint32_t prim, const Box& box, int axis, float pos, Box& lower, Box& upper) {
+                                 const auto v = m.vertices(prim);
+                                 splitTriangleInBox(v[0], v[1], v[2], box, axis, pos, lower, upper);
+                               });
   } catch (const InvalidArgument& e) {
     throw InvalidArgument("mesh '" + m.name() + "': " + e.what());
   }
-  built_sah_ = bvh_.sahCost(config);
+  built_sah_ = parts_->bvh.sahCost(config);
   buildBvhBlocks();
 }
 
 void MeshObject::buildBvhBlocks() {
   const TriangleMesh& m = *mesh_;
-  const std::vector<std::uint32_t>& refs = bvh_.prim_indices;
-  blocks_.resize(refs.size() / 4);
-  forChunks(blocks_.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
+  const std::vector<std::uint32_t>& refs = parts_->bvh.prim_indices;
+  parts_->blocks.resize(refs.size() / 4);
+  forChunks(parts_->blocks.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
     for (std::size_t b = first; b < last; ++b)
-      fillBvhBlock(blocks_[b], &refs[4 * b], m.triangles().data(), m.positions().data(),
+      fillBvhBlock(parts_->blocks[b], &refs[4 * b], m.triangles().data(), m.positions().data(),
                    [](const glm::vec3&, const glm::vec3&, const glm::vec3&) {});
   });
   makeView();
 }
 
 void MeshObject::makeView() {
-  view_ = std::make_unique<const detail::MeshBvhView>(
-      detail::MeshBvhView{bvh_.nodes.data(), bvh_.root, bvh_.bounds, blocks_.data()});
+  parts_->view = std::make_unique<const detail::MeshBvhView>(
+      detail::MeshBvhView{parts_->bvh.nodes.data(), parts_->bvh.root, parts_->bvh.bounds, parts_->blocks.data()});
 }
 
 ObjectRayEntry MeshObject::rayEntry() const {
-  if (structure_ != MeshStructure::Bvh || !view_) return {};
+  if (structure_ != MeshStructure::Bvh || !parts_->view) return {};
   const detail::MeshBvhKernels& k = detail::meshBvhKernels();
-  return {k.intersect_view, k.occluded_view, view_.get()};
+  return {k.intersect_view, k.occluded_view, parts_->view.get()};
 }
 
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, KdTree tree, PartsTag)
-    : Object(mesh->name()), mesh_(std::move(mesh)), structure_(MeshStructure::KdTree), tree_(std::move(tree)) {
+    : Object(mesh->name()),
+      mesh_(std::move(mesh)),
+      structure_(MeshStructure::KdTree),
+      parts_(std::make_unique<detail::MeshParts>()) {
+  parts_->tree = std::move(tree);
   config_.structure = MeshStructure::KdTree;
   buildLeafBlocks();
 }
@@ -379,7 +385,11 @@ std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const Tr
 }
 
 MeshObject::MeshObject(std::shared_ptr<const TriangleMesh> mesh, WideBvh bvh, PartsTag)
-    : Object(mesh->name()), mesh_(std::move(mesh)), structure_(MeshStructure::Bvh), bvh_(std::move(bvh)) {
+    : Object(mesh->name()),
+      mesh_(std::move(mesh)),
+      structure_(MeshStructure::Bvh),
+      parts_(std::make_unique<detail::MeshParts>()) {
+  parts_->bvh = std::move(bvh);
   buildBvhBlocks();
 }
 
@@ -387,13 +397,17 @@ std::shared_ptr<const MeshObject> MeshObject::fromParts(std::shared_ptr<const Tr
   if (!mesh) throw InvalidArgument("MeshObject::fromParts: null mesh");
   checkBvhAgainstMesh(bvh, *mesh);
   std::unique_ptr<MeshObject> object(new MeshObject(std::move(mesh), std::move(bvh), PartsTag{}));
-  object->built_sah_ = object->bvh_.sahCost(object->config_.bvh);
+  object->built_sah_ = object->parts_->bvh.sahCost(object->config_.bvh);
   return object;
 }
 
 MeshObject::~MeshObject() = default;
 
-double MeshObject::sahCost() const { return structure_ == MeshStructure::Bvh ? bvh_.sahCost(config_.bvh) : 0.0; }
+const KdTree& MeshObject::tree() const { return parts_->tree; }
+
+const WideBvh& MeshObject::bvh() const { return parts_->bvh; }
+
+double MeshObject::sahCost() const { return structure_ == MeshStructure::Bvh ? parts_->bvh.sahCost(config_.bvh) : 0.0; }
 
 std::shared_ptr<const Object> MeshObject::deformed(std::span<const glm::vec3> positions_os) const {
   return deformedMesh(positions_os);
@@ -404,7 +418,8 @@ MeshObject::MeshObject(const MeshObject& from, RefitTag)
       structure_(MeshStructure::Bvh),
       config_(from.config_),
       built_sah_(from.built_sah_),
-      refitted_(true) {}
+      refitted_(true),
+      parts_(std::make_unique<detail::MeshParts>()) {}
 
 std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::vec3> positions_os) const {
   mesh_->checkPositions(positions_os);
@@ -427,33 +442,34 @@ std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::
   // loads and tests that every triangle in the tree keeps an area; the nodes above are written
   // once each, with their orders, by the refit.
   std::unique_ptr<MeshObject> out(new MeshObject(*this, RefitTag{}));
-  WideBvh& bvh = out->bvh_;
-  bvh.root = bvh_.root;
-  bvh.leaf_block = bvh_.leaf_block;
-  bvh.prim_indices = bvh_.prim_indices;
-  bvh.nodes.resize(bvh_.nodes.size());
-  out->blocks_.resize(blocks_.size());
+  WideBvh& bvh = out->parts_->bvh;
+  bvh.root = parts_->bvh.root;
+  bvh.leaf_block = parts_->bvh.leaf_block;
+  bvh.prim_indices = parts_->bvh.prim_indices;
+  bvh.nodes.resize(parts_->bvh.nodes.size());
+  out->parts_->blocks.resize(parts_->blocks.size());
   std::atomic<bool> lost_area{false};
   const std::uint32_t* refs = bvh.prim_indices.data();
-  const std::size_t block_count = out->blocks_.size();
-  detail::TriangleBlock4* blocks = out->blocks_.data();
-  bvh.bounds = refitWideBvhNodes(bvh_, bvh.nodes, [&](std::uint32_t ref) {  // indices checked when bvh_ was made
-    const std::uint32_t first = BvhRef::leafBlock(ref), count = BvhRef::leafCount(ref);
-    Box box;
-    bool flat = false;
-    for (std::uint32_t b = first; b < first + (count + 3) / 4; ++b) {
-      prefetchBlockCorners(refs, block_count, b, tris.data(), positions.data());
-      fillBvhBlock(blocks[b], refs + std::size_t{4} * b, tris.data(), positions.data(),
-                   [&](const glm::vec3& p0, const glm::vec3& p1, const glm::vec3& p2) {
-                     box.extend(p0);
-                     box.extend(p1);
-                     box.extend(p2);
-                     flat |= !TriangleMesh::hasArea(p0, p1, p2);
-                   });
-    }
-    if (flat) lost_area.store(true, std::memory_order_relaxed);
-    return box;
-  });
+  const std::size_t block_count = out->parts_->blocks.size();
+  detail::TriangleBlock4* blocks = out->parts_->blocks.data();
+  bvh.bounds =
+      refitWideBvhNodes(parts_->bvh, bvh.nodes, [&](std::uint32_t ref) {  // indices checked when the BVH was made
+        const std::uint32_t first = BvhRef::leafBlock(ref), count = BvhRef::leafCount(ref);
+        Box box;
+        bool flat = false;
+        for (std::uint32_t b = first; b < first + (count + 3) / 4; ++b) {
+          prefetchBlockCorners(refs, block_count, b, tris.data(), positions.data());
+          fillBvhBlock(blocks[b], refs + std::size_t{4} * b, tris.data(), positions.data(),
+                       [&](const glm::vec3& p0, const glm::vec3& p1, const glm::vec3& p2) {
+                         box.extend(p0);
+                         box.extend(p1);
+                         box.extend(p2);
+                         flat |= !TriangleMesh::hasArea(p0, p1, p2);
+                       });
+        }
+        if (flat) lost_area.store(true, std::memory_order_relaxed);
+        return box;
+      });
   if (lost_area.load(std::memory_order_relaxed)) return rebuild();
   if (!(bvh.sahCost(config_.bvh) <= static_cast<double>(config_.bvh.refit_limit) * built_sah_)) return rebuild();
   // Every valid triangle is in a leaf: the refitted bounds are the mesh's.
@@ -466,24 +482,24 @@ std::shared_ptr<const MeshObject> MeshObject::deformedMesh(std::span<const glm::
 void MeshObject::buildLeafBlocks() {
   const TriangleMesh& m = *mesh_;
   const std::vector<glm::vec3>& positions = m.positions();
-  const std::vector<std::uint32_t>& refs = tree_.prim_indices;
-  block_tree_.bounds = tree_.bounds;
-  block_tree_.nodes = tree_.nodes;
+  const std::vector<std::uint32_t>& refs = parts_->tree.prim_indices;
+  parts_->block_tree.bounds = parts_->tree.bounds;
+  parts_->block_tree.nodes = parts_->tree.nodes;
   // Each non-empty leaf's first block, in node order (a serial pass over the nodes only); then the
   // blocks are filled leaf by leaf in parallel, each leaf writing only its own range.
   std::size_t block_count = 0;
-  for (KdNode& node : block_tree_.nodes) {
+  for (KdNode& node : parts_->block_tree.nodes) {
     if (!node.isLeaf() || node.isJump() || node.primCount() == 0) continue;
     node.setPrimOffset(static_cast<std::uint32_t>(block_count));
     block_count += (node.primCount() + 3) / 4;
   }
-  blocks_.resize(block_count);
-  forChunks(tree_.nodes.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
+  parts_->blocks.resize(block_count);
+  forChunks(parts_->tree.nodes.size(), kNodesPerTask, [&](std::size_t first, std::size_t last) {
     for (std::size_t n = first; n < last; ++n) {
-      const KdNode& node = tree_.nodes[n];
+      const KdNode& node = parts_->tree.nodes[n];
       if (!node.isLeaf() || node.isJump() || node.primCount() == 0) continue;
       const std::uint32_t begin = node.primOffset(), end = begin + node.primCount();
-      detail::TriangleBlock4* block = blocks_.data() + block_tree_.nodes[n].primOffset();
+      detail::TriangleBlock4* block = parts_->blocks.data() + parts_->block_tree.nodes[n].primOffset();
       for (std::uint32_t i = begin; i < end; i += 4, ++block) {
         for (std::uint32_t k = 0; k < 4; ++k) {
           // Padding lanes repeat the leaf's last triangle (masked off by the leaf's count).
@@ -533,16 +549,17 @@ struct AllHitsLeaf {
 }  // namespace
 
 bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
-  if (structure_ == MeshStructure::Bvh) return detail::meshBvhKernels().intersect(bvhView(bvh_, blocks_), ray_os, hit);
+  if (structure_ == MeshStructure::Bvh)
+    return detail::meshBvhKernels().intersect(bvhView(parts_->bvh, parts_->blocks), ray_os, hit);
   detail::MeshRay ray;
   float tmin, tmax;
-  if (!detail::setupMeshRay(ray_os, block_tree_.bounds, ray, tmin, tmax)) return false;
+  if (!detail::setupMeshRay(ray_os, parts_->block_tree.bounds, ray, tmin, tmax)) return false;
   float t_best = std::min(hit.t, ray_os.tfar);
   detail::ClosestHit best;
-  const detail::TriangleBlock4* blocks = blocks_.data();
+  const detail::TriangleBlock4* blocks = parts_->blocks.data();
   // The axis permutation of the triangle test is a run-time value (no dispatch per ray: the six
   // choices are a coin flip on random rays, and six copies of the traversal cost code size).
-  traverseKdTreeClipped<false>(block_tree_, ray.kd, tmin, tmax, t_best,
+  traverseKdTreeClipped<false>(parts_->block_tree, ray.kd, tmin, tmax, t_best,
                                [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
                                  return detail::closestInLeaf(ray, blocks + begin, count, t_max, best);
                                });
@@ -552,13 +569,14 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit) const {
 }
 
 bool MeshObject::occluded(const Ray& ray_os) const {
-  if (structure_ == MeshStructure::Bvh) return detail::meshBvhKernels().occluded(bvhView(bvh_, blocks_), ray_os);
+  if (structure_ == MeshStructure::Bvh)
+    return detail::meshBvhKernels().occluded(bvhView(parts_->bvh, parts_->blocks), ray_os);
   detail::MeshRay ray;
   float tmin, tmax;
-  if (!detail::setupMeshRay(ray_os, block_tree_.bounds, ray, tmin, tmax)) return false;
+  if (!detail::setupMeshRay(ray_os, parts_->block_tree.bounds, ray, tmin, tmax)) return false;
   float t_best = ray_os.tfar;
-  const detail::TriangleBlock4* blocks = blocks_.data();
-  return traverseKdTreeClipped<true>(block_tree_, ray.kd, tmin, tmax, t_best,
+  const detail::TriangleBlock4* blocks = parts_->blocks.data();
+  return traverseKdTreeClipped<true>(parts_->block_tree, ray.kd, tmin, tmax, t_best,
                                      [&](std::uint32_t begin, std::uint32_t count, float& t_max) {
                                        return detail::anyInLeaf(ray, blocks + begin, count, t_max);
                                      });
@@ -569,10 +587,10 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
   const WatertightRay wray(ray_os);
   const std::size_t first = hits.size();
   dispatchPermutation(wray, [&]<int KX, int KY, int KZ>() {
-    const AllHitsLeaf leaf{wray, blocks_.data(), ray_os.tfar, hits};
+    const AllHitsLeaf leaf{wray, parts_->blocks.data(), ray_os.tfar, hits};
     if (structure_ == MeshStructure::Bvh) {
       detail::meshBvhKernels().forEachLeaf(
-          bvhView(bvh_, blocks_), ray_os,
+          bvhView(parts_->bvh, parts_->blocks), ray_os,
           [](void* context, std::uint32_t block, std::uint32_t count) {
             static_cast<const AllHitsLeaf*>(context)->template test<KX, KY, KZ>(block, count);
           },
@@ -581,7 +599,7 @@ void MeshObject::intersectAll(const Ray& ray_os, std::vector<Hit>& hits, QueryCo
     }
     const KdRay kray(ray_os);
     float t_best = ray_os.tfar;  // never lowered: every leaf along the ray is visited
-    traverseKdTree<false>(block_tree_, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
+    traverseKdTree<false>(parts_->block_tree, kray, t_best, [&](std::uint32_t begin, std::uint32_t count, float&) {
       leaf.template test<KX, KY, KZ>(begin, count);
       return false;
     });
@@ -694,12 +712,13 @@ bool closestPointSimilar(const WideBvh& bvh, const detail::TriangleBlock4* block
 }  // namespace
 
 bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryContext&) const {
-  if (structure_ == MeshStructure::Bvh && q.similarity) return closestPointSimilar(bvh_, blocks_.data(), q, best);
+  if (structure_ == MeshStructure::Bvh && q.similarity)
+    return closestPointSimilar(parts_->bvh, parts_->blocks.data(), q, best);
   bool improved = false;
   // Every triangle of a leaf's blocks, mapped to world space: the distance is a world distance
   // whatever the instance's scale.
   auto testLeaf = [&](std::uint32_t first_block, std::uint32_t count) {
-    const detail::TriangleBlock4* block = blocks_.data() + first_block;
+    const detail::TriangleBlock4* block = parts_->blocks.data() + first_block;
     for (std::uint32_t i = 0; i < count; ++i) {
       const detail::TriangleBlock4& b = block[i / 4];
       const int k = static_cast<int>(i % 4);
@@ -735,8 +754,8 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
     void pop_back() { --size; }
   } stack;
   if (structure_ == MeshStructure::Bvh) {
-    if (bvh_.root == BvhRef::kEmpty) return false;
-    stack.push_back({bvh_.root, bvh_.bounds});
+    if (parts_->bvh.root == BvhRef::kEmpty) return false;
+    stack.push_back({parts_->bvh.root, parts_->bvh.bounds});
     while (!stack.empty()) {
       const Entry e = stack.back();
       stack.pop_back();
@@ -745,7 +764,7 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
         testLeaf(BvhRef::leafBlock(e.node), BvhRef::leafCount(e.node));
         continue;
       }
-      const BvhNode8& node = bvh_.nodes[e.node];
+      const BvhNode8& node = parts_->bvh.nodes[e.node];
       // The children that may reach, pushed farthest first so that the nearest is visited next.
       std::pair<double, int> order[BvhNode8::kWidth];
       int n = 0;
@@ -760,12 +779,12 @@ bool MeshObject::closestPoint(const PointQuery& q, ClosestPoint& best, QueryCont
     }
     return improved;
   }
-  stack.push_back({0, block_tree_.bounds});
+  stack.push_back({0, parts_->block_tree.bounds});
   while (!stack.empty()) {
     const Entry e = stack.back();
     stack.pop_back();
     if (!q.mayReach(e.box, best.distance)) continue;
-    const KdNode& node = block_tree_.nodes[e.node];
+    const KdNode& node = parts_->block_tree.nodes[e.node];
     if (node.isLeaf()) {
       if (node.primCount() > 0) testLeaf(node.primOffset(), node.primCount());
       continue;
@@ -839,14 +858,14 @@ glm::dvec3 blockVertex(const detail::TriangleBlock4& b, int lane, int k) { retur
 }  // namespace
 
 std::optional<bool> MeshObject::inRegion(const ConvexRegion& region, RegionMode mode) const {
-  const detail::TriangleBlock4* blocks = blocks_.data();
+  const detail::TriangleBlock4* blocks = parts_->blocks.data();
   if (mode == RegionMode::Inside) {
     if (region.containsBox(mesh_->bounds())) return true;
     if (structure_ == MeshStructure::Bvh) {
       // Every part of the geometry lies in some child box: a box the region excludes, or a
       // triangle with a corner outside, means some geometry is outside.
       bool outside = false;
-      std::vector<std::pair<std::uint32_t, Box>> stack{{bvh_.root, bvh_.bounds}};
+      std::vector<std::pair<std::uint32_t, Box>> stack{{parts_->bvh.root, parts_->bvh.bounds}};
       while (!stack.empty() && !outside) {
         const auto [ref, box] = stack.back();
         stack.pop_back();
@@ -863,7 +882,7 @@ std::optional<bool> MeshObject::inRegion(const ConvexRegion& region, RegionMode 
           }
           continue;
         }
-        const BvhNode8& node = bvh_.nodes[ref];
+        const BvhNode8& node = parts_->bvh.nodes[ref];
         for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k)
           stack.emplace_back(node.child[k], node.childBox(k));
       }
@@ -881,7 +900,8 @@ std::optional<bool> MeshObject::inRegion(const ConvexRegion& region, RegionMode 
   }
   if (mode != RegionMode::Touching) return std::nullopt;
   return forEachLeafInRegion(
-      structure_, bvh_, block_tree_, region, [&](std::uint32_t first, std::uint32_t count, bool box_inside) {
+      structure_, parts_->bvh, parts_->block_tree, region,
+      [&](std::uint32_t first, std::uint32_t count, bool box_inside) {
         if (box_inside) return true;  // a BVH box holds part of a triangle
         for (std::uint32_t i = 0; i < count; ++i) {
           const detail::TriangleBlock4& b = blocks[first + i / 4];
@@ -894,17 +914,18 @@ std::optional<bool> MeshObject::inRegion(const ConvexRegion& region, RegionMode 
 }
 
 bool MeshObject::trianglesInRegion(const ConvexRegion& region, std::vector<RegionTriangle>& out) const {
-  const detail::TriangleBlock4* blocks = blocks_.data();
+  const detail::TriangleBlock4* blocks = parts_->blocks.data();
   std::vector<std::uint32_t> prims;
-  forEachLeafInRegion(structure_, bvh_, block_tree_, region, [&](std::uint32_t first, std::uint32_t count, bool) {
-    for (std::uint32_t i = 0; i < count; ++i) {
-      const detail::TriangleBlock4& b = blocks[first + i / 4];
-      const int lane = static_cast<int>(i % 4);
-      if (region.meetsTriangle(blockVertex(b, lane, 0), blockVertex(b, lane, 1), blockVertex(b, lane, 2)))
-        prims.push_back(b.prim[lane]);
-    }
-    return false;
-  });
+  forEachLeafInRegion(
+      structure_, parts_->bvh, parts_->block_tree, region, [&](std::uint32_t first, std::uint32_t count, bool) {
+        for (std::uint32_t i = 0; i < count; ++i) {
+          const detail::TriangleBlock4& b = blocks[first + i / 4];
+          const int lane = static_cast<int>(i % 4);
+          if (region.meetsTriangle(blockVertex(b, lane, 0), blockVertex(b, lane, 1), blockVertex(b, lane, 2)))
+            prims.push_back(b.prim[lane]);
+        }
+        return false;
+      });
   // A triangle referenced by several leaves (kd-tree, spatial splits) is reported once.
   std::sort(prims.begin(), prims.end());
   prims.erase(std::unique(prims.begin(), prims.end()), prims.end());
@@ -928,20 +949,21 @@ std::uint32_t MeshObject::intersectPacket(std::span<const Ray> rays_os, std::spa
   if (structure_ != MeshStructure::Bvh || !packetSizeOk(rays_os.size(), hits.size()))
     return Object::intersectPacket(rays_os, hits, active, ctx);  // the kd-tree, or the default's errors
   active &= packetLanes(rays_os.size());
-  return detail::meshBvhKernels().intersectPacket(bvhView(bvh_, blocks_), rays_os.data(), hits.data(), active);
+  return detail::meshBvhKernels().intersectPacket(bvhView(parts_->bvh, parts_->blocks), rays_os.data(), hits.data(),
+                                                  active);
 }
 
 std::uint32_t MeshObject::occludedPacket(std::span<const Ray> rays_os, std::uint32_t active, QueryContext& ctx) const {
   if (structure_ != MeshStructure::Bvh || !packetSizeOk(rays_os.size(), rays_os.size()))
     return Object::occludedPacket(rays_os, active, ctx);
   active &= packetLanes(rays_os.size());
-  return detail::meshBvhKernels().occludedPacket(bvhView(bvh_, blocks_), rays_os.data(), active);
+  return detail::meshBvhKernels().occludedPacket(bvhView(parts_->bvh, parts_->blocks), rays_os.data(), active);
 }
 
 std::size_t MeshObject::accelBytes() const {
-  return tree_.nodes.size() * sizeof(KdNode) + tree_.prim_indices.size() * sizeof(std::uint32_t) +
-         blocks_.size() * sizeof(detail::TriangleBlock4) + block_tree_.nodes.size() * sizeof(KdNode) +
-         bvh_.memoryBytes();
+  return parts_->tree.nodes.size() * sizeof(KdNode) + parts_->tree.prim_indices.size() * sizeof(std::uint32_t) +
+         parts_->blocks.size() * sizeof(detail::TriangleBlock4) + parts_->block_tree.nodes.size() * sizeof(KdNode) +
+         parts_->bvh.memoryBytes();
 }
 
 std::vector<ObjectFigure> MeshObject::figures() const {

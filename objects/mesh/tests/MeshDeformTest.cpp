@@ -5,6 +5,8 @@
 /// nothing. Through the scene: deformObject / replaceObject reach every instance in one commit,
 /// rollback drops them, and removed objects release their memory.
 
+#include "BvhChecks.h"
+#include "KdTreeChecks.h"
 #include "MeshChecks.h"
 #include "Reference.h"
 #include "TestSupport.h"
@@ -14,6 +16,7 @@
 #include "duplex/objects/MeshObject.h"
 #include "duplex/scenegraph/SceneGraph.h"
 #include "duplex/scenegraph/SceneTracer.h"
+#include "duplex/accel/WideBvh.h"
 
 #include <gtest/gtest.h>
 

@@ -11,6 +11,7 @@
 #include "duplex/accel/KdTreeBuilder.h"
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/objects/MeshObject.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 

@@ -13,6 +13,8 @@
 #include "duplex/accel/RayGenerator.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/TriangleMesh.h"
+#include "duplex/accel/WideBvh.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 

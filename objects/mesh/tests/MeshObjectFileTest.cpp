@@ -15,6 +15,8 @@
 #include "duplex/accel/Xxh64.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/MeshObjectFile.h"
+#include "duplex/accel/WideBvh.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 

@@ -10,6 +10,8 @@
 #include "duplex/objects/MeshObjectFile.h"
 #include "duplex/objects/MeshTypes.h"
 #include "duplex/scenegraph/SceneDocument.h"
+#include "duplex/accel/WideBvh.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -11,6 +11,7 @@
 #include "duplex/scenegraph/SceneDocument.h"
 #include "duplex/scenegraph/SceneGraph.h"
 #include "duplex/scenegraph/SceneTracer.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>

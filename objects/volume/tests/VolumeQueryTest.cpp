@@ -12,6 +12,7 @@
 #include "duplex/accel/TopLevel.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/objects/VolumeObjectVdb.h"
+#include "duplex/accel/KdTree.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>

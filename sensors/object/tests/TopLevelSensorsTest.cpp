@@ -11,6 +11,7 @@
 #include "duplex/accel/TopLevel.h"
 #include "duplex/objects/MeshObject.h"
 #include "duplex/sensors/SensorObject.h"
+#include "duplex/accel/KdTree.h"
 
 #include "MeshChecks.h"
 #include "TestSupport.h"

@@ -9,6 +9,7 @@
 #include "duplex/objects/VolumeObjectVdb.h"
 #include "duplex/sensors/CounterRng.h"
 #include "duplex/sensors/HenyeyGreenstein.h"
+#include "duplex/accel/KdTree.h"
 #include "SensorFixture.h"
 #include "SlabMedium.h"
 

@@ -5,9 +5,7 @@
 
 #include "duplex/accel/BvhBuildConfig.h"
 #include "duplex/accel/KdBuildConfig.h"
-#include "duplex/accel/KdTree.h"
 #include "duplex/accel/Object.h"
-#include "duplex/accel/WideBvh.h"
 #include "duplex/objects/TriangleMesh.h"
 
 #include <cstdint>
@@ -18,9 +16,11 @@
 
 namespace duplex {
 
+struct KdTree;   // duplex/accel/KdTree.h
+struct WideBvh;  // duplex/accel/WideBvh.h
+
 namespace detail {
-struct TriangleBlock4;
-struct MeshBvhView;
+struct MeshParts;  // the structures and leaf blocks (objects/mesh/src/MeshParts.h)
 }  // namespace detail
 
 /// The bottom-level structures a mesh can have.
@@ -146,11 +146,11 @@ class MeshObject final : public Object {
   /// Which structure the object has.
   [[nodiscard]] MeshStructure structure() const { return structure_; }
   /// The kd-tree over the mesh's triangles (object space; prim_indices hold triangle ids); empty
-  /// (no nodes) when the structure is the BVH.
-  [[nodiscard]] const KdTree& tree() const { return tree_; }
+  /// (no nodes) when the structure is the BVH. Include duplex/accel/KdTree.h to read it.
+  [[nodiscard]] const KdTree& tree() const;
   /// The BVH over the mesh's triangles (object space; prim_indices hold triangle ids); empty (root
-  /// kEmpty, no nodes) when the structure is the kd-tree.
-  [[nodiscard]] const WideBvh& bvh() const { return bvh_; }
+  /// kEmpty, no nodes) when the structure is the kd-tree. Include duplex/accel/WideBvh.h to read it.
+  [[nodiscard]] const WideBvh& bvh() const;
   /// Bytes of the acceleration structure (nodes, index list, per-leaf triangle blocks).
   [[nodiscard]] std::size_t accelBytes() const;
 
@@ -164,11 +164,11 @@ class MeshObject final : public Object {
   MeshObject(const MeshObject& from, RefitTag);
   void buildKd(const KdBuildConfig& config);
   void buildBvh(const BvhBuildConfig& config);
-  /// Fills blocks_ and block_tree_ from tree_ (see below).
+  /// Fills the leaf blocks and block_tree from the kd-tree (MeshParts.h).
   void buildLeafBlocks();
-  /// Fills blocks_ from bvh_: block k holds bvh_.prim_indices[4k, 4k + 4), and makes view_.
+  /// Fills the leaf blocks from the BVH: block k holds its prim_indices[4k, 4k + 4), and makes the view.
   void buildBvhBlocks();
-  /// Points view_ at bvh_ and blocks_ (once both are final).
+  /// Points the view at the BVH and the blocks (once both are final).
   void makeView();
 
   std::shared_ptr<const TriangleMesh> mesh_;
@@ -176,20 +176,10 @@ class MeshObject final : public Object {
   MeshBuildConfig config_;
   double built_sah_ = 0.0;  // BVH: SAH cost at the last build (refits compare against it)
   bool refitted_ = false;
-  WideBvh bvh_;  // leaf references index blocks_ directly (the ranges are block aligned)
-  KdTree tree_;  // prim_indices hold mesh triangle ids (what tests and tools inspect)
-  // Each non-empty leaf's triangles copied into consecutive 4-wide blocks (structure of arrays, in
-  // the leaf's reference order, the last block padded), so that a leaf is a few sequential loads
-  // and its test needs neither an index list nor a transpose. A triangle referenced by several
-  // leaves is copied into each (about 40 bytes per reference).
-  std::vector<detail::TriangleBlock4> blocks_;
-  // What queries traverse: tree_'s bounds and nodes, with each leaf's offset pointing at its first
-  // block instead of into prim_indices (which stays empty), so reaching a leaf's triangles costs no
-  // dependent load through an index list.
-  KdTree block_tree_;
-  // The BVH kernels' view of bvh_ and blocks_ (BVH structure only), kept for the direct entry
-  // (rayEntry) so that an instance visit builds none.
-  std::unique_ptr<const detail::MeshBvhView> view_;
+  // The BVH or kd-tree, the leaf blocks and the kernels' view: never null. Behind a pointer so that
+  // this header does not include the structures (one more load per instance visit, beside the
+  // virtual call already paid there).
+  std::unique_ptr<detail::MeshParts> parts_;
 };
 
 }  // namespace duplex
