@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Fails on a broken relative link in the project's Markdown (README.md, docs/, bench/results/).
+"""Fails on a broken relative link in the project's Markdown (README.md, docs/, bench/results/),
+and on a README.md that outgrows a front page (README_LIMIT characters).
 
 A link [text](path#anchor) or image ![alt](path) that is not a URL must name a file or folder that
 exists, relative to the page; an anchor into a Markdown page (or #anchor alone) must name one of
@@ -17,6 +18,8 @@ LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"
 FENCE = re.compile(r"^\s*(```|~~~)")
 HEADING = re.compile(r"^ {0,3}(#{1,6})\s+(.*?)\s*#*\s*$")
 INLINE_CODE = re.compile(r"(`+)(?:(?!\1).)+?\1")
+# The README is the front page: what Duplex is, the two commands, a tour, links. Detail belongs in docs/.
+README_LIMIT = 12000
 
 
 def pages(root):
@@ -93,6 +96,11 @@ def main():
     root = os.path.abspath(root)
     checked = pages(root)
     problems = [p for page in checked for p in check(root, page)]
+    readme = os.path.join(root, "README.md")
+    if os.path.isfile(readme):
+        size = len(open(readme, encoding="utf-8").read())
+        if size > README_LIMIT:
+            problems.append("README.md: %d characters, more than %d: move detail to docs/" % (size, README_LIMIT))
     for p in problems:
         print(p)
     print("check_doc_links: %d pages, %d broken links" % (len(checked), len(problems)), file=sys.stderr)
