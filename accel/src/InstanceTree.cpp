@@ -603,6 +603,36 @@ Hit InstanceTree::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t
   return intersectImpl(fromDouble(ray_ws).f, &ray_ws, ctx, mask);
 }
 
+void InstanceTree::intersectBatch(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                                  std::uint32_t mask) const {
+  if (hits.size() < rays_ws.size())
+    throw InvalidArgument("InstanceTree::intersectBatch: " + std::to_string(hits.size()) + " hits for " +
+                          std::to_string(rays_ws.size()) + " rays");
+  const State& s = *state_;
+  if (tree_.empty() || !s.wide.usable) {
+    for (std::size_t i = 0; i < rays_ws.size(); ++i) hits[i] = intersectImpl(rays_ws[i], nullptr, ctx, mask);
+    return;
+  }
+  ctx.stats.rays += rays_ws.size();
+  wideKernels().closestBatch({&s.wide, s.records.data(), s.filters.data(), mask}, rays_ws.data(), rays_ws.size(),
+                             hits.data(), ctx);
+}
+
+void InstanceTree::occludedBatch(std::span<const Ray> rays_ws, std::span<std::uint8_t> occluded_out, QueryContext& ctx,
+                                 std::uint32_t mask) const {
+  if (occluded_out.size() < rays_ws.size())
+    throw InvalidArgument("InstanceTree::occludedBatch: " + std::to_string(occluded_out.size()) + " results for " +
+                          std::to_string(rays_ws.size()) + " rays");
+  const State& s = *state_;
+  if (tree_.empty() || !s.wide.usable) {
+    for (std::size_t i = 0; i < rays_ws.size(); ++i) occluded_out[i] = occluded(rays_ws[i], ctx, mask) ? 1 : 0;
+    return;
+  }
+  ctx.stats.rays += rays_ws.size();
+  wideKernels().occludedBatch({&s.wide, s.records.data(), s.filters.data(), mask}, rays_ws.data(), rays_ws.size(),
+                              occluded_out.data(), ctx);
+}
+
 bool InstanceTree::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   ++ctx.stats.rays;
   if (tree_.empty()) return false;

@@ -163,8 +163,8 @@ inline std::uint32_t packetChildHits(const PacketRays& p, const WideNode& node, 
 #include "InstanceTreeWide.inl"
 
 }  // namespace
-const WideKernels kKernels{SimdIsa::Sse2,      closestEntry,        occludedEntry,
-                           closestPacketEntry, occludedPacketEntry, walkEntry};
+const WideKernels kKernels{SimdIsa::Sse2,      closestEntry,       occludedEntry,       closestBatchEntry,
+                           occludedBatchEntry, closestPacketEntry, occludedPacketEntry, walkEntry};
 }  // namespace sse2
 
 #if defined(__clang__)
@@ -305,8 +305,8 @@ inline Ray objectRay(const Record& rec, const WorldRay& w) {
 #include "InstanceTreeWide.inl"
 
 }  // namespace
-const WideKernels kKernels{SimdIsa::Avx2,      closestEntry,        occludedEntry,
-                           closestPacketEntry, occludedPacketEntry, walkEntry};
+const WideKernels kKernels{SimdIsa::Avx2,      closestEntry,       occludedEntry,       closestBatchEntry,
+                           occludedBatchEntry, closestPacketEntry, occludedPacketEntry, walkEntry};
 }  // namespace avx2
 #if defined(__clang__)
 #pragma clang attribute pop

@@ -7,6 +7,7 @@
 #include "InstanceTreeState.h"
 #include "WideTop.h"
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 
@@ -28,6 +29,10 @@ struct WideKernels {
   bool (*closest)(const WideQuery& q, const Ray& ray_f, const RayD* ray_d, Hit& out, QueryContext& ctx);
   // Whether any blocking instance passing the mask blocks `ray` within [tnear, tfar].
   bool (*occluded)(const WideQuery& q, const Ray& ray, QueryContext& ctx);
+  // closest() / occluded() of rays[0, n) one by one into out[0, n) (a miss: Hit{}; occluded: 1 or
+  // 0), with the rays' count not added to ctx.stats.
+  void (*closestBatch)(const WideQuery& q, const Ray* rays, std::size_t n, Hit* out, QueryContext& ctx);
+  void (*occludedBatch)(const WideQuery& q, const Ray* rays, std::size_t n, std::uint8_t* out, QueryContext& ctx);
   // Packets: the rays `rays[j]` of the lanes `lanes` (all of one octant: the same direction signs,
   // each queryable) walk the form together: each child box is tested against all of them at once,
   // and each instance is asked once with the lanes that reach it (Object::intersectPacket). Closest:

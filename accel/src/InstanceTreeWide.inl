@@ -111,6 +111,17 @@ bool occludedEntry(const WideQuery& q, const Ray& ray, QueryContext& ctx) {
   });
 }
 
+void closestBatchEntry(const WideQuery& q, const Ray* rays, std::size_t n, Hit* out, QueryContext& ctx) {
+  for (std::size_t i = 0; i < n; ++i) {
+    out[i] = Hit{};
+    closestEntry(q, rays[i], nullptr, out[i], ctx);
+  }
+}
+
+void occludedBatchEntry(const WideQuery& q, const Ray* rays, std::size_t n, std::uint8_t* out, QueryContext& ctx) {
+  for (std::size_t i = 0; i < n; ++i) out[i] = occludedEntry(q, rays[i], ctx) ? 1 : 0;
+}
+
 // Sub-packets of at most this many lanes enter an object through its single-ray entry.
 constexpr int kAloneLanes = 4;
 

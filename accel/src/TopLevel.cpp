@@ -119,6 +119,16 @@ Hit TopLevel::intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mas
   return blocking_.intersect(ray_ws, ctx, mask);
 }
 
+void TopLevel::intersectBatch(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                              std::uint32_t mask) const {
+  blocking_.intersectBatch(rays_ws, hits, ctx, mask);
+}
+
+void TopLevel::occludedBatch(std::span<const Ray> rays_ws, std::span<std::uint8_t> occluded, QueryContext& ctx,
+                             std::uint32_t mask) const {
+  blocking_.occludedBatch(rays_ws, occluded, ctx, mask);
+}
+
 bool TopLevel::occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask) const {
   return blocking_.occluded(ray_ws, ctx, mask);
 }

@@ -254,15 +254,17 @@ TEST(TopLevel, WideAndKdTraversalsAgree) {
 // packets whose origins spread over up to a third of the scene (shadow rays from surface points),
 // whose directions differ by up to 0.3 (still mostly one octant), some starting inside the scene
 // (tnear > 0), some with zero direction components (+0 and -0), against single rays bit for bit.
-TEST(TopLevel, PacketsOfSpreadOriginsAndDirectionsEqualSingleRays) {
+// Packets and batches against single rays, in a world with instances placed as authored (offset
+// zero: the identity path, which asks objects with the caller's rays) and in one without.
+void expectPacketsAndBatchesEqualSingleRays(glm::dvec3 offset, std::uint64_t seed) {
   const Library lib;
-  const World w = randomWorld(lib, 60, glm::dvec3(0.5, -1.0, 2.0), 6.0, 93, true);
+  const World w = randomWorld(lib, 60, offset, 6.0, seed, true);
   TopLevel top;
   buildTopChecked(top, w.instances);
   const Box b = top.bounds();
   const glm::vec3 size = b.hi - b.lo;
   const float diagonal = glm::length(size);
-  std::mt19937_64 rng(94);
+  std::mt19937_64 rng(seed + 1);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f), sym(-1.0f, 1.0f);
   QueryContext ctx;
   std::size_t hits = 0, blocked = 0, mismatches = 0, rays = 0;
@@ -280,28 +282,64 @@ TEST(TopLevel, PacketsOfSpreadOriginsAndDirectionsEqualSingleRays) {
       r.dir = axis + turn * glm::vec3(sym(rng), sym(rng), sym(rng));
       if (packet % 5 == 1 && j % 3 != 0) r.dir = glm::vec3(j % 2 == 0 ? 0.0f : -0.0f, 0.0f, axis.z);
       if (packet % 7 == 3) r.tnear = (1.0f + 0.5f * u01(rng)) * diagonal / glm::length(r.dir);
+      if (packet % 11 == 5) r.tfar = (0.8f + 0.6f * u01(rng)) * diagonal / glm::length(r.dir);
     }
-    std::array<Hit, kMaxPacketRays> got{};
+    std::array<Hit, kMaxPacketRays> got{}, batch{};
+    std::array<std::uint8_t, kMaxPacketRays> batch_blocked{};
     const std::uint32_t found = top.intersectPacket(rs, got, ctx);
     const std::uint32_t occluded = top.occludedPacket(rs, ctx);
+    top.intersectBatch(rs, batch, ctx);
+    top.occludedBatch(rs, batch_blocked, ctx);
     for (int j = 0; j < kMaxPacketRays; ++j) {
-      const Ray& r = rs[static_cast<std::size_t>(j)];
+      const auto i = static_cast<std::size_t>(j);
+      const Ray& r = rs[i];
       const Hit want = top.intersect(r, ctx);
       const bool want_blocked = top.occluded(r, ctx);
       ++rays;
       hits += want.valid() ? 1 : 0;
       blocked += want_blocked ? 1 : 0;
-      const bool ok = sameHitBits(got[static_cast<std::size_t>(j)], want) && ((found >> j & 1u) != 0) == want.valid() &&
-                      ((occluded >> j & 1u) != 0) == want_blocked;
+      const bool ok = sameHitBits(got[i], want) && ((found >> j & 1u) != 0) == want.valid() &&
+                      ((occluded >> j & 1u) != 0) == want_blocked && sameHitBits(batch[i], want) &&
+                      (batch_blocked[i] != 0) == want_blocked;
       if (!ok && ++mismatches <= 5)
-        ADD_FAILURE() << "packet " << packet << ", lane " << j << ", " << r << ": packet "
-                      << got[static_cast<std::size_t>(j)] << ", single " << want;
+        ADD_FAILURE() << "packet " << packet << ", lane " << j << ", " << r << ": packet " << got[i] << ", batch "
+                      << batch[i] << ", single " << want;
     }
   }
   EXPECT_EQ(mismatches, 0u);
   EXPECT_GT(hits, rays / 10);
   EXPECT_LT(hits, rays);
   EXPECT_GT(blocked, rays / 10);
+}
+
+TEST(TopLevel, PacketsOfSpreadOriginsAndDirectionsEqualSingleRays) {
+  expectPacketsAndBatchesEqualSingleRays(glm::dvec3(0.5, -1.0, 2.0), 93);
+}
+
+TEST(TopLevel, PacketsThroughInstancesPlacedAsAuthoredEqualSingleRays) {
+  expectPacketsAndBatchesEqualSingleRays(glm::dvec3(0.0), 193);
+}
+
+TEST(TopLevel, BatchesRefuseShortResultSpans) {
+  const Library lib;
+  const World w = randomWorld(lib, 8, glm::dvec3(0.0), 3.0, 5, false);
+  TopLevel top;
+  buildTopChecked(top, w.instances);
+  QueryContext ctx;
+  std::array<Ray, 3> rs{};
+  for (Ray& r : rs) r.dir = glm::vec3(0.0f, 0.0f, 1.0f);
+  std::array<Hit, 2> hits{};
+  std::array<std::uint8_t, 2> blocked{};
+  const auto expect_refused = [](auto&& call, const std::string& needle) {
+    try {
+      call();
+      ADD_FAILURE() << "no InvalidArgument (" << needle << ")";
+    } catch (const InvalidArgument& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  expect_refused([&] { top.intersectBatch(rs, hits, ctx); }, "2 hits for 3 rays");
+  expect_refused([&] { top.occludedBatch(rs, blocked, ctx); }, "2 results for 3 rays");
 }
 
 TEST(TopLevel, ManyOverlappingInstancesOfOneObject) {

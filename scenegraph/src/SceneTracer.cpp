@@ -243,7 +243,7 @@ void forEachRay(const char* what, std::span<const In> rays, std::span<Out> out, 
 void intersectRange(const TopLevel& top, bool packets, std::span<const Ray> rays, Hit* out, QueryContext& ctx,
                     std::uint32_t mask) {
   if (!packets) {
-    for (std::size_t i = 0; i < rays.size(); ++i) out[i] = top.intersect(rays[i], ctx, mask);
+    top.intersectBatch(rays, {out, rays.size()}, ctx, mask);
     return;
   }
   constexpr auto kPacket = static_cast<std::size_t>(kMaxPacketRays);
@@ -256,7 +256,7 @@ void intersectRange(const TopLevel& top, bool packets, std::span<const Ray> rays
 void occludedRange(const TopLevel& top, bool packets, std::span<const Ray> rays, std::uint8_t* out, QueryContext& ctx,
                    std::uint32_t mask) {
   if (!packets) {
-    for (std::size_t i = 0; i < rays.size(); ++i) out[i] = top.occluded(rays[i], ctx, mask) ? 1 : 0;
+    top.occludedBatch(rays, {out, rays.size()}, ctx, mask);
     return;
   }
   constexpr auto kPacket = static_cast<std::size_t>(kMaxPacketRays);

@@ -160,6 +160,12 @@ class InstanceTree {
   [[nodiscard]] Hit intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Whether a Surface instance whose mask meets `mask` is hit within [tnear, tfar].
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Closest hits of a batch of world rays one by one (see TopLevel::intersectBatch).
+  void intersectBatch(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                      std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// occluded() of a batch of world rays one by one, 1 or 0 each (see TopLevel::occludedBatch).
+  void occludedBatch(std::span<const Ray> rays_ws, std::span<std::uint8_t> occluded, QueryContext& ctx,
+                     std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Closest hits of up to kMaxPacketRays world rays traced together (see TopLevel::intersectPacket):
   /// hits[i] is exactly intersect(rays_ws[i], ctx, mask). Returns the lanes that hit.
   std::uint32_t intersectPacket(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,

@@ -122,6 +122,16 @@ class TopLevel {
   [[nodiscard]] Hit intersect(const RayD& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Whether any blocking instance whose mask meets `mask` is hit within [tnear, tfar].
   [[nodiscard]] bool occluded(const Ray& ray_ws, QueryContext& ctx, std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// Closest hits of a batch of world rays traced one by one: hits[i] is intersect(rays_ws[i], ctx,
+  /// mask) bit for bit, world space as intersect(); the per-call work (the kernel for the CPU, the
+  /// tree's state) is done once per batch. Throws InvalidArgument when `hits` is shorter than
+  /// `rays_ws`.
+  void intersectBatch(std::span<const Ray> rays_ws, std::span<Hit> hits, QueryContext& ctx,
+                      std::uint32_t mask = 0xFFFFFFFFu) const;
+  /// occluded[i] = 1 when occluded(rays_ws[i], ctx, mask), else 0, the rays traced one by one as
+  /// intersectBatch's. Throws InvalidArgument when `occluded` is shorter than `rays_ws`.
+  void occludedBatch(std::span<const Ray> rays_ws, std::span<std::uint8_t> occluded, QueryContext& ctx,
+                     std::uint32_t mask = 0xFFFFFFFFu) const;
   /// Closest hits of up to kMaxPacketRays world rays (world space, t in units of each ray's
   /// direction) traced together: the rays of each octant go through the kd-tree as one packet, and
   /// each instance they reach answers the sub-packet of rays that reach it, transformed to object
