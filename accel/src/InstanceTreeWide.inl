@@ -39,6 +39,19 @@ inline bool walk(const WideTop& top, const WideRay& r, float& t_best, Visit&& vi
           cur_t = t_enter[first];
           continue;
         }
+        if constexpr (!AnyHit) {
+          if ((mask & (mask - 1)) == 0) {
+            // Two: the nearer taken, the other pushed, chosen by selects rather than a branch on
+            // their order (a coin flip for the predictor).
+            const int second = std::countr_zero(mask);
+            const bool first_nearer = t_enter[first] < t_enter[second];  // ties: the later child first, as below
+            const int near = first_nearer ? first : second, far = first_nearer ? second : first;
+            stack[depth++] = {node.child[far], t_enter[far]};
+            cur = node.child[near];
+            cur_t = t_enter[near];
+            continue;
+          }
+        }
         // Several: pushed sorted by entry, the nearest last (popped, that is taken, at once).
         const int base = depth;
         stack[depth++] = {node.child[first], t_enter[first]};
