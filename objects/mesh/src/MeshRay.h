@@ -41,16 +41,17 @@ struct MeshRay {
   // Permutation and shear (WatertightRay's rules, kept in scalar form because the choice is
   // integer logic; the three divisions become one vector division d / d[kz] and lane 3 = 1/d[kz]).
   WatertightRay& w = r.wray;
-  const float dx = ray.dir.x, dy = ray.dir.y, dz = ray.dir.z;
-  const float a0 = std::abs(dx), a1 = std::abs(dy), a2 = std::abs(dz);
   // Table lookups rather than WatertightRay's arithmetic, which the compiler turned into a branch
   // on |dy| >= |dz| (a coin flip on random rays, half a misprediction per ray). kDominant by the
-  // three comparisons: x when it is >= both others, else y when |dy| >= |dz|, else z.
+  // three comparisons |dx| >= |dy|, |dx| >= |dz|, |dy| >= |dz| (one vector compare, bits 0-2):
+  // x when it is >= both others, else y when |dy| >= |dz|, else z.
   static constexpr std::int8_t kDominant[8] = {2, 2, 2, 0, 1, 1, 1, 0};
   // (kx, ky) by kz and the sign of d[kz]: the next two axes, swapped when d[kz] < 0 (winding).
   static constexpr std::int8_t kCross[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
-  const int kz =
-      kDominant[static_cast<int>(a0 >= a1) | static_cast<int>(a0 >= a2) << 1 | static_cast<int>(a1 >= a2) << 2];
+  const __m128 a = _mm_andnot_ps(_mm_set1_ps(-0.0f), d);
+  const __m128 lhs = _mm_shuffle_ps(a, a, _MM_SHUFFLE(3, 1, 0, 0));  // |dx|, |dx|, |dy|
+  const __m128 rhs = _mm_shuffle_ps(a, a, _MM_SHUFFLE(3, 2, 2, 1));  // |dy|, |dz|, |dz|
+  const int kz = kDominant[_mm_movemask_ps(_mm_cmpge_ps(lhs, rhs)) & 7];
   const float dkz = (&ray.dir.x)[kz];
   const int negative = static_cast<int>(dkz < 0.0f);
   const int kx = kCross[kz][negative][0];
