@@ -158,7 +158,8 @@ struct Node {
   }
 };
 
-// The leaf step: one 4-wide test per block (MeshLeafTest.h).
+// The leaf step: one 4-wide test per block (MeshLeafTest.h). Inlined into the traversal (as in
+// the wider paths): a call would spill the traversal's broadcast ray constants around every leaf.
 struct Leaf {
   struct RayConstants {
     explicit RayConstants(const MeshRay&) {}
@@ -167,8 +168,8 @@ struct Leaf {
                       float& t_max, ClosestHit& best) {
     return closestInLeaf(ray, blocks, count, t_max, best);
   }
-  static bool any(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks, std::uint32_t count,
-                  float t_max) {
+  [[gnu::always_inline]] static bool any(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks,
+                                         std::uint32_t count, float t_max) {
     return anyInLeaf(ray, blocks, count, t_max);
   }
 };
@@ -320,11 +321,14 @@ inline __m256 rows2(const float* lo, const float* hi) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(lo)), _mm_load_ps(hi), 1);
 }
 
+// Leaf::any is inlined into the any-hit traversal: out of line, the call made the traversal spill
+// and reload its broadcast ray constants around every leaf, and the callee save and realign its
+// frame, which cost the any-hit walk more than the 8-lane test itself.
 struct Leaf {
   /// WatertightRay4's constants on 8 lanes, once per ray.
   struct RayConstants {
     __m256 o[3], sx, sy, sz, tnear;
-    explicit RayConstants(const MeshRay& ray)
+    [[gnu::always_inline]] explicit RayConstants(const MeshRay& ray)
         : o{broadcast2(ray.wray4.o[0]), broadcast2(ray.wray4.o[1]), broadcast2(ray.wray4.o[2])},
           sx(broadcast2(ray.wray4.sx)),
           sy(broadcast2(ray.wray4.sy)),
@@ -332,8 +336,8 @@ struct Leaf {
           tnear(broadcast2(ray.wray4.tnear)) {}
   };
 
-  static Watertight8v test8(const MeshRay& ray, const RayConstants& c, const TriangleBlock4& b0,
-                            const TriangleBlock4& b1, int lanes, float t_max) {
+  [[gnu::always_inline]] static Watertight8v test8(const MeshRay& ray, const RayConstants& c, const TriangleBlock4& b0,
+                                                   const TriangleBlock4& b1, int lanes, float t_max) {
     const int kx = ray.wray4.kx, ky = ray.wray4.ky, kz = ray.wray4.kz;
     const float *rx0 = b0.v[kx], *ry0 = b0.v[ky], *rz0 = b0.v[kz];
     const float *rx1 = b1.v[kx], *ry1 = b1.v[ky], *rz1 = b1.v[kz];
@@ -421,19 +425,27 @@ struct Leaf {
   }
 
   /// anyInLeaf (MeshLeafTest.h) two blocks at a time, a last lone block as in closest().
-  static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
-                  float t_max) {
+  [[gnu::always_inline]] static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block,
+                                         std::uint32_t count, float t_max) {
     for (int left = static_cast<int>(count); left > 0; left -= 8, block += 2) {
       const Watertight8v r =
           test8(ray, c, block[0], block[left > 4 ? 1 : 0], left >= 8 ? 0xFF : (1 << left) - 1, t_max);
       if (r.fast != 0) return true;
-      for (int lanes_left = r.exact; lanes_left != 0; lanes_left &= lanes_left - 1) {
-        const int k = std::countr_zero(static_cast<unsigned>(lanes_left));
-        const TriangleBlock4& b = block[k >> 2];
-        float t, u, v;
-        if (intersectWatertight(ray.wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), t_max, t, u, v))
-          return true;
-      }
+      if (r.exact != 0 && anyExact(ray, block, r.exact, t_max)) return true;
+    }
+    return false;
+  }
+
+  /// The lanes of `exact` (an edge function zero: bit i, lane i & 3 of block[i >> 2]) decided by
+  /// the scalar test. Rare, so out of line: it keeps the inlined any() small.
+  [[gnu::noinline, gnu::cold]] static bool anyExact(const MeshRay& ray, const TriangleBlock4* block, int exact,
+                                                    float t_max) {
+    for (; exact != 0; exact &= exact - 1) {
+      const int k = std::countr_zero(static_cast<unsigned>(exact));
+      const TriangleBlock4& b = block[k >> 2];
+      float t, u, v;
+      if (intersectWatertight(ray.wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), t_max, t, u, v))
+        return true;
     }
     return false;
   }
@@ -483,7 +495,81 @@ namespace avx512 {
 namespace {
 
 using avx2::BoxRay;
-using avx2::Leaf;
+// The leaf step: avx2::Leaf's closest-hit test; the any-hit test on a whole leaf (up to 16
+// triangles, BvhRef::kMaxLeafSize) at once, lane for lane the operations of avx2::Leaf::test8
+// (no fused multiply-add), so every lane decides as the 8-wide, 4-wide and scalar tests do.
+// Without a loop over block pairs, the leaf has no branch on its triangle count.
+struct Leaf {
+  static_assert(BvhRef::kMaxLeafSize <= 16);
+  struct RayConstants {
+    avx2::Leaf::RayConstants c8;
+    __m512 o[3], sx, sy, sz, tnear;
+    [[gnu::always_inline]] explicit RayConstants(const MeshRay& ray)
+        : c8(ray),
+          o{_mm512_set1_ps(ray.wray.origin[ray.wray.kx]), _mm512_set1_ps(ray.wray.origin[ray.wray.ky]),
+            _mm512_set1_ps(ray.wray.origin[ray.wray.kz])},
+          sx(_mm512_set1_ps(ray.wray.sx)),
+          sy(_mm512_set1_ps(ray.wray.sy)),
+          sz(_mm512_set1_ps(ray.wray.sz)),
+          tnear(_mm512_set1_ps(ray.wray.tnear)) {}
+  };
+
+  static bool closest(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* blocks, std::uint32_t count,
+                      float& t_max, ClosestHit& best) {
+    return avx2::Leaf::closest(ray, c.c8, blocks, count, t_max, best);
+  }
+
+  // Coordinate `axis` of a vertex of four blocks (lanes 4j..4j+3: block b[j]); `offset` 12 k picks
+  // vertex k.
+  [[gnu::always_inline]] static __m512 rows4(const TriangleBlock4* const* b, int offset, int axis) {
+    const __m512 v = _mm512_castps128_ps512(_mm_load_ps(b[0]->v[axis] + offset));
+    const __m512 v1 = _mm512_insertf32x4(v, _mm_load_ps(b[1]->v[axis] + offset), 1);
+    const __m512 v2 = _mm512_insertf32x4(v1, _mm_load_ps(b[2]->v[axis] + offset), 2);
+    return _mm512_insertf32x4(v2, _mm_load_ps(b[3]->v[axis] + offset), 3);
+  }
+
+  [[gnu::always_inline]] static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block,
+                                         std::uint32_t count, float t_max) {
+    // Blocks past the leaf's last repeat it, their lanes masked off.
+    const std::uint32_t last = (count - 1) >> 2;
+    const TriangleBlock4* const b[4] = {block, block + std::min(1u, last), block + std::min(2u, last), block + last};
+    const auto lanes = static_cast<__mmask16>((1u << count) - 1u);
+    const int kx = ray.wray4.kx, ky = ray.wray4.ky, kz = ray.wray4.kz;
+    const __m512 Az = _mm512_sub_ps(rows4(b, 0, kz), c.o[2]);
+    const __m512 ax = _mm512_sub_ps(_mm512_sub_ps(rows4(b, 0, kx), c.o[0]), _mm512_mul_ps(c.sx, Az));
+    const __m512 ay = _mm512_sub_ps(_mm512_sub_ps(rows4(b, 0, ky), c.o[1]), _mm512_mul_ps(c.sy, Az));
+    const __m512 Bz = _mm512_sub_ps(rows4(b, 12, kz), c.o[2]);
+    const __m512 bx = _mm512_sub_ps(_mm512_sub_ps(rows4(b, 12, kx), c.o[0]), _mm512_mul_ps(c.sx, Bz));
+    const __m512 by = _mm512_sub_ps(_mm512_sub_ps(rows4(b, 12, ky), c.o[1]), _mm512_mul_ps(c.sy, Bz));
+    const __m512 Cz = _mm512_sub_ps(rows4(b, 24, kz), c.o[2]);
+    const __m512 cx = _mm512_sub_ps(_mm512_sub_ps(rows4(b, 24, kx), c.o[0]), _mm512_mul_ps(c.sx, Cz));
+    const __m512 cy = _mm512_sub_ps(_mm512_sub_ps(rows4(b, 24, ky), c.o[1]), _mm512_mul_ps(c.sy, Cz));
+    const __m512 V = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
+    const __m512 W = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
+    const __m512 U = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
+    const __m512 zero = _mm512_setzero_ps();
+    const __mmask16 exact = (_mm512_cmp_ps_mask(U, zero, _CMP_EQ_OQ) | _mm512_cmp_ps_mask(V, zero, _CMP_EQ_OQ) |
+                             _mm512_cmp_ps_mask(W, zero, _CMP_EQ_OQ)) &
+                            lanes;
+    // The masked forms with every lane set: GCC warns about the unmasked forms' undefined pass-through.
+    const __m512 lo = _mm512_mask_min_ps(U, 0xFFFF, U, _mm512_mask_min_ps(V, 0xFFFF, V, W));
+    const __m512 hi = _mm512_mask_max_ps(U, 0xFFFF, U, _mm512_mask_max_ps(V, 0xFFFF, V, W));
+    const __m512 det = _mm512_add_ps(_mm512_add_ps(U, V), W);
+    const __mmask16 rejected = (_mm512_cmp_ps_mask(lo, zero, _CMP_LT_OQ) & _mm512_cmp_ps_mask(hi, zero, _CMP_GT_OQ)) |
+                               _mm512_cmp_ps_mask(det, zero, _CMP_EQ_OQ);
+    const __m512 T = _mm512_add_ps(
+        _mm512_add_ps(_mm512_mul_ps(U, _mm512_mul_ps(c.sz, Az)), _mm512_mul_ps(V, _mm512_mul_ps(c.sz, Bz))),
+        _mm512_mul_ps(W, _mm512_mul_ps(c.sz, Cz)));
+    const __m512 abs_det = _mm512_abs_ps(det);
+    const __m512 sT = _mm512_castsi512_ps(_mm512_xor_si512(
+        _mm512_castps_si512(T), _mm512_and_si512(_mm512_castps_si512(det), _mm512_set1_epi32(INT32_MIN))));
+    const __mmask16 outside = _mm512_cmp_ps_mask(sT, _mm512_mul_ps(c.tnear, abs_det), _CMP_LT_OQ) |
+                              _mm512_cmp_ps_mask(sT, _mm512_mul_ps(_mm512_set1_ps(t_max), abs_det), _CMP_GT_OQ);
+    const __mmask16 fast = lanes & ~exact & ~rejected & ~outside;
+    if (fast != 0) return true;
+    return exact != 0 && avx2::Leaf::anyExact(ray, block, exact, t_max);
+  }
+};
 
 struct Node {
   // As avx2::Node::push, with the compaction in registers (vpcompressd / vcompressps).
