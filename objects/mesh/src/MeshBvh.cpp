@@ -514,8 +514,9 @@ struct Leaf {
           tnear(_mm512_set1_ps(ray.wray.tnear)) {}
   };
 
-  static bool closest(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* blocks, std::uint32_t count,
-                      float& t_max, ClosestHit& best) {
+  // Inlined, so that the closest-hit walk passes avx2's constants alone and never stores these.
+  [[gnu::always_inline]] static bool closest(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* blocks,
+                                             std::uint32_t count, float& t_max, ClosestHit& best) {
     return avx2::Leaf::closest(ray, c.c8, blocks, count, t_max, best);
   }
 
