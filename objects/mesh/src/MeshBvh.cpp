@@ -158,8 +158,8 @@ struct Node {
   }
 };
 
-// The leaf step: one 4-wide test per block (MeshLeafTest.h). Inlined into the traversal (as in
-// the wider paths): a call would spill the traversal's broadcast ray constants around every leaf.
+// The leaf step: one 4-wide test per block (MeshLeafTest.h). The any-hit test is inlined into the
+// walk (as in the wider paths): a call would spill the walk's ray constants around every leaf.
 struct Leaf {
   struct RayConstants {
     explicit RayConstants(const MeshRay&) {}
@@ -321,9 +321,9 @@ inline __m256 rows2(const float* lo, const float* hi) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(lo)), _mm_load_ps(hi), 1);
 }
 
-// Leaf::any is inlined into the any-hit traversal: out of line, the call made the traversal spill
-// and reload its broadcast ray constants around every leaf, and the callee save and realign its
-// frame, which cost the any-hit walk more than the 8-lane test itself.
+// Leaf::any is inlined into the any-hit walk: a call would make the walk spill and reload its
+// broadcast ray constants around every leaf, and the callee save registers and realign its frame,
+// which costs more than the 8-lane test itself.
 struct Leaf {
   /// WatertightRay4's constants on 8 lanes, once per ray.
   struct RayConstants {
