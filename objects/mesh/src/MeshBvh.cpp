@@ -158,7 +158,8 @@ struct Node {
   }
 };
 
-// The leaf step: one 4-wide test per block (MeshLeafTest.h).
+// The leaf step: one 4-wide test per block (MeshLeafTest.h). The any-hit test is inlined into the
+// walk (as in the wider paths): a call would spill the walk's ray constants around every leaf.
 struct Leaf {
   struct RayConstants {
     explicit RayConstants(const MeshRay&) {}
@@ -167,8 +168,8 @@ struct Leaf {
                       float& t_max, ClosestHit& best) {
     return closestInLeaf(ray, blocks, count, t_max, best);
   }
-  static bool any(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks, std::uint32_t count,
-                  float t_max) {
+  [[gnu::always_inline]] static bool any(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks,
+                                         std::uint32_t count, float t_max) {
     return anyInLeaf(ray, blocks, count, t_max);
   }
 };
@@ -320,11 +321,14 @@ inline __m256 rows2(const float* lo, const float* hi) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(lo)), _mm_load_ps(hi), 1);
 }
 
+// Leaf::any is inlined into the any-hit walk: a call would make the walk spill and reload its
+// broadcast ray constants around every leaf, and the callee save registers and realign its frame,
+// which costs more than the 8-lane test itself.
 struct Leaf {
   /// WatertightRay4's constants on 8 lanes, once per ray.
   struct RayConstants {
     __m256 o[3], sx, sy, sz, tnear;
-    explicit RayConstants(const MeshRay& ray)
+    [[gnu::always_inline]] explicit RayConstants(const MeshRay& ray)
         : o{broadcast2(ray.wray4.o[0]), broadcast2(ray.wray4.o[1]), broadcast2(ray.wray4.o[2])},
           sx(broadcast2(ray.wray4.sx)),
           sy(broadcast2(ray.wray4.sy)),
@@ -332,8 +336,8 @@ struct Leaf {
           tnear(broadcast2(ray.wray4.tnear)) {}
   };
 
-  static Watertight8v test8(const MeshRay& ray, const RayConstants& c, const TriangleBlock4& b0,
-                            const TriangleBlock4& b1, int lanes, float t_max) {
+  [[gnu::always_inline]] static Watertight8v test8(const MeshRay& ray, const RayConstants& c, const TriangleBlock4& b0,
+                                                   const TriangleBlock4& b1, int lanes, float t_max) {
     const int kx = ray.wray4.kx, ky = ray.wray4.ky, kz = ray.wray4.kz;
     const float *rx0 = b0.v[kx], *ry0 = b0.v[ky], *rz0 = b0.v[kz];
     const float *rx1 = b1.v[kx], *ry1 = b1.v[ky], *rz1 = b1.v[kz];
@@ -421,19 +425,27 @@ struct Leaf {
   }
 
   /// anyInLeaf (MeshLeafTest.h) two blocks at a time, a last lone block as in closest().
-  static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
-                  float t_max) {
+  [[gnu::always_inline]] static bool any(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block,
+                                         std::uint32_t count, float t_max) {
     for (int left = static_cast<int>(count); left > 0; left -= 8, block += 2) {
       const Watertight8v r =
           test8(ray, c, block[0], block[left > 4 ? 1 : 0], left >= 8 ? 0xFF : (1 << left) - 1, t_max);
       if (r.fast != 0) return true;
-      for (int lanes_left = r.exact; lanes_left != 0; lanes_left &= lanes_left - 1) {
-        const int k = std::countr_zero(static_cast<unsigned>(lanes_left));
-        const TriangleBlock4& b = block[k >> 2];
-        float t, u, v;
-        if (intersectWatertight(ray.wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), t_max, t, u, v))
-          return true;
-      }
+      if (r.exact != 0 && anyExact(ray, block, r.exact, t_max)) return true;
+    }
+    return false;
+  }
+
+  /// The lanes of `exact` (an edge function zero: bit i, lane i & 3 of block[i >> 2]) decided by
+  /// the scalar test. Rare, so out of line: it keeps the inlined any() small.
+  [[gnu::noinline, gnu::cold]] static bool anyExact(const MeshRay& ray, const TriangleBlock4* block, int exact,
+                                                    float t_max) {
+    for (; exact != 0; exact &= exact - 1) {
+      const int k = std::countr_zero(static_cast<unsigned>(exact));
+      const TriangleBlock4& b = block[k >> 2];
+      float t, u, v;
+      if (intersectWatertight(ray.wray, b.vertex(k & 3, 0), b.vertex(k & 3, 1), b.vertex(k & 3, 2), t_max, t, u, v))
+        return true;
     }
     return false;
   }

@@ -70,17 +70,28 @@ inline bool closestInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::
   return found;
 }
 
-/// Whether any of the `count` triangles of the blocks from `block` on is hit within t_max.
-inline bool anyInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::uint32_t count, float t_max) {
+/// The lanes of `exact` (edge function zero) of `block` decided by the scalar test: whether one is
+/// hit within t_max. Rare, so out of line: it keeps the inlined anyInLeaf small.
+[[gnu::noinline, gnu::cold]] inline bool anyExactInBlock(const MeshRay& ray, const TriangleBlock4& block, int exact,
+                                                         float t_max) {
+  for (; exact != 0; exact &= exact - 1) {
+    const int k = std::countr_zero(static_cast<unsigned>(exact));
+    float t, u, v;
+    if (intersectWatertight(ray.wray, block.vertex(k, 0), block.vertex(k, 1), block.vertex(k, 2), t_max, t, u, v))
+      return true;
+  }
+  return false;
+}
+
+/// Whether any of the `count` triangles of the blocks from `block` on is hit within t_max: the
+/// first block with a lane decided in float ends the search. Inlined into the traversals: a call
+/// would spill their ray constants around every leaf.
+[[gnu::always_inline]] inline bool anyInLeaf(const MeshRay& ray, const TriangleBlock4* block, std::uint32_t count,
+                                             float t_max) {
   for (int left = static_cast<int>(count); left > 0; left -= 4, ++block) {
     const Watertight4v r = intersectWatertight4v(ray.wray4, *block, kLeafLaneMask[std::min(left, 4)], t_max);
-    if (r.fast) return true;
-    for (int lanes = r.exact; lanes != 0; lanes &= lanes - 1) {
-      const int k = std::countr_zero(static_cast<unsigned>(lanes));
-      float t, u, v;
-      if (intersectWatertight(ray.wray, block->vertex(k, 0), block->vertex(k, 1), block->vertex(k, 2), t_max, t, u, v))
-        return true;
-    }
+    if (r.fast != 0) return true;
+    if (r.exact != 0 && anyExactInBlock(ray, *block, r.exact, t_max)) return true;
   }
   return false;
 }

@@ -8,6 +8,7 @@
 #include "duplex/objects/TriangleClip.h"
 #include "duplex/objects/WatertightTriangle.h"
 #include "MeshBvh.h"
+#include "MeshClosestPoint.h"
 #include "MeshLeafTest.h"
 #include "MeshParts.h"
 #include "MeshRay.h"
@@ -625,76 +626,21 @@ bool MeshObject::intersect(const Ray& ray_os, Hit& hit, QueryContext&) const { r
 namespace {
 
 // MeshObject::closestPoint on a BVH under a similarity transform (identity included): the search
-// runs in object space with squared distances, so no vertex is transformed and no square root is
-// taken per box or triangle; the world distance is the object-space one times the transform's
-// scale. A triangle's own box is checked before the exact test: most triangles of a reached leaf
-// are farther than the best. Boxes are pruned against the best squared distance grown by a
-// relative 1e-10, so that the rounding of a box's distance never prunes the box of a triangle
-// that ties the best.
+// runs in object space with squared distances (MeshClosestPoint.h), so no vertex is transformed and
+// no square root is taken per box or triangle; the world distance is the object-space one times the
+// transform's scale.
 bool closestPointSimilar(const WideBvh& bvh, const detail::TriangleBlock4* blocks, const PointQuery& q,
                          ClosestPoint& best) {
   if (bvh.root == BvhRef::kEmpty) return false;
-  constexpr double kSlack = 1.0 + 1e-10;
   const glm::dvec3 p = q.point_os;
   const double radius_os = best.distance / q.scale_ws;
-  double best2 = radius_os * radius_os;  // +inf for an unbounded query
-  double prune2 = best2 * kSlack;
-  const detail::TriangleBlock4* found_block = nullptr;
-  int found_lane = 0;
-  glm::dvec3 found_point{0.0};
-  struct Entry {
-    std::uint32_t ref;
-    double d2;  // squared object-space distance from p to the entry's box
-  };
-  // Bounded: a path holds at most 7 pending siblings per level.
-  Entry stack[1 + (BvhNode8::kWidth - 1) * WideBvh::kMaxDepth];
-  std::size_t size = 0;
-  stack[size++] = {bvh.root, distanceSquared(bvh.bounds, p)};
-  while (size > 0) {
-    const Entry e = stack[--size];
-    if (!(e.d2 < prune2)) continue;
-    if (BvhRef::isLeaf(e.ref)) {
-      const detail::TriangleBlock4* first = blocks + BvhRef::leafBlock(e.ref);
-      const std::uint32_t count = BvhRef::leafCount(e.ref);
-      for (std::uint32_t i = 0; i < count; ++i) {
-        const detail::TriangleBlock4& b = first[i / 4];
-        const int k = static_cast<int>(i % 4);
-        double box2 = 0.0;
-        for (int a = 0; a < 3; ++a) {
-          const double x0 = b.v[a][k], x1 = b.v[3 + a][k], x2 = b.v[6 + a][k];
-          const double lo = std::min(x0, std::min(x1, x2)), hi = std::max(x0, std::max(x1, x2));
-          const double g = std::max(std::max(lo - p[a], p[a] - hi), 0.0);
-          box2 += g * g;
-        }
-        if (!(box2 < prune2)) continue;
-        const glm::dvec3 c = closestPointOnTriangle(p, glm::dvec3(b.vertex(k, 0)), glm::dvec3(b.vertex(k, 1)),
-                                                    glm::dvec3(b.vertex(k, 2)));
-        const glm::dvec3 off = c - p;
-        const double d2 = glm::dot(off, off);
-        if (!(d2 < best2)) continue;
-        best2 = d2;
-        prune2 = d2 * kSlack;
-        found_block = &b;
-        found_lane = k;
-        found_point = c;
-      }
-      continue;
-    }
-    const BvhNode8& node = bvh.nodes[e.ref];
-    std::pair<double, std::uint32_t> order[BvhNode8::kWidth];
-    int n = 0;
-    for (int k = 0; k < BvhNode8::kWidth && node.child[k] != BvhRef::kEmpty; ++k) {
-      double d2 = 0.0;
-      for (int a = 0; a < 3; ++a) {
-        const double g = std::max(std::max(double{node.lo[a][k]} - p[a], p[a] - double{node.hi[a][k]}), 0.0);
-        d2 += g * g;
-      }
-      if (d2 < prune2) order[n++] = {d2, node.child[k]};
-    }
-    for (int i = 1; i < n; ++i)  // descending by distance (at most 8): the nearest ends on top
-      for (int j = i; j > 0 && order[j - 1].first < order[j].first; --j) std::swap(order[j - 1], order[j]);
-    for (int i = 0; i < n; ++i) stack[size++] = {order[i].second, order[i].first};
-  }
+  detail::ClosestPointSearch search;
+  search.best2 = radius_os * radius_os;  // +inf for an unbounded query
+  detail::meshClosestPointKernel()(bvh, blocks, p, search);
+  const detail::TriangleBlock4* found_block = search.block;
+  const int found_lane = search.lane;
+  const glm::dvec3 found_point = search.point;
+  const double best2 = search.best2;
   if (found_block == nullptr) return false;
   best.distance = std::sqrt(best2) * q.scale_ws;
   best.point_ws = q.world_from_object.point(found_point);

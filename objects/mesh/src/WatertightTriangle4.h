@@ -61,8 +61,8 @@ struct Watertight4v {
 };
 
 /// Tests the lanes in `lanes` (bit i: lane i holds one of the leaf's triangles) of `block`.
-inline Watertight4v intersectWatertight4v(const WatertightRay4& ray, const TriangleBlock4& block, int lanes,
-                                          float t_max) {
+[[gnu::always_inline]] inline Watertight4v intersectWatertight4v(const WatertightRay4& ray, const TriangleBlock4& block,
+                                                                 int lanes, float t_max) {
   // Rows of coordinate kx / ky / kz of vertex 0; vertex k's rows follow 12 k floats further
   // (block.v[3 k + axis]), so each row is one pointer plus a constant offset: three live pointers
   // instead of nine row addresses, which the compiler kept on the stack.
