@@ -161,6 +161,7 @@ struct Node {
 // The leaf step: one 4-wide test per block (MeshLeafTest.h). The any-hit test is inlined into the
 // walk (as in the wider paths): a call would spill the walk's ray constants around every leaf.
 struct Leaf {
+  static constexpr bool kUsesRay4 = true;  // the 4-wide test reads MeshRay::wray4
   struct RayConstants {
     explicit RayConstants(const MeshRay&) {}
   };
@@ -325,20 +326,24 @@ inline __m256 rows2(const float* lo, const float* hi) {
 // broadcast ray constants around every leaf, and the callee save registers and realign its frame,
 // which costs more than the 8-lane test itself.
 struct Leaf {
+  // The constants come from the ray's scalar WatertightRay, broadcast once per ray here: the
+  // 4-lane copy (MeshRay::wray4) is not needed, and the ray set-up skips it.
+  static constexpr bool kUsesRay4 = false;
   /// WatertightRay4's constants on 8 lanes, once per ray.
   struct RayConstants {
     __m256 o[3], sx, sy, sz, tnear;
     [[gnu::always_inline]] explicit RayConstants(const MeshRay& ray)
-        : o{broadcast2(ray.wray4.o[0]), broadcast2(ray.wray4.o[1]), broadcast2(ray.wray4.o[2])},
-          sx(broadcast2(ray.wray4.sx)),
-          sy(broadcast2(ray.wray4.sy)),
-          sz(broadcast2(ray.wray4.sz)),
-          tnear(broadcast2(ray.wray4.tnear)) {}
+        : o{_mm256_set1_ps(ray.wray.origin[ray.wray.kx]), _mm256_set1_ps(ray.wray.origin[ray.wray.ky]),
+            _mm256_set1_ps(ray.wray.origin[ray.wray.kz])},
+          sx(_mm256_set1_ps(ray.wray.sx)),
+          sy(_mm256_set1_ps(ray.wray.sy)),
+          sz(_mm256_set1_ps(ray.wray.sz)),
+          tnear(_mm256_set1_ps(ray.wray.tnear)) {}
   };
 
   [[gnu::always_inline]] static Watertight8v test8(const MeshRay& ray, const RayConstants& c, const TriangleBlock4& b0,
                                                    const TriangleBlock4& b1, int lanes, float t_max) {
-    const int kx = ray.wray4.kx, ky = ray.wray4.ky, kz = ray.wray4.kz;
+    const int kx = ray.wray.kx, ky = ray.wray.ky, kz = ray.wray.kz;
     const float *rx0 = b0.v[kx], *ry0 = b0.v[ky], *rz0 = b0.v[kz];
     const float *rx1 = b1.v[kx], *ry1 = b1.v[ky], *rz1 = b1.v[kz];
     const __m256 Az = _mm256_sub_ps(rows2(rz0, rz1), c.o[2]);

@@ -114,14 +114,14 @@ inline auto byOctant(int octant, F&& f) {
 inline bool intersectEntry(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit) {
   if (bvh.root == BvhRef::kEmpty) return false;
   MeshRay ray;
-  if (!prepareMeshRay(ray_os, ray)) return false;
+  if (!prepareMeshRay<Leaf::kUsesRay4>(ray_os, ray)) return false;
   return byOctant(octantOf(ray), [&](auto oct) { return intersectKernel<oct.value>(bvh, ray_os, ray, hit); });
 }
 
 inline bool occludedEntry(const MeshBvhView& bvh, const Ray& ray_os) {
   if (bvh.root == BvhRef::kEmpty) return false;
   MeshRay ray;
-  if (!prepareMeshRay(ray_os, ray)) return false;
+  if (!prepareMeshRay<Leaf::kUsesRay4>(ray_os, ray)) return false;
   return byOctant(octantOf(ray), [&](auto oct) { return occludedKernel<oct.value>(bvh, ray_os, ray); });
 }
 
@@ -137,7 +137,7 @@ inline bool occludedViewEntry(const void* bvh, const Ray& ray_os) {
 inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhLeafVisitor visit, void* context) {
   if (bvh.root == BvhRef::kEmpty) return;
   MeshRay ray;
-  if (!prepareMeshRay(ray_os, ray)) return;
+  if (!prepareMeshRay<Leaf::kUsesRay4>(ray_os, ray)) return;
   byOctant(octantOf(ray), [&](auto oct) { forEachLeafKernel<oct.value>(bvh, ray_os, ray, visit, context); });
 }
 
@@ -310,7 +310,7 @@ inline void forEachPacketGroup(const Ray* rays, unsigned active, MeshRay* prepar
   unsigned by_octant[8] = {};
   for (unsigned lanes = active; lanes != 0; lanes &= lanes - 1) {
     const int i = std::countr_zero(lanes);
-    if (prepareMeshRay(rays[i], prepared[i])) by_octant[octantOf(prepared[i])] |= 1u << i;
+    if (prepareMeshRay<Leaf::kUsesRay4>(rays[i], prepared[i])) by_octant[octantOf(prepared[i])] |= 1u << i;
   }
   // Incoherent rays (spread over more than kMaxPacketOctants octants): ray by ray, at the single
   // path's cost.

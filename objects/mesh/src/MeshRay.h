@@ -33,7 +33,10 @@ struct MeshRay {
 };
 
 /// Fills `r` from `ray` (object space): returns false when the ray is not queryable (isQueryable in
-/// Ray.h). The BVH traversal needs no more (its root's box test clips the ray).
+/// Ray.h). The BVH traversal needs no more (its root's box test clips the ray). With kWithRay4
+/// false, r.wray4 is left unset, for leaf tests that broadcast the scalar constants themselves
+/// (the 8-lane leaves).
+template <bool kWithRay4 = true>
 [[gnu::always_inline]] inline bool prepareMeshRay(const Ray& ray, MeshRay& r) {
   if (!prepareKdRay(ray, r.kd)) return false;
   const __m128 d = _mm_loadu_ps(&ray.dir.x);
@@ -71,7 +74,7 @@ struct MeshRay {
   w.sx = q[kx];
   w.sy = q[ky];
   w.sz = q[3];
-  r.wray4 = WatertightRay4(w);
+  if constexpr (kWithRay4) r.wray4 = WatertightRay4(w);
 
   return true;
 }
