@@ -143,7 +143,7 @@ void MeshBench::trace(const std::vector<RaySet>& sets, nlohmann::json& out) {
 
 // Where the time of a random closest-hit ray of the kd-tree goes (when it is measured), one thread, CPU time, medians
 // of the repetitions with the order alternating: the cumulative parts above, our full query and Embree's (medium).
-// Differences of the medians give harness, setup, traversal and triangle tests (docs/kdtree.md,
+// Differences of the medians give harness, setup, traversal and triangle tests (docs/design/kdtree.md,
 // "Where the time goes").
 void MeshBench::timeSplit(const RaySet& random, nlohmann::json& out) {
   const std::span<const Ray> rays = random.rays;

@@ -200,7 +200,7 @@ nlohmann::json runSweep(const Options& options) {
       // Instruction counts: one repetition, every section dumped by name; no timing, no Embree.
       for (std::size_t i = 0; i < all.size(); ++i) {
         // Only the SAH settings that could replace the defaults: the median / middle heuristics and
-        // intersection costs above twice the default trace much slower (docs/bench/sweep.txt) and
+        // intersection costs above twice the default trace much slower (bench/results/sweep.txt) and
         // would take most of the run, which valgrind slows many times.
         if (all[i].config.heuristic != KdHeuristic::Sah ||
             all[i].config.intersection_cost > 2.0f * defaults.intersection_cost)

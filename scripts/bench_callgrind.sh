@@ -12,7 +12,7 @@
 # Environment: BUILD_DIR (default build-callgrind), MESH (koala.obj), RAYS (20000),
 #              STRUCTURE (bvh:medium; kdtree, bvh:fast, bvh:medium/leaf=4, ...),
 #              WHAT (tracers: ours,embree),
-#              OUT (docs/bench/callgrind.json; empty: do not write), KEEP (1: keep the dumps).
+#              OUT (bench/results/callgrind.json; empty: do not write), KEEP (1: keep the dumps).
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -21,7 +21,7 @@ MESH=${MESH:-koala.obj}
 RAYS=${RAYS:-20000}
 WHAT=${WHAT:-ours,embree}
 STRUCTURE=${STRUCTURE:-bvh:medium}
-OUT=${OUT-$ROOT/docs/bench/callgrind.json}
+OUT=${OUT-$ROOT/bench/results/callgrind.json}
 JOBS=${JOBS:-2}
 
 command -v valgrind >/dev/null || { echo "bench_callgrind.sh: valgrind not found" >&2; exit 1; }

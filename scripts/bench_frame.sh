@@ -2,8 +2,8 @@
 # The frame benchmark (docs/bench.md, "Interactive frames"): generates the scenes of
 # scripts/bench_update.sh from ../shared/data/meshes, runs duplex_bench_frame (`duplex bench frame`
 # with Embree's two-level scenes interleaved frame by frame) on each, and writes
-# docs/bench/frame/<scene>.json, the chart docs/bench/frame/frame_time.png (frame time against
-# instances moved, ours and Embree's) and docs/bench/frame/table.md.
+# bench/results/frame/<scene>.json and table.md, and the chart docs/bench/frame/frame_time.png (frame
+# time against instances moved, ours and Embree's).
 #
 #   paper-1   koala split into 19 objects
 #   paper-2   koala split into 6,804 objects
@@ -13,7 +13,8 @@
 #
 # Environment:
 #   BUILD_DIR   build directory with bin/duplex and bench/duplex_bench_frame (default: build)
-#   OUTDIR      results (default: docs/bench/frame)
+#   OUTDIR      JSON and table (default: bench/results/frame)
+#   CHARTDIR    chart (default: docs/bench/frame)
 #   SCENE_DIR   generated scenes (default: out/paper)
 #   SCENES      subset, e.g. "paper-1 robot5" (default: all five)
 #   MOVES       instances moved per frame, one run each (default "1,1%,10%")
@@ -28,7 +29,8 @@
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
-OUTDIR=${OUTDIR:-$ROOT/docs/bench/frame}
+OUTDIR=${OUTDIR:-$ROOT/bench/results/frame}
+CHARTDIR=${CHARTDIR:-$ROOT/docs/bench/frame}
 SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
 SCENES=${SCENES:-"paper-1 paper-2 paper-3 robot5 hammer1k"}
 MOVES=${MOVES:-"1,1%,10%"}
@@ -57,5 +59,5 @@ for scene in $SCENES; do
   mv "$OUTDIR/$scene.json.tmp" "$OUTDIR/$scene.json"
   jsons+=("$OUTDIR/$scene.json")
 done
-/usr/bin/python3 "$ROOT/scripts/plot_frame.py" --outdir "$OUTDIR" "${jsons[@]}"
+/usr/bin/python3 "$ROOT/scripts/plot_frame.py" --outdir "$OUTDIR" --charts "$CHARTDIR" "${jsons[@]}"
 cat "$OUTDIR/table.md"

@@ -12,7 +12,7 @@ per batch, rank 0's time in MPI calls and in adding batches). Every run's result
 with the first 1p2t run's (they must be identical).
 
   /usr/bin/python3 scripts/bench_mpi.py --duplex build/bin/duplex [--rays 3000000] [--repeat 5]
-      [--out docs/bench/mpi_scaling.json]
+      [--out bench/results/mpi_scaling.json]
 
 Scenes: examples/scenes/sensor_room.json (3,328 bins) and the same room with a 512 x 512-bin
 ceiling ("room_fine", 263,168 bins), so that the tallies are 100x larger.
@@ -76,7 +76,7 @@ def main():
     ap.add_argument("--mpirun", default=shutil.which("mpirun") or "mpirun")
     ap.add_argument("--rays", type=int, default=3000000)
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "bench", "mpi_scaling.json"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "bench", "results", "mpi_scaling.json"))
     args = ap.parse_args()
 
     work = tempfile.mkdtemp(prefix="duplex_bench_mpi_")

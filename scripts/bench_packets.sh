@@ -2,11 +2,13 @@
 # Ray packets against single rays and Embree 3's packets (docs/bench.md, "Ray packets"): runs
 # duplex_bench_packets on meshes of ../shared/data/meshes and on the paper's scenes (generated as
 # scripts/bench_update.sh generates them), once per SIMD path (DUPLEX_ISA: packets of 16, 8 and 4
-# rays; the narrower paths on the meshes only), and draws docs/bench/packets/*.png and packets.txt.
+# rays; the narrower paths on the meshes only), writes bench/results/packets/*.json and packets.txt,
+# and draws docs/bench/packets/*.png.
 #
 # Environment:
 #   BUILD_DIR   build directory (default: build)
-#   OUTDIR      results (default: docs/bench/packets)
+#   OUTDIR      JSON and table (default: bench/results/packets)
+#   CHARTDIR    charts (default: docs/bench/packets)
 #   SCENE_DIR   generated scenes (default: out/paper)
 #   SCENES      scenes (default: "paper-1 paper-2 robot5")
 #   MESHES      meshes (default: "spot.obj hammer.obj koala.obj abb_irb6640/link_1.stl")
@@ -14,7 +16,8 @@
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
-OUTDIR=${OUTDIR:-$ROOT/docs/bench/packets}
+OUTDIR=${OUTDIR:-$ROOT/bench/results/packets}
+CHARTDIR=${CHARTDIR:-$ROOT/docs/bench/packets}
 SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
 SCENES=${SCENES:-"paper-1 paper-2 robot5"}
 MESHES=${MESHES:-"spot.obj hammer.obj koala.obj abb_irb6640/link_1.stl"}
@@ -42,4 +45,4 @@ for isa in avx2 sse2; do
   DUPLEX_ISA=$isa "$BENCH" --meshes $MESHES --threads 1 $ARGS --out "$OUTDIR/packets_$isa.json"
 done
 /usr/bin/python3 "$ROOT/scripts/plot_packets.py" --json "$OUTDIR/packets_avx512.json" --json "$OUTDIR/packets_avx2.json" \
-  --json "$OUTDIR/packets_sse2.json" --outdir "$OUTDIR"
+  --json "$OUTDIR/packets_sse2.json" --outdir "$OUTDIR" --charts "$CHARTDIR"

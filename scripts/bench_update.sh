@@ -2,7 +2,7 @@
 # The update benchmark of the paper's table: generates the scenes from
 # ../shared/data/meshes, runs `duplex bench update` with the Embree baseline (the benchmark
 # duplex_bench_update: the installed `duplex` tool has no Embree) on each (1 moved instance and 1% moved per
-# commit), and writes docs/bench/update/<scene>_<moves>.json and docs/bench/update/table.md
+# commit), and writes bench/results/update/<scene>_<moves>.json and bench/results/update/table.md
 # (ours beside the paper's figures and Embree's, as ratios from the same run).
 #
 #   paper-1   koala split into 19 objects
@@ -13,7 +13,7 @@
 #
 # Environment:
 #   BUILD_DIR   build directory with bin/duplex and bench/duplex_bench_update (default: build)
-#   OUTDIR      results (default: docs/bench/update)
+#   OUTDIR      results (default: bench/results/update)
 #   SCENE_DIR   generated scenes (default: out/paper)
 #   REPEAT      commits per measurement of ours (default 1000: the trace after 1,000 commits)
 #   BASELINE_REPEAT  commits per measurement of the full-rebuild and Embree baselines (default 30)
@@ -27,7 +27,7 @@
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
-OUTDIR=${OUTDIR:-$ROOT/docs/bench/update}
+OUTDIR=${OUTDIR:-$ROOT/bench/results/update}
 SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
 REPEAT=${REPEAT:-1000}
 BASELINE_REPEAT=${BASELINE_REPEAT:-30}

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Instructions and branch mispredictions per primary ray on two-level scenes, ours (single rays and
 # packets) beside Embree 3's (rtcIntersect1 and rtcIntersect16), counted by callgrind: repeatable on
-# a shared machine where wall-clock times are not. Writes docs/bench/twolevel_callgrind.json and
+# a shared machine where wall-clock times are not. Writes bench/results/twolevel_callgrind.json and
 # prints a table (docs/bench.md, "Two-level traces: instructions per ray").
 #
 # Runs duplex_bench_packets --callgrind --kd-walk (one dump per tracer, only the trace loops
@@ -12,13 +12,13 @@
 # model: read mispredictions as relative figures.
 #
 # Environment: BUILD_DIR (default build), SCENE_DIR (out/paper), SCENES ("koala1 paper-1 paper-2
-# hammer1k"), OUT (docs/bench/twolevel_callgrind.json; empty: do not write).
+# hammer1k"), OUT (bench/results/twolevel_callgrind.json; empty: do not write).
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
 SCENE_DIR=${SCENE_DIR:-$ROOT/out/paper}
 SCENES=${SCENES:-"koala1 paper-1 paper-2 hammer1k"}
-OUT=${OUT-$ROOT/docs/bench/twolevel_callgrind.json}
+OUT=${OUT-$ROOT/bench/results/twolevel_callgrind.json}
 DATA=$ROOT/../shared/data/meshes
 DUPLEX=$BUILD_DIR/bin/duplex
 BENCH=$BUILD_DIR/bench/duplex_bench_packets

@@ -9,7 +9,7 @@
                             structure (config.default_structure; throughput per ray kind, query and
                             thread count; build time; bytes per triangle).
 
-usage: plot_bench.py [--sweep docs/bench/sweep.json] [--main docs/bench/mesh_bench.json] [--outdir docs/bench]
+usage: plot_bench.py [--sweep bench/results/sweep.json] [--main bench/results/mesh_bench.json] [--outdir docs/bench]
 """
 
 import argparse
@@ -240,10 +240,11 @@ def plot_main(doc, path):
 
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
+    results_dir = os.path.join(os.path.dirname(here), "bench", "results")
     default_dir = os.path.join(os.path.dirname(here), "docs", "bench")
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sweep", default=os.path.join(default_dir, "sweep.json"))
-    ap.add_argument("--main", default=os.path.join(default_dir, "mesh_bench.json"))
+    ap.add_argument("--sweep", default=os.path.join(results_dir, "sweep.json"))
+    ap.add_argument("--main", default=os.path.join(results_dir, "mesh_bench.json"))
     ap.add_argument("--outdir", default=default_dir)
     args = ap.parse_args()
     os.makedirs(args.outdir, exist_ok=True)

@@ -6,7 +6,7 @@
   table.md        per scene, thread count and k: frame, edit + commit and trace ms of ours and of
                   Embree's fastest side, the ratios ours / Embree, and whether the hit counts agree.
 
-usage: plot_frame.py [--outdir docs/bench/frame] SCENE.json [SCENE.json ...]
+usage: plot_frame.py [--outdir bench/results/frame] [--charts docs/bench/frame] SCENE.json [SCENE.json ...]
 """
 
 import argparse
@@ -96,12 +96,14 @@ def table(docs, outdir):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--outdir", default="docs/bench/frame")
+    ap.add_argument("--outdir", default="bench/results/frame", help="the table (table.md)")
+    ap.add_argument("--charts", default="docs/bench/frame", help="the PNG chart")
     ap.add_argument("json", nargs="+")
     args = ap.parse_args()
     docs = [json.load(open(p)) for p in args.json]
     os.makedirs(args.outdir, exist_ok=True)
-    chart(docs, args.outdir)
+    os.makedirs(args.charts, exist_ok=True)
+    chart(docs, args.charts)
     table(docs, args.outdir)
 
 

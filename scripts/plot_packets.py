@@ -8,8 +8,8 @@
                          SIMD path: 4 SSE2, 8 AVX2, 16 AVX-512) and Embree (rtcIntersect4/8/16).
   packets.txt            the ratios as a table (from the widest path's JSON).
 
-usage: plot_packets.py --json docs/bench/packets/packets_avx512.json [--json ..._avx2.json ...]
-                       [--outdir docs/bench/packets]
+usage: plot_packets.py --json bench/results/packets/packets_avx512.json [--json ..._avx2.json ...]
+                       [--outdir bench/results/packets] [--charts docs/bench/packets]
 """
 
 import argparse
@@ -110,12 +110,14 @@ def table(doc, outdir):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--json", action="append", required=True)
-    ap.add_argument("--outdir", default="docs/bench/packets")
+    ap.add_argument("--outdir", default="bench/results/packets", help="the table (packets.txt)")
+    ap.add_argument("--charts", default="docs/bench/packets", help="the PNG charts")
     args = ap.parse_args()
     docs = load(args.json)
     os.makedirs(args.outdir, exist_ok=True)
-    coherence_chart(docs[0], args.outdir)
-    width_chart(docs, args.outdir)
+    os.makedirs(args.charts, exist_ok=True)
+    coherence_chart(docs[0], args.charts)
+    width_chart(docs, args.charts)
     table(docs[0], args.outdir)
 
 

@@ -9,7 +9,7 @@
                                  vertices that leak (miss, or hit beyond the target), per structure.
   structures.csv / .txt          the same figures as a table (written also without matplotlib).
 
-usage: plot_structures.py [--main docs/bench/mesh_bench.json] [--outdir docs/bench]
+usage: plot_structures.py [--main bench/results/mesh_bench.json] [--outdir bench/results] [--charts docs/bench]
 """
 
 import argparse
@@ -205,16 +205,18 @@ def plot(doc, table, outdir):
 
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
-    default_dir = os.path.join(os.path.dirname(here), "docs", "bench")
+    results_dir = os.path.join(os.path.dirname(here), "bench", "results")
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--main", default=os.path.join(default_dir, "mesh_bench.json"))
-    ap.add_argument("--outdir", default=default_dir)
+    ap.add_argument("--main", default=os.path.join(results_dir, "mesh_bench.json"))
+    ap.add_argument("--outdir", default=results_dir, help="the tables (structures.csv, .txt)")
+    ap.add_argument("--charts", default=os.path.join(os.path.dirname(here), "docs", "bench"), help="the PNG charts")
     args = ap.parse_args()
     with open(args.main) as f:
         doc = json.load(f)
     if not any("structures" in m for m in doc.get("meshes", [])):
         sys.exit("%s has no per-structure figures (meshes[].structures): rerun duplex_bench_mesh" % args.main)
     os.makedirs(args.outdir, exist_ok=True)
+    os.makedirs(args.charts, exist_ok=True)
     table = rows(doc)
     print("wrote", write_tables(table, args.outdir), "and structures.csv")
     try:
@@ -222,7 +224,7 @@ def main():
     except ImportError:
         print("matplotlib not found: tables only", file=sys.stderr)
         return 0
-    for path in plot(doc, table, args.outdir):
+    for path in plot(doc, table, args.charts):
         print("wrote", path)
     return 0
 

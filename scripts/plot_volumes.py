@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """Charts of duplex_bench_volume's JSON into docs/volumes/*.png.
 
-    build/bench/duplex_bench_volume > docs/volumes/volume_bench.json
-    scripts/plot_volumes.py docs/volumes/volume_bench.json docs/volumes
+    build/bench/duplex_bench_volume > bench/results/volumes/volume_bench.json
+    scripts/plot_volumes.py bench/results/volumes/volume_bench.json docs/volumes
 
 fog_error_vs_time.png     transmittance RMSE against the analytic value vs ns per ray, per profile
 fog_error_vs_exact.png    the same against the exact integral of the voxelised field (estimator

@@ -3,19 +3,19 @@
 # bench/SweepBench.cpp that could replace the defaults, instructions per triangle of the build and
 # instructions per ray of four trace loops (random / primary rays, closest / any hit), relative to
 # the shipped defaults. Instruction counts repeat exactly on the shared, noisy machine; they do not
-# see cache misses or mispredicted branches, so read them beside the timed sweep (docs/bench/sweep.txt).
+# see cache misses or mispredicted branches, so read them beside the timed sweep (bench/results/sweep.txt).
 #
 #   BUILD_DIR  build directory (default: build); duplex_bench_mesh is built there
 #   MESHES     comma-separated meshes (default: the ones the build defaults were chosen on)
 #   RAYS       random rays per loop (default 20000); PRIMARY: W of the W x W primary image (128)
-#   OUT        table (default docs/bench/sweep_callgrind.txt; empty: stdout only)
+#   OUT        table (default bench/results/sweep_callgrind.txt; empty: stdout only)
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
 MESHES=${MESHES:-koala.obj,hammer.obj,plane.obj,abb_irb6640/link_2.stl,abb_irb6640/base_link.stl}
 RAYS=${RAYS:-20000}
 PRIMARY=${PRIMARY:-128}
-OUT=${OUT-$ROOT/docs/bench/sweep_callgrind.txt}
+OUT=${OUT-$ROOT/bench/results/sweep_callgrind.txt}
 command -v valgrind >/dev/null || { echo "sweep_callgrind.sh: valgrind not found" >&2; exit 1; }
 # Records what is about to be compiled (revision, hash of uncommitted library changes).
 . "$ROOT/scripts/bench_library_state.sh"

@@ -56,7 +56,7 @@ struct CrossingGrid {
   // Cells per box (cubic cells over the boxes' bounds): a cell holds about eight boxes (a dozen
   // entries with the boxes that reach in from its neighbours), one or two vector tests. Finer
   // grids take more cell steps than they save box tests, coarser ones more box tests than they
-  // save cell steps (docs/sensors.md, "Speed").
+  // save cell steps (docs/design/sensors.md, "Speed").
   static constexpr double kCellsPerBox = 0.125;
   // The grid is dropped when boxes span more cells than this on average (large sensors).
   static constexpr double kMaxRefsPerBox = 4.0;

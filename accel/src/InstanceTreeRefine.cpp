@@ -42,7 +42,7 @@ constexpr std::uint32_t kMinFrontierRefs = 1024;  // smaller frontiers: no bette
 constexpr std::uint32_t kFrontiersPerTree = 64;
 // A frontier is due for a rebuild when the references added to or removed from it since its last
 // build exceed this share of its references (plus 4). Larger shares let a frontier drift further
-// from a fresh build before it comes due (docs/two-level.md, "The incremental top level").
+// from a fresh build before it comes due (docs/design/two-level.md, "The incremental top level").
 constexpr double kFrontierEditShare = 0.05;
 // References of rebuild work each reference edit pays for (see rebuildEditedFrontiers); less
 // credit leaves frontiers waiting longer, and the tree's cost drifts up.

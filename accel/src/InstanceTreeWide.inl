@@ -114,8 +114,27 @@ bool occludedEntry(const WideQuery& q, const Ray& ray, QueryContext& ctx) {
 // Sub-packets of at most this many lanes enter an object through its single-ray entry.
 constexpr int kAloneLanes = 4;
 
+// The largest / smallest value of a row of kMaxPacketRays lanes.
+inline float rowMax(const float* row) {
+  __m128 r = _mm_max_ps(_mm_max_ps(_mm_load_ps(row), _mm_load_ps(row + 4)),
+                        _mm_max_ps(_mm_load_ps(row + 8), _mm_load_ps(row + 12)));
+  r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
+  return _mm_cvtss_f32(_mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1))));
+}
+
+inline float rowMin(const float* row) {
+  __m128 r = _mm_min_ps(_mm_min_ps(_mm_load_ps(row), _mm_load_ps(row + 4)),
+                        _mm_min_ps(_mm_load_ps(row + 8), _mm_load_ps(row + 12)));
+  r = _mm_min_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
+  return _mm_cvtss_f32(_mm_min_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1))));
+}
+
+// `rays` are the caller's world rays (float; lanes index them). An instance placed as authored
+// (Record::identity) is asked with them as they are: its object space is world space, so the
+// rays need no copy, and for a closest-hit query the best distance so far goes in the hit's t, which
+// bounds an object's search as the ray's tfar does (Object::intersect), without touching the ray.
 template <bool AnyHit>
-std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, std::uint32_t lanes, Hit* best,
+std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const Ray* rays, std::uint32_t lanes, Hit* best,
                          std::uint32_t* best_id, const Record** winner, QueryContext& ctx) {
   struct Entry {
     const WideNode* parent;
@@ -128,18 +147,14 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
   Mailbox mailbox[kMaxPacketRays];
   Ray rays_os[kMaxPacketRays];
   Hit hits_os[kMaxPacketRays];
+  // Object rays are read up to the highest lane in use.
+  const std::size_t span = static_cast<std::size_t>(32 - std::countl_zero(lanes));
   const WideNode* nodes = q.top->nodes.data();
   std::uint32_t done = 0;  // any hit: blocked lanes; closest hit: lanes that found something
   std::uint32_t cur = q.top->root;
   std::uint32_t m = lanes;
   // The furthest any lane still looks (unused lanes hold -inf).
-  const auto reachOf = [&p] {
-    __m128 r = _mm_max_ps(_mm_max_ps(_mm_load_ps(p.t), _mm_load_ps(p.t + 4)),
-                          _mm_max_ps(_mm_load_ps(p.t + 8), _mm_load_ps(p.t + 12)));
-    r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
-    return _mm_cvtss_f32(_mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1))));
-  };
-  float reach = reachOf();
+  float reach = rowMax(p.t);
   while (true) {
     if (cur & kWideRef) {
       const std::uint32_t slot = cur & ~kWideRef;
@@ -153,14 +168,20 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
       if (sub != 0) {
         const Record& rec = q.records[slot];
         ctx.stats.instance_visits += static_cast<std::uint64_t>(std::popcount(sub));
-        for (std::uint32_t l = sub; l != 0; l &= l - 1) {
-          const int j = std::countr_zero(l);
-          rays_os[j] = objectRay(rec, w[j]);
-          if constexpr (!AnyHit) {
-            // As closerHit (InstanceTreeState.h): asked a few ulps beyond the best hit, decided by replacesBest.
-            rays_os[j].tfar = askBound(p.t[j]);
-            hits_os[j] = Hit{};
-            hits_os[j].t = rays_os[j].tfar;
+        const Ray* ask = rays;
+        if (!rec.identity) {
+          for (std::uint32_t l = sub; l != 0; l &= l - 1) {
+            const int j = std::countr_zero(l);
+            rays_os[j] = objectRay(rec, fromFloat(rays[j]));
+          }
+          ask = rays_os;
+        }
+        if constexpr (!AnyHit) {
+          // As closerHit (InstanceTreeState.h): asked a few ulps beyond the best hit, decided by replacesBest.
+          for (std::uint32_t l = sub; l != 0; l &= l - 1) {
+            const int j = std::countr_zero(l);
+            hits_os[j].t = askBound(p.t[j]);
+            if (!rec.identity) rays_os[j].tfar = hits_os[j].t;
           }
         }
         // A sub-packet of a few lanes costs less through the single-ray entry (an object's
@@ -170,10 +191,10 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
           if (alone) {
             for (std::uint32_t l = sub; l != 0; l &= l - 1) {
               const int j = std::countr_zero(l);
-              if (rec.entry.occluded(rec.entry.data, rays_os[j])) done |= 1u << j;
+              if (rec.entry.occluded(rec.entry.data, ask[j])) done |= 1u << j;
             }
           } else {
-            done |= rec.object->occludedPacket(rays_os, sub, ctx);
+            done |= rec.object->occludedPacket({ask, span}, sub, ctx);
           }
           if ((done & lanes) == lanes) return done;
         } else {
@@ -181,10 +202,10 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
           if (alone) {
             for (std::uint32_t l = sub; l != 0; l &= l - 1) {
               const int j = std::countr_zero(l);
-              if (rec.entry.intersect(rec.entry.data, rays_os[j], hits_os[j])) found |= 1u << j;
+              if (rec.entry.intersect(rec.entry.data, ask[j], hits_os[j])) found |= 1u << j;
             }
           } else {
-            found = rec.object->intersectPacket(rays_os, hits_os, sub, ctx);
+            found = rec.object->intersectPacket({ask, span}, {hits_os, span}, sub, ctx);
           }
           for (std::uint32_t l = found; l != 0; l &= l - 1) {
             const int j = std::countr_zero(l);
@@ -195,7 +216,7 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
             winner[j] = &rec;
             done |= 1u << j;
           }
-          if (found != 0) reach = reachOf();
+          if (found != 0) reach = rowMax(p.t);
         }
       }
     } else {
@@ -238,78 +259,64 @@ std::uint32_t packetWalk(const WideQuery& q, PacketRays& p, const WorldRay* w, s
   }
 }
 
-// Fills the packet rows of the lanes (unused lanes never meet a box).
-inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p, WorldRay* w) {
-  // Unused lanes repeat the first lane's origin and direction, so that the bounds are reductions
-  // over whole rows, and never meet a box (tnear +inf, t -inf).
-  alignas(32) float dir[3][kMaxPacketRays];
+// Fills the packet rows of the lanes, four rays at a time: each ray is two 4-float vectors
+// (origin, tnear) and (direction, tfar), transposed into rows. Unused lanes repeat the first lane's
+// ray, so that the bounds are reductions over whole rows and no ray past the caller's is read, and
+// never meet a box (tnear +inf, t -inf).
+inline void setupPacket(const Ray* rays, std::uint32_t lanes, PacketRays& p) {
   const int first = std::countr_zero(lanes);
-  const Ray& r0 = rays[first];
-  for (int j = 0; j < kMaxPacketRays; ++j) {
-    p.org[0][j] = r0.origin.x;
-    p.org[1][j] = r0.origin.y;
-    p.org[2][j] = r0.origin.z;
-    dir[0][j] = r0.dir.x;
-    dir[1][j] = r0.dir.y;
-    dir[2][j] = r0.dir.z;
-    p.tnear[j] = std::numeric_limits<float>::infinity();
-    p.t[j] = -std::numeric_limits<float>::infinity();
+  const __m128 one = _mm_set1_ps(1.0f);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128i bit = _mm_setr_epi32(1, 2, 4, 8);
+  for (int k = 0; k < kMaxPacketRays; k += 4) {
+    const std::uint32_t want = lanes >> k & 0xFu;
+    __m128 o[4], d[4];
+    for (int i = 0; i < 4; ++i) {
+      const Ray& r = rays[(want >> i & 1u) != 0 ? k + i : first];
+      o[i] = _mm_loadu_ps(&r.origin.x);
+      d[i] = _mm_loadu_ps(&r.dir.x);
+    }
+    _MM_TRANSPOSE4_PS(o[0], o[1], o[2], o[3]);
+    _MM_TRANSPOSE4_PS(d[0], d[1], d[2], d[3]);
+    const __m128 used =
+        _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(static_cast<int>(want)), bit), bit));
+    for (int a = 0; a < 3; ++a) {
+      _mm_store_ps(p.org[a] + k, o[a]);
+      // +-inf for a zero (or denormal) component, as prepareKdRay's.
+      _mm_store_ps(p.inv[a] + k, _mm_div_ps(one, d[a]));
+    }
+    _mm_store_ps(p.tnear + k, _mm_or_ps(_mm_and_ps(used, o[3]), _mm_andnot_ps(used, inf)));
+    _mm_store_ps(p.t + k, _mm_or_ps(_mm_and_ps(used, d[3]), _mm_andnot_ps(used, _mm_xor_ps(inf, _mm_set1_ps(-0.0f)))));
   }
-  for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
-    const int j = std::countr_zero(l);
-    const Ray& r = rays[j];
-    p.org[0][j] = r.origin.x;
-    p.org[1][j] = r.origin.y;
-    p.org[2][j] = r.origin.z;
-    dir[0][j] = r.dir.x;
-    dir[1][j] = r.dir.y;
-    dir[2][j] = r.dir.z;
-    p.tnear[j] = r.tnear;
-    p.t[j] = r.tfar;
-    w[j] = fromFloat(r);
-  }
-  // Four lanes per division: +-inf for a zero (or denormal) component, as prepareKdRay's.
-  for (int a = 0; a < 3; ++a)
-    for (int k = 0; k < kMaxPacketRays; k += 4)
-      _mm_store_ps(p.inv[a] + k, _mm_div_ps(_mm_set1_ps(1.0f), _mm_load_ps(dir[a] + k)));
   for (int a = 0; a < 3; ++a) p.near_row[a] = 2 * a + (std::signbit(p.inv[a][first]) ? 1 : 0);
-  const auto reduce = [](const float* row, auto op) {
-    __m128 r = op(op(_mm_load_ps(row), _mm_load_ps(row + 4)), op(_mm_load_ps(row + 8), _mm_load_ps(row + 12)));
-    r = op(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
-    return _mm_cvtss_f32(op(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1))));
-  };
-  const auto vmin = [](__m128 a, __m128 b) { return _mm_min_ps(a, b); };
-  const auto vmax = [](__m128 a, __m128 b) { return _mm_max_ps(a, b); };
   for (int a = 0; a < 3; ++a) {
     const bool neg = (p.near_row[a] & 1) != 0;
-    const float o_lo = reduce(p.org[a], vmin), o_hi = reduce(p.org[a], vmax);
+    const float o_lo = rowMin(p.org[a]), o_hi = rowMax(p.org[a]);
     p.near_o[a] = neg ? o_lo : o_hi;
     p.far_o[a] = neg ? o_hi : o_lo;
-    p.inv_lo[a] = reduce(p.inv[a], vmin);
-    p.inv_hi[a] = reduce(p.inv[a], vmax);
+    p.inv_lo[a] = rowMin(p.inv[a]);
+    p.inv_hi[a] = rowMax(p.inv[a]);
   }
-  p.t_lo = reduce(p.tnear, vmin);
+  p.t_lo = rowMin(p.tnear);
 }
 
 std::uint32_t closestPacketEntry(const WideQuery& q, const Ray* rays, std::uint32_t lanes, Hit* best,
                                  const Record** winner, QueryContext& ctx) {
   PacketRays p;
-  WorldRay w[kMaxPacketRays];
-  setupPacket(rays, lanes, p, w);
+  setupPacket(rays, lanes, p);
   std::uint32_t best_id[kMaxPacketRays];
   for (std::uint32_t l = lanes; l != 0; l &= l - 1) {
     const int j = std::countr_zero(l);
     best_id[j] = kInvalidId;
     winner[j] = nullptr;
   }
-  return packetWalk<false>(q, p, w, lanes, best, best_id, winner, ctx);
+  return packetWalk<false>(q, p, rays, lanes, best, best_id, winner, ctx);
 }
 
 std::uint32_t occludedPacketEntry(const WideQuery& q, const Ray* rays, std::uint32_t lanes, QueryContext& ctx) {
   PacketRays p;
-  WorldRay w[kMaxPacketRays];
-  setupPacket(rays, lanes, p, w);
-  return packetWalk<true>(q, p, w, lanes, nullptr, nullptr, nullptr, ctx) & lanes;
+  setupPacket(rays, lanes, p);
+  return packetWalk<true>(q, p, rays, lanes, nullptr, nullptr, nullptr, ctx) & lanes;
 }
 
 bool walkEntry(const WideTop& top, const Ray& ray, bool any_hit, float& t_best,

@@ -80,7 +80,7 @@ struct LeafBoxes {
   // as soon as it is known, so that its load overlaps the remaining tests (without a branch: when
   // a vector meets nothing, the prefetched line is that of the vector's next reference, which
   // costs nothing). That index comes from the mask, not from `out`: reading back the index just
-  // stored waits for the store (on AMD Zen 5 a stall on every vector; docs/sensors.md, "Speed").
+  // stored waits for the store (on AMD Zen 5 a stall on every vector; docs/design/sensors.md, "Speed").
   std::uint32_t metInRuns(const KdRay& ray, float t_max, const std::uint32_t* runs, std::uint32_t run_count,
                           std::uint32_t* out, const void* records = nullptr) const {
 #if defined(DUPLEX_LEAF_BOXES_X86)

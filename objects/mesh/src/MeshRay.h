@@ -9,7 +9,7 @@
 // objects/mesh/tests/MeshRaySetupTest.cpp checks; only the way they are computed differs: two vector
 // divisions instead of six scalar ones, the three slabs of the box at once, one branch for the
 // validity checks, and no dispatch per ray together with the run-time permutation of the
-// triangle test (docs/kdtree.md, "Traversal").
+// triangle test (docs/design/kdtree.md, "Traversal").
 
 #include "duplex/accel/Box.h"
 #include "duplex/accel/KdTraversal.h"

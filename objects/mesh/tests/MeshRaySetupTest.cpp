@@ -1,6 +1,6 @@
 // MeshObject's per-ray setup (objects/mesh/src/MeshRay.h) computes with SSE, in one pass, what KdRay,
 // WatertightRay, clipRayToBox and isQueryable compute separately. The traversal and the exactness
-// arguments (docs/kdtree.md) rely on those values, so the setup must equal them bit for bit: this
+// arguments (docs/design/kdtree.md) rely on those values, so the setup must equal them bit for bit: this
 // test compares them on random rays and on the awkward ones (zero and negative-zero direction
 // components, denormal components, origins on the box faces and outside, directions that overflow
 // 1/d, non-finite and non-queryable rays).

@@ -442,7 +442,7 @@ TEST(VolumeQueries, TwoThreadsGiveTheResultsOfOne) {
   EXPECT_EQ(t1, t2);
 }
 
-// ---- where methods fail (docs/volumes.md) ----
+// ---- where methods fail (docs/design/volumes.md) ----
 
 openvdb::FloatGrid::Ptr sphereLevelSet(float radius, float voxel, float half_width = 3.0f) {
   openvdb::initialize();

@@ -1,4 +1,4 @@
-// A light source inside a closed mesh (docs/sensors.md, "Where methods fail"): no path may leave a closed
+// A light source inside a closed mesh (docs/design/sensors.md, "Where methods fail"): no path may leave a closed
 // watertight mesh, whatever its material, near the origin or far from it, and the energy balance
 // closes exactly. Also the depth limit: in a closed mirror every path ends by it.
 

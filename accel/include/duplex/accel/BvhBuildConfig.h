@@ -57,7 +57,7 @@ struct BvhBuildConfig {
   /// Refits (new positions, same triangles: MeshObject::deformed) keep the tree while its SAH cost
   /// stays at most this multiple of the cost it had when it was last built; beyond it the object
   /// is rebuilt. 1 rebuilds on any loss, a large value never rebuilds. The default keeps the trace
-  /// time of smoothly deforming meshes within about ten percent of a fresh build (docs/bvh.md).
+  /// time of smoothly deforming meshes within about ten percent of a fresh build (docs/design/bvh.md).
   float refit_limit = 1.15f;
 
   /// The parameters of a preset.

@@ -58,7 +58,7 @@ enum class TopLevelUpdate : std::uint8_t {
 /// dependent load and a branch that mispredicts on about half the steps of incoherent rays. So the
 /// intersection cost is 0.3 node steps and empty-space cuts get no bonus: shallower trees with
 /// leaves of a few instances. Higher costs make deeper trees whose node steps mispredict, lower
-/// ones test and visit more instances per ray (the sweep: docs/two-level.md, "Costs").
+/// ones test and visit more instances per ray (the sweep: docs/design/two-level.md, "Costs").
 inline KdBuildConfig topLevelBuildDefaults() {
   KdBuildConfig c;
   c.intersection_cost = 0.3f;
@@ -72,7 +72,7 @@ inline KdBuildConfig topLevelBuildDefaults() {
 /// is met), which costs far less than a node step, and a small sensor gains little from an
 /// empty-space cut, which costs every ray passing near it a node step. So: intersection cost 0.05
 /// and no empty bonus, a shallow tree with leaves of several sensors (the benchmark's many small
-/// sensors query about twice as fast as with the top-level defaults; docs/sensors.md, "Speed").
+/// sensors query about twice as fast as with the top-level defaults; docs/design/sensors.md, "Speed").
 inline KdBuildConfig crossingLevelBuildDefaults() {
   KdBuildConfig c;
   c.intersection_cost = 0.05f;
@@ -88,13 +88,13 @@ struct TopLevelConfig {
   KdBuildConfig crossing_build = crossingLevelBuildDefaults();
   /// The crossing query walks a uniform grid over the crossing level's boxes instead of its
   /// kd-tree when the level holds many instances (at least 256, each spanning few cells) and the ray's
-  /// rounding is small against the grid's margin; same crossings either way (docs/sensors.md,
+  /// rounding is small against the grid's margin; same crossings either way (docs/design/sensors.md,
   /// "The crossing query"). false: always the kd-tree (for comparisons).
   bool crossing_grid = true;
   /// Closest-hit, any-hit and packet queries of the blocking instances walk an 8-wide form derived
   /// from the kd-tree after every build and commit (tight boxes tested 8 at a time; a commit
   /// derives again only what its edits' paths cross): fewer steps and mispredictions per ray than
-  /// the kd-tree's node steps, for a little more memory and commit time (docs/two-level.md, "The
+  /// the kd-tree's node steps, for a little more memory and commit time (docs/design/two-level.md, "The
   /// wide form"). false: the kd-tree itself (for comparisons). Same hits either way. Unlike the
   /// other fields, a change through setConfig() takes effect at once.
   bool wide_traversal = true;

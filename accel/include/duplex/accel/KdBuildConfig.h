@@ -36,7 +36,7 @@ struct KdBuildConfig {
   /// packet), but the SAH model ignores what a node step really costs on incoherent rays (a
   /// dependent load and an unpredictable branch per node), so smaller, shallower trees with larger
   /// leaves win, up to a point: higher costs build slower and trace no faster, lower ones build
-  /// faster but trace primary rays slower on large flat regions (docs/kdtree.md, "Costs"; the sweep
+  /// faster but trace primary rays slower on large flat regions (docs/design/kdtree.md, "Costs"; the sweep
   /// is bench/SweepBench.cpp). The top level and the sensors' level set their own intersection
   /// costs (TopLevel.h) and keep traversal_cost 1, so change this one, not that.
   float intersection_cost = 0.05f;

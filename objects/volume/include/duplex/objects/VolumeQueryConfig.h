@@ -2,7 +2,7 @@
 /// \file VolumeQueryConfig.h
 /// How a VolumeObject answers its queries: the fog transmittance method and its parameters, the
 /// majorant level of delta and ratio tracking, and the level-set root search. One struct with
-/// documented defaults (docs/volumes.md charts the accuracy and speed of every choice).
+/// documented defaults (docs/design/volumes.md charts the accuracy and speed of every choice).
 
 #include <cstdint>
 #include <ostream>
@@ -41,7 +41,7 @@ struct VolumeQueryConfig {
   /// Method of VolumeObject::transmittance() (and so of TopLevel / SceneTracer transmittance and
   /// `duplex trace --transmittance`). Default Exact: it is deterministic (the same answer for a ray
   /// on any thread count, as the CLI's byte-identical outputs need), has no noise, and in the
-  /// benchmark (docs/volumes.md) it is as fast as or faster than ratio tracking at equal error
+  /// benchmark (docs/design/volumes.md) it is as fast as or faster than ratio tracking at equal error
   /// on voxel-resolution data.
   FogMethod transmittance = FogMethod::Exact;
   /// Stochastic methods: estimates averaged per query (>= 1).
