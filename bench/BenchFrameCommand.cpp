@@ -406,21 +406,18 @@ nlohmann::ordered_json runBenchFrame(const BenchFrameOptions& options) {
   const ObjectLibrary& library = graph.library();
 
   // The benchmark's instances: the visible ones, in document order, with what resets them.
-  std::vector<NodeId> instances;
+  const std::vector<NodeId> instances = visibleInstances(*doc, options.scene);
   std::vector<Affine> initial, initial_local;
   std::vector<std::optional<Affine>> parent_from_world;
-  for (const NodeId node : doc->instances)
-    if (graph.isVisibleInstance(node)) {
-      instances.push_back(node);
-      initial.push_back(graph.worldTransform(node));
-      const NodeInfo info = graph.node(node);
-      initial_local.push_back(info.local);
-      // Parents never move: an instance below transform nodes gets the local transform of its world one.
-      parent_from_world.push_back(
-          info.parent == kRootNode ? std::nullopt : std::optional(graph.worldTransform(info.parent).inverse()));
-    }
+  for (const NodeId node : instances) {
+    initial.push_back(graph.worldTransform(node));
+    const NodeInfo info = graph.node(node);
+    initial_local.push_back(info.local);
+    // Parents never move: an instance below transform nodes gets the local transform of its world one.
+    parent_from_world.push_back(info.parent == kRootNode ? std::nullopt
+                                                         : std::optional(graph.worldTransform(info.parent).inverse()));
+  }
   const std::size_t n = instances.size();
-  if (n == 0) throw InvalidArgument(options.scene.string() + ": no visible instances to move");
   std::vector<std::size_t> moves;
   for (const std::string& spec : options.moves) moves.push_back(parseMoves(spec, n));
   // The frame's buffers, per side: the camera rays (shared), hits, shadow rays and their flags.

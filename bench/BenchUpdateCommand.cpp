@@ -319,15 +319,10 @@ nlohmann::ordered_json runBenchUpdate(const BenchUpdateOptions& options) {
   const ObjectLibrary& library = graph.library();
 
   // The benchmark's instances: the visible ones, in document order.
-  std::vector<NodeId> instances;
+  const std::vector<NodeId> instances = visibleInstances(*doc, options.scene);
   std::vector<Affine> initial;
-  for (const NodeId node : doc->instances)
-    if (graph.isVisibleInstance(node)) {
-      instances.push_back(node);
-      initial.push_back(graph.worldTransform(node));
-    }
+  for (const NodeId node : instances) initial.push_back(graph.worldTransform(node));
   const std::size_t n = instances.size();
-  if (n == 0) throw InvalidArgument(options.scene.string() + ": no visible instances to move");
   const Box bounds = visibleWorldBounds(*doc);
   const double side = 0.05 * glm::length(glm::dvec3(bounds.hi) - glm::dvec3(bounds.lo));
   const std::size_t moves = parseMoves(options.moves, n);

@@ -1,6 +1,6 @@
 # cmake -P script of the install.consumer test: install the build into PREFIX, then configure,
 # build and run tests/cli/consumer against it. Variables: BUILD_DIR, PREFIX, WORK_DIR,
-# CONSUMER_SOURCE, CXX_COMPILER, BUILD_TYPE, SANITIZE; PYTHON (the interpreter, empty when the
+# CONSUMER_SOURCE, CXX_COMPILER, BUILD_TYPE; PYTHON (the interpreter, empty when the
 # Python module is not built) and PYTHON_DIR (where the module is installed, relative to PREFIX).
 cmake_minimum_required(VERSION 3.25)
 
@@ -37,15 +37,9 @@ if(PYTHON)
   message(STATUS "python module: ${out}")
 endif()
 
-# The installed targets do not carry the sanitizer flags (they are build-tree only), so a
-# sanitized build's consumer must add them itself.
-set(extra_flags "")
-if(SANITIZE)
-  set(extra_flags "-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined" "-DCMAKE_EXE_LINKER_FLAGS=-fsanitize=address,undefined")
-endif()
 execute_process(COMMAND "${CMAKE_COMMAND}" -S "${CONSUMER_SOURCE}" -B "${WORK_DIR}"
                         "-DCMAKE_PREFIX_PATH=${PREFIX}" "-DCMAKE_CXX_COMPILER=${CXX_COMPILER}"
-                        "-DCMAKE_BUILD_TYPE=${BUILD_TYPE}" ${extra_flags}
+                        "-DCMAKE_BUILD_TYPE=${BUILD_TYPE}"
                 OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
 execute_process(COMMAND "${CMAKE_COMMAND}" --build "${WORK_DIR}" OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
 execute_process(COMMAND "${WORK_DIR}/duplex_consumer" RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)

@@ -200,11 +200,8 @@ std::vector<char> usableBoxes(std::span<const Box> boxes) {
   for (std::size_t i = 0; i < boxes.size(); ++i) {
     if (!usable[i]) continue;
     const glm::dvec3 lo(boxes[i].lo), hi(boxes[i].hi);
-    for (int corner = 0; corner < 9; ++corner) {
-      const glm::dvec3 p =
-          corner == 8 ? 0.5 * (lo + hi)
-                      : glm::dvec3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z);
-      if (!coveredByLeaves(p, leaves[i])) {
+    for (int k = 0; k < 9; ++k) {
+      if (!coveredByLeaves(kdcheck_detail::boxSamplePoint(lo, hi, k), leaves[i])) {
         f.add([&](auto& os) { os << "a point of box " << i << " " << boxes[i] << " is in no leaf referencing it"; });
         break;
       }
@@ -216,12 +213,8 @@ std::vector<char> usableBoxes(std::span<const Box> boxes) {
 ::testing::AssertionResult checkTriangleBvh(const WideBvh& bvh, std::span<const std::array<glm::vec3, 3>> tris,
                                             const std::vector<char>& usable, const BvhCheckOptions& opt) {
   using namespace bvhcheck_detail;
-  std::vector<Box> bounds(tris.size());
-  for (std::size_t i = 0; i < tris.size(); ++i)
-    if (usable[i])
-      for (const auto& v : tris[i]) bounds[i].extend(v);
   // Without spatial splits, leaf boxes containing the triangle boxes contain all three vertices.
-  auto structure = checkBvhStructure(bvh, bounds, usable, opt);
+  auto structure = checkBvhStructure(bvh, kdcheck_detail::triangleBounds(tris, usable), usable, opt);
   if (!structure || !opt.spatial_splits) return structure;
   Failures f;
   const auto leaves = leafBoxesByPrimitive(bvh, tris.size());

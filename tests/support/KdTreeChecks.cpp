@@ -4,6 +4,15 @@
 
 namespace duplex::test {
 
+std::vector<Box> kdcheck_detail::triangleBounds(std::span<const std::array<glm::vec3, 3>> tris,
+                                                const std::vector<char>& usable) {
+  std::vector<Box> bounds(tris.size());
+  for (std::size_t i = 0; i < tris.size(); ++i)
+    if (usable[i])
+      for (const auto& v : tris[i]) bounds[i].extend(v);
+  return bounds;
+}
+
 ::testing::AssertionResult checkKdStructure(const KdTree& tree, std::span<const Box> prim_bounds,
                                             const std::vector<char>& usable, int max_depth, const Box* root_bounds) {
   using namespace kdcheck_detail;
@@ -127,8 +136,14 @@ namespace duplex::test {
     if (usable[i] && !referenced[i]) f.add([&](auto& os) { os << "usable primitive " << i << " is in no leaf"; });
   // KdTree::nodeBox and KdTree::stats assume a well-formed node array: only ask them now.
   if (f.any()) return f.result("kd-tree structure");
-  for (std::uint32_t i = 0; i < tree.nodes.size(); ++i) {
-    if (i % 8 != 0 && tree.nodes.size() >= 4096) continue;  // nodeBox walks from the root: sample big trees
+  // nodeBox walks from the root, so asking it for every node costs O(n^2): ask for at most
+  // kNodeBoxSamples nodes spread over the array (the root and the last node among them), which keeps
+  // the check linear in the tree's size.
+  constexpr std::size_t kNodeBoxSamples = 64;
+  const std::size_t node_count = tree.nodes.size();
+  const std::size_t stride = std::max<std::size_t>(1, node_count / kNodeBoxSamples);
+  for (std::size_t k = 0; k < node_count; k += stride) {
+    const auto i = static_cast<std::uint32_t>(k + stride >= node_count ? node_count - 1 : k);
     const Box nb = tree.nodeBox(i);
     if (!(nb == walk_boxes[i]))
       f.add([&](auto& os) { os << "nodeBox(" << i << ") = " << nb << " but walk gives " << walk_boxes[i]; });
@@ -145,11 +160,7 @@ namespace duplex::test {
 ::testing::AssertionResult checkTriangleKdTree(const KdTree& tree, std::span<const std::array<glm::vec3, 3>> tris,
                                                const std::vector<char>& usable, int max_depth) {
   using namespace kdcheck_detail;
-  std::vector<Box> bounds(tris.size());
-  for (std::size_t i = 0; i < tris.size(); ++i)
-    if (usable[i])
-      for (const auto& v : tris[i]) bounds[i].extend(v);
-  auto structure = checkKdStructure(tree, bounds, usable, max_depth);
+  auto structure = checkKdStructure(tree, triangleBounds(tris, usable), usable, max_depth);
   if (!structure || tree.nodes.empty()) return structure;
 
   Failures f;
@@ -271,11 +282,8 @@ namespace duplex::test {
     };
     visit(0, tree.bounds);
     const glm::dvec3 lo(boxes[i].lo), hi(boxes[i].hi);
-    for (int corner = 0; corner < 9; ++corner) {
-      const glm::dvec3 p =
-          corner == 8 ? 0.5 * (lo + hi)
-                      : glm::dvec3(corner & 1 ? hi.x : lo.x, corner & 2 ? hi.y : lo.y, corner & 4 ? hi.z : lo.z);
-      if (!pointCovered(tree, p, prim)) {
+    for (int k = 0; k < 9; ++k) {
+      if (!pointCovered(tree, boxSamplePoint(lo, hi, k), prim)) {
         f.add([&](auto& os) {
           os << "point of box " << prim << " " << boxes[i] << " lies in no leaf that references it";
         });

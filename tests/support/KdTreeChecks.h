@@ -158,6 +158,16 @@ inline int depthBound(std::size_t usable, int max_depth) {
   return std::min(automatic, 60) + 1;  // +1: slack for the rounding of the bound
 }
 
+/// The boxes of `tris` (model space), empty for those not `usable`: what a structure over them
+/// bounds.
+std::vector<Box> triangleBounds(std::span<const std::array<glm::vec3, 3>> tris, const std::vector<char>& usable);
+
+/// Sample point `k` (0-8) of the box [lo, hi]: its corners (bit 0, 1, 2 of `k`: x, y, z at hi) and,
+/// for 8, its centre: the points a structure must cover where it references the box.
+inline glm::dvec3 boxSamplePoint(const glm::dvec3& lo, const glm::dvec3& hi, int k) {
+  return k == 8 ? 0.5 * (lo + hi) : glm::dvec3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+}
+
 }  // namespace kdcheck_detail
 
 /// Structural and geometric checks shared by triangle and box trees. `prim_bounds[i]` is the

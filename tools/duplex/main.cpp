@@ -33,6 +33,7 @@
 #include <cstdint>
 #include <exception>
 #include <iostream>
+#include <string>
 
 namespace {
 
@@ -48,6 +49,15 @@ void addMaxMemoryToCommands(CLI::App& app, std::uint64_t& bytes) {
       duplex::cli::addMaxMemoryOption(*cmd, bytes);
     else addMaxMemoryToCommands(*cmd, bytes);
   }
+}
+
+// A group of commands (`duplex scene ...`, `duplex bench ...`): a command of `app` whose own
+// commands `add(group)` declares; one of them must be given.
+template <class AddCommands>
+void addGroup(CLI::App& app, const std::string& name, const std::string& description, AddCommands add) {
+  CLI::App* group = app.add_subcommand(name, description);
+  group->require_subcommand(1);
+  add(*group);
 }
 
 }  // namespace
@@ -71,18 +81,18 @@ int main(int argc, char** argv) {
   ChosenCommand chosen;
   addTraceCommand(app, chosen);
   addRaysCommand(app, chosen);
-  CLI::App* scene = app.add_subcommand("scene", "Write benchmark scenes as scene-json-v1 (split, instances, robot)");
-  scene->require_subcommand(1);
-  addSceneSplitCommand(*scene, chosen);
-  addSceneInstancesCommand(*scene, chosen);
-  addSceneRobotCommand(*scene, chosen);
+  addGroup(app, "scene", "Write benchmark scenes as scene-json-v1 (split, instances, robot)", [&](CLI::App& scene) {
+    addSceneSplitCommand(scene, chosen);
+    addSceneInstancesCommand(scene, chosen);
+    addSceneRobotCommand(scene, chosen);
+  });
   addPrepareCommand(app, chosen);
   addClosestCommand(app, chosen);
-  CLI::App* bench = app.add_subcommand("bench", "Benchmarks (update, frame, deform)");
-  bench->require_subcommand(1);
-  addBenchUpdateCommand(*bench, chosen);
-  addBenchFrameCommand(*bench, chosen);
-  addBenchDeformCommand(*bench, chosen);
+  addGroup(app, "bench", "Benchmarks (update, frame, deform)", [&](CLI::App& bench) {
+    addBenchUpdateCommand(bench, chosen);
+    addBenchFrameCommand(bench, chosen);
+    addBenchDeformCommand(bench, chosen);
+  });
   addSensorCommand(app, chosen);
   addInfoCommand(app, chosen);
   addViewCommand(app, chosen);

@@ -35,6 +35,14 @@ InstanceIds::InstanceIds(const SceneDocument& doc) {
 
 Box visibleWorldBounds(const SceneDocument& doc) { return doc.graph->worldBounds(doc.instances); }
 
+std::vector<NodeId> visibleInstances(const SceneDocument& doc, const std::filesystem::path& scene) {
+  std::vector<NodeId> visible;
+  for (const NodeId node : doc.instances)
+    if (doc.graph->isVisibleInstance(node)) visible.push_back(node);
+  if (visible.empty()) throw InvalidArgument(scene.string() + ": no visible instances to move");
+  return visible;
+}
+
 std::map<std::string, std::size_t> meshStructureCounts(const SceneDocument& doc) {
   const ObjectLibrary& library = doc.graph->library();
   std::map<std::string, std::size_t> counts;

@@ -54,6 +54,11 @@ class InstanceIds {
 /// mapped by its world_from_object), in the order of SceneDocument::instances. Empty without any.
 [[nodiscard]] Box visibleWorldBounds(const SceneDocument& doc);
 
+/// The visible instances of `doc` as of the last commit, in the order of SceneDocument::instances:
+/// what the benchmarks move. Throws InvalidArgument naming `scene` (the document's file) when there
+/// is none.
+[[nodiscard]] std::vector<NodeId> visibleInstances(const SceneDocument& doc, const std::filesystem::path& scene);
+
 /// Triangles as the rays see them: the mesh triangles of every instance (hidden ones included),
 /// summed over instances.
 [[nodiscard]] std::size_t instancedTriangles(const SceneDocument& doc);

@@ -1,9 +1,9 @@
 // VolumeObject (OpenVDB grids): level-set hits against the analytic sphere at two voxel sizes,
 // rays from inside, instancing through the SceneTracer, 2 threads against 1, fog transmittance
-// against exp(-sigma L) through a box, scene files, and the load errors. The only test file that includes OpenVDB (slow
-// to compile).
+// against exp(-sigma L) through a box, scene files, and the load errors.
 
 #include "TestSupport.h"
+#include "VolumeTestSupport.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/objects/BuiltinTypes.h"
@@ -32,7 +32,9 @@ namespace duplex {
 namespace {
 
 using test::expectErrorNaming;
+using test::randomUnit;
 using test::TempDir;
+using test::writeGrids;
 
 constexpr double kRadius = 1.0;
 const glm::dvec3 kCentre(0.3, -0.2, 0.1);
@@ -61,12 +63,6 @@ double impact(const glm::dvec3& o, const glm::dvec3& d) {
   const glm::dvec3 oc = kCentre - o;
   const glm::dvec3 dn = glm::normalize(d);
   return glm::length(oc - glm::dot(oc, dn) * dn);
-}
-
-glm::dvec3 randomUnit(std::mt19937& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  glm::dvec3 v = test::draw3<glm::dvec3>(n, rng);
-  return glm::normalize(v);
 }
 
 // Outside rays aimed near the sphere; the direction's length is random (t must not depend on it).
@@ -399,12 +395,6 @@ TEST(VolumeObject, FogMissesGiveOneAndInfiniteRaysTerminate) {
 }
 
 // ---- files and errors ----
-
-void writeGrids(const std::filesystem::path& file, const openvdb::GridPtrVec& grids) {
-  openvdb::io::File out(file.string());
-  out.write(grids);
-  out.close();
-}
 
 TEST(VolumeObject, LoadsFilesByGridNameOrFirstFloatGrid) {
   TempDir dir;

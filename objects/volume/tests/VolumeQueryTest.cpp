@@ -7,6 +7,7 @@
 // grids, damaged files). Includes OpenVDB (slow to compile), like VolumeObjectTest.
 
 #include "TestSupport.h"
+#include "VolumeTestSupport.h"
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/TopLevel.h"
@@ -36,14 +37,11 @@ namespace duplex {
 namespace {
 
 using test::expectErrorNaming;
+using test::randomUnit;
 using test::TempDir;
+using test::writeGrids;
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
-
-glm::dvec3 randomUnit(std::mt19937& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  return glm::normalize(test::draw3<glm::dvec3>(n, rng));
-}
 
 // Density sigma over voxels [lo, hi]^3, stored as voxels (no tiles), voxel size `voxel`.
 openvdb::FloatGrid::Ptr voxelBox(float sigma, int lo, int hi, double voxel) {
@@ -684,12 +682,6 @@ TEST(VolumeFailureCases, HugeSparseGridsStayBoundedInMemoryAndTime) {
   const auto pick = v->firstDensityAbove(ray, 2.5f, ctx);
   ASSERT_TRUE(pick);
   EXPECT_NEAR(*pick, 3.0e8 - 0.5, 64.0);  // float t: ulp 32 at 3e8
-}
-
-void writeGrids(const std::filesystem::path& file, const openvdb::GridPtrVec& grids) {
-  openvdb::io::File out(file.string());
-  out.write(grids);
-  out.close();
 }
 
 TEST(VolumeFailureCases, NonFloatGridsAndBadConfigsGiveClearErrors) {

@@ -60,12 +60,9 @@ struct Coating {
     }
   }
   /// Adds both fractions.
-  void hash(StateHash& h) const {
-    h.add(reflect);
-    h.add(transmit);
-  }
+  void hash(StateHash& h) const { hashFractions(h, reflect, transmit); }
   /// "reflect=..., transmit=...".
-  void print(std::ostream& os) const { os << "reflect=" << reflect.value << ", transmit=" << transmit.value; }
+  void print(std::ostream& os) const { printFractions(os, reflect, transmit); }
   /// One random number: reflected (specular), passed undeviated, or absorbed.
   template <class Event>
   SurfaceStep step(Event& ev) const {

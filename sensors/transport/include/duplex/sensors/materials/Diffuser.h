@@ -48,12 +48,9 @@ struct Diffuser {
                               std::to_string(reflect.in(k) + transmit.in(k)) + ")");
   }
   /// Adds both fractions.
-  void hash(StateHash& h) const {
-    h.add(reflect);
-    h.add(transmit);
-  }
+  void hash(StateHash& h) const { hashFractions(h, reflect, transmit); }
   /// "reflect=..., transmit=...".
-  void print(std::ostream& os) const { os << "reflect=" << reflect.value << ", transmit=" << transmit.value; }
+  void print(std::ostream& os) const { printFractions(os, reflect, transmit); }
   /// One random number: reflected, transmitted or absorbed; two more for the cosine-distributed
   /// direction, mirrored through the surface plane for the transmitted part.
   template <class Event>

@@ -145,6 +145,17 @@ SurfaceStep splitByFractions(Event& ev, const BandValue& reflect, const BandValu
   return s;
 }
 
+/// The hash of a pair of fractions reflected and transmitted (the materials that split by them).
+inline void hashFractions(StateHash& h, const BandValue& reflect, const BandValue& transmit) {
+  h.add(reflect);
+  h.add(transmit);
+}
+
+/// Prints a pair of fractions reflected and transmitted: "reflect=..., transmit=...".
+inline void printFractions(std::ostream& os, const BandValue& reflect, const BandValue& transmit) {
+  os << "reflect=" << reflect.value << ", transmit=" << transmit.value;
+}
+
 /// A material type: parameters, reader, validation, hash and printing (the path step is checked
 /// where the path loop instantiates it). See the file comment. (No copy_constructible here: a
 /// Material's converting constructor asks whether Material itself is a material type while
