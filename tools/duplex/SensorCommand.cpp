@@ -545,6 +545,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
 // of it, a beam travelling against the normal, an area light with a corner in front.
 bool reachesFront(const Light& l, const glm::dvec3& centre, const glm::dvec3& normal) {
   if (l.type == LightType::Directional) return glm::dot(l.direction, normal) < 0.0;
+  if (l.type == LightType::Sky) return normal.z > -1.0;  // some of the sky is in front of all but a floor's underside
   if (l.type != LightType::Area) return glm::dot(l.position - centre, normal) > 0.0;
   for (const double x : {-0.5 * l.width, 0.5 * l.width})
     for (const double y : {-0.5 * l.height, 0.5 * l.height})

@@ -63,6 +63,23 @@ bool isFinite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(
 // power_w cos_l / (pi sides); a directional light lights a point inside its beam's cylinder
 // (downstream of its disk, the light coming from the disk along the beam) with the irradiance
 // power_w / (pi r^2) on a plane across the beam, whichever ray was emitted.
+// A beam of parallel rays along unit `b` from the disk of `radius` about `centre` (across b),
+// with the irradiance e across it: a point inside its cylinder, downstream of the disk, receives it
+// from the disk's point upstream of it; elsewhere nothing.
+template <class Connect>
+void connectBeam(const glm::dvec3& centre, const glm::dvec3& b, double radius, double e, Connect&& connect) {
+  connect(
+      [&](const glm::dvec3& x) {
+        const double along = glm::dot(x - centre, b);
+        const glm::dvec3 across = x - centre - along * b;
+        const bool lit = along > 0.0 && glm::dot(across, across) <= radius * radius;
+        return lit ? x - along * b : x;  // x itself: distance 0, no connection
+      },
+      [&](const glm::dvec3&, double d) {
+        return d > 0.0 ? e * d * d : 0.0;  // irradiance e across the beam: radiance e d^2 / cos
+      });
+}
+
 template <class Connect>
 void connectLight(const Light& light, const EmittedRay& emitted, double scale, Connect&& connect) {
   switch (light.type) {
@@ -88,22 +105,18 @@ void connectLight(const Light& light, const EmittedRay& emitted, double scale, C
               });
       break;
     }
-    case LightType::Directional: {
-      const glm::dvec3 b = glm::normalize(light.direction);
-      const double e = scale * light.power_w / (std::numbers::pi * light.radius * light.radius);
-      // The disk's point upstream of x; outside the cylinder or upstream of the disk: nothing.
-      connect(
-          [&](const glm::dvec3& x) {
-            const double along = glm::dot(x - light.position, b);
-            const glm::dvec3 across = x - light.position - along * b;
-            const bool lit = along > 0.0 && glm::dot(across, across) <= light.radius * light.radius;
-            return lit ? x - along * b : x;  // x itself: distance 0, no connection
-          },
-          [&](const glm::dvec3&, double d) {
-            return d > 0.0 ? e * d * d : 0.0;  // irradiance e across the beam: radiance e d^2 / cos
-          });
+    case LightType::Directional:
+      connectBeam(light.position, glm::normalize(light.direction), light.radius,
+                  scale * light.power_w / (std::numbers::pi * light.radius * light.radius), connect);
       break;
-    }
+    case LightType::Sky:
+      // The emitted direction is a sample of the sky's radiance (pdf ~ L, weight of mean 1): along
+      // it, a point of the lit sphere receives the irradiance power_w / (pi r^2) weight across the
+      // beam, an unbiased estimate of the integral of L over the sky, as for the beam of a
+      // directional light from the ray's disk (centred one radius upstream of the sphere's centre).
+      connectBeam(light.position - light.radius * emitted.dir, emitted.dir, light.radius,
+                  scale * emitted.weight * light.power_w / (std::numbers::pi * light.radius * light.radius), connect);
+      break;
   }
 }
 

@@ -116,6 +116,10 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(l.polygon.data(), l.polygon.size() * sizeof(glm::dvec2));
     add(l.triangles.data(), l.triangles.size() * sizeof(l.triangles[0]));
     if (l.profile) addDouble(l.profile->integral());
+    if (l.sky) {  // its shape: the type and the sun it follows
+      addDouble(l.sky->type());
+      for (int k = 0; k < 3; ++k) addDouble(l.sky->sun()[k]);
+    }
   }
   return h.value;
 }
