@@ -217,6 +217,11 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   const auto connect = [&](auto&& from_of, auto&& radiance) {
     std::uint32_t bin = meter_base;
     for (const PointMeter& mt : meters) {
+      // A luminance meter counts the connections arriving within its cone, without the cosine,
+      // over the cone's solid angle.
+      const bool cone = mt.half_angle > 0.0;
+      const double cos_cone = std::cos(mt.half_angle),
+                   per_sr = cone ? 1.0 / (2.0 * std::numbers::pi * (1.0 - cos_cone)) : 0.0;
       for (std::size_t i = 0; i < mt.points.size(); ++i, ++bin) {
         const glm::dvec3 from = from_of(mt.points[i]);
         const glm::dvec3 to = mt.points[i] - from;
@@ -224,7 +229,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         if (!(d > 0.0)) continue;
         const glm::dvec3 u = to / d;
         const double cos_m = -glm::dot(u, mt.normals[i]);
-        if (cos_m <= 0.0) continue;
+        if (cos_m <= 0.0 || (cone && cos_m < cos_cone)) continue;
         const double value = radiance(u, d);
         if (!(value > 0.0)) continue;
         Ray shadow;
@@ -235,7 +240,7 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         shadow.tfar = static_cast<float>(d * (1.0 - 1e-5));
         const SegmentEnd end = top.intersectWithCrossings(shadow, no_crossings, ctx, shadow_query);
         if (end.hit.valid()) continue;
-        path_bins.push_back({bin, kInvalidId, value * cos_m / (d * d) * end.transmittance});
+        path_bins.push_back({bin, kInvalidId, value * (cone ? per_sr : cos_m) / (d * d) * end.transmittance});
       }
     }
   };

@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <mutex>
+#include <numbers>
 #include <string>
 #include <unordered_set>
 
@@ -301,6 +302,10 @@ void SensorScene::setMeters(std::vector<PointMeter> meters) {
     if (m.name.empty()) throw InvalidArgument("a meter has an empty name");
     if (!names.insert(m.name).second) throw InvalidArgument("two meters named '" + m.name + "'");
     if (m.points.empty()) throw InvalidArgument(what + ": no points");
+    if (!(m.half_angle >= 0.0 && m.half_angle <= std::numbers::pi / 2))
+      throw InvalidArgument(what +
+                            ": the half-angle of a luminance meter must be in (0, 90] degrees (0: an "
+                            "illuminance meter)");
     if (m.normals.size() != m.points.size())
       throw InvalidArgument(what + ": " + std::to_string(m.normals.size()) + " normals for " +
                             std::to_string(m.points.size()) + " points (one per point)");

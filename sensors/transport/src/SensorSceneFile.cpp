@@ -582,7 +582,7 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const std::string p = at("/meters", i);
       const json& e = list[i];
       if (!e.is_object()) ctx.fail(p, "expected an object");
-      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals"});
+      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals", "half_angle"});
       PointMeter m;
       m.name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
       const json& pts = ctx.member(e, p, "points");
@@ -598,6 +598,11 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
         if (!ns.is_array() || ns.size() != pts.size())
           ctx.fail(at(p, "normals"), "expected one [x, y, z] per point (" + std::to_string(pts.size()) + ")");
         for (std::size_t k = 0; k < ns.size(); ++k) m.normals.push_back(direction(ns[k], at(at(p, "normals"), k), ctx));
+      }
+      if (e.contains("half_angle")) {  // a luminance meter: the cone about each normal, degrees
+        const double deg = ctx.number(e["half_angle"], at(p, "half_angle"));
+        if (!(deg > 0.0 && deg <= 90.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 90] degrees");
+        m.half_angle = deg * std::numbers::pi / 180.0;
       }
       meters.push_back(std::move(m));
     }

@@ -124,6 +124,17 @@ struct MeterResult {
   std::vector<std::vector<double>> light_irradiance_w_m2;
   std::vector<std::vector<double>> light_stderr_w_m2;     ///< [light][point], as stderr_w_m2
   std::vector<std::vector<double>> light_illuminance_lx;  ///< [light][point], photometric runs
+  /// Luminance meters (half_angle > 0, radians): the mean radiance over the cone about each
+  /// normal (W/(m^2 sr) per square scene unit), in these arrays instead of the irradiance ones
+  /// above, which stay empty; the luminance (cd/m^2) in photometric runs.
+  double half_angle = 0.0;
+  std::vector<double> radiance_w_m2_sr;                            ///< [point]
+  std::vector<double> radiance_stderr_w_m2_sr;                     ///< [point]
+  std::vector<double> luminance_cd_m2;                             ///< [point], photometric runs
+  std::vector<double> luminance_stderr_cd_m2;                      ///< [point], photometric runs
+  std::vector<std::vector<double>> light_radiance_w_m2_sr;         ///< [light][point]
+  std::vector<std::vector<double>> light_radiance_stderr_w_m2_sr;  ///< [light][point]
+  std::vector<std::vector<double>> light_luminance_cd_m2;          ///< [light][point], as light_illuminance_lx
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so

@@ -103,11 +103,15 @@ struct SurfaceInstance {
 /// Illuminance meters at points: each point with the unit normal of the surface it measures
 /// (world space, scene units). A run estimates the irradiance at each point by connecting every
 /// emission and every diffuse reflection to it (next-event estimation), not by averaging over an
-/// area, so the points may be placed anywhere, also on a surface.
+/// area, so the points may be placed anywhere, also on a surface. With a half-angle, a luminance
+/// meter instead: the mean radiance arriving at the point from the directions within half_angle
+/// of its normal (its axis of view), the same connections counted without the cosine, over the
+/// cone's solid angle 2 pi (1 - cos half_angle).
 struct PointMeter {
   std::string name;                 ///< unique among the scene's meters, non-empty
   std::vector<glm::dvec3> points;   ///< world space
-  std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point
+  std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point (luminance meters: the axis of view)
+  double half_angle = 0.0;          ///< radians: 0 an illuminance meter, in (0, pi / 2] a luminance meter
 };
 
 /// A scene prepared for light transport (see the file comment): graph and tracer, lights, materials, sensors and
@@ -175,7 +179,7 @@ class SensorScene {
   [[nodiscard]] std::uint32_t meterPointCount() const { return meter_points_; }
   /// Sets the illuminance meters. Throws InvalidArgument naming the meter for an empty or repeated
   /// name, no points, a point or normal that is not finite, a zero normal (normals are normalised),
-  /// normals not one per point, or more than 2^24 points in all.
+  /// normals not one per point, a half-angle outside [0, pi / 2], or more than 2^24 points in all.
   void setMeters(std::vector<PointMeter> meters);
   /// Throws InvalidArgument naming the first material a run with meters cannot connect through:
   /// meters see the lights and diffuse (Lambertian) reflections directly, so a mirror, coating,
