@@ -348,8 +348,8 @@ instances' world box, directions uniform on the sphere. Returns float32 (count, 
 have meters and no sensors. A meter's dict: "points", "normals" (N, 3), "ray_count" (N); an
 illuminance meter "irradiance", "stderr" (W per square scene unit), in photometric scenes
 "illuminance", "illuminance_stderr" (lx); a luminance meter ("half_angle" in the scene) instead
-"half_angle_deg", "radiance", "radiance_stderr" (W/(m^2 sr)), "luminance", "luminance_stderr"
-(cd/m^2); with per_light "light_names" and (lights, N) arrays "light_irradiance", "light_stderr",
+"half_angle_deg" (a camera "image_size" (w, h), its pixels row by row from the top left),
+"radiance", "radiance_stderr" (W/(m^2 sr)), "luminance", "luminance_stderr" (cd/m^2); with per_light "light_names" and (lights, N) arrays "light_irradiance", "light_stderr",
 "light_illuminance" (luminance meters "light_radiance", "light_radiance_stderr",
 "light_luminance").)doc");
   m.def("run_sensors", runWith(false), "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0,

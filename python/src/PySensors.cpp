@@ -65,12 +65,13 @@ py::dict meterDict(const MeterResult& m, const SensorRunResults& r) {
   const auto flat = [](const std::vector<double>& v) {
     return py::array_t<double>(static_cast<py::ssize_t>(v.size()), v.data());
   };
-  const bool cone = m.half_angle > 0.0;
+  const bool cone = m.luminance();
   py::dict d;
   d["points"] = rows3(m.points);
   d["normals"] = rows3(m.normals);
   d["ray_count"] = py::array_t<std::uint64_t>(n, m.ray_count.data());
-  if (cone) d["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
+  if (m.half_angle > 0.0) d["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
+  if (m.image_width != 0) d["image_size"] = py::make_tuple(m.image_width, m.image_height);
   d[cone ? "radiance" : "irradiance"] = flat(cone ? m.radiance_w_m2_sr : m.irradiance_w_m2);
   d[cone ? "radiance_stderr" : "stderr"] = flat(cone ? m.radiance_stderr_w_m2_sr : m.stderr_w_m2);
   if (r.photometric) {

@@ -768,7 +768,9 @@ void checkSkyAndLuminanceMeter(const std::string& duplex, const fs::path& dir) {
     {"type": "sky", "name": "day", "model": "overcast", "horizontal_illuminance": 10000,
      "sun": {"altitude": 40, "azimuth": 120, "normal_illuminance": 50000}, "centre": [0, 0, 0], "radius": 2}],
     "meters": [{"name": "desk", "points": [[0, 0, 0]], "normal": [0, 0, 1]},
-               {"name": "eye", "points": [[0, 0, 0]], "normal": [0, 0, 1], "half_angle": 10}]})");
+               {"name": "eye", "points": [[0, 0, 0]], "normal": [0, 0, 1], "half_angle": 10},
+               {"name": "cam", "camera": {"eye": [0, 0, 0], "target": [0, 0, 1], "up": [0, 1, 0], "fov": 10,
+                                          "pixels": [2, 2]}}]})");
   std::vector<std::string> args = sensorArgs(duplex, dir / "sky.json", "100000", "2", dir / "sky");
   args.push_back("--per-light");
   const nlohmann::json r = runJson(args, dir);
@@ -787,6 +789,15 @@ void checkSkyAndLuminanceMeter(const std::string& duplex, const fs::path& dir) {
                  4.5 * eye["luminance_stderr_cd_m2"][0].get<double>() &&
              eye["lights"].size() == 2 && eye["lights"][1]["luminance_cd_m2"][0] == 0.0,
          "sky: eye " + eye.dump() + ", expected " + std::to_string(l) + " cd/m^2");
+  // The camera's four pixels about the zenith (5 degrees): close to L_z, each within 4.5 SE + 1%
+  // of the 10 degree cone's mean (they differ by less than 0.2%).
+  const nlohmann::json& cam = r["meters"][2];
+  bool pixels = cam["image_size"] == nlohmann::json::array({2, 2}) && cam["luminance_cd_m2"].size() == 4 &&
+                !cam.contains("illuminance_lx") && cam["points"].size() == 4;
+  for (int k = 0; pixels && k < 4; ++k)
+    pixels = std::abs(cam["luminance_cd_m2"][k].get<double>() - l) <=
+             4.5 * cam["luminance_stderr_cd_m2"][k].get<double>() + 0.01 * l;
+  expect(pixels, "sky: camera " + cam.dump());
 }
 
 int main(int argc, char** argv) {

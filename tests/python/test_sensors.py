@@ -184,7 +184,9 @@ def test_lighting_meters_and_per_light_equal_the_cli(cli, tmp_path):
                    {"type": "point", "name": "lamp", "position": [0.3, 0, 1], "lumens": 2000}],
         "sensors": [{"name": "desk", "size": [1, 1], "bins": [2, 3], "two_sided": False}],
         "meters": [{"name": "desk_points", "points": [[0, 0, 0], [0.2, 0.1, 0]], "normal": [0, 0, 1]},
-                   {"name": "eye", "points": [[0, 0, 0]], "normal": [0, 0, 1], "half_angle": 15}]}))
+                   {"name": "eye", "points": [[0, 0, 0]], "normal": [0, 0, 1], "half_angle": 15},
+                   {"name": "cam", "camera": {"eye": [0, 0, 0.1], "target": [1, 0, 1], "fov": 50,
+                                              "pixels": [4, 3]}}]}))
     report = run_cli(cli, "sensor", "--scene", scene, "--rays", RAYS, "--seed", 5, "--out", tmp_path / "out",
                      "--progress", "none", "--threads", 2, "--per-light")
     got = duplex.run_lighting(str(scene), rays=RAYS, seed=5, threads=1, per_light=True)
@@ -205,6 +207,10 @@ def test_lighting_meters_and_per_light_equal_the_cli(cli, tmp_path):
     assert "illuminance" not in eye and eye["half_angle_deg"] == pytest.approx(15.0, rel=1e-12)
     assert np.array_equal(eye["luminance"], np.array(ref_eye["luminance_cd_m2"]))
     assert np.array_equal(eye["light_luminance"][0], np.array(ref_eye["lights"][0]["luminance_cd_m2"]))
+    cam, ref_cam = got["meters"]["cam"], by_name["cam"]
+    assert cam["image_size"] == (4, 3) == tuple(ref_cam["image_size"]) and cam["luminance"].shape == (12,)
+    assert np.array_equal(cam["luminance"], np.array(ref_cam["luminance_cd_m2"]))
+    assert np.array_equal(cam["normals"], np.array(ref_cam["normals"]))
     # The sensors: the same as run_sensors, whose per-light arrays are the tool's.
     sensors = duplex.run_sensors(str(scene), rays=RAYS, seed=5, threads=1, per_light=True)
     desk = sensors["desk"]

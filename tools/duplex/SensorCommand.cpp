@@ -264,8 +264,9 @@ nlohmann::ordered_json meterReport(const SensorRunResults& r) {
     j["name"] = m.name;
     j["points"] = xyz(m.points);
     j["normals"] = xyz(m.normals);
-    if (m.half_angle > 0.0) {  // a luminance meter
-      j["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
+    if (m.image_width != 0) j["image_size"] = {m.image_width, m.image_height};  // pixels, row by row from the top left
+    if (m.luminance()) {                                                        // a luminance meter or a camera
+      if (m.half_angle > 0.0) j["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
       j["radiance_w_m2_sr"] = radiometric(m.radiance_w_m2_sr, r);
       j["radiance_stderr_w_m2_sr"] = radiometric(m.radiance_stderr_w_m2_sr, r);
     } else {
@@ -273,14 +274,14 @@ nlohmann::ordered_json meterReport(const SensorRunResults& r) {
       j["stderr_w_m2"] = radiometric(m.stderr_w_m2, r);
     }
     j["ray_count"] = m.ray_count;
-    if (r.photometric && m.half_angle > 0.0) {
+    if (r.photometric && m.luminance()) {
       j["luminance_cd_m2"] = m.luminance_cd_m2;
       j["luminance_stderr_cd_m2"] = m.luminance_stderr_cd_m2;
     } else if (r.photometric) {
       j["illuminance_lx"] = m.illuminance_lx;
       j["illuminance_stderr_lx"] = m.illuminance_stderr_lx;
     }
-    const bool cone = m.half_angle > 0.0;
+    const bool cone = m.luminance();
     const auto& per_light = cone ? m.light_radiance_w_m2_sr : m.light_irradiance_w_m2;
     const auto& per_light_se = cone ? m.light_radiance_stderr_w_m2_sr : m.light_stderr_w_m2;
     const auto& per_light_lm = cone ? m.light_luminance_cd_m2 : m.light_illuminance_lx;
@@ -876,8 +877,8 @@ void addSensorCommand(CLI::App& parent, ChosenCommand& chosen) {
   cmd->add_option("--roulette", sensor.roulette,
                   "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
   cmd->add_flag("--per-light", sensor.per_light,
-                "Also report each light's contribution (run.json and each sensor file's \"lights\"); "
-                "one process only");
+                "Also report each light's contribution (run.json's, each meter's and each sensor file's "
+                "\"lights\"; under mpirun too)");
   cmd->add_option("--failure-threshold", sensor.failure_threshold,
                   "Warn on stderr when numerical failures, or the path limits, carry more than this fraction of the "
                   "emitted power, in [0, 1] (default 0.001)");

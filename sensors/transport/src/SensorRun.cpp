@@ -484,8 +484,10 @@ void SensorRun::meterResults(const Tally& all, bool light_lm, SensorRunResults& 
       for (auto& v : out.light_illuminance_lx)
         for (double& x : v) x *= scene_.luminousWeight(0);
     }
-    if (m.half_angle > 0.0) {  // a luminance meter: the same estimates are radiances
-      out.half_angle = m.half_angle;
+    out.half_angle = m.half_angle;
+    out.image_width = m.image_width;
+    out.image_height = m.image_height;
+    if (out.luminance()) {  // a luminance meter or a camera: the same estimates are radiances
       out.radiance_w_m2_sr = std::exchange(out.irradiance_w_m2, {});
       out.radiance_stderr_w_m2_sr = std::exchange(out.stderr_w_m2, {});
       out.luminance_cd_m2 = std::exchange(out.illuminance_lx, {});

@@ -60,6 +60,7 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(m.points.data(), m.points.size() * sizeof(glm::dvec3));
     add(m.normals.data(), m.normals.size() * sizeof(glm::dvec3));
     if (m.half_angle > 0.0) add(&m.half_angle, sizeof m.half_angle);  // a luminance meter
+    if (m.image_width != 0) add(m.pixel_solid_angle.data(), m.pixel_solid_angle.size() * sizeof(double));
   }
   if (config_.per_light) {  // the state then holds per-light sums
     static constexpr char kPerLight[] = "per-light";

@@ -582,9 +582,38 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const std::string p = at("/meters", i);
       const json& e = list[i];
       if (!e.is_object()) ctx.fail(p, "expected an object");
-      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals", "half_angle"});
+      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals", "half_angle", "camera"});
       PointMeter m;
       m.name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
+      if (e.contains("camera")) {
+        // A pinhole camera: {"eye", "target", "up" (default +z), "fov" (vertical, degrees), "pixels": [w, h]}.
+        if (e.contains("points") || e.contains("normal") || e.contains("normals") || e.contains("half_angle"))
+          ctx.fail(p, "a camera meter has \"camera\" and no \"points\", \"normal(s)\" or \"half_angle\"");
+        const std::string q = at(p, "camera");
+        const json& c = e["camera"];
+        if (!c.is_object()) ctx.fail(q, "expected {\"eye\", \"target\", \"up\", \"fov\", \"pixels\"}");
+        ctx.onlyKeys(c, q, {"eye", "target", "up", "fov", "pixels"});
+        const glm::dvec3 eye = vec3(ctx.member(c, q, "eye"), at(q, "eye"), ctx);
+        const glm::dvec3 target = vec3(ctx.member(c, q, "target"), at(q, "target"), ctx);
+        const glm::dvec3 up = c.contains("up") ? direction(c["up"], at(q, "up"), ctx) : glm::dvec3(0, 0, 1);
+        const double fov = ctx.number(ctx.member(c, q, "fov"), at(q, "fov"));
+        const json& px = ctx.member(c, q, "pixels");
+        if (!px.is_array() || px.size() != 2 || !px[0].is_number_unsigned() || !px[1].is_number_unsigned() ||
+            px[0].get<std::uint64_t>() == 0 || px[1].get<std::uint64_t>() == 0 ||
+            px[0].get<std::uint64_t>() * px[1].get<std::uint64_t>() > (std::uint64_t{1} << 24))
+          ctx.fail(at(q, "pixels"), "expected [width, height], positive integers, at most 2^24 pixels");
+        requireMemory(arrayBytes(px[0].get<std::uint64_t>() * px[1].get<std::uint64_t>(), 3 * sizeof(glm::dvec3)),
+                      path.string() + ": " + q + ": camera pixels");
+        try {
+          m = pinholeMeter(m.name, eye, target, up, fov * std::numbers::pi / 180.0,
+                           static_cast<std::uint32_t>(px[0].get<std::uint64_t>()),
+                           static_cast<std::uint32_t>(px[1].get<std::uint64_t>()));
+        } catch (const InvalidArgument& ex) {
+          ctx.fail(q, ex.what());
+        }
+        meters.push_back(std::move(m));
+        continue;
+      }
       const json& pts = ctx.member(e, p, "points");
       if (!pts.is_array() || pts.empty()) ctx.fail(at(p, "points"), "expected a non-empty array of [x, y, z]");
       requireMemory(arrayBytes(pts.size(), 2 * sizeof(glm::dvec3)), path.string() + ": " + p + ": meter points");

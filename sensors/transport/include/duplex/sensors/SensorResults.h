@@ -128,6 +128,11 @@ struct MeterResult {
   /// normal (W/(m^2 sr) per square scene unit), in these arrays instead of the irradiance ones
   /// above, which stay empty; the luminance (cd/m^2) in photometric runs.
   double half_angle = 0.0;
+  /// Pinhole cameras (PointMeter::image_width > 0): the image size; the points are its pixels, row
+  /// by row from the top left, with luminance results too.
+  std::uint32_t image_width = 0, image_height = 0;
+  /// Whether the results are radiances (a luminance meter or a camera) rather than irradiances.
+  [[nodiscard]] bool luminance() const { return half_angle > 0.0 || image_width > 0; }
   std::vector<double> radiance_w_m2_sr;                            ///< [point]
   std::vector<double> radiance_stderr_w_m2_sr;                     ///< [point]
   std::vector<double> luminance_cd_m2;                             ///< [point], photometric runs

@@ -112,7 +112,26 @@ struct PointMeter {
   std::vector<glm::dvec3> points;   ///< world space
   std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point (luminance meters: the axis of view)
   double half_angle = 0.0;          ///< radians: 0 an illuminance meter, in (0, pi / 2] a luminance meter
+  /// Pinhole cameras (image_width > 0; made by pinholeMeter): the points are the eye repeated once
+  /// per pixel, the normals each pixel's central direction, row by row from the top left. Each
+  /// connection to the eye is binned into the one pixel its direction falls in (one shadow ray
+  /// per event for the whole image), over that pixel's solid angle: the mean radiance over the
+  /// pixel's pyramid, so the pixels tile the field of view. Luminance results (half_angle is 0).
+  std::uint32_t image_width = 0, image_height = 0;
+  /// \var image_right
+  /// The camera's unit right, up and forward directions (world space, orthonormal).
+  glm::dvec3 image_right{1.0, 0.0, 0.0}, image_up{0.0, 1.0, 0.0}, image_forward{0.0, 0.0, -1.0};
+  /// tan of half the horizontal and vertical field of view (the image plane at distance 1).
+  double image_tan_x = 0.0, image_tan_y = 0.0;
+  std::vector<double> pixel_solid_angle;  ///< sr, per pixel
 };
+
+/// A pinhole camera meter `name` at world point `eye` looking at `target`, `up` the image's up
+/// (not parallel to the view), vertical field of view `fov_y` (radians, (0, pi)), width x height
+/// square pixels. Throws InvalidArgument naming the meter for non-finite input, eye == target, an
+/// up along the view, a field of view outside (0, pi) or a zero pixel count.
+[[nodiscard]] PointMeter pinholeMeter(std::string name, const glm::dvec3& eye, const glm::dvec3& target,
+                                      const glm::dvec3& up, double fov_y, std::uint32_t width, std::uint32_t height);
 
 /// A scene prepared for light transport (see the file comment): graph and tracer, lights, materials, sensors and
 /// scattering media.
