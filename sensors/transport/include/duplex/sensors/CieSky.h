@@ -50,6 +50,7 @@ class CieSky {
     glm::dvec3 dir_ws{0.0, 0.0, 1.0};  ///< towards the sky, world space, unit length
     double weight = 1.0;               ///< see above
   };
+  /// Draws a Sample (see above) from uniform u0, u1 in [0, 1).
   [[nodiscard]] Sample sample(double u0, double u1) const;
   /// Probability density (per sr) of sample() drawing unit direction `dir_ws`.
   [[nodiscard]] double pdf(const glm::dvec3& dir_ws) const;

@@ -128,8 +128,11 @@ struct MeterResult {
   /// normal (W/(m^2 sr) per square scene unit), in these arrays instead of the irradiance ones
   /// above, which stay empty; the luminance (cd/m^2) in photometric runs.
   double half_angle = 0.0;
-  /// Pinhole cameras (PointMeter::image_width > 0): the image size; the points are its pixels, row
-  /// by row from the top left, with luminance results too.
+  /// \var image_width
+  /// Pinhole cameras (PointMeter::image_width > 0): the image's width in pixels; the points are
+  /// its pixels, row by row from the top left, with luminance results too.
+  /// \var image_height
+  /// The camera image's height in pixels (0: not a camera).
   std::uint32_t image_width = 0, image_height = 0;
   /// Whether the results are radiances (a luminance meter or a camera) rather than irradiances.
   [[nodiscard]] bool luminance() const { return half_angle > 0.0 || image_width > 0; }

@@ -112,16 +112,26 @@ struct PointMeter {
   std::vector<glm::dvec3> points;   ///< world space
   std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point (luminance meters: the axis of view)
   double half_angle = 0.0;          ///< radians: 0 an illuminance meter, in (0, pi / 2] a luminance meter
+  /// \var image_width
   /// Pinhole cameras (image_width > 0; made by pinholeMeter): the points are the eye repeated once
   /// per pixel, the normals each pixel's central direction, row by row from the top left. Each
   /// connection to the eye is binned into the one pixel its direction falls in (one shadow ray
   /// per event for the whole image), over that pixel's solid angle: the mean radiance over the
   /// pixel's pyramid, so the pixels tile the field of view. Luminance results (half_angle is 0).
+  /// \var image_height
+  /// The camera's pixel rows (0: not a camera).
   std::uint32_t image_width = 0, image_height = 0;
   /// \var image_right
-  /// The camera's unit right, up and forward directions (world space, orthonormal).
+  /// The camera's unit right direction (world space; right, up and forward are orthonormal).
+  /// \var image_up
+  /// The camera's unit up direction (world space).
+  /// \var image_forward
+  /// The camera's unit viewing direction (world space).
   glm::dvec3 image_right{1.0, 0.0, 0.0}, image_up{0.0, 1.0, 0.0}, image_forward{0.0, 0.0, -1.0};
-  /// tan of half the horizontal and vertical field of view (the image plane at distance 1).
+  /// \var image_tan_x
+  /// tan of half the horizontal field of view (the image plane at distance 1).
+  /// \var image_tan_y
+  /// tan of half the vertical field of view.
   double image_tan_x = 0.0, image_tan_y = 0.0;
   std::vector<double> pixel_solid_angle;  ///< sr, per pixel
 };
