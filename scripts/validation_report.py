@@ -67,12 +67,24 @@ Every reference here is computed from a closed form, not copied from the report'
   glass: with the absorption chosen so that the slab matches the curve at normal incidence
   (0.8788), the exact slab and the curve still differ by the amounts shown, largest at grazing
   incidence.
+- **Daylight** (sky component through unglazed roof and facade openings, direct sun): the report's
+  daylight cases 5.9 onward in the form Duplex checks them, with geometry chosen here (a black
+  4 m x 4 m x 3 m room, a 2 m x 2 m roof opening or a 2 m x 1.5 m south window, 25 floor points;
+  the report's own dimensions and tabulated daylight factors were not reproduced). The reference
+  at each point is the zenith luminance times the sky's relative luminance (ISO 15469 / CIE S 011,
+  the formulas written out in the validation code apart from the library's sky) times cos cos /
+  d^2, integrated over the opening by a 300 x 300 midpoint rule; the zenith luminance is 10,000 lx
+  over the sky's horizontal integral by an 800 x 1600 midpoint rule, so the library's own
+  integrals and sampling are checked as well. The sun patch is exact: E_n sin(altitude) inside
+  the opening's parallel projection, 0 outside.
 """
 
 NOT_MODELLED = """## What Duplex does not model (and the cases left out)
 
-- **Daylight** (the report's sky cases 5.9 onward): Duplex has no CIE standard sky (overcast,
-  clear, with the sun) yet, so these cases are not run.
+- **Daylight**: the skies have no ground (no externally reflected component) and the sun is a
+  parallel beam (no solar disk); glazed openings and the internally reflected component of the
+  report's later daylight cases are not run here, and neither are its own room dimensions and
+  tables (the cases above use their own geometry).
 - **IES-source cases**: Duplex reads LM-63 profiles (goniometric lights), but the report's
   luminaire files and tables are not reproduced here; a point light with an IES table is checked
   against its intensity table by the unit tests (`IesProfileTest`, `SensorPhotometryTest`).

@@ -32,8 +32,8 @@ except ImportError as _e:
         + (f" or use the interpreter duplex was built for, {_other}" if _other else "") + f" [{_e}]") from None
 
 try:
-    from ._duplex import (INVALID_ID, Cancelled, Scene, max_memory, primary_rays, random_rays, run_sensors,
-                          set_max_memory)
+    from ._duplex import (INVALID_ID, Cancelled, Scene, max_memory, primary_rays, random_rays, run_lighting,
+                          run_sensors, set_max_memory)
     from ._duplex import __version__
 except ImportError as _e:
     _other = _built_for()
@@ -46,4 +46,4 @@ except ImportError as _e:
 from ._open3d import Array, RaycastingScene  # noqa: E402
 
 __all__ = ["Array", "Cancelled", "INVALID_ID", "RaycastingScene", "Scene", "max_memory", "primary_rays",
-           "random_rays", "run_sensors", "set_max_memory", "__version__"]
+           "random_rays", "run_lighting", "run_sensors", "set_max_memory", "__version__"]

@@ -92,7 +92,13 @@ def run_sensors(scene: Union[str, os.PathLike[str]], rays: int = 1000000, seed: 
                 progress: Optional[Callable[[int, int], None]] = None, max_depth: Optional[int] = None,
                 max_scatterings: int = 100000, roulette: float = 0.05, target_error: float = 0.0,
                 target_sensor: str = "", structure: str = "", at: Optional[float] = None,
-                failure_threshold: float = 0.001) -> Dict[str, Any]: ...
+                failure_threshold: float = 0.001, per_light: bool = False) -> Dict[str, Any]: ...
+
+def run_lighting(scene: Union[str, os.PathLike[str]], rays: int = 1000000, seed: int = 1, threads: int = 0,
+                 progress: Optional[Callable[[int, int], None]] = None, max_depth: Optional[int] = None,
+                 max_scatterings: int = 100000, roulette: float = 0.05, target_error: float = 0.0,
+                 target_sensor: str = "", structure: str = "", at: Optional[float] = None,
+                 failure_threshold: float = 0.001, per_light: bool = False) -> Dict[str, Any]: ...
 
 class Array(np.ndarray[Any, Any]):
     def numpy(self) -> npt.NDArray[Any]: ...

@@ -316,28 +316,48 @@ dy, dz, tnear, tfar], row-major from the top-left pixel, unit directions.)doc");
         R"doc(The rays of `duplex rays --random N --seed X`: origins uniform in the visible
 instances' world box, directions uniform on the sphere. Returns float32 (count, 8).)doc");
 
-  m.def(
-      "run_sensors",
-      [](const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
-         const py::object& progress, std::optional<std::uint32_t> max_depth, std::uint32_t max_scatterings,
-         double roulette, double target_error, const std::string& target_sensor, const std::string& structure,
-         std::optional<double> at, double failure_threshold) {
-        SensorRunOptions o;
-        o.at = at;
-        o.failure_threshold = failure_threshold;
-        o.max_depth = max_depth.value_or(kNoDepthLimit);
-        o.max_scatterings = max_scatterings;
-        o.roulette_threshold = roulette;
-        o.target_error = target_error;
-        o.target_sensor = target_sensor;
-        o.structure = structure;
-        return runSensors(scene_file, rays, seed, threads, progress, o);
-      },
-      "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0, "progress"_a = py::none(),
-      "max_depth"_a = py::none(), "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
-      "roulette"_a = SensorRunOptions{}.roulette_threshold, "target_error"_a = 0.0, "target_sensor"_a = "",
-      "structure"_a = "", "at"_a = py::none(), "failure_threshold"_a = SensorRunOptions{}.failure_threshold,
-      R"doc(A light-tracing run of a scene file's lights and sensors, as `duplex sensor` runs it:
+  // run_sensors and run_lighting: the same run and parameters, two shapes of result.
+  const auto runWith = [](bool lighting) {
+    return
+        [lighting](const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
+                   const py::object& progress, std::optional<std::uint32_t> max_depth, std::uint32_t max_scatterings,
+                   double roulette, double target_error, const std::string& target_sensor, const std::string& structure,
+                   std::optional<double> at, double failure_threshold, bool per_light) {
+          SensorRunOptions o;
+          o.at = at;
+          o.failure_threshold = failure_threshold;
+          o.max_depth = max_depth.value_or(kNoDepthLimit);
+          o.max_scatterings = max_scatterings;
+          o.roulette_threshold = roulette;
+          o.target_error = target_error;
+          o.target_sensor = target_sensor;
+          o.structure = structure;
+          o.per_light = per_light;
+          return runScene(scene_file, rays, seed, threads, progress, o, lighting);
+        };
+  };
+  m.def("run_lighting", runWith(true), "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0,
+        "progress"_a = py::none(), "max_depth"_a = py::none(), "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
+        "roulette"_a = SensorRunOptions{}.roulette_threshold, "target_error"_a = 0.0, "target_sensor"_a = "",
+        "structure"_a = "", "at"_a = py::none(), "failure_threshold"_a = SensorRunOptions{}.failure_threshold,
+        "per_light"_a = false,
+        R"doc(The run of run_sensors (same parameters and numbers), returning the sensors and the meters:
+{"sensors": what run_sensors returns, "meters": meter name -> dict, and the run's "rays", "seed",
+"status", "emitted_power", "energy", "edits_applied", "emitted_luminous_flux" (photometric),
+"light_names", "light_emitted_power", "light_emitted_luminous_flux" (per_light)}. A scene may
+have meters and no sensors. A meter's dict: "points", "normals" (N, 3), "ray_count" (N); an
+illuminance meter "irradiance", "stderr" (W per square scene unit), in photometric scenes
+"illuminance", "illuminance_stderr" (lx); a luminance meter ("half_angle" in the scene) instead
+"half_angle_deg" (a camera "image_size" (w, h), its pixels row by row from the top left),
+"radiance", "radiance_stderr" (W/(m^2 sr)), "luminance", "luminance_stderr" (cd/m^2); with per_light "light_names" and (lights, N) arrays "light_irradiance", "light_stderr",
+"light_illuminance" (luminance meters "light_radiance", "light_radiance_stderr",
+"light_luminance").)doc");
+  m.def("run_sensors", runWith(false), "scene"_a, "rays"_a = 1000000, "seed"_a = 1, "threads"_a = 0,
+        "progress"_a = py::none(), "max_depth"_a = py::none(), "max_scatterings"_a = SensorRunOptions{}.max_scatterings,
+        "roulette"_a = SensorRunOptions{}.roulette_threshold, "target_error"_a = 0.0, "target_sensor"_a = "",
+        "structure"_a = "", "at"_a = py::none(), "failure_threshold"_a = SensorRunOptions{}.failure_threshold,
+        "per_light"_a = false,
+        R"doc(A light-tracing run of a scene file's lights and sensors, as `duplex sensor` runs it:
 the same seed gives the same numbers, for any thread count. progress: None or a callable
 (done, total) called from the calling thread between batches of rays; an exception raised in it
 (or Ctrl-C) stops the run and is raised again. target_error > 0 stops once the target sensor's
@@ -363,7 +383,13 @@ scenes (lights in lumens, or bands with wavelengths) "luminous_flux", "luminous_
 "total_chromaticity_xy", "band_nm".
 A far-field sensor ("shape" "farfield", "bins" (n_c, n_gamma)) has instead of the (ny, nx)
 arrays "intensity", "intensity_stderr" (W/sr), "flux", "ray_count", "solid_angle" (sr), each
-(n_c, n_gamma), and "c_deg", "gamma_deg" (the grid's angles).)doc");
+(n_c, n_gamma), and "c_deg", "gamma_deg" (the grid's angles).
+per_light: each light's contribution beside the totals, from the same rays: "light_names",
+"light_emitted_power" (W) and "light_emitted_luminous_flux" (photometric), (lights, ny, nx)
+arrays "light_irradiance", "light_stderr", "light_flux", "light_flux_stderr" (far field
+"light_intensity", "light_intensity_stderr"), "light_total_flux", "light_total_flux_stderr",
+and where every ray has one luminous weight "light_illuminance", "light_illuminance_stderr" (far
+field "light_intensity_cd", ...), "light_luminous_flux", "light_luminous_flux_stderr".)doc");
 
   m.attr("__name__") = extension_name;
 }

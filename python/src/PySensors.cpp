@@ -9,8 +9,11 @@
 
 #include <pybind11/stl.h>
 
+#include <glm/vec3.hpp>
+
 #include <cmath>
 #include <exception>
+#include <numbers>
 #include <optional>
 #include <sstream>
 #include <vector>
@@ -43,10 +46,69 @@ const char* shapeName(SensorShape s) {
                                       : "rectangle";
 }
 
+// The per-light arrays of a sensor or meter result ([light][bin or point]) as (lights, rows, cols).
+py::array_t<double> lightGrids(const std::vector<std::vector<double>>& v, py::ssize_t rows, py::ssize_t cols) {
+  return bandGrids(v, rows, cols);
+}
+
+// (N, 3) of world-space points or directions.
+py::array_t<double> rows3(const std::vector<glm::dvec3>& v) {
+  py::array_t<double> a(std::vector<py::ssize_t>{static_cast<py::ssize_t>(v.size()), 3});
+  double* p = a.mutable_data();
+  for (const glm::dvec3& x : v) p = std::copy(&x.x, &x.x + 3, p);
+  return a;
+}
+
+// A meter's dict (see run_lighting's docstring).
+py::dict meterDict(const MeterResult& m, const SensorRunResults& r) {
+  const auto n = static_cast<py::ssize_t>(m.points.size());
+  const auto flat = [](const std::vector<double>& v) {
+    return py::array_t<double>(static_cast<py::ssize_t>(v.size()), v.data());
+  };
+  const bool cone = m.luminance();
+  py::dict d;
+  d["points"] = rows3(m.points);
+  d["normals"] = rows3(m.normals);
+  d["ray_count"] = py::array_t<std::uint64_t>(n, m.ray_count.data());
+  if (m.half_angle > 0.0) d["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
+  if (m.image_width != 0) d["image_size"] = py::make_tuple(m.image_width, m.image_height);
+  d[cone ? "radiance" : "irradiance"] = flat(cone ? m.radiance_w_m2_sr : m.irradiance_w_m2);
+  d[cone ? "radiance_stderr" : "stderr"] = flat(cone ? m.radiance_stderr_w_m2_sr : m.stderr_w_m2);
+  if (r.photometric) {
+    d[cone ? "luminance" : "illuminance"] = flat(cone ? m.luminance_cd_m2 : m.illuminance_lx);
+    d[cone ? "luminance_stderr" : "illuminance_stderr"] =
+        flat(cone ? m.luminance_stderr_cd_m2 : m.illuminance_stderr_lx);
+  }
+  const auto& per_light = cone ? m.light_radiance_w_m2_sr : m.light_irradiance_w_m2;
+  if (!per_light.empty()) {
+    d["light_names"] = r.light_names;
+    d[cone ? "light_radiance" : "light_irradiance"] =
+        lightGrids(per_light, 1, n).reshape({static_cast<py::ssize_t>(per_light.size()), n});
+    const auto& se = cone ? m.light_radiance_stderr_w_m2_sr : m.light_stderr_w_m2;
+    d[cone ? "light_radiance_stderr" : "light_stderr"] =
+        lightGrids(se, 1, n).reshape({static_cast<py::ssize_t>(se.size()), n});
+    const auto& lm = cone ? m.light_luminance_cd_m2 : m.light_illuminance_lx;
+    if (!lm.empty())
+      d[cone ? "light_luminance" : "light_illuminance"] =
+          lightGrids(lm, 1, n).reshape({static_cast<py::ssize_t>(lm.size()), n});
+  }
+  return d;
+}
+
 }  // namespace
 
 py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
                     const py::object& progress, const SensorRunOptions& options) {
+  return runScene(scene_file, rays, seed, threads, progress, options, false);
+}
+
+py::dict runLighting(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
+                     const py::object& progress, const SensorRunOptions& options) {
+  return runScene(scene_file, rays, seed, threads, progress, options, true);
+}
+
+py::dict runScene(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
+                  const py::object& progress, const SensorRunOptions& options, bool lighting) {
   if (rays == 0) throw InvalidArgument("rays must be at least 1");
   if (threads < 0) throw InvalidArgument("threads must be >= 0 (0: all hardware threads)");
   if (!(options.target_error >= 0.0 && std::isfinite(options.target_error)))
@@ -79,8 +141,11 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
     if (PyErr_WarnEx(PyExc_UserWarning, note.str().c_str(), 1) != 0) throw py::error_already_set();
   }
   if (scene->lights().empty()) throw FileError(scene_file.string() + ": the scene has no lights (\"lights\": [...])");
-  if (scene->sensors().empty())
+  if (!lighting && scene->sensors().empty())
     throw FileError(scene_file.string() + ": the scene has no sensors (\"sensors\": [...])");
+  if (lighting && scene->sensors().empty() && scene->meters().empty())
+    throw FileError(scene_file.string() +
+                    ": the scene has no sensors (\"sensors\": [...]) or meters (\"meters\": [...])");
 
   SensorRunConfig config;
   config.seed = seed;
@@ -88,6 +153,7 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   config.max_depth = options.max_depth;
   config.max_scatterings = options.max_scatterings;
   config.roulette_threshold = options.roulette_threshold;
+  config.per_light = options.per_light;
   SensorRun run(*scene, config);
   SensorStopRule stop;
   if (options.target_error > 0.0) {
@@ -146,6 +212,15 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
   const char* status_name = status == SensorRunStatus::TargetReached ? "target_reached"
                             : status == SensorRunStatus::Cancelled   ? "cancelled"
                                                                      : "completed";
+  // The run's entries, in every sensor's dict and in run_lighting's.
+  const auto runEntries = [&](py::dict& d) {
+    d["rays"] = r.rays;
+    d["seed"] = r.seed;
+    d["status"] = status_name;
+    d["emitted_power"] = r.energy.emitted_w;
+    d["energy"] = energy;
+    d["edits_applied"] = edits_applied;
+  };
   py::dict out;
   for (const SensorResult& s : r.sensors) {
     const auto ny = static_cast<py::ssize_t>(s.ny), nx = static_cast<py::ssize_t>(s.nx);
@@ -205,15 +280,41 @@ py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays,
       d["total_chromaticity_xy"] = s.total_chromaticity_xy;
       d["band_nm"] = r.band_nm;
     }
-    d["rays"] = r.rays;
-    d["seed"] = r.seed;
-    d["status"] = status_name;
-    d["emitted_power"] = r.energy.emitted_w;
-    d["energy"] = energy;
-    d["edits_applied"] = edits_applied;
+    runEntries(d);
+    if (!r.light_names.empty()) {  // per-light results: (lights, rows, cols)
+      d["light_names"] = r.light_names;
+      d["light_emitted_power"] = r.light_emitted_w;
+      d[far ? "light_intensity" : "light_irradiance"] = lightGrids(s.light_irradiance_w_m2, rows, cols);
+      d[far ? "light_intensity_stderr" : "light_stderr"] = lightGrids(s.light_stderr_w_m2, rows, cols);
+      d["light_flux"] = lightGrids(s.light_flux_w, rows, cols);
+      d["light_flux_stderr"] = lightGrids(s.light_flux_stderr_w, rows, cols);
+      d["light_total_flux"] = s.light_total_flux_w;
+      d["light_total_flux_stderr"] = s.light_total_flux_stderr_w;
+      if (r.photometric) d["light_emitted_luminous_flux"] = r.light_emitted_lm;
+      if (!s.light_illuminance_lx.empty()) {
+        d[far ? "light_intensity_cd" : "light_illuminance"] = lightGrids(s.light_illuminance_lx, rows, cols);
+        d[far ? "light_intensity_cd_stderr" : "light_illuminance_stderr"] =
+            lightGrids(s.light_illuminance_stderr_lx, rows, cols);
+        d["light_luminous_flux"] = s.light_luminous_flux_lm;
+        d["light_luminous_flux_stderr"] = s.light_luminous_flux_stderr_lm;
+      }
+    }
     out[py::str(s.name)] = d;
   }
-  return out;
+  if (!lighting) return out;
+  py::dict meters;
+  for (const MeterResult& m : r.meters) meters[py::str(m.name)] = meterDict(m, r);
+  py::dict all;
+  all["sensors"] = out;
+  all["meters"] = meters;
+  runEntries(all);
+  if (r.photometric) all["emitted_luminous_flux"] = r.emitted_lm;
+  if (!r.light_names.empty()) {
+    all["light_names"] = r.light_names;
+    all["light_emitted_power"] = r.light_emitted_w;
+    if (r.photometric) all["light_emitted_luminous_flux"] = r.light_emitted_lm;
+  }
+  return all;
 }
 
 }  // namespace duplex::python

@@ -32,6 +32,8 @@ struct SensorRunOptions {
   /// A UserWarning when numerical failures, or the path limits, carry more than this fraction of
   /// the emitted power (`duplex sensor --failure-threshold`).
   double failure_threshold = 0.001;
+  /// Each light's contribution beside the totals (SensorRunConfig::per_light).
+  bool per_light = false;
 };
 
 /// Runs `rays` light paths of `scene_file` with `seed` on `threads` threads (0: all) and returns a
@@ -40,5 +42,14 @@ struct SensorRunOptions {
 /// and is raised again.
 py::dict runSensors(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
                     const py::object& progress, const SensorRunOptions& options);
+
+/// The same run, returning {"sensors": what runSensors returns, "meters": meter name -> dict, and
+/// the run's entries}; a scene may have meters and no sensors (duplex.run_lighting).
+py::dict runLighting(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
+                     const py::object& progress, const SensorRunOptions& options);
+
+/// What both run: `lighting` selects runLighting's result.
+py::dict runScene(const std::filesystem::path& scene_file, std::uint64_t rays, std::uint64_t seed, int threads,
+                  const py::object& progress, const SensorRunOptions& options, bool lighting);
 
 }  // namespace duplex::python

@@ -758,6 +758,48 @@ void checkPhotometricKeysAndPerLight(const std::string& duplex, const fs::path& 
          "watts: " + w.dump());
 }
 
+// A CIE overcast sky of 10,000 lx with a sun of 50,000 lx at altitude 40 (`--per-light`): the sky
+// and the sun are listed apart; an illuminance meter facing up reads 10,000 + 50,000 sin 40, a
+// luminance meter looking at the zenith through 10 degrees reads L_z (2 + cos 10) / 3 (L_z =
+// 10,000 / (7 pi / 9)) under the luminance keys and has no illuminance keys.
+void checkSkyAndLuminanceMeter(const std::string& duplex, const fs::path& dir) {
+  fs::create_directories(dir);
+  write(dir / "sky.json", R"({"format": "scene-json-v1", "objects": [], "instances": [], "lights": [
+    {"type": "sky", "name": "day", "model": "overcast", "horizontal_illuminance": 10000,
+     "sun": {"altitude": 40, "azimuth": 120, "normal_illuminance": 50000}, "centre": [0, 0, 0], "radius": 2}],
+    "meters": [{"name": "desk", "points": [[0, 0, 0]], "normal": [0, 0, 1]},
+               {"name": "eye", "points": [[0, 0, 0]], "normal": [0, 0, 1], "half_angle": 10},
+               {"name": "cam", "camera": {"eye": [0, 0, 0], "target": [0, 0, 1], "up": [0, 1, 0], "fov": 10,
+                                          "pixels": [2, 2]}}]})");
+  std::vector<std::string> args = sensorArgs(duplex, dir / "sky.json", "100000", "2", dir / "sky");
+  args.push_back("--per-light");
+  const nlohmann::json r = runJson(args, dir);
+  const double pi = 3.14159265358979323846;
+  expect(r["lights"].size() == 2 && r["lights"][0]["name"] == "day" && r["lights"][1]["name"] == "day/sun",
+         "sky: run.json lights " + r["lights"].dump());
+  const nlohmann::json& desk = r["meters"][0];
+  const double e = 10000 + 50000 * std::sin(40 * pi / 180);
+  expect(std::abs(desk["illuminance_lx"][0].get<double>() - e) <= 4.5 * desk["illuminance_stderr_lx"][0].get<double>(),
+         "sky: desk " + desk.dump() + ", expected " + std::to_string(e) + " lx");
+  const nlohmann::json& eye = r["meters"][1];
+  const double l = 10000 / (7 * pi / 9) * (2 + std::cos(10 * pi / 180)) / 3;
+  expect(!eye.contains("illuminance_lx") && !eye.contains("irradiance_w_m2") &&
+             std::abs(eye["half_angle_deg"].get<double>() - 10.0) < 1e-12 &&
+             std::abs(eye["luminance_cd_m2"][0].get<double>() - l) <=
+                 4.5 * eye["luminance_stderr_cd_m2"][0].get<double>() &&
+             eye["lights"].size() == 2 && eye["lights"][1]["luminance_cd_m2"][0] == 0.0,
+         "sky: eye " + eye.dump() + ", expected " + std::to_string(l) + " cd/m^2");
+  // The camera's four pixels about the zenith (5 degrees): close to L_z, each within 4.5 SE + 1%
+  // of the 10 degree cone's mean (they differ by less than 0.2%).
+  const nlohmann::json& cam = r["meters"][2];
+  bool pixels = cam["image_size"] == nlohmann::json::array({2, 2}) && cam["luminance_cd_m2"].size() == 4 &&
+                !cam.contains("illuminance_lx") && cam["points"].size() == 4;
+  for (int k = 0; pixels && k < 4; ++k)
+    pixels = std::abs(cam["luminance_cd_m2"][k].get<double>() - l) <=
+             4.5 * cam["luminance_stderr_cd_m2"][k].get<double>() + 0.01 * l;
+  expect(pixels, "sky: camera " + cam.dump());
+}
+
 int main(int argc, char** argv) {
   if (argc != 3) {
     std::cerr << "usage: duplex_sensor_cli_check DUPLEX DIR\n";
@@ -768,6 +810,7 @@ int main(int argc, char** argv) {
     checkBandsAndAngles(argv[1], fs::path(argv[2]) / "spectral");
     checkFarFieldAndEdits(argv[1], fs::path(argv[2]) / "farfield");
     checkOutputFolderRules(argv[1], fs::path(argv[2]) / "output");
+    checkSkyAndLuminanceMeter(argv[1], fs::path(argv[2]) / "sky");
     checkBackFacingWarning(argv[1], fs::path(argv[2]) / "back_facing");
     checkPhotometricKeysAndPerLight(argv[1], fs::path(argv[2]) / "photometric");
     return status;

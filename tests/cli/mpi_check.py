@@ -5,7 +5,7 @@ A run shared by N ranks writes the files of a one-process run of the same seed, 
 resuming with another rank count, a rank killed with SIGKILL and a rank that cannot load its scene
 behave as docs/distributed.md says.
 
-  mpi_check.py ranks   DUPLEX MPIRUN WITH_MPI DIR   1, 2, 3 ranks x 1, 2 threads: identical files
+  mpi_check.py ranks   DUPLEX MPIRUN WITH_MPI DIR   1, 2, 3 ranks x 1, 2 threads (and --per-light): identical files
   mpi_check.py target  DUPLEX MPIRUN WITH_MPI DIR   --target-error stops every rank count at one batch
   mpi_check.py resume  DUPLEX MPIRUN WITH_MPI DIR   2 ranks to a total inside a batch, resumed by 3
   mpi_check.py kill    DUPLEX MPIRUN WITH_MPI DIR   rank 1 killed (SIGKILL), resumed to the same files
@@ -134,6 +134,27 @@ def check_ranks(duplex, mpi, d, scene):
     compare(one_b, out, "--batch-rays 40000, 3 ranks vs one process")
     print("1, 2, 3 ranks x 1, 2 threads, ranks of 2, 1 and 1 threads, and --batch-rays 40000 with 3 ranks: every "
           "file identical to the one-process run: ok")
+    # --per-light with a CIE sky and its sun beside the point light, an illuminance and a luminance
+    # meter: the per-light sums travel with the batches, so 3 ranks write the one-process files.
+    daylight = dict(SCENE)
+    daylight["lights"] = SCENE["lights"] + [
+        {"type": "sky", "name": "day", "model": "clear", "zenith_radiance": 2, "spectrum": [1, 1],
+         "sun": {"altitude": 50, "azimuth": 100, "normal_irradiance": 4}, "centre": [0, 0, 0], "radius": 2}]
+    daylight["meters"] = [{"name": "floor", "points": [[0, 0, -0.45], [0.5, 0.3, -0.45]], "normal": [0, 0, 1]},
+                          {"name": "eye", "points": [[0, 0, 0.5]], "normal": [0, 0, -1], "half_angle": 20}]
+    daylight_scene = os.path.join(d, "daylight.json")
+    with open(daylight_scene, "w") as f:
+        json.dump(daylight, f)
+    one_l = os.path.join(d, "one_light")
+    run(sensor_args(duplex, daylight_scene, 300000, 2, one_l, "--per-light"))
+    out = os.path.join(d, "r3_light")
+    run(mpirun(mpi, 3) + sensor_args(duplex, daylight_scene, 300000, 1, out, "--per-light"))
+    compare(one_l, out, "--per-light with a sky and meters, 3 ranks vs one process")
+    r = report(out)
+    expect([l["name"] for l in r["lights"]] == ["lights/0", "day", "day/sun"] and len(r["meters"]) == 2 and
+           len(r["meters"][1]["lights"]) == 3 and r["meters"][0]["lights"][1]["irradiance_w_m2"][0] > 0,
+           "--per-light under mpirun: run.json lights and meters %s %s" % (r["lights"], r["meters"]))
+    print("--per-light with a CIE sky, its sun and meters, 3 ranks: every file identical to the one-process run: ok")
 
 
 def check_target(duplex, mpi, d, scene):

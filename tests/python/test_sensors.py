@@ -169,3 +169,64 @@ def test_colour_keys_of_bands_with_wavelengths(tmp_path):
     assert np.isnan(got["chromaticity_xy"][~lit]).all()
     assert got["emitted_luminous_flux"] == pytest.approx(100.0, rel=1e-12)
     assert got["band_nm"] == [[540.0, 560.0], [620.0, 640.0]] or got["band_nm"] == [(540.0, 560.0), (620.0, 640.0)]
+
+
+def test_lighting_meters_and_per_light_equal_the_cli(cli, tmp_path):
+    """run_lighting's meters (an illuminance and a luminance meter under a sky with its sun) and
+    run_sensors' per-light arrays hold the numbers of `duplex sensor --per-light` for the same seed,
+    and the per-light values add up to the totals."""
+    scene = tmp_path / "daylight.json"
+    scene.write_text(json.dumps({
+        "format": "scene-json-v1", "objects": [], "instances": [],
+        "lights": [{"type": "sky", "name": "day", "model": "clear", "horizontal_illuminance": 10000,
+                    "sun": {"altitude": 40, "azimuth": 150, "normal_illuminance": 50000},
+                    "centre": [0, 0, 0], "radius": 2},
+                   {"type": "point", "name": "lamp", "position": [0.3, 0, 1], "lumens": 2000}],
+        "sensors": [{"name": "desk", "size": [1, 1], "bins": [2, 3], "two_sided": False}],
+        "meters": [{"name": "desk_points", "points": [[0, 0, 0], [0.2, 0.1, 0]], "normal": [0, 0, 1]},
+                   {"name": "eye", "points": [[0, 0, 0]], "normal": [0, 0, 1], "half_angle": 15},
+                   {"name": "cam", "camera": {"eye": [0, 0, 0.1], "target": [1, 0, 1], "fov": 50,
+                                              "pixels": [4, 3]}}]}))
+    report = run_cli(cli, "sensor", "--scene", scene, "--rays", RAYS, "--seed", 5, "--out", tmp_path / "out",
+                     "--progress", "none", "--threads", 2, "--per-light")
+    got = duplex.run_lighting(str(scene), rays=RAYS, seed=5, threads=1, per_light=True)
+    assert got["light_names"] == ["day", "day/sun", "lamp"] == [l["name"] for l in report["lights"]]
+    assert got["rays"] == RAYS and got["status"] == "completed"
+    by_name = {m["name"]: m for m in report["meters"]}
+    points = got["meters"]["desk_points"]
+    ref = by_name["desk_points"]
+    assert points["points"].shape == (2, 3) and np.array_equal(points["points"], np.array(ref["points"]))
+    assert np.array_equal(points["illuminance"], np.array(ref["illuminance_lx"]))
+    assert np.array_equal(points["illuminance_stderr"], np.array(ref["illuminance_stderr_lx"]))
+    assert np.array_equal(points["ray_count"], np.array(ref["ray_count"]))
+    assert points["light_illuminance"].shape == (3, 2)
+    for l, entry in enumerate(ref["lights"]):
+        assert np.array_equal(points["light_illuminance"][l], np.array(entry["illuminance_lx"]))
+    assert np.allclose(points["light_illuminance"].sum(axis=0), points["illuminance"], rtol=1e-12)
+    eye, ref_eye = got["meters"]["eye"], by_name["eye"]
+    assert "illuminance" not in eye and eye["half_angle_deg"] == pytest.approx(15.0, rel=1e-12)
+    assert np.array_equal(eye["luminance"], np.array(ref_eye["luminance_cd_m2"]))
+    assert np.array_equal(eye["light_luminance"][0], np.array(ref_eye["lights"][0]["luminance_cd_m2"]))
+    cam, ref_cam = got["meters"]["cam"], by_name["cam"]
+    assert cam["image_size"] == (4, 3) == tuple(ref_cam["image_size"]) and cam["luminance"].shape == (12,)
+    assert np.array_equal(cam["luminance"], np.array(ref_cam["luminance_cd_m2"]))
+    assert np.array_equal(cam["normals"], np.array(ref_cam["normals"]))
+    # The sensors: the same as run_sensors, whose per-light arrays are the tool's.
+    sensors = duplex.run_sensors(str(scene), rays=RAYS, seed=5, threads=1, per_light=True)
+    desk = sensors["desk"]
+    assert np.array_equal(desk["illuminance"], got["sensors"]["desk"]["illuminance"])
+    ref_desk = json.loads(open(report["sensors"][0]["file"]).read())
+    assert desk["light_names"] == ["day", "day/sun", "lamp"] and desk["light_illuminance"].shape == (3, 3, 2)
+    for l, entry in enumerate(ref_desk["lights"]):
+        assert np.array_equal(desk["light_illuminance"][l].ravel(), np.array(entry["illuminance_lx"]))
+        assert desk["light_total_flux"][l] == entry["total_flux_lm"]
+    assert np.allclose(desk["light_illuminance"].sum(axis=0), desk["illuminance"], rtol=1e-12)
+    assert "light_names" not in duplex.run_sensors(str(scene), rays=1000, seed=5, threads=1)["desk"]
+    # A scene of meters alone: run_lighting runs it, run_sensors refuses it.
+    alone = tmp_path / "meters_only.json"
+    data = json.loads(scene.read_text())
+    del data["sensors"]
+    alone.write_text(json.dumps(data))
+    assert duplex.run_lighting(str(alone), rays=1000)["sensors"] == {}
+    with pytest.raises(OSError, match="no sensors"):
+        duplex.run_sensors(str(alone), rays=1000)

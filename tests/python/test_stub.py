@@ -172,7 +172,7 @@ def test_stub_methods_have_the_runtime_parameters(tree, cls):
 
 
 def test_stub_functions_have_the_runtime_parameters(tree):
-    for name in ("set_max_memory", "max_memory", "primary_rays", "random_rays", "run_sensors"):
+    for name in ("set_max_memory", "max_memory", "primary_rays", "random_rays", "run_sensors", "run_lighting"):
         rs = runtime_signatures(getattr(duplex, name), name)
         ss = stub_signatures(tree, None, name)
         assert len(rs) == len(ss) and all(any(same(r, s) for s in ss) for r in rs), f"{name}: runtime {rs} != stub {ss}"

@@ -8,9 +8,12 @@
 #include "SlabRuns.h"
 
 #include "duplex/objects/ProceduralMesh.h"
+#include "duplex/sensors/CieSky.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <string>
 
@@ -229,16 +232,21 @@ CaseResult clearGlassCase(const CaseOptions& o) {
 
 namespace {
 
-// The 8 x 8 centres of the 0.5 m cells of the 4 m x 4 m floor, facing up.
-PointMeter floorPoints() {
+// An n x n grid of floor points `step` apart centred at the origin, facing up, row by row (x
+// fastest).
+PointMeter floorGrid(int n, double step) {
   PointMeter m{"floor", {}, {}};
-  for (int iy = 0; iy < 8; ++iy)
-    for (int ix = 0; ix < 8; ++ix) {
-      m.points.push_back({-1.75 + 0.5 * ix, -1.75 + 0.5 * iy, 0.0});
+  const double first = -0.5 * (n - 1) * step;
+  for (int iy = 0; iy < n; ++iy)
+    for (int ix = 0; ix < n; ++ix) {
+      m.points.push_back({first + step * ix, first + step * iy, 0.0});
       m.normals.push_back({0, 0, 1});
     }
   return m;
 }
+
+// The 8 x 8 centres of the 0.5 m cells of the 4 m x 4 m floor.
+PointMeter floorPoints() { return floorGrid(8, 0.5); }
 
 // Rows of a meter against `exact(point)`.
 template <class Exact>
@@ -321,6 +329,185 @@ CaseResult blackCubeCase(const CaseOptions& o) {
   return c;
 }
 
+namespace {
+
+// The CIE sky luminance relative to the zenith, written out here from ISO 15469 / CIE S 011 apart
+// from the library's CieSky: type 0 the standard overcast sky, else general sky type 8 or 12 (the
+// two these cases use) with the sun towards unit `sun`; 0 below the horizon.
+double skyRelative(int type, const glm::dvec3& sun, const glm::dvec3& d) {
+  if (d.z <= 0.0) return 0.0;
+  if (type == 0) return (1.0 + 2.0 * d.z) / 3.0;
+  const double a = type == 8 ? 0.0 : -1.0, b = type == 8 ? -1.0 : -0.32, c = 10.0, dd = -3.0, e = 0.45;
+  const auto f = [&](double chi) {
+    return 1.0 + c * (std::exp(dd * chi) - std::exp(dd * std::numbers::pi / 2)) + e * std::cos(chi) * std::cos(chi);
+  };
+  const auto phi = [&](double cos_z) { return 1.0 + a * std::exp(b / cos_z); };
+  const double chi = std::acos(std::clamp(glm::dot(d, sun), -1.0, 1.0));
+  return f(chi) * phi(d.z) / (f(std::acos(sun.z)) * phi(1.0));
+}
+
+// The horizontal illuminance per zenith luminance of that sky: the midpoint rule in (zenith angle,
+// azimuth), 800 x 1600 (7 pi / 9 for the overcast sky).
+double skyHorizontal(int type, const glm::dvec3& sun) {
+  const int nz = 800, na = 1600;
+  double sum = 0.0;
+  for (int i = 0; i < nz; ++i) {
+    const double z = (i + 0.5) * (std::numbers::pi / 2) / nz;
+    for (int j = 0; j < na; ++j) {
+      const double az = (j + 0.5) * 2 * std::numbers::pi / na;
+      const glm::dvec3 d(std::sin(z) * std::sin(az), std::sin(z) * std::cos(az), std::cos(z));
+      sum += skyRelative(type, sun, d) * std::cos(z) * std::sin(z);
+    }
+  }
+  return sum * (std::numbers::pi / 2) / nz * 2 * std::numbers::pi / na;
+}
+
+// The sun's direction from its altitude and azimuth (degrees; azimuth from north, +y, towards east).
+glm::dvec3 sunAt(double altitude_deg, double azimuth_deg) {
+  const double h = altitude_deg * std::numbers::pi / 180, a = azimuth_deg * std::numbers::pi / 180;
+  return {std::cos(h) * std::sin(a), std::cos(h) * std::cos(a), std::sin(h)};
+}
+
+// A black (absorbing) rectangle w x h centred at `at`, spanned by unit ex, ey.
+void blackRectangle(Fixture& f, const std::string& name, double w, double h, const glm::dvec3& at, const glm::dvec3& ex,
+                    const glm::dvec3& ey) {
+  f.add(std::make_shared<const MeshObject>(std::make_shared<const TriangleMesh>(makePlane({w, h}, name))),
+        frame(at, ex, ey), name);
+}
+
+// The black room of the daylight cases: 4 m x 4 m, 3 m high, floor z = 0 (no floor surface: the
+// meters lie on it), with a 2 m x 2 m opening centred in the roof (`roof`) or a 2 m wide, 1.5 m
+// high window with its sill at 1 m centred in the south wall y = -2 (facade).
+void blackRoom(Fixture& f, bool roof) {
+  const glm::dvec3 x(1, 0, 0), y(0, 1, 0), z(0, 0, 1);
+  blackRectangle(f, "wall_n", 4, 3, {0, 2, 1.5}, x, z);
+  blackRectangle(f, "wall_e", 4, 3, {2, 0, 1.5}, y, z);
+  blackRectangle(f, "wall_w", 4, 3, {-2, 0, 1.5}, y, z);
+  if (roof) {
+    blackRectangle(f, "wall_s", 4, 3, {0, -2, 1.5}, x, z);
+    blackRectangle(f, "roof_n", 4, 1, {0, 1.5, 3}, x, y);
+    blackRectangle(f, "roof_s", 4, 1, {0, -1.5, 3}, x, y);
+    blackRectangle(f, "roof_e", 1, 2, {1.5, 0, 3}, x, y);
+    blackRectangle(f, "roof_w", 1, 2, {-1.5, 0, 3}, x, y);
+  } else {
+    blackRectangle(f, "roof", 4, 4, {0, 0, 3}, x, y);
+    blackRectangle(f, "wall_s_low", 4, 1, {0, -2, 0.5}, x, z);
+    blackRectangle(f, "wall_s_high", 4, 0.5, {0, -2, 2.75}, x, z);
+    blackRectangle(f, "wall_s_e", 1, 1.5, {1.5, -2, 1.75}, x, z);
+    blackRectangle(f, "wall_s_w", 1, 1.5, {-1.5, -2, 1.75}, x, z);
+  }
+}
+
+// The 5 x 5 floor points of the daylight cases (0.8 m apart).
+PointMeter daylightFloor() { return floorGrid(5, 0.8); }
+
+std::string pointLabel(const glm::dvec3& p) {
+  char s[48];
+  std::snprintf(s, sizeof s, "(%.1f, %.1f)", p.x, p.y);
+  return s;
+}
+
+// The sky component at floor point p (facing up) through the opening {o + s ex + t ey : |s| <= w/2,
+// |t| <= h/2}: L_z times the integral of the relative luminance cos_p cos_o / d^2 over the opening
+// (midpoint rule, 300 x 300).
+double skyThrough(int type, const glm::dvec3& sun, double lz, const glm::dvec3& p, const glm::dvec3& o,
+                  const glm::dvec3& ex, const glm::dvec3& ey, double w, double h) {
+  const glm::dvec3 n = glm::cross(ex, ey);
+  const int k = 300;
+  double sum = 0.0;
+  for (int i = 0; i < k; ++i)
+    for (int j = 0; j < k; ++j) {
+      const glm::dvec3 q = o + ((i + 0.5) / k - 0.5) * w * ex + ((j + 0.5) / k - 0.5) * h * ey;
+      const glm::dvec3 v = q - p;
+      const double d2 = glm::dot(v, v);
+      const glm::dvec3 u = v / std::sqrt(d2);
+      sum += skyRelative(type, sun, u) * u.z * std::abs(glm::dot(u, n)) / d2;
+    }
+  return lz * sum * w * h / (k * k);
+}
+
+constexpr double kSkyLux = 10000.0;  // the unobstructed sky's horizontal illuminance
+
+}  // namespace
+
+CaseResult daylightOpeningCase(bool roof, const CaseOptions& o) {
+  CaseResult c = describe(
+      roof ? "daylight-roof-opening" : "daylight-facade-opening",
+      roof ? "Sky component on the floor of a black 4 m x 4 m x 3 m room under a 2 m x 2 m unglazed roof opening: "
+             "CIE overcast sky and CIE skies 8 and 12 (sun at altitude 30, azimuth 180, not itself emitted), 10,000 lx "
+             "horizontal"
+           : "Sky component on the floor of a black 4 m x 4 m x 3 m room with a 2 m x 1.5 m unglazed window (sill "
+             "1 m) in its south wall: the same skies",
+      "L_z x integral of the sky's relative luminance (ISO 15469 formulas written out apart from the library) x cos "
+      "cos / d^2 over the opening, 300 x 300 midpoint rule; L_z = 10,000 lx / the sky's horizontal integral (800 x "
+      "1600 midpoint rule)",
+      "lx", 100000, o);
+  const glm::dvec3 sun = sunAt(30, 180);
+  const PointMeter floor = daylightFloor();
+  const std::vector<glm::dvec3>& points = floor.points;
+  for (const int type : {0, 8, 12}) {
+    Fixture f;
+    blackRoom(f, roof);
+    Light sky;
+    sky.type = LightType::Sky;
+    sky.name = "sky";
+    sky.sky = std::make_shared<const CieSky>(type == 0 ? CieSky::overcast() : CieSky::general(type, sun));
+    sky.position = {0, 0, 1.5};
+    sky.radius = 3.5;  // holds the room (its corners are 3.2 m from the centre)
+    sky.power_w = kSkyLux / sky.sky->horizontalIntegral() * sky.sky->radianceIntegral() * std::numbers::pi *
+                  sky.radius * sky.radius;
+    SensorScene scene = f.scene({sky});
+    scene.setMeters({floor});
+    const Timed t = run(scene, c.rays, o);
+    c.seconds += t.seconds;
+    const MeterResult& m = t.results.meters[0];
+    const double lz = kSkyLux / skyHorizontal(type, sun);
+    const std::string name = type == 0 ? "overcast" : "type " + std::to_string(type);
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      const double ref = roof ? skyThrough(type, sun, lz, points[k], {0, 0, 3}, {1, 0, 0}, {0, 1, 0}, 2, 2)
+                              : skyThrough(type, sun, lz, points[k], {0, -2, 1.75}, {1, 0, 0}, {0, 0, 1}, 2, 1.5);
+      c.rows.push_back(
+          {name + " " + pointLabel(points[k]), ref, m.irradiance_w_m2[k], m.stderr_w_m2[k], std::nan(""), 0.005});
+    }
+  }
+  return c;
+}
+
+CaseResult daylightSunCase(const CaseOptions& o) {
+  // The sun at altitude 60, azimuth 180 through the roof opening: its beam travels north and down,
+  // the opening's patch on the floor is the opening shifted 3 / tan 60 = 1.732 m north (y from
+  // 0.732 to 2.732, x from -1 to 1); no floor point lies within 0.06 m of its edge.
+  CaseResult c =
+      describe("daylight-sun-patch",
+               "Direct sunlight of 50,000 lx normal illuminance (altitude 60, azimuth 180) through the "
+               "2 m x 2 m roof opening of the black room onto 25 floor points",
+               "E_n sin(altitude) inside the opening's sunlit patch, 0 outside (parallel rays)", "lx", 20000, o);
+  Fixture f;
+  blackRoom(f, true);
+  const glm::dvec3 sun = sunAt(60, 180);
+  Light beam;
+  beam.type = LightType::Directional;
+  beam.name = "sun";
+  beam.direction = -sun;
+  beam.position = glm::dvec3(0, 0, 1.5) + 3.5 * sun;
+  beam.radius = 3.5;
+  beam.power_w = 50000.0 * std::numbers::pi * beam.radius * beam.radius;
+  const PointMeter floor = daylightFloor();
+  const std::vector<glm::dvec3>& points = floor.points;
+  SensorScene scene = f.scene({beam});
+  scene.setMeters({floor});
+  const Timed t = run(scene, c.rays, o);
+  c.seconds = t.seconds;
+  const double shift = 3.0 / std::tan(60 * std::numbers::pi / 180);
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const bool lit = std::abs(points[k].x) < 1.0 && std::abs(points[k].y - shift) < 1.0;
+    const double ref = lit ? 50000.0 * std::sin(60 * std::numbers::pi / 180) : 0.0;
+    c.rows.push_back({"sun " + pointLabel(points[k]), ref, t.results.meters[0].irradiance_w_m2[k],
+                      t.results.meters[0].stderr_w_m2[k], std::nan(""), 1e-9});
+  }
+  return c;
+}
+
 std::vector<CaseResult> allCases(const CaseOptions& o) {
   std::vector<CaseResult> all;
   all.push_back(pointSourceCase(o));
@@ -331,6 +518,9 @@ std::vector<CaseResult> allCases(const CaseOptions& o) {
   for (const double rho : {0.2, 0.5, 0.8}) all.push_back(diffuseCubeCase(rho, o));
   all.push_back(diffuseCubeCase(0.95, o, true));
   all.push_back(clearGlassCase(o));
+  all.push_back(daylightOpeningCase(true, o));
+  all.push_back(daylightOpeningCase(false, o));
+  all.push_back(daylightSunCase(o));
   return all;
 }
 

@@ -89,6 +89,18 @@ struct CaseOptions {
 /// the CIE 171 clear-glass curve beside them.
 [[nodiscard]] CaseResult clearGlassCase(const CaseOptions& o);
 
+/// Daylight, the sky component of the report's unglazed-opening cases (5.9 onward) with geometry
+/// chosen here: a black 4 m x 4 m x 3 m room with a 2 m x 2 m roof opening (`roof`) or a 2 m x
+/// 1.5 m south window (sill 1 m), 25 floor points read by meters, under the CIE standard overcast
+/// sky and the CIE general skies 8 and 12 (sun at altitude 30, azimuth 180, not emitted), 10,000 lx
+/// horizontal: each point against the sky's luminance integrated over the opening by quadrature
+/// (the formulas written out apart from the library's CieSky).
+[[nodiscard]] CaseResult daylightOpeningCase(bool roof, const CaseOptions& o);
+
+/// Direct sunlight (50,000 lx normal, altitude 60, azimuth 180) through the roof opening: E_n sin
+/// 60 at the floor points inside the sunlit patch, 0 outside.
+[[nodiscard]] CaseResult daylightSunCase(const CaseOptions& o);
+
 /// Every case above (the cube at reflectances 0.2, 0.5, 0.8 and 0.95).
 [[nodiscard]] std::vector<CaseResult> allCases(const CaseOptions& o);
 

@@ -39,6 +39,12 @@ TEST(CieValidation, DiffuseCubesInterReflectWithoutBias) {
 
 TEST(CieValidation, ClearGlassAtEveryAngle) { expectRows(clearGlassCase({})); }
 
+TEST(CieValidation, DaylightThroughRoofAndFacadeOpenings) {
+  expectRows(daylightOpeningCase(true, {}));
+  expectRows(daylightOpeningCase(false, {}));
+  expectRows(daylightSunCase({}));
+}
+
 TEST(CieValidation, ReferencesAgreeWithIndependentForms) {
   // The parallel-rectangle exchange area of two unit squares 1 apart (the tabulated 0.19982),
   // additive over a split of one rectangle, and equal to the point factor integrated over a cell;

@@ -264,20 +264,34 @@ nlohmann::ordered_json meterReport(const SensorRunResults& r) {
     j["name"] = m.name;
     j["points"] = xyz(m.points);
     j["normals"] = xyz(m.normals);
-    j["irradiance_w_m2"] = radiometric(m.irradiance_w_m2, r);
-    j["stderr_w_m2"] = radiometric(m.stderr_w_m2, r);
+    if (m.image_width != 0) j["image_size"] = {m.image_width, m.image_height};  // pixels, row by row from the top left
+    if (m.luminance()) {                                                        // a luminance meter or a camera
+      if (m.half_angle > 0.0) j["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
+      j["radiance_w_m2_sr"] = radiometric(m.radiance_w_m2_sr, r);
+      j["radiance_stderr_w_m2_sr"] = radiometric(m.radiance_stderr_w_m2_sr, r);
+    } else {
+      j["irradiance_w_m2"] = radiometric(m.irradiance_w_m2, r);
+      j["stderr_w_m2"] = radiometric(m.stderr_w_m2, r);
+    }
     j["ray_count"] = m.ray_count;
-    if (r.photometric) {
+    if (r.photometric && m.luminance()) {
+      j["luminance_cd_m2"] = m.luminance_cd_m2;
+      j["luminance_stderr_cd_m2"] = m.luminance_stderr_cd_m2;
+    } else if (r.photometric) {
       j["illuminance_lx"] = m.illuminance_lx;
       j["illuminance_stderr_lx"] = m.illuminance_stderr_lx;
     }
-    if (!m.light_irradiance_w_m2.empty()) {
+    const bool cone = m.luminance();
+    const auto& per_light = cone ? m.light_radiance_w_m2_sr : m.light_irradiance_w_m2;
+    const auto& per_light_se = cone ? m.light_radiance_stderr_w_m2_sr : m.light_stderr_w_m2;
+    const auto& per_light_lm = cone ? m.light_luminance_cd_m2 : m.light_illuminance_lx;
+    if (!per_light.empty()) {
       nlohmann::ordered_json lights = nlohmann::ordered_json::array();
-      for (std::size_t l = 0; l < m.light_irradiance_w_m2.size(); ++l) {
+      for (std::size_t l = 0; l < per_light.size(); ++l) {
         nlohmann::ordered_json e{{"name", r.light_names[l]},
-                                 {"irradiance_w_m2", radiometric(m.light_irradiance_w_m2[l], r)},
-                                 {"stderr_w_m2", radiometric(m.light_stderr_w_m2[l], r)}};
-        if (!m.light_illuminance_lx.empty()) e["illuminance_lx"] = m.light_illuminance_lx[l];
+                                 {cone ? "radiance_w_m2_sr" : "irradiance_w_m2", radiometric(per_light[l], r)},
+                                 {cone ? "stderr_w_m2_sr" : "stderr_w_m2", radiometric(per_light_se[l], r)}};
+        if (!per_light_lm.empty()) e[cone ? "luminance_cd_m2" : "illuminance_lx"] = per_light_lm[l];
         lights.push_back(std::move(e));
       }
       j["lights"] = std::move(lights);
@@ -545,6 +559,7 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
 // of it, a beam travelling against the normal, an area light with a corner in front.
 bool reachesFront(const Light& l, const glm::dvec3& centre, const glm::dvec3& normal) {
   if (l.type == LightType::Directional) return glm::dot(l.direction, normal) < 0.0;
+  if (l.type == LightType::Sky) return normal.z > -1.0;  // some of the sky is in front of all but a floor's underside
   if (l.type != LightType::Area) return glm::dot(l.position - centre, normal) > 0.0;
   for (const double x : {-0.5 * l.width, 0.5 * l.width})
     for (const double y : {-0.5 * l.height, 0.5 * l.height})
@@ -641,8 +656,6 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     cfg.roulette_threshold = o.roulette;
     cfg.batch_rays = o.batch_rays;
     cfg.per_light = o.per_light;
-    if (o.per_light && ranks.shared())
-      throw InvalidArgument("--per-light: per-light results are kept in one process only, not under mpirun");
     running.emplace(scene, cfg);
     if (!files) return;
     std::error_code ec;
@@ -864,8 +877,8 @@ void addSensorCommand(CLI::App& parent, ChosenCommand& chosen) {
   cmd->add_option("--roulette", sensor.roulette,
                   "Russian roulette below this fraction of a ray's emitted power, in [0, 1) (default 0.05; 0: off)");
   cmd->add_flag("--per-light", sensor.per_light,
-                "Also report each light's contribution (run.json and each sensor file's \"lights\"); "
-                "one process only");
+                "Also report each light's contribution (run.json's, each meter's and each sensor file's "
+                "\"lights\"; under mpirun too)");
   cmd->add_option("--failure-threshold", sensor.failure_threshold,
                   "Warn on stderr when numerical failures, or the path limits, carry more than this fraction of the "
                   "emitted power, in [0, 1] (default 0.001)");

@@ -3,6 +3,7 @@
 // The world is split into communicators of its own, and each one's rank 0 must hold the saved
 // state of a one-process run, byte for byte.
 
+#include "duplex/sensors/CieSky.h"
 #include "duplex/sensors/SensorRunMpi.h"
 
 #include "SensorFixture.h"
@@ -108,6 +109,47 @@ TEST(SensorRunMpi, ResumesAStateEndingInsideABatchAndStopsOnTheTarget) {
   if (worldRank() == 0) {
     EXPECT_EQ(shared.raysDone(), alone.raysDone());
     EXPECT_EQ(stateBytes(shared), stateBytes(alone));
+  }
+}
+
+TEST(SensorRunMpi, PerLightResultsAndMetersUnderASkyMergeBitForBit) {
+  // A CIE clear sky with its sun and a point light over the reflecting box's floor, illuminance and
+  // luminance meters, per-light results: rank 0 ends with the one-process run's state, and its
+  // per-light and meter values, bit for bit.
+  Fixture f;
+  closeBox(f);
+  f.add(quad(0.5, "white"), translate(0, 0, -0.5), "white", Material{Lambertian{0.9}});
+  Light sky;
+  sky.type = LightType::Sky;
+  sky.name = "sky";
+  sky.sky = std::make_shared<const CieSky>(CieSky::general(12, {0.3, -0.5, 0.6}));
+  sky.radius = 2.0;
+  sky.power_w = 3.0;
+  Light sun;
+  sun.type = LightType::Directional;
+  sun.name = "sky/sun";
+  sun.direction = {-0.3, 0.5, -0.6};
+  sun.position = -2.0 * glm::normalize(sun.direction);
+  sun.radius = 2.0;
+  sun.power_w = 5.0;
+  SensorScene scene = f.scene({sky, sun, pointLight({0, 0, 0.2}, 1.0)});
+  PointMeter lum{"eye", {{0, 0, 0}}, {{0, 0, -1}}};
+  lum.half_angle = 0.3;
+  scene.setMeters({{"floor", {{0.1, 0, -0.4}, {0, 0, 0}}, {{0, 0, 1}, {0, 0, 1}}}, lum});
+  SensorRunConfig cfg = config(2);
+  cfg.per_light = true;
+  SensorRun reference(scene, cfg);
+  (void)reference.runUntil(45000);
+  cfg.threads = 1;
+  SensorRun run(scene, cfg);
+  EXPECT_EQ(runUntilMpi(run, MPI_COMM_WORLD, 45000), SensorRunStatus::Completed);
+  if (worldRank() == 0) {
+    EXPECT_EQ(stateBytes(run), stateBytes(reference));
+    const SensorRunResults a = run.results(), b = reference.results();
+    EXPECT_EQ(a.sensors[4].light_flux_w, b.sensors[4].light_flux_w);
+    EXPECT_EQ(a.meters[0].light_irradiance_w_m2, b.meters[0].light_irradiance_w_m2);
+    EXPECT_EQ(a.meters[1].light_radiance_w_m2_sr, b.meters[1].light_radiance_w_m2_sr);
+    EXPECT_GT(a.meters[0].light_irradiance_w_m2[0][0], 0.0);  // the sky reached the floor meter
   }
 }
 

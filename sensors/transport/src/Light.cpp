@@ -68,6 +68,11 @@ void Light::validate() const {
       if (!(finite(direction) && glm::length(direction) > 0.0)) bad("direction must be a finite non-zero vector");
       if (!(std::isfinite(radius) && radius > 0.0)) bad("radius must be finite and > 0");
       break;
+    case LightType::Sky:
+      if (!sky) bad("no sky luminance distribution");
+      if (!finite(position)) bad("position is not finite");
+      if (!(std::isfinite(radius) && radius > 0.0)) bad("radius must be finite and > 0");
+      break;
     case LightType::Goniometric: {
       if (!profile) bad("no intensity profile");
       if (!finite(position)) bad("position is not finite");
@@ -224,6 +229,8 @@ Light placeLight(const Light& light, const Affine& world_from_node) {
   out.position = w.point(light.position);
   out.direction = w.vector(light.direction);
   out.world_from_light = w * light.world_from_light;
+  if (light.type == LightType::Sky)
+    throw InvalidArgument("light '" + light.name + "': a sky is not placed at a node (it lights the world)");
   if (light.type == LightType::Directional || light.type == LightType::Goniometric) {
     // The uniform scale of a similarity: |L e_x|, checked against L^T L = s^2 I.
     const glm::dmat3 g = glm::transpose(w.linear) * w.linear;
@@ -285,6 +292,18 @@ EmittedRay sampleLight(const Light& light, const double u[4]) {
       const double rad = light.radius * std::sqrt(u[0]), phi = kTwoPi * u[1];
       r.origin = light.position + rad * std::cos(phi) * t + rad * std::sin(phi) * b;
       r.dir = n;
+      break;
+    }
+    case LightType::Sky: {
+      // A direction by the sky's luminance; the ray enters across the lit sphere from a disk of its
+      // radius perpendicular to the direction, one radius upstream of the centre.
+      const CieSky::Sample s = light.sky->sample(u[0], u[1]);
+      glm::dvec3 t, b;
+      detail::orthonormalBasis(s.dir_ws, t, b);
+      const double rad = light.radius * std::sqrt(u[2]), phi = kTwoPi * u[3];
+      r.origin = light.position + light.radius * s.dir_ws + rad * std::cos(phi) * t + rad * std::sin(phi) * b;
+      r.dir = -s.dir_ws;
+      r.weight = s.weight;
       break;
     }
     case LightType::Goniometric: {

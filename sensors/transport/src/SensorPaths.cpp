@@ -63,6 +63,23 @@ bool isFinite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(
 // power_w cos_l / (pi sides); a directional light lights a point inside its beam's cylinder
 // (downstream of its disk, the light coming from the disk along the beam) with the irradiance
 // power_w / (pi r^2) on a plane across the beam, whichever ray was emitted.
+// A beam of parallel rays along unit `b` from the disk of `radius` about `centre` (across b),
+// with the irradiance e across it: a point inside its cylinder, downstream of the disk, receives it
+// from the disk's point upstream of it; elsewhere nothing.
+template <class Connect>
+void connectBeam(const glm::dvec3& centre, const glm::dvec3& b, double radius, double e, Connect&& connect) {
+  connect(
+      [&](const glm::dvec3& x) {
+        const double along = glm::dot(x - centre, b);
+        const glm::dvec3 across = x - centre - along * b;
+        const bool lit = along > 0.0 && glm::dot(across, across) <= radius * radius;
+        return lit ? x - along * b : x;  // x itself: distance 0, no connection
+      },
+      [&](const glm::dvec3&, double d) {
+        return d > 0.0 ? e * d * d : 0.0;  // irradiance e across the beam: radiance e d^2 / cos
+      });
+}
+
 template <class Connect>
 void connectLight(const Light& light, const EmittedRay& emitted, double scale, Connect&& connect) {
   switch (light.type) {
@@ -88,22 +105,18 @@ void connectLight(const Light& light, const EmittedRay& emitted, double scale, C
               });
       break;
     }
-    case LightType::Directional: {
-      const glm::dvec3 b = glm::normalize(light.direction);
-      const double e = scale * light.power_w / (std::numbers::pi * light.radius * light.radius);
-      // The disk's point upstream of x; outside the cylinder or upstream of the disk: nothing.
-      connect(
-          [&](const glm::dvec3& x) {
-            const double along = glm::dot(x - light.position, b);
-            const glm::dvec3 across = x - light.position - along * b;
-            const bool lit = along > 0.0 && glm::dot(across, across) <= light.radius * light.radius;
-            return lit ? x - along * b : x;  // x itself: distance 0, no connection
-          },
-          [&](const glm::dvec3&, double d) {
-            return d > 0.0 ? e * d * d : 0.0;  // irradiance e across the beam: radiance e d^2 / cos
-          });
+    case LightType::Directional:
+      connectBeam(light.position, glm::normalize(light.direction), light.radius,
+                  scale * light.power_w / (std::numbers::pi * light.radius * light.radius), connect);
       break;
-    }
+    case LightType::Sky:
+      // The emitted direction is a sample of the sky's radiance (pdf ~ L, weight of mean 1): along
+      // it, a point of the lit sphere receives the irradiance power_w / (pi r^2) weight across the
+      // beam, an unbiased estimate of the integral of L over the sky, as for the beam of a
+      // directional light from the ray's disk (centred one radius upstream of the sphere's centre).
+      connectBeam(light.position - light.radius * emitted.dir, emitted.dir, light.radius,
+                  scale * emitted.weight * light.power_w / (std::numbers::pi * light.radius * light.radius), connect);
+      break;
   }
 }
 
@@ -201,9 +214,55 @@ void SensorRun::traceChunk(Chunk& chunk) const {
   const std::uint32_t meter_base = scene_.binCount() + scene_.angleBinCount();
   CrossingQuery shadow_query = query;
   shadow_query.crossing_mask = 0;
+  // Whether the segment from `from` along unit u to the meter point at distance d is free of
+  // blocking surfaces, and the media's transmittance along it. It stops short of the point by more
+  // than float's rounding of t, so that a meter lying on a surface is not hidden by that surface.
+  const auto unblocked = [&](const glm::dvec3& from, const glm::dvec3& u, double d, double& transmittance) {
+    Ray shadow;
+    shadow.origin = glm::vec3(from);
+    shadow.dir = glm::vec3(u);
+    shadow.tfar = static_cast<float>(d * (1.0 - 1e-5));
+    const SegmentEnd end = top.intersectWithCrossings(shadow, no_crossings, ctx, shadow_query);
+    transmittance = end.transmittance;
+    return !end.hit.valid();
+  };
+  // The pixel of camera `mt` (its bins from `first`) that the connection from `from_of(eye)` falls
+  // in, if any: its radiance over the pixel's solid angle.
+  const auto connectCamera = [&](const PointMeter& mt, std::uint32_t first, auto&& from_of, auto&& radiance) {
+    const glm::dvec3 eye = mt.points[0];
+    const glm::dvec3 from = from_of(eye);
+    const glm::dvec3 to = eye - from;
+    const double d = glm::length(to);
+    if (!(d > 0.0)) return;
+    const glm::dvec3 u = to / d, v = -u;  // v: from the eye towards the source
+    const double z = glm::dot(v, mt.image_forward);
+    if (!(z > 0.0)) return;
+    const double sx = glm::dot(v, mt.image_right) / z, sy = glm::dot(v, mt.image_up) / z;
+    if (!(std::abs(sx) < mt.image_tan_x && std::abs(sy) < mt.image_tan_y)) return;
+    const auto px =
+        std::min(mt.image_width - 1, static_cast<std::uint32_t>((sx / mt.image_tan_x + 1.0) * 0.5 * mt.image_width));
+    const auto py =
+        std::min(mt.image_height - 1, static_cast<std::uint32_t>((1.0 - sy / mt.image_tan_y) * 0.5 * mt.image_height));
+    const double value = radiance(u, d);
+    if (!(value > 0.0)) return;
+    double transmittance = 0.0;
+    if (!unblocked(from, u, d, transmittance)) return;
+    const std::uint32_t pixel = py * mt.image_width + px;
+    path_bins.push_back({first + pixel, kInvalidId, value / (d * d) / mt.pixel_solid_angle[pixel] * transmittance});
+  };
   const auto connect = [&](auto&& from_of, auto&& radiance) {
     std::uint32_t bin = meter_base;
     for (const PointMeter& mt : meters) {
+      if (mt.image_width != 0) {  // a pinhole camera: one connection to the eye, into one pixel
+        connectCamera(mt, bin, from_of, radiance);
+        bin += static_cast<std::uint32_t>(mt.points.size());
+        continue;
+      }
+      // A luminance meter counts the connections arriving within its cone, without the cosine,
+      // over the cone's solid angle.
+      const bool cone = mt.half_angle > 0.0;
+      const double cos_cone = std::cos(mt.half_angle),
+                   per_sr = cone ? 1.0 / (2.0 * std::numbers::pi * (1.0 - cos_cone)) : 0.0;
       for (std::size_t i = 0; i < mt.points.size(); ++i, ++bin) {
         const glm::dvec3 from = from_of(mt.points[i]);
         const glm::dvec3 to = mt.points[i] - from;
@@ -211,18 +270,12 @@ void SensorRun::traceChunk(Chunk& chunk) const {
         if (!(d > 0.0)) continue;
         const glm::dvec3 u = to / d;
         const double cos_m = -glm::dot(u, mt.normals[i]);
-        if (cos_m <= 0.0) continue;
+        if (cos_m <= 0.0 || (cone && cos_m < cos_cone)) continue;
         const double value = radiance(u, d);
         if (!(value > 0.0)) continue;
-        Ray shadow;
-        shadow.origin = glm::vec3(from);
-        shadow.dir = glm::vec3(u);
-        // Stop short of the point by more than float's rounding of t, so that a meter lying on a
-        // surface is not hidden by that surface.
-        shadow.tfar = static_cast<float>(d * (1.0 - 1e-5));
-        const SegmentEnd end = top.intersectWithCrossings(shadow, no_crossings, ctx, shadow_query);
-        if (end.hit.valid()) continue;
-        path_bins.push_back({bin, kInvalidId, value * cos_m / (d * d) * end.transmittance});
+        double transmittance = 0.0;
+        if (!unblocked(from, u, d, transmittance)) continue;
+        path_bins.push_back({bin, kInvalidId, value * (cone ? per_sr : cos_m) / (d * d) * transmittance});
       }
     }
   };

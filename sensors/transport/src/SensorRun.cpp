@@ -23,6 +23,7 @@
 #include <limits>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace duplex {
@@ -482,6 +483,18 @@ void SensorRun::meterResults(const Tally& all, bool light_lm, SensorRunResults& 
       out.light_illuminance_lx = out.light_irradiance_w_m2;
       for (auto& v : out.light_illuminance_lx)
         for (double& x : v) x *= scene_.luminousWeight(0);
+    }
+    out.half_angle = m.half_angle;
+    out.image_width = m.image_width;
+    out.image_height = m.image_height;
+    if (out.luminance()) {  // a luminance meter or a camera: the same estimates are radiances
+      out.radiance_w_m2_sr = std::exchange(out.irradiance_w_m2, {});
+      out.radiance_stderr_w_m2_sr = std::exchange(out.stderr_w_m2, {});
+      out.luminance_cd_m2 = std::exchange(out.illuminance_lx, {});
+      out.luminance_stderr_cd_m2 = std::exchange(out.illuminance_stderr_lx, {});
+      out.light_radiance_w_m2_sr = std::exchange(out.light_irradiance_w_m2, {});
+      out.light_radiance_stderr_w_m2_sr = std::exchange(out.light_stderr_w_m2, {});
+      out.light_luminance_cd_m2 = std::exchange(out.light_illuminance_lx, {});
     }
     r.meters.push_back(std::move(out));
   }

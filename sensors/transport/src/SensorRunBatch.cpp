@@ -5,8 +5,10 @@
 // Layout (this machine's byte order): "DXBATCH2", then 64-bit fingerprint, first ray, rays, bins,
 // sensors, bands (0: one radiometric band), reached bins R, segments, crossings, scatterings; then
 // R bin indices (32-bit), their sums, squares and counts, per band their sums and squares
-// (R * bands each), the sensors' sums and squares, per band theirs, and the energy tallies (six powers, six ray
-// counts).
+// (R * bands each), in runs with per-light results per light their sums and squares (R * lights
+// each), the sensors' sums and squares, per band theirs, per light theirs, and the energy tallies
+// (six powers, six ray counts). Per-light runs hash "per-light" into the fingerprint, so a tally
+// with light sums is only ever added to a run that expects them.
 
 #include "duplex/sensors/SensorRun.h"
 
@@ -38,10 +40,6 @@ void put(std::vector<std::byte>& out, const T* data, std::size_t count) {
 SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_rays) {
   checkScene();
   if (scene_.lights().empty()) throw InvalidArgument("SensorRun: the scene has no light");
-  if (config_.per_light)
-    throw InvalidArgument(
-        "SensorRun::traceBatch: per-light results (SensorRunConfig::per_light) are not carried by "
-        "batch tallies: run in one process");
   const std::uint64_t first = batch * config_.batch_rays;
   if (batch > total_rays / config_.batch_rays || first >= total_rays)
     throw InvalidArgument("SensorRun::traceBatch: batch " + std::to_string(batch) + " starts after the run's " +
@@ -57,6 +55,7 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
   out.rays = traced;
   out.complete = traced == end - first;
   const std::size_t nb = t.band_bin_sum.empty() ? 0 : scene_.bandCount();
+  const std::size_t nl = t.light_bin_sum.empty() ? 0 : scene_.lights().size();
   const std::uint64_t head[10] = {fingerprint(),
                                   first,
                                   traced,
@@ -68,7 +67,7 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
                                   t.counters.crossings,
                                   t.counters.scatterings};
   std::vector<std::byte>& b = out.bytes;
-  b.reserve(kBatchHead + t.touched.size() * (4 + 24 + 16 * nb) + t.sensors.size() * 16 * (1 + nb) +
+  b.reserve(kBatchHead + t.touched.size() * (4 + 24 + 16 * (nb + nl)) + t.sensors.size() * 16 * (1 + nb + nl) +
             sizeof(detail::EnergyWords));
   put(b, kBatchMagic, sizeof kBatchMagic);
   put(b, head, 10);
@@ -79,27 +78,31 @@ SensorBatchTally SensorRun::traceBatch(std::uint64_t batch, std::uint64_t total_
   for (const std::vector<double>* v : {&t.band_bin_sum, &t.band_bin_sum2})
     for (const std::uint32_t i : t.touched)
       if (nb) put(b, v->data() + std::size_t{i} * nb, nb);
+  for (const std::vector<double>* v : {&t.light_bin_sum, &t.light_bin_sum2})
+    for (const std::uint32_t i : t.touched)
+      if (nl) put(b, v->data() + std::size_t{i} * nl, nl);
   for (const std::uint64_t k : {0, 1})
     for (const SensorSums& s : t.sensors) put(b, k ? &s.sum2 : &s.sum, 1);
   put(b, t.band_sensor_sum.data(), t.band_sensor_sum.size());
   put(b, t.band_sensor_sum2.data(), t.band_sensor_sum2.size());
+  put(b, t.light_sensor_sum.data(), t.light_sensor_sum.size());
+  put(b, t.light_sensor_sum2.data(), t.light_sensor_sum2.size());
   const detail::EnergyWords energy = detail::energyWords(t.energy);
   put(b, &energy, 1);
-  detail::clearTally(t, nb, 0);  // for the next batch: only what this one reached
+  detail::clearTally(t, nb, nl);  // for the next batch: only what this one reached
   return out;
 }
 
 void SensorRun::addBatch(std::span<const std::byte> tally) {
   checkScene();
   const auto refuse = [](const std::string& why) { throw InvalidArgument("SensorRun::addBatch: " + why); };
-  if (config_.per_light)
-    refuse("per-light results (SensorRunConfig::per_light) are not carried by batch tallies: run in one process");
   if (tally.size() < kBatchHead || std::memcmp(tally.data(), kBatchMagic, sizeof kBatchMagic) != 0)
     refuse("not a batch tally of this version (" + std::to_string(tally.size()) + " bytes)");
   std::uint64_t h[10];
   std::memcpy(h, tally.data() + sizeof kBatchMagic, sizeof h);
   const std::uint64_t first = h[1], rays = h[2], reached = h[6];
   const std::size_t nb = open_->band_bin_sum.empty() ? 0 : scene_.bandCount();
+  const std::size_t nl = open_->light_bin_sum.empty() ? 0 : scene_.lights().size();
   if (h[0] != fingerprint() || h[3] != closed_->bins.size() || h[4] != closed_->sensors.size() || h[5] != nb)
     refuse("the batch is of another scene, seed or configuration");
   if (first != rays_done_ || rays_done_ % config_.batch_rays != 0)
@@ -110,7 +113,7 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
   const std::size_t ns = closed_->sensors.size();
   const std::size_t expected =
       kBatchHead + reached * (sizeof(std::uint32_t) + 2 * sizeof(double) + sizeof(std::uint64_t)) +
-      reached * 2 * nb * sizeof(double) + ns * 2 * (1 + nb) * sizeof(double) + sizeof(detail::EnergyWords);
+      reached * 2 * (nb + nl) * sizeof(double) + ns * 2 * (1 + nb + nl) * sizeof(double) + sizeof(detail::EnergyWords);
   if (tally.size() != expected)
     refuse("batch tally of " + std::to_string(tally.size()) + " bytes, expected " + std::to_string(expected));
   // Read into the spare tallies and check them: a refused batch leaves the run as it was.
@@ -147,6 +150,11 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
       get(v->data() + std::size_t{t.touched[r]} * nb, nb * sizeof(double));
       for (std::size_t k = 0; k < nb; ++k) value((*v)[std::size_t{t.touched[r]} * nb + k]);
     }
+  for (std::vector<double>* v : {&t.light_bin_sum, &t.light_bin_sum2})
+    for (std::size_t r = 0; ok && r < reached; ++r) {
+      get(v->data() + std::size_t{t.touched[r]} * nl, nl * sizeof(double));
+      for (std::size_t k = 0; k < nl; ++k) value((*v)[std::size_t{t.touched[r]} * nl + k]);
+    }
   if (ok) {
     for (std::size_t k = 0; k < 2; ++k)
       for (SensorSums& s : t.sensors) {
@@ -156,8 +164,11 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
       }
     get(t.band_sensor_sum.data(), t.band_sensor_sum.size() * sizeof(double));
     get(t.band_sensor_sum2.data(), t.band_sensor_sum2.size() * sizeof(double));
-    for (const double x : t.band_sensor_sum) value(x);
-    for (const double x : t.band_sensor_sum2) value(x);
+    get(t.light_sensor_sum.data(), t.light_sensor_sum.size() * sizeof(double));
+    get(t.light_sensor_sum2.data(), t.light_sensor_sum2.size() * sizeof(double));
+    for (const std::vector<double>* v :
+         {&t.band_sensor_sum, &t.band_sensor_sum2, &t.light_sensor_sum, &t.light_sensor_sum2})
+      for (const double x : *v) value(x);
     detail::EnergyWords energy;
     get(&energy, sizeof energy);
     ok = ok && detail::energyFromWords(energy, rays, t.energy);
@@ -168,7 +179,7 @@ void SensorRun::addBatch(std::span<const std::byte> tally) {
     // Empty the spare tallies again: the bins written so far (the others are zero).
     t.touched.resize(std::min(filled + 1, reached));
     std::erase_if(t.touched, [&t](std::uint32_t i) { return i >= t.bins.size(); });
-    detail::clearTally(t, nb, 0);
+    detail::clearTally(t, nb, nl);
     refuse("batch tally holds repeated or out-of-range bins, or negative, non-finite or impossible values");
   }
   rays_done_ += rays;

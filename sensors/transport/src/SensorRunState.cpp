@@ -59,6 +59,8 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(m.name.data(), m.name.size() + 1);
     add(m.points.data(), m.points.size() * sizeof(glm::dvec3));
     add(m.normals.data(), m.normals.size() * sizeof(glm::dvec3));
+    if (m.half_angle > 0.0) add(&m.half_angle, sizeof m.half_angle);  // a luminance meter
+    if (m.image_width != 0) add(m.pixel_solid_angle.data(), m.pixel_solid_angle.size() * sizeof(double));
   }
   if (config_.per_light) {  // the state then holds per-light sums
     static constexpr char kPerLight[] = "per-light";
@@ -116,6 +118,10 @@ std::uint64_t SensorRun::computeFingerprint() const {
     add(l.polygon.data(), l.polygon.size() * sizeof(glm::dvec2));
     add(l.triangles.data(), l.triangles.size() * sizeof(l.triangles[0]));
     if (l.profile) addDouble(l.profile->integral());
+    if (l.sky) {  // its shape: the type and the sun it follows
+      addDouble(l.sky->type());
+      for (int k = 0; k < 3; ++k) addDouble(l.sky->sun()[k]);
+    }
   }
   return h.value;
 }

@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <mutex>
+#include <numbers>
 #include <string>
 #include <unordered_set>
 
@@ -290,6 +291,45 @@ bool SensorScene::isSimilarity(const glm::dmat3& linear) {
   return off <= 1e-9 * s2;  // false for NaN
 }
 
+PointMeter pinholeMeter(std::string name, const glm::dvec3& eye, const glm::dvec3& target, const glm::dvec3& up,
+                        double fov_y, std::uint32_t width, std::uint32_t height) {
+  const std::string what = "meter '" + name + "'";
+  const auto finite = [](const glm::dvec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
+  if (!finite(eye) || !finite(target) || !finite(up) || !(glm::length(target - eye) > 0.0))
+    throw InvalidArgument(what + ": the camera's eye and target must be finite and differ");
+  if (!(fov_y > 0.0 && fov_y < std::numbers::pi))
+    throw InvalidArgument(what + ": the camera's field of view must be in (0, 180) degrees");
+  if (width == 0 || height == 0 || std::uint64_t{width} * height > (std::uint64_t{1} << 24))
+    throw InvalidArgument(what + ": the camera needs 1 to 2^24 pixels");
+  PointMeter m;
+  m.name = std::move(name);
+  m.image_forward = glm::normalize(target - eye);
+  const glm::dvec3 right = glm::cross(m.image_forward, up);
+  if (!(glm::length(right) > 1e-12 * glm::length(up)))
+    throw InvalidArgument(what + ": the camera's up must not be parallel to its view");
+  m.image_right = glm::normalize(right);
+  m.image_up = glm::cross(m.image_right, m.image_forward);
+  m.image_width = width;
+  m.image_height = height;
+  m.image_tan_y = std::tan(0.5 * fov_y);
+  m.image_tan_x = m.image_tan_y * width / height;
+  // The solid angle of the pixel [x0, x1] x [y0, y1] of the image plane at distance 1: F(x1, y1) -
+  // F(x0, y1) - F(x1, y0) + F(x0, y0), F(x, y) = atan(x y / sqrt(1 + x^2 + y^2)).
+  const auto f = [](double x, double y) { return std::atan(x * y / std::sqrt(1.0 + x * x + y * y)); };
+  for (std::uint32_t py = 0; py < height; ++py)
+    for (std::uint32_t px = 0; px < width; ++px) {
+      const double x0 = m.image_tan_x * (2.0 * px / width - 1.0), x1 = m.image_tan_x * (2.0 * (px + 1) / width - 1.0);
+      const double y1 = m.image_tan_y * (1.0 - 2.0 * py / height), y0 = m.image_tan_y * (1.0 - 2.0 * (py + 1) / height);
+      m.pixel_solid_angle.push_back(f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0));
+      m.points.push_back(eye);
+      m.normals.push_back(
+          glm::normalize(m.image_forward + 0.5 * (x0 + x1) * m.image_right + 0.5 * (y0 + y1) * m.image_up));
+    }
+  return m;
+}
+
 void SensorScene::setMeters(std::vector<PointMeter> meters) {
   std::unordered_set<std::string> names;
   std::uint64_t points = 0;
@@ -301,6 +341,13 @@ void SensorScene::setMeters(std::vector<PointMeter> meters) {
     if (m.name.empty()) throw InvalidArgument("a meter has an empty name");
     if (!names.insert(m.name).second) throw InvalidArgument("two meters named '" + m.name + "'");
     if (m.points.empty()) throw InvalidArgument(what + ": no points");
+    if (m.image_width != 0 && (m.half_angle != 0.0 || m.pixel_solid_angle.size() != m.points.size() ||
+                               std::uint64_t{m.image_width} * m.image_height != m.points.size()))
+      throw InvalidArgument(what + ": a camera's pixels are not set (pinholeMeter)");
+    if (!(m.half_angle >= 0.0 && m.half_angle <= std::numbers::pi / 2))
+      throw InvalidArgument(what +
+                            ": the half-angle of a luminance meter must be in (0, 90] degrees (0: an "
+                            "illuminance meter)");
     if (m.normals.size() != m.points.size())
       throw InvalidArgument(what + ": " + std::to_string(m.normals.size()) + " normals for " +
                             std::to_string(m.points.size()) + " points (one per point)");

@@ -243,10 +243,9 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     // so the light emits their integral.
     if (!v.contains("power") && !v.contains("lumens")) l.lumens = l.profile->integral();
   } else {
-    ctx.fail(
-        at(p, "type"),
-        "unknown light type \"" + type +
-            "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\", \"polygon\", \"mesh\" or \"ies\")");
+    ctx.fail(at(p, "type"), "unknown light type \"" + type +
+                                "\" (expected \"point\", \"spot\", \"directional\", \"area\", \"disk\", \"polygon\", "
+                                "\"mesh\", \"ies\" or \"sky\")");
   }
   if (v.contains("spectrum"))
     l.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
@@ -257,6 +256,110 @@ Light readLight(const json& v, const std::string& p, const ObjectSpecContext& ct
     ctx.fail(p, e.what());
   }
   return l;
+}
+
+// A "sky" entry: the sky light and, with "sun", the sun as a directional light named
+// "<name>/sun" (docs/sensors.md, "Skies and the sun").
+std::vector<Light> readSky(const json& v, const std::string& p, const ObjectSpecContext& ctx,
+                           const std::vector<std::string>& bands) {
+  ctx.onlyKeys(v, p,
+               {"type", "name", "model", "cie_type", "zenith_luminance", "horizontal_illuminance", "zenith_radiance",
+                "horizontal_irradiance", "sun", "centre", "radius", "spectrum"});
+  Light sky;
+  sky.type = LightType::Sky;
+  sky.name = v.contains("name") ? ctx.string(v["name"], at(p, "name")) : p.substr(1);
+  sky.position = vec3(ctx.member(v, p, "centre"), at(p, "centre"), ctx);
+  sky.radius = ctx.positiveNumber(ctx.member(v, p, "radius"), at(p, "radius"));
+  // The sun's position: altitude above the horizon, azimuth from north (+y) towards east (+x).
+  std::optional<glm::dvec3> sun_dir;
+  const json* sun = v.contains("sun") ? &v["sun"] : nullptr;
+  const std::string ps = at(p, "sun");
+  if (sun) {
+    if (!sun->is_object()) ctx.fail(ps, "expected {\"altitude\": deg, \"azimuth\": deg, ...}");
+    ctx.onlyKeys(*sun, ps, {"altitude", "azimuth", "normal_illuminance", "normal_irradiance"});
+    const double alt = ctx.number(ctx.member(*sun, ps, "altitude"), at(ps, "altitude"));
+    const double az = ctx.number(ctx.member(*sun, ps, "azimuth"), at(ps, "azimuth"));
+    if (!(alt >= 0.0 && alt <= 90.0)) ctx.fail(at(ps, "altitude"), "expected an altitude in [0, 90] degrees");
+    const double h = alt * std::numbers::pi / 180.0, a = az * std::numbers::pi / 180.0;
+    sun_dir = glm::dvec3(std::cos(h) * std::sin(a), std::cos(h) * std::cos(a), std::sin(h));
+  }
+  const std::string model = v.contains("model") ? ctx.string(v["model"], at(p, "model")) : "overcast";
+  if (v.contains("cie_type") != (model == "cie"))
+    ctx.fail(p, "\"cie_type\" (1-15) goes with \"model\": \"cie\" and only with it");
+  try {
+    if (model == "overcast") {
+      sky.sky = std::make_shared<const CieSky>(CieSky::overcast());
+    } else if (model == "uniform") {
+      sky.sky = std::make_shared<const CieSky>(CieSky::general(5, {0.0, 0.0, 1.0}));
+    } else if (model == "clear" || model == "cie") {
+      int type = 12;
+      if (model == "cie") {
+        const double t = ctx.number(v["cie_type"], at(p, "cie_type"));
+        if (!(t >= 1.0 && t <= 15.0 && t == std::floor(t))) ctx.fail(at(p, "cie_type"), "expected a type 1-15");
+        type = static_cast<int>(t);
+      }
+      // Types 1, 3 and 5 have no indicatrix (c = 0, e = 0): no sun needed.
+      const bool needs_sun = type != 1 && type != 3 && type != 5;
+      if (needs_sun && !sun_dir) ctx.fail(p, "this sky's luminance follows the sun: give \"sun\" with its position");
+      sky.sky = std::make_shared<const CieSky>(CieSky::general(type, sun_dir.value_or(glm::dvec3(0.0, 0.0, 1.0))));
+    } else {
+      ctx.fail(at(p, "model"),
+               "unknown sky \"" + model + "\" (expected \"overcast\", \"clear\", \"uniform\" or \"cie\")");
+    }
+  } catch (const InvalidArgument& e) {
+    ctx.fail(p, e.what());
+  }
+  // Its level: zenith luminance (cd/m^2) or horizontal illuminance (lx), or their radiometric
+  // counterparts; the sky emits L_z * radianceIntegral * pi r^2 into the sphere.
+  const char* level = nullptr;
+  for (const char* key : {"zenith_luminance", "horizontal_illuminance", "zenith_radiance", "horizontal_irradiance"})
+    if (v.contains(key)) {
+      if (level)
+        ctx.fail(p, std::string("a sky has one of \"zenith_luminance\", \"horizontal_illuminance\", "
+                                "\"zenith_radiance\" or \"horizontal_irradiance\"; \"") +
+                        key + "\" is not the only one");
+      level = key;
+    }
+  if (!level)
+    ctx.fail(p,
+             "a sky needs its level: \"zenith_luminance\" (cd/m^2) or \"horizontal_illuminance\" (lx), "
+             "or \"zenith_radiance\" (W/(m^2 sr)) or \"horizontal_irradiance\" (W/m^2)");
+  const std::string_view lv(level);
+  const double value = ctx.positiveNumber(v[level], at(p, level));
+  const double zenith = lv.starts_with("horizontal") ? value / sky.sky->horizontalIntegral() : value;
+  const double power = zenith * sky.sky->radianceIntegral() * std::numbers::pi * sky.radius * sky.radius;
+  const bool photometric = lv == "zenith_luminance" || lv == "horizontal_illuminance";
+  if (photometric) sky.lumens = power;
+  else sky.power_w = power;
+  if (v.contains("spectrum"))
+    sky.spectrum = v["spectrum"].is_object() ? namedBandValues(v["spectrum"], at(p, "spectrum"), ctx, bands)
+                                             : numbers(v["spectrum"], at(p, "spectrum"), ctx);
+  std::vector<Light> out{sky};
+  // The sun: a directional light of the direct normal illuminance across its beam, covering the
+  // same sphere from one radius upstream.
+  if (sun && (sun->contains("normal_illuminance") || sun->contains("normal_irradiance"))) {
+    if (sun->contains("normal_illuminance") && sun->contains("normal_irradiance"))
+      ctx.fail(ps, "the sun has \"normal_illuminance\" (lx) or \"normal_irradiance\" (W/m^2), not both");
+    const bool lx = sun->contains("normal_illuminance");
+    const char* key = lx ? "normal_illuminance" : "normal_irradiance";
+    Light s;
+    s.type = LightType::Directional;
+    s.name = sky.name + "/sun";
+    s.direction = -*sun_dir;
+    s.position = sky.position + sky.radius * *sun_dir;
+    s.radius = sky.radius;
+    const double e = ctx.positiveNumber((*sun)[key], at(ps, key)) * std::numbers::pi * s.radius * s.radius;
+    if (lx) s.lumens = e;
+    else s.power_w = e;
+    s.spectrum = sky.spectrum;
+    out.push_back(s);
+  }
+  for (const Light& l : out) try {
+      l.validate();
+    } catch (const InvalidArgument& e) {
+      ctx.fail(p, e.what());
+    }
+  return out;
 }
 
 // `bands`: the scene's band names, which per-band values may use as keys ({"red": 0.9, ...}).
@@ -416,7 +519,12 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
     const json& list = root["lights"];
     if (!list.is_array()) ctx.fail("/lights", "expected an array of lights");
     for (std::size_t i = 0; i < list.size(); ++i) {
-      lights.push_back(readLight(list[i], at("/lights", i), ctx, graph, bands));
+      const json& e = list[i];
+      if (e.is_object() && e.contains("type") && e["type"] == "sky") {
+        for (Light& l : readSky(e, at("/lights", i), ctx, bands)) lights.push_back(std::move(l));
+      } else {
+        lights.push_back(readLight(e, at("/lights", i), ctx, graph, bands));
+      }
       bandCount(lights.back().spectrum, at(at("/lights", i), "spectrum"));
     }
   }
@@ -474,9 +582,38 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
       const std::string p = at("/meters", i);
       const json& e = list[i];
       if (!e.is_object()) ctx.fail(p, "expected an object");
-      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals"});
+      ctx.onlyKeys(e, p, {"name", "points", "normal", "normals", "half_angle", "camera"});
       PointMeter m;
       m.name = ctx.string(ctx.member(e, p, "name"), at(p, "name"));
+      if (e.contains("camera")) {
+        // A pinhole camera: {"eye", "target", "up" (default +z), "fov" (vertical, degrees), "pixels": [w, h]}.
+        if (e.contains("points") || e.contains("normal") || e.contains("normals") || e.contains("half_angle"))
+          ctx.fail(p, "a camera meter has \"camera\" and no \"points\", \"normal(s)\" or \"half_angle\"");
+        const std::string q = at(p, "camera");
+        const json& c = e["camera"];
+        if (!c.is_object()) ctx.fail(q, "expected {\"eye\", \"target\", \"up\", \"fov\", \"pixels\"}");
+        ctx.onlyKeys(c, q, {"eye", "target", "up", "fov", "pixels"});
+        const glm::dvec3 eye = vec3(ctx.member(c, q, "eye"), at(q, "eye"), ctx);
+        const glm::dvec3 target = vec3(ctx.member(c, q, "target"), at(q, "target"), ctx);
+        const glm::dvec3 up = c.contains("up") ? direction(c["up"], at(q, "up"), ctx) : glm::dvec3(0, 0, 1);
+        const double fov = ctx.number(ctx.member(c, q, "fov"), at(q, "fov"));
+        const json& px = ctx.member(c, q, "pixels");
+        if (!px.is_array() || px.size() != 2 || !px[0].is_number_unsigned() || !px[1].is_number_unsigned() ||
+            px[0].get<std::uint64_t>() == 0 || px[1].get<std::uint64_t>() == 0 ||
+            px[0].get<std::uint64_t>() * px[1].get<std::uint64_t>() > (std::uint64_t{1} << 24))
+          ctx.fail(at(q, "pixels"), "expected [width, height], positive integers, at most 2^24 pixels");
+        requireMemory(arrayBytes(px[0].get<std::uint64_t>() * px[1].get<std::uint64_t>(), 3 * sizeof(glm::dvec3)),
+                      path.string() + ": " + q + ": camera pixels");
+        try {
+          m = pinholeMeter(m.name, eye, target, up, fov * std::numbers::pi / 180.0,
+                           static_cast<std::uint32_t>(px[0].get<std::uint64_t>()),
+                           static_cast<std::uint32_t>(px[1].get<std::uint64_t>()));
+        } catch (const InvalidArgument& ex) {
+          ctx.fail(q, ex.what());
+        }
+        meters.push_back(std::move(m));
+        continue;
+      }
       const json& pts = ctx.member(e, p, "points");
       if (!pts.is_array() || pts.empty()) ctx.fail(at(p, "points"), "expected a non-empty array of [x, y, z]");
       requireMemory(arrayBytes(pts.size(), 2 * sizeof(glm::dvec3)), path.string() + ": " + p + ": meter points");
@@ -490,6 +627,11 @@ SensorScene SensorScene::load(const std::filesystem::path& path, const SceneDocu
         if (!ns.is_array() || ns.size() != pts.size())
           ctx.fail(at(p, "normals"), "expected one [x, y, z] per point (" + std::to_string(pts.size()) + ")");
         for (std::size_t k = 0; k < ns.size(); ++k) m.normals.push_back(direction(ns[k], at(at(p, "normals"), k), ctx));
+      }
+      if (e.contains("half_angle")) {  // a luminance meter: the cone about each normal, degrees
+        const double deg = ctx.number(e["half_angle"], at(p, "half_angle"));
+        if (!(deg > 0.0 && deg <= 90.0)) ctx.fail(at(p, "half_angle"), "expected a half-angle in (0, 90] degrees");
+        m.half_angle = deg * std::numbers::pi / 180.0;
       }
       meters.push_back(std::move(m));
     }

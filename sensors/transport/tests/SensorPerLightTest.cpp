@@ -1,7 +1,7 @@
 // Per-light results (SensorRunConfig::per_light): each light's irradiance against the
 // inverse-square cosine law of that light alone, the per-light values summing to the totals, the
 // per-light tallies kept through a saved and loaded run state, luminous per-light values in a
-// lumens-only run, and the refusals of batch tallies.
+// lumens-only run, and batch tallies that carry them bit for bit.
 
 #include "duplex/accel/Error.h"
 #include "duplex/sensors/SensorRun.h"
@@ -137,14 +137,41 @@ TEST(SensorPerLight, LumensOnlyRunsGivePerLightIlluminance) {
   }
 }
 
-TEST(SensorPerLight, BatchTalliesRefuseIt) {
+TEST(SensorPerLight, BatchTalliesCarryItBitForBit) {
+  // Batches traced by another run and added in order give the per-light sensor and meter values of
+  // one run, bit for bit; a per-light tally is refused by a run without (and the reverse), and a
+  // truncated one.
   TwoLights t;
-  const SensorScene scene = t.scene();
+  SensorScene scene = t.scene();
+  scene.setMeters({{"m", {{0, 0, 0}, {0.3, 0.1, 0}}, {{0, 0, 1}, {0, 0, 1}}}});
   SensorRunConfig cfg;
   cfg.per_light = true;
-  SensorRun run(scene, cfg);
-  EXPECT_THROW((void)run.traceBatch(0, 1000), InvalidArgument);
-  EXPECT_THROW(run.addBatch({}), InvalidArgument);
+  cfg.batch_rays = 10000;
+  SensorRun whole(scene, cfg), worker(scene, cfg), sum(scene, cfg);
+  (void)whole.runUntil(40000);
+  for (std::uint64_t b = 0; b < 4; ++b) sum.addBatch(worker.traceBatch(b, 40000).bytes);
+  const SensorRunResults a = whole.results(), c = sum.results();
+  ASSERT_EQ(a.sensors[0].light_flux_w.size(), 2u);
+  EXPECT_EQ(a.sensors[0].light_flux_w, c.sensors[0].light_flux_w);
+  EXPECT_EQ(a.sensors[0].light_flux_stderr_w, c.sensors[0].light_flux_stderr_w);
+  EXPECT_EQ(a.sensors[0].light_total_flux_w, c.sensors[0].light_total_flux_w);
+  EXPECT_EQ(a.sensors[0].light_total_flux_stderr_w, c.sensors[0].light_total_flux_stderr_w);
+  EXPECT_EQ(a.meters[0].light_irradiance_w_m2, c.meters[0].light_irradiance_w_m2);
+  EXPECT_EQ(a.meters[0].light_stderr_w_m2, c.meters[0].light_stderr_w_m2);
+  EXPECT_EQ(a.meters[0].irradiance_w_m2, c.meters[0].irradiance_w_m2);
+  EXPECT_EQ(a.sensors[0].flux_w, c.sensors[0].flux_w);
+  SensorRunConfig plain = cfg;
+  plain.per_light = false;
+  SensorRun plain_worker(scene, plain), plain_sum(scene, plain);
+  EXPECT_THROW(sum.addBatch(plain_worker.traceBatch(4, 50000).bytes), InvalidArgument);
+  const SensorBatchTally next = worker.traceBatch(4, 50000);
+  EXPECT_THROW(plain_sum.addBatch(next.bytes), InvalidArgument);
+  std::vector<std::byte> cut = next.bytes;
+  cut.resize(cut.size() - 8);
+  EXPECT_THROW(sum.addBatch(cut), InvalidArgument);
+  sum.addBatch(next.bytes);  // the refusals left the run as it was
+  (void)whole.runUntil(50000);
+  EXPECT_EQ(whole.results().sensors[0].light_flux_w, sum.results().sensors[0].light_flux_w);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 
 #include "duplex/accel/Affine.h"
 #include "duplex/scenegraph/NodeId.h"
+#include "duplex/sensors/CieSky.h"
 #include "duplex/sensors/IesProfile.h"
 
 #include <glm/vec2.hpp>
@@ -33,6 +34,11 @@ enum class LightType : std::uint8_t {
   /// Point with a goniometric intensity table (IES LM-63): intensity P * profile(d_lf) / integral,
   /// d_lf the direction in the luminaire frame (world_from_light's rotation; nadir = local -z).
   Goniometric,
+  /// A CIE standard sky (Light::sky) lighting the sphere of `radius` about `position` from every
+  /// direction above the horizon (+z up): rays enter from a disk of that radius across their
+  /// direction, upstream of the sphere, so that every point inside it receives the sky's radiance
+  /// L_z relativeLuminance from every unobstructed direction. power_w = L_z radianceIntegral pi r^2.
+  Sky,
 };
 
 /// One light. Only the fields of its type are used; validate() checks them.
@@ -40,14 +46,15 @@ struct Light {
   LightType type = LightType::Point;     ///< kind of light (which fields below apply)
   std::string name;                      ///< for messages (the scene file's "name", or "lights/<k>")
   double power_w = 1.0;                  ///< total emitted power, > 0
-  glm::dvec3 position{0.0};              ///< Point, Spot; Directional: the centre of its disk
+  glm::dvec3 position{0.0};              ///< Point, Spot; Directional: the centre of its disk; Sky: of its sphere
   glm::dvec3 direction{0.0, 0.0, -1.0};  ///< Spot (cone axis), Directional (ray direction); any length > 0
   double cone_angle = 0.5;               ///< Spot: half-angle in radians, in (0, pi]
-  double radius = 1.0;                   ///< Directional: disk radius, > 0
+  double radius = 1.0;                   ///< Directional: disk radius; Sky: the lit sphere's radius; > 0
   double width = 1.0;                    ///< Area: along local x, > 0
   double height = 1.0;                   ///< Area: along local y, > 0
   Affine world_from_light;  ///< Area: placement of the local rectangle; Goniometric: its rotation orients the luminaire
   std::shared_ptr<const IesProfile> profile;  ///< Goniometric: the intensity table (its shape; power_w scales it)
+  std::shared_ptr<const CieSky> sky;          ///< Sky: the luminance distribution (its shape; power_w scales it)
   bool two_sided = false;                     ///< Area: also emits towards -z (half the power each side)
   /// Area: the disk of radius width / 2 (width == height) inscribed in the rectangle instead of the
   /// rectangle itself (a scene file's "disk" light).
@@ -116,8 +123,8 @@ struct Light {
 struct EmittedRay {
   glm::dvec3 origin{0.0};         ///< world space, scene units
   glm::dvec3 dir{0.0, 0.0, 1.0};  ///< world space, unit length
-  /// Power of this ray relative to the light's mean ray power (1 for all but goniometric lights,
-  /// whose directions are importance-sampled from the table with weights of mean 1).
+  /// Power of this ray relative to the light's mean ray power (1 for all but goniometric lights and
+  /// skies, whose directions are importance-sampled from a table with weights of mean 1).
   double weight = 1.0;
   /// Emissive meshes: the world unit normal of the front face of the triangle the ray leaves
   /// (before a two-sided light picks a face); zero for other lights.

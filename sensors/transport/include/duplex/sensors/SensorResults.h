@@ -124,6 +124,25 @@ struct MeterResult {
   std::vector<std::vector<double>> light_irradiance_w_m2;
   std::vector<std::vector<double>> light_stderr_w_m2;     ///< [light][point], as stderr_w_m2
   std::vector<std::vector<double>> light_illuminance_lx;  ///< [light][point], photometric runs
+  /// Luminance meters (half_angle > 0, radians): the mean radiance over the cone about each
+  /// normal (W/(m^2 sr) per square scene unit), in these arrays instead of the irradiance ones
+  /// above, which stay empty; the luminance (cd/m^2) in photometric runs.
+  double half_angle = 0.0;
+  /// \var image_width
+  /// Pinhole cameras (PointMeter::image_width > 0): the image's width in pixels; the points are
+  /// its pixels, row by row from the top left, with luminance results too.
+  /// \var image_height
+  /// The camera image's height in pixels (0: not a camera).
+  std::uint32_t image_width = 0, image_height = 0;
+  /// Whether the results are radiances (a luminance meter or a camera) rather than irradiances.
+  [[nodiscard]] bool luminance() const { return half_angle > 0.0 || image_width > 0; }
+  std::vector<double> radiance_w_m2_sr;                            ///< [point]
+  std::vector<double> radiance_stderr_w_m2_sr;                     ///< [point]
+  std::vector<double> luminance_cd_m2;                             ///< [point], photometric runs
+  std::vector<double> luminance_stderr_cd_m2;                      ///< [point], photometric runs
+  std::vector<std::vector<double>> light_radiance_w_m2_sr;         ///< [light][point]
+  std::vector<std::vector<double>> light_radiance_stderr_w_m2_sr;  ///< [light][point]
+  std::vector<std::vector<double>> light_luminance_cd_m2;          ///< [light][point], as light_illuminance_lx
 };
 
 /// Where the emitted power went (W, estimates over the rays traced). Sensors never absorb, so

@@ -82,8 +82,8 @@ struct SensorRunConfig {
   std::uint64_t max_accumulator_bytes = std::uint64_t{4} << 30;
   /// Results per light beside the totals (SensorResult::light_flux_w, ...): each ray's deposits are
   /// also tallied under the light that emitted it, which costs two sums per bin, sensor and light.
-  /// The per-light results of one run add up to its totals. Not with batches traced in other
-  /// processes (traceBatch / addBatch refuse it).
+  /// The per-light results of one run add up to its totals. Batch tallies carry them (traceBatch /
+  /// addBatch), so runs shared between processes keep them too.
   bool per_light = false;
 };
 

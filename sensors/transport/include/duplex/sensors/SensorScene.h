@@ -103,12 +103,45 @@ struct SurfaceInstance {
 /// Illuminance meters at points: each point with the unit normal of the surface it measures
 /// (world space, scene units). A run estimates the irradiance at each point by connecting every
 /// emission and every diffuse reflection to it (next-event estimation), not by averaging over an
-/// area, so the points may be placed anywhere, also on a surface.
+/// area, so the points may be placed anywhere, also on a surface. With a half-angle, a luminance
+/// meter instead: the mean radiance arriving at the point from the directions within half_angle
+/// of its normal (its axis of view), the same connections counted without the cosine, over the
+/// cone's solid angle 2 pi (1 - cos half_angle).
 struct PointMeter {
   std::string name;                 ///< unique among the scene's meters, non-empty
   std::vector<glm::dvec3> points;   ///< world space
-  std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point
+  std::vector<glm::dvec3> normals;  ///< world space, unit length, one per point (luminance meters: the axis of view)
+  double half_angle = 0.0;          ///< radians: 0 an illuminance meter, in (0, pi / 2] a luminance meter
+  /// \var image_width
+  /// Pinhole cameras (image_width > 0; made by pinholeMeter): the points are the eye repeated once
+  /// per pixel, the normals each pixel's central direction, row by row from the top left. Each
+  /// connection to the eye is binned into the one pixel its direction falls in (one shadow ray
+  /// per event for the whole image), over that pixel's solid angle: the mean radiance over the
+  /// pixel's pyramid, so the pixels tile the field of view. Luminance results (half_angle is 0).
+  /// \var image_height
+  /// The camera's pixel rows (0: not a camera).
+  std::uint32_t image_width = 0, image_height = 0;
+  /// \var image_right
+  /// The camera's unit right direction (world space; right, up and forward are orthonormal).
+  /// \var image_up
+  /// The camera's unit up direction (world space).
+  /// \var image_forward
+  /// The camera's unit viewing direction (world space).
+  glm::dvec3 image_right{1.0, 0.0, 0.0}, image_up{0.0, 1.0, 0.0}, image_forward{0.0, 0.0, -1.0};
+  /// \var image_tan_x
+  /// tan of half the horizontal field of view (the image plane at distance 1).
+  /// \var image_tan_y
+  /// tan of half the vertical field of view.
+  double image_tan_x = 0.0, image_tan_y = 0.0;
+  std::vector<double> pixel_solid_angle;  ///< sr, per pixel
 };
+
+/// A pinhole camera meter `name` at world point `eye` looking at `target`, `up` the image's up
+/// (not parallel to the view), vertical field of view `fov_y` (radians, (0, pi)), width x height
+/// square pixels. Throws InvalidArgument naming the meter for non-finite input, eye == target, an
+/// up along the view, a field of view outside (0, pi) or a zero pixel count.
+[[nodiscard]] PointMeter pinholeMeter(std::string name, const glm::dvec3& eye, const glm::dvec3& target,
+                                      const glm::dvec3& up, double fov_y, std::uint32_t width, std::uint32_t height);
 
 /// A scene prepared for light transport (see the file comment): graph and tracer, lights, materials, sensors and
 /// scattering media.
@@ -175,7 +208,7 @@ class SensorScene {
   [[nodiscard]] std::uint32_t meterPointCount() const { return meter_points_; }
   /// Sets the illuminance meters. Throws InvalidArgument naming the meter for an empty or repeated
   /// name, no points, a point or normal that is not finite, a zero normal (normals are normalised),
-  /// normals not one per point, or more than 2^24 points in all.
+  /// normals not one per point, a half-angle outside [0, pi / 2], or more than 2^24 points in all.
   void setMeters(std::vector<PointMeter> meters);
   /// Throws InvalidArgument naming the first material a run with meters cannot connect through:
   /// meters see the lights and diffuse (Lambertian) reflections directly, so a mirror, coating,
