@@ -45,6 +45,7 @@
 #include <atomic>
 #include <cstring>
 #include <functional>
+#include <exception>
 #include <iostream>
 #include <map>
 #include <optional>
@@ -558,4 +559,12 @@ int run(int argc, char** argv) {
 }  // namespace
 }  // namespace duplex::bench
 
-int main(int argc, char** argv) { return duplex::bench::run(argc, argv); }
+int main(int argc, char** argv) {
+  // A refused input (a missing scene file, a bad option value) ends with its message, not an abort.
+  try {
+    return duplex::bench::run(argc, argv);
+  } catch (const std::exception& e) {
+    std::cerr << "duplex_bench_packets: " << e.what() << '\n';
+    return 1;
+  }
+}
