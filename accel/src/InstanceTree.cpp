@@ -608,11 +608,12 @@ void InstanceTree::intersectBatch(std::span<const Ray> rays_ws, std::span<Hit> h
   if (hits.size() < rays_ws.size())
     throw InvalidArgument("InstanceTree::intersectBatch: " + std::to_string(hits.size()) + " hits for " +
                           std::to_string(rays_ws.size()) + " rays");
-  const State& s = *state_;
-  if (tree_.empty() || !s.wide.usable) {
+  // An empty tree may have no state yet (intersectImpl answers it without reading any).
+  if (tree_.empty() || !state_->wide.usable) {
     for (std::size_t i = 0; i < rays_ws.size(); ++i) hits[i] = intersectImpl(rays_ws[i], nullptr, ctx, mask);
     return;
   }
+  const State& s = *state_;
   ctx.stats.rays += rays_ws.size();
   wideKernels().closestBatch({&s.wide, s.records.data(), s.filters.data(), mask}, rays_ws.data(), rays_ws.size(),
                              hits.data(), ctx);
@@ -623,11 +624,11 @@ void InstanceTree::occludedBatch(std::span<const Ray> rays_ws, std::span<std::ui
   if (occluded_out.size() < rays_ws.size())
     throw InvalidArgument("InstanceTree::occludedBatch: " + std::to_string(occluded_out.size()) + " results for " +
                           std::to_string(rays_ws.size()) + " rays");
-  const State& s = *state_;
-  if (tree_.empty() || !s.wide.usable) {
+  if (tree_.empty() || !state_->wide.usable) {
     for (std::size_t i = 0; i < rays_ws.size(); ++i) occluded_out[i] = occluded(rays_ws[i], ctx, mask) ? 1 : 0;
     return;
   }
+  const State& s = *state_;
   ctx.stats.rays += rays_ws.size();
   wideKernels().occludedBatch({&s.wide, s.records.data(), s.filters.data(), mask}, rays_ws.data(), rays_ws.size(),
                               occluded_out.data(), ctx);

@@ -320,6 +320,24 @@ TEST(TopLevel, PacketsThroughInstancesPlacedAsAuthoredEqualSingleRays) {
   expectPacketsAndBatchesEqualSingleRays(glm::dvec3(0.0), 193);
 }
 
+TEST(TopLevel, BatchesOnATopLevelNeverBuiltMissEveryRay) {
+  const TopLevel top;
+  QueryContext ctx;
+  std::array<Ray, 5> rs{};
+  for (Ray& r : rs) r.dir = glm::vec3(0.0f, 1.0f, 0.0f);
+  std::array<Hit, 5> hits{};
+  for (Hit& h : hits) h.prim_id = 7;  // overwritten by a miss
+  std::array<std::uint8_t, 5> blocked{};
+  blocked.fill(1);
+  top.intersectBatch(rs, hits, ctx);
+  top.occludedBatch(rs, blocked, ctx);
+  for (std::size_t i = 0; i < rs.size(); ++i) {
+    EXPECT_FALSE(hits[i].valid()) << i;
+    EXPECT_EQ(blocked[i], 0) << i;
+  }
+  EXPECT_EQ(ctx.stats.rays, 2 * rs.size());
+}
+
 TEST(TopLevel, BatchesRefuseShortResultSpans) {
   const Library lib;
   const World w = randomWorld(lib, 8, glm::dvec3(0.0), 3.0, 5, false);
