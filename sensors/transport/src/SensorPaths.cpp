@@ -2,6 +2,7 @@
 // the scene's surfaces, materials and media, and their deposits on the sensors recorded per ray
 // (merged per bin within the path, so that a bin's sum of squares is over emitted rays).
 
+#include "duplex/objects/MeshObject.h"
 #include "duplex/sensors/CounterRng.h"
 #include "duplex/sensors/HenyeyGreenstein.h"
 #include "duplex/sensors/SensorRun.h"

@@ -1,3 +1,4 @@
+#include "duplex/objects/MeshObject.h"
 #include "duplex/sensors/SensorScene.h"
 
 #include "duplex/accel/Error.h"

@@ -3,6 +3,7 @@
 
 #include "duplex/accel/Error.h"
 #include "duplex/accel/MemoryLimit.h"
+#include "duplex/objects/MeshObject.h"
 #include "duplex/sensors/SensorScene.h"
 #include "duplex/sensors/SensorTypes.h"
 

@@ -17,7 +17,6 @@
 /// accessor describes the committed graph as it is now, and a SensorRun takes the scene as it is
 /// when the run is made (a run refuses to go on once the graph was committed again).
 
-#include "duplex/objects/MeshObject.h"
 #include "duplex/objects/VolumeObject.h"
 #include "duplex/scenegraph/SceneDocument.h"
 #include "duplex/scenegraph/SceneGraph.h"
@@ -35,6 +34,11 @@
 #include <unordered_map>
 #include <utility>
 #include <vector>
+
+namespace duplex {
+// Held by pointer only: users of its members include duplex/objects/MeshObject.h.
+class MeshObject;
+}  // namespace duplex
 
 namespace duplex {
 
