@@ -12,18 +12,15 @@
 // (WideBvh::kMaxDepth levels) plus one 8-lane write fit.
 constexpr int kStackSize = 7 * WideBvh::kMaxDepth + 8;
 
-// The closest hit below `cur` (a node or leaf of the ray's traversal) closer than t_best: lowers
-// t_best and records the hit in `best`, and returns whether it did. The single-ray traversal runs
-// it from the root; the packet traversal from the node where a packet's rays have thinned out.
+namespace walk {  // qualified calls: no argument-dependent lookup into another ISA's copy
+// The walk from `cur` with the stack holding `sp` entries: the closest hit closer than t_best
+// lowers t_best and is recorded in `best`; returns whether one was found.
 template <int kOct>
-inline bool closestSubtree(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray, float& t_best,
-                           ClosestHit& best) {
-  const BoxRay box_ray(ray.kd);
+[[gnu::always_inline]] inline bool closestLoop(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray,
+                                               const BoxRay& box_ray, std::uint32_t* refs, float* dists, int sp,
+                                               float& t_best, ClosestHit& best) {
   const Leaf::RayConstants leaf_ray(ray);
   bool found = false;
-  alignas(32) std::uint32_t refs[kStackSize];
-  alignas(32) float dists[kStackSize];
-  int sp = 0;
   while (true) {
     if (BvhRef::isInner(cur)) {
       sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_best, refs + sp, dists + sp);
@@ -40,23 +37,66 @@ inline bool closestSubtree(const MeshBvhView& bvh, std::uint32_t cur, const Mesh
   }
 }
 
+}  // namespace walk
+
+// The closest hit below `cur` (a node or leaf of the ray's traversal) closer than t_best: lowers
+// t_best and records the hit in `best`, and returns whether it did. The packet traversal runs it
+// from the node where a packet's rays have thinned out, with rays prepared in full.
 template <int kOct>
-inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray, Hit& hit) {
+inline bool closestSubtree(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray, float& t_best,
+                           ClosestHit& best) {
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
+  return walk::closestLoop<kOct>(bvh, cur, ray, BoxRay(ray.kd), refs, dists, 0, t_best, best);
+}
+
+namespace walk {
+// The inner nodes of the walk from `cur` up to the first leaf the ray reaches (left in `cur`, the
+// stack as the walk leaves it); false when the ray reaches none. kCull: pop as the closest-hit
+// walk does (entries behind t_best dropped), else as the any-hit walk (none dropped). The
+// single-ray entries walk so before they set up the triangle test (prepareWatertight).
+template <int kOct, bool kCull>
+[[gnu::always_inline]] inline bool toFirstLeaf(const MeshBvhView& bvh, std::uint32_t& cur, const BoxRay& box_ray,
+                                               std::uint32_t* refs, float* dists, int& sp, float t_best) {
+  while (BvhRef::isInner(cur)) {
+    sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_best, refs + sp, dists + sp);
+    do {
+      if (sp == 0) return false;
+      --sp;
+    } while (kCull && dists[sp] > t_best);
+    cur = refs[sp];
+  }
+  return true;
+}
+
+}  // namespace walk
+
+// The single-ray closest hit: `ray` holds the box part only (prepareKdRay); its triangle part is
+// set up from `ray_os` at the first leaf.
+template <int kOct>
+inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, MeshRay& ray, Hit& hit) {
   float t_best = std::min(hit.t, ray_os.tfar);
+  const BoxRay box_ray(ray.kd);
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
+  int sp = 0;
+  std::uint32_t cur = bvh.root;
+  if (!walk::toFirstLeaf<kOct, true>(bvh, cur, box_ray, refs, dists, sp, t_best)) return false;
+  prepareWatertight<Leaf::kUsesRay4>(ray_os, ray);
   ClosestHit best;
-  if (!closestSubtree<kOct>(bvh, bvh.root, ray, t_best, best)) return false;
+  if (!walk::closestLoop<kOct>(bvh, cur, ray, box_ray, refs, dists, sp, t_best, best)) return false;
   fillHit(best, t_best, hit);
   return true;
 }
 
-// Whether anything below `cur` blocks the ray within [tnear, t_far].
+namespace walk {
+// The any-hit walk from `cur` with the stack holding `sp` entries: whether anything blocks the
+// ray within [tnear, t_far].
 template <int kOct>
-inline bool occludedSubtree(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray, float t_far) {
-  const BoxRay box_ray(ray.kd);
+[[gnu::always_inline]] inline bool occludedLoop(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray,
+                                                const BoxRay& box_ray, std::uint32_t* refs, float* dists, int sp,
+                                                float t_far) {
   const Leaf::RayConstants leaf_ray(ray);
-  alignas(32) std::uint32_t refs[kStackSize];
-  alignas(32) float dists[kStackSize];
-  int sp = 0;
   while (true) {
     if (BvhRef::isInner(cur)) {
       sp += Node::template push<kOct>(bvh.nodes[cur], box_ray, t_far, refs + sp, dists + sp);
@@ -68,9 +108,27 @@ inline bool occludedSubtree(const MeshBvhView& bvh, std::uint32_t cur, const Mes
   }
 }
 
+}  // namespace walk
+
+// Whether anything below `cur` blocks the ray (prepared in full) within [tnear, t_far].
 template <int kOct>
-inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, const MeshRay& ray) {
-  return occludedSubtree<kOct>(bvh, bvh.root, ray, ray_os.tfar);
+inline bool occludedSubtree(const MeshBvhView& bvh, std::uint32_t cur, const MeshRay& ray, float t_far) {
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
+  return walk::occludedLoop<kOct>(bvh, cur, ray, BoxRay(ray.kd), refs, dists, 0, t_far);
+}
+
+// The single-ray any hit, with the triangle part set up at the first leaf as in intersectKernel.
+template <int kOct>
+inline bool occludedKernel(const MeshBvhView& bvh, const Ray& ray_os, MeshRay& ray) {
+  const BoxRay box_ray(ray.kd);
+  alignas(32) std::uint32_t refs[kStackSize];
+  alignas(32) float dists[kStackSize];
+  int sp = 0;
+  std::uint32_t cur = bvh.root;
+  if (!walk::toFirstLeaf<kOct, false>(bvh, cur, box_ray, refs, dists, sp, ray_os.tfar)) return false;
+  prepareWatertight<Leaf::kUsesRay4>(ray_os, ray);
+  return walk::occludedLoop<kOct>(bvh, cur, ray, box_ray, refs, dists, sp, ray_os.tfar);
 }
 
 template <int kOct>
@@ -114,14 +172,14 @@ inline auto byOctant(int octant, F&& f) {
 inline bool intersectEntry(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit) {
   if (bvh.root == BvhRef::kEmpty) return false;
   MeshRay ray;
-  if (!prepareMeshRay<Leaf::kUsesRay4>(ray_os, ray)) return false;
+  if (!prepareKdRay(ray_os, ray.kd)) return false;
   return byOctant(octantOf(ray), [&](auto oct) { return intersectKernel<oct.value>(bvh, ray_os, ray, hit); });
 }
 
 inline bool occludedEntry(const MeshBvhView& bvh, const Ray& ray_os) {
   if (bvh.root == BvhRef::kEmpty) return false;
   MeshRay ray;
-  if (!prepareMeshRay<Leaf::kUsesRay4>(ray_os, ray)) return false;
+  if (!prepareKdRay(ray_os, ray.kd)) return false;
   return byOctant(octantOf(ray), [&](auto oct) { return occludedKernel<oct.value>(bvh, ray_os, ray); });
 }
 
@@ -137,7 +195,7 @@ inline bool occludedViewEntry(const void* bvh, const Ray& ray_os) {
 inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhLeafVisitor visit, void* context) {
   if (bvh.root == BvhRef::kEmpty) return;
   MeshRay ray;
-  if (!prepareMeshRay<Leaf::kUsesRay4>(ray_os, ray)) return;
+  if (!prepareKdRay(ray_os, ray.kd)) return;  // the leaves are the visitor's: no triangle set-up
   byOctant(octantOf(ray), [&](auto oct) { forEachLeafKernel<oct.value>(bvh, ray_os, ray, visit, context); });
 }
 

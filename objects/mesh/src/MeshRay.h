@@ -32,13 +32,13 @@ struct MeshRay {
   WatertightRay4 wray4;  // the same, broadcast and permuted for the 4-wide test
 };
 
-/// Fills `r` from `ray` (object space): returns false when the ray is not queryable (isQueryable in
-/// Ray.h). The BVH traversal needs no more (its root's box test clips the ray). With kWithRay4
-/// false, r.wray4 is left unset, for leaf tests that broadcast the scalar constants themselves
-/// (the 8-lane leaves).
+/// Fills the triangle test's part of `r` (r.wray, and r.wray4 with kWithRay4) from `ray` (object
+/// space), which must be queryable (isQueryable in Ray.h). With kWithRay4 false, r.wray4 is left
+/// unset, for leaf tests that broadcast the scalar constants themselves (the 8-lane leaves). Kept
+/// apart from the box part (prepareKdRay) because a BVH walk needs it only once it reaches a leaf:
+/// many visits of an instance end at the root's boxes.
 template <bool kWithRay4 = true>
-[[gnu::always_inline]] inline bool prepareMeshRay(const Ray& ray, MeshRay& r) {
-  if (!prepareKdRay(ray, r.kd)) return false;
+[[gnu::always_inline]] inline void prepareWatertight(const Ray& ray, MeshRay& r) {
   const __m128 d = _mm_loadu_ps(&ray.dir.x);
 
   // Permutation and shear (WatertightRay's rules, kept in scalar form because the choice is
@@ -75,7 +75,15 @@ template <bool kWithRay4 = true>
   w.sy = q[ky];
   w.sz = q[3];
   if constexpr (kWithRay4) r.wray4 = WatertightRay4(w);
+}
 
+/// Fills `r` from `ray` (object space): returns false when the ray is not queryable (isQueryable in
+/// Ray.h). The BVH traversal needs no more (its root's box test clips the ray). kWithRay4: as in
+/// prepareWatertight.
+template <bool kWithRay4 = true>
+[[gnu::always_inline]] inline bool prepareMeshRay(const Ray& ray, MeshRay& r) {
+  if (!prepareKdRay(ray, r.kd)) return false;
+  prepareWatertight<kWithRay4>(ray, r);
   return true;
 }
 
