@@ -15,6 +15,7 @@
 
 #include "InstanceTreeWide.h"
 
+#include "duplex/accel/SimdTarget.h"
 #include "duplex/accel/SimdIsa.h"
 
 #include <immintrin.h>
@@ -167,12 +168,7 @@ const WideKernels kKernels{SimdIsa::Sse2,      closestEntry,       occludedEntry
                            occludedBatchEntry, closestPacketEntry, occludedPacketEntry, walkEntry};
 }  // namespace sse2
 
-#if defined(__clang__)
-#pragma clang attribute push(__attribute__((target("avx2"))), apply_to = function)
-#else
-#pragma GCC push_options
-#pragma GCC target("avx2")
-#endif
+DUPLEX_TARGET_AVX2_BEGIN
 namespace avx2 {
 namespace {
 
@@ -308,11 +304,7 @@ inline Ray objectRay(const Record& rec, const WorldRay& w) {
 const WideKernels kKernels{SimdIsa::Avx2,      closestEntry,       occludedEntry,       closestBatchEntry,
                            occludedBatchEntry, closestPacketEntry, occludedPacketEntry, walkEntry};
 }  // namespace avx2
-#if defined(__clang__)
-#pragma clang attribute pop
-#else
-#pragma GCC pop_options
-#endif
+DUPLEX_TARGET_END
 
 const WideKernels& wideKernels() {
   static const WideKernels& k = widestSimdIsa() >= SimdIsa::Avx2 ? avx2::kKernels : sse2::kKernels;

@@ -1,7 +1,6 @@
 // The mesh BVH kernels (MeshBvh.h), compiled three times from MeshBvhTraversal.inl: SSE2 (two
 // 4-wide halves per node), AVX2 (one 8-wide test) and AVX-512 (8 wide with mask registers). Each
-// copy lives in its own namespace inside a `#pragma GCC target` region (clang: `#pragma clang
-// attribute` with the same target), so that only the code of
+// copy lives in its own namespace inside a target region (SimdTarget.h), so that only the code of
 // that region may use the wider instructions: every header is included before the first region
 // (standard library and helper templates are compiled for the baseline, not per region, and the
 // linker cannot merge a wide copy into the baseline path).
@@ -17,6 +16,7 @@
 
 #include "MeshBvh.h"
 
+#include "duplex/accel/SimdTarget.h"
 #include "MeshLeafTest.h"
 #include "MeshRay.h"
 
@@ -211,12 +211,7 @@ const MeshBvhKernels kKernels{SimdIsa::Sse2,    intersectEntry,       occludedEn
                               PV::kWidth,       intersectViewEntry,   occludedViewEntry};
 }  // namespace sse2
 
-#if defined(__clang__)
-#pragma clang attribute push(__attribute__((target("avx2"))), apply_to = function)
-#else
-#pragma GCC push_options
-#pragma GCC target("avx2")
-#endif
+DUPLEX_TARGET_AVX2_BEGIN
 namespace avx2 {
 namespace {
 
@@ -316,7 +311,6 @@ struct Watertight8v {
   __m256 T, det, V, W;
 };
 
-inline __m256 broadcast2(__m128 x) { return _mm256_insertf128_ps(_mm256_castps128_ps256(x), x, 1); }
 // Row `row` of two blocks (lo: lanes 0..3, hi: lanes 4..7).
 inline __m256 rows2(const float* lo, const float* hi) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(lo)), _mm_load_ps(hi), 1);
@@ -484,18 +478,9 @@ const MeshBvhKernels kKernels{SimdIsa::Avx2,    intersectEntry,       occludedEn
                               forEachLeafEntry, intersectPacketEntry, occludedPacketEntry,
                               PV::kWidth,       intersectViewEntry,   occludedViewEntry};
 }  // namespace avx2
-#if defined(__clang__)
-#pragma clang attribute pop
-#else
-#pragma GCC pop_options
-#endif
+DUPLEX_TARGET_END
 
-#if defined(__clang__)
-#pragma clang attribute push(__attribute__((target("avx2,avx512f,avx512vl,avx512dq,avx512bw"))), apply_to = function)
-#else
-#pragma GCC push_options
-#pragma GCC target("avx2,avx512f,avx512vl,avx512dq,avx512bw")
-#endif
+DUPLEX_TARGET_AVX512_BEGIN
 namespace avx512 {
 namespace {
 
@@ -552,11 +537,7 @@ const MeshBvhKernels kKernels{SimdIsa::Avx512,  intersectEntry,       occludedEn
                               forEachLeafEntry, intersectPacketEntry, occludedPacketEntry,
                               PV::kWidth,       intersectViewEntry,   occludedViewEntry};
 }  // namespace avx512
-#if defined(__clang__)
-#pragma clang attribute pop
-#else
-#pragma GCC pop_options
-#endif
+DUPLEX_TARGET_END
 
 const MeshBvhKernels& meshBvhKernels(SimdIsa isa) {
   switch (isa) {

@@ -1,5 +1,5 @@
 // The mesh BVH traversal, included by MeshBvh.cpp once per instruction set inside a namespace and
-// a `#pragma GCC target` region that define `BoxRay`, `Node::push` (the node's 8 child boxes
+// a target region (SimdTarget.h) that define `BoxRay`, `Node::push` (the node's 8 child boxes
 // against the ray; the children entered are pushed on the stack) and `Leaf` (the triangles of a
 // leaf, with per-ray constants Leaf::RayConstants). No include guard: it is meant to be compiled
 // several times.

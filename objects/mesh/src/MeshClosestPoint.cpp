@@ -1,12 +1,15 @@
 // The closest-point kernels (MeshClosestPoint.h), compiled three times from
 // MeshClosestPointSearch.inl: SSE2 (two doubles per register), AVX2 and AVX-512 (four). Each copy
-// lives in its own namespace inside a `#pragma GCC target` region (clang: `#pragma clang attribute`),
-// as the BVH ray kernels (MeshBvh.cpp): every header is included before the first region.
+// lives in its own namespace inside a target region (SimdTarget.h), as the BVH ray kernels
+// (MeshBvh.cpp): every header is included before the first region.
 
 #include "MeshClosestPoint.h"
 
+#include "duplex/accel/SimdTarget.h"
+
 #include "duplex/accel/Box.h"
 #include "duplex/accel/PointQuery.h"
+#include "duplex/accel/SimdTarget.h"
 #include "MeshLeafTest.h"
 
 #include <glm/geometric.hpp>
@@ -50,12 +53,7 @@ struct D4 {
 }  // namespace
 }  // namespace sse2
 
-#if defined(__clang__)
-#pragma clang attribute push(__attribute__((target("avx2"))), apply_to = function)
-#else
-#pragma GCC push_options
-#pragma GCC target("avx2")
-#endif
+DUPLEX_TARGET_AVX2_BEGIN
 namespace avx2 {
 namespace {
 
@@ -76,18 +74,9 @@ struct D4 {
 
 }  // namespace
 }  // namespace avx2
-#if defined(__clang__)
-#pragma clang attribute pop
-#else
-#pragma GCC pop_options
-#endif
+DUPLEX_TARGET_END
 
-#if defined(__clang__)
-#pragma clang attribute push(__attribute__((target("avx2,avx512f,avx512vl,avx512dq,avx512bw"))), apply_to = function)
-#else
-#pragma GCC push_options
-#pragma GCC target("avx2,avx512f,avx512vl,avx512dq,avx512bw")
-#endif
+DUPLEX_TARGET_AVX512_BEGIN
 namespace avx512 {
 namespace {
 
@@ -98,11 +87,7 @@ using D4 = avx2::D4;
 
 }  // namespace
 }  // namespace avx512
-#if defined(__clang__)
-#pragma clang attribute pop
-#else
-#pragma GCC pop_options
-#endif
+DUPLEX_TARGET_END
 
 MeshClosestPointKernel meshClosestPointKernel(SimdIsa isa) {
   switch (isa) {

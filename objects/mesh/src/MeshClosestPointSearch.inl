@@ -1,5 +1,5 @@
 // The closest-point search of the mesh BVH (MeshClosestPoint.h), included by MeshClosestPoint.cpp
-// once per instruction set inside a namespace and a `#pragma GCC target` region that define `D4`:
+// once per instruction set inside a namespace and a target region (SimdTarget.h) that define `D4`:
 // four doubles per value (V) and the operations below. No include guard: it is compiled several
 // times.
 //
