@@ -526,8 +526,14 @@ struct PV {
   static V abs(V a) { return _mm512_abs_ps(a); }
   static unsigned le(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_LE_OQ); }
   static unsigned gt(V a, V b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ); }
-  static float hmin(V a) { return _mm512_reduce_min_ps(a); }
-  static float hmax(V a) { return _mm512_reduce_max_ps(a); }
+  // The two halves folded, then avx2's reduction. The masked extracts with every lane set, as
+  // above: GCC 12's reductions and casts expand to unmasked forms and warn.
+  template <int kHalf>
+  static __m256 half(V a) {
+    return _mm512_mask_extractf32x8_ps(_mm256_setzero_ps(), 0xFF, a, kHalf);
+  }
+  static float hmin(V a) { return avx2::PV::hmin(_mm256_min_ps(half<0>(a), half<1>(a))); }
+  static float hmax(V a) { return avx2::PV::hmax(_mm256_max_ps(half<0>(a), half<1>(a))); }
 };
 
 #include "MeshBvhTraversal.inl"
