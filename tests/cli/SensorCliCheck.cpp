@@ -138,6 +138,35 @@ void expectPngWithScaleBar(const fs::path& png) {
   expect(top_in_map, png.string() + ": the scale bar's top colour (the maximum) is not the colour of any bin");
 }
 
+// A camera's EXR (built with OpenEXR): its pixels are the JSON's luminance and standard error as
+// floats, the camera's top row first, and the header names the camera and the units.
+void expectCameraExr(const fs::path& exr, const nlohmann::json& cam) {
+#ifdef DUPLEX_CHECK_EXR
+  const int w = cam["image_size"][0], h = cam["image_size"][1];
+  Imf::InputFile file(exr.c_str());
+  const Imath::Box2i win = file.header().dataWindow();
+  expect(win.max.x - win.min.x + 1 == w && win.max.y - win.min.y + 1 == h,
+         exr.string() + ": image size is not the camera's");
+  const auto* name = file.header().findTypedAttribute<Imf::StringAttribute>("sensor");
+  const auto* units = file.header().findTypedAttribute<Imf::StringAttribute>("units");
+  expect(name && name->value() == cam["name"].get<std::string>() && units && units->value() == "cd/m^2",
+         exr.string() + ": header lacks the camera's name or the units cd/m^2");
+  std::vector<float> y(static_cast<std::size_t>(w) * h), e(y.size());
+  Imf::FrameBuffer fb;
+  fb.insert("Y", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(y.data()), sizeof(float), sizeof(float) * w));
+  fb.insert("stderr", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(e.data()), sizeof(float), sizeof(float) * w));
+  file.setFrameBuffer(fb);
+  file.readPixels(win.min.y, win.max.y);
+  for (std::size_t p = 0; p < y.size(); ++p)
+    expect(y[p] == static_cast<float>(cam["luminance_cd_m2"][p].get<double>()) &&
+               e[p] == static_cast<float>(cam["luminance_stderr_cd_m2"][p].get<double>()),
+           exr.string() + ": pixel " + std::to_string(p) + " differs from run.json");
+  expect(cam["exr"] == exr.string(), "run.json names " + cam.dump() + " instead of " + exr.string());
+#else
+  expect(!fs::exists(exr) && !cam.contains("exr"), exr.string() + " written by a build without OpenEXR");
+#endif
+}
+
 void expectSameMaps(const fs::path& a, const fs::path& b, const std::string& what) {
   for (int k = 0; k < 6; ++k) {
     const std::string name = "face" + std::to_string(k) + ".json";
@@ -798,6 +827,21 @@ void checkSkyAndLuminanceMeter(const std::string& duplex, const fs::path& dir) {
     pixels = std::abs(cam["luminance_cd_m2"][k].get<double>() - l) <=
              4.5 * cam["luminance_stderr_cd_m2"][k].get<double>() + 0.01 * l;
   expect(pixels, "sky: camera " + cam.dump());
+  // Its image files: the PNG in false colour with a scale bar, the EXR with run.json's values.
+  expectPngWithScaleBar(dir / "sky" / "cam.png");
+  expect(cam["png"] == (dir / "sky" / "cam.png").string(), "sky: camera's png key " + cam.dump());
+  expectCameraExr(dir / "sky" / "cam.exr", cam);
+
+  // A camera named as a sensor would write over its image: refused before any ray, naming both.
+  write(dir / "clash.json", R"({"format": "scene-json-v1", "objects": [], "instances": [],
+    "lights": [{"type": "point", "position": [0, 0, 1], "power": 5}],
+    "sensors": [{"name": "cam", "shape": "rectangle", "size": [1, 1], "bins": [2, 2]}],
+    "meters": [{"name": "cam", "camera": {"eye": [0, 0, 0], "target": [0, 0, 1], "up": [0, 1, 0], "fov": 10,
+                                          "pixels": [2, 2]}}]})");
+  const RunResult clash = run(sensorArgs(duplex, dir / "clash.json", "1000", "1", dir / "clash"), dir.string());
+  expect(clash.exited && clash.exit_code == 1 && clash.err.find("sensor 'cam' and camera 'cam'") != std::string::npos &&
+             !fs::exists(dir / "clash" / "run.json"),
+         "a camera named as a sensor: " + describe(clash) + "\n" + clash.err);
 }
 
 int main(int argc, char** argv) {

@@ -112,11 +112,26 @@ void checkOutputNames(const SensorScene& scene, const std::filesystem::path& sce
     if (base == "run")
       throw InvalidArgument(scene_file.string() + ": sensor '" + s.name +
                             "' would write run.json, the run's report; rename the sensor");
-    const auto [it, fresh] = owner.emplace(base, s.name);
+    const auto [it, fresh] = owner.emplace(base, "sensor '" + s.name + "'");
     if (!fresh)
-      throw InvalidArgument(scene_file.string() + ": sensors '" + it->second + "' and '" + s.name +
-                            "' would both write " + base +
-                            ".json (characters other than [A-Za-z0-9._-] become '_'); rename one");
+      throw InvalidArgument(scene_file.string() + ": " + it->second + " and sensor '" + s.name + "' would both write " +
+                            base + ".json (characters other than [A-Za-z0-9._-] become '_'); rename one");
+  }
+  // A camera writes DIR/<file name>.{png,exr}: the same rules against the sensors and the run.
+  for (const PointMeter& m : scene.meters()) {
+    if (m.image_width == 0) continue;
+    const std::string base = sensorFileStem(m.name);
+    if (base.size() + 5 > 255)
+      throw InvalidArgument(scene_file.string() + ": camera '" + m.name.substr(0, 40) + "...' (" +
+                            std::to_string(m.name.size()) +
+                            " characters) is too long for its image files' names (at most 250); shorten it");
+    if (base == "run")
+      throw InvalidArgument(scene_file.string() + ": camera '" + m.name +
+                            "' would write files named like run.json, the run's report; rename the camera");
+    const auto [it, fresh] = owner.emplace(base, "camera '" + m.name + "'");
+    if (!fresh)
+      throw InvalidArgument(scene_file.string() + ": " + it->second + " and camera '" + m.name + "' would both write " +
+                            base + ".png (characters other than [A-Za-z0-9._-] become '_'); rename one");
   }
 }
 
@@ -252,7 +267,7 @@ std::string csvFields(double a, double b, double c, bool empty = false) {
 // run.json's "meters": per meter its points and normals (world space) and per point the
 // irradiance on the plane of its normal, its standard error and the rays that connected, with
 // the luminous and per-light values where the run has them.
-nlohmann::ordered_json meterReport(const SensorRunResults& r) {
+nlohmann::ordered_json meterReport(const SensorRunResults& r, const std::filesystem::path& out) {
   const auto xyz = [](const std::vector<glm::dvec3>& v) {
     nlohmann::ordered_json out = nlohmann::ordered_json::array();
     for (const glm::dvec3& p : v) out.push_back({p.x, p.y, p.z});
@@ -264,8 +279,12 @@ nlohmann::ordered_json meterReport(const SensorRunResults& r) {
     j["name"] = m.name;
     j["points"] = xyz(m.points);
     j["normals"] = xyz(m.normals);
-    if (m.image_width != 0) j["image_size"] = {m.image_width, m.image_height};  // pixels, row by row from the top left
-    if (m.luminance()) {                                                        // a luminance meter or a camera
+    if (m.image_width != 0) {
+      j["image_size"] = {m.image_width, m.image_height};  // pixels, row by row from the top left
+      j["png"] = (out / (sensorFileStem(m.name) + ".png")).string();
+      if (sensorExrAvailable()) j["exr"] = (out / (sensorFileStem(m.name) + ".exr")).string();
+    }
+    if (m.luminance()) {  // a luminance meter or a camera
       if (m.half_angle > 0.0) j["half_angle_deg"] = m.half_angle * 180.0 / std::numbers::pi;
       j["radiance_w_m2_sr"] = radiometric(m.radiance_w_m2_sr, r);
       j["radiance_stderr_w_m2_sr"] = radiometric(m.radiance_stderr_w_m2_sr, r);
@@ -554,6 +573,27 @@ void writeSensorFiles(const std::filesystem::path& dir, const SensorResult& s, c
   if (sensorExrAvailable()) writeSensorExr(dir / (base + ".exr"), s.name, s.irradiance_w_m2, s.stderr_w_m2, s.nx, s.ny);
 }
 
+// A camera's image as DIR/<file name>.png (false colour with a scale bar, as a sensor's map) and
+// .exr (Y and stderr): luminance in cd/m^2 in photometric runs, else radiance in W/(m^2 sr). The
+// camera's pixels run from the top row down, a sensor's bins from the bottom row up: the rows
+// are flipped so that both writers show the view upright.
+void writeCameraImages(const std::filesystem::path& dir, const MeterResult& m, const SensorRunResults& r) {
+  const bool lum = r.photometric;
+  const std::vector<double>& value = lum ? m.luminance_cd_m2 : m.radiance_w_m2_sr;
+  const std::vector<double>& error = lum ? m.luminance_stderr_cd_m2 : m.radiance_stderr_w_m2_sr;
+  const std::uint32_t w = m.image_width, h = m.image_height;
+  std::vector<double> up(value.size()), up_error(error.size());
+  for (std::uint32_t row = 0; row < h && value.size() == std::size_t{w} * h && error.size() == value.size(); ++row)
+    for (std::uint32_t x = 0; x < w; ++x) {
+      up[std::size_t{h - 1 - row} * w + x] = value[std::size_t{row} * w + x];
+      up_error[std::size_t{h - 1 - row} * w + x] = error[std::size_t{row} * w + x];
+    }
+  const std::string base = sensorFileStem(m.name);
+  demo::writePng(dir / (base + ".png"), falseColourImage(up, w, h));
+  if (sensorExrAvailable())
+    writeSensorExr(dir / (base + ".exr"), m.name, up, up_error, w, h, lum ? "cd/m^2" : "W/(m^2 sr)");
+}
+
 // Whether light from `l` can arrive at the front (the side its normal points to) of the plane
 // through `centre` with unit normal `normal`, ignoring what lies between: a point source in front
 // of it, a beam travelling against the normal, an area light with a corner in front.
@@ -645,6 +685,8 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
                       ": the scene has no sensors (\"sensors\": [...]) or meters (\"meters\": [...])");
     checkOutputNames(scene, o.scene);
     for (const SensorInstance& s : scene.sensors()) stems.push_back(sensorFileStem(s.name));
+    for (const PointMeter& m : scene.meters())
+      if (m.image_width != 0) stems.push_back(sensorFileStem(m.name));
     if (files) checkOutputFolder(o.out, stems, o.resume, o.overwrite);
 
     SensorRunConfig cfg;
@@ -800,13 +842,15 @@ nlohmann::ordered_json runSensorOn(SensorRanks& ranks, const SensorOptions& o) {
     sensors.push_back(std::move(entry));
   }
   report["sensors"] = sensors;
-  if (!r.meters.empty()) report["meters"] = meterReport(r);
+  if (!r.meters.empty()) report["meters"] = meterReport(r, o.out);
   if (ranks.shared()) report["mpi"] = ranks.report();
   // All result files or none: written into a staging folder, moved into --out when complete.
   try {
     SensorOutputSet output(o.out);
     for (std::size_t k = 0; k < r.sensors.size(); ++k)
       writeSensorFiles(output.staging(), r.sensors[k], scene.sensors()[k], r, o.text_map_limit);
+    for (const MeterResult& m : r.meters)
+      if (m.image_width != 0) writeCameraImages(output.staging(), m, r);
     writeText(output.staging() / "run.json", report.dump() + "\n");
     output.commit(stems);
   } catch (const Error& e) {

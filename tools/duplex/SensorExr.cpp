@@ -24,11 +24,12 @@ bool sensorExrAvailable() noexcept {
 #endif
 }
 
-void writeSensorExr(const std::filesystem::path& path, const std::string& sensor, const std::vector<double>& irradiance,
-                    const std::vector<double>& stderr_w_m2, std::uint32_t nx, std::uint32_t ny) {
+void writeSensorExr(const std::filesystem::path& path, const std::string& sensor, const std::vector<double>& values,
+                    const std::vector<double>& stderr_values, std::uint32_t nx, std::uint32_t ny,
+                    const std::string& units) {
   const std::size_t n = static_cast<std::size_t>(nx) * ny;
-  if (nx == 0 || ny == 0 || irradiance.size() != n || stderr_w_m2.size() != n)
-    throw InvalidArgument(path.string() + ": sensor '" + sensor + "' map has " + std::to_string(irradiance.size()) +
+  if (nx == 0 || ny == 0 || values.size() != n || stderr_values.size() != n)
+    throw InvalidArgument(path.string() + ": '" + sensor + "' map has " + std::to_string(values.size()) +
                           " values for " + std::to_string(nx) + " x " + std::to_string(ny) + " bins");
 #ifdef DUPLEX_HAVE_OPENEXR
   // Flip rows once into float planes: EXR's first scanline is the top of the picture.
@@ -36,8 +37,8 @@ void writeSensorExr(const std::filesystem::path& path, const std::string& sensor
   for (std::uint32_t row = 0; row < ny; ++row) {
     const std::size_t src = static_cast<std::size_t>(ny - 1 - row) * nx, dst = static_cast<std::size_t>(row) * nx;
     for (std::uint32_t ix = 0; ix < nx; ++ix) {
-      y[dst + ix] = static_cast<float>(irradiance[src + ix]);
-      e[dst + ix] = static_cast<float>(stderr_w_m2[src + ix]);
+      y[dst + ix] = static_cast<float>(values[src + ix]);
+      e[dst + ix] = static_cast<float>(stderr_values[src + ix]);
     }
   }
   try {
@@ -46,7 +47,7 @@ void writeSensorExr(const std::filesystem::path& path, const std::string& sensor
     header.channels().insert("Y", Imf::Channel(Imf::FLOAT));
     header.channels().insert("stderr", Imf::Channel(Imf::FLOAT));
     header.insert("sensor", Imf::StringAttribute(sensor));
-    header.insert("units", Imf::StringAttribute("W/m^2"));
+    header.insert("units", Imf::StringAttribute(units));
     Imf::FrameBuffer fb;
     const std::size_t xs = sizeof(float), ys = sizeof(float) * nx;
     fb.insert("Y", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(y.data()), xs, ys));
