@@ -98,41 +98,29 @@ class StopSignals {
   bool released_ = false;
 };
 
-// Every sensor writes DIR/<file name>.{json,csv,png,exr} and the run writes DIR/run.json: two
-// sensors whose names map to one file name (or a sensor called "run") would overwrite each other.
+// Every sensor writes DIR/<file name>.{json,csv,png,exr}, every camera DIR/<file name>.{png,exr},
+// and the run writes DIR/run.json: two of them whose names map to one file name (or one called
+// "run") would overwrite each other.
 void checkOutputNames(const SensorScene& scene, const std::filesystem::path& scene_file) {
   std::map<std::string, std::string> owner;
-  for (const SensorInstance& s : scene.sensors()) {
-    const std::string base = sensorFileStem(s.name);
+  const auto claim = [&](const std::string& kind, const std::string& name, const char* extension) {
+    const std::string base = sensorFileStem(name), what = kind + " '" + name + "'";
     // NAME_MAX of Linux file systems, for the longest of the files written (".json", ".png", ...).
     if (base.size() + 5 > 255)
-      throw InvalidArgument(scene_file.string() + ": sensor name '" + s.name.substr(0, 40) + "...' (" +
-                            std::to_string(s.name.size()) +
+      throw InvalidArgument(scene_file.string() + ": " + kind + " name '" + name.substr(0, 40) + "...' (" +
+                            std::to_string(name.size()) +
                             " characters) is too long for its output files' names (at most 250); shorten it");
     if (base == "run")
-      throw InvalidArgument(scene_file.string() + ": sensor '" + s.name +
-                            "' would write run.json, the run's report; rename the sensor");
-    const auto [it, fresh] = owner.emplace(base, "sensor '" + s.name + "'");
+      throw InvalidArgument(scene_file.string() + ": " + what + " would write run" + extension +
+                            (kind == "sensor" ? "" : " beside run.json") + ", the run's report; rename the " + kind);
+    const auto [it, fresh] = owner.emplace(base, what);
     if (!fresh)
-      throw InvalidArgument(scene_file.string() + ": " + it->second + " and sensor '" + s.name + "' would both write " +
-                            base + ".json (characters other than [A-Za-z0-9._-] become '_'); rename one");
-  }
-  // A camera writes DIR/<file name>.{png,exr}: the same rules against the sensors and the run.
-  for (const PointMeter& m : scene.meters()) {
-    if (m.image_width == 0) continue;
-    const std::string base = sensorFileStem(m.name);
-    if (base.size() + 5 > 255)
-      throw InvalidArgument(scene_file.string() + ": camera '" + m.name.substr(0, 40) + "...' (" +
-                            std::to_string(m.name.size()) +
-                            " characters) is too long for its image files' names (at most 250); shorten it");
-    if (base == "run")
-      throw InvalidArgument(scene_file.string() + ": camera '" + m.name +
-                            "' would write files named like run.json, the run's report; rename the camera");
-    const auto [it, fresh] = owner.emplace(base, "camera '" + m.name + "'");
-    if (!fresh)
-      throw InvalidArgument(scene_file.string() + ": " + it->second + " and camera '" + m.name + "' would both write " +
-                            base + ".png (characters other than [A-Za-z0-9._-] become '_'); rename one");
-  }
+      throw InvalidArgument(scene_file.string() + ": " + it->second + " and " + what + " would both write " + base +
+                            extension + " (characters other than [A-Za-z0-9._-] become '_'); rename one");
+  };
+  for (const SensorInstance& s : scene.sensors()) claim("sensor", s.name, ".json");
+  for (const PointMeter& m : scene.meters())
+    if (m.image_width != 0) claim("camera", m.name, ".png");
 }
 
 // JSON has no infinity: a relative error with nothing measured is written as null.
