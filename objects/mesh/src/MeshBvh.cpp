@@ -169,6 +169,16 @@ struct Leaf {
                       float& t_max, ClosestHit& best) {
     return closestInLeaf(ray, blocks, count, t_max, best);
   }
+  // As avx2::Leaf::closestLanes.
+  static unsigned closestLanes(const MeshRay* const* rays, unsigned lanes, const TriangleBlock4* blocks,
+                               std::uint32_t count, float* t_max, ClosestHit* best) {
+    unsigned found = 0;
+    for (; lanes != 0; lanes &= lanes - 1) {
+      const int j = std::countr_zero(lanes);
+      if (closestInLeaf(*rays[j], blocks, count, t_max[j], best[j])) found |= 1u << j;
+    }
+    return found;
+  }
   [[gnu::always_inline]] static bool any(const MeshRay& ray, const RayConstants&, const TriangleBlock4* blocks,
                                          std::uint32_t count, float t_max) {
     return anyInLeaf(ray, blocks, count, t_max);
@@ -384,6 +394,23 @@ struct Leaf {
   /// itself, its upper lanes masked off (one code path: no second loop to mispredict into).
   static bool closest(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block, std::uint32_t count,
                       float& t_max, ClosestHit& best) {
+    return closestIn(ray, c, block, count, t_max, best);
+  }
+
+  /// closest() for each lane j of `lanes` (rays[j], t_max[j], best[j]) in one call: a packet's
+  /// leaf pays one call, not one per lane. Returns the lanes that found a hit.
+  static unsigned closestLanes(const MeshRay* const* rays, unsigned lanes, const TriangleBlock4* block,
+                               std::uint32_t count, float* t_max, ClosestHit* best) {
+    unsigned found = 0;
+    for (; lanes != 0; lanes &= lanes - 1) {
+      const int j = std::countr_zero(lanes);
+      if (closestIn(*rays[j], RayConstants(*rays[j]), block, count, t_max[j], best[j])) found |= 1u << j;
+    }
+    return found;
+  }
+
+  [[gnu::always_inline]] static bool closestIn(const MeshRay& ray, const RayConstants& c, const TriangleBlock4* block,
+                                               std::uint32_t count, float& t_max, ClosestHit& best) {
     bool found = false;
     for (int left = static_cast<int>(count); left > 0; left -= 8, block += 2) {
       const int lanes = left >= 8 ? 0xFF : (1 << left) - 1;

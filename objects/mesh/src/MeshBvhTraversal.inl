@@ -292,15 +292,9 @@ inline unsigned intersectPacketKernel(const MeshBvhView& bvh, const MeshRay* con
     } else {
       const TriangleBlock4* blocks = bvh.blocks + BvhRef::leafBlock(cur);
       const std::uint32_t count = BvhRef::leafCount(cur);
-      bool lowered = false;
-      for (unsigned lanes = m; lanes != 0; lanes &= lanes - 1) {
-        const int j = std::countr_zero(lanes);
-        if (Leaf::closest(*rays[j], Leaf::RayConstants(*rays[j]), blocks, count, p.t_best[j], best[j])) {
-          found |= 1u << j;
-          lowered = true;
-        }
-      }
-      if (lowered) reach = packetReach(p, active);
+      const unsigned lowered = Leaf::closestLanes(rays, m, blocks, count, p.t_best, best);
+      found |= lowered;
+      if (lowered != 0) reach = packetReach(p, active);
     }
     // Pop the next child with a lane not behind its closest hit.
     do {
