@@ -71,7 +71,7 @@ template <int kOct, bool kCull>
 
 }  // namespace walk
 
-// The single-ray closest hit: `ray` holds the box part only (prepareKdRay); its triangle part is
+// The single-ray closest hit: `ray` holds the box part only (prepareBvhRay); its triangle part is
 // set up from `ray_os` at the first leaf.
 template <int kOct>
 inline bool intersectKernel(const MeshBvhView& bvh, const Ray& ray_os, MeshRay& ray, Hit& hit) {
@@ -172,15 +172,17 @@ inline auto byOctant(int octant, F&& f) {
 inline bool intersectEntry(const MeshBvhView& bvh, const Ray& ray_os, Hit& hit) {
   if (bvh.root == BvhRef::kEmpty) return false;
   MeshRay ray;
-  if (!prepareKdRay(ray_os, ray.kd)) return false;
-  return byOctant(octantOf(ray), [&](auto oct) { return intersectKernel<oct.value>(bvh, ray_os, ray, hit); });
+  int octant;
+  if (!prepareBvhRay(ray_os, ray, octant)) return false;
+  return byOctant(octant, [&](auto oct) { return intersectKernel<oct.value>(bvh, ray_os, ray, hit); });
 }
 
 inline bool occludedEntry(const MeshBvhView& bvh, const Ray& ray_os) {
   if (bvh.root == BvhRef::kEmpty) return false;
   MeshRay ray;
-  if (!prepareKdRay(ray_os, ray.kd)) return false;
-  return byOctant(octantOf(ray), [&](auto oct) { return occludedKernel<oct.value>(bvh, ray_os, ray); });
+  int octant;
+  if (!prepareBvhRay(ray_os, ray, octant)) return false;
+  return byOctant(octant, [&](auto oct) { return occludedKernel<oct.value>(bvh, ray_os, ray); });
 }
 
 // The direct entries (ObjectRayEntry): `bvh` is the object's MeshBvhView.
@@ -195,8 +197,9 @@ inline bool occludedViewEntry(const void* bvh, const Ray& ray_os) {
 inline void forEachLeafEntry(const MeshBvhView& bvh, const Ray& ray_os, MeshBvhLeafVisitor visit, void* context) {
   if (bvh.root == BvhRef::kEmpty) return;
   MeshRay ray;
-  if (!prepareKdRay(ray_os, ray.kd)) return;  // the leaves are the visitor's: no triangle set-up
-  byOctant(octantOf(ray), [&](auto oct) { forEachLeafKernel<oct.value>(bvh, ray_os, ray, visit, context); });
+  int octant;
+  if (!prepareBvhRay(ray_os, ray, octant)) return;  // the leaves are the visitor's: no triangle set-up
+  byOctant(octant, [&](auto oct) { forEachLeafKernel<oct.value>(bvh, ray_os, ray, visit, context); });
 }
 
 // ---- Packets: PV::kWidth rays of one octant through the tree together ----

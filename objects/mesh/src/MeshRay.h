@@ -77,6 +77,22 @@ template <bool kWithRay4 = true>
   if constexpr (kWithRay4) r.wray4 = WatertightRay4(w);
 }
 
+/// The box part of `r` for the BVH walks of single rays, from `ray` (object space): r.kd's origin,
+/// inv_dir and tnear, the values prepareKdRay computes, and the ray's octant (bit a set: direction
+/// negative on axis a, as KdRay::neg_mask says). r.kd's sign masks, zero flags and tfar are left
+/// unset: the BVH's box test reads none of them, and each visit of an instance pays this set-up.
+/// Returns false when the ray is not queryable (isQueryable in Ray.h).
+[[gnu::always_inline]] inline bool prepareBvhRay(const Ray& ray, MeshRay& r, int& octant) {
+  const __m128 o = _mm_loadu_ps(&ray.origin.x), d = _mm_loadu_ps(&ray.dir.x);
+  if (!kd_detail::queryableSse(o, d, ray)) return false;
+  const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), d);
+  _mm_storeu_ps(r.kd.origin, o);     // lane 3 (tnear) lands in inv_dir[0], written next
+  _mm_storeu_ps(r.kd.inv_dir, inv);  // lane 3 lands in neg_mask[0], unused here
+  r.kd.tnear = ray.tnear;
+  octant = _mm_movemask_ps(inv) & 7;  // the sign bits of 1 / d: -0 gives -inf, as neg_mask has it
+  return true;
+}
+
 /// Fills `r` from `ray` (object space): returns false when the ray is not queryable (isQueryable in
 /// Ray.h). The BVH traversal needs no more (its root's box test clips the ray). kWithRay4: as in
 /// prepareWatertight.

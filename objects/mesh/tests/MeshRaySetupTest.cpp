@@ -1,5 +1,6 @@
 // MeshObject's per-ray setup (objects/mesh/src/MeshRay.h) computes with SSE, in one pass, what KdRay,
-// WatertightRay, clipRayToBox and isQueryable compute separately. The traversal and the exactness
+// WatertightRay, clipRayToBox and isQueryable compute separately (and prepareBvhRay the part of it
+// the BVH's single-ray walks read). The traversal and the exactness
 // arguments (docs/design/kdtree.md) rely on those values, so the setup must equal them bit for bit: this
 // test compares them on random rays and on the awkward ones (zero and negative-zero direction
 // components, denormal components, origins on the box faces and outside, directions that overflow
@@ -48,11 +49,23 @@ void checkRay(const Ray& ray, const Box& box) {
   detail::MeshRay m;
   float tmin = kNaN, tmax = kNaN;
   const bool hit = detail::setupMeshRay(ray, box, m, tmin, tmax);
+  detail::MeshRay b;
+  int octant = -1;
+  const bool bvh_ok = detail::prepareBvhRay(ray, b, octant);
   if (!isQueryable(ray)) {
     EXPECT_FALSE(hit);
+    EXPECT_FALSE(bvh_ok);
     return;
   }
   const KdRay kd(ray);
+  // The BVH walks' box part: the values the BVH's box test reads, and the octant of the sign masks.
+  ASSERT_TRUE(bvh_ok);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(bits(b.kd.origin[k]), bits(kd.origin[k])) << "axis " << k;
+    EXPECT_EQ(bits(b.kd.inv_dir[k]), bits(kd.inv_dir[k])) << "axis " << k;
+  }
+  EXPECT_EQ(bits(b.kd.tnear), bits(kd.tnear));
+  EXPECT_EQ(octant, static_cast<int>((kd.neg_mask[0] & 1u) | (kd.neg_mask[1] & 2u) | (kd.neg_mask[2] & 4u)));
   float ref_min = kNaN, ref_max = kNaN;
   const bool ref_hit = clipRayToBox(kd, box, ref_min, ref_max);
   ASSERT_EQ(hit, ref_hit);
@@ -163,6 +176,8 @@ TEST(MeshRaySetup, NonQueryableRaysAreRefused) {
     detail::MeshRay m;
     float tmin, tmax;
     EXPECT_FALSE(detail::setupMeshRay(r, box, m, tmin, tmax)) << r;
+    int octant;
+    EXPECT_FALSE(detail::prepareBvhRay(r, m, octant)) << r;
   }
   // And a queryable ray through the box is accepted (the refusals above are not a stuck false).
   detail::MeshRay m;
