@@ -39,7 +39,7 @@ struct WatertightRay4 {
   __m128 o[3];
   __m128 sx, sy, sz;
   __m128 tnear;
-  int kx = 0, ky = 1, kz = 2;
+  int kx, ky, kz;  // unset in a default-made one (MeshRay holds one the 8-lane leaves never fill)
 
   WatertightRay4() = default;
   explicit WatertightRay4(const WatertightRay& ray)
