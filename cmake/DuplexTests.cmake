@@ -101,10 +101,18 @@ macro(_duplex_add_to_test_executable target area)
   if(NOT TARGET ${target})
     add_executable(${target})
     target_link_libraries(${target} PRIVATE duplex_test_support)
-    # What most test files include, parsed once per executable (GoogleTest alone is about a second
-    # of every test file's compile without optimisation).
-    target_precompile_headers(${target} PRIVATE <gtest/gtest.h> <algorithm> <cmath> <filesystem> <fstream>
-      <limits> <memory> <random> <sstream> <string> <vector> <glm/geometric.hpp>)
+    # What most test files include, parsed once per build (GoogleTest alone is about a second of
+    # every test file's compile without optimisation): the first test executable (accel's, whose
+    # compile definitions every other one also has; clang refuses a header precompiled with a
+    # definition its user lacks) precompiles it, the others use its file.
+    get_property(duplex_pch_owner GLOBAL PROPERTY DUPLEX_TEST_PCH_OWNER)
+    if(duplex_pch_owner)
+      target_precompile_headers(${target} REUSE_FROM ${duplex_pch_owner})
+    else()
+      target_precompile_headers(${target} PRIVATE <gtest/gtest.h> <algorithm> <cmath> <filesystem> <fstream>
+        <limits> <memory> <random> <sstream> <string> <vector> <glm/geometric.hpp>)
+      set_property(GLOBAL PROPERTY DUPLEX_TEST_PCH_OWNER ${target})
+    endif()
     # The tests' own code (checks, brute-force references, fixtures) is compiled at -O1 in every
     # optimised build, the sanitizer builds included, while the library keeps its flags: GCC's -O3
     # costs much more compile time on a test file, and the tests check the library as it was built.

@@ -2,6 +2,7 @@
 
 #include "Command.h"
 #include "DecimalOption.h"
+#include "Elapsed.h"
 #include "StructureOption.h"
 #include "LoadScene.h"
 #include "WorkerThreads.h"
@@ -23,7 +24,6 @@ namespace duplex::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 }  // namespace
 

@@ -2,6 +2,7 @@
 
 #include "Command.h"
 #include "DecimalOption.h"
+#include "Elapsed.h"
 #include "StructureOption.h"
 #include "LoadScene.h"
 #include "WorkerThreads.h"
@@ -27,19 +28,17 @@ namespace duplex::cli {
 namespace {
 
 namespace fs = std::filesystem;
-using json = nlohmann::ordered_json;
+using OrderedJson = nlohmann::ordered_json;
 using Clock = std::chrono::steady_clock;
 
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
-
-json readJson(const fs::path& path) {
+OrderedJson readJson(const fs::path& path) {
   if (const std::string problem = notRegularFile(path); !problem.empty())
     throw FileError(path.string() + ": cannot open: " + problem);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(path.string() + ": cannot open");
   try {
-    return json::parse(in);
-  } catch (const json::exception& e) {
+    return OrderedJson::parse(in);
+  } catch (const OrderedJson::exception& e) {
     throw FileError(path.string() + ": " + e.what());
   }
 }
@@ -54,11 +53,11 @@ std::string rebasePath(const std::string& file, const fs::path& source_dir, cons
 
 /// A type's spec for the copy: a "file" key rebased to `out_dir`. A v1 mesh keeps only what v1
 /// reads ("file" wins over the inline arrays); the own format's specs are copied as they are.
-json specForCopy(const std::string& type, const json& spec, bool v1, const fs::path& source_dir,
-                 const fs::path& out_dir) {
-  json out = spec;
+OrderedJson specForCopy(const std::string& type, const OrderedJson& spec, bool v1, const fs::path& source_dir,
+                        const fs::path& out_dir) {
+  OrderedJson out = spec;
   if (v1 && type == "mesh") {
-    out = json::object();
+    out = OrderedJson::object();
     if (spec.contains("file")) {
       out["file"] = spec["file"];
     } else {
@@ -73,11 +72,11 @@ json specForCopy(const std::string& type, const json& spec, bool v1, const fs::p
 
 /// Compact JSON with one line per top-level key and per element of its arrays (objects, nodes,
 /// edits): small for inline meshes, readable in a diff.
-std::string layout(const json& doc) {
+std::string layout(const OrderedJson& doc) {
   std::string text = "{";
   bool first_key = true;
   for (const auto& [key, value] : doc.items()) {
-    text += (first_key ? "" : ",\n ") + json(key).dump() + ": ";
+    text += (first_key ? "" : ",\n ") + OrderedJson(key).dump() + ": ";
     first_key = false;
     if (!value.is_array() || value.empty()) {
       text += value.dump();
@@ -89,7 +88,7 @@ std::string layout(const json& doc) {
   return text + "}\n";
 }
 
-void writeText(const fs::path& path, const std::string& text) {
+void writeReplacing(const fs::path& path, const std::string& text) {
   const fs::path temporary = fs::path(path.string() + ".tmp");
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
@@ -126,24 +125,24 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
   const double save_ms = msSince(t_save);
 
   // The copy: the loader accepted the file, so its shape is known to be valid here.
-  const json source = readJson(options.scene);
+  const OrderedJson source = readJson(options.scene);
   const bool v1 = doc->format == "scene-json-v1";
   const fs::path source_dir = options.scene.parent_path();
-  json copy = json::object();
+  OrderedJson copy = OrderedJson::object();
   copy["format"] = "duplex-scene-v1";
-  copy["objects"] = json::array();
+  copy["objects"] = OrderedJson::array();
   std::size_t mesh_objects = 0, structures = 0;
   const ObjectLibrary& library = doc->graph->library();
   const ObjectTypeRegistry& registry = sensorTypeRegistry();  // the types loadDocumentNamed reads
-  const json& objects = source["objects"];
+  const OrderedJson& objects = source["objects"];
   for (std::size_t k = 0; k < objects.size(); ++k) {
-    const json& entry = objects[k];
+    const OrderedJson& entry = objects[k];
     const ObjectId id = doc->objects.at(k);
     const fs::path& structure = saved.at(id);
     // The entry's type is the registered key the loader found in it.
     const std::string type(library.typeName(id));
     const ObjectTypeInfo* info = registry.find(type);
-    json out_entry = v1 ? json{{"name", entry["name"]}} : entry;
+    OrderedJson out_entry = v1 ? OrderedJson{{"name", entry["name"]}} : entry;
     out_entry[type] = specForCopy(type, entry[type], v1, source_dir, options.out);
     if (info && info->accepts_structure) {
       if (structure.empty())
@@ -158,8 +157,8 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
     copy["objects"].push_back(std::move(out_entry));
   }
   if (v1) {
-    copy["nodes"] = json::array();
-    const json& instances = source["instances"];
+    copy["nodes"] = OrderedJson::array();
+    const OrderedJson& instances = source["instances"];
     for (std::size_t k = 0; k < instances.size(); ++k)
       copy["nodes"].push_back({{"instance", "instance" + std::to_string(k)},
                                {"object", instances[k]["object"]},
@@ -168,9 +167,9 @@ nlohmann::ordered_json runPrepare(const PrepareOptions& options) {
     for (const char* key : {"nodes", "edits"})
       if (source.contains(key)) copy[key] = source[key];
   }
-  writeText(scene_out, layout(copy));
+  writeReplacing(scene_out, layout(copy));
 
-  json report;
+  OrderedJson report;
   report["scene"] = scene_out.string();
   report["format_in"] = doc->format;
   report["objects"] = objects.size();

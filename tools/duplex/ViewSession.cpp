@@ -1,6 +1,7 @@
 #include "ViewSession.h"
 
 #include "DemoCamera.h"
+#include "Elapsed.h"
 
 #include <duplex/accel/MemoryLimit.h>
 #include <duplex/sensors/SensorObject.h>
@@ -25,8 +26,6 @@ namespace {
 
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 // Rows per strip of a render: bounds the rays and hits held at once (about 100 bytes per pixel)
 // for the largest images a request may ask for.

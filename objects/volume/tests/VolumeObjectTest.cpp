@@ -33,6 +33,7 @@ namespace {
 
 using test::expectErrorNaming;
 using test::randomUnit;
+using test::registeredGrid;
 using test::TempDir;
 using test::writeGrids;
 
@@ -398,9 +399,7 @@ TEST(VolumeObject, FogMissesGiveOneAndInfiniteRaysTerminate) {
 
 TEST(VolumeObject, LoadsFilesByGridNameOrFirstFloatGrid) {
   TempDir dir;
-  auto vec = openvdb::Vec3SGrid::create();
-  vec->setName("velocity");
-  vec->tree().setValue(openvdb::Coord(1, 2, 3), openvdb::Vec3s(1, 0, 0));
+  const auto vec = registeredGrid("Tree_vec3s_5_4_3", "velocity");
   auto fog = fogBox(1.0f, 0, 3);
   writeGrids(dir / "two.vdb", {vec, sphereGrid(0.1), fog});
   // "First" is in OpenVDB's listing order (by grid name): "density" before "sphere", whatever the
@@ -462,9 +461,7 @@ TEST(VolumeObject, ErrorsNameTheFileGridAndProblem) {
   TempDir dir;
   openvdb::initialize();
   expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "absent.vdb"); }, "absent.vdb: no such file");
-  auto vec = openvdb::Vec3SGrid::create();
-  vec->setName("velocity");
-  vec->tree().setValue(openvdb::Coord(1, 2, 3), openvdb::Vec3s(1, 0, 0));
+  const auto vec = registeredGrid("Tree_vec3s_5_4_3", "velocity");
   writeGrids(dir / "vec.vdb", {vec});
   expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "vec.vdb"); }, "no float grid");
   expectErrorNaming<FileError>(

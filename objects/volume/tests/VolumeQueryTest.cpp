@@ -38,6 +38,7 @@ namespace {
 
 using test::expectErrorNaming;
 using test::randomUnit;
+using test::registeredGrid;
 using test::TempDir;
 using test::writeGrids;
 
@@ -687,12 +688,8 @@ TEST(VolumeFailureCases, HugeSparseGridsStayBoundedInMemoryAndTime) {
 TEST(VolumeFailureCases, NonFloatGridsAndBadConfigsGiveClearErrors) {
   TempDir dir;
   openvdb::initialize();
-  auto dbl = openvdb::DoubleGrid::create(0.0);
-  dbl->setName("density");
-  dbl->tree().setValue(openvdb::Coord(0), 1.0);
-  auto mask = openvdb::MaskGrid::create();
-  mask->setName("mask");
-  mask->tree().setValueOn(openvdb::Coord(1));
+  const auto dbl = registeredGrid("Tree_double_5_4_3", "density");
+  const auto mask = registeredGrid("Tree_mask_5_4_3", "mask");
   writeGrids(dir / "other.vdb", {dbl, mask});
   expectErrorNaming<FileError>([&] { (void)VolumeObject::load(dir / "other.vdb"); },
                                "no float grid (grids: \"density\" (double)");
