@@ -10,14 +10,19 @@
 /// GCC takes `#pragma GCC target` between push_options / pop_options; clang applies a target
 /// attribute to every function of the region. Library-internal: for the kernels' sources only.
 
+/// `_Pragma` of its argument, stringised (a pragma written inside a macro).
 #define DUPLEX_SIMD_PRAGMA(x) _Pragma(#x)
 
 #if defined(__clang__)
+/// Opens a region compiled for the target feature list `isa` (a string literal, e.g. "avx2").
 #define DUPLEX_TARGET_BEGIN(isa) \
   DUPLEX_SIMD_PRAGMA(clang attribute push(__attribute__((target(isa))), apply_to = function))
+/// Closes the region DUPLEX_TARGET_BEGIN (or one of the ISA forms below) opened.
 #define DUPLEX_TARGET_END DUPLEX_SIMD_PRAGMA(clang attribute pop)
 #else
+/// Opens a region compiled for the target feature list `isa` (a string literal, e.g. "avx2").
 #define DUPLEX_TARGET_BEGIN(isa) DUPLEX_SIMD_PRAGMA(GCC push_options) DUPLEX_SIMD_PRAGMA(GCC target(isa))
+/// Closes the region DUPLEX_TARGET_BEGIN (or one of the ISA forms below) opened.
 #define DUPLEX_TARGET_END DUPLEX_SIMD_PRAGMA(GCC pop_options)
 #endif
 
